@@ -1,0 +1,1 @@
+"""Reduced and discrete models: gap systems, ringdown integrators, nonlinear normal modes."""

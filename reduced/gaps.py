@@ -1,0 +1,188 @@
+"""Linear structures with penalty gap stops: the system every nonlinear solver works on.
+
+The equation of motion is
+
+    M x'' + C x' + K x + B^T f(B x) = 0,
+
+where ``s = B x`` (m,) are the *contact coordinates* (a DOF, or a difference of DOFs
+such as tip minus face) and each row ``j`` of ``B`` carries one penalty stop:
+
+    f_j(s) = k_j (s_j - o_j)   if side_j (s_j - o_j) > 0   (stop closed)
+             0                 otherwise                   (stop open).
+
+``side = +1`` is an upper stop at ``s = o`` (contact when s > o), ``side = -1`` a lower
+stop (contact when s < o). A two-sided clearance ``|s| <= g`` is a pair of stops sharing
+one *tip*: (o = +g, side = +1) and (o = -g, side = -1). Stops of one tip exclude each
+other, so a system with T two-sided tips has 3**T linear contact states.
+
+The energy is ``E = 1/2 v^T M v + 1/2 x^T K x + sum_j 1/2 k_j max(0, side_j (s_j - o_j))^2``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import product
+
+import numpy as np
+
+MAX_STOPS = 16  # 2**16 contact states is the most the exact integrator tabulates
+
+
+@dataclass(frozen=True, eq=False)
+class GapSystem:
+    """An n-DOF linear structure with m penalty stops (SI units).
+
+    Attributes
+    ----------
+    M, C, K : (n, n) arrays
+        Mass [kg], viscous damping [N s/m] and stiffness [N/m] matrices, symmetric.
+    B : (m, n) array
+        Rows map x to the contact coordinates s = B x [m].
+    k : (m,) array
+        N/m, penalty stiffness of each stop.
+    offset : (m,) array
+        m, position of each stop in s (+g for an upper stop, -g for a lower one).
+    side : (m,) array of +1 / -1
+        Upper (+1) or lower (-1) stop.
+    tip : (m,) int array
+        Stops with the same tip number exclude each other (one clearance).
+    dof_names, stop_names : tuples of str
+    """
+
+    M: np.ndarray
+    C: np.ndarray
+    K: np.ndarray
+    B: np.ndarray
+    k: np.ndarray
+    offset: np.ndarray
+    side: np.ndarray
+    tip: np.ndarray
+    dof_names: tuple[str, ...]
+    stop_names: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        n = self.M.shape[0]
+        for name in ("M", "C", "K"):
+            A = getattr(self, name)
+            if A.shape != (n, n):
+                raise ValueError(f"{name} must be {n}x{n}, got shape {A.shape}")
+            if not np.all(np.isfinite(A)):
+                raise ValueError(f"{name} has non-finite entries")
+            if not np.allclose(A, A.T, rtol=1e-12, atol=0.0):
+                raise ValueError(f"{name} must be symmetric")
+        m = self.B.shape[0]
+        if self.B.shape != (m, n):
+            raise ValueError(f"B must be (m, {n}), got {self.B.shape}")
+        if m > MAX_STOPS:
+            raise ValueError(f"at most {MAX_STOPS} stops are supported, got {m}")
+        for name in ("k", "offset", "side", "tip"):
+            a = getattr(self, name)
+            if a.shape != (m,):
+                raise ValueError(f"{name} must have shape ({m},), got {a.shape}")
+            if not np.all(np.isfinite(a)):
+                raise ValueError(f"{name} has non-finite entries")
+        if np.any(self.k < 0):
+            raise ValueError("stop stiffness k must be >= 0")
+        if not np.all(np.isin(self.side, (-1.0, 1.0))):
+            raise ValueError("side must be +1 or -1")
+        if np.any(np.linalg.eigvalsh(self.M) <= 0):
+            raise ValueError("M must be positive definite")
+
+    # -- sizes -------------------------------------------------------------------------
+    @property
+    def n(self) -> int:
+        return self.M.shape[0]
+
+    @property
+    def m(self) -> int:
+        return self.B.shape[0]
+
+    @property
+    def undamped(self) -> bool:
+        return not np.any(self.C)
+
+    # -- forces and energy -------------------------------------------------------------
+    def penetration(self, x: np.ndarray) -> np.ndarray:
+        """m, ``side_j (s_j - o_j)`` for x of shape (..., n); positive where a stop is closed."""
+        return self.side * (np.asarray(x) @ self.B.T - self.offset)
+
+    def contact_force(self, x: np.ndarray) -> np.ndarray:
+        """N, generalized stop force ``B^T f(B x)`` for x of shape (..., n)."""
+        s = np.asarray(x) @ self.B.T - self.offset
+        f = np.where(self.side * s > 0.0, self.k * s, 0.0)
+        return f @ self.B
+
+    def stop_force(self, x: np.ndarray) -> np.ndarray:
+        """N, force in each stop (m,) for x of shape (..., n); >= 0 is compression."""
+        return self.k * np.maximum(self.penetration(x), 0.0)
+
+    def energy(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """J, total mechanical energy for x, v of shape (..., n)."""
+        x = np.asarray(x)
+        v = np.asarray(v)
+        kin = 0.5 * np.einsum("...i,ij,...j->...", v, self.M, v)
+        lin = 0.5 * np.einsum("...i,ij,...j->...", x, self.K, x)
+        pen = np.maximum(self.penetration(x), 0.0)
+        return kin + lin + 0.5 * (pen**2) @ self.k
+
+    # -- linear contact states ---------------------------------------------------------
+    def state_matrices(self, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(K_s, F_s): with the stops in ``active`` closed, M x'' + C x' + K_s x = F_s."""
+        Ks = self.K.copy()
+        Fs = np.zeros(self.n)
+        for j in np.flatnonzero(active):
+            Ks += self.k[j] * np.outer(self.B[j], self.B[j])
+            Fs += self.k[j] * self.offset[j] * self.B[j]
+        return Ks, Fs
+
+    def feasible_states(self) -> list[np.ndarray]:
+        """Every active-set a motion can reach: at most one closed stop per tip."""
+        tips = np.unique(self.tip)
+        choices = [[-1, *np.flatnonzero(self.tip == t)] for t in tips]
+        states = []
+        for combo in product(*choices):
+            a = np.zeros(self.m, dtype=bool)
+            for j in combo:
+                if j >= 0:
+                    a[j] = True
+            states.append(a)
+        return states
+
+    def closed_stiffness(self) -> np.ndarray:
+        """N/m, stiffness with one stop of every tip closed (the stiffest contact state)."""
+        Ks = self.K.copy()
+        for t in np.unique(self.tip):
+            j = np.flatnonzero(self.tip == t)
+            jmax = j[np.argmax(self.k[j])]
+            Ks += self.k[jmax] * np.outer(self.B[jmax], self.B[jmax])
+        return Ks
+
+    def omega_max(self) -> float:
+        """rad/s, highest natural frequency over all contact states (the closed state)."""
+        from scipy.linalg import eigh
+
+        return float(np.sqrt(max(eigh(self.closed_stiffness(), self.M, eigvals_only=True)[-1], 0.0)))
+
+
+def two_sided_stops(
+    rows: np.ndarray, k: np.ndarray, gap: np.ndarray, names: tuple[str, ...]
+) -> dict[str, np.ndarray | tuple[str, ...]]:
+    """B, k, offset, side, tip, stop_names for clearances ``|rows[i] @ x| <= gap[i]``.
+
+    Each row gives an upper stop (offset +gap, side +1) followed by a lower one
+    (offset -gap, side -1) with the same tip number.
+    """
+    rows = np.atleast_2d(np.asarray(rows, dtype=float))
+    T = rows.shape[0]
+    k = np.broadcast_to(np.asarray(k, dtype=float), (T,))
+    gap = np.broadcast_to(np.asarray(gap, dtype=float), (T,))
+    if np.any(~(gap >= 0.0)):
+        raise ValueError(f"gap must be >= 0 m, got {gap!r}")
+    return {
+        "B": np.repeat(rows, 2, axis=0),
+        "k": np.repeat(k, 2),
+        "offset": np.column_stack([gap, -gap]).ravel(),
+        "side": np.tile([1.0, -1.0], T),
+        "tip": np.repeat(np.arange(T), 2),
+        "stop_names": tuple(f"{nm}{s}" for nm in names for s in ("+", "-")),
+    }

@@ -1,0 +1,84 @@
+"""Exact frequency-energy relation of NNM 2 (the antisymmetric mode x1 = -x3, x2 = 0).
+
+On NNM 2 of a model with m1 = m3, Eq. (9) reduces to the piecewise-linear oscillator
+
+    m1 x'' + 2 k_s x + f(x) = 0                                   (paper, Eq. 11)
+
+with f the two-sided gap force of Eq. (10). Let omega_0 = sqrt(2 k_s / m1),
+K = k_g / (2 k_s), omega_c = omega_0 sqrt(1 + K), chi_0 = x0 / g and
+R = chi_0 (1 + K) - K. Starting from rest at x0 > g, the closed-gap motion is a cosine
+about x* = g K / (1 + K) and meets x = g when cos(omega_c t) = 1 / R, so the time spent
+in |x| > g per period is
+
+    T_g = (4 / omega_c) arccos(1 / R).                            (paper's Eq. 12, with
+                                                                   its omega = omega_c)
+
+The speed at x = g is omega_c (x0 - x*) sqrt(1 - 1/R^2), and the free flight from g to 0
+takes arctan(omega_0 g / v) / omega_0, so
+
+    T_s = (4 / omega_0) arccot( sqrt((R^2 - 1) / (1 + K)) ).
+
+The paper's Eq. (13) prints arccot(R / sqrt(1 + K)) instead: it drops the "- 1" under the
+root and so misses the grazing limit (T_s must tend to 2 pi / omega_0 as R -> 1; the
+printed form gives (4 / omega_0) arccot(1 / sqrt(1 + K))). Both are implemented; the tests
+check which one a direct integration of Eq. (9) confirms (ours, to 1e-12).
+
+The energy on NNM 2 (both outer masses, from rest at x0) is
+E = 2 k_s x0^2 + k_g (x0 - g)^2 for x0 > g, and the frequency is
+omega = 2 pi / (T_g + T_s) above the grazing energy 2 k_s g^2, omega_0 below it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from reduced.discrete import DiscreteParams
+
+
+def _require_symmetric(p: DiscreteParams) -> None:
+    if p.m1 != p.m3:
+        raise ValueError(
+            f"the exact NNM 2 relation needs m1 == m3 (antisymmetric mode), got m1={p.m1}, m3={p.m3}"
+        )
+
+
+def amplitude_from_energy(p: DiscreteParams, energy_J: np.ndarray) -> np.ndarray:
+    """m, turning-point amplitude x0 of NNM 2 with total energy E (inverts E(x0))."""
+    E = np.asarray(energy_J, dtype=float)
+    below = np.sqrt(E / (2.0 * p.k_s))
+    kt = 2.0 * p.k_s + p.k_g
+    disc = kt * E - 2.0 * p.k_s * p.k_g * p.g**2
+    above = (p.k_g * p.g + np.sqrt(np.maximum(disc, 0.0))) / kt
+    return np.where(E <= p.grazing_energy_nnm2, below, above)
+
+
+def energy_from_amplitude(p: DiscreteParams, x0: np.ndarray) -> np.ndarray:
+    """J, total energy of NNM 2 at rest at amplitude x0: 2 k_s x0^2 + k_g (x0 - g)_+^2."""
+    x0 = np.abs(np.asarray(x0, dtype=float))
+    return 2.0 * p.k_s * x0**2 + p.k_g * np.maximum(x0 - p.g, 0.0) ** 2
+
+
+def period_from_amplitude(p: DiscreteParams, x0: np.ndarray, *, paper: bool = False) -> np.ndarray:
+    """s, period of NNM 2 at amplitude x0 (exact; ``paper=True`` uses the printed Eq. 13)."""
+    _require_symmetric(p)
+    x0 = np.abs(np.asarray(x0, dtype=float))
+    w0 = np.sqrt(2.0 * p.k_s / p.m1)
+    K = p.k_g / (2.0 * p.k_s)
+    wc = w0 * np.sqrt(1.0 + K)
+    T_open = 2.0 * np.pi / w0
+    if p.g == 0.0:
+        return np.where(x0 > 0.0, 2.0 * np.pi / wc, T_open)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        R = np.maximum(x0 / p.g * (1.0 + K) - K, 1.0)
+        Tg = 4.0 / wc * np.arccos(1.0 / R)
+        if paper:
+            Ts = 4.0 / w0 * np.arctan2(np.sqrt(1.0 + K), R)
+        else:
+            Ts = 4.0 / w0 * np.arctan2(np.sqrt(1.0 + K), np.sqrt(R * R - 1.0))
+    return np.where(x0 > p.g, Tg + Ts, T_open)
+
+
+def frequency_from_energy(p: DiscreteParams, energy_J: np.ndarray, *, paper: bool = False) -> np.ndarray:
+    """Hz, frequency of NNM 2 at total energy E (exact unless ``paper=True``)."""
+    x0 = amplitude_from_energy(p, energy_J)
+    return 1.0 / period_from_amplitude(p, x0, paper=paper)
