@@ -1,0 +1,73 @@
+"""Stages of the pipeline and the runner that does only what a scene asks for.
+
+Each stage is a function ``stage(scene, writer, progress, **options)`` writing its files
+through a :class:`bearingshaft.output.StageWriter`; :func:`run_stage` wraps it in a staged
+output folder so a failure leaves nothing half-written.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+from bearingshaft.output import StageWriter, staged_output
+from bearingshaft.scenes import Scene
+
+
+class StageUnavailable(Exception):
+    """The scene does not ask for this stage, or the stage is not built yet."""
+
+
+def _ringdown(scene: Scene, writer: StageWriter, progress: bool, method: str | None = None, **_) -> None:
+    from bearingshaft.stages.ringdown import ringdown_stage
+
+    ringdown_stage(scene, writer, progress, method=method)
+
+
+def _nnm(scene: Scene, writer: StageWriter, progress: bool, **_) -> None:
+    from bearingshaft.stages.nnm import nnm_stage
+
+    nnm_stage(scene, writer, progress)
+
+
+def _study(scene: Scene, writer: StageWriter, progress: bool, **_) -> None:
+    from bearingshaft.stages.study import study_stage
+
+    study_stage(scene, writer, progress)
+
+
+def _not_yet(issue: int, what: str) -> Callable:
+    def stage(scene: Scene, writer: StageWriter, progress: bool, **_) -> None:
+        raise StageUnavailable(f"{what} is not built yet (issue #{issue}); nothing was written")
+
+    return stage
+
+
+STAGES: dict[str, Callable] = {
+    "modal": _not_yet(4, "the 3-D model and modal analysis"),
+    "ringdown": _ringdown,
+    "nnm": _nnm,
+    "study": _study,
+    "verify": _not_yet(5, "verification of the reduced model"),
+}
+
+
+def run_stage(scene: Scene, stage: str, out_dir: str | Path, progress: bool = True, **options) -> None:
+    """Run one stage of ``scene`` into ``out_dir`` (refused if the scene lacks its table)."""
+    if stage not in scene.stages:
+        tables = {"ringdown": "[ringdown]", "nnm": "[nnm]", "study": "[work_precision] or [stiff_cases]",
+                  "modal": "[modal]", "verify": "[verify]"}
+        raise StageUnavailable(
+            f"scene {scene.name!r} has no {tables.get(stage, stage)} table, so it has no {stage} stage "
+            f"(its stages: {', '.join(scene.stages) or 'none'})"
+        )
+    with staged_output(out_dir, scene.name, scene.source, stage) as writer:
+        STAGES[stage](scene, writer, progress, **options)
+
+
+def run_scene(scene: Scene, out_dir: str | Path, progress: bool = True) -> None:
+    """Every stage the scene asks for, in pipeline order."""
+    for stage in scene.stages:
+        if progress:
+            print(f"[{scene.name}] {stage}", flush=True)
+        run_stage(scene, stage, out_dir, progress=progress)

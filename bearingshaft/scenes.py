@@ -1,0 +1,311 @@
+"""Scenes: TOML cases turned into frozen dataclasses, in this one place.
+
+A scene names a model and the stages to run on it; a table present in the file is a stage
+to run, a table absent is a stage skipped (and so never built). Layout::
+
+    name = "discrete-impulse"          # optional, defaults to the file name
+    description = "..."
+    [model]          kind = "discrete" and the model's parameters (DiscreteParams)
+    [initial]        x0_m, v0_m_s
+    [ringdown]       integrator and run length                      -> stage ringdown
+    [spectrogram]    STFT of one DOF with the NNM curves overlaid  (with ringdown)
+    [symmetry]       |x_a - x_b| against time                      (with ringdown)
+    [nnm]            frequency-energy relations                     -> stage nnm
+    [work_precision] error against run time                         -> stage study
+    [stiff_cases]    stiff and extreme parameter sweep              -> stage study
+
+Unknown keys, wrong types and invalid values raise :class:`SceneError` with a one-line
+message naming the table and key.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+import types
+import typing
+from dataclasses import dataclass, field, fields
+from importlib import resources
+from pathlib import Path
+
+from reduced.discrete import DiscreteParams
+
+METHODS = ("exact", "explicit", "dop853")
+
+
+class SceneError(ValueError):
+    """A scene that cannot be read or is invalid; the message is one line."""
+
+
+def _check(cond: bool, msg: str) -> None:
+    if not cond:
+        raise ValueError(msg)
+
+
+def _positive(obj, *names: str) -> None:
+    for name in names:
+        v = getattr(obj, name)
+        _check(v is not None and v > 0 and math.isfinite(v), f"{name} must be > 0, got {v!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class InitialSpec:
+    """Initial state of the ringdown."""
+
+    x0_m: tuple[float, ...] = (0.0, 0.0, 0.0)  # m, displacement of each DOF
+    v0_m_s: tuple[float, ...] = (0.0, 0.0, 0.0)  # m/s, velocity of each DOF
+
+
+@dataclass(frozen=True, slots=True)
+class RingdownSpec:
+    """Free response from the initial state."""
+
+    method: str = "exact"  # exact | explicit | dop853
+    duration_s: float = 2.0  # s
+    sample_rate_hz: float = 20000.0  # Hz, output sampling
+    dt_s: float | None = None  # s, explicit step (default: omega_dt / omega_max)
+    omega_dt: float = 0.05  # rad, explicit step as a fraction of the closed-gap period
+    rtol: float = 1e-10  # dop853 relative tolerance
+    atol: float | None = None  # m, dop853 absolute tolerance (default rtol x gap)
+
+    def __post_init__(self) -> None:
+        _check(self.method in METHODS, f"method must be one of {', '.join(METHODS)}, got {self.method!r}")
+        _positive(self, "duration_s", "sample_rate_hz", "omega_dt", "rtol")
+        if self.dt_s is not None:
+            _positive(self, "dt_s")
+        if self.atol is not None:
+            _positive(self, "atol")
+
+
+@dataclass(frozen=True, slots=True)
+class SpectrogramSpec:
+    """Short-time Fourier transform (Hann window) of one DOF."""
+
+    dof: str = "x1"  # which DOF to transform
+    window_s: float = 0.05  # s, Hann window length
+    overlap: float = 0.9  # fraction of the window shared by neighbouring frames
+    fmax_hz: float = 1500.0  # Hz, top of the plot
+    db_range: float = 120.0  # dB shown below the peak
+
+    def __post_init__(self) -> None:
+        _positive(self, "window_s", "fmax_hz", "db_range")
+        _check(0.0 <= self.overlap < 1.0, f"overlap must be in [0, 1), got {self.overlap!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class SymmetrySpec:
+    """Symmetry-breaking plot: |x_a - x_b| against time (Fig. 4)."""
+
+    dofs: tuple[str, ...] = ("x1", "x3")  # the pair that a symmetric motion keeps equal
+
+    def __post_init__(self) -> None:
+        _check(len(self.dofs) == 2, f"dofs must name two DOFs, got {self.dofs!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class NNMSpec:
+    """Frequency-energy relations of the nonlinear normal modes."""
+
+    n_energy: int = 400  # number of energies, log-spaced
+    energy_min_J: float = 1e-4  # J
+    energy_max_J: float = 1e5  # J
+
+    def __post_init__(self) -> None:
+        _check(self.n_energy >= 2, f"n_energy must be >= 2, got {self.n_energy!r}")
+        _positive(self, "energy_min_J", "energy_max_J")
+        _check(self.energy_max_J > self.energy_min_J, "energy_max_J must exceed energy_min_J")
+
+
+@dataclass(frozen=True, slots=True)
+class WorkPrecisionSpec:
+    """Error against run time of the three integrators over a short window."""
+
+    window_s: float = 0.05  # s, before chaotic divergence dominates
+    sample_rate_hz: float = 20000.0  # Hz, grid on which errors are measured
+    explicit_omega_dt: tuple[float, ...] = (0.8, 0.4, 0.2, 0.1, 0.05, 0.025, 0.0125, 0.00625, 0.003125)
+    dop853_rtol: tuple[float, ...] = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12, 1e-13)
+    repeats: int = 3  # best-of timing
+
+    def __post_init__(self) -> None:
+        _positive(self, "window_s", "sample_rate_hz")
+        _check(len(self.explicit_omega_dt) >= 3, "explicit_omega_dt needs >= 3 values to fit an order")
+        _check(all(v > 0 for v in self.explicit_omega_dt + self.dop853_rtol), "steps and tolerances must be > 0")
+        _check(self.repeats >= 1, f"repeats must be >= 1, got {self.repeats!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class StiffCasesSpec:
+    """Sweep over stiff and extreme parameters (every combination is run)."""
+
+    k_g: tuple[float, ...] = (3.502e7, 1e9, 1e11)  # N/m
+    gap: tuple[float, ...] = (0.0, 2.54e-4, 1e-2)  # m
+    speed: tuple[float, ...] = (0.01, 200.0, 2000.0)  # m/s, initial velocity of mass 3
+    c: tuple[float, ...] = (0.0, 4.0, 400.0)  # N s/m
+    duration_s: float = 0.2  # s
+    sample_rate_hz: float = 5000.0  # Hz
+    methods: tuple[str, ...] = ("exact", "explicit")
+
+    def __post_init__(self) -> None:
+        _positive(self, "duration_s", "sample_rate_hz")
+        for m in self.methods:
+            _check(m in METHODS, f"methods: unknown method {m!r}")
+
+
+MODEL_KINDS: dict[str, type] = {"discrete": DiscreteParams}
+
+SECTIONS: dict[str, type] = {
+    "initial": InitialSpec,
+    "ringdown": RingdownSpec,
+    "spectrogram": SpectrogramSpec,
+    "symmetry": SymmetrySpec,
+    "nnm": NNMSpec,
+    "work_precision": WorkPrecisionSpec,
+    "stiff_cases": StiffCasesSpec,
+}
+
+STAGES = ("ringdown", "nnm", "study")
+
+
+@dataclass(frozen=True, slots=True)
+class Scene:
+    """One case: a model and the stages to run on it."""
+
+    name: str
+    description: str
+    model_kind: str
+    model: DiscreteParams
+    source: str = field(repr=False)  # the TOML text as read, kept with every result
+    initial: InitialSpec = InitialSpec()
+    ringdown: RingdownSpec | None = None
+    spectrogram: SpectrogramSpec | None = None
+    symmetry: SymmetrySpec | None = None
+    nnm: NNMSpec | None = None
+    work_precision: WorkPrecisionSpec | None = None
+    stiff_cases: StiffCasesSpec | None = None
+
+    @property
+    def stages(self) -> tuple[str, ...]:
+        """The pipeline stages this scene asks for, in pipeline order."""
+        wanted = {
+            "ringdown": self.ringdown is not None,
+            "nnm": self.nnm is not None,
+            "study": self.work_precision is not None or self.stiff_cases is not None,
+        }
+        return tuple(s for s in STAGES if wanted[s])
+
+
+# -- conversion --------------------------------------------------------------------------
+def _coerce(value, typ, where: str):
+    origin = typing.get_origin(typ)
+    if origin in (types.UnionType, typing.Union):
+        args = [a for a in typing.get_args(typ) if a is not type(None)]
+        return _coerce(value, args[0], where)
+    if origin is tuple:
+        (inner, _) = typing.get_args(typ)
+        if not isinstance(value, list):
+            raise SceneError(f"{where}: expected a list, got {value!r}")
+        return tuple(_coerce(v, inner, f"{where}[{i}]") for i, v in enumerate(value))
+    if typ is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise SceneError(f"{where}: expected a number, got {value!r}")
+        if not math.isfinite(value):
+            raise SceneError(f"{where}: must be finite, got {value!r}")
+        return float(value)
+    if typ is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise SceneError(f"{where}: expected an integer, got {value!r}")
+        return value
+    if typ is str:
+        if not isinstance(value, str):
+            raise SceneError(f"{where}: expected a string, got {value!r}")
+        return value
+    if typ is bool:
+        if not isinstance(value, bool):
+            raise SceneError(f"{where}: expected true or false, got {value!r}")
+        return value
+    raise TypeError(f"unsupported field type {typ!r} at {where}")  # a bug, not bad input
+
+
+def from_table(cls: type, table: dict, where: str):
+    """Build dataclass ``cls`` from a TOML table, naming ``where`` in every error."""
+    if not isinstance(table, dict):
+        raise SceneError(f"{where}: expected a table, got {table!r}")
+    hints = typing.get_type_hints(cls)
+    known = [f.name for f in fields(cls)]
+    for key in table:
+        if key not in known:
+            raise SceneError(f"{where}: unknown key {key!r} (known: {', '.join(known)})")
+    kwargs = {k: _coerce(v, hints[k], f"{where} {k}") for k, v in table.items()}
+    try:
+        return cls(**kwargs)
+    except (ValueError, TypeError) as exc:
+        raise SceneError(f"{where}: {exc}") from None
+
+
+def parse_scene(text: str, default_name: str, origin: str) -> Scene:
+    """A :class:`Scene` from TOML text; ``origin`` names the file in error messages."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{origin}: invalid TOML: {exc}") from None
+    top = {"name", "description", "model", *SECTIONS}
+    for key in data:
+        if key not in top:
+            raise SceneError(f"{origin}: unknown key {key!r} (known: {', '.join(sorted(top))})")
+    name = data.get("name", default_name)
+    description = data.get("description", "")
+    if not isinstance(name, str) or not name or "/" in name:
+        raise SceneError(f"{origin}: name must be a non-empty string without '/', got {name!r}")
+    if not isinstance(description, str):
+        raise SceneError(f"{origin}: description must be a string")
+    model_table = dict(data.get("model", {}))
+    kind = model_table.pop("kind", "discrete")
+    if kind not in MODEL_KINDS:
+        raise SceneError(f"{origin} [model] kind: unknown model {kind!r} (known: {', '.join(MODEL_KINDS)})")
+    model = from_table(MODEL_KINDS[kind], model_table, f"{origin} [model]")
+    sections = {
+        key: from_table(cls, data[key], f"{origin} [{key}]") for key, cls in SECTIONS.items() if key in data
+    }
+    n = model.system().n
+    init = sections.get("initial", InitialSpec())
+    for key in ("x0_m", "v0_m_s"):
+        if len(getattr(init, key)) != n:
+            raise SceneError(f"{origin} [initial] {key}: needs {n} values, got {len(getattr(init, key))}")
+    dof_names = model.system().dof_names
+    spec = sections.get("spectrogram")
+    if spec is not None and spec.dof not in dof_names:
+        raise SceneError(f"{origin} [spectrogram] dof: unknown DOF {spec.dof!r} (known: {', '.join(dof_names)})")
+    sym = sections.get("symmetry")
+    if sym is not None and any(d not in dof_names for d in sym.dofs):
+        raise SceneError(f"{origin} [symmetry] dofs: unknown DOF in {sym.dofs!r}")
+    if ("spectrogram" in sections or "symmetry" in sections) and "ringdown" not in sections:
+        raise SceneError(f"{origin}: [spectrogram] and [symmetry] need a [ringdown] table")
+    return Scene(name=name, description=description, model_kind=kind, model=model, source=text, **sections)
+
+
+# -- built-in scenes ---------------------------------------------------------------------
+def builtin_names() -> list[str]:
+    """Names of the scenes shipped with the package, sorted."""
+    folder = resources.files("bearingshaft") / "scenes"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def load_scene(name_or_path: str) -> Scene:
+    """A built-in scene by name, or a scene from a TOML file path."""
+    path = Path(name_or_path)
+    if path.suffix == ".toml" or path.exists():
+        try:
+            text = path.read_text(encoding="utf-8")
+        except OSError as exc:
+            raise SceneError(f"{name_or_path}: cannot read scene file ({exc.strerror})") from None
+        return parse_scene(text, path.stem, str(path))
+    if name_or_path not in builtin_names():
+        raise SceneError(
+            f"unknown scene {name_or_path!r}: not a file, and no built-in scene has that name "
+            f"(built-in: {', '.join(builtin_names())})"
+        )
+    text = (resources.files("bearingshaft") / "scenes" / f"{name_or_path}.toml").read_text(encoding="utf-8")
+    return parse_scene(text, name_or_path, f"scene {name_or_path}")
+
+
+__all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "builtin_names", "from_table"]

@@ -1,0 +1,1 @@
+"""One module per pipeline stage: each reads a scene and writes its files."""
