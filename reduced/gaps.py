@@ -126,6 +126,16 @@ class GapSystem:
         return kin + lin + 0.5 * (pen**2) @ self.k
 
     # -- linear contact states ---------------------------------------------------------
+    def contact_state(self, x: np.ndarray, v: np.ndarray, atol: float = 0.0) -> np.ndarray:
+        """(m,) bool, which stops are closed at (x, v).
+
+        A stop within ``atol`` of its threshold counts as closed when it is closing
+        (penetration rate > 0): this settles stops that cross at the same instant.
+        """
+        pen = self.penetration(x)
+        rate = self.side * (self.B @ np.asarray(v))
+        return (pen > atol) | ((np.abs(pen) <= atol) & (rate > 0.0))
+
     def state_matrices(self, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(K_s, F_s): with the stops in ``active`` closed, M x'' + C x' + K_s x = F_s."""
         Ks = self.K.copy()

@@ -82,3 +82,55 @@ def frequency_from_energy(p: DiscreteParams, energy_J: np.ndarray, *, paper: boo
     """Hz, frequency of NNM 2 at total energy E (exact unless ``paper=True``)."""
     x0 = amplitude_from_energy(p, energy_J)
     return 1.0 / period_from_amplitude(p, x0, paper=paper)
+
+
+def period_by_integration(p: DiscreteParams, x0: float, rtol: float = 1e-13) -> float:
+    """s, period of NNM 2 measured by integrating the full Eq. (9) with DOP853.
+
+    Starts undamped from x = [x0, 0, -x0], v = 0 and integrates leg by leg, restarting at
+    every stop crossing (so each leg is smooth), until x1' next crosses zero from above
+    after a minimum of x1 (one full period). Independent of the closed form above and of
+    the event-driven integrator. SciPy looks for events only at step ends, so a contact
+    shorter than a step would be missed: the step is capped at 0.05 / omega_closed, which
+    resolves contacts down to x0 = (1 + 1e-6) g.
+    """
+    from dataclasses import replace
+
+    from scipy.integrate import solve_ivp
+
+    system = replace(p, c=0.0).system()
+    n = system.n
+    Minv = np.linalg.inv(system.M)
+    z = np.array([x0, 0.0, -x0, 0.0, 0.0, 0.0])
+    active = system.penetration(z[:n]) > 0.0
+    w_guess = 2.0 * np.pi / period_from_amplitude(p, x0)
+    t0, t_end = 0.0, 3.0 * 2.0 * np.pi / w_guess
+    passed_minimum = False
+    max_step = 0.05 / system.omega_max()
+    while True:
+        Ks, Fs = system.state_matrices(active)
+
+        def rhs(t, y, Ks=Ks, Fs=Fs):
+            return np.concatenate([y[n:], Minv @ (Fs - Ks @ y[:n])])
+
+        events = []
+        for j in range(system.m):
+            ev = lambda t, y, j=j: system.penetration(y[:n])[j]  # noqa: E731
+            ev.terminal, ev.direction = True, (-1.0 if active[j] else 1.0)
+            events.append(ev)
+        turn = lambda t, y: y[n]  # noqa: E731  x1' = 0
+        turn.terminal, turn.direction = True, (-1.0 if passed_minimum else 1.0)
+        events.append(turn)
+        sol = solve_ivp(rhs, (t0, t_end), z, method="DOP853", rtol=rtol, atol=rtol * p.g,
+                        events=events, max_step=max_step)
+        if sol.status != 1:
+            raise RuntimeError(f"no period found by t = {t_end:.4g} s ({sol.message})")
+        times = [e[0] if e.size else np.inf for e in sol.t_events]
+        je = int(np.argmin(times))
+        t0, z = times[je], sol.y_events[je][0]
+        if je == system.m:
+            if passed_minimum:
+                return t0
+            passed_minimum = True
+        else:
+            active = system.contact_state(z[:n], z[n:], atol=1e-9 * p.g)
