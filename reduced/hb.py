@@ -1,0 +1,402 @@
+"""Harmonic balance (HB) for M x'' + C x' + K x + f_nl(x) = 0 with alternating frequency/time.
+
+Layer 1 of the three-layer design (NLvib's ``HB_residual``): residuals with analytic
+Jacobians. Layer 2 is :func:`newton` (below), layer 3 :mod:`reduced.continuation`.
+
+Ansatz (real Fourier series in the phase tau = omega t, H harmonics)::
+
+    x(tau) = c_0 + sum_{k=1..H} [ c_k cos(k tau) + s_k sin(k tau) ],    c_k, s_k in R^n.
+
+**Layout of the coefficient vector X** (length n (2H + 1), harmonic-major)::
+
+    X.reshape(2H + 1, n) = [c_0; c_1; s_1; c_2; s_2; ...; c_H; s_H]
+
+so row ``h`` holds harmonic ``(h + 1) // 2``, a cosine for odd h, a sine for even h > 0.
+Every operator that acts on a single harmonic is a Kronecker product ``kron(D, A)`` of a
+(2H+1)x(2H+1) harmonic matrix D and an n x n structural matrix A.
+
+Galerkin projection onto the same basis gives (paper, Eq. 4)
+
+    R(X, omega) = [ kron(I, K) + omega^2 kron(Nab^2, M) + omega kron(Nab, C) ] X + F(X) = 0,
+
+with Nab the derivative operator (d/dtau of cos(k tau) is -k sin(k tau); Nab^2 = -k^2 on
+harmonic k) and F the Fourier
+coefficients of f_nl(x(tau)). Alternating frequency/time (AFT, Cameron & Griffin 1989):
+x is synthesised at N equally spaced phases, f_nl evaluated there, and projected back::
+
+    x_i = sum_h E[i, h] X_h,      F_h = sum_i P[h, i] f(x_i),     P E = I  (N > 2H),
+
+and dF/dX = sum_r kron(P diag(w_r) E, Q_r) when the force Jacobian at each sample is
+written df/dx(x_i) = sum_r w_r(x_i) Q_r (for a gap system, r runs over the stops,
+w_r = k_r [stop r closed] and Q_r = B_r^T B_r), exactly the derivative of the discrete
+AFT map wherever no sample sits on a kink.
+
+**How many samples.** For a polynomial force of degree d, N >= (d + 1) H + 1 makes the
+AFT projection exact (4H + 1 for a cubic). A gap force is not polynomial: f(x(t)) has a
+kink wherever a stop opens or closes, its harmonics decay only like k^-2 and the
+trapezoidal projection of a kinked function errs by O(N^-2) whatever H is; the contact
+pulse near grazing is also much shorter than the period. :func:`default_samples` takes
+N = 2^ceil(log2(32 (2H + 1))): enough that AFT error stays below the truncation error of
+H harmonics in the convergence study (hb_convergence.csv shows both).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.linalg import lu_factor, lu_solve
+
+from reduced.gaps import GapSystem
+
+SAMPLES_PER_COEFFICIENT = 32  # AFT samples per Fourier coefficient (gap forces need >> 2)
+
+
+class NewtonError(RuntimeError):
+    """Newton's method did not converge (message: iterations, residual, step)."""
+
+
+def default_samples(H: int) -> int:
+    """AFT samples per period for H harmonics with a gap force: a power of 2, >= 32 (2H+1)."""
+    return int(2 ** math.ceil(math.log2(SAMPLES_PER_COEFFICIENT * (2 * H + 1))))
+
+
+# -- nonlinear forces in AFT form ------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class GapForce:
+    """f_nl(x) = B^T f(B x) of a :class:`GapSystem`; df/dx = sum_j k_j [closed_j] B_j^T B_j."""
+
+    system: GapSystem
+
+    @property
+    def Q(self) -> np.ndarray:
+        """(m, n, n) the outer products B_j^T B_j."""
+        B = self.system.B
+        return np.einsum("ji,jk->jik", B, B)
+
+    def __call__(self, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Forces (N, n) and weights w (N, m) at the samples xs (N, n)."""
+        s = self.system
+        d = xs @ s.B.T - s.offset
+        closed = s.side * d > 0.0
+        w = np.where(closed, s.k, 0.0)
+        return (w * d) @ s.B, w
+
+
+@dataclass(frozen=True, eq=False)
+class CubicForce:
+    """f_nl(x) = gamma x^3 on every DOF (for tests: the Duffing oscillator)."""
+
+    gamma: np.ndarray  # N/m^3, (n,)
+
+    @property
+    def Q(self) -> np.ndarray:
+        n = self.gamma.size
+        Q = np.zeros((n, n, n))
+        Q[np.arange(n), np.arange(n), np.arange(n)] = 1.0
+        return Q
+
+    def __call__(self, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return self.gamma * xs**3, 3.0 * self.gamma * xs**2
+
+
+# -- the harmonic balance operator ---------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class HarmonicBalance:
+    """HB discretisation of M x'' + C x' + K x + f_nl(x) = 0 with H harmonics, N AFT samples.
+
+    ``force(xs) -> (f (N, n), w (N, r))`` and ``force.Q`` (r, n, n) give the nonlinear force
+    and its Jacobian df/dx = sum_r w_r Q_r at the samples (see the module docstring).
+    """
+
+    M: np.ndarray
+    K: np.ndarray
+    force: object
+    H: int
+    N: int
+    C: np.ndarray | None = None  # N s/m; None for the conservative (NNM) problem
+    E: np.ndarray = field(init=False, repr=False)  # (N, 2H+1) synthesis
+    P: np.ndarray = field(init=False, repr=False)  # (2H+1, N) projection
+    Nab: np.ndarray = field(init=False, repr=False)  # (2H+1, 2H+1) d/dtau
+    Qr: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        H, N = self.H, self.N
+        if H < 0:
+            raise ValueError(f"H must be >= 0, got {H}")
+        if N <= 2 * H:
+            raise ValueError(f"N must exceed 2H = {2 * H} for the projection to invert synthesis, got {N}")
+        tau = 2.0 * np.pi * np.arange(N) / N
+        E = np.ones((N, 2 * H + 1))
+        P = np.full((2 * H + 1, N), 1.0 / N)
+        Nab = np.zeros((2 * H + 1, 2 * H + 1))
+        for k in range(1, H + 1):
+            E[:, 2 * k - 1] = np.cos(k * tau)
+            E[:, 2 * k] = np.sin(k * tau)
+            P[2 * k - 1] = 2.0 / N * np.cos(k * tau)
+            P[2 * k] = 2.0 / N * np.sin(k * tau)
+            # x = c cos + s sin  ->  dx/dtau = (k s) cos + (-k c) sin
+            Nab[2 * k - 1, 2 * k] = k
+            Nab[2 * k, 2 * k - 1] = -k
+        object.__setattr__(self, "E", E)
+        object.__setattr__(self, "P", P)
+        object.__setattr__(self, "Nab", Nab)
+        object.__setattr__(self, "Qr", np.asarray(self.force.Q, float))
+
+    @classmethod
+    def for_system(cls, system: GapSystem, H: int, N: int | None = None, damped: bool = False):
+        """HB of a gap system (conservative unless ``damped``)."""
+        return cls(system.M, system.K, GapForce(system), H, N or default_samples(H),
+                   system.C if damped else None)
+
+    # -- sizes and helpers ----------------------------------------------------------------
+    @property
+    def n(self) -> int:
+        return self.M.shape[0]
+
+    @property
+    def size(self) -> int:
+        """Length of X: n (2H + 1)."""
+        return self.n * (2 * self.H + 1)
+
+    def unpack(self, X: np.ndarray) -> np.ndarray:
+        """(2H+1, n) rows [c_0, c_1, s_1, ..., c_H, s_H] from the flat X (module docstring)."""
+        return np.asarray(X).reshape(2 * self.H + 1, self.n)
+
+    def harmonic_numbers(self) -> np.ndarray:
+        """(2H+1,) harmonic k of each row of the unpacked X."""
+        return (np.arange(2 * self.H + 1) + 1) // 2
+
+    def pack_modes(self, amplitudes: dict[int, np.ndarray]) -> np.ndarray:
+        """X with cosine coefficients {k: c_k}; the rest zero."""
+        Xm = np.zeros((2 * self.H + 1, self.n))
+        for k, c in amplitudes.items():
+            Xm[0 if k == 0 else 2 * k - 1] = c
+        return Xm.ravel()
+
+    def time_series(self, X: np.ndarray, omega: float | None = None, N: int | None = None):
+        """x at N phases (N, n); with ``omega``, also the velocity dx/dt (N, n)."""
+        Xm = self.unpack(X)
+        if N is None:
+            E = self.E
+        else:
+            E = HarmonicBalance(self.M, self.K, self.force, self.H, N).E
+        x = E @ Xm
+        if omega is None:
+            return x
+        return x, omega * (E @ (self.Nab @ Xm))
+
+    def linear_operator(self, omega: float) -> np.ndarray:
+        """A(omega) = kron(I, K) + omega^2 kron(Nab^2, M) + omega kron(Nab, C)."""
+        I = np.eye(2 * self.H + 1)
+        A = np.kron(I, self.K) + omega**2 * np.kron(self.Nab @ self.Nab, self.M)
+        if self.C is not None:
+            A += omega * np.kron(self.Nab, self.C)
+        return A
+
+    # -- AFT ------------------------------------------------------------------------------
+    def aft(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """F(X) (size,) and dF/dX (size, size) by alternating frequency/time."""
+        xs = self.E @ self.unpack(X)
+        f, w = self.force(xs)
+        F = (self.P @ f).ravel()
+        dF = np.zeros((self.size, self.size))
+        for r in range(self.Qr.shape[0]):
+            wr = w[:, r]
+            if not np.any(wr):
+                continue
+            G = (self.P * wr) @ self.E
+            dF += np.kron(G, self.Qr[r])
+        return F, dF
+
+    def residual(self, X: np.ndarray, omega: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """R(X, omega) (size,), dR/dX (size, size), dR/domega (size,)  (Eq. 4)."""
+        X = np.asarray(X, float)
+        F, dF = self.aft(X)
+        A = self.linear_operator(omega)
+        dA = 2.0 * omega * np.kron(self.Nab @ self.Nab, self.M)
+        if self.C is not None:
+            dA += np.kron(self.Nab, self.C)
+        return A @ X + F, A + dF, dA @ X
+
+    # -- post-processing ------------------------------------------------------------------
+    def energy(self, X: np.ndarray, omega: float, potential=None) -> float:
+        """J, mean over the AFT samples of T + V (constant along an exact conservative orbit).
+
+        ``potential(xs) -> (N,)`` is the nonlinear potential; by default that of a
+        :class:`GapForce` (zero otherwise).
+        """
+        x, v = self.time_series(X, omega)
+        kin = 0.5 * np.einsum("ij,jk,ik->i", v, self.M, v)
+        lin = 0.5 * np.einsum("ij,jk,ik->i", x, self.K, x)
+        if potential is None:
+            if isinstance(self.force, GapForce):
+                s = self.force.system
+                pen = np.maximum(s.penetration(x), 0.0)
+                nl = 0.5 * (pen**2) @ s.k
+            elif isinstance(self.force, CubicForce):
+                nl = 0.25 * (x**4) @ self.force.gamma
+            else:
+                nl = 0.0
+        else:
+            nl = potential(x)
+        return float(np.mean(kin + lin + nl))
+
+    def hill_matrices(self, X: np.ndarray, omega: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(J0, J1, J2) of Hill's quadratic eigenproblem (J2 lam^2 + J1 lam + J0) p = 0.
+
+        A perturbation e^{lam t} p(tau) of the periodic solution, p in the HB basis, obeys
+        J0 = dR/dX, J1 = 2 omega kron(Nab, M) + kron(I, C), J2 = kron(I, M).
+        """
+        _, J0, _ = self.residual(X, omega)
+        I = np.eye(2 * self.H + 1)
+        J1 = 2.0 * omega * np.kron(self.Nab, self.M)
+        if self.C is not None:
+            J1 += np.kron(I, self.C)
+        return J0, J1, np.kron(I, self.M)
+
+
+# -- nonlinear modes: the NLvib NMA formulation -----------------------------------------------
+@dataclass(frozen=True, eq=False)
+class NNMResidual:
+    """Residual of a conservative nonlinear normal mode for continuation in log amplitude.
+
+    Unknowns ``y = [Psi (size), w, d, log10 a]`` (NLvib's nonlinear modal analysis,
+    Krack & Gross 2019, Sec. 4.4):
+
+    - ``X = a Psi`` are the HB coefficients (layout in the module docstring), ``a`` the
+      modal amplitude (sqrt(kg) m: the mass-norm of the fundamental harmonic),
+    - ``omega = w omega_ref`` (rad/s),
+    - ``d`` an artificial damping coefficient, ``delta = d omega_ref``: the term
+      ``-delta M x'`` makes the equations regular (in a conservative system the projection
+      onto x' vanishes identically, so without it dR/dy is rank deficient); it is zero on
+      every solution and serves as a check.
+
+    Equations (size + 2), rows scaled by 1 / omega_ref^2 so they are O(Psi)::
+
+        [ A(omega) Psi + F(a Psi) / a - delta omega kron(Nab, M) Psi ] / omega_ref^2 = 0
+        Psi_{s_1}[ref] = 0                                   (phase: sine of DOF ref)
+        Psi_{c_1}^T M Psi_{c_1} + Psi_{s_1}^T M Psi_{s_1} - 1 = 0   (amplitude normalisation)
+    """
+
+    hb: HarmonicBalance
+    omega_ref: float  # rad/s
+    ref: int  # DOF whose fundamental sine coefficient fixes the phase
+
+    @property
+    def size(self) -> int:
+        return self.hb.size + 3
+
+    def split(self, y: np.ndarray) -> tuple[np.ndarray, float, float, float]:
+        """Psi, omega [rad/s], delta [1/s], a  from y."""
+        nX = self.hb.size
+        return y[:nX], y[nX] * self.omega_ref, y[nX + 1] * self.omega_ref, 10.0 ** y[nX + 2]
+
+    def X_omega(self, y: np.ndarray) -> tuple[np.ndarray, float]:
+        """HB coefficients X = a Psi [m] and omega [rad/s] of the point y."""
+        Psi, omega, _, a = self.split(y)
+        return a * Psi, omega
+
+    def __call__(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """R (size+2,) and dR/dy (size+2, size+3)."""
+        hb, wr = self.hb, self.omega_ref
+        n, nX = hb.n, hb.size
+        Psi, omega, delta, a = self.split(y)
+        F, dF = hb.aft(a * Psi)
+        A = hb.linear_operator(omega)
+        DM = np.kron(hb.Nab, hb.M)
+        N2M = np.kron(hb.Nab @ hb.Nab, hb.M)
+        R = np.empty(nX + 2)
+        J = np.zeros((nX + 2, nX + 3))
+        R[:nX] = (A @ Psi + F / a - delta * omega * (DM @ Psi)) / wr**2
+        J[:nX, :nX] = (A + dF - delta * omega * DM) / wr**2
+        dA_dw = 2.0 * omega * N2M + (np.kron(hb.Nab, hb.C) if hb.C is not None else 0.0)
+        J[:nX, nX] = (dA_dw @ Psi - delta * (DM @ Psi)) / wr
+        J[:nX, nX + 1] = -omega * (DM @ Psi) / wr
+        J[:nX, nX + 2] = np.log(10.0) * (dF @ Psi - F / a) / wr**2
+        # phase: the fundamental sine coefficient of DOF ref
+        i_s1 = 2 * n + self.ref
+        R[nX] = Psi[i_s1]
+        J[nX, i_s1] = 1.0
+        # normalisation of the fundamental
+        c1, s1 = Psi[n:2 * n], Psi[2 * n:3 * n]
+        R[nX + 1] = c1 @ hb.M @ c1 + s1 @ hb.M @ s1 - 1.0
+        J[nX + 1, n:2 * n] = 2.0 * hb.M @ c1
+        J[nX + 1, 2 * n:3 * n] = 2.0 * hb.M @ s1
+        return R, J
+
+    def start(self, phi: np.ndarray, omega: float, log10a: float) -> np.ndarray:
+        """Initial y from a mass-normalised linear mode shape phi and its omega."""
+        Psi = self.hb.pack_modes({1: phi / math.sqrt(phi @ self.hb.M @ phi)})
+        return np.concatenate([Psi, [omega / self.omega_ref, 0.0, log10a]])
+
+    def energy(self, y: np.ndarray) -> float:
+        """J, mean total energy of the HB orbit at y."""
+        X, omega = self.X_omega(y)
+        return self.hb.energy(X, omega)
+
+
+# -- Newton ---------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class NewtonResult:
+    """Converged point of :func:`newton`."""
+
+    y: np.ndarray
+    residual_norm: float
+    n_iter: int
+    jacobian: np.ndarray  # at y (square, as solved)
+
+
+def newton(fun, y0: np.ndarray, *, tol: float = 1e-10, max_iter: int = 20,
+           max_step: float | None = None) -> NewtonResult:
+    """Solve fun(y) = 0, ``fun(y) -> (R, dR/dy)`` square, by Newton's method.
+
+    Each step is halved (up to 6 times) while it does not lower ||R||_2: with a gap force
+    the AFT residual is piecewise smooth, and a full step from one side of a kink can
+    overshoot into a cycle. Converged when ``||dy||_inf <= tol (1 + ||y||_inf)`` with a
+    small residual, or ``||R||_inf`` is at the round-off level of the first residual.
+    Raises :class:`NewtonError` after ``max_iter`` iterations, on a singular Jacobian,
+    a non-finite residual, or a step longer than ``max_step``.
+    """
+    y = np.array(y0, dtype=float)
+    R, J = fun(y)
+    r0 = float(np.max(np.abs(R)))
+    rtiny = 1e3 * np.finfo(float).eps * max(r0, 1.0)
+    step = np.inf
+    for it in range(1, max_iter + 1):
+        if not np.all(np.isfinite(R)) or not np.all(np.isfinite(J)):
+            raise NewtonError(f"non-finite residual or Jacobian at iteration {it}")
+        try:
+            lu = lu_factor(J, check_finite=False)
+            dy = -lu_solve(lu, R, check_finite=False)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            raise NewtonError(f"singular Jacobian at iteration {it}: {exc}") from None
+        if not np.all(np.isfinite(dy)):
+            raise NewtonError(f"singular Jacobian at iteration {it}")
+        step = float(np.max(np.abs(dy)))
+        if max_step is not None and step > max_step:
+            raise NewtonError(f"Newton step {step:.3g} exceeds {max_step:.3g} at iteration {it}")
+        r2 = float(R @ R)
+        lam = 1.0
+        for _ in range(6):
+            Rn, Jn = fun(y + lam * dy)
+            if np.all(np.isfinite(Rn)) and float(Rn @ Rn) < r2:
+                break
+            lam *= 0.5
+        y = y + lam * dy
+        R, J = Rn, Jn
+        rn = float(np.max(np.abs(R)))
+        if rn <= rtiny or (lam == 1.0 and step <= tol * (1.0 + float(np.max(np.abs(y))))):
+            if rn > 1e-6 * max(r0, 1.0) and rn > 1e-8:
+                raise NewtonError(f"step converged but residual {rn:.3g} is not small")
+            return NewtonResult(y, rn, it, J)
+    raise NewtonError(
+        f"no convergence in {max_iter} iterations: |R| = {float(np.max(np.abs(R))):.3g}, last step {step:.3g}"
+    )
+
+
+__all__ = [
+    "NewtonError", "NewtonResult", "newton", "HarmonicBalance", "NNMResidual", "GapForce",
+    "CubicForce", "default_samples",
+]

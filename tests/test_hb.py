@@ -1,0 +1,175 @@
+"""Harmonic balance: Jacobians, the Duffing backbone, NNM 2 against its exact relation."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.special import ellipk
+
+from reduced import nnm2
+from reduced.backbones import hb_backbones, nnm_branch
+from reduced.discrete import DiscreteParams, linear_modes
+from reduced.gaps import GapSystem
+from reduced.hb import (
+    CubicForce,
+    HarmonicBalance,
+    NewtonError,
+    NNMResidual,
+    default_samples,
+    newton,
+)
+
+P = DiscreteParams()
+SYS = P.system()
+
+
+def _fd_jacobian(fun, y, rel=1e-7):
+    R0 = fun(y)[0]
+    J = np.zeros((R0.size, y.size))
+    for i in range(y.size):
+        h = rel * max(1.0, abs(y[i]))
+        e = np.zeros(y.size)
+        e[i] = h
+        J[:, i] = (fun(y + e)[0] - fun(y - e)[0]) / (2 * h)
+    return J
+
+
+@pytest.mark.parametrize("H", [1, 3, 7])
+def test_residual_jacobian_matches_finite_differences(H):
+    # a generic point in contact: random coefficients of a few gaps, well off every kink
+    rng = np.random.default_rng(H)
+    hb = HarmonicBalance.for_system(SYS, H)
+    X = 5 * P.g * rng.standard_normal(hb.size) / np.arange(1, hb.size + 1)
+    omega = 900.0
+    R, J, dRdw = hb.residual(X, omega)
+    Jf = _fd_jacobian(lambda z: (hb.residual(z[:-1], z[-1])[0], None), np.append(X, omega), rel=1e-9)
+    # central differences on a piecewise-linear force: exact unless a sample crosses a kink
+    # within +-h; the kinks are isolated so almost every column agrees to round-off
+    scale = np.abs(J).max()
+    err = np.abs(np.column_stack([J, dRdw]) - Jf) / scale
+    assert np.median(err) < 1e-8
+    assert np.mean(err < 1e-6) > 0.98, f"{np.mean(err >= 1e-6):.3f} of entries differ"
+
+
+def test_nnm_residual_jacobian_matches_finite_differences():
+    hb = HarmonicBalance.for_system(SYS, 5)
+    lin = linear_modes(SYS)
+    res = NNMResidual(hb, float(lin.omega[1]), 0)
+    rng = np.random.default_rng(1)
+    y = res.start(lin.phi[:, 1], float(lin.omega[1]) * 3.0, math.log10(0.01))
+    y[:-3] += 0.05 * rng.standard_normal(hb.size)
+    y[-2] = 0.01
+    R, J = res(y)
+    Jf = _fd_jacobian(res, y, rel=1e-8)
+    err = np.abs(J - Jf) / np.abs(J).max()
+    assert np.mean(err < 1e-6) > 0.98, f"{np.mean(err >= 1e-6):.3f} of entries differ"
+
+
+def test_projection_inverts_synthesis():
+    hb = HarmonicBalance.for_system(SYS, 4, 9)  # the minimal N = 2H + 1
+    assert np.allclose(hb.P @ hb.E, np.eye(9), atol=1e-13)
+    with pytest.raises(ValueError):
+        HarmonicBalance.for_system(SYS, 4, 8)
+
+
+def test_default_samples_grow_with_harmonics():
+    assert default_samples(1) >= 96 and default_samples(50) >= 32 * 101
+    assert all(default_samples(h) > 4 * h + 1 for h in (1, 5, 25, 50))
+
+
+def _duffing_at_amplitude(H, A, N=None):
+    """omega of x'' + x + x^3 = 0 with x(0) = A by HB (H harmonics)."""
+    hb = HarmonicBalance(np.eye(1), np.eye(1), CubicForce(np.ones(1)), H, N or (4 * H + 1))
+    nX = hb.size
+    DM = np.kron(hb.Nab, hb.M)
+    xs0 = hb.E[0]  # synthesis row at tau = 0
+
+    def fun(y):
+        X, w, d = y[:nX], y[nX], y[nX + 1]
+        R, J, dw = hb.residual(X, w)
+        Rf = np.concatenate([R - d * w * (DM @ X), [X[2] if H else 0.0], [xs0 @ X - A]])
+        Jf = np.zeros((nX + 2, nX + 2))
+        Jf[:nX, :nX] = J - d * w * DM
+        Jf[:nX, nX] = dw - d * (DM @ X)
+        Jf[:nX, nX + 1] = -w * (DM @ X)
+        Jf[nX, 2] = 1.0
+        Jf[nX + 1, :nX] = xs0
+        return Rf, Jf
+
+    y = np.zeros(nX + 2)
+    y[1] = A
+    y[nX] = math.sqrt(1 + 0.75 * A * A)
+    return newton(fun, y, tol=1e-13).y[nX]
+
+
+@pytest.mark.parametrize("A", [0.5, 1.0, 2.0])
+def test_duffing_one_harmonic_is_the_textbook_backbone(A):
+    # with one harmonic and N >= 4H + 1 the AFT projection of x^3 is exact, so
+    # omega^2 = omega_0^2 + 3/4 gamma A^2 holds to round-off
+    w = _duffing_at_amplitude(1, A)
+    assert w == pytest.approx(math.sqrt(1 + 0.75 * A * A), rel=1e-13)
+
+
+@pytest.mark.parametrize("A, exact", [(0.5, 1.0891581788), (1.0, 1.3177760650), (2.0, 1.9760163641)])
+def test_duffing_converged_matches_elliptic_integral(A, exact):
+    m = A * A / (2 * (1 + A * A))
+    assert exact == pytest.approx(math.pi * math.sqrt(1 + A * A) / (2 * ellipk(m)), abs=1e-10)
+    # the harmonics of the Duffing solution decay geometrically (H = 9 is still 5e-8 off
+    # at A = 2, H = 15 is converged to 3e-11): compare at the 1e-10 of the printed values
+    w = _duffing_at_amplitude(15, A)
+    assert w == pytest.approx(exact, abs=1e-10)
+
+
+def test_newton_raises_named_error():
+    with pytest.raises(NewtonError):
+        newton(lambda y: (np.array([y[0] ** 2 + 1.0]), np.array([[2 * y[0]]])), np.array([0.3]), max_iter=15)
+
+
+def test_linear_system_returns_linear_modes_at_every_energy():
+    # no stop can ever close (gap 1 m): every NNM is its linear mode, at any energy
+    s0 = SYS
+    s = GapSystem(s0.M, s0.C, s0.K, s0.B, s0.k, s0.offset * 1e6, s0.side, s0.tip, s0.dof_names, s0.stop_names)
+    lin = linear_modes(s)
+    for mode in range(3):
+        b = nnm_branch(s, mode, H=3, energy_max_J=1e3, energy_start_J=1e-3)
+        assert b.energy_J[-1] >= 1e3 and b.energy_J[0] < 1e-2
+        assert np.allclose(b.freq_hz, lin.freq_hz[mode], rtol=1e-12, atol=0.0)
+
+
+def test_nnm2_one_harmonic_tracks_exact_relation():
+    b = nnm_branch(SYS, 1, H=1)
+    assert b.branch.status == "stop" and b.energy_J[-1] >= 1e5
+    exact = nnm2.frequency_from_energy(P, b.energy_J)
+    err = np.abs(b.freq_hz / exact - 1.0)
+    # below grazing the mode is linear: HB is exact
+    low = b.energy_J < 0.99 * P.grazing_energy_nnm2
+    assert np.max(err[low]) < 1e-12
+    # one harmonic: about 12 % off just above grazing (short contact pulses), < 1 % at 1e4 J
+    assert np.max(err) < 0.15
+    assert np.max(err[b.energy_J > 1e4]) < 0.01
+
+
+@pytest.mark.xfail(reason="H > 1 continuation through grazing: work in progress", strict=False)
+def test_nnm2_converges_with_harmonics():
+    errs = []
+    for H in (1, 5, 15):
+        b = nnm_branch(SYS, 1, H=H, energy_max_J=1e2)
+        exact = nnm2.frequency_from_energy(P, b.energy_J)
+        errs.append(np.max(np.abs(b.freq_hz / exact - 1.0)[b.energy_J > 2 * P.grazing_energy_nnm2]))
+    assert errs[0] > errs[1] > errs[2], errs
+    assert errs[2] < 0.2 * errs[0], errs
+
+
+def test_hb_backbones_fig2():
+    bb = hb_backbones(SYS, harmonics=1, energy_max_J=1e5)
+    assert list(bb) == ["NNM 1", "NNM 2", "NNM 3"]
+    lo = linear_modes(SYS, "open").freq_hz
+    hi = linear_modes(SYS, "closed").freq_hz
+    for i, (E, f) in enumerate(bb.values()):
+        assert np.all(np.diff(E) >= 0) and E[-1] >= 1e5
+        assert f[0] == pytest.approx(lo[i], rel=1e-12)
+        # saturates toward the closed-gap frequency (within 0.5 % at 1e5 J)
+        assert f[-1] == pytest.approx(hi[i], rel=5e-3)
+        assert np.all(f <= hi[i] * (1 + 1e-9)) and np.all(f >= lo[i] * (1 - 1e-9))
