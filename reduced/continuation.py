@@ -172,7 +172,7 @@ def continue_branch(
             n_rej += 1
             ds *= 0.5
             if ds < ds_min:
-                corner = _corner_step(fun, y, t, watch, corner_ds, tol, max_iter, reject)
+                corner = _corner_step(fun, y, t, watch, param, corner_ds, tol, max_iter, reject)
                 if corner is None:
                     status = "min_step"
                 else:
@@ -203,7 +203,7 @@ def continue_branch(
                   time.perf_counter() - t_wall, data, corners)
 
 
-def _corner_step(fun, y, t, coords, h, tol, max_iter, reject):
+def _corner_step(fun, y, t, coords, param, h, tol, max_iter, reject):
     """Leave a corner the tangent cannot turn: fix one coordinate at y_c +- h and correct.
 
     Past a corner sharper than 90 degrees (HB with H > 1 at grazing: the discretised
@@ -214,6 +214,8 @@ def _corner_step(fun, y, t, coords, h, tol, max_iter, reject):
     """
     p1 = y.size
     for c in coords:
+        if c == param:
+            continue
         for sgn in (1.0, -1.0):
             for hh in (h, 0.1 * h, 0.01 * h):
                 target = y[c] + sgn * hh
@@ -224,20 +226,25 @@ def _corner_step(fun, y, t, coords, h, tol, max_iter, reject):
                     e[c] = 1.0
                     return np.concatenate([R, [z[c] - target]]), np.vstack([J, e])
 
-                guess = y.copy()
-                guess[c] = target
-                try:
-                    res = newton(fixed, guess, tol=tol, max_iter=3 * max_iter)
-                except NewtonError:
-                    continue
-                d = res.y - y
-                if np.linalg.norm(d) < 0.5 * hh or (reject is not None and reject(y, res.y)):
-                    continue
-                _, Jn = fun(res.y)
-                tn = tangent(Jn, d / np.linalg.norm(d))
-                if tn @ t < -0.5:  # back along the branch we came from
-                    continue
-                return res, tn
+                # the last point may sit where the new branch has no foothold (e.g. no
+                # contact yet, so R does not depend on the amplitude): nudge the start
+                # parameter along its tangent sign as well
+                for nudge in (0.0, hh, 10.0 * hh):
+                    guess = y.copy()
+                    guess[c] = target
+                    guess[param] += nudge * (1.0 if t[param] >= 0 else -1.0)
+                    try:
+                        res = newton(fixed, guess, tol=tol, max_iter=3 * max_iter)
+                    except NewtonError:
+                        continue
+                    d = res.y - y
+                    if np.linalg.norm(d) < 0.5 * hh or (reject is not None and reject(y, res.y)):
+                        continue
+                    _, Jn = fun(res.y)
+                    tn = tangent(Jn, d / np.linalg.norm(d))
+                    if tn @ t < -0.5:  # back along the branch we came from
+                        continue
+                    return res, tn
     return None
 
 

@@ -95,7 +95,9 @@ def integrate_dop853(
                 je = int(np.argmin([e[0] if e.size else np.inf for e in sol.t_events]))
                 t0 = float(sol.t_events[je][0])
                 z = sol.y_events[je][0].copy()
+                flipped = not active[je]
                 active = system.contact_state(z[:n], z[n : 2 * n], atol=1e-9 * x_scale)
+                active[je] = flipped  # the stop that fired has crossed, whatever round-off says
                 n_events += 1
                 if progress is not None:
                     progress(t0 / ts[-1])

@@ -133,4 +133,6 @@ def period_by_integration(p: DiscreteParams, x0: float, rtol: float = 1e-13) -> 
                 return t0
             passed_minimum = True
         else:
-            active = system.contact_state(z[:n], z[n:], atol=1e-9 * p.g)
+            flipped = not active[je]
+            active = system.contact_state(z[:n], z[n:], atol=1e-10 * x0)
+            active[je] = flipped  # the stop that fired has crossed, whatever round-off says

@@ -1,0 +1,146 @@
+"""Figures of the discrete-model stages (matplotlib, no screen needed)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from reduced.result import RingdownResult  # noqa: E402
+from reduced.spectrogram import Spectrogram, curve_in_time  # noqa: E402
+
+CURVE_STYLES = ("-", "--", "-.", ":")
+
+
+def ringdown_figure(res: RingdownResult, path: Path, title: str) -> None:
+    """Displacements, energy and energy-balance error against time."""
+    fig, ax = plt.subplots(3, 1, figsize=(9, 8), sharex=True, constrained_layout=True)
+    for i, name in enumerate(res.system.dof_names):
+        ax[0].plot(res.t, res.x[:, i] * 1e3, lw=0.6, label=name)
+    gap = float(np.max(res.system.offset, initial=0.0))
+    if gap > 0:
+        for s in (1, -1):
+            ax[0].axhline(s * gap * 1e3, color="k", lw=0.5, ls=":")
+    ax[0].set_ylabel("displacement [mm]")
+    ax[0].legend(loc="upper right", ncol=3)
+    E = res.energy
+    ax[1].semilogy(res.t, np.maximum(E, 1e-300), label="E(t)")
+    ax[1].semilogy(res.t, np.maximum(res.dissipated, 1e-300), label="dissipated W(t)")
+    ax[1].set_ylabel("energy [J]")
+    ax[1].legend(loc="center right")
+    ax[2].semilogy(res.t, np.abs(E[0] - E - res.dissipated) / max(E[0], 1e-300) + 1e-18)
+    ax[2].set_ylabel("|E0 - E - W| / E0")
+    ax[2].set_xlabel("time [s]")
+    ax[0].set_title(title)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def spectrogram_figure(
+    spec: Spectrogram,
+    energy_t: tuple[np.ndarray, np.ndarray],
+    curves: dict[str, tuple[np.ndarray, np.ndarray]],
+    path: Path,
+    title: str,
+    fmax_hz: float,
+    db_range: float,
+) -> None:
+    """Spectrogram in dB with the NNM frequency-energy curves mapped onto time, f(E(t))."""
+    fig, ax = plt.subplots(figsize=(9, 5.5), constrained_layout=True)
+    keep = spec.freq_hz <= fmax_hz
+    db = 10.0 * np.log10(np.maximum(spec.power[keep], 1e-300))
+    top = float(np.max(db))
+    mesh = ax.pcolormesh(spec.t, spec.freq_hz[keep], db, shading="nearest", cmap="viridis",
+                         vmin=top - db_range, vmax=top, rasterized=True)
+    fig.colorbar(mesh, ax=ax, label="PSD [dB re 1 m^2/Hz]")
+    t_E, E = energy_t
+    colors = ("w", "r", "orange", "magenta", "cyan", "yellow")
+    for i, (label, (E_curve, f_curve)) in enumerate(curves.items()):
+        f_t = curve_in_time(E, E_curve, f_curve)
+        ax.plot(t_E, f_t, color=colors[i % len(colors)], ls=CURVE_STYLES[i % len(CURVE_STYLES)], lw=1.2,
+                label=label)
+    ax.set_ylim(0, fmax_hz)
+    ax.set_xlim(spec.t[0], spec.t[-1])
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("frequency [Hz]")
+    ax.set_title(title)
+    if curves:
+        ax.legend(loc="upper right", fontsize=8, framealpha=0.6)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def symmetry_figure(runs: dict[str, tuple[RingdownResult, float | None]], pair: tuple[int, int],
+                    names: tuple[str, str], path: Path, title: str) -> None:
+    """|x_a - x_b| against time for each method, the tolerance and the break time (Fig. 4)."""
+    fig, ax = plt.subplots(2, 1, figsize=(9, 7), sharex=True, constrained_layout=True)
+    first = next(iter(runs.values()))[0]
+    a, b = pair
+    ax[0].plot(first.t, first.x[:, a] * 1e3, lw=0.6, label=names[0])
+    ax[0].plot(first.t, first.x[:, b] * 1e3, lw=0.6, ls="--", label=names[1])
+    ax[0].set_ylabel(f"displacement [mm] ({first.method})")
+    ax[0].legend(loc="upper right")
+    for i, (method, (res, t_break)) in enumerate(runs.items()):
+        color = f"C{i}"
+        d = np.abs(res.x[:, a] - res.x[:, b])
+        ax[1].semilogy(res.t, d + 1e-30, color=color, lw=0.6, label=f"{method}")
+        ax[1].axhline(res.tolerance, color=color, lw=0.8, ls=":")
+        if t_break is not None:
+            for axis in ax:
+                axis.axvline(t_break, color=color, ls="--", lw=1.0)
+    ax[1].set_ylim(1e-22, None)
+    ax[1].set_ylabel(f"|{names[0]} - {names[1]}| [m]")
+    ax[1].set_xlabel("time [s]")
+    ax[1].legend(loc="lower right", title="dotted: solver tolerance; dashed: break")
+    ax[0].set_title(title)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def nnm2_figure(E: np.ndarray, f_exact: np.ndarray, f_paper: np.ndarray, checks: list[dict],
+                f_open: np.ndarray, f_closed: np.ndarray, path: Path) -> None:
+    """Frequency-energy curve of NNM 2: exact, the paper's Eq. 13, integrated periods."""
+    fig, ax = plt.subplots(figsize=(8, 5), constrained_layout=True)
+    ax.semilogx(E, f_exact, "k-", label="exact (this work)")
+    ax.semilogx(E, f_paper, "r--", label="paper's Eq. 12-14 as printed")
+    if checks:
+        ax.semilogx([c["energy_J"] for c in checks], [c["freq_integrated_hz"] for c in checks], "o",
+                    mfc="none", color="C0", label="DOP853 on Eq. 9 (period)")
+    for f in f_open:
+        ax.axhline(f, color="k", ls=":", lw=0.6)
+    for f in f_closed:
+        ax.axhline(f, color="r", ls=":", lw=0.6)
+    ax.set_ylim(0, 1.1 * max(f_exact.max(), f_closed[1] if len(f_closed) > 1 else 0))
+    ax.set_xlabel("energy [J]")
+    ax.set_ylabel("frequency [Hz]")
+    ax.set_title("NNM 2 frequency-energy relation (dotted: open (black) / closed (red) linear modes)")
+    ax.legend(loc="upper left")
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def work_precision_figure(rows: list[dict], order: float, path: Path, window_s: float) -> None:
+    """Error against run time for each method."""
+    fig, ax = plt.subplots(figsize=(8, 5.5), constrained_layout=True)
+    markers = {"exact": "*", "explicit": "o", "dop853": "s"}
+    for i, method in enumerate(("exact", "explicit", "dop853")):
+        pts = [r for r in rows if r["method"] == method]
+        if not pts:
+            continue
+        label = method + (f" (observed order {order:.2f})" if method == "explicit" else "")
+        ax.loglog([r["runtime_s"] for r in pts], [max(r["error"], 1e-17) for r in pts],
+                  marker=markers[method], ms=9 if method == "exact" else 6, color=f"C{i}", label=label)
+        for r in pts:
+            ax.annotate(str(r["setting"]), (r["runtime_s"], max(r["error"], 1e-17)), fontsize=6,
+                        xytext=(3, 3), textcoords="offset points")
+    ax.set_xlabel("run time [s] (best of repeats)")
+    ax.set_ylabel("max |x - x_ref| / max |x_ref|")
+    ax.set_title(f"Work-precision, discrete-impulse, window 0-{window_s:g} s")
+    ax.legend()
+    ax.grid(True, which="both", lw=0.3)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

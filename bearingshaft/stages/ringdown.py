@@ -1,0 +1,131 @@
+"""Stage ``ringdown``: free response, its spectrogram with NNM overlays, symmetry breaking."""
+
+from __future__ import annotations
+
+import csv
+
+import numpy as np
+from tqdm import tqdm
+
+from bearingshaft import plots
+from bearingshaft.output import StageWriter
+from bearingshaft.scenes import RingdownSpec, Scene
+from reduced.discrete import DiscreteParams, linear_modes
+from reduced.integrate import ringdown
+from reduced.result import RingdownResult
+from reduced.spectrogram import spectrogram
+
+
+class _Bar:
+    """A progress callback (fraction done) drawing a tqdm bar."""
+
+    def __init__(self, desc: str, enabled: bool) -> None:
+        self.bar = tqdm(total=1000, desc=desc, disable=not enabled, leave=False,
+                        bar_format="{l_bar}{bar}| {elapsed}<{remaining}")
+        self.done = 0
+
+    def __call__(self, fraction: float) -> None:
+        new = int(round(1000 * min(max(fraction, 0.0), 1.0)))
+        if new > self.done:
+            self.bar.update(new - self.done)
+            self.done = new
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def run_ringdown(scene: Scene, spec: RingdownSpec, method: str, progress: bool) -> RingdownResult:
+    """The scene's system from its initial state, by ``method``, with a progress bar."""
+    bar = _Bar(f"{scene.name}: {method}", progress)
+    try:
+        return ringdown(
+            scene.model.system(), np.array(scene.initial.x0_m), np.array(scene.initial.v0_m_s),
+            spec.duration_s, spec.sample_rate_hz, method, dt=spec.dt_s, omega_dt=spec.omega_dt,
+            rtol=spec.rtol, atol=spec.atol, progress=bar,
+        )
+    finally:
+        bar.close()
+
+
+def backbone_curves(params: DiscreteParams) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Frequency-energy curves to overlay: the exact NNM 2 and, when built, HB (H = 1)."""
+    from reduced import nnm2
+
+    E = np.logspace(-4, 5, 400)
+    curves: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    try:
+        from reduced.backbones import hb_backbones
+    except ImportError:
+        hb_backbones = None
+    if hb_backbones is not None:
+        for name, (E_hb, f_hb) in hb_backbones(params.system(), harmonics=1).items():
+            curves[f"{name}, HB H=1"] = (E_hb, f_hb)
+    if params.m1 == params.m3:
+        curves["NNM 2, exact"] = (E, nnm2.frequency_from_energy(params, E))
+    return curves
+
+
+def first_exceedance(t: np.ndarray, d: np.ndarray, threshold: float) -> float | None:
+    """s, first time d exceeds threshold (None if never)."""
+    idx = np.flatnonzero(d > threshold)
+    return float(t[idx[0]]) if idx.size else None
+
+
+def growth_rate(t: np.ndarray, d: np.ndarray, lo: float, hi: float) -> float:
+    """1/s, least-squares slope of ln d over the samples with lo < d < hi (NaN if too few)."""
+    sel = (d > lo) & (d < hi)
+    if np.count_nonzero(sel) < 10:
+        return float("nan")
+    return float(np.polyfit(t[sel], np.log(d[sel]), 1)[0])
+
+
+def ringdown_stage(scene: Scene, writer: StageWriter, progress: bool, method: str | None = None) -> None:
+    spec = scene.ringdown
+    method = method or spec.method
+    res = run_ringdown(scene, spec, method, progress)
+    res.save(writer.path("ringdown.npz"))
+    plots.ringdown_figure(res, writer.path("ringdown.png"), f"{scene.name}: {scene.description}")
+    writer.stats.update(
+        {"method": method, "duration_s": spec.duration_s, "energy_J_initial": float(res.energy[0]),
+         "energy_balance_error": res.energy_balance_error, **res.stats}
+    )
+    system = res.system
+    if scene.spectrogram is not None:
+        sp = scene.spectrogram
+        i = system.dof_names.index(sp.dof)
+        S = spectrogram(res.t, res.x[:, i], sp.window_s, sp.overlap)
+        modes = {s: linear_modes(system, s).freq_hz for s in ("open", "closed")}
+        plots.spectrogram_figure(
+            S, (res.t, res.energy), backbone_curves(scene.model), writer.path("spectrogram.png"),
+            f"{scene.name}: spectrogram of {sp.dof} ({method}); open-gap "
+            f"{', '.join(f'{f:.1f}' for f in modes['open'])} Hz",
+            sp.fmax_hz, sp.db_range,
+        )
+    if scene.symmetry is not None:
+        symmetry_stage(scene, res, writer, progress)
+
+
+def symmetry_stage(scene: Scene, res: RingdownResult, writer: StageWriter, progress: bool) -> None:
+    """Fig. 4: when does |x_a - x_b| first exceed each method's tolerance?"""
+    names = scene.symmetry.dofs
+    a, b = (res.system.dof_names.index(n) for n in names)
+    runs = {res.method: res}
+    for other in ("exact", "explicit", "dop853"):
+        if other not in runs:
+            runs[other] = run_ringdown(scene, scene.ringdown, other, progress)
+    rows, table = [], {}
+    for method, r in runs.items():
+        d = np.abs(r.x[:, a] - r.x[:, b])
+        t_break = first_exceedance(r.t, d, r.tolerance)
+        rate = growth_rate(r.t, d, 1e3 * max(np.min(d[d > 0], initial=1e-300), 1e-30), 1e-3 * np.max(np.abs(r.x)))
+        table[method] = (r, t_break)
+        rows.append({"method": method, "tolerance_m": r.tolerance, "t_break_s": t_break,
+                     "growth_rate_per_s": rate, "max_abs_diff_m": float(np.max(d)),
+                     "runtime_s": r.stats.get("wall_s")})
+    with open(writer.path("symmetry.csv"), "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    plots.symmetry_figure(table, (a, b), names, writer.path("symmetry.png"),
+                          f"{scene.name}: symmetry breaking of {names[0]} and {names[1]}")
+    writer.stats["symmetry"] = rows
