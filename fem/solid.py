@@ -1,0 +1,149 @@
+"""3-D linear elasticity of the meshed solids, assembled with scikit-fem.
+
+Stiffness and consistent mass, K = sum_e int B^T D B dV and M = sum_e int rho N^T N dV,
+per part with its own material. Two assembly paths give the same matrices:
+
+- ``"skfem"``: scikit-fem's vectorised :func:`skfem.asm` over every element;
+- ``"cached"``: the block-structured meshes of :mod:`geometry.build` hold only a few dozen
+  distinct element shapes, so each shape's element matrices are computed once (by
+  scikit-fem, on a one-element mesh) and scattered to all elements of that shape. Exact,
+  not an approximation: elements with the same node offsets have identical matrices.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from skfem import Basis, ElementHex1, ElementHex2, ElementHexS2, ElementVector, MeshHex1, asm
+from skfem.assembly import Dofs
+from skfem.io.meshio import INV_HEX_MAPPING
+
+from fem.material import Material, mass_form, stiffness_form
+
+ELEMENTS = {"hex8": ElementHex1, "hex20": ElementHexS2, "hex27": ElementHex2}
+KEY_DECIMALS = 10  # m, element shapes equal to 1e-10 m share their matrices
+CHUNK_ENTRIES = 20_000_000  # COO entries per assembly chunk (bounds memory)
+
+
+@dataclass(frozen=True, eq=False)
+class SolidMatrices:
+    """Assembled stiffness and mass of the solids with their DOF map."""
+
+    K: sp.csr_matrix  # N/m, (n_dofs, n_dofs)
+    M: sp.csr_matrix  # kg, (n_dofs, n_dofs)
+    nodal_dofs: np.ndarray  # (3, n_nodes) DOF index of each node's x, y, z displacement
+    dof_component: np.ndarray  # (n_dofs,) 0, 1, 2 for x, y, z
+    dof_location: np.ndarray  # m, (n_dofs, 3) node, edge midpoint, face or cell centre of each DOF
+    element: str
+    n_unique_shapes: int = 0
+    timing: dict = field(default_factory=dict)  # s, per step
+
+    @property
+    def n_dofs(self) -> int:
+        return self.K.shape[0]
+
+
+def skfem_mesh(points: np.ndarray, hexes: np.ndarray) -> MeshHex1:
+    """scikit-fem mesh from gmsh/meshio-ordered hexahedra."""
+    return MeshHex1(np.ascontiguousarray(points.T), np.ascontiguousarray(hexes[:, INV_HEX_MAPPING[:8]].T))
+
+
+def dof_table(mesh: MeshHex1, dof: Dofs) -> tuple[np.ndarray, np.ndarray]:
+    """Component (0, 1, 2) and location (n_dofs, 3) of every DOF of a vector Lagrange element.
+
+    Each DOF is a displacement component at a node, an edge midpoint, a face centre or the
+    cell centre, so a rigid motion u = a + theta x X is interpolated exactly by its values there.
+    """
+    comp = np.empty(dof.N, dtype=np.int8)
+    loc = np.empty((dof.N, 3))
+    p = mesh.p
+    places = [(dof.nodal_dofs, p), (dof.edge_dofs, p[:, mesh.edges].mean(axis=1) if dof.edge_dofs.size else None),
+              (dof.facet_dofs, p[:, mesh.facets].mean(axis=1) if dof.facet_dofs.size else None),
+              (dof.interior_dofs, p[:, mesh.t].mean(axis=1) if dof.interior_dofs.size else None)]
+    for d, X in places:
+        if d.size == 0:
+            continue
+        if d.shape[0] != 3:
+            raise RuntimeError(f"unexpected DOF layout {d.shape}")
+        for c in range(3):
+            comp[d[c]] = c
+            loc[d[c]] = X.T
+    return comp, loc
+
+
+def assemble_solid(points: np.ndarray, hexes: np.ndarray, cell_material: list[tuple[np.ndarray, Material]],
+                   element: str = "hex20", method: str = "cached") -> SolidMatrices:
+    """Assemble K and M of the hexahedral mesh.
+
+    Parameters
+    ----------
+    points, hexes : (n, 3) node coordinates in m and (n_cells, 8) gmsh-ordered connectivity.
+    cell_material : list of (cell indices, Material) covering the cells.
+    element : 'hex8' (trilinear; locks in bending), 'hex20' (serendipity) or 'hex27'.
+    method : 'cached' (shape-cached, default) or 'skfem' (plain scikit-fem).
+    """
+    if element not in ELEMENTS:
+        raise ValueError(f"element must be one of {', '.join(ELEMENTS)}, got {element!r}")
+    t0 = time.perf_counter()
+    mesh = skfem_mesh(points, hexes)
+    e = ElementVector(ELEMENTS[element]())
+    if method == "skfem":
+        n = Dofs(mesh, e).N
+        K = sp.csr_matrix((n, n))
+        M = sp.csr_matrix((n, n))
+        for cells, mat in cell_material:
+            basis = Basis(mesh, e, elements=np.asarray(cells))
+            K = K + asm(stiffness_form(mat), basis)
+            M = M + asm(mass_form(mat), basis)
+        dof = Dofs(mesh, e)
+        dofs = dof.nodal_dofs
+        n_shapes = 0
+    elif method == "cached":
+        dof = Dofs(mesh, e)
+        n = dof.N
+        ed = dof.element_dofs  # (n_local, n_cells)
+        dofs = dof.nodal_dofs
+        X = points[hexes]  # (n_cells, 8, 3)
+        rows_k, rows_m = [], []
+        n_shapes = 0
+        for cells, mat in cell_material:
+            cells = np.asarray(cells)
+            key = np.round(X[cells] - X[cells, :1], KEY_DECIMALS).reshape(len(cells), -1)
+            uniq, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+            n_shapes += len(uniq)
+            Ke = np.empty((len(uniq), ed.shape[0], ed.shape[0]))
+            Me = np.empty_like(Ke)
+            for s, c in enumerate(cells[first]):
+                one = skfem_mesh(X[c] - X[c, 0], np.arange(8)[None, :])
+                b1 = Basis(one, e)
+                loc = b1.element_dofs[:, 0]
+                Ke[s] = asm(stiffness_form(mat), b1).toarray()[np.ix_(loc, loc)]
+                Me[s] = asm(mass_form(mat), b1).toarray()[np.ix_(loc, loc)]
+            rows_k.append((cells, inv.ravel(), Ke))
+            rows_m.append((cells, inv.ravel(), Me))
+        K = _scatter(rows_k, ed, n)
+        M = _scatter(rows_m, ed, n)
+    else:
+        raise ValueError(f"method must be 'cached' or 'skfem', got {method!r}")
+    comp, loc = dof_table(mesh, dof)
+    return SolidMatrices(K=K.tocsr(), M=M.tocsr(), nodal_dofs=np.asarray(dofs), dof_component=comp,
+                         dof_location=loc, element=element,
+                         n_unique_shapes=n_shapes, timing={"assembly_s": time.perf_counter() - t0})
+
+
+def _scatter(blocks, ed: np.ndarray, n: int) -> sp.csr_matrix:
+    """Sum element matrices Ae[shape_of_cell] into an (n, n) CSR matrix, chunk by chunk."""
+    nl = ed.shape[0]
+    total = sp.csr_matrix((n, n))
+    per_chunk = max(1, CHUNK_ENTRIES // (nl * nl))
+    for cells, shape, Ae in blocks:
+        for i in range(0, len(cells), per_chunk):
+            c, s = cells[i:i + per_chunk], shape[i:i + per_chunk]
+            d = ed[:, c]  # (nl, nc)
+            rows = np.broadcast_to(d[:, None, :], (nl, nl, len(c))).transpose(2, 0, 1).ravel()
+            cols = np.broadcast_to(d[None, :, :], (nl, nl, len(c))).transpose(2, 0, 1).ravel()
+            total = total + sp.coo_matrix((Ae[s].ravel(), (rows, cols)), shape=(n, n)).tocsr()
+    return total
