@@ -13,10 +13,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from reduced.continuation import Branch, continue_branch
+from reduced.continuation import continue_branch
 from reduced.discrete import linear_modes
 from reduced.gaps import GapSystem
-from reduced.hb import HarmonicBalance, NNMResidual, default_samples
+from reduced.hb import HarmonicBalance, NewtonError, NNMResidual, default_samples, newton
 
 START_FRACTION = 0.3  # start amplitude as a fraction of the grazing amplitude (open gap)
 
@@ -31,7 +31,12 @@ def grazing_amplitude(system: GapSystem, phi: np.ndarray) -> float:
 
 @dataclass(eq=False)
 class NNMBranch:
-    """One HB backbone: energy [J] and frequency [Hz] per point, with the continuation data."""
+    """One HB backbone: energy [J] and frequency [Hz] per point, with the continuation data.
+
+    ``segment`` numbers the continued pieces: a new piece starts after an internal
+    resonance tongue was stepped over (``tongues`` says where); points of different pieces
+    are not joined by a computed path.
+    """
 
     mode: int  # 0-based index of the linear mode it starts from
     H: int
@@ -40,10 +45,37 @@ class NNMBranch:
     freq_hz: np.ndarray
     X: np.ndarray  # (n_points, n (2H+1)) HB coefficients [m]
     omega: np.ndarray  # rad/s
-    branch: Branch
+    segment: np.ndarray  # (n_points,) int
+    branches: list  # the Branch of each piece
     residual: NNMResidual
     wall_s: float
+    tongues: list = field(default_factory=list)  # dicts: harmonic, energy_J, freq_hz, action
     notes: list = field(default_factory=list)
+
+    @property
+    def status(self) -> str:
+        return self.branches[-1].status
+
+    @property
+    def n_steps(self) -> int:
+        return sum(len(b.y) for b in self.branches)
+
+
+def harmonic_ratio(hb: HarmonicBalance, X: np.ndarray) -> tuple[float, int]:
+    """Largest mass-norm amplitude of a harmonic k >= 2 over that of the fundamental, and k."""
+    Xm = hb.unpack(X)
+    amp = np.array([
+        math.sqrt(Xm[2 * k - 1] @ hb.M @ Xm[2 * k - 1] + Xm[2 * k] @ hb.M @ Xm[2 * k])
+        for k in range(1, hb.H + 1)
+    ])
+    if hb.H < 2 or amp[0] == 0.0:
+        return 0.0, 1
+    k = int(np.argmax(amp[1:])) + 2
+    return float(amp[k - 1] / amp[0]), k
+
+
+TONGUE_RATIO = 1.0  # a harmonic k >= 2 larger than the fundamental: an internal resonance
+STEP_OVER_LOG10A = (0.02, 0.05, 0.1, 0.2, 0.35, 0.5, 0.75, 1.0)  # tried jumps in log10 a past a tongue
 
 
 def nnm_branch(
@@ -58,6 +90,8 @@ def nnm_branch(
     ds_max: float = 0.3,
     max_steps: int = 3000,
     max_angle_deg: float = 15.0,
+    tongue_ratio: float = TONGUE_RATIO,
+    max_tongues: int = 60,
     progress=None,
 ) -> NNMBranch:
     """Continue NNM ``mode`` (0-based) by HB with H harmonics until energy >= energy_max_J.
@@ -65,6 +99,16 @@ def nnm_branch(
     The branch starts at START_FRACTION of the amplitude at which the linear mode first
     touches a stop (or lower, at ``energy_start_J``), continued in log10 of the modal
     amplitude (:class:`reduced.hb.NNMResidual`).
+
+    Internal resonances (tongues, H > 1): when a harmonic k >= 2 outgrows the fundamental
+    (``tongue_ratio``), or the frequency falls while the energy rises, the branch has left the backbone for a k:1 resonance with another
+    mode (for the 3-DOF model, NNM 1 meets NNM 3 wherever k f_1 = f_3; followed, such a
+    tongue runs all the way along NNM 3). The tongue is *stepped over*: from the last
+    backbone point before it (ratio < tongue_ratio / 3, frequency at its running maximum) the amplitude is raised in jumps
+    (STEP_OVER_LOG10A), the frequency predicted from the one-harmonic backbone, until a
+    solution with a small ratio, a higher frequency and a higher energy is found; continuation restarts
+    there. Each tongue is reported in ``tongues`` with action "stepped over"; if no jump
+    lands, the run ends with action "stopped" (never a silent jump).
     """
     t0 = time.perf_counter()
     lin = linear_modes(system, "open")
@@ -81,19 +125,107 @@ def nnm_branch(
         a0 = min(a0, math.sqrt(2.0 * energy_start_J) / omega0)
     y0 = res.start(phi, omega0, math.log10(a0))
     nX = hb.size
-    branch = continue_branch(
-        res, y0, param=nX + 2, direction=1.0, ds=ds, ds_max=ds_max, max_steps=max_steps,
-        max_angle_deg=max_angle_deg, stop=lambda y: res.energy(y) >= energy_max_J,
-        monitor=(nX,), callback=res.energy, progress=progress,
-    )
-    X = np.array([res.X_omega(y)[0] for y in branch.y])
-    omega = branch.y[:, nX] * omega0
-    E = np.array(branch.data)
-    notes = []
-    if branch.status != "stop":
-        notes.append(f"stopped early ({branch.status}) at E = {E[-1]:.3g} J")
-    return NNMBranch(mode, H, hb.N, E, omega / (2 * np.pi), X, omega, branch, res,
-                     time.perf_counter() - t0, notes)
+    i_w, i_a = nX, nX + 2
+    in_tongue = {"flag": False}
+
+    def ratio(y):
+        return harmonic_ratio(hb, y[:nX])
+
+    prev = {"w": -np.inf, "E": -np.inf}
+
+    def stop(y):
+        E = res.energy(y)
+        if E >= energy_max_J:
+            return True
+        # on the backbone of a hardening gap system the frequency rises with the energy;
+        # a frequency that falls while the energy rises is the bend into a tongue
+        bend = y[i_w] < prev["w"] * (1.0 - 1e-6) and E > prev["E"]
+        prev["w"], prev["E"] = y[i_w], E
+        if H > 1 and (ratio(y)[0] > tongue_ratio or bend):
+            in_tongue["flag"] = True
+            return True
+        return False
+
+    backbone1 = None
+    pieces, tongues, notes = [], [], []
+    steps_left = max_steps
+    ystart = y0
+    for _ in range(max_tongues + 1):
+        in_tongue["flag"] = False
+        prev["w"], prev["E"] = -np.inf, -np.inf
+        br = continue_branch(
+            res, ystart, param=i_a, direction=1.0, ds=ds, ds_max=ds_max, max_steps=steps_left,
+            max_angle_deg=max_angle_deg, stop=stop, monitor=(i_w,), callback=res.energy,
+            progress=progress,
+        )
+        steps_left -= len(br.y)
+        if not in_tongue["flag"]:
+            pieces.append((br, np.arange(len(br.y))))
+            break
+        # keep the backbone up to the last point clearly off the tongue
+        r = np.array([ratio(y)[0] for y in br.y])
+        w_max = np.maximum.accumulate(br.y[:, i_w])
+        keep = np.flatnonzero((r < tongue_ratio / 3.0) & (br.y[:, i_w] >= w_max))
+        if keep.size == 0:
+            keep = np.array([0])
+        last = int(keep[-1])
+        k = ratio(br.y[-1])[1]
+        pieces.append((br, np.arange(last + 1)))
+        anchor = br.y[last]
+        E_a = float(br.data[last])
+        f_a = anchor[i_w] * omega0 / (2 * np.pi)
+        if backbone1 is None:
+            backbone1 = nnm_branch(system, mode, H=1, energy_max_J=energy_max_J,
+                                   energy_start_J=energy_start_J).branches[0].y
+        n1 = system.n * 3  # size of an H = 1 coefficient vector
+        la1 = backbone1[:, n1 + 2]
+        bias = anchor[i_w] / float(np.interp(anchor[i_a], la1, backbone1[:, n1]))
+        landed = None
+        for jump in STEP_OVER_LOG10A:
+            la = anchor[i_a] + jump
+            # a clean guess on the main backbone: the one-harmonic solution at this
+            # amplitude (higher harmonics zero), its frequency scaled by the HB bias
+            guess = np.zeros_like(anchor)
+            for c in range(n1):
+                guess[c] = np.interp(la, la1, backbone1[:, c])
+            guess[i_w] = bias * float(np.interp(la, la1, backbone1[:, n1]))
+            guess[i_a] = la
+
+            def fixed(z, la=la):
+                R, J = res(z)
+                e = np.zeros(z.size)
+                e[i_a] = 1.0
+                return np.concatenate([R, [z[i_a] - la]]), np.vstack([J, e])
+
+            try:
+                sol = newton(fixed, guess, max_iter=40, max_step=1.0)
+            except NewtonError:
+                continue
+            # accept only a point on this backbone: near the predicted frequency, above
+            # the anchor in frequency and energy, with a dominant fundamental
+            if (abs(sol.y[i_w] / guess[i_w] - 1.0) < 0.1 and ratio(sol.y)[0] < tongue_ratio / 3.0
+                    and sol.y[i_w] > anchor[i_w] and res.energy(sol.y) > E_a):
+                landed = sol.y
+                break
+        if landed is None or steps_left <= 0:
+            tongues.append({"harmonic": k, "energy_J": E_a, "freq_hz": f_a, "action": "stopped"})
+            notes.append(f"{k}:1 internal resonance at E = {E_a:.4g} J, {f_a:.2f} Hz: could not step over")
+            break
+        E_b = res.energy(landed)
+        tongues.append({"harmonic": k, "energy_J": E_a, "freq_hz": f_a, "action": "stepped over",
+                        "energy_after_J": E_b})
+        notes.append(f"{k}:1 internal resonance at E = {E_a:.4g} J, {f_a:.2f} Hz: stepped over to "
+                     f"E = {E_b:.4g} J")
+        ystart = landed
+    Y = np.concatenate([b.y[idx] for b, idx in pieces])
+    E = np.concatenate([np.asarray(b.data)[idx] for b, idx in pieces])
+    seg = np.concatenate([np.full(idx.size, i) for i, (_, idx) in enumerate(pieces)])
+    X = np.array([res.X_omega(y)[0] for y in Y])
+    omega = Y[:, i_w] * omega0
+    if pieces[-1][0].status != "stop" or E[-1] < energy_max_J:
+        notes.append(f"stopped early ({pieces[-1][0].status}) at E = {E[-1]:.3g} J")
+    return NNMBranch(mode, H, hb.N, E, omega / (2 * np.pi), X, omega, seg, [b for b, _ in pieces], res,
+                     time.perf_counter() - t0, tongues, notes)
 
 
 def hb_backbones(
@@ -113,4 +245,4 @@ def hb_backbones(
     return out
 
 
-__all__ = ["NNMBranch", "nnm_branch", "hb_backbones", "grazing_amplitude"]
+__all__ = ["NNMBranch", "nnm_branch", "hb_backbones", "grazing_amplitude", "harmonic_ratio"]
