@@ -18,6 +18,12 @@ class StageUnavailable(Exception):
     """The scene does not ask for this stage, or the stage is not built yet."""
 
 
+def _modal(scene: Scene, writer: StageWriter, progress: bool, **_) -> None:
+    from bearingshaft.stages.modal import modal_stage
+
+    modal_stage(scene, writer, progress)
+
+
 def _ringdown(scene: Scene, writer: StageWriter, progress: bool, method: str | None = None, **_) -> None:
     from bearingshaft.stages.ringdown import ringdown_stage
 
@@ -44,7 +50,7 @@ def _not_yet(issue: int, what: str) -> Callable:
 
 
 STAGES: dict[str, Callable] = {
-    "modal": _not_yet(4, "the 3-D model and modal analysis"),
+    "modal": _modal,
     "ringdown": _ringdown,
     "nnm": _nnm,
     "study": _study,

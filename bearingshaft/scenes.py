@@ -11,6 +11,7 @@ to run, a table absent is a stage skipped (and so never built). Layout::
     [spectrogram]    STFT of one DOF with the NNM curves overlaid  (with ringdown)
     [symmetry]       |x_a - x_b| against time                      (with ringdown)
     [nnm]            frequency-energy relations                     -> stage nnm
+    [fep]            HB / shooting backbones and stability (issue 3)   -> stage nnm
     [work_precision] error against run time                         -> stage study
     [stiff_cases]    stiff and extreme parameter sweep              -> stage study
 
@@ -28,6 +29,7 @@ from dataclasses import dataclass, field, fields
 from importlib import resources
 from pathlib import Path
 
+from fem.model import AssemblyModel
 from reduced.discrete import DiscreteParams
 
 METHODS = ("exact", "explicit", "dop853")
@@ -117,6 +119,25 @@ class NNMSpec:
 
 
 @dataclass(frozen=True, slots=True)
+class FEPSpec:
+    """Frequency-energy plots by HB, shooting and their stability (issue 3) -> stage nnm."""
+
+    harmonics: tuple[int, ...] = (1, 15)  # HB orders drawn in fep.png (1: the paper's Fig. 2)
+    convergence_harmonics: tuple[int, ...] = (1, 3, 5, 9, 15, 25, 50)  # hb_convergence study
+    samples_study_harmonics: int = 5  # H at which the AFT sample count N is varied
+    samples: tuple[int, ...] = (16, 32, 64, 128, 256, 512, 1024)  # N values of that study
+    energy_max_J: float = 1e5  # J, every branch runs at least this far
+    n_shooting: int = 60  # shooting orbits per NNM (log-spaced in energy)
+
+    def __post_init__(self) -> None:
+        _check(all(h >= 1 for h in self.harmonics + self.convergence_harmonics), "harmonics must be >= 1")
+        _check(all(n > 2 * self.samples_study_harmonics for n in self.samples),
+               "samples must exceed 2 x samples_study_harmonics")
+        _positive(self, "energy_max_J")
+        _check(self.n_shooting >= 2, f"n_shooting must be >= 2, got {self.n_shooting!r}")
+
+
+@dataclass(frozen=True, slots=True)
 class WorkPrecisionSpec:
     """Error against run time of the three integrators over a short window."""
 
@@ -151,19 +172,38 @@ class StiffCasesSpec:
             _check(m in METHODS, f"methods: unknown method {m!r}")
 
 
-MODEL_KINDS: dict[str, type] = {"discrete": DiscreteParams}
+@dataclass(frozen=True, slots=True)
+class ModalSpec:
+    """Modal analysis of a 3-D model (kind = "assembly"): correlation, MAC, pictures."""
+
+    n_modes: int = 20  # modes computed, rigid-body ones included
+    shift_hz: float = 1.0  # Hz, the shift is sigma = -(2 pi shift_hz)^2 (K - sigma M > 0)
+    solver: str = "pardiso"  # pardiso | superlu (falls back to superlu without pypardiso)
+    test_shapes: str = ""  # UFF (dataset 55) or CSV file of test mode shapes; "" -> FE auto-MAC
+    pictures: bool = True  # mode-shape pictures rendered with pyvista off screen
+    vtu: bool = True  # modes.vtu of the labelled modes for ParaView
+
+    def __post_init__(self) -> None:
+        _check(self.n_modes >= 12, f"n_modes must be >= 12 (6 rigid + 6 pseudo-rigid), got {self.n_modes!r}")
+        _positive(self, "shift_hz")
+        _check(self.solver in ("pardiso", "superlu"), f"solver must be pardiso or superlu, got {self.solver!r}")
+
+
+MODEL_KINDS: dict[str, type] = {"discrete": DiscreteParams, "assembly": AssemblyModel}
 
 SECTIONS: dict[str, type] = {
+    "modal": ModalSpec,
     "initial": InitialSpec,
     "ringdown": RingdownSpec,
     "spectrogram": SpectrogramSpec,
     "symmetry": SymmetrySpec,
     "nnm": NNMSpec,
+    "fep": FEPSpec,
     "work_precision": WorkPrecisionSpec,
     "stiff_cases": StiffCasesSpec,
 }
 
-STAGES = ("ringdown", "nnm", "study")
+STAGES = ("modal", "ringdown", "nnm", "study")
 
 
 @dataclass(frozen=True, slots=True)
@@ -173,13 +213,15 @@ class Scene:
     name: str
     description: str
     model_kind: str
-    model: DiscreteParams
+    model: DiscreteParams | AssemblyModel
     source: str = field(repr=False)  # the TOML text as read, kept with every result
     initial: InitialSpec = InitialSpec()
+    modal: ModalSpec | None = None
     ringdown: RingdownSpec | None = None
     spectrogram: SpectrogramSpec | None = None
     symmetry: SymmetrySpec | None = None
     nnm: NNMSpec | None = None
+    fep: FEPSpec | None = None
     work_precision: WorkPrecisionSpec | None = None
     stiff_cases: StiffCasesSpec | None = None
 
@@ -187,8 +229,9 @@ class Scene:
     def stages(self) -> tuple[str, ...]:
         """The pipeline stages this scene asks for, in pipeline order."""
         wanted = {
+            "modal": self.modal is not None,
             "ringdown": self.ringdown is not None,
-            "nnm": self.nnm is not None,
+            "nnm": self.nnm is not None or self.fep is not None,
             "study": self.work_precision is not None or self.stiff_cases is not None,
         }
         return tuple(s for s in STAGES if wanted[s])
@@ -266,6 +309,13 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
     sections = {
         key: from_table(cls, data[key], f"{origin} [{key}]") for key, cls in SECTIONS.items() if key in data
     }
+    if not hasattr(model, "system"):  # a 3-D model: only [modal] applies
+        other = [k for k in sections if k != "modal"]
+        if other:
+            raise SceneError(f"{origin}: model kind {kind!r} takes only a [modal] table, got [{other[0]}]")
+        return Scene(name=name, description=description, model_kind=kind, model=model, source=text, **sections)
+    if "modal" in sections:
+        raise SceneError(f"{origin}: [modal] needs a 3-D model (kind = \"assembly\"), not {kind!r}")
     n = model.system().n
     init = sections.get("initial", InitialSpec())
     for key in ("x0_m", "v0_m_s"):

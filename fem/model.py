@@ -152,7 +152,8 @@ class FESystem:
         return self.solid.nodal_dofs[:, self.mesh.node_sets[name]]
 
     def sensor_names(self, part: str) -> list[str]:
-        return sorted(k for k in self.mesh.node_sets if k.startswith(f"{part}_s"))
+        names = [k for k in self.mesh.node_sets if k.startswith(f"{part}_s") and k[len(part) + 2:].isdigit()]
+        return sorted(names, key=lambda k: int(k[len(part) + 2:]))
 
     def sensor_dofs(self, names: list[str]) -> np.ndarray:
         """DOF indices of sensors, x y z per sensor in order."""
