@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from reduced._blas import single_thread_blas
 from reduced.continuation import continue_branch
 from reduced.discrete import linear_modes
 from reduced.gaps import GapSystem
@@ -78,7 +79,7 @@ TONGUE_RATIO = 1.0  # a harmonic k >= 2 larger than the fundamental: an internal
 STEP_OVER_LOG10A = (0.02, 0.05, 0.1, 0.2, 0.35, 0.5, 0.75, 1.0)  # tried jumps in log10 a past a tongue
 
 
-def nnm_branch(
+def _nnm_branch(
     system: GapSystem,
     mode: int,
     *,
@@ -175,7 +176,7 @@ def nnm_branch(
         E_a = float(br.data[last])
         f_a = anchor[i_w] * omega0 / (2 * np.pi)
         if backbone1 is None:
-            backbone1 = nnm_branch(system, mode, H=1, energy_max_J=energy_max_J,
+            backbone1 = _nnm_branch(system, mode, H=1, energy_max_J=energy_max_J,
                                    energy_start_J=energy_start_J).branches[0].y
         n1 = system.n * 3  # size of an H = 1 coefficient vector
         la1 = backbone1[:, n1 + 2]
@@ -226,6 +227,15 @@ def nnm_branch(
         notes.append(f"stopped early ({pieces[-1][0].status}) at E = {E[-1]:.3g} J")
     return NNMBranch(mode, H, hb.N, E, omega / (2 * np.pi), X, omega, seg, [b for b, _ in pieces], res,
                      time.perf_counter() - t0, tongues, notes)
+
+
+def nnm_branch(system: GapSystem, mode: int, **options) -> NNMBranch:
+    """Continue NNM ``mode`` (0-based) by HB; see :func:`_nnm_branch` for the options.
+
+    Runs with single-threaded BLAS (:mod:`reduced._blas`): the matrices are small.
+    """
+    with single_thread_blas():
+        return _nnm_branch(system, mode, **options)
 
 
 def hb_backbones(

@@ -21,6 +21,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from reduced._blas import single_thread_blas
 from reduced.flow import Flow
 from reduced.gaps import GapSystem
 
@@ -86,6 +87,11 @@ def shoot(
     ``flow`` must be the exact flow of an undamped system (see :func:`conservative`).
     Raises :class:`ShootingError` if Gauss-Newton fails.
     """
+    with single_thread_blas():
+        return _shoot(flow, x0, v0, period_s, energy_J, ref=ref, tol=tol, max_iter=max_iter)
+
+
+def _shoot(flow, x0, v0, period_s, energy_J, *, ref, tol, max_iter) -> PeriodicOrbit:
     t0 = time.perf_counter()
     system = flow.system
     if not system.undamped:
@@ -135,4 +141,43 @@ def shoot(
                          time.perf_counter() - t0)
 
 
-__all__ = ["PeriodicOrbit", "ShootingError", "shoot", "conservative", "energy_gradient", "FLOQUET_TOL"]
+__all__ = ["PeriodicOrbit", "ShootingError", "shoot", "shooting_branch", "conservative", "energy_gradient", "FLOQUET_TOL"]
+
+
+def shooting_branch(flow: Flow, energies_J: np.ndarray, guides: list, *, max_rel_jump: float = 0.2):
+    """Orbits at increasing energies along an NNM, each refined from the best guess.
+
+    ``guides`` are HB branches (:class:`reduced.backbones.NNMBranch`, best first) of the
+    same NNM. At each energy the guesses tried are the previous orbit scaled to the new
+    energy, then each guide's point nearest in log energy; an orbit is accepted only if
+    its frequency is within ``max_rel_jump`` of the first guide's at that energy (so a
+    guess that converges onto another NNM is refused, not silently kept). Returns a list
+    with a :class:`PeriodicOrbit` or None per energy.
+    """
+    out = []
+    prev = None
+    for E in np.asarray(energies_J, float):
+        guesses = []
+        if prev is not None and E / prev.energy_J < 3.0:
+            sc = np.sqrt(E / prev.energy_J)
+            guesses.append((prev.x0 * sc, prev.v0 * sc, prev.period_s))
+        for g in guides:
+            i = int(np.argmin(np.abs(np.log(g.energy_J / E))))
+            x, v = g.residual.hb.time_series(g.X[i], g.omega[i])
+            guesses.append((x[0], v[0], 2 * np.pi / g.omega[i]))
+        g0 = guides[0]
+        order = np.argsort(g0.energy_J)
+        f_ref = float(np.interp(np.log(E), np.log(g0.energy_J[order]), g0.freq_hz[order]))
+        orbit = None
+        for x0, v0, T in guesses:
+            try:
+                o = shoot(flow, x0, v0, T, E)
+            except (ShootingError, RuntimeError):
+                continue
+            if abs(o.freq_hz / f_ref - 1.0) < max_rel_jump:
+                orbit = o
+                break
+        out.append(orbit)
+        if orbit is not None:
+            prev = orbit
+    return out

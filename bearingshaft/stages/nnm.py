@@ -63,3 +63,7 @@ def nnm_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
         writer.stats["nnm2_max_rel_err_paper_eq13"] = max(abs(c["rel_err_paper"]) for c in checks)
     plots.nnm2_figure(E, f_exact, f_paper, checks, modes["open"].freq_hz, modes["closed"].freq_hz,
                       writer.path("nnm2.png"))
+    if scene.fep is not None:
+        from bearingshaft.stages.fep import fep_stage
+
+        fep_stage(scene, writer, progress)

@@ -1,0 +1,286 @@
+"""Frequency-energy plots of the NNMs by HB and shooting, their stability, HB convergence.
+
+Called at the end of the nnm stage when the scene has an [fep] table. Writes
+
+- ``fep.csv`` (nnm, method, harmonics, energy_J, freq_hz, stable) and ``fep.png``:
+  HB backbones for each H of ``[fep] harmonics`` (stability by Hill's method) and the
+  shooting orbits on the exact flow (stability by Floquet multipliers);
+- ``stability.csv``: Hill against Floquet at each shooting energy, disagreements flagged;
+- ``tongues.csv``: internal resonances met by the HB branches and what was done;
+- ``hb_convergence.csv`` and ``hb_convergence.png``: HB frequency error against the exact
+  NNM 2 relation and against shooting for each H (and AFT samples N at one H), with the
+  run time of each branch.
+"""
+
+from __future__ import annotations
+
+import csv
+import time
+import warnings
+
+import numpy as np
+from tqdm import tqdm
+
+from bearingshaft.output import StageWriter
+from bearingshaft.scenes import Scene
+from reduced import nnm2
+from reduced._blas import single_thread_blas
+from reduced.backbones import nnm_branch
+from reduced.discrete import linear_modes
+from reduced.flow import Flow
+from reduced.shooting import conservative, shooting_branch
+from reduced.stability import compare, hill
+
+GRAZING_BAND = 10.0  # "near grazing": energies below this many times the grazing energy
+
+
+def _write_csv(path, rows: list[dict]) -> None:
+    if not rows:
+        path.write_text("")
+        return
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+
+
+def _interp_log(E_q, E, f):
+    order = np.argsort(E)
+    return np.interp(np.log(E_q), np.log(E[order]), f[order], left=np.nan, right=np.nan)
+
+
+def fep_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
+    """Write fep.csv/png, stability.csv, tongues.csv, hb_convergence.csv/png (module docstring)."""
+    with single_thread_blas():
+        _fep_stage(scene, writer, progress)
+
+
+def _fep_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
+    spec = scene.fep
+    p = scene.model
+    system = conservative(p.system())
+    n = system.n
+    flow = Flow(system)
+    open_hz = linear_modes(system, "open").freq_hz
+    closed_hz = linear_modes(system, "closed").freq_hz
+    Hs = sorted(set(spec.harmonics) | set(spec.convergence_harmonics))
+    hs_study = spec.samples_study_harmonics
+    # the work list: (mode, H, N) branches; NNM 2 for every H (exact reference), all modes
+    # for the H drawn in fep.png and for the convergence study up to H = 15
+    jobs = []
+    for H in Hs:
+        for mode in range(n):
+            if mode == 1 or H in spec.harmonics or H <= 15:
+                jobs.append((mode, H, None))
+    for N in spec.samples:
+        jobs.append((1, hs_study, N))
+    total = len(jobs) + 2 * n
+    bar = tqdm(total=total, desc=f"{scene.name}: NNM backbones", disable=not progress, unit="branch")
+    branches = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # LinAlgWarning from LU on rejected steps
+        for mode, H, N in jobs:
+            bar.set_postfix_str(f"NNM {mode + 1}, H={H}" + (f", N={N}" if N else ""))
+            branches[(mode, H, N)] = nnm_branch(system, mode, H=H, N=N, energy_max_J=spec.energy_max_J)
+            bar.update()
+        # shooting along each NNM, guided by the best complete HB branches
+        shots = {}
+        for mode in range(n):
+            bar.set_postfix_str(f"shooting NNM {mode + 1}")
+            guides = [branches[(mode, 1, None)]]
+            hi = max(spec.harmonics)
+            if branches[(mode, hi, None)].energy_J[-1] >= spec.energy_max_J:
+                guides.insert(0, branches[(mode, hi, None)])
+            E0 = guides[-1].energy_J[0]
+            energies = np.logspace(np.log10(E0), np.log10(spec.energy_max_J), spec.n_shooting)
+            t0 = time.perf_counter()
+            shots[mode] = (energies, shooting_branch(flow, energies, guides), time.perf_counter() - t0)
+            bar.update()
+        # Hill's method on every HB point of the drawn branches
+        hills = {}
+        for mode in range(n):
+            bar.set_postfix_str(f"Hill NNM {mode + 1}")
+            for H in spec.harmonics:
+                b = branches[(mode, H, None)]
+                hills[(mode, H)] = [hill(b.residual.hb, b.X[i], b.omega[i]) for i in range(len(b.energy_J))]
+            bar.update()
+    bar.close()
+
+    # -- fep.csv ------------------------------------------------------------------------
+    rows = []
+    for mode in range(n):
+        for H in spec.harmonics:
+            b = branches[(mode, H, None)]
+            for i in range(len(b.energy_J)):
+                rows.append({"nnm": mode + 1, "method": "hb", "harmonics": H, "energy_J": b.energy_J[i],
+                             "freq_hz": b.freq_hz[i], "stable": int(hills[(mode, H)][i].stable)})
+        energies, orbits, _ = shots[mode]
+        for E, o in zip(energies, orbits, strict=True):
+            if o is not None:
+                rows.append({"nnm": mode + 1, "method": "shooting", "harmonics": "", "energy_J": o.energy_J,
+                             "freq_hz": o.freq_hz, "stable": int(o.stable)})
+    _write_csv(writer.path("fep.csv"), rows)
+
+    # -- stability.csv: Hill (each drawn H) against Floquet at the shooting energies -------
+    srows = []
+    n_dis = {}
+    for mode in range(n):
+        energies, orbits, _ = shots[mode]
+        fl_max = np.array([o.max_multiplier if o else np.nan for o in orbits])
+        fl_st = np.array([o.stable if o else False for o in orbits])
+        for H in spec.harmonics:
+            b = branches[(mode, H, None)]
+            hm = np.array([h.max_multiplier for h in hills[(mode, H)]])
+            hs = np.array([h.stable for h in hills[(mode, H)]])
+            # the HB point nearest in log energy (on the same piece of branch)
+            idx = [int(np.argmin(np.abs(np.log(b.energy_J / E)))) for E in energies]
+            near = np.array([abs(np.log(b.energy_J[i] / E)) < 0.05 for i, E in zip(idx, energies, strict=True)])
+            cmp = compare(energies, np.where(near, fl_max, np.nan), fl_st, hm[idx], hs[idx])
+            n_dis[f"NNM {mode + 1} H={H}"] = cmp.n_disagree
+            for k, E in enumerate(energies):
+                if not near[k] or orbits[k] is None:
+                    continue
+                srows.append({"nnm": mode + 1, "harmonics": H, "energy_J": E, "floquet_max_abs_mu": fl_max[k],
+                              "hill_max_abs_mu": hm[idx[k]], "floquet_stable": int(fl_st[k]),
+                              "hill_stable": int(hs[idx[k]]), "agree": int(cmp.agree[k])})
+    _write_csv(writer.path("stability.csv"), srows)
+    writer.stats["stability_disagreements"] = n_dis
+
+    # -- tongues.csv ----------------------------------------------------------------------
+    trows = []
+    for (mode, H, N), b in branches.items():
+        for t in b.tongues:
+            trows.append({"nnm": mode + 1, "harmonics": H, "samples": b.N, "resonance": f"{t['harmonic']}:1",
+                          "energy_J": t["energy_J"], "freq_hz": t["freq_hz"], "action": t["action"],
+                          "energy_after_J": t.get("energy_after_J", "")})
+    _write_csv(writer.path("tongues.csv"), trows)
+
+    # -- hb_convergence.csv -------------------------------------------------------------------
+    crow = []
+    E_graze = p.grazing_energy_nnm2
+    for (mode, H, N), b in branches.items():
+        energies, orbits, _ = shots[mode]
+        Es = np.array([o.energy_J for o in orbits if o is not None])
+        fs = np.array([o.freq_hz for o in orbits if o is not None])
+        f_hb = _interp_log(Es, b.energy_J, b.freq_hz) if b.energy_J.size > 1 else np.full(Es.size, np.nan)
+        err_s = np.abs(f_hb / fs - 1.0)
+        contact = Es > 1.01 * Es.min() if Es.size else Es.astype(bool)
+        row = {"nnm": mode + 1, "harmonics": H, "samples": b.N, "samples_study": int(N is not None),
+               "wall_s": round(b.wall_s, 4), "n_points": len(b.energy_J), "energy_reached_J": b.energy_J[-1],
+               "max_err_vs_shooting": float(np.nanmax(err_s[contact])) if np.any(np.isfinite(err_s)) else np.nan,
+               "median_err_vs_shooting": float(np.nanmedian(err_s)) if np.any(np.isfinite(err_s)) else np.nan}
+        if mode == 1 and p.m1 == p.m3:
+            err_x = np.abs(b.freq_hz / nnm2.frequency_from_energy(p, b.energy_J) - 1.0)
+            near = (b.energy_J > E_graze) & (b.energy_J < GRAZING_BAND * E_graze)
+            far = b.energy_J >= GRAZING_BAND * E_graze
+            row.update({"max_err_vs_exact": float(err_x.max()),
+                        "max_err_vs_exact_near_grazing": float(err_x[near].max()) if near.any() else np.nan,
+                        "max_err_vs_exact_above_10x_grazing": float(err_x[far].max()) if far.any() else np.nan})
+        else:
+            row.update({"max_err_vs_exact": "", "max_err_vs_exact_near_grazing": "",
+                        "max_err_vs_exact_above_10x_grazing": ""})
+        row["tongues"] = "; ".join(f"{t['harmonic']}:1 at {t['energy_J']:.3g} J {t['action']}" for t in b.tongues)
+        crow.append(row)
+    _write_csv(writer.path("hb_convergence.csv"), crow)
+    writer.stats["fep_wall_s"] = {f"NNM {m + 1} H={H}" + (f" N={N}" if N else ""): round(b.wall_s, 3)
+                                  for (m, H, N), b in branches.items()}
+    writer.stats["shooting_wall_s"] = {f"NNM {m + 1}": round(s[2], 3) for m, s in shots.items()}
+    writer.stats["shooting_failures"] = {f"NNM {m + 1}": sum(o is None for o in s[1]) for m, s in shots.items()}
+
+    _plot_fep(writer.path("fep.png"), branches, hills, shots, spec, open_hz, closed_hz)
+    _plot_convergence(writer.path("hb_convergence.png"), crow, branches, p, spec)
+
+
+def _plot_fep(path, branches, hills, shots, spec, open_hz, closed_hz) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 5.5))
+    colors = ["C0", "C1", "C2"]
+    for f in open_hz:
+        ax.axhline(f, color="k", ls="--", lw=0.8)
+    for f in closed_hz:
+        ax.axhline(f, color="r", ls="--", lw=0.8)
+    styles = {h: s for h, s in zip(spec.harmonics, ["-", ":", "-."], strict=False)}
+    for (mode, H, N), b in branches.items():
+        if N is not None or H not in spec.harmonics:
+            continue
+        st = np.array([h.stable for h in hills[(mode, H)]])
+        for seg in np.unique(b.segment):
+            m = b.segment == seg
+            ax.plot(b.energy_J[m], b.freq_hz[m], styles[H], color=colors[mode], lw=1.2,
+                    label=f"NNM {mode + 1}, HB H={H}" if seg == 0 else None)
+        uns = ~st
+        ax.plot(b.energy_J[uns], b.freq_hz[uns], "x", color=colors[mode], ms=3, alpha=0.6)
+    for mode, (energies, orbits, _) in shots.items():
+        E = np.array([o.energy_J for o in orbits if o])
+        f = np.array([o.freq_hz for o in orbits if o])
+        s = np.array([o.stable for o in orbits if o])
+        ax.plot(E[s], f[s], "o", mfc=colors[mode], mec="k", ms=4, label=f"NNM {mode + 1}, shooting (stable)")
+        ax.plot(E[~s], f[~s], "o", mfc="none", mec=colors[mode], ms=5, label=f"NNM {mode + 1}, shooting (unstable)")
+    ax.set_xscale("log")
+    ax.set_xlabel("energy [J]")
+    ax.set_ylabel("frequency [Hz]")
+    ax.set_title("Frequency-energy plot (black dashed: open gap, red dashed: closed gap;\n"
+                 "x: HB point unstable by Hill, open circles: unstable by Floquet)", fontsize=9)
+    ax.legend(fontsize=6.5, ncol=2, loc="upper left")
+    ax.grid(True, which="both", alpha=0.2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=150)
+    plt.close(fig)
+
+
+def _plot_convergence(path, rows, branches, p, spec) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axs = plt.subplots(1, 3, figsize=(14, 4.5))
+    ax = axs[0]
+    for (mode, H, N), b in branches.items():
+        if mode != 1 or N is not None or H not in spec.convergence_harmonics:
+            continue
+        err = np.abs(b.freq_hz / nnm2.frequency_from_energy(p, b.energy_J) - 1.0)
+        ax.loglog(b.energy_J, np.maximum(err, 1e-16), lw=1, label=f"H={H}")
+    ax.axvline(p.grazing_energy_nnm2, color="k", ls=":", lw=0.8)
+    ax.set_xlabel("energy [J]")
+    ax.set_ylabel("|f_HB / f_exact - 1|, NNM 2")
+    ax.legend(fontsize=7)
+    ax.set_title("HB error along NNM 2 (dotted: grazing)", fontsize=9)
+    ax = axs[1]
+    for mode in range(3):
+        r = [x for x in rows if x["nnm"] == mode + 1 and not x["samples_study"]]
+        if not r:
+            continue
+        ax.loglog([x["harmonics"] for x in r], [x["max_err_vs_shooting"] for x in r], "o-",
+                  label=f"NNM {mode + 1} vs shooting")
+    r = [x for x in rows if x["nnm"] == 2 and not x["samples_study"]]
+    ax.loglog([x["harmonics"] for x in r], [x["max_err_vs_exact_above_10x_grazing"] for x in r], "s--",
+              label="NNM 2 vs exact, E > 10 E_graze")
+    ax.set_xlabel("harmonics H")
+    ax.set_ylabel("max relative frequency error")
+    ax.legend(fontsize=7)
+    ax.set_title("error against H", fontsize=9)
+    ax = axs[2]
+    r = [x for x in rows if x["nnm"] == 2 and not x["samples_study"]]
+    ax.loglog([x["wall_s"] for x in r], [x["max_err_vs_exact"] for x in r], "o-", label="H study (default N)")
+    for x in r:
+        ax.annotate(f"H={x['harmonics']}", (x["wall_s"], x["max_err_vs_exact"]), fontsize=6)
+    r = [x for x in rows if x["nnm"] == 2 and x["samples_study"]]
+    ax.loglog([x["wall_s"] for x in r], [x["max_err_vs_exact"] for x in r], "s--",
+              label=f"N study at H={spec.samples_study_harmonics}")
+    for x in r:
+        ax.annotate(f"N={x['samples']}", (x["wall_s"], x["max_err_vs_exact"]), fontsize=6)
+    ax.set_xlabel("branch run time [s]")
+    ax.set_ylabel("max |f_HB / f_exact - 1|, NNM 2")
+    ax.legend(fontsize=7)
+    ax.set_title("error against run time", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+__all__ = ["fep_stage"]
