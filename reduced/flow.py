@@ -44,6 +44,7 @@ def _flow_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, s
     ytmp = np.empty(N)
     t = 0.0
     n_seg = 0
+    n_zero = 0
     status = 0
     max_seg = seg_state.shape[0]
     while True:
@@ -80,6 +81,18 @@ def _flow_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, s
                 tau_ev = tj
                 j_ev = j
         _eval_state(yp[s], X, lam_s, tau_ev, ytmp)
+        if j_ev >= 0:
+            # a crossing against the stop's own rate (closing while separating, or the
+            # reverse) is a round-off root next to a crossing just made: not an event;
+            # march hmin further in the present state instead
+            rate = 0.0
+            for r in range(n):
+                rate += B[j_ev, r] * ytmp[n + r]
+            rate = side[j_ev] * rate
+            if (rate > 0.0) == active[j_ev] and rate != 0.0:
+                tau_ev = min(tau_ev + hmin, T - t)
+                _eval_state(yp[s], X, lam_s, tau_ev, ytmp)
+                j_ev = -2
         for r in range(N):
             y[r] = ytmp[r]
         if n_seg >= max_seg:
@@ -88,15 +101,28 @@ def _flow_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, s
         seg_tau[n_seg] = tau_ev
         n_seg += 1
         t += tau_ev
+        if j_ev == -2:
+            if t >= T:
+                break
+            continue
         if j_ev < 0:
             break
         active[j_ev] = not active[j_ev]
-        # switch stops that cross at the same instant (symmetric motions) together
+        if tau_ev == 0.0:
+            n_zero += 1
+        else:
+            n_zero = 0
+        # switch stops that cross at the same instant (symmetric motions) together; after
+        # repeated zero-length segments (a stop flipping on round-off at a crossing) set
+        # every stop from the sign of its penetration, ties by the sign of its rate
+        settle_all = n_zero > 4
+        if n_zero > 64:
+            return n_seg, -1
         scale = 0.0
         for r in range(n):
             scale += abs(y[r])
         for j in range(m):
-            if j == j_ev:
+            if j == j_ev and not settle_all:
                 continue
             pen = 0.0
             rate = 0.0
@@ -107,6 +133,8 @@ def _flow_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, s
             rate = side[j] * rate
             if abs(pen) <= QTOL_REL * (scale + abs(offset[j])):
                 active[j] = rate > 0.0
+            elif settle_all:
+                active[j] = pen > 0.0
     return n_seg, status
 
 

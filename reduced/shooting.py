@@ -22,6 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from reduced._blas import single_thread_blas
+from reduced.exact import ExactIntegratorError
 from reduced.flow import Flow
 from reduced.gaps import GapSystem
 
@@ -108,11 +109,18 @@ def _shoot(flow, x0, v0, period_s, energy_J, *, ref, tol, max_iter) -> PeriodicO
     w = 2.0 * np.pi / T
     D = np.concatenate([np.full(n, xs), np.full(n, w * xs), [T]])
     rs = np.concatenate([np.full(n, xs), np.full(n, w * xs)])
-    best = None
-    for it in range(1, max_iter + 1):
+    def evaluate(x, v, T):
         fl = flow(x, v, T, jacobian=True)
         y0 = np.concatenate([x, v])
         r = np.concatenate([(fl.y - y0) / rs, [v[ref] / (w * xs)], [(system.energy(x, v) - energy_J) / energy_J]])
+        return fl, r
+
+    try:
+        fl, r = evaluate(x, v, T)
+    except ExactIntegratorError as exc:
+        raise ShootingError(f"the flow failed at the initial guess: {exc}") from None
+    best = None
+    for it in range(1, max_iter + 1):
         J = np.zeros((2 * n + 2, 2 * n + 1))
         J[: 2 * n, : 2 * n] = (fl.jacobian - np.eye(2 * n)) / rs[:, None]
         J[: 2 * n, 2 * n] = flow.vector_field(fl.y) / rs
@@ -127,11 +135,22 @@ def _shoot(flow, x0, v0, period_s, energy_J, *, ref, tol, max_iter) -> PeriodicO
         dz = -np.linalg.lstsq(J, r, rcond=None)[0] * D
         if np.max(np.abs(dz[:n])) < 1e-16 * xs and it > 2:
             break
-        x = x + dz[:n]
-        v = v + dz[n:2 * n]
-        T = T + dz[2 * n]
-        if not (T > 0 and np.all(np.isfinite(x))):
-            raise ShootingError(f"diverged at iteration {it}")
+        # damped Gauss-Newton: halve the step while the flow fails (e.g. chattering on a
+        # grazing iterate) or the residual grows
+        lam = 1.0
+        for _ in range(10):
+            xn, vn, Tn = x + lam * dz[:n], v + lam * dz[n:2 * n], T + lam * dz[2 * n]
+            if Tn > 0 and np.all(np.isfinite(xn)):
+                try:
+                    fln, rnew = evaluate(xn, vn, Tn)
+                    if float(np.max(np.abs(rnew))) < max(rn, 1e-300) or lam < 0.01:
+                        break
+                except ExactIntegratorError:
+                    pass
+            lam *= 0.5
+        else:
+            raise ShootingError(f"no acceptable step at iteration {it}")
+        x, v, T, fl, r = xn, vn, Tn, fln, rnew
     rn, x, v, T, fl, it = best
     if rn > 1e-9:
         raise ShootingError(f"no periodic orbit: closure residual {rn:.3g} after {max_iter} iterations")
@@ -144,13 +163,19 @@ def _shoot(flow, x0, v0, period_s, energy_J, *, ref, tol, max_iter) -> PeriodicO
 __all__ = ["PeriodicOrbit", "ShootingError", "shoot", "shooting_branch", "conservative", "energy_gradient", "FLOQUET_TOL"]
 
 
-def shooting_branch(flow: Flow, energies_J: np.ndarray, guides: list, *, max_rel_jump: float = 0.2):
+def _mac(M, a, b) -> float:
+    return float((a @ M @ b) ** 2 / ((a @ M @ a) * (b @ M @ b)))
+
+
+def shooting_branch(flow: Flow, energies_J: np.ndarray, guides: list, *, max_rel_jump: float = 0.25,
+                    min_mac: float = 0.8):
     """Orbits at increasing energies along an NNM, each refined from the best guess.
 
     ``guides`` are HB branches (:class:`reduced.backbones.NNMBranch`, best first) of the
     same NNM. At each energy the guesses tried are the previous orbit scaled to the new
     energy, then each guide's point nearest in log energy; an orbit is accepted only if
-    its frequency is within ``max_rel_jump`` of the first guide's at that energy (so a
+    its frequency is within ``max_rel_jump`` of the first guide's at that energy and its
+    shape has a MAC above ``min_mac`` with the guide's (so a
     guess that converges onto another NNM is refused, not silently kept). Returns a list
     with a :class:`PeriodicOrbit` or None per energy.
     """
@@ -168,13 +193,17 @@ def shooting_branch(flow: Flow, energies_J: np.ndarray, guides: list, *, max_rel
         g0 = guides[0]
         order = np.argsort(g0.energy_J)
         f_ref = float(np.interp(np.log(E), np.log(g0.energy_J[order]), g0.freq_hz[order]))
+        i0 = int(np.argmin(np.abs(np.log(g0.energy_J / E))))
+        shape_ref = g0.residual.hb.time_series(g0.X[i0])[0]
         orbit = None
         for x0, v0, T in guesses:
             try:
                 o = shoot(flow, x0, v0, T, E)
             except (ShootingError, RuntimeError):
                 continue
-            if abs(o.freq_hz / f_ref - 1.0) < max_rel_jump:
+            # the same NNM: near the guide's frequency and the same shape (mass-weighted
+            # MAC of the turning-point displacement; NNM 2 and NNM 3 are orthogonal)
+            if abs(o.freq_hz / f_ref - 1.0) < max_rel_jump and _mac(flow.system.M, o.x0, shape_ref[0]) > min_mac:
                 orbit = o
                 break
         out.append(orbit)
