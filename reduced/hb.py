@@ -43,10 +43,11 @@ H harmonics in the convergence study (hb_convergence.csv shows both).
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg import lu_factor, lu_solve
+from scipy.linalg import LinAlgWarning, lu_factor, lu_solve
 
 from reduced.gaps import GapSystem
 
@@ -368,8 +369,10 @@ def newton(fun, y0: np.ndarray, *, tol: float = 1e-10, max_iter: int = 20,
         if not np.all(np.isfinite(R)) or not np.all(np.isfinite(J)):
             raise NewtonError(f"non-finite residual or Jacobian at iteration {it}")
         try:
-            lu = lu_factor(J, check_finite=False)
-            dy = -lu_solve(lu, R, check_finite=False)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", LinAlgWarning)  # a zero pivot gives inf: caught below
+                lu = lu_factor(J, check_finite=False)
+                dy = -lu_solve(lu, R, check_finite=False)
         except (ValueError, np.linalg.LinAlgError) as exc:
             raise NewtonError(f"singular Jacobian at iteration {it}: {exc}") from None
         if not np.all(np.isfinite(dy)):

@@ -1,0 +1,69 @@
+"""Pseudo-arclength continuation: folds, corners, stop rule, tongues."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from reduced.backbones import nnm_branch
+from reduced.continuation import continue_branch
+from reduced.discrete import DiscreteParams
+
+SYS = DiscreteParams().system()
+
+
+def circle(y):
+    return np.array([y[0] ** 2 + y[1] ** 2 - 1.0]), np.array([[2 * y[0], 2 * y[1]]])
+
+
+def test_circle_folds_are_detected_and_points_stay_on_it():
+    br = continue_branch(circle, np.array([0.0, 1.0]), param=0, ds=0.1, ds_max=0.2, max_steps=200,
+                         stop=lambda y: y[0] < -0.5 and y[1] > 0)
+    assert br.status == "stop"
+    assert np.allclose(np.hypot(br.y[:, 0], br.y[:, 1]), 1.0, atol=1e-12)
+    # y0 turns at (1, 0) and (-1, 0): two folds of coordinate 0, in that order
+    fold_x = [br.y[i, 0] for i, c in br.folds if c == 0]
+    assert len(fold_x) == 2 and fold_x[0] > 0.95 and fold_x[1] < -0.95
+
+
+@pytest.mark.parametrize("kind, c", [("sqrt", 0.1), ("kink", 10.0)])
+def test_corners_are_passed(kind, c):
+    # y1 = c sqrt(y0 - 1) (a vertical tangent, like a backbone at grazing) or
+    # y1 = c (y0 - 1) (an 84 degree kink, like an AFT sample entering contact) for y0 > 1,
+    # y1 = 0 before: the branch must turn the corner and go on to y0 = 2
+    def f(y):
+        d = y[0] - 1.0
+        if d <= 0:
+            return np.array([y[1]]), np.array([[0.0, 1.0]])
+        if kind == "sqrt":
+            return np.array([y[1] - c * math.sqrt(d)]), np.array([[-0.5 * c / math.sqrt(d), 1.0]])
+        return np.array([y[1] - c * d]), np.array([[-c, 1.0]])
+
+    br = continue_branch(f, np.array([0.0, 0.0]), param=0, ds=0.1, ds_max=0.2, max_steps=400,
+                         stop=lambda y: y[0] >= 2.0, monitor=(1,))
+    assert br.status == "stop" and br.y[-1, 0] >= 2.0
+    assert all(abs(f(y)[0][0]) < 1e-9 for y in br.y)
+    assert np.all(np.diff(br.y[:, 0]) > 0)  # never turned back
+
+
+def test_stop_on_energy_and_grazing_corner_with_harmonics():
+    b = nnm_branch(SYS, 1, H=3, energy_max_J=1e3)
+    assert b.status == "stop" and 1e3 <= b.energy_J[-1] < 1e4
+    # the branch keeps rising in frequency through the grazing corner
+    assert b.freq_hz[-1] > 3 * b.freq_hz[0]
+
+
+def test_nnm1_tongues_are_reported_not_jumped():
+    b = nnm_branch(SYS, 0, H=5, energy_max_J=1e5)
+    assert b.tongues, "H = 5 meets the 5:1 resonance with NNM 3 near 140 Hz"
+    for t in b.tongues:
+        assert t["action"] in ("stepped over", "stopped")
+        assert t["harmonic"] >= 2
+    # every continued piece is itself continuous (no jump larger than the step control
+    # allows) and pieces are reported in `segment`
+    assert b.segment.max() == sum(t["action"] == "stepped over" for t in b.tongues)
+    for s in np.unique(b.segment):
+        f = b.freq_hz[b.segment == s]
+        assert np.all(np.abs(np.diff(np.log(f))) < 0.3)

@@ -1,0 +1,50 @@
+"""Hill's method against Floquet multipliers from shooting on the exact flow."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from reduced.backbones import nnm_branch
+from reduced.discrete import DiscreteParams
+from reduced.flow import Flow
+from reduced.shooting import conservative, shoot
+from reduced.stability import compare, hill
+
+P = DiscreteParams()
+SYS = conservative(P.system())
+
+
+@pytest.fixture(scope="module")
+def nnm2_h15():
+    return nnm_branch(SYS, 1, H=15, energy_max_J=200.0)
+
+
+def _at(b, E):
+    i = int(np.argmin(np.abs(np.log(b.energy_J / E))))
+    X, w = b.X[i], b.omega[i]
+    x, v = b.residual.hb.time_series(X, w)
+    orb = shoot(Flow(SYS), x[0], v[0], 2 * np.pi / w, b.energy_J[i])
+    return hill(b.residual.hb, X, w), orb
+
+
+def test_hill_and_floquet_agree_on_an_unstable_orbit(nnm2_h15):
+    # NNM 2 near 2.6 J: one real multiplier pair off the unit circle (|mu| ~ 1.7)
+    h, orb = _at(nnm2_h15, 2.6)
+    assert not orb.stable and not h.stable
+    assert 1.3 < orb.max_multiplier < 2.5
+    # Hill on 15 harmonics of a kinked force: exponents within a few percent
+    assert h.max_multiplier == pytest.approx(orb.max_multiplier, rel=0.05)
+
+
+def test_hill_and_floquet_agree_on_a_stable_orbit(nnm2_h15):
+    h, orb = _at(nnm2_h15, 50.0)
+    assert orb.stable and h.stable
+    # a conservative orbit: all multipliers on the unit circle
+    assert np.allclose(np.abs(orb.multipliers), 1.0, atol=1e-6)
+    assert np.allclose(np.abs(h.multipliers), 1.0, atol=1e-3)
+
+
+def test_compare_flags_disagreements():
+    c = compare([1.0, 2.0, 3.0], [1.0, 2.0, np.nan], [True, False, False], [1.0, 1.0, 1.0], [True, True, True])
+    assert list(c.agree) == [True, False, True] and c.n_disagree == 1
