@@ -1,0 +1,100 @@
+"""Geometry: named groups, meshed volumes against closed forms, validation before gmsh."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from geometry.build import build_mesh
+from geometry.params import AssemblyGeometry
+
+COARSE = dict(element_size=0.08)
+
+
+@pytest.fixture(scope="module")
+def mesh():
+    return build_mesh(AssemblyGeometry(**COARSE))
+
+
+def test_every_named_group_exists_and_is_not_empty(mesh):
+    g = AssemblyGeometry(**COARSE)
+    assert mesh.part_names == ("beam", "tube")
+    expected = [f"{p}_seat_{s}" for p in ("beam", "tube") for s in g.seat_centres("beam")]
+    expected += [f"beam_contact_{s}" for s in g.seat_centres("beam")]
+    expected += list(g.beam_sensors()) + list(g.tube_sensors()) + [f"bungee_{i}" for i in range(1, 5)]
+    for name in expected:
+        assert name in mesh.node_sets and len(mesh.node_sets[name]) > 0, name
+    for name, xyz in {**g.beam_sensors(), **g.tube_sensors()}.items():
+        # a sensor is one node exactly at its point (selection tolerance 1e-5 m > gmsh's 1e-7 padding)
+        assert len(mesh.node_sets[name]) == 1
+        np.testing.assert_allclose(mesh.points[mesh.node_sets[name][0]], xyz, atol=1e-9)
+
+
+def test_meshed_volumes_equal_closed_forms(mesh):
+    g = AssemblyGeometry(**COARSE)
+    # trilinear hexahedra on straight blocks are exact: only round-off remains
+    assert mesh.volume("beam") == pytest.approx(g.beam_volume, rel=1e-10)
+    assert mesh.volume("tube") == pytest.approx(g.tube_volume, rel=1e-10)
+    # beam mass at the paper's value with the section of fem.model
+    from fem.model import AssemblyModel
+
+    m = AssemblyModel()
+    assert 7850.0 * m.geometry().beam_volume == pytest.approx(2.516, rel=1e-12)
+
+
+def test_three_hexahedra_through_the_tube_wall(mesh):
+    g = AssemblyGeometry(**COARSE)
+    top = g.tube_inner_height / 2
+    p = mesh.points[mesh.part_nodes("tube")]
+    # nodes on one vertical line through the top wall at a seat centre
+    line = p[(np.abs(p[:, 0] - g.L) < 1e-9) & (np.abs(p[:, 1]) < 1e-9) & (p[:, 2] >= top - 1e-9)]
+    assert len(np.unique(np.round(line[:, 2], 9))) == g.wall_layers + 1 >= 4
+
+
+def test_only_the_parts_asked_for_are_built():
+    m = build_mesh(AssemblyGeometry(parts=("beam",), **COARSE))
+    assert m.part_names == ("beam",)
+    assert not any(k.startswith("tube") for k in m.node_sets)
+
+
+def test_mesh_is_meshio_readable_with_tags(tmp_path, mesh):
+    import meshio
+
+    path = tmp_path / "assembly.vtu"
+    mesh.write(path)
+    back = meshio.read(path)
+    assert back.cells_dict["hexahedron"].shape == mesh.hexes.shape
+    np.testing.assert_array_equal(back.cell_data["part"][0], mesh.cell_part)
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(tube_wall=-0.001), "tube_wall must be > 0"),
+        (dict(tube_clearance_y=-0.01), "tube_clearance_y must be > 0"),
+        (dict(tube_clearance_y=0.0), "tube_clearance_y must be > 0"),
+        (dict(spring_length=0.0), "spring_length must be > 0"),
+        (dict(beam_length=0.3), "must lie on the beam"),
+        (dict(seat_diameter=0.03), "smaller than beam_width"),
+        (dict(tube_wall=0.05), "too thick"),
+        (dict(parts=("tube",)), "must include 'beam'"),
+    ],
+)
+def test_bad_geometry_is_refused_before_gmsh_runs(monkeypatch, kwargs, message):
+    import gmsh
+
+    def boom(*a, **k):
+        raise AssertionError("gmsh was started for an invalid geometry")
+
+    monkeypatch.setattr(gmsh, "initialize", boom)
+    with pytest.raises(ValueError, match=message):
+        build_mesh(AssemblyGeometry(**kwargs))
+
+
+def test_model_refuses_a_beam_inside_which_the_seats_do_not_fit():
+    from fem.model import AssemblyModel
+
+    with pytest.raises(ValueError, match="must lie on the beam"):
+        AssemblyModel(beam_length=0.3)
+    with pytest.raises(ValueError, match="tube_mass must be > 0"):
+        AssemblyModel(tube_mass=-1.0)
