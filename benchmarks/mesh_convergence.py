@@ -77,7 +77,8 @@ def main(argv=None) -> int:
     for r in rows:
         errs = [abs(r[f"{n}_hz"] - ext[n]) / ext[n] for n in TABLE2_ORDER]
         r["max_error_pct"] = 100 * max(errs)
-        r["first_elastic_error_pct"] = 100 * (r["first_elastic_hz"] - ext["first_elastic"]) / ext["first_elastic"]
+        fe = ext["first_elastic"]
+        r["first_elastic_error_pct"] = 100 * (r["first_elastic_hz"] - fe) / fe
     ok = [r for r in hexs if r["max_error_pct"] < 100 * TOLERANCE]
     default = min(ok, key=lambda r: r["total_s"]) if ok else None
     cols = list(rows[0])

@@ -100,7 +100,8 @@ def calibrate(model: AssemblyModel, evaluate: Callable[[AssemblyModel], np.ndarr
     fitted = np.exp(sol.x)
     best = dataclasses.replace(model, **{n: float(v) for n, v in zip(names, fitted, strict=True)})
     return CalibrationResult(model=best, names=names, initial=p0, fitted=fitted, freq_hz=f, test_hz=test,
-                             sensitivity=S, n_evaluations=len(history), status=sol.status, message=sol.message,
+                             sensitivity=S, n_evaluations=len(history), status=sol.status,
+                             message=sol.message,
                              wall_time_s=time.perf_counter() - t0, history=history)
 
 

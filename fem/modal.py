@@ -190,7 +190,8 @@ def modal_analysis(K: sp.spmatrix, M: sp.spmatrix, n_modes: int = 20, shift_hz: 
     res = np.linalg.norm(Kphi - (M @ phi) * lam, axis=0) / np.maximum(np.linalg.norm(Kphi, axis=0), 1e-300)
     elastic = lam > (2 * np.pi * shift_hz) ** 2
     freq = np.sqrt(np.clip(lam, 0.0, None)) / (2 * np.pi)
-    return ModalResult(freq_hz=freq, phi=phi, omega2=lam, solver=f"{solver}/{method}", shift_hz=shift_hz, n_op=n_op, n_iter=n_iter,
+    return ModalResult(freq_hz=freq, phi=phi, omega2=lam, solver=f"{solver}/{method}", shift_hz=shift_hz,
+                       n_op=n_op, n_iter=n_iter,
                        timing={"factorize_s": t1 - t0, "iterate_s": t2 - t1},
                        residual=float(res[elastic].max()) if elastic.any() else 0.0)
 

@@ -60,7 +60,8 @@ def dof_table(mesh: MeshHex1, dof: Dofs) -> tuple[np.ndarray, np.ndarray]:
     comp = np.empty(dof.N, dtype=np.int8)
     loc = np.empty((dof.N, 3))
     p = mesh.p
-    places = [(dof.nodal_dofs, p), (dof.edge_dofs, p[:, mesh.edges].mean(axis=1) if dof.edge_dofs.size else None),
+    places = [(dof.nodal_dofs, p),
+              (dof.edge_dofs, p[:, mesh.edges].mean(axis=1) if dof.edge_dofs.size else None),
               (dof.facet_dofs, p[:, mesh.facets].mean(axis=1) if dof.facet_dofs.size else None),
               (dof.interior_dofs, p[:, mesh.t].mean(axis=1) if dof.interior_dofs.size else None)]
     for d, X in places:

@@ -39,7 +39,8 @@ class CoilSpring:
     @property
     def EI(self) -> float:
         """N m^2, bending rigidity (1 + nu) D^2 k_s l / (2 (2 + nu))."""
-        return (1 + self.nu_wire) * self.coil_diameter**2 * self.k_axial * self.length / (2 * (2 + self.nu_wire))
+        nu = self.nu_wire
+        return (1 + nu) * self.coil_diameter**2 * self.k_axial * self.length / (2 * (2 + nu))
 
     @property
     def GJ(self) -> float:

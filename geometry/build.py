@@ -114,7 +114,8 @@ def beam_grid(g: AssemblyGeometry) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def tube_grid(g: AssemblyGeometry) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Block grid lines of the tube in x, y, z (wall cells only are built)."""
     s, L, lt = g.seat_diameter / 2, g.L, g.tube_length / 2
-    W, H, w, h = g.tube_outer_width / 2, g.tube_outer_height / 2, g.tube_inner_width / 2, g.tube_inner_height / 2
+    W, H = g.tube_outer_width / 2, g.tube_outer_height / 2
+    w, h = g.tube_inner_width / 2, g.tube_inner_height / 2
     xs = _grid([-lt, -L - s, -L, -L + s, 0, L - s, L, L + s, lt])
     ys = _grid([-W, -w, -s, 0, s, w, W])
     zs = _grid([-H, -h, h, H])

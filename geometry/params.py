@@ -53,12 +53,14 @@ class AssemblyGeometry:
         half = self.beam_length / 2
         if not self.L + self.seat_diameter / 2 < half:
             raise ValueError(
-                f"the spring seats at x = +-(L + seat_diameter/2) = +-{self.L + self.seat_diameter / 2:.4g} m "
+                f"the spring seats at x = +-(L + seat_diameter/2) = "
+                f"+-{self.L + self.seat_diameter / 2:.4g} m "
                 f"must lie on the beam (half-length {half:.4g} m)"
             )
         if not self.seat_diameter < self.beam_width:
             raise ValueError(
-                f"seat_diameter {self.seat_diameter:.4g} m must be smaller than beam_width {self.beam_width:.4g} m"
+                f"seat_diameter {self.seat_diameter:.4g} m must be smaller than "
+                f"beam_width {self.beam_width:.4g} m"
             )
         if not self.L > self.seat_diameter / 2:
             raise ValueError("the two seats overlap: L must exceed seat_diameter / 2")

@@ -99,7 +99,7 @@ def test_rigid_mass_properties_of_the_beam(free_beam):
     l = m.beam_length
     P = _rigid(free_beam)
     Mrb = P.T @ free_beam.M @ P
-    I = np.diag([m.beam_mass * (b * b + h * h), m.beam_mass * (l * l + h * h), m.beam_mass * (l * l + b * b)]) / 12
+    I = m.beam_mass / 12 * np.diag([b * b + h * h, l * l + h * h, l * l + b * b])
     expected = np.block([[m.beam_mass * np.eye(3), np.zeros((3, 3))], [np.zeros((3, 3)), I]])
     np.testing.assert_allclose(Mrb, expected, rtol=1e-9, atol=1e-12 * m.beam_mass)
 
@@ -219,7 +219,8 @@ def test_cli_modal_writes_the_correlation_files(tmp_path):
         assert (out / name).exists(), name
     lines = (out / "frequencies.csv").read_text().splitlines()
     assert lines[0] == "mode,description,freq_hz,test_hz,error_pct"
-    assert [ln.split(",")[1] for ln in lines[1:]] == ["longitudinal", "lateral", "yaw", "bounce", "pitch", "roll"]
+    labels = [ln.split(",")[1] for ln in lines[1:]]
+    assert labels == ["longitudinal", "lateral", "yaw", "bounce", "pitch", "roll"]
     assert "no test shapes" in (out / "mac_beam.csv").read_text()
     # the FE shapes read back as "test" shapes correlate perfectly with themselves
     scene.write_text(SCENE.format(pictures="false", shapes=str(out / "fe_shapes.uff")))

@@ -108,7 +108,8 @@ def _free_beam_table(result, writer: StageWriter) -> None:
         used.add(j)
         rows.append([k + 1, f"{name} (Euler-Bernoulli/bar theory)", float(f[j]), float(ref),
                      100 * (f[j] - ref) / ref])
-    _write_csv(writer.path("frequencies.csv"), ["mode", "description", "freq_hz", "test_hz", "error_pct"], rows)
+    header = ["mode", "description", "freq_hz", "test_hz", "error_pct"]
+    _write_csv(writer.path("frequencies.csv"), header, rows)
 
 
 def _mac_files(result, chosen, names, spec, writer: StageWriter) -> None:
@@ -141,7 +142,8 @@ def _mac_files(result, chosen, names, spec, writer: StageWriter) -> None:
         else:
             nodes, _, test = read_uff55(path)
             if len(nodes) != len(all_s):
-                raise ValueError(f"{path}: expected {len(all_s)} sensor nodes (1..{len(all_s)}), got {len(nodes)}")
+                raise ValueError(f"{path}: expected {len(all_s)} sensor nodes (1..{len(all_s)}), "
+                                 f"got {len(nodes)}")
     note = "test shapes from " + spec.test_shapes if test is not None else (
         "no test shapes given: FE auto-MAC (can the sensors tell the modes apart?)")
     writer.stats["mac"] = note
@@ -186,7 +188,8 @@ def _write_vtu(result, chosen, names, path: Path) -> None:
     data = {}
     for i, name in zip(chosen, names, strict=True):
         f = result.modes.freq_hz[i]
-        data[f"mode{i + 1:02d}_{name.replace(' ', '_')}_{f:.2f}Hz"] = _nodal_field(result, i).astype(np.float32)
+        key = f"mode{i + 1:02d}_{name.replace(' ', '_')}_{f:.2f}Hz"
+        data[key] = _nodal_field(result, i).astype(np.float32)
     meshio.Mesh(mesh.points.astype(np.float32), [("hexahedron", mesh.hexes.astype(np.int32))],
                 point_data=data, cell_data={"part": [mesh.cell_part.astype(np.int32)]}).write(str(path))
 
