@@ -57,13 +57,13 @@ class AssemblyModel:
     nu: float = 0.3  # steel
     rho: float = 7850.0  # kg/m^3, beam steel; the beam section follows from beam_mass
     # -- choices, fitted to Table 2 by fem.calibrate (see results/assembly-modal/) ---------
-    beam_length: float = 0.5167  # m, overall length of the impact beam
-    coil_diameter: float = 0.0182  # m, mean coil diameter: lateral, bending, torsion of a spring
-    spring_length: float = 0.0406  # m, installed spring length (sets the tube's inner height)
-    seat_k_rx: float = 3.0  # N m/rad, tube seat rotational stiffness about x
-    seat_k_ry: float = 1.66  # N m/rad, tube seat rotational stiffness about y
-    seat_k_rz: float = 1.0e3  # N m/rad, tube seat torsional stiffness (nearly clamped)
-    tube_mass: float = 13.47  # kg, box tube with its sensors and fixtures, smeared over its volume
+    beam_length: float = 0.43926  # m, overall length of the impact beam
+    coil_diameter: float = 0.013961  # m, mean coil diameter: lateral, bending, torsion of a spring
+    spring_length: float = 0.032792  # m, installed spring length (sets the tube's inner height)
+    seat_k_rx: float = 2.5762  # N m/rad, tube seat rotational stiffness about x
+    seat_k_ry: float = 1.3463  # N m/rad, tube seat rotational stiffness about y
+    seat_k_rz: float = 9735.0  # N m/rad, tube seat torsion (at its bound: clamped; no influence)
+    tube_mass: float = 13.183  # kg, box tube with its sensors and fixtures, smeared over its volume
     # -- other choices ---------------------------------------------------------------------
     tip_mass: float = 0.08  # kg, one impact tip + bolt + load cell, lumped on its tube seat
     tube_wall: float = 0.00635  # m, 1/4 in wall
@@ -73,7 +73,7 @@ class AssemblyModel:
     bungee_kxy: float = 30.0  # N/m, horizontal (pendulum) stiffness of each attachment
     # -- discretisation --------------------------------------------------------------------
     element: str = "hex20"  # hex8 | hex20 | hex27 (from the element study)
-    element_size: float = 0.012  # m, target element edge (default from the mesh study)
+    element_size: float = 0.3  # m, target element edge (default from the mesh study)
     wall_layers: int = 3  # elements through the tube wall
 
     def __post_init__(self) -> None:
