@@ -42,7 +42,9 @@ class AssemblyGeometry:
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise ValueError(f"{f.name} must be a finite number, got {v!r}")
             if not v > 0:
-                raise ValueError(f"{f.name} must be > 0, got {v!r}")
+                why = {"tube_clearance_y": " (the tube must be larger than the beam)",
+                       "tube_wall": " (a box tube needs a wall)"}.get(f.name, "")
+                raise ValueError(f"{f.name} must be > 0, got {v!r}{why}")
         unknown = [p for p in self.parts if p not in PARTS]
         if unknown or not self.parts:
             raise ValueError(f"parts must be a non-empty subset of {PARTS}, got {self.parts!r}")
