@@ -124,8 +124,8 @@ class FEPSpec:
 
     harmonics: tuple[int, ...] = (1, 15)  # HB orders drawn in fep.png (1: the paper's Fig. 2)
     convergence_harmonics: tuple[int, ...] = (1, 3, 5, 9, 15, 25, 50)  # hb_convergence study
-    samples_study_harmonics: int = 5  # H at which the AFT sample count N is varied
-    samples: tuple[int, ...] = (16, 32, 64, 128, 256, 512, 1024)  # N values of that study
+    samples_study_harmonics: int = 15  # H at which the AFT sample count N is varied
+    samples: tuple[int, ...] = (32, 64, 128, 256, 512, 1024, 2048)  # N values of that study
     energy_max_J: float = 1e5  # J, every branch runs at least this far
     n_shooting: int = 60  # shooting orbits per NNM (log-spaced in energy)
 

@@ -76,7 +76,7 @@ def harmonic_ratio(hb: HarmonicBalance, X: np.ndarray) -> tuple[float, int]:
 
 
 TONGUE_RATIO = 1.0  # a harmonic k >= 2 larger than the fundamental: an internal resonance
-STEP_OVER_LOG10A = (0.02, 0.05, 0.1, 0.2, 0.35, 0.5, 0.75, 1.0)  # tried jumps in log10 a past a tongue
+STEP_OVER_DW = (0.01, 0.02, 0.05, 0.1, 0.2, 0.35)  # tried relative frequency jumps past a tongue
 
 
 def _nnm_branch(
@@ -93,6 +93,7 @@ def _nnm_branch(
     max_angle_deg: float = 15.0,
     tongue_ratio: float = TONGUE_RATIO,
     max_tongues: int = 60,
+    follow_steps: int = 100,
     progress=None,
 ) -> NNMBranch:
     """Continue NNM ``mode`` (0-based) by HB with H harmonics until energy >= energy_max_J.
@@ -102,13 +103,15 @@ def _nnm_branch(
     amplitude (:class:`reduced.hb.NNMResidual`).
 
     Internal resonances (tongues, H > 1): when a harmonic k >= 2 outgrows the fundamental
-    (``tongue_ratio``), or the frequency falls while the energy rises, the branch has left the backbone for a k:1 resonance with another
+    (``tongue_ratio``), or the frequency falls while the energy rises and does not come back
+    within ``follow_steps`` points (a tongue that does come back is "followed"), the branch
+    has left the backbone for a k:1 resonance with another
     mode (for the 3-DOF model, NNM 1 meets NNM 3 wherever k f_1 = f_3; followed, such a
     tongue runs all the way along NNM 3). The tongue is *stepped over*: from the last
-    backbone point before it (ratio < tongue_ratio / 3, frequency at its running maximum) the amplitude is raised in jumps
-    (STEP_OVER_LOG10A), the frequency predicted from the one-harmonic backbone, until a
-    solution with a small ratio, a higher frequency and a higher energy is found; continuation restarts
-    there. Each tongue is reported in ``tongues`` with action "stepped over"; if no jump
+    backbone point before it (ratio < tongue_ratio / 3, frequency at its running
+    maximum) the frequency is raised in jumps (STEP_OVER_DW), the amplitude predicted from
+    the one-harmonic backbone, until a solution with a small ratio, a larger amplitude and
+    a higher energy is found; continuation restarts there. Each tongue is reported in ``tongues`` with action "stepped over"; if no jump
     lands, the run ends with action "stopped" (never a silent jump).
     """
     t0 = time.perf_counter()
@@ -128,32 +131,54 @@ def _nnm_branch(
     nX = hb.size
     i_w, i_a = nX, nX + 2
     in_tongue = {"flag": False}
+    tongues, notes = [], []
 
     def ratio(y):
         return harmonic_ratio(hb, y[:nX])
 
-    prev = {"w": -np.inf, "E": -np.inf}
+    st = {}
+
+    def reset():
+        st.update(w_max=-np.inf, E_prev=-np.inf, count=0, bend_at=None, bend=None)
 
     def stop(y):
+        st["count"] += 1
         E = res.energy(y)
         if E >= energy_max_J:
             return True
-        # on the backbone of a hardening gap system the frequency rises with the energy;
-        # a frequency that falls while the energy rises is the bend into a tongue
-        bend = y[i_w] < prev["w"] * (1.0 - 1e-6) and E > prev["E"]
-        prev["w"], prev["E"] = y[i_w], E
-        if H > 1 and (ratio(y)[0] > tongue_ratio or bend):
-            in_tongue["flag"] = True
-            return True
+        if H > 1:
+            r, k = ratio(y)
+            if r > tongue_ratio:
+                in_tongue["flag"] = True
+                return True
+            # on the backbone of a hardening gap system the frequency rises with the energy;
+            # a frequency that falls while the energy rises is the bend into a tongue: follow
+            # it for up to follow_steps points, hoping it returns above its highest frequency
+            if st["bend_at"] is None:
+                if y[i_w] < st["w_max"] * (1.0 - 1e-6) and E > st["E_prev"]:
+                    st["bend_at"] = st["count"]
+                    st["bend"] = (k, E, st["w_max"])
+            elif y[i_w] > st["bend"][2] and r < tongue_ratio / 3.0:
+                k0, E0, w0 = st["bend"]
+                tongues.append({"harmonic": k0, "energy_J": E0, "freq_hz": w0 * omega0 / (2 * np.pi),
+                                "action": "followed", "energy_after_J": E})
+                notes.append(f"{k0}:1 internal resonance at E = {E0:.4g} J: followed (the branch "
+                             f"returned at E = {E:.4g} J)")
+                st["bend_at"] = None
+            elif st["count"] - st["bend_at"] > follow_steps:
+                in_tongue["flag"] = True
+                return True
+        st["w_max"] = max(st["w_max"], y[i_w])
+        st["E_prev"] = E
         return False
 
     backbone1 = None
-    pieces, tongues, notes = [], [], []
+    pieces = []
     steps_left = max_steps
     ystart = y0
     for _ in range(max_tongues + 1):
         in_tongue["flag"] = False
-        prev["w"], prev["E"] = -np.inf, -np.inf
+        reset()
         br = continue_branch(
             res, ystart, param=i_a, direction=1.0, ds=ds, ds_max=ds_max, max_steps=steps_left,
             max_angle_deg=max_angle_deg, stop=stop, monitor=(i_w,), callback=res.energy,
@@ -182,30 +207,37 @@ def _nnm_branch(
         la1 = backbone1[:, n1 + 2]
         bias = anchor[i_w] / float(np.interp(anchor[i_a], la1, backbone1[:, n1]))
         landed = None
-        for jump in STEP_OVER_LOG10A:
-            la = anchor[i_a] + jump
-            # a clean guess on the main backbone: the one-harmonic solution at this
-            # amplitude (higher harmonics zero), its frequency scaled by the HB bias
-            guess = np.zeros_like(anchor)
-            for c in range(n1):
-                guess[c] = np.interp(la, la1, backbone1[:, c])
-            guess[i_w] = bias * float(np.interp(la, la1, backbone1[:, n1]))
+        w1 = backbone1[:, n1]
+        mono = np.maximum.accumulate(w1)  # the one-harmonic backbone, made monotone for inversion
+        for jump, kind in [(j, g) for j in STEP_OVER_DW for g in ("anchor", "one-harmonic")]:
+            # fix the frequency a little above the anchor's: the resonance sits at one
+            # frequency (k omega = omega of the other mode), so a solve at fixed frequency
+            # past it stays well conditioned, where one at fixed amplitude may not
+            w_t = anchor[i_w] * (1.0 + jump)
+            la = float(np.interp(w_t / bias, mono, la1))
+            if kind == "anchor":  # the anchor's shape at the predicted amplitude
+                guess = anchor.copy()
+            else:  # the one-harmonic solution at that amplitude, higher harmonics zero
+                guess = np.zeros_like(anchor)
+                for c in range(n1):
+                    guess[c] = np.interp(la, la1, backbone1[:, c])
+            guess[i_w] = w_t
             guess[i_a] = la
 
-            def fixed(z, la=la):
+            def fixed(z, w_t=w_t):
                 R, J = res(z)
                 e = np.zeros(z.size)
-                e[i_a] = 1.0
-                return np.concatenate([R, [z[i_a] - la]]), np.vstack([J, e])
+                e[i_w] = 1.0
+                return np.concatenate([R, [z[i_w] - w_t]]), np.vstack([J, e])
 
             try:
-                sol = newton(fixed, guess, max_iter=40, max_step=1.0)
+                sol = newton(fixed, guess, max_iter=40, max_step=5.0)
             except NewtonError:
                 continue
-            # accept only a point on this backbone: near the predicted frequency, above
-            # the anchor in frequency and energy, with a dominant fundamental
-            if (abs(sol.y[i_w] / guess[i_w] - 1.0) < 0.1 and ratio(sol.y)[0] < tongue_ratio / 3.0
-                    and sol.y[i_w] > anchor[i_w] and res.energy(sol.y) > E_a):
+            # accept only a point on this backbone: amplitude near the prediction and above
+            # the anchor's, more energy, a dominant fundamental
+            if (abs(sol.y[i_a] - la) < 0.5 and ratio(sol.y)[0] < tongue_ratio / 3.0
+                    and sol.y[i_a] > anchor[i_a] and res.energy(sol.y) > E_a):
                 landed = sol.y
                 break
         if landed is None or steps_left <= 0:
@@ -255,4 +287,22 @@ def hb_backbones(
     return out
 
 
-__all__ = ["NNMBranch", "nnm_branch", "hb_backbones", "grazing_amplitude", "harmonic_ratio"]
+__all__ = ["NNMBranch", "nnm_branch", "hb_backbones", "grazing_amplitude", "harmonic_ratio", "hb_point_at_energy"]
+
+
+def hb_point_at_energy(res: NNMResidual, y_guess: np.ndarray, energy_J: float, *, tol: float = 1e-11) -> np.ndarray:
+    """The HB solution of ``res`` whose (mean) energy is ``energy_J``, from a nearby point.
+
+    Newton on [R(y); (E(y) - E*) / E*] (square: the arclength row replaced by the energy),
+    with the analytic dE/dy of :meth:`reduced.hb.NNMResidual.energy_gradient`.
+    Raises :class:`reduced.hb.NewtonError` on failure. Used to compare HB with exact
+    orbits at exactly the same energy, with no interpolation along the branch.
+    """
+    def fun(y):
+        R, J = res(y)
+        E = res.energy(y)
+        return (np.concatenate([R, [(E - energy_J) / energy_J]]),
+                np.vstack([J, res.energy_gradient(y) / energy_J]))
+
+    with single_thread_blas():
+        return newton(fun, y_guess, tol=tol, max_iter=30).y

@@ -38,6 +38,8 @@ QTOL_REL = 64.0 * EPS  # q is a sum of ~2n terms: round-off of its evaluation, r
 HMIN_PERIODS = 1e-9  # the march's smallest step, in units of 1/omega_max (grazing floor)
 MAX_MARCH_ITER = 10_000_000  # per stop per segment: a hang guard, never reached in practice
 MAX_COND = 1e10  # refuse nearly defective (critically damped) states
+NOISE_FACTOR = 4.0  # margin on the propagated round-off bound of q and q'
+REST_FLOOR = 1e-15  # motion this small relative to the initial one is round-off at rest
 
 
 class ExactIntegratorError(RuntimeError):
@@ -53,6 +55,7 @@ class StateTable:
     Vinv: np.ndarray  # (S, 2n, 2n) complex
     yp: np.ndarray  # (S, 2n), equilibrium [K_s^-1 F_s; 0]
     valid: np.ndarray  # (S,) bool, feasible states
+    cond: np.ndarray  # (S,) condition number of V: the closed form loses cond eps |y|
 
 
 def _decompose(system: GapSystem, Ks: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -94,16 +97,18 @@ def state_table(system: GapSystem) -> StateTable:
     yp = np.zeros((S, 2 * n))
     valid = np.zeros(S, bool)
     cache: dict[bytes, tuple] = {}
+    cond = np.ones(S)
     for active in system.feasible_states():
         s = int(np.sum(active * (1 << np.arange(m))))
         Ks, Fs = system.state_matrices(active)
         key = Ks.tobytes()
         if key not in cache:
-            cache[key] = _decompose(system, Ks)
-        lam[s], V[s], Vinv[s] = cache[key]
+            lam_k, V_k, Vinv_k = _decompose(system, Ks)
+            cache[key] = (lam_k, V_k, Vinv_k, float(np.linalg.cond(V_k)))
+        lam[s], V[s], Vinv[s], cond[s] = cache[key]
         yp[s, :n] = solve(Ks, Fs, assume_a="sym") if np.any(Fs) else 0.0
         valid[s] = True
-    return StateTable(lam, V, Vinv, yp, valid)
+    return StateTable(lam, V, Vinv, yp, valid, cond)
 
 
 @nb.njit(cache=True)
@@ -128,30 +133,43 @@ def _work(G, lam, tau):
 
 
 @nb.njit(cache=True)
-def _first_root(const, coef, lam, tau_limit, hmin):
+def _first_root(const, coef, lam, tau_limit, hmin, qnoise, dnoise, floor):
     """First tau in [0, tau_limit) where q = const + Re sum coef e^{lam tau} turns positive.
 
-    Returns (tau, n_iter); tau = inf when there is none before tau_limit.
+    q is known to QTOL_REL x the size of its terms plus ``qnoise``, the round-off carried
+    in from the modal coordinates w (q' likewise, with ``dnoise``); within that band a
+    stop is at its threshold. Returns (tau, n_iter); tau = inf when there is none
+    before tau_limit. A motion smaller than ``floor`` is round-off about a state that
+    rests on a stop's threshold (zero gap, heavy damping): it triggers no event.
     """
     N = lam.shape[0]
-    scale = abs(const)
+    osc = 0.0
     for i in range(N):
-        scale += abs(coef[i])
-    qtol = QTOL_REL * scale
+        osc += abs(coef[i])
+    if osc < floor and abs(const) < floor:
+        return np.inf, 0
+    qtol = QTOL_REL * (abs(const) + osc) + NOISE_FACTOR * qnoise
     tau = 0.0
     for it in range(MAX_MARCH_ITER):
         q = const
         d = 0.0
+        dscale = 0.0
         Q2 = 0.0
         for i in range(N):
             e = coef[i] * np.exp(lam[i] * tau)
             q += e.real
             d += (lam[i] * e).real
+            dscale += abs(e) * abs(lam[i])
             Q2 += abs(e) * abs(lam[i]) ** 2
         if q > -qtol:
-            if q > qtol:
+            dtol = QTOL_REL * dscale + NOISE_FACTOR * dnoise
+            if q > qtol and d >= -dtol:
                 return tau, it
-            if d > 0.0:
+            # At the threshold a crossing needs q' > 0 beyond its round-off; otherwise it is a
+            # tangential graze. A q just past the threshold but falling back (q' < 0) is the
+            # round-off of re-expanding the state right after a switch, not a crossing:
+            # deciding either by noise would flip the state back and forth forever.
+            if d > dtol:
                 return tau + max(-q, 0.0) / d, it
         qn = -min(q, 0.0)
         disc = np.sqrt(d * d + 2.0 * Q2 * qn)
@@ -178,8 +196,8 @@ def _eval_state(yp, X, lam, tau, out):
 
 
 @nb.njit(cache=True)
-def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, C, damped,
-                  y, active, t, t_end, t_samples, i_samp, out_y, out_W, W, hmin, max_events):
+def _exact_kernel(lam, V, Vinv, yp, valid, cond, B, offset, side, tip, C, damped,
+                  y, active, t, t_end, t_samples, i_samp, out_y, out_W, W, hmin, floor, max_events):
     """March events from t to t_end; fills samples from index i_samp. Returns the new state."""
     n = B.shape[1]
     m = B.shape[0]
@@ -188,10 +206,12 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, C, damped,
     X = np.empty((N, N), np.complex128)
     G = np.zeros((N, N), np.complex128)
     coef = np.empty(N, np.complex128)
+    werr = np.empty(N)
     ytmp = np.empty(N)
     n_events = 0
     n_iter = 0
     status = 0
+    n_stuck = 0  # consecutive events with no progress in time
     while True:
         s = 0
         for j in range(m):
@@ -201,11 +221,14 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, C, damped,
             status = -2
             break
         lam_s = lam[s]
-        # w = Vinv (y - yp);  X[:, i] = V[:, i] w_i
+        # w = Vinv (y - yp);  X[:, i] = V[:, i] w_i;  werr bounds the round-off in w
         for i in range(N):
             wi = 0.0 + 0.0j
+            err = 0.0
             for r in range(N):
                 wi += Vinv[s, i, r] * (y[r] - yp[s, r])
+                err += abs(Vinv[s, i, r]) * (abs(y[r]) + abs(yp[s, r]))
+            werr[i] = EPS * err
             for r in range(N):
                 X[r, i] = V[s, r, i] * wi
         if damped:
@@ -225,12 +248,18 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, C, damped,
             for r in range(n):
                 const += B[j, r] * yp[s, r]
             const = sgn * (const - offset[j])
+            qnoise = 0.0
+            dnoise = 0.0
             for i in range(N):
                 acc = 0.0 + 0.0j
+                pv = 0.0 + 0.0j
                 for r in range(n):
                     acc += B[j, r] * X[r, i]
+                    pv += B[j, r] * V[s, r, i]
                 coef[i] = sgn * acc
-            tj, it = _first_root(const, coef, lam_s, tau_ev, hmin)
+                qnoise += abs(pv) * werr[i]
+                dnoise += abs(pv) * abs(lam_s[i]) * werr[i]
+            tj, it = _first_root(const, coef, lam_s, tau_ev, hmin, qnoise, dnoise, floor)
             n_iter += it
             if tj < 0.0:
                 status = -3
@@ -253,10 +282,21 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, C, damped,
             y[r] = ytmp[r]
         if damped:
             W += _work(G, lam_s, tau_ev)
+        n_stuck = n_stuck + 1 if tau_ev == 0.0 else 0
+        if n_stuck > 8 * m:
+            status = -4
+            break
         t = t_next
         if j_ev < 0:
             break
-        active[j_ev] = not active[j_ev]
+        if active[j_ev]:
+            active[j_ev] = False
+        else:
+            # closing a stop opens its tip's other stop: at zero gap both cross together
+            for j in range(m):
+                if tip[j] == tip[j_ev]:
+                    active[j] = False
+            active[j_ev] = True
         n_events += 1
         if n_events >= max_events:
             status = -1
@@ -288,10 +328,15 @@ def integrate_exact(
     """
     t_wall = time.perf_counter()
     n = system.n
+    original, system = system, system.fold_zero_gap_tips()
     table = state_table(system)
-    hmin = HMIN_PERIODS / system.omega_max()
+    omega_max = system.omega_max()
+    hmin = HMIN_PERIODS / omega_max
     y = np.concatenate([np.asarray(x0, float), np.asarray(v0, float)])
     active = system.penetration(y[:n]) > 0.0
+    # motion below REST_FLOOR of the initial one (in m) is round-off: see _first_root
+    x_scale = np.abs(system.B) @ (np.abs(y[:n]) + np.abs(y[n:]) / omega_max)
+    floor = REST_FLOOR * float(np.max(x_scale, initial=0.0))
     ts = sample_times(duration_s, sample_rate_hz)
     out_y = np.empty((ts.size, 2 * n))
     out_W = np.empty(ts.size)
@@ -299,9 +344,9 @@ def integrate_exact(
     bounds = np.linspace(0.0, max(duration_s, ts[-1]), chunks + 1)
     for c in range(chunks):
         t, W, i_samp, ne, ni, status = _exact_kernel(
-            table.lam, table.V, table.Vinv, table.yp, table.valid, system.B, system.offset,
-            system.side, system.C, not system.undamped, y, active, t, bounds[c + 1], ts,
-            i_samp, out_y, out_W, W, hmin, max_events - n_events,
+            table.lam, table.V, table.Vinv, table.yp, table.valid, table.cond, system.B, system.offset,
+            system.side, system.tip, system.C, not system.undamped, y, active, t, bounds[c + 1], ts,
+            i_samp, out_y, out_W, W, hmin, floor, max_events - n_events,
         )
         n_events += ne
         n_iter += ni
@@ -312,6 +357,11 @@ def integrate_exact(
             )
         if status == -2:
             raise ExactIntegratorError("the motion reached an infeasible contact state")
+        if status == -4:
+            raise ExactIntegratorError(
+                f"contact state flips back and forth at t = {t:.6g} s without progress (round-off "
+                "at a stop exceeds the event tolerance); use method 'explicit'"
+            )
         if status == -3:
             raise ExactIntegratorError(f"event search did not converge near t = {t:.6g} s")
         if progress is not None:
@@ -323,18 +373,20 @@ def integrate_exact(
     x, v = out_y[:, :n], out_y[:, n:]
     amp = float(np.max(np.abs(x))) if x.size else 0.0
     return RingdownResult(
-        system=system,
+        system=original,
         t=ts,
         x=x,
         v=v,
         dissipated=out_W,
         method="exact",
-        tolerance=QTOL_REL * max(amp, float(np.max(np.abs(system.offset), initial=0.0))),
+        # evaluating V diag(e^{lam t}) V^-1 y loses cond(V) eps |y| at each event
+        tolerance=float(np.max(table.cond)) * EPS * max(amp, float(np.max(np.abs(system.offset), initial=0.0))),
         stats={
             "n_events": n_events,
             "n_steps": n_events + 1,
             "n_march": n_iter,
             "n_states": int(table.valid.sum()),
+            "cond_V": float(np.max(table.cond)),
             "wall_s": time.perf_counter() - t_wall,
         },
     )

@@ -158,6 +158,28 @@ class GapSystem:
             states.append(a)
         return states
 
+    def fold_zero_gap_tips(self) -> GapSystem:
+        """The same system with every zero-gap, two-sided tip of equal stiffness made linear.
+
+        Such a tip pushes k s on both sides of s = 0, so it is a linear spring; folding it
+        into K removes a threshold that a decaying motion would otherwise cross forever.
+        """
+        keep = np.ones(self.m, bool)
+        K = self.K.copy()
+        for t in np.unique(self.tip):
+            j = np.flatnonzero(self.tip == t)
+            if (len(j) == 2 and np.all(self.offset[j] == 0.0) and self.k[j[0]] == self.k[j[1]]
+                    and np.array_equal(self.B[j[0]], self.B[j[1]]) and self.side[j].sum() == 0.0):
+                K += self.k[j[0]] * np.outer(self.B[j[0]], self.B[j[0]])
+                keep[j] = False
+        if keep.all():
+            return self
+        return GapSystem(
+            M=self.M, C=self.C, K=K, B=self.B[keep], k=self.k[keep], offset=self.offset[keep],
+            side=self.side[keep], tip=self.tip[keep], dof_names=self.dof_names,
+            stop_names=tuple(n for n, k in zip(self.stop_names, keep, strict=True) if k),
+        )
+
     def closed_stiffness(self) -> np.ndarray:
         """N/m, stiffness with one stop of every tip closed (the stiffest contact state)."""
         Ks = self.K.copy()

@@ -337,6 +337,28 @@ class NNMResidual:
         X, omega = self.X_omega(y)
         return self.hb.energy(X, omega)
 
+    def energy_gradient(self, y: np.ndarray) -> np.ndarray:
+        """dE/dy of :meth:`energy` (analytic: dU/dx is the nonlinear force itself).
+
+        With x_i = sum_h E[i,h] X_h and v_i = omega sum_h (E Nab)[i,h] X_h,
+        dE/dX_h = mean_i [E[i,h] (K x_i + f(x_i)) + omega (E Nab)[i,h] M v_i].
+        """
+        hb = self.hb
+        nX = hb.size
+        Psi, omega, _, a = self.split(y)
+        Xm = hb.unpack(a * Psi)
+        x = hb.E @ Xm
+        G = hb.E @ hb.Nab
+        v = omega * (G @ Xm)
+        f, _ = hb.force(x)
+        N = x.shape[0]
+        dX = (hb.E.T @ (x @ hb.K + f) + omega * (G.T @ (v @ hb.M))) / N
+        g = np.zeros(nX + 3)
+        g[:nX] = a * dX.ravel()
+        g[nX] = float(np.mean(np.einsum("ij,jk,ik->i", v, hb.M, v))) / omega * self.omega_ref
+        g[nX + 2] = np.log(10.0) * float(dX.ravel() @ (a * Psi))
+        return g
+
 
 # -- Newton ---------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)

@@ -168,44 +168,83 @@ def _mac(M, a, b) -> float:
 
 
 def shooting_branch(flow: Flow, energies_J: np.ndarray, guides: list, *, max_rel_jump: float = 0.25,
-                    min_mac: float = 0.8):
-    """Orbits at increasing energies along an NNM, each refined from the best guess.
+                    min_mac: float = 0.995, max_iter: int = 25, max_substeps: int = 2):
+    """Orbits at increasing energies along an NNM: natural-parameter continuation in energy.
 
     ``guides`` are HB branches (:class:`reduced.backbones.NNMBranch`, best first) of the
     same NNM. At each energy the guesses tried are the previous orbit scaled to the new
-    energy, then each guide's point nearest in log energy; an orbit is accepted only if
-    its frequency is within ``max_rel_jump`` of the first guide's at that energy and its
-    shape has a MAC above ``min_mac`` with the guide's (so a
-    guess that converges onto another NNM is refused, not silently kept). Returns a list
-    with a :class:`PeriodicOrbit` or None per energy.
+    energy (a secant prediction from the last two orbits first; its period scaled by the
+    first guide's frequency ratio, then unscaled), then
+    each guide's point nearest in log energy. An orbit is accepted only if its frequency is
+    within ``max_rel_jump`` of the first guide's and its shape has a MAC above ``min_mac``
+    with the previous orbit's (the guide's for the first), so a guess that converges onto
+    another orbit family is refused, not silently kept. Near grazing the orbits are very
+    unstable (|mu| ~ 1e2) and single shooting has a small basin: when every guess fails,
+    the energy step from the previous orbit is halved (in log) up to ``max_substeps``
+    times. Returns a list with a :class:`PeriodicOrbit` or None per energy.
     """
-    out = []
-    prev = None
-    for E in np.asarray(energies_J, float):
+    g0 = guides[0]
+    order = np.argsort(g0.energy_J)
+    lgE, fg = np.log(g0.energy_J[order]), g0.freq_hz[order]
+
+    def f_guide(E):
+        return float(np.interp(np.log(E), lgE, fg))
+
+    def attempt(E, prev, prev2=None):
         guesses = []
+        if prev is not None and prev2 is not None and E / prev.energy_J < 3.0 and prev.energy_J > prev2.energy_J:
+            # secant predictor in log energy from the last two orbits
+            s_ = np.log(E / prev.energy_J) / np.log(prev.energy_J / prev2.energy_J)
+            guesses.append((prev.x0 + s_ * (prev.x0 - prev2.x0), prev.v0 + s_ * (prev.v0 - prev2.v0),
+                            prev.period_s + s_ * (prev.period_s - prev2.period_s)))
         if prev is not None and E / prev.energy_J < 3.0:
             sc = np.sqrt(E / prev.energy_J)
+            ratio = f_guide(prev.energy_J) / f_guide(E)
+            guesses.append((prev.x0 * sc, prev.v0 * sc, prev.period_s * ratio))
             guesses.append((prev.x0 * sc, prev.v0 * sc, prev.period_s))
         for g in guides:
             i = int(np.argmin(np.abs(np.log(g.energy_J / E))))
             x, v = g.residual.hb.time_series(g.X[i], g.omega[i])
             guesses.append((x[0], v[0], 2 * np.pi / g.omega[i]))
-        g0 = guides[0]
-        order = np.argsort(g0.energy_J)
-        f_ref = float(np.interp(np.log(E), np.log(g0.energy_J[order]), g0.freq_hz[order]))
-        i0 = int(np.argmin(np.abs(np.log(g0.energy_J / E))))
-        shape_ref = g0.residual.hb.time_series(g0.X[i0])[0]
-        orbit = None
+        if prev is not None and E / prev.energy_J < 3.0:
+            shape_ref = prev.x0  # the last exact orbit of this branch is the better shape
+        else:
+            i0 = int(np.argmin(np.abs(np.log(g0.energy_J / E))))
+            shape_ref = g0.residual.hb.time_series(g0.X[i0])[0]
+        f_ref = f_guide(E)
         for x0, v0, T in guesses:
+            if not T > 0.0:
+                continue
             try:
-                o = shoot(flow, x0, v0, T, E)
+                o = shoot(flow, x0, v0, T, E, max_iter=max_iter)
             except (ShootingError, RuntimeError):
                 continue
             # the same NNM: near the guide's frequency and the same shape (mass-weighted
             # MAC of the turning-point displacement; NNM 2 and NNM 3 are orthogonal)
-            if abs(o.freq_hz / f_ref - 1.0) < max_rel_jump and _mac(flow.system.M, o.x0, shape_ref[0]) > min_mac:
-                orbit = o
-                break
+            if abs(o.freq_hz / f_ref - 1.0) < max_rel_jump and _mac(flow.system.M, o.x0, shape_ref) > min_mac:
+                return o
+        return None
+
+    out = []
+    prev = prev2 = None
+    for E in np.asarray(energies_J, float):
+        orbit = attempt(E, prev, prev2)
+        if orbit is None and prev is not None and E > prev.energy_J:
+            # substeps: march from the previous orbit in smaller energy steps
+            for depth in range(1, max_substeps + 1):
+                cur, cur2 = prev, prev2
+                for Es in np.geomspace(prev.energy_J, E, 2**depth + 1)[1:]:
+                    nxt = attempt(Es, cur, cur2)
+                    if nxt is None:
+                        break
+                    cur, cur2 = nxt, cur
+                else:
+                    orbit = cur
+                if orbit is not None:
+                    prev2 = cur2
+                    break
+        elif orbit is not None:
+            prev2 = prev
         out.append(orbit)
         if orbit is not None:
             prev = orbit

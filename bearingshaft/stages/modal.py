@@ -147,7 +147,7 @@ def _mac_files(result, chosen, names, spec, writer: StageWriter) -> None:
     note = "test shapes from " + spec.test_shapes if test is not None else (
         "no test shapes given: FE auto-MAC (can the sensors tell the modes apart?)")
     writer.stats["mac"] = note
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.8))
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5.2), gridspec_kw={"wspace": 0.5})
     for ax, (set_name, sensors) in zip(axes, sets.items(), strict=True):
         rows_idx = np.concatenate([[3 * all_s.index(s) + c for c in range(3)] for s in sensors])
         A = fe_all[rows_idx]
@@ -207,12 +207,13 @@ def _pictures(result, chosen, names, path: Path) -> str:
             return pv.UnstructuredGrid(cells, np.full(len(hexes), pv.CellType.HEXAHEDRON), mesh.points)
 
         grids = {p: part_grid(p) for p in mesh.part_names}
-        size = float(np.ptp(mesh.points, axis=0).max())
         pl = pv.Plotter(off_screen=True, shape=(2, 3), window_size=(1500, 900))
         for k, (i, name) in enumerate(zip(chosen, names, strict=True)):
             u = _nodal_field(result, i)
             ub = u[mesh.part_nodes("beam")]
-            scale = 0.08 * size / max(np.abs(ub).max(), 1e-300)
+            # largest beam displacement drawn as 40 % of the beam's smaller side: visible
+            # translations without a roll rotation of radians
+            scale = 0.4 * min(result.system.model.beam_section) / max(np.abs(ub).max(), 1e-300)
             pl.subplot(k // 3, k % 3)
             for part, grid in grids.items():
                 g = grid.copy()
