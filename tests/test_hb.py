@@ -172,3 +172,16 @@ def test_hb_backbones_fig2():
         # saturates toward the closed-gap frequency (within 0.5 % at 1e5 J)
         assert f[-1] == pytest.approx(hi[i], rel=5e-3)
         assert np.all(f <= hi[i] * (1 + 1e-9)) and np.all(f >= lo[i] * (1 - 1e-9))
+
+
+def test_energy_gradient_matches_finite_differences():
+    hb = HarmonicBalance.for_system(SYS, 5)
+    lin = linear_modes(SYS)
+    res = NNMResidual(hb, float(lin.omega[0]), 0)
+    rng = np.random.default_rng(3)
+    y = res.start(lin.phi[:, 0], float(lin.omega[0]) * 4.0, math.log10(0.02))
+    y[:-3] += 0.05 * rng.standard_normal(hb.size)
+    g = res.energy_gradient(y)
+    gf = np.array([(res.energy(y + e) - res.energy(y - e)) / (2 * 1e-7 * max(1, abs(y[i])))
+                   for i, e in enumerate(np.eye(y.size) * (1e-7 * np.maximum(1, np.abs(y))))])
+    assert np.allclose(g, gf, rtol=1e-5, atol=1e-7 * np.abs(g).max())
