@@ -20,7 +20,6 @@ from __future__ import annotations
 import csv
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -98,9 +97,16 @@ def main(argv=None) -> int:
         measured = np.log(a_hi / a_lo) / (WINDOW_S - 0.01) if a_lo > 0 and a_hi > 0 else np.nan
         ja, jb = np.minimum(np.searchsorted(t_chunks, [ta, tb]), t_chunks.size - 1)
         predicted = (log_growth[jb] - log_growth[ja]) / (t_chunks[jb] - t_chunks[ja])
-        rows.append({"t_start_s": round(ta, 4), "energy_J": float(np.mean(energy[i])),
-                     "asymmetry_m": float(np.max(asym[i])), "asymmetry_rel": float(np.max(asym[i] / scale[i])),
-                     "growth_measured_1_s": float(measured), "transverse_lyapunov_1_s": float(predicted)})
+        rows.append(
+            {
+                "t_start_s": round(ta, 4),
+                "energy_J": float(np.mean(energy[i])),
+                "asymmetry_m": float(np.max(asym[i])),
+                "asymmetry_rel": float(np.max(asym[i] / scale[i])),
+                "growth_measured_1_s": float(measured),
+                "transverse_lyapunov_1_s": float(predicted),
+            }
+        )
     _write(out / "symmetry_growth.csv", rows)
 
     # 3. Floquet multipliers of NNM 1 and 3 at energies along the ringdown
@@ -112,7 +118,7 @@ def main(argv=None) -> int:
         guide = nnm_branch(cons, mode, H=1)
         with single_thread_blas():
             orbits = shooting_branch(cflow, energies, [guide])
-        for E, o in zip(energies, orbits, strict=True):
+        for _E, o in zip(energies, orbits, strict=True):
             if o is None:
                 continue
             lam, vec = np.linalg.eig(o.monodromy)
@@ -120,10 +126,17 @@ def main(argv=None) -> int:
             e = vec[:, k]
             anti = float(np.linalg.norm(e[[0, 3]] - e[[2, 5]]))
             sym = float(np.linalg.norm(e[[0, 3]] + e[[2, 5]]) + 2 * np.linalg.norm(e[[1, 4]]))
-            frows.append({"nnm": mode + 1, "energy_J": float(o.energy_J), "freq_hz": o.freq_hz,
-                          "max_abs_mu": o.max_multiplier, "stable": int(o.stable),
-                          "growth_1_s": float(np.log(o.max_multiplier) * o.freq_hz),
-                          "eigvec": "antisymmetric" if anti > sym else "symmetric"})
+            frows.append(
+                {
+                    "nnm": mode + 1,
+                    "energy_J": float(o.energy_J),
+                    "freq_hz": o.freq_hz,
+                    "max_abs_mu": o.max_multiplier,
+                    "stable": int(o.stable),
+                    "growth_1_s": float(np.log(o.max_multiplier) * o.freq_hz),
+                    "eigvec": "antisymmetric" if anti > sym else "symmetric",
+                }
+            )
     _write(out / "symmetry_floquet.csv", frows)
 
     # the break: first time |x1 - x3| exceeds the solver tolerance, and BREAK_M
@@ -136,7 +149,8 @@ def main(argv=None) -> int:
         "t_break_s": float(r.t[i_rel]) if i_rel >= 0 else np.nan,
         "energy_at_break_J": float(energy[i_rel]) if i_rel >= 0 else np.nan,
         "total_log_growth_transverse_0_to_break": float(np.interp(r.t[i_rel], t_chunks, log_growth))
-        if i_rel >= 0 else np.nan,
+        if i_rel >= 0
+        else np.nan,
         "asymmetry_at_0.05s_m": float(np.max(asym[r.t < 0.05])),
         "wall_s": time.perf_counter() - t0,
     }
@@ -145,10 +159,16 @@ def main(argv=None) -> int:
     a0 = float(np.max(asym[(r.t >= 0.04) & (r.t < 0.05)]))
     for tc in np.arange(0.1, 1.01, 0.1):
         m = (r.t >= tc - 0.01) & (r.t < tc)
-        crow.append({"t_s": round(tc, 2), "energy_J": float(np.mean(energy[m])),
-                     "ln_asym_growth_measured": float(np.log(np.max(asym[m]) / a0)),
-                     "ln_growth_transverse": float(np.interp(tc, t_chunks, log_growth)
-                                                   - np.interp(0.05, t_chunks, log_growth))})
+        crow.append(
+            {
+                "t_s": round(tc, 2),
+                "energy_J": float(np.mean(energy[m])),
+                "ln_asym_growth_measured": float(np.log(np.max(asym[m]) / a0)),
+                "ln_growth_transverse": float(
+                    np.interp(tc, t_chunks, log_growth) - np.interp(0.05, t_chunks, log_growth)
+                ),
+            }
+        )
     _write(out / "symmetry_cumulative.csv", crow)
     # seeded asymmetry: the same instability must amplify a deliberate seed, breaking
     # symmetry earlier by the time the transverse growth needs to cover the head start
@@ -158,8 +178,13 @@ def main(argv=None) -> int:
         a_ = np.abs(rs_.x[:, 0] - rs_.x[:, 2])
         b_ = a_ > BREAK_M
         tb_ = float(rs_.t[int(np.argmax(b_))]) if np.any(b_) else np.nan
-        seeds.append({"seed_m": seed, "t_break_s": tb_,
-                      "ln_head_start": float(np.log(seed / summary["asymmetry_at_0.05s_m"]))})
+        seeds.append(
+            {
+                "seed_m": seed,
+                "t_break_s": tb_,
+                "ln_head_start": float(np.log(seed / summary["asymmetry_at_0.05s_m"])),
+            }
+        )
     _write(out / "symmetry_seeds.csv", seeds)
     print("seeded asymmetry (seed, t_break, ln head start):")
     for sd in seeds:
@@ -167,17 +192,24 @@ def main(argv=None) -> int:
     _write(out / "symmetry_summary.csv", [summary])
     print("cumulative log growth from t = 0.05 s (t, E, measured, transverse):")
     for c in crow:
-        print(f"  {c['t_s']:.1f}  {c['energy_J']:8.1f}  {c['ln_asym_growth_measured']:7.2f}  {c['ln_growth_transverse']:7.2f}")
+        print(
+            f"  {c['t_s']:.1f}  {c['energy_J']:8.1f}  {c['ln_asym_growth_measured']:7.2f}  "
+            f"{c['ln_growth_transverse']:7.2f}"
+        )
     for k, v in summary.items():
         print(f"{k}: {v}")
     print("window rates (t, E, asym, measured, transverse):")
     for row in rows[::2]:
-        print(f"  {row['t_start_s']:.2f}  {row['energy_J']:9.1f}  {row['asymmetry_m']:.2e}  "
-              f"{row['growth_measured_1_s']:8.2f}  {row['transverse_lyapunov_1_s']:8.2f}")
+        print(
+            f"  {row['t_start_s']:.2f}  {row['energy_J']:9.1f}  {row['asymmetry_m']:.2e}  "
+            f"{row['growth_measured_1_s']:8.2f}  {row['transverse_lyapunov_1_s']:8.2f}"
+        )
     print("Floquet (nnm, E, f, |mu|max, growth 1/s, eigvec):")
     for fr in frows:
-        print(f"  {fr['nnm']}  {fr['energy_J']:9.1f}  {fr['freq_hz']:7.2f}  {fr['max_abs_mu']:9.4f}  "
-              f"{fr['growth_1_s']:8.2f}  {fr['eigvec']}")
+        print(
+            f"  {fr['nnm']}  {fr['energy_J']:9.1f}  {fr['freq_hz']:7.2f}  {fr['max_abs_mu']:9.4f}  "
+            f"{fr['growth_1_s']:8.2f}  {fr['eigvec']}"
+        )
     return 0
 
 

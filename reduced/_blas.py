@@ -14,8 +14,10 @@ import glob
 import os
 from contextlib import contextmanager
 
-_NAMES = (("scipy_openblas_set_num_threads64_", "scipy_openblas_get_num_threads64_"),
-          ("scipy_openblas_set_num_threads", "scipy_openblas_get_num_threads"))
+_NAMES = (
+    ("scipy_openblas_set_num_threads64_", "scipy_openblas_get_num_threads64_"),
+    ("scipy_openblas_set_num_threads", "scipy_openblas_get_num_threads"),
+)
 
 
 def _libraries() -> list:

@@ -65,10 +65,12 @@ class NNMBranch:
 def harmonic_ratio(hb: HarmonicBalance, X: np.ndarray) -> tuple[float, int]:
     """Largest mass-norm amplitude of a harmonic k >= 2 over that of the fundamental, and k."""
     Xm = hb.unpack(X)
-    amp = np.array([
-        math.sqrt(Xm[2 * k - 1] @ hb.M @ Xm[2 * k - 1] + Xm[2 * k] @ hb.M @ Xm[2 * k])
-        for k in range(1, hb.H + 1)
-    ])
+    amp = np.array(
+        [
+            math.sqrt(Xm[2 * k - 1] @ hb.M @ Xm[2 * k - 1] + Xm[2 * k] @ hb.M @ Xm[2 * k])
+            for k in range(1, hb.H + 1)
+        ]
+    )
     if hb.H < 2 or amp[0] == 0.0:
         return 0.0, 1
     k = int(np.argmax(amp[1:])) + 2
@@ -111,7 +113,8 @@ def _nnm_branch(
     backbone point before it (ratio < tongue_ratio / 3, frequency at its running
     maximum) the frequency is raised in jumps (STEP_OVER_DW), the amplitude predicted from
     the one-harmonic backbone, until a solution with a small ratio, a larger amplitude and
-    a higher energy is found; continuation restarts there. Each tongue is reported in ``tongues`` with action "stepped over"; if no jump
+    a higher energy is found; continuation restarts there. Each tongue is reported in
+    ``tongues`` with action "stepped over" (or "followed"); if no jump
     lands, the run ends with action "stopped" (never a silent jump).
     """
     t0 = time.perf_counter()
@@ -160,10 +163,19 @@ def _nnm_branch(
                     st["bend"] = (k, E, st["w_max"])
             elif y[i_w] > st["bend"][2] and r < tongue_ratio / 3.0:
                 k0, E0, w0 = st["bend"]
-                tongues.append({"harmonic": k0, "energy_J": E0, "freq_hz": w0 * omega0 / (2 * np.pi),
-                                "action": "followed", "energy_after_J": E})
-                notes.append(f"{k0}:1 internal resonance at E = {E0:.4g} J: followed (the branch "
-                             f"returned at E = {E:.4g} J)")
+                tongues.append(
+                    {
+                        "harmonic": k0,
+                        "energy_J": E0,
+                        "freq_hz": w0 * omega0 / (2 * np.pi),
+                        "action": "followed",
+                        "energy_after_J": E,
+                    }
+                )
+                notes.append(
+                    f"{k0}:1 internal resonance at E = {E0:.4g} J: followed (the branch "
+                    f"returned at E = {E:.4g} J)"
+                )
                 st["bend_at"] = None
             elif st["count"] - st["bend_at"] > follow_steps:
                 in_tongue["flag"] = True
@@ -180,8 +192,17 @@ def _nnm_branch(
         in_tongue["flag"] = False
         reset()
         br = continue_branch(
-            res, ystart, param=i_a, direction=1.0, ds=ds, ds_max=ds_max, max_steps=steps_left,
-            max_angle_deg=max_angle_deg, stop=stop, monitor=(i_w,), callback=res.energy,
+            res,
+            ystart,
+            param=i_a,
+            direction=1.0,
+            ds=ds,
+            ds_max=ds_max,
+            max_steps=steps_left,
+            max_angle_deg=max_angle_deg,
+            stop=stop,
+            monitor=(i_w,),
+            callback=res.energy,
             progress=progress,
         )
         steps_left -= len(br.y)
@@ -201,8 +222,11 @@ def _nnm_branch(
         E_a = float(br.data[last])
         f_a = anchor[i_w] * omega0 / (2 * np.pi)
         if backbone1 is None:
-            backbone1 = _nnm_branch(system, mode, H=1, energy_max_J=energy_max_J,
-                                   energy_start_J=energy_start_J).branches[0].y
+            backbone1 = (
+                _nnm_branch(system, mode, H=1, energy_max_J=energy_max_J, energy_start_J=energy_start_J)
+                .branches[0]
+                .y
+            )
         n1 = system.n * 3  # size of an H = 1 coefficient vector
         la1 = backbone1[:, n1 + 2]
         bias = anchor[i_w] / float(np.interp(anchor[i_a], la1, backbone1[:, n1]))
@@ -236,8 +260,12 @@ def _nnm_branch(
                 continue
             # accept only a point on this backbone: amplitude near the prediction and above
             # the anchor's, more energy, a dominant fundamental
-            if (abs(sol.y[i_a] - la) < 0.5 and ratio(sol.y)[0] < tongue_ratio / 3.0
-                    and sol.y[i_a] > anchor[i_a] and res.energy(sol.y) > E_a):
+            if (
+                abs(sol.y[i_a] - la) < 0.5
+                and ratio(sol.y)[0] < tongue_ratio / 3.0
+                and sol.y[i_a] > anchor[i_a]
+                and res.energy(sol.y) > E_a
+            ):
                 landed = sol.y
                 break
         if landed is None or steps_left <= 0:
@@ -245,10 +273,12 @@ def _nnm_branch(
             notes.append(f"{k}:1 internal resonance at E = {E_a:.4g} J, {f_a:.2f} Hz: could not step over")
             break
         E_b = res.energy(landed)
-        tongues.append({"harmonic": k, "energy_J": E_a, "freq_hz": f_a, "action": "stepped over",
-                        "energy_after_J": E_b})
-        notes.append(f"{k}:1 internal resonance at E = {E_a:.4g} J, {f_a:.2f} Hz: stepped over to "
-                     f"E = {E_b:.4g} J")
+        tongues.append(
+            {"harmonic": k, "energy_J": E_a, "freq_hz": f_a, "action": "stepped over", "energy_after_J": E_b}
+        )
+        notes.append(
+            f"{k}:1 internal resonance at E = {E_a:.4g} J, {f_a:.2f} Hz: stepped over to E = {E_b:.4g} J"
+        )
         ystart = landed
     Y = np.concatenate([b.y[idx] for b, idx in pieces])
     E = np.concatenate([np.asarray(b.data)[idx] for b, idx in pieces])
@@ -257,8 +287,21 @@ def _nnm_branch(
     omega = Y[:, i_w] * omega0
     if pieces[-1][0].status != "stop" or E[-1] < energy_max_J:
         notes.append(f"stopped early ({pieces[-1][0].status}) at E = {E[-1]:.3g} J")
-    return NNMBranch(mode, H, hb.N, E, omega / (2 * np.pi), X, omega, seg, [b for b, _ in pieces], res,
-                     time.perf_counter() - t0, tongues, notes)
+    return NNMBranch(
+        mode,
+        H,
+        hb.N,
+        E,
+        omega / (2 * np.pi),
+        X,
+        omega,
+        seg,
+        [b for b, _ in pieces],
+        res,
+        time.perf_counter() - t0,
+        tongues,
+        notes,
+    )
 
 
 def nnm_branch(system: GapSystem, mode: int, **options) -> NNMBranch:
@@ -287,10 +330,19 @@ def hb_backbones(
     return out
 
 
-__all__ = ["NNMBranch", "nnm_branch", "hb_backbones", "grazing_amplitude", "harmonic_ratio", "hb_point_at_energy"]
+__all__ = [
+    "NNMBranch",
+    "nnm_branch",
+    "hb_backbones",
+    "grazing_amplitude",
+    "harmonic_ratio",
+    "hb_point_at_energy",
+]
 
 
-def hb_point_at_energy(res: NNMResidual, y_guess: np.ndarray, energy_J: float, *, tol: float = 1e-11) -> np.ndarray:
+def hb_point_at_energy(
+    res: NNMResidual, y_guess: np.ndarray, energy_J: float, *, tol: float = 1e-11
+) -> np.ndarray:
     """The HB solution of ``res`` whose (mean) energy is ``energy_J``, from a nearby point.
 
     Newton on [R(y); (E(y) - E*) / E*] (square: the arclength row replaced by the energy),
@@ -298,11 +350,14 @@ def hb_point_at_energy(res: NNMResidual, y_guess: np.ndarray, energy_J: float, *
     Raises :class:`reduced.hb.NewtonError` on failure. Used to compare HB with exact
     orbits at exactly the same energy, with no interpolation along the branch.
     """
+
     def fun(y):
         R, J = res(y)
         E = res.energy(y)
-        return (np.concatenate([R, [(E - energy_J) / energy_J]]),
-                np.vstack([J, res.energy_gradient(y) / energy_J]))
+        return (
+            np.concatenate([R, [(E - energy_J) / energy_J]]),
+            np.vstack([J, res.energy_gradient(y) / energy_J]),
+        )
 
     with single_thread_blas():
         return newton(fun, y_guess, tol=tol, max_iter=30).y

@@ -199,8 +199,18 @@ def continue_branch(
             break
         if res.n_iter <= good_iter:
             ds = min(ds * growth, ds_max)
-    return Branch(np.array(ys), np.array(ts), np.array(dss), np.array(its), folds, status, n_rej,
-                  time.perf_counter() - t_wall, data, corners)
+    return Branch(
+        np.array(ys),
+        np.array(ts),
+        np.array(dss),
+        np.array(its),
+        folds,
+        status,
+        n_rej,
+        time.perf_counter() - t_wall,
+        data,
+        corners,
+    )
 
 
 def _corner_step(fun, y, t, coords, param, h, tol, max_iter, reject):

@@ -15,7 +15,7 @@ is continuous and the saltation matrix (Leine & Nijmeijer 2004)
 is the identity: the derivative of the flow is the plain product of the segment
 exponentials, ``Phi(T) = exp(A_{s_k} tau_k) ... exp(A_{s_1} tau_1)``, exact up to round-off.
 (A grazing segment, n^T f_- = 0, changes nothing either, since S = I whatever the
-denominator.) The events are located as in :mod:`reduced.exact` (its ``_first_root``);
+denominator.) The events are located by a copy of the root march of :mod:`reduced.exact`;
 stops crossing within round-off of the same instant are switched together.
 """
 
@@ -26,8 +26,65 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from reduced.exact import QTOL_REL, ExactIntegratorError, StateTable, _eval_state, _first_root, state_table
+from reduced.exact import ExactIntegratorError, StateTable, state_table
 from reduced.gaps import GapSystem
+
+EPS = np.finfo(float).eps
+QTOL_REL = 64.0 * EPS  # q is a sum of ~2n terms: round-off of its evaluation, relative
+MAX_MARCH_ITER = 10_000_000  # per stop per segment: a hang guard
+
+
+# The root march and state evaluation are those of reduced.exact at commit 86a1770, kept
+# here so that this module does not depend on the private kernels of another module.
+@nb.njit(cache=True)
+def _first_root(const, coef, lam, tau_limit, hmin):
+    """First tau in [0, tau_limit) where q = const + Re sum coef e^{lam tau} turns positive.
+
+    Returns (tau, n_iter); tau = inf when there is none before tau_limit.
+    """
+    N = lam.shape[0]
+    scale = abs(const)
+    for i in range(N):
+        scale += abs(coef[i])
+    qtol = QTOL_REL * scale
+    tau = 0.0
+    for it in range(MAX_MARCH_ITER):
+        q = const
+        d = 0.0
+        Q2 = 0.0
+        for i in range(N):
+            e = coef[i] * np.exp(lam[i] * tau)
+            q += e.real
+            d += (lam[i] * e).real
+            Q2 += abs(e) * abs(lam[i]) ** 2
+        if q > -qtol:
+            if q > qtol:
+                return tau, it
+            if d > 0.0:
+                return tau + max(-q, 0.0) / d, it
+        qn = -min(q, 0.0)
+        disc = np.sqrt(d * d + 2.0 * Q2 * qn)
+        if d > 0.0:
+            h = 2.0 * qn / (d + disc)
+        elif Q2 > 0.0:
+            h = (disc - d) / Q2
+        else:
+            return np.inf, it
+        tau += max(h, hmin)
+        if tau >= tau_limit:
+            return np.inf, it
+    return -1.0, MAX_MARCH_ITER
+
+
+@nb.njit(cache=True)
+def _eval_state(yp, X, lam, tau, out):
+    N = lam.shape[0]
+    for r in range(N):
+        acc = 0.0
+        for i in range(N):
+            acc += (X[r, i] * np.exp(lam[i] * tau)).real
+        out[r] = yp[r] + acc
+
 
 HMIN_PERIODS = 1e-9  # as in reduced.exact: smallest march step, in units of 1/omega_max
 MAX_SEGMENTS = 100_000  # per call: a hang guard (a period has tens of events)
@@ -164,7 +221,9 @@ class Flow:
         self._seg_tau = np.empty(MAX_SEGMENTS)
 
     def initial_state(self, x0: np.ndarray, v0: np.ndarray) -> np.ndarray:
-        return self.system.contact_state(x0, v0, atol=QTOL_REL * (np.abs(x0).sum() + np.abs(self.system.offset)))
+        return self.system.contact_state(
+            x0, v0, atol=QTOL_REL * (np.abs(x0).sum() + np.abs(self.system.offset))
+        )
 
     def segment_exponential(self, s: int, tau: float) -> np.ndarray:
         """exp(A_s tau) (2n, 2n) from the closed form."""
@@ -184,10 +243,23 @@ class Flow:
             raise ValueError(f"T must be >= 0 s, got {T!r}")
         tb = self.table
         y = np.concatenate([np.asarray(x0, float), np.asarray(v0, float)])
-        active = self.initial_state(y[: self.system.n], y[self.system.n:])
-        n_seg, status = _flow_kernel(tb.lam, tb.V, tb.Vinv, tb.yp, tb.valid, self.system.B,
-                                     self.system.offset, self.system.side, y, active, float(T),
-                                     self.hmin, self._seg_state, self._seg_tau)
+        active = self.initial_state(y[: self.system.n], y[self.system.n :])
+        n_seg, status = _flow_kernel(
+            tb.lam,
+            tb.V,
+            tb.Vinv,
+            tb.yp,
+            tb.valid,
+            self.system.B,
+            self.system.offset,
+            self.system.side,
+            y,
+            active,
+            float(T),
+            self.hmin,
+            self._seg_state,
+            self._seg_tau,
+        )
         if status == -1:
             raise ExactIntegratorError(f"more than {MAX_SEGMENTS} contact events in {T:.4g} s")
         if status == -2:

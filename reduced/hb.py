@@ -148,8 +148,9 @@ class HarmonicBalance:
     @classmethod
     def for_system(cls, system: GapSystem, H: int, N: int | None = None, damped: bool = False):
         """HB of a gap system (conservative unless ``damped``)."""
-        return cls(system.M, system.K, GapForce(system), H, N or default_samples(H),
-                   system.C if damped else None)
+        return cls(
+            system.M, system.K, GapForce(system), H, N or default_samples(H), system.C if damped else None
+        )
 
     # -- sizes and helpers ----------------------------------------------------------------
     @property
@@ -321,10 +322,10 @@ class NNMResidual:
         R[nX] = Psi[i_s1]
         J[nX, i_s1] = 1.0
         # normalisation of the fundamental
-        c1, s1 = Psi[n:2 * n], Psi[2 * n:3 * n]
+        c1, s1 = Psi[n : 2 * n], Psi[2 * n : 3 * n]
         R[nX + 1] = c1 @ hb.M @ c1 + s1 @ hb.M @ s1 - 1.0
-        J[nX + 1, n:2 * n] = 2.0 * hb.M @ c1
-        J[nX + 1, 2 * n:3 * n] = 2.0 * hb.M @ s1
+        J[nX + 1, n : 2 * n] = 2.0 * hb.M @ c1
+        J[nX + 1, 2 * n : 3 * n] = 2.0 * hb.M @ s1
         return R, J
 
     def start(self, phi: np.ndarray, omega: float, log10a: float) -> np.ndarray:
@@ -371,8 +372,9 @@ class NewtonResult:
     jacobian: np.ndarray  # at y (square, as solved)
 
 
-def newton(fun, y0: np.ndarray, *, tol: float = 1e-10, max_iter: int = 20,
-           max_step: float | None = None) -> NewtonResult:
+def newton(
+    fun, y0: np.ndarray, *, tol: float = 1e-10, max_iter: int = 20, max_step: float | None = None
+) -> NewtonResult:
     """Solve fun(y) = 0, ``fun(y) -> (R, dR/dy)`` square, by Newton's method.
 
     Each step is halved (up to 6 times) while it does not lower ||R||_2: with a gap force
@@ -422,6 +424,12 @@ def newton(fun, y0: np.ndarray, *, tol: float = 1e-10, max_iter: int = 20,
 
 
 __all__ = [
-    "NewtonError", "NewtonResult", "newton", "HarmonicBalance", "NNMResidual", "GapForce",
-    "CubicForce", "default_samples",
+    "NewtonError",
+    "NewtonResult",
+    "newton",
+    "HarmonicBalance",
+    "NNMResidual",
+    "GapForce",
+    "CubicForce",
+    "default_samples",
 ]

@@ -26,8 +26,18 @@ from reduced.exact import ExactIntegratorError
 from reduced.flow import Flow
 from reduced.gaps import GapSystem
 
-FLOQUET_TOL = 1e-5  # |mu| - 1 above this is unstable; the trivial pair at +1 is a Jordan
-# block whose eigenvalues split by ~sqrt(eps) |Phi| under round-off, far below this
+FLOQUET_TOL = 1e-6  # |mu| - 1 above this is unstable. The trivial pair at +1 is a Jordan
+# block whose eigenvalues split by ~sqrt(eps |Phi|) under round-off (1.5e-5 seen at
+# |Phi| ~ 7e3), so it is removed before the test (drop_trivial_pair), not thresholded.
+
+
+def drop_trivial_pair(mu: np.ndarray) -> np.ndarray:
+    """mu without the two multipliers nearest +1 (a conservative autonomous orbit has them)."""
+    mu = np.asarray(mu)
+    if mu.size <= 2:
+        return mu[:0]
+    keep = np.argsort(np.abs(mu - 1.0), kind="stable")[2:]
+    return mu[np.sort(keep)]
 
 
 class ShootingError(RuntimeError):
@@ -54,8 +64,14 @@ class PeriodicOrbit:
         return 1.0 / self.period_s
 
     @property
+    def nontrivial(self) -> np.ndarray:
+        """The multipliers without the trivial pair at +1 (time shift and energy)."""
+        return drop_trivial_pair(self.multipliers)
+
+    @property
     def max_multiplier(self) -> float:
-        return float(np.abs(self.multipliers[0]))
+        """Largest |mu| over the nontrivial multipliers."""
+        return float(np.max(np.abs(self.nontrivial), initial=1.0))
 
     @property
     def stable(self) -> bool:
@@ -109,10 +125,13 @@ def _shoot(flow, x0, v0, period_s, energy_J, *, ref, tol, max_iter) -> PeriodicO
     w = 2.0 * np.pi / T
     D = np.concatenate([np.full(n, xs), np.full(n, w * xs), [T]])
     rs = np.concatenate([np.full(n, xs), np.full(n, w * xs)])
+
     def evaluate(x, v, T):
         fl = flow(x, v, T, jacobian=True)
         y0 = np.concatenate([x, v])
-        r = np.concatenate([(fl.y - y0) / rs, [v[ref] / (w * xs)], [(system.energy(x, v) - energy_J) / energy_J]])
+        r = np.concatenate(
+            [(fl.y - y0) / rs, [v[ref] / (w * xs)], [(system.energy(x, v) - energy_J) / energy_J]]
+        )
         return fl, r
 
     try:
@@ -139,7 +158,7 @@ def _shoot(flow, x0, v0, period_s, energy_J, *, ref, tol, max_iter) -> PeriodicO
         # grazing iterate) or the residual grows
         lam = 1.0
         for _ in range(10):
-            xn, vn, Tn = x + lam * dz[:n], v + lam * dz[n:2 * n], T + lam * dz[2 * n]
+            xn, vn, Tn = x + lam * dz[:n], v + lam * dz[n : 2 * n], T + lam * dz[2 * n]
             if Tn > 0 and np.all(np.isfinite(xn)):
                 try:
                     fln, rnew = evaluate(xn, vn, Tn)
@@ -156,19 +175,37 @@ def _shoot(flow, x0, v0, period_s, energy_J, *, ref, tol, max_iter) -> PeriodicO
         raise ShootingError(f"no periodic orbit: closure residual {rn:.3g} after {max_iter} iterations")
     mu = np.linalg.eigvals(fl.jacobian)
     mu = mu[np.argsort(-np.abs(mu), kind="stable")]
-    return PeriodicOrbit(x, v, T, float(system.energy(x, v)), fl.jacobian, mu, rn, it, fl.n_events,
-                         time.perf_counter() - t0)
+    return PeriodicOrbit(
+        x, v, T, float(system.energy(x, v)), fl.jacobian, mu, rn, it, fl.n_events, time.perf_counter() - t0
+    )
 
 
-__all__ = ["PeriodicOrbit", "ShootingError", "shoot", "shooting_branch", "conservative", "energy_gradient", "FLOQUET_TOL"]
+__all__ = [
+    "drop_trivial_pair",
+    "PeriodicOrbit",
+    "ShootingError",
+    "shoot",
+    "shooting_branch",
+    "conservative",
+    "energy_gradient",
+    "FLOQUET_TOL",
+]
 
 
 def _mac(M, a, b) -> float:
     return float((a @ M @ b) ** 2 / ((a @ M @ a) * (b @ M @ b)))
 
 
-def shooting_branch(flow: Flow, energies_J: np.ndarray, guides: list, *, max_rel_jump: float = 0.25,
-                    min_mac: float = 0.995, max_iter: int = 25, max_substeps: int = 2):
+def shooting_branch(
+    flow: Flow,
+    energies_J: np.ndarray,
+    guides: list,
+    *,
+    max_rel_jump: float = 0.25,
+    min_mac: float = 0.995,
+    max_iter: int = 25,
+    max_substeps: int = 2,
+):
     """Orbits at increasing energies along an NNM: natural-parameter continuation in energy.
 
     ``guides`` are HB branches (:class:`reduced.backbones.NNMBranch`, best first) of the
@@ -192,11 +229,21 @@ def shooting_branch(flow: Flow, energies_J: np.ndarray, guides: list, *, max_rel
 
     def attempt(E, prev, prev2=None):
         guesses = []
-        if prev is not None and prev2 is not None and E / prev.energy_J < 3.0 and prev.energy_J > prev2.energy_J:
+        if (
+            prev is not None
+            and prev2 is not None
+            and E / prev.energy_J < 3.0
+            and prev.energy_J > prev2.energy_J
+        ):
             # secant predictor in log energy from the last two orbits
             s_ = np.log(E / prev.energy_J) / np.log(prev.energy_J / prev2.energy_J)
-            guesses.append((prev.x0 + s_ * (prev.x0 - prev2.x0), prev.v0 + s_ * (prev.v0 - prev2.v0),
-                            prev.period_s + s_ * (prev.period_s - prev2.period_s)))
+            guesses.append(
+                (
+                    prev.x0 + s_ * (prev.x0 - prev2.x0),
+                    prev.v0 + s_ * (prev.v0 - prev2.v0),
+                    prev.period_s + s_ * (prev.period_s - prev2.period_s),
+                )
+            )
         if prev is not None and E / prev.energy_J < 3.0:
             sc = np.sqrt(E / prev.energy_J)
             ratio = f_guide(prev.energy_J) / f_guide(E)

@@ -19,8 +19,15 @@ def circle(y):
 
 
 def test_circle_folds_are_detected_and_points_stay_on_it():
-    br = continue_branch(circle, np.array([0.0, 1.0]), param=0, ds=0.1, ds_max=0.2, max_steps=200,
-                         stop=lambda y: y[0] < -0.5 and y[1] > 0)
+    br = continue_branch(
+        circle,
+        np.array([0.0, 1.0]),
+        param=0,
+        ds=0.1,
+        ds_max=0.2,
+        max_steps=200,
+        stop=lambda y: y[0] < -0.5 and y[1] > 0,
+    )
     assert br.status == "stop"
     assert np.allclose(np.hypot(br.y[:, 0], br.y[:, 1]), 1.0, atol=1e-12)
     # y0 turns at (1, 0) and (-1, 0): two folds of coordinate 0, in that order
@@ -41,8 +48,16 @@ def test_corners_are_passed(kind, c):
             return np.array([y[1] - c * math.sqrt(d)]), np.array([[-0.5 * c / math.sqrt(d), 1.0]])
         return np.array([y[1] - c * d]), np.array([[-c, 1.0]])
 
-    br = continue_branch(f, np.array([0.0, 0.0]), param=0, ds=0.1, ds_max=0.2, max_steps=400,
-                         stop=lambda y: y[0] >= 2.0, monitor=(1,))
+    br = continue_branch(
+        f,
+        np.array([0.0, 0.0]),
+        param=0,
+        ds=0.1,
+        ds_max=0.2,
+        max_steps=400,
+        stop=lambda y: y[0] >= 2.0,
+        monitor=(1,),
+    )
     assert br.status == "stop" and br.y[-1, 0] >= 2.0
     assert all(abs(f(y)[0][0]) < 1e-9 for y in br.y)
     assert np.all(np.diff(br.y[:, 0]) > 0)  # never turned back

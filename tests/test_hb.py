@@ -182,6 +182,10 @@ def test_energy_gradient_matches_finite_differences():
     y = res.start(lin.phi[:, 0], float(lin.omega[0]) * 4.0, math.log10(0.02))
     y[:-3] += 0.05 * rng.standard_normal(hb.size)
     g = res.energy_gradient(y)
-    gf = np.array([(res.energy(y + e) - res.energy(y - e)) / (2 * 1e-7 * max(1, abs(y[i])))
-                   for i, e in enumerate(np.eye(y.size) * (1e-7 * np.maximum(1, np.abs(y))))])
+    gf = np.array(
+        [
+            (res.energy(y + e) - res.energy(y - e)) / (2 * 1e-7 * max(1, abs(y[i])))
+            for i, e in enumerate(np.eye(y.size) * (1e-7 * np.maximum(1, np.abs(y))))
+        ]
+    )
     assert np.allclose(g, gf, rtol=1e-5, atol=1e-7 * np.abs(g).max())

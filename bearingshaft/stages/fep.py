@@ -26,9 +26,9 @@ from bearingshaft.scenes import Scene
 from reduced import nnm2
 from reduced._blas import single_thread_blas
 from reduced.backbones import START_FRACTION, hb_point_at_energy, nnm_branch
-from reduced.hb import NewtonError
 from reduced.discrete import linear_modes
 from reduced.flow import Flow
+from reduced.hb import NewtonError
 from reduced.shooting import conservative, shooting_branch
 from reduced.stability import compare, hill
 
@@ -133,13 +133,29 @@ def _fep_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
         for H in spec.harmonics:
             b = branches[(mode, H, None)]
             for i in range(len(b.energy_J)):
-                rows.append({"nnm": mode + 1, "method": "hb", "harmonics": H, "energy_J": b.energy_J[i],
-                             "freq_hz": b.freq_hz[i], "stable": int(hills[(mode, H)][i].stable)})
+                rows.append(
+                    {
+                        "nnm": mode + 1,
+                        "method": "hb",
+                        "harmonics": H,
+                        "energy_J": b.energy_J[i],
+                        "freq_hz": b.freq_hz[i],
+                        "stable": int(hills[(mode, H)][i].stable),
+                    }
+                )
         energies, orbits, _ = shots[mode]
-        for E, o in zip(energies, orbits, strict=True):
+        for _E, o in zip(energies, orbits, strict=True):
             if o is not None:
-                rows.append({"nnm": mode + 1, "method": "shooting", "harmonics": "", "energy_J": o.energy_J,
-                             "freq_hz": o.freq_hz, "stable": int(o.stable)})
+                rows.append(
+                    {
+                        "nnm": mode + 1,
+                        "method": "shooting",
+                        "harmonics": "",
+                        "energy_J": o.energy_J,
+                        "freq_hz": o.freq_hz,
+                        "stable": int(o.stable),
+                    }
+                )
     _write_csv(writer.path("fep.csv"), rows)
 
     # -- stability.csv: Hill (each drawn H) against Floquet at the shooting energies -------
@@ -155,25 +171,45 @@ def _fep_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
             hs = np.array([h.stable for h in hills[(mode, H)]])
             # the HB point nearest in log energy (on the same piece of branch)
             idx = [int(np.argmin(np.abs(np.log(b.energy_J / E)))) for E in energies]
-            near = np.array([abs(np.log(b.energy_J[i] / E)) < 0.05 for i, E in zip(idx, energies, strict=True)])
+            near = np.array(
+                [abs(np.log(b.energy_J[i] / E)) < 0.05 for i, E in zip(idx, energies, strict=True)]
+            )
             cmp = compare(energies, np.where(near, fl_max, np.nan), fl_st, hm[idx], hs[idx])
             n_dis[f"NNM {mode + 1} H={H}"] = cmp.n_disagree
             for k, E in enumerate(energies):
                 if not near[k] or orbits[k] is None:
                     continue
-                srows.append({"nnm": mode + 1, "harmonics": H, "energy_J": E, "floquet_max_abs_mu": fl_max[k],
-                              "hill_max_abs_mu": hm[idx[k]], "floquet_stable": int(fl_st[k]),
-                              "hill_stable": int(hs[idx[k]]), "agree": int(cmp.agree[k])})
+                srows.append(
+                    {
+                        "nnm": mode + 1,
+                        "harmonics": H,
+                        "energy_J": E,
+                        "floquet_max_abs_mu": fl_max[k],
+                        "hill_max_abs_mu": hm[idx[k]],
+                        "floquet_stable": int(fl_st[k]),
+                        "hill_stable": int(hs[idx[k]]),
+                        "agree": int(cmp.agree[k]),
+                    }
+                )
     _write_csv(writer.path("stability.csv"), srows)
     writer.stats["stability_disagreements"] = n_dis
 
     # -- tongues.csv ----------------------------------------------------------------------
     trows = []
-    for (mode, H, N), b in branches.items():
+    for (mode, H, _N), b in branches.items():
         for t in b.tongues:
-            trows.append({"nnm": mode + 1, "harmonics": H, "samples": b.N, "resonance": f"{t['harmonic']}:1",
-                          "energy_J": t["energy_J"], "freq_hz": t["freq_hz"], "action": t["action"],
-                          "energy_after_J": t.get("energy_after_J", "")})
+            trows.append(
+                {
+                    "nnm": mode + 1,
+                    "harmonics": H,
+                    "samples": b.N,
+                    "resonance": f"{t['harmonic']}:1",
+                    "energy_J": t["energy_J"],
+                    "freq_hz": t["freq_hz"],
+                    "action": t["action"],
+                    "energy_after_J": t.get("energy_after_J", ""),
+                }
+            )
     _write_csv(writer.path("tongues.csv"), trows)
 
     # -- hb_convergence.csv -------------------------------------------------------------------
@@ -182,8 +218,18 @@ def _fep_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
     crow = []
     # NNM 1's exact backbone has its own internal-resonance tongues, on which shooting
     # orbits are not the HB backbone's: report the error above the last tongue separately
-    last_tongue = {m: max([t.get("energy_after_J") or t["energy_J"] for (mm, _, _), bb in branches.items()
-                           if mm == m for t in bb.tongues], default=0.0) for m in range(n)}
+    last_tongue = {
+        m: max(
+            [
+                t.get("energy_after_J") or t["energy_J"]
+                for (mm, _, _), bb in branches.items()
+                if mm == m
+                for t in bb.tongues
+            ],
+            default=0.0,
+        )
+        for m in range(n)
+    }
     for (mode, H, N), b in branches.items():
         energies, orbits, _ = shots[mode]
         E_sh = np.array([o.energy_J if o else np.nan for o in orbits])
@@ -194,13 +240,20 @@ def _fep_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
         E_gr = b.energy_J[0] / START_FRACTION**2  # the linear mode starts at START_FRACTION a_g
         near_s = ok & (E_sh < GRAZING_BAND * E_gr) & (E_sh > E_gr)
         far_s = ok & (E_sh >= GRAZING_BAND * E_gr)
-        row = {"nnm": mode + 1, "harmonics": H, "samples": b.N, "samples_study": int(N is not None),
-               "wall_s": round(b.wall_s, 4), "n_points": len(b.energy_J), "energy_reached_J": b.energy_J[-1],
-               "n_compared": int(ok.sum()),
-               "max_err_vs_shooting": float(np.max(e[ok])) if ok.any() else np.nan,
-               "median_err_vs_shooting": float(np.median(e[ok])) if ok.any() else np.nan,
-               "max_err_vs_shooting_near_grazing": float(np.max(e[near_s])) if near_s.any() else np.nan,
-               "max_err_vs_shooting_above_10x_grazing": float(np.max(e[far_s])) if far_s.any() else np.nan}
+        row = {
+            "nnm": mode + 1,
+            "harmonics": H,
+            "samples": b.N,
+            "samples_study": int(N is not None),
+            "wall_s": round(b.wall_s, 4),
+            "n_points": len(b.energy_J),
+            "energy_reached_J": b.energy_J[-1],
+            "n_compared": int(ok.sum()),
+            "max_err_vs_shooting": float(np.max(e[ok])) if ok.any() else np.nan,
+            "median_err_vs_shooting": float(np.median(e[ok])) if ok.any() else np.nan,
+            "max_err_vs_shooting_near_grazing": float(np.max(e[near_s])) if near_s.any() else np.nan,
+            "max_err_vs_shooting_above_10x_grazing": float(np.max(e[far_s])) if far_s.any() else np.nan,
+        }
         above = ok & (E_sh > last_tongue[mode])
         row["max_err_vs_shooting_above_last_tongue"] = float(np.max(e[above])) if above.any() else np.nan
         row["last_tongue_energy_J"] = last_tongue[mode]
@@ -209,23 +262,39 @@ def _fep_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
             err_x = np.abs(b.freq_hz / nnm2.frequency_from_energy(p, b.energy_J) - 1.0)
             near = (b.energy_J > E_graze) & (b.energy_J < GRAZING_BAND * E_graze)
             far = b.energy_J >= GRAZING_BAND * E_graze
-            row.update({"max_err_vs_exact": float(err_x.max()),
-                        "max_err_vs_exact_near_grazing": float(err_x[near].max()) if near.any() else np.nan,
-                        "max_err_vs_exact_above_10x_grazing": float(err_x[far].max()) if far.any() else np.nan})
+            row.update(
+                {
+                    "max_err_vs_exact": float(err_x.max()),
+                    "max_err_vs_exact_near_grazing": float(err_x[near].max()) if near.any() else np.nan,
+                    "max_err_vs_exact_above_10x_grazing": float(err_x[far].max()) if far.any() else np.nan,
+                }
+            )
         else:
-            row.update({"max_err_vs_exact": "", "max_err_vs_exact_near_grazing": "",
-                        "max_err_vs_exact_above_10x_grazing": ""})
-        row["tongues"] = "; ".join(f"{t['harmonic']}:1 at {t['energy_J']:.3g} J {t['action']}" for t in b.tongues)
+            row.update(
+                {
+                    "max_err_vs_exact": "",
+                    "max_err_vs_exact_near_grazing": "",
+                    "max_err_vs_exact_above_10x_grazing": "",
+                }
+            )
+        row["tongues"] = "; ".join(
+            f"{t['harmonic']}:1 at {t['energy_J']:.3g} J {t['action']}" for t in b.tongues
+        )
         crow.append(row)
     _write_csv(writer.path("hb_convergence.csv"), crow)
-    writer.stats["fep_wall_s"] = {f"NNM {m + 1} H={H}" + (f" N={N}" if N else ""): round(b.wall_s, 3)
-                                  for (m, H, N), b in branches.items()}
+    writer.stats["fep_wall_s"] = {
+        f"NNM {m + 1} H={H}" + (f" N={N}" if N else ""): round(b.wall_s, 3)
+        for (m, H, N), b in branches.items()
+    }
     writer.stats["shooting_wall_s"] = {f"NNM {m + 1}": round(s[2], 3) for m, s in shots.items()}
     if n > 1 and p.m1 == p.m3:
         o2 = [o for o in shots[1][1] if o is not None]
-        writer.stats["shooting_vs_exact_nnm2_max_rel"] = float(max(
-            abs(o.freq_hz / float(nnm2.frequency_from_energy(p, o.energy_J)) - 1.0) for o in o2))
-    writer.stats["shooting_failures"] = {f"NNM {m + 1}": sum(o is None for o in s[1]) for m, s in shots.items()}
+        writer.stats["shooting_vs_exact_nnm2_max_rel"] = float(
+            max(abs(o.freq_hz / float(nnm2.frequency_from_energy(p, o.energy_J)) - 1.0) for o in o2)
+        )
+    writer.stats["shooting_failures"] = {
+        f"NNM {m + 1}": sum(o is None for o in s[1]) for m, s in shots.items()
+    }
 
     _plot_fep(writer.path("fep.png"), branches, hills, shots, spec, open_hz, closed_hz)
     _plot_convergence(writer.path("hb_convergence.png"), crow, branches, p, spec)
@@ -251,23 +320,48 @@ def _plot_fep(path, branches, hills, shots, spec, open_hz, closed_hz) -> None:
         st = np.array([h.stable for h in hills[(mode, H)]])
         for seg in np.unique(b.segment):
             m = b.segment == seg
-            ax.plot(b.energy_J[m], b.freq_hz[m], styles[H], color=colors[mode], lw=widths[H],
-                    label=f"NNM {mode + 1}, HB H={H}" if seg == 0 else None)
+            ax.plot(
+                b.energy_J[m],
+                b.freq_hz[m],
+                styles[H],
+                color=colors[mode],
+                lw=widths[H],
+                label=f"NNM {mode + 1}, HB H={H}" if seg == 0 else None,
+            )
         uns = ~st
         ax.plot(b.energy_J[uns], b.freq_hz[uns], "x", color=colors[mode], ms=3, alpha=0.6)
-    for mode, (energies, orbits, _) in shots.items():
+    for mode, (_energies, orbits, _) in shots.items():
         E = np.array([o.energy_J for o in orbits if o])
         f = np.array([o.freq_hz for o in orbits if o])
         s = np.array([o.stable for o in orbits if o])
-        ax.plot(E[s], f[s], "o", mfc=colors[mode], mec="k", ms=3, mew=0.5,
-                label=f"NNM {mode + 1}, shooting (stable)")
-        ax.plot(E[~s], f[~s], "o", mfc="none", mec=colors[mode], ms=4, mew=0.8,
-                label=f"NNM {mode + 1}, shooting (unstable)")
+        ax.plot(
+            E[s],
+            f[s],
+            "o",
+            mfc=colors[mode],
+            mec="k",
+            ms=3,
+            mew=0.5,
+            label=f"NNM {mode + 1}, shooting (stable)",
+        )
+        ax.plot(
+            E[~s],
+            f[~s],
+            "o",
+            mfc="none",
+            mec=colors[mode],
+            ms=4,
+            mew=0.8,
+            label=f"NNM {mode + 1}, shooting (unstable)",
+        )
     ax.set_xscale("log")
     ax.set_xlabel("energy [J]")
     ax.set_ylabel("frequency [Hz]")
-    ax.set_title("Frequency-energy plot (black dashed: open gap, red dashed: closed gap;\n"
-                 "x: HB point unstable by Hill, open circles: unstable by Floquet)", fontsize=9)
+    ax.set_title(
+        "Frequency-energy plot (black dashed: open gap, red dashed: closed gap;\n"
+        "x: HB point unstable by Hill, open circles: unstable by Floquet)",
+        fontsize=9,
+    )
     ax.legend(fontsize=6.5, ncol=2, loc="upper left")
     ax.grid(True, which="both", alpha=0.2)
     fig.tight_layout()
@@ -298,11 +392,19 @@ def _plot_convergence(path, rows, branches, p, spec) -> None:
         r = [x for x in rows if x["nnm"] == mode + 1 and not x["samples_study"]]
         if not r:
             continue
-        ax.loglog([x["harmonics"] for x in r], [x["max_err_vs_shooting_above_last_tongue"] for x in r], "o-",
-                  label=f"NNM {mode + 1} vs shooting" + (" (above the tongues)" if mode == 0 else ""))
+        ax.loglog(
+            [x["harmonics"] for x in r],
+            [x["max_err_vs_shooting_above_last_tongue"] for x in r],
+            "o-",
+            label=f"NNM {mode + 1} vs shooting" + (" (above the tongues)" if mode == 0 else ""),
+        )
     r = [x for x in rows if x["nnm"] == 2 and not x["samples_study"]]
-    ax.loglog([x["harmonics"] for x in r], [x["max_err_vs_exact_above_10x_grazing"] for x in r], "s--",
-              label="NNM 2 vs exact, E > 10 E_graze")
+    ax.loglog(
+        [x["harmonics"] for x in r],
+        [x["max_err_vs_exact_above_10x_grazing"] for x in r],
+        "s--",
+        label="NNM 2 vs exact, E > 10 E_graze",
+    )
     ax.set_xlabel("harmonics H")
     ax.set_ylabel("max relative frequency error")
     ax.legend(fontsize=7)
@@ -313,8 +415,12 @@ def _plot_convergence(path, rows, branches, p, spec) -> None:
     for x in r:
         ax.annotate(f"H={x['harmonics']}", (x["wall_s"], x["max_err_vs_exact"]), fontsize=6)
     r = [x for x in rows if x["nnm"] == 2 and x["samples_study"]]
-    ax.loglog([x["wall_s"] for x in r], [x["max_err_vs_exact"] for x in r], "s--",
-              label=f"N study at H={spec.samples_study_harmonics}")
+    ax.loglog(
+        [x["wall_s"] for x in r],
+        [x["max_err_vs_exact"] for x in r],
+        "s--",
+        label=f"N study at H={spec.samples_study_harmonics}",
+    )
     for x in r:
         ax.annotate(f"N={x['samples']}", (x["wall_s"], x["max_err_vs_exact"]), fontsize=6)
     ax.set_xlabel("branch run time [s]")
