@@ -10,6 +10,7 @@ Bad input gives a one-line message and exit code 2; nothing half-written is left
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from pathlib import Path
 
@@ -68,6 +69,8 @@ def _out_dir(arg: str | None, scene_name: str, parent: bool = False) -> Path:
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code (0 success, 1 solver failure, 2 bad input)."""
     parser = build_parser()
+    if argv is None:  # as a command: a kill is an interrupt, so scratch folders are removed
+        signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # argparse already printed its one-line usage error
