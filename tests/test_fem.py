@@ -240,3 +240,14 @@ def test_scene_refuses_modal_on_the_discrete_model():
         parse_scene('[model]\nkind = "assembly"\n[ringdown]\n', "x", "x.toml")
     scene = parse_scene('[model]\nkind = "assembly"\nlayout = "beam-free"\n[modal]\n', "x", "x.toml")
     assert scene.stages == ("modal",)
+
+
+def test_beam_section_matches_the_mass_and_kappa_of_the_paper():
+    # A = m / (rho l) and E I = 2 kappa L / 3: the mid-span stiffness 6 EI / L^3 of the beam
+    # simply supported at +-L equals the 3-DOF model's 4 kappa / L^2 (fem.model docstring)
+    m = AssemblyModel()
+    b, h = m.beam_section
+    assert m.rho * b * h * m.beam_length == pytest.approx(2.516, rel=1e-12)
+    EI = m.E * b * h**3 / 12
+    assert 6 * EI / m.L**3 == pytest.approx(4 * m.kappa / m.L**2, rel=1e-12)
+    assert h > 0 and b > m.coil_diameter
