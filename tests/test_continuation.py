@@ -82,3 +82,14 @@ def test_nnm1_tongues_are_reported_not_jumped():
     for s in np.unique(b.segment):
         f = b.freq_hz[b.segment == s]
         assert np.all(np.abs(np.diff(np.log(f))) < 0.3)
+
+
+@pytest.mark.slow
+def test_converged_branches_reach_1e5_joules():
+    # H = 15: every NNM to >= 1e5 J; NNM 1 crosses its 11:1 ... 3:1 tongues by stepping over
+    for mode in range(3):
+        b = nnm_branch(SYS, mode, H=15, energy_max_J=1e5)
+        assert b.status == "stop" and b.energy_J[-1] >= 1e5
+        assert all(t["action"] in ("stepped over", "followed") for t in b.tongues)
+        if mode == 0:
+            assert {t["harmonic"] for t in b.tongues} >= {3, 5}
