@@ -256,6 +256,9 @@ def _fep_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
         }
         above = ok & (E_sh > last_tongue[mode])
         row["max_err_vs_shooting_above_last_tongue"] = float(np.max(e[above])) if above.any() else np.nan
+        row["n_folds"] = sum(len(br.folds) for br in b.branches)  # turning points of log10 a or omega
+        row["n_corner_steps"] = sum(len(br.corners) for br in b.branches)  # grazing corners
+        row["n_rejected_steps"] = sum(br.n_rejected for br in b.branches)
         row["last_tongue_energy_J"] = last_tongue[mode]
         if mode == 1 and p.m1 == p.m3:
             E_graze = p.grazing_energy_nnm2
