@@ -182,8 +182,11 @@ class HarmonicBalance:
         Xm = self.unpack(X)
         if N is None:
             E = self.E
-        else:
-            E = HarmonicBalance(self.M, self.K, self.force, self.H, N).E
+        else:  # synthesis only: any N >= 1 will do
+            tau = 2.0 * np.pi * np.arange(N) / N
+            k = self.harmonic_numbers()
+            E = np.where(np.arange(2 * self.H + 1) % 2 == 1, np.cos(np.outer(tau, k)), np.sin(np.outer(tau, k)))
+            E[:, 0] = 1.0
         x = E @ Xm
         if omega is None:
             return x

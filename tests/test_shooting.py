@@ -64,3 +64,18 @@ def test_linear_orbits_have_unit_multipliers():
         orb = shoot(FLOW, x0, np.zeros(3), 1.0 / lin.freq_hz[k], E)
         assert orb.freq_hz == pytest.approx(lin.freq_hz[k], rel=1e-13)
         assert np.allclose(np.abs(orb.multipliers), 1.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("E", [1.1e-3, 3.17e-3, 1.3e-2])
+def test_multiple_shooting_near_grazing(E):
+    # just above grazing NNM 2 is violently unstable (|mu| ~ 50-150): multiple shooting
+    # from the H = 15 HB orbit converges to the exact orbit
+    from reduced.backbones import nnm_branch
+    from reduced.shooting import shoot_multiple
+
+    b = nnm_branch(SYS, 1, H=15, energy_max_J=0.1)
+    i = int(np.argmin(np.abs(np.log(b.energy_J / E))))
+    x, v = b.residual.hb.time_series(b.X[i], b.omega[i], N=8)
+    orb = shoot_multiple(FLOW, np.hstack([x, v]), 2 * np.pi / b.omega[i], b.energy_J[i])
+    assert orb.freq_hz == pytest.approx(float(nnm2.frequency_from_energy(P, orb.energy_J)), rel=1e-12)
+    assert orb.max_multiplier > 10.0
