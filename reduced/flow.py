@@ -26,66 +26,12 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from reduced.exact import ExactIntegratorError, StateTable, state_table
+from reduced.exact import QTOL_REL, ExactIntegratorError, StateTable, _eval_state, _first_root, state_table
 from reduced.gaps import GapSystem
 
-EPS = np.finfo(float).eps
-QTOL_REL = 64.0 * EPS  # q is a sum of ~2n terms: round-off of its evaluation, relative
-MAX_MARCH_ITER = 10_000_000  # per stop per segment: a hang guard
-
-
-# The root march and state evaluation are those of reduced.exact at commit 86a1770, kept
-# here so that this module does not depend on the private kernels of another module.
-@nb.njit(cache=True)
-def _first_root(const, coef, lam, tau_limit, hmin):
-    """First tau in [0, tau_limit) where q = const + Re sum coef e^{lam tau} turns positive.
-
-    Returns (tau, n_iter); tau = inf when there is none before tau_limit.
-    """
-    N = lam.shape[0]
-    scale = abs(const)
-    for i in range(N):
-        scale += abs(coef[i])
-    qtol = QTOL_REL * scale
-    tau = 0.0
-    for it in range(MAX_MARCH_ITER):
-        q = const
-        d = 0.0
-        Q2 = 0.0
-        for i in range(N):
-            e = coef[i] * np.exp(lam[i] * tau)
-            q += e.real
-            d += (lam[i] * e).real
-            Q2 += abs(e) * abs(lam[i]) ** 2
-        if q > -qtol:
-            if q > qtol:
-                return tau, it
-            if d > 0.0:
-                return tau + max(-q, 0.0) / d, it
-        qn = -min(q, 0.0)
-        disc = np.sqrt(d * d + 2.0 * Q2 * qn)
-        if d > 0.0:
-            h = 2.0 * qn / (d + disc)
-        elif Q2 > 0.0:
-            h = (disc - d) / Q2
-        else:
-            return np.inf, it
-        tau += max(h, hmin)
-        if tau >= tau_limit:
-            return np.inf, it
-    return -1.0, MAX_MARCH_ITER
-
-
-@nb.njit(cache=True)
-def _eval_state(yp, X, lam, tau, out):
-    N = lam.shape[0]
-    for r in range(N):
-        acc = 0.0
-        for i in range(N):
-            acc += (X[r, i] * np.exp(lam[i] * tau)).real
-        out[r] = yp[r] + acc
-
-
+# The event march (a step that provably skips no root of q, Newton-like near one) and the
+# closed-form evaluation are reduced.exact's own kernels; the flow passes no round-off
+# noise bound (qnoise = dnoise = 0) and no rest floor.
 HMIN_PERIODS = 1e-9  # as in reduced.exact: smallest march step, in units of 1/omega_max
 MAX_SEGMENTS = 100_000  # per call: a hang guard (a period has tens of events)
 
@@ -131,7 +77,7 @@ def _flow_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, s
                 for r in range(n):
                     acc += B[j, r] * X[r, i]
                 coef[i] = sgn * acc
-            tj, it = _first_root(const, coef, lam_s, tau_ev, hmin)
+            tj, it = _first_root(const, coef, lam_s, tau_ev, hmin, 0.0, 0.0, 0.0)
             if tj < 0.0:
                 return n_seg, -3
             if tj < tau_ev:

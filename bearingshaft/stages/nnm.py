@@ -25,7 +25,6 @@ def _write_csv(path, rows: list[dict]) -> None:
 
 def nnm_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
     p = scene.model
-    spec = scene.nnm
     system = p.system()
     modes = {s: linear_modes(system, s) for s in ("open", "closed")}
     rows = []
@@ -40,7 +39,18 @@ def nnm_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
 
     if p.m1 != p.m3:
         writer.stats["nnm2_exact"] = "skipped: the exact NNM 2 relation needs m1 == m3"
-        return
+    else:
+        _nnm2_exact(scene, writer, progress, modes)
+    if scene.fep is not None:
+        from bearingshaft.stages.fep import fep_stage
+
+        fep_stage(scene, writer, progress)
+
+
+def _nnm2_exact(scene: Scene, writer: StageWriter, progress: bool, modes: dict) -> None:
+    """nnm2_exact.csv, the check against integrated periods (nnm2_check.csv) and nnm2.png."""
+    p = scene.model
+    spec = scene.nnm
     E = np.logspace(np.log10(spec.energy_min_J), np.log10(spec.energy_max_J), spec.n_energy)
     f_exact = nnm2.frequency_from_energy(p, E)
     f_paper = nnm2.frequency_from_energy(p, E, paper=True)
@@ -63,7 +73,3 @@ def nnm_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
         writer.stats["nnm2_max_rel_err_paper_eq13"] = max(abs(c["rel_err_paper"]) for c in checks)
     plots.nnm2_figure(E, f_exact, f_paper, checks, modes["open"].freq_hz, modes["closed"].freq_hz,
                       writer.path("nnm2.png"))
-    if scene.fep is not None:
-        from bearingshaft.stages.fep import fep_stage
-
-        fep_stage(scene, writer, progress)
