@@ -206,6 +206,12 @@ def _pictures(result, chosen, names, path: Path) -> str:
         import pyvista as pv
 
         pv.OFF_SCREEN = True
+        # VTK probes for an X display before falling back to off-screen rendering and
+        # prints a warning that means nothing here
+        import vtk
+
+        vtk.vtkObject.GlobalWarningDisplayOff()
+
         def part_grid(part):
             hexes = mesh.hexes[mesh.part_cells(part)]
             cells = np.hstack([np.full((len(hexes), 1), 8), hexes]).ravel()
