@@ -8,6 +8,7 @@ folder as it was, never a half-written set of files that looks complete.
 
 from __future__ import annotations
 
+import csv
 import json
 import platform
 import shutil
@@ -49,6 +50,16 @@ def _jsonable(obj):
     if isinstance(obj, float) and not np.isfinite(obj):
         return str(obj)
     return obj
+
+
+def write_rows(path: str | Path, rows: list[dict], fields: list[str] | None = None) -> None:
+    """CSV of dict rows; columns ``fields`` (default: the first row's keys; others dropped)."""
+    with open(path, "w", newline="") as fh:
+        if not rows and fields is None:
+            return
+        w = csv.DictWriter(fh, fieldnames=fields or list(rows[0]), extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
 
 
 class StageWriter:

@@ -31,8 +31,7 @@ from pathlib import Path
 
 from fem.model import AssemblyModel
 from reduced.discrete import DiscreteParams
-
-METHODS = ("exact", "explicit", "dop853")
+from reduced.integrate import METHODS
 
 
 class SceneError(ValueError):
@@ -316,12 +315,13 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
         return Scene(name=name, description=description, model_kind=kind, model=model, source=text, **sections)
     if "modal" in sections:
         raise SceneError(f"{origin}: [modal] needs a 3-D model (kind = \"assembly\"), not {kind!r}")
-    n = model.system().n
+    system = model.system()
+    n = system.n
     init = sections.get("initial", InitialSpec())
     for key in ("x0_m", "v0_m_s"):
         if len(getattr(init, key)) != n:
             raise SceneError(f"{origin} [initial] {key}: needs {n} values, got {len(getattr(init, key))}")
-    dof_names = model.system().dof_names
+    dof_names = system.dof_names
     spec = sections.get("spectrogram")
     if spec is not None and spec.dof not in dof_names:
         raise SceneError(f"{origin} [spectrogram] dof: unknown DOF {spec.dof!r} (known: {', '.join(dof_names)})")

@@ -186,6 +186,31 @@ def _first_root(const, coef, lam, tau_limit, hmin, qnoise, dnoise, floor):
 
 
 @nb.njit(cache=True)
+def _state_index(active):
+    """Index of a contact state in the tables: sum_j active_j 2^j."""
+    s = 0
+    for j in range(active.shape[0]):
+        if active[j]:
+            s += 1 << j
+    return s
+
+
+@nb.njit(cache=True)
+def _stop_series(B, j, sgn, offset_j, yp_s, X, coef):
+    """q_j(tau) = const + Re sum_i coef_i e^{lam_i tau}: fills coef, returns const."""
+    n = B.shape[1]
+    const = 0.0
+    for r in range(n):
+        const += B[j, r] * yp_s[r]
+    for i in range(X.shape[1]):
+        acc = 0.0 + 0.0j
+        for r in range(n):
+            acc += B[j, r] * X[r, i]
+        coef[i] = sgn * acc
+    return sgn * (const - offset_j)
+
+
+@nb.njit(cache=True)
 def _eval_state(yp, X, lam, tau, out):
     N = lam.shape[0]
     for r in range(N):
@@ -196,7 +221,7 @@ def _eval_state(yp, X, lam, tau, out):
 
 
 @nb.njit(cache=True)
-def _exact_kernel(lam, V, Vinv, yp, valid, cond, B, offset, side, tip, C, damped,
+def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
                   y, active, t, t_end, t_samples, i_samp, out_y, out_W, W, hmin, floor, max_events):
     """March events from t to t_end; fills samples from index i_samp. Returns the new state."""
     n = B.shape[1]
@@ -213,10 +238,7 @@ def _exact_kernel(lam, V, Vinv, yp, valid, cond, B, offset, side, tip, C, damped
     status = 0
     n_stuck = 0  # consecutive events with no progress in time
     while True:
-        s = 0
-        for j in range(m):
-            if active[j]:
-                s += 1 << j
+        s = _state_index(active)
         if not valid[s]:
             status = -2
             break
@@ -244,19 +266,13 @@ def _exact_kernel(lam, V, Vinv, yp, valid, cond, B, offset, side, tip, C, damped
         j_ev = -1
         for j in range(m):
             sgn = -side[j] if active[j] else side[j]
-            const = 0.0
-            for r in range(n):
-                const += B[j, r] * yp[s, r]
-            const = sgn * (const - offset[j])
+            const = _stop_series(B, j, sgn, offset[j], yp[s], X, coef)
             qnoise = 0.0
             dnoise = 0.0
             for i in range(N):
-                acc = 0.0 + 0.0j
                 pv = 0.0 + 0.0j
                 for r in range(n):
-                    acc += B[j, r] * X[r, i]
                     pv += B[j, r] * V[s, r, i]
-                coef[i] = sgn * acc
                 qnoise += abs(pv) * werr[i]
                 dnoise += abs(pv) * abs(lam_s[i]) * werr[i]
             tj, it = _first_root(const, coef, lam_s, tau_ev, hmin, qnoise, dnoise, floor)
@@ -344,7 +360,7 @@ def integrate_exact(
     bounds = np.linspace(0.0, max(duration_s, ts[-1]), chunks + 1)
     for c in range(chunks):
         t, W, i_samp, ne, ni, status = _exact_kernel(
-            table.lam, table.V, table.Vinv, table.yp, table.valid, table.cond, system.B, system.offset,
+            table.lam, table.V, table.Vinv, table.yp, table.valid, system.B, system.offset,
             system.side, system.tip, system.C, not system.undamped, y, active, t, bounds[c + 1], ts,
             i_samp, out_y, out_W, W, hmin, floor, max_events - n_events,
         )

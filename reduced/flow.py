@@ -26,7 +26,16 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from reduced.exact import QTOL_REL, ExactIntegratorError, StateTable, _eval_state, _first_root, state_table
+from reduced.exact import (
+    QTOL_REL,
+    ExactIntegratorError,
+    StateTable,
+    _eval_state,
+    _first_root,
+    _state_index,
+    _stop_series,
+    state_table,
+)
 from reduced.gaps import GapSystem
 
 # The event march (a step that provably skips no root of q, Newton-like near one) and the
@@ -51,10 +60,7 @@ def _flow_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, s
     status = 0
     max_seg = seg_state.shape[0]
     while True:
-        s = 0
-        for j in range(m):
-            if active[j]:
-                s += 1 << j
+        s = _state_index(active)
         if not valid[s]:
             return n_seg, -2
         lam_s = lam[s]
@@ -68,15 +74,7 @@ def _flow_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, s
         j_ev = -1
         for j in range(m):
             sgn = -side[j] if active[j] else side[j]
-            const = 0.0
-            for r in range(n):
-                const += B[j, r] * yp[s, r]
-            const = sgn * (const - offset[j])
-            for i in range(N):
-                acc = 0.0 + 0.0j
-                for r in range(n):
-                    acc += B[j, r] * X[r, i]
-                coef[i] = sgn * acc
+            const = _stop_series(B, j, sgn, offset[j], yp[s], X, coef)
             tj, it = _first_root(const, coef, lam_s, tau_ev, hmin, 0.0, 0.0, 0.0)
             if tj < 0.0:
                 return n_seg, -3

@@ -14,14 +14,13 @@ Called at the end of the nnm stage when the scene has an [fep] table. Writes
 
 from __future__ import annotations
 
-import csv
 import time
 import warnings
 
 import numpy as np
 from tqdm import tqdm
 
-from bearingshaft.output import StageWriter
+from bearingshaft.output import StageWriter, write_rows
 from bearingshaft.scenes import Scene
 from reduced import nnm2
 from reduced._blas import single_thread_blas
@@ -33,16 +32,6 @@ from reduced.shooting import conservative, shooting_branch
 from reduced.stability import compare, hill
 
 GRAZING_BAND = 10.0  # "near grazing": energies below this many times the grazing energy
-
-
-def _write_csv(path, rows: list[dict]) -> None:
-    if not rows:
-        path.write_text("")
-        return
-    with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
 
 
 def _hb_at(b, E_q):
@@ -156,7 +145,7 @@ def _fep_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
                         "stable": int(o.stable),
                     }
                 )
-    _write_csv(writer.path("fep.csv"), rows)
+    write_rows(writer.path("fep.csv"), rows)
 
     # -- stability.csv: Hill (each drawn H) against Floquet at the shooting energies -------
     srows = []
@@ -191,7 +180,7 @@ def _fep_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
                         "agree": int(cmp.agree[k]),
                     }
                 )
-    _write_csv(writer.path("stability.csv"), srows)
+    write_rows(writer.path("stability.csv"), srows)
     writer.stats["stability_disagreements"] = n_dis
 
     # -- tongues.csv ----------------------------------------------------------------------
@@ -210,7 +199,7 @@ def _fep_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
                     "energy_after_J": t.get("energy_after_J", ""),
                 }
             )
-    _write_csv(writer.path("tongues.csv"), trows)
+    write_rows(writer.path("tongues.csv"), trows)
 
     # -- hb_convergence.csv -------------------------------------------------------------------
     # against shooting: at every exact orbit of the reference branch, the HB frequency
@@ -284,7 +273,7 @@ def _fep_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
             f"{t['harmonic']}:1 at {t['energy_J']:.3g} J {t['action']}" for t in b.tongues
         )
         crow.append(row)
-    _write_csv(writer.path("hb_convergence.csv"), crow)
+    write_rows(writer.path("hb_convergence.csv"), crow)
     writer.stats["fep_wall_s"] = {
         f"NNM {m + 1} H={H}" + (f" N={N}" if N else ""): round(b.wall_s, 3)
         for (m, H, N), b in branches.items()

@@ -2,25 +2,16 @@
 
 from __future__ import annotations
 
-import csv
-
 import numpy as np
 from tqdm import tqdm
 
 from bearingshaft import plots
-from bearingshaft.output import StageWriter
+from bearingshaft.output import StageWriter, write_rows
 from bearingshaft.scenes import Scene
 from reduced import nnm2
 from reduced.discrete import linear_modes
 
 CHECK_CHI = (1.000001, 1.0001, 1.01, 1.1, 2.0, 10.0, 100.0, 1000.0)  # x0 / g checked by integration
-
-
-def _write_csv(path, rows: list[dict]) -> None:
-    with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
 
 
 def nnm_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
@@ -33,7 +24,7 @@ def nnm_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
             shape = lm.phi[:, r] / lm.phi[np.argmax(np.abs(lm.phi[:, r])), r]
             rows.append({"state": state, "mode": r + 1, "freq_hz": lm.freq_hz[r],
                          **{f"phi_{d}": shape[i] for i, d in enumerate(system.dof_names)}})
-    _write_csv(writer.path("linear_modes.csv"), rows)
+    write_rows(writer.path("linear_modes.csv"), rows)
     writer.stats["open_hz"] = modes["open"].freq_hz.tolist()
     writer.stats["closed_hz"] = modes["closed"].freq_hz.tolist()
 
@@ -68,7 +59,7 @@ def _nnm2_exact(scene: Scene, writer: StageWriter, progress: bool, modes: dict) 
             checks.append({"x0_over_g": chi, "energy_J": float(nnm2.energy_from_amplitude(p, x0)),
                            "freq_integrated_hz": f_int, "freq_exact_hz": f_ex, "freq_paper_eq13_hz": f_pa,
                            "rel_err_exact": (f_ex - f_int) / f_int, "rel_err_paper": (f_pa - f_int) / f_int})
-        _write_csv(writer.path("nnm2_check.csv"), checks)
+        write_rows(writer.path("nnm2_check.csv"), checks)
         writer.stats["nnm2_max_rel_err_exact"] = max(abs(c["rel_err_exact"]) for c in checks)
         writer.stats["nnm2_max_rel_err_paper_eq13"] = max(abs(c["rel_err_paper"]) for c in checks)
     plots.nnm2_figure(E, f_exact, f_paper, checks, modes["open"].freq_hz, modes["closed"].freq_hz,

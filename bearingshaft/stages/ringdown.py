@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import csv
-
 import numpy as np
 from tqdm import tqdm
 
 from bearingshaft import plots
-from bearingshaft.output import StageWriter
+from bearingshaft.output import StageWriter, write_rows
 from bearingshaft.scenes import RingdownSpec, Scene
 from reduced.discrete import DiscreteParams, linear_modes
 from reduced.integrate import ringdown
@@ -122,10 +120,7 @@ def symmetry_stage(scene: Scene, res: RingdownResult, writer: StageWriter, progr
         rows.append({"method": method, "tolerance_m": r.tolerance, "t_break_s": t_break,
                      "growth_rate_per_s": rate, "max_abs_diff_m": float(np.max(d)),
                      "runtime_s": r.stats.get("wall_s")})
-    with open(writer.path("symmetry.csv"), "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_rows(writer.path("symmetry.csv"), rows)
     plots.symmetry_figure(table, (a, b), names, writer.path("symmetry.png"),
                           f"{scene.name}: symmetry breaking of {names[0]} and {names[1]}")
     writer.stats["symmetry"] = rows

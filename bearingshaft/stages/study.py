@@ -2,22 +2,13 @@
 
 from __future__ import annotations
 
-import csv
-
 import numpy as np
 
 from bearingshaft import plots
-from bearingshaft.output import StageWriter
+from bearingshaft.output import StageWriter, write_rows
 from bearingshaft.scenes import Scene
 from bearingshaft.stages.ringdown import _Bar
 from reduced.studies import stiff_cases, work_precision
-
-
-def _write_csv(path, rows: list[dict], fields: list[str]) -> None:
-    with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=fields, extrasaction="ignore")
-        w.writeheader()
-        w.writerows(rows)
 
 
 def _fmt(v, spec: str = ".3g") -> str:
@@ -34,7 +25,7 @@ def study_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
             wp.sample_rate_hz, wp.explicit_omega_dt, wp.dop853_rtol, wp.repeats, progress=bar,
         )
         bar.close()
-        _write_csv(writer.path("work_precision.csv"), rows, ["method", "setting", "runtime_s", "error"])
+        write_rows(writer.path("work_precision.csv"), rows, ["method", "setting", "runtime_s", "error"])
         plots.work_precision_figure(rows, order, writer.path("work_precision.png"), wp.window_s)
         print(f"[{scene.name}] explicit central difference: observed order of accuracy {order:.3f}")
         writer.stats["explicit_observed_order"] = order
@@ -62,7 +53,7 @@ def study_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
         bar.close()
         fields = ["k_g", "gap", "speed", "c", "method", "status", "energy_J", "energy_balance_error",
                   "n_steps", "n_events", "runtime_s", "max_penetration_m", "reason"]
-        _write_csv(writer.path("stiff_cases.csv"), rows, fields)
+        write_rows(writer.path("stiff_cases.csv"), rows, fields)
         ok = [r for r in rows if r["status"] == "ok"]
         refused = [r for r in rows if r["status"] == "refused"]
         bad = [r for r in rows if r["status"] not in ("ok", "refused")]
