@@ -1,9 +1,10 @@
 """Command line: ``bearingshaft <subcommand> --scene NAME_OR_TOML [--out DIR]``.
 
 Subcommands follow the pipeline (geometry -> fem -> reduced -> results):
-``modal`` (mesh and modal analysis), ``ringdown``, ``nnm``, ``study`` (error against run
-time, stiff cases), ``verify`` (reduction against the discrete model), ``run`` (every
-stage of one or more scenes; all built-in scenes when none is named) and ``scenes``.
+``modal`` (mesh and modal analysis), ``reduce`` (Craig-Bampton onto the tips),
+``ringdown``, ``nnm``, ``study`` (error against run time, stiff cases), ``verify``
+(reduction against the discrete model), ``run`` (every stage of one or more scenes; all
+built-in scenes when none is named) and ``scenes``.
 Bad input gives a one-line message and exit code 2; nothing half-written is left behind.
 """
 
@@ -41,6 +42,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser("modal", help="build the mesh and run the modal analysis of a 3-D scene")
+    _add_common(p)
+    p = sub.add_parser("reduce", help="reduce the 3-D model to its tips (Craig-Bampton): rom.npz, cb_check.csv")
     _add_common(p)
     p = sub.add_parser("ringdown", help="free response from the scene's initial state")
     _add_common(p)

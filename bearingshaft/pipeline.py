@@ -42,27 +42,35 @@ def _study(scene: Scene, writer: StageWriter, progress: bool, **_) -> None:
     study_stage(scene, writer, progress)
 
 
-def _not_yet(issue: int, what: str) -> Callable:
-    def stage(scene: Scene, writer: StageWriter, progress: bool, **_) -> None:
-        raise StageUnavailable(f"{what} is not built yet (issue #{issue}); nothing was written")
+def _reduce(scene: Scene, writer: StageWriter, progress: bool, **_) -> None:
+    from bearingshaft.stages.reduce import reduce_stage
 
-    return stage
+    reduce_stage(scene, writer, progress)
+
+
+def _verify(scene: Scene, writer: StageWriter, progress: bool, **_) -> None:
+    from bearingshaft.stages.verify import verify_stage
+
+    verify_stage(scene, writer, progress)
 
 
 STAGES: dict[str, Callable] = {
     "modal": _modal,
+    "reduce": _reduce,
     "ringdown": _ringdown,
     "nnm": _nnm,
     "study": _study,
-    "verify": _not_yet(5, "verification of the reduced model"),
+    "verify": _verify,
 }
 
 
 def run_stage(scene: Scene, stage: str, out_dir: str | Path, progress: bool = True, **options) -> None:
     """Run one stage of ``scene`` into ``out_dir`` (refused if the scene lacks its table)."""
     if stage not in scene.stages:
-        tables = {"ringdown": "[ringdown]", "nnm": "[nnm]", "study": "[work_precision] or [stiff_cases]",
-                  "modal": "[modal]", "verify": "[verify]"}
+        tables = {"ringdown": "[ringdown]", "nnm": "[nnm]",
+                  "study": "[work_precision], [stiff_cases] or [rom_convergence]",
+                  "modal": "[modal]", "verify": "[verify]",
+                  "reduce": '[model] kind = "rom"'}
         raise StageUnavailable(
             f"scene {scene.name!r} has no {tables.get(stage, stage)} table, so it has no {stage} stage "
             f"(its stages: {', '.join(scene.stages) or 'none'})"

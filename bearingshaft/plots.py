@@ -74,19 +74,19 @@ def spectrogram_figure(
     plt.close(fig)
 
 
-def symmetry_figure(runs: dict[str, tuple[RingdownResult, float | None]], pair: tuple[int, int],
+def symmetry_figure(runs: dict[str, tuple[RingdownResult, float | None]], pair: tuple[np.ndarray, np.ndarray],
                     names: tuple[str, str], path: Path, title: str) -> None:
-    """|x_a - x_b| against time for each method, the tolerance and the break time (Fig. 4)."""
+    """|x_a - x_b| against time for each method (points a, b as rows of the DOFs), tolerance, break time."""
     fig, ax = plt.subplots(2, 1, figsize=(9, 7), sharex=True, constrained_layout=True)
     first = next(iter(runs.values()))[0]
     a, b = pair
-    ax[0].plot(first.t, first.x[:, a] * 1e3, lw=0.6, label=names[0])
-    ax[0].plot(first.t, first.x[:, b] * 1e3, lw=0.6, ls="--", label=names[1])
+    ax[0].plot(first.t, (first.x @ a) * 1e3, lw=0.6, label=names[0])
+    ax[0].plot(first.t, (first.x @ b) * 1e3, lw=0.6, ls="--", label=names[1])
     ax[0].set_ylabel(f"displacement [mm] ({first.method})")
     ax[0].legend(loc="upper right")
     for i, (method, (res, t_break)) in enumerate(runs.items()):
         color = f"C{i}"
-        d = np.abs(res.x[:, a] - res.x[:, b])
+        d = np.abs(res.x @ (a - b))
         ax[1].semilogy(res.t, d + 1e-30, color=color, lw=0.6, label=f"{method}")
         ax[1].axhline(res.tolerance, color=color, lw=0.8, ls=":")
         if t_break is not None:

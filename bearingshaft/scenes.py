@@ -5,8 +5,9 @@ to run, a table absent is a stage skipped (and so never built). Layout::
 
     name = "discrete-impulse"          # optional, defaults to the file name
     description = "..."
-    [model]          kind = "discrete" and the model's parameters (DiscreteParams)
-    [initial]        x0_m, v0_m_s
+    [model]          kind = "discrete" (DiscreteParams), "rom" (reduced.rom.RomSpec: the 3-D
+                     model reduced to its tips) or "assembly" (fem.model.AssemblyModel)
+    [initial]        x0_m, v0_m_s at the points x1, x2, x3
     [ringdown]       integrator and run length                      -> stage ringdown
     [spectrogram]    STFT of one DOF with the NNM curves overlaid  (with ringdown)
     [symmetry]       |x_a - x_b| against time                      (with ringdown)
@@ -14,6 +15,8 @@ to run, a table absent is a stage skipped (and so never built). Layout::
     [fep]            HB / shooting backbones and stability (issue 3)   -> stage nnm
     [work_precision] error against run time                         -> stage study
     [stiff_cases]    stiff and extreme parameter sweep              -> stage study
+    [rom_convergence] reduced model against its mode count          -> stage study (kind "rom")
+    [verify]         reduction against the discrete model           -> stage verify (kind "rom")
 
 Unknown keys, wrong types and invalid values raise :class:`SceneError` with a one-line
 message naming the table and key.
@@ -29,9 +32,9 @@ from dataclasses import dataclass, field, fields
 from importlib import resources
 from pathlib import Path
 
-from fem.model import AssemblyModel
 from reduced.discrete import DiscreteParams
 from reduced.integrate import METHODS
+from reduced.rom import RomSpec
 
 
 class SceneError(ValueError):
@@ -51,10 +54,14 @@ def _positive(obj, *names: str) -> None:
 
 @dataclass(frozen=True, slots=True)
 class InitialSpec:
-    """Initial state of the ringdown."""
+    """Initial state of the ringdown at the points x1, x2, x3 (see :mod:`reduced.initial`).
 
-    x0_m: tuple[float, ...] = (0.0, 0.0, 0.0)  # m, displacement of each DOF
-    v0_m_s: tuple[float, ...] = (0.0, 0.0, 0.0)  # m/s, velocity of each DOF
+    For the discrete model the points are its DOFs. A reduced model takes the point values
+    in its lowest three open-gap modes (heave, pitch, first bending), as the discrete model.
+    """
+
+    x0_m: tuple[float, ...] = (0.0, 0.0, 0.0)  # m, displacement of each point
+    v0_m_s: tuple[float, ...] = (0.0, 0.0, 0.0)  # m/s, velocity of each point
 
 
 @dataclass(frozen=True, slots=True)
@@ -164,9 +171,12 @@ class StiffCasesSpec:
     duration_s: float = 0.2  # s
     sample_rate_hz: float = 5000.0  # Hz
     methods: tuple[str, ...] = ("exact", "explicit")
+    long_duration_s: float = 0.0  # s, also run the nominal case (first k_g, Table-1 gap, 200 m/s) this long
+    # for every c (0: no long runs)
 
     def __post_init__(self) -> None:
         _positive(self, "duration_s", "sample_rate_hz")
+        _check(self.long_duration_s >= 0, f"long_duration_s must be >= 0, got {self.long_duration_s!r}")
         for m in self.methods:
             _check(m in METHODS, f"methods: unknown method {m!r}")
 
@@ -188,7 +198,50 @@ class ModalSpec:
         _check(self.solver in ("pardiso", "superlu"), f"solver must be pardiso or superlu, got {self.solver!r}")
 
 
-MODEL_KINDS: dict[str, type] = {"discrete": DiscreteParams, "assembly": AssemblyModel}
+@dataclass(frozen=True, slots=True)
+class RomConvergenceSpec:
+    """Reduced model against its number of fixed-interface modes (kind = "rom")."""
+
+    modes: tuple[int, ...] = (1, 2, 5, 10, 20, 50)  # fixed-interface modes; the largest is the reference
+    window_s: float = 0.05  # s, ringdown window over which the error is measured
+    sample_rate_hz: float = 20000.0  # Hz, grid on which errors are measured
+    n_compare: int = 4  # contact-coupled frequencies compared (open and closed gap)
+    repeats: int = 3  # best-of timing
+
+    def __post_init__(self) -> None:
+        _check(len(self.modes) >= 2 and all(m >= 0 for m in self.modes), "modes needs >= 2 counts >= 0")
+        _positive(self, "window_s", "sample_rate_hz")
+        _check(self.n_compare >= 1 and self.repeats >= 1, "n_compare and repeats must be >= 1")
+
+
+@dataclass(frozen=True, slots=True)
+class VerifySpec:
+    """Reduction against the discrete model: identified parameters, frequencies, NNMs, ringdowns."""
+
+    duration_s: float = 2.0  # s, ringdown of each of the paper's three initial conditions
+    sample_rate_hz: float = 20000.0  # Hz
+    method: str = "exact"  # ringdown integrator
+    energy_max_J: float = 1e5  # J, NNM backbones (HB, H = 1) up to this energy
+    window_s: float = 0.05  # s, spectrogram window
+    fmax_hz: float = 1500.0  # Hz, top of the spectrograms
+
+    def __post_init__(self) -> None:
+        _check(self.method in METHODS, f"method must be one of {', '.join(METHODS)}, got {self.method!r}")
+        _positive(self, "duration_s", "sample_rate_hz", "energy_max_J", "window_s", "fmax_hz")
+
+
+def _assembly_model():
+    from fem.model import AssemblyModel  # imported only for 3-D scenes: no scikit-fem otherwise
+
+    return AssemblyModel
+
+
+MODEL_KINDS: dict[str, object] = {"discrete": DiscreteParams, "assembly": _assembly_model, "rom": RomSpec}
+
+
+def model_class(kind: str) -> type:
+    entry = MODEL_KINDS[kind]
+    return entry if isinstance(entry, type) else entry()
 
 SECTIONS: dict[str, type] = {
     "modal": ModalSpec,
@@ -200,9 +253,11 @@ SECTIONS: dict[str, type] = {
     "fep": FEPSpec,
     "work_precision": WorkPrecisionSpec,
     "stiff_cases": StiffCasesSpec,
+    "rom_convergence": RomConvergenceSpec,
+    "verify": VerifySpec,
 }
 
-STAGES = ("modal", "ringdown", "nnm", "study")
+STAGES = ("modal", "reduce", "ringdown", "nnm", "study", "verify")
 
 
 @dataclass(frozen=True, slots=True)
@@ -212,7 +267,7 @@ class Scene:
     name: str
     description: str
     model_kind: str
-    model: DiscreteParams | AssemblyModel
+    model: object  # DiscreteParams | RomSpec | fem.model.AssemblyModel
     source: str = field(repr=False)  # the TOML text as read, kept with every result
     initial: InitialSpec = InitialSpec()
     modal: ModalSpec | None = None
@@ -223,15 +278,20 @@ class Scene:
     fep: FEPSpec | None = None
     work_precision: WorkPrecisionSpec | None = None
     stiff_cases: StiffCasesSpec | None = None
+    rom_convergence: RomConvergenceSpec | None = None
+    verify: VerifySpec | None = None
 
     @property
     def stages(self) -> tuple[str, ...]:
         """The pipeline stages this scene asks for, in pipeline order."""
         wanted = {
             "modal": self.modal is not None,
+            "reduce": self.model_kind == "rom",
             "ringdown": self.ringdown is not None,
             "nnm": self.nnm is not None or self.fep is not None,
-            "study": self.work_precision is not None or self.stiff_cases is not None,
+            "study": self.work_precision is not None or self.stiff_cases is not None
+            or self.rom_convergence is not None,
+            "verify": self.verify is not None,
         }
         return tuple(s for s in STAGES if wanted[s])
 
@@ -304,7 +364,7 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
     kind = model_table.pop("kind", "discrete")
     if kind not in MODEL_KINDS:
         raise SceneError(f"{origin} [model] kind: unknown model {kind!r} (known: {', '.join(MODEL_KINDS)})")
-    model = from_table(MODEL_KINDS[kind], model_table, f"{origin} [model]")
+    model = from_table(model_class(kind), model_table, f"{origin} [model]")
     sections = {
         key: from_table(cls, data[key], f"{origin} [{key}]") for key, cls in SECTIONS.items() if key in data
     }
@@ -315,13 +375,22 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
         return Scene(name=name, description=description, model_kind=kind, model=model, source=text, **sections)
     if "modal" in sections:
         raise SceneError(f"{origin}: [modal] needs a 3-D model (kind = \"assembly\"), not {kind!r}")
-    system = model.system()
-    n = system.n
+    if kind == "rom":
+        for key in ("nnm", "fep", "work_precision"):
+            if key in sections:
+                raise SceneError(f"{origin}: [{key}] is for the discrete model; a reduced model has "
+                                 "[ringdown], [stiff_cases], [rom_convergence] and [verify]")
+    else:
+        for key in ("rom_convergence", "verify"):
+            if key in sections:
+                raise SceneError(f"{origin}: [{key}] needs a reduced model (kind = \"rom\"), not {kind!r}")
+    dof_names = model.point_names  # what [initial], [spectrogram] and [symmetry] refer to
+    n = len(dof_names)
     init = sections.get("initial", InitialSpec())
     for key in ("x0_m", "v0_m_s"):
         if len(getattr(init, key)) != n:
-            raise SceneError(f"{origin} [initial] {key}: needs {n} values, got {len(getattr(init, key))}")
-    dof_names = system.dof_names
+            raise SceneError(f"{origin} [initial] {key}: needs {n} values ({', '.join(dof_names)}), "
+                             f"got {len(getattr(init, key))}")
     spec = sections.get("spectrogram")
     if spec is not None and spec.dof not in dof_names:
         raise SceneError(f"{origin} [spectrogram] dof: unknown DOF {spec.dof!r} (known: {', '.join(dof_names)})")

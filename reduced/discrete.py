@@ -55,6 +55,16 @@ class DiscreteParams:
         return self.kappa / self.L**2
 
     @property
+    def point_names(self) -> tuple[str, ...]:
+        """The points a scene's initial state refers to: the three masses."""
+        return ("x1", "x2", "x3")
+
+    @property
+    def point_rows(self) -> np.ndarray:
+        """(3, 3) the points as rows of the coordinates: the identity."""
+        return np.eye(3)
+
+    @property
     def grazing_energy_nnm2(self) -> float:
         """J, energy at which NNM 2 first touches the stops: 2 k_s g^2."""
         return 2.0 * self.k_s * self.g**2

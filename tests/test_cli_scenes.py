@@ -117,7 +117,7 @@ def test_parse_errors_are_scene_errors():
     [
         (["ringdown", "--scene", "no-such-scene"], "unknown scene 'no-such-scene'"),
         (["ringdown", "--scene", "missing.toml"], "cannot read scene file"),
-        (["study", "--scene", "discrete-symmetric"], "has no [work_precision] or [stiff_cases] table"),
+        (["study", "--scene", "discrete-symmetric"], "[stiff_cases] or [rom_convergence] table"),
         (["ringdown", "--scene", "discrete-impulse", "--method", "rk4"], "invalid choice"),
         (["frobnicate"], "invalid choice"),
     ],

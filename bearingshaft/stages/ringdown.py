@@ -9,6 +9,8 @@ from bearingshaft import plots
 from bearingshaft.output import StageWriter, write_rows
 from bearingshaft.scenes import RingdownSpec, Scene
 from reduced.discrete import DiscreteParams, linear_modes
+from reduced.gaps import GapSystem
+from reduced.initial import initial_state
 from reduced.integrate import ringdown
 from reduced.result import RingdownResult
 from reduced.spectrogram import spectrogram
@@ -32,34 +34,55 @@ class _Bar:
         self.bar.close()
 
 
+def model_system(model, progress: bool = False) -> tuple[GapSystem, np.ndarray]:
+    """(system, P): a scene model's gap system and its points x1, x2, x3 as rows P of its DOFs."""
+    if hasattr(model, "reduced"):  # a reduced 3-D model: from rom.npz or the cache
+        rom = model.reduced(progress)
+        return rom.system(), rom.point_rows
+    return model.system(), model.point_rows
+
+
+def scene_initial_state(scene: Scene, system: GapSystem, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(x0, v0) on the system's DOFs from the scene's point values (:mod:`reduced.initial`)."""
+    init = scene.initial
+    return initial_state(system.M, system.K, P, init.x0_m, init.v0_m_s)
+
+
 def run_ringdown(scene: Scene, spec: RingdownSpec, method: str, progress: bool) -> RingdownResult:
     """The scene's system from its initial state, by ``method``, with a progress bar."""
+    system, P = model_system(scene.model, progress)
+    x0, v0 = scene_initial_state(scene, system, P)
     bar = _Bar(f"{scene.name}: {method}", progress)
     try:
         return ringdown(
-            scene.model.system(), np.array(scene.initial.x0_m), np.array(scene.initial.v0_m_s),
-            spec.duration_s, spec.sample_rate_hz, method, dt=spec.dt_s, omega_dt=spec.omega_dt,
+            system, x0, v0, spec.duration_s, spec.sample_rate_hz, method, dt=spec.dt_s, omega_dt=spec.omega_dt,
             rtol=spec.rtol, atol=spec.atol, progress=bar,
         )
     finally:
         bar.close()
 
 
-def backbone_curves(params: DiscreteParams) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Frequency-energy curves to overlay: the exact NNM 2 and, when built, HB (H = 1)."""
-    from reduced import nnm2
+def point_series(x: np.ndarray, P: np.ndarray, names: tuple[str, ...], name: str) -> np.ndarray:
+    """The displacement of point ``name`` over time from DOF histories x (n_t, n)."""
+    return x @ P[names.index(name)]
 
-    E = np.logspace(-4, 5, 400)
+
+def backbone_curves(model, system: GapSystem | None = None, n_modes: int = 3
+                    ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Frequency-energy curves to overlay: HB (H = 1) of the lowest ``n_modes`` NNMs of the
+    system, and the exact NNM 2 of a symmetric discrete model."""
+    from reduced import nnm2
+    from reduced.backbones import nnm_branch
+
+    system = model.system() if system is None else system
     curves: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    try:
-        from reduced.backbones import hb_backbones
-    except ImportError:
-        hb_backbones = None
-    if hb_backbones is not None:
-        for name, (E_hb, f_hb) in hb_backbones(params.system(), harmonics=1).items():
-            curves[f"{name}, HB H=1"] = (E_hb, f_hb)
-    if params.m1 == params.m3:
-        curves["NNM 2, exact"] = (E, nnm2.frequency_from_energy(params, E))
+    for mode in range(min(n_modes, system.n)):
+        b = nnm_branch(system, mode, H=1)
+        order = np.argsort(b.energy_J, kind="stable")
+        curves[f"NNM {mode + 1}, HB H=1"] = (b.energy_J[order], b.freq_hz[order])
+    if isinstance(model, DiscreteParams) and model.m1 == model.m3:
+        E = np.logspace(-4, 5, 400)
+        curves["NNM 2, exact"] = (E, nnm2.frequency_from_energy(model, E))
     return curves
 
 
@@ -88,15 +111,15 @@ def ringdown_stage(scene: Scene, writer: StageWriter, progress: bool, method: st
          "energy_balance_error": res.energy_balance_error, **res.stats}
     )
     system = res.system
+    _, P = model_system(scene.model)
     if scene.spectrogram is not None:
         sp = scene.spectrogram
-        i = system.dof_names.index(sp.dof)
-        S = spectrogram(res.t, res.x[:, i], sp.window_s, sp.overlap)
+        S = spectrogram(res.t, point_series(res.x, P, scene.model.point_names, sp.dof), sp.window_s, sp.overlap)
         modes = {s: linear_modes(system, s).freq_hz for s in ("open", "closed")}
         plots.spectrogram_figure(
-            S, (res.t, res.energy), backbone_curves(scene.model), writer.path("spectrogram.png"),
+            S, (res.t, res.energy), backbone_curves(scene.model, system), writer.path("spectrogram.png"),
             f"{scene.name}: spectrogram of {sp.dof} ({method}); open-gap "
-            f"{', '.join(f'{f:.1f}' for f in modes['open'])} Hz",
+            f"{', '.join(f'{f:.1f}' for f in modes['open'][:3])} Hz",
             sp.fmax_hz, sp.db_range,
         )
     if scene.symmetry is not None:
@@ -106,14 +129,15 @@ def ringdown_stage(scene: Scene, writer: StageWriter, progress: bool, method: st
 def symmetry_stage(scene: Scene, res: RingdownResult, writer: StageWriter, progress: bool) -> None:
     """Fig. 4: when does |x_a - x_b| first exceed each method's tolerance?"""
     names = scene.symmetry.dofs
-    a, b = (res.system.dof_names.index(n) for n in names)
+    _, P = model_system(scene.model)
+    pa, pb = (P[scene.model.point_names.index(n)] for n in names)
     runs = {res.method: res}
     for other in ("exact", "explicit", "dop853"):
         if other not in runs:
             runs[other] = run_ringdown(scene, scene.ringdown, other, progress)
     rows, table = [], {}
     for method, r in runs.items():
-        d = np.abs(r.x[:, a] - r.x[:, b])
+        d = np.abs(r.x @ (pa - pb))
         t_break = first_exceedance(r.t, d, r.tolerance)
         rate = growth_rate(r.t, d, 1e3 * max(np.min(d[d > 0], initial=1e-300), 1e-30), 1e-3 * np.max(np.abs(r.x)))
         table[method] = (r, t_break)
@@ -121,6 +145,6 @@ def symmetry_stage(scene: Scene, res: RingdownResult, writer: StageWriter, progr
                      "growth_rate_per_s": rate, "max_abs_diff_m": float(np.max(d)),
                      "runtime_s": r.stats.get("wall_s")})
     write_rows(writer.path("symmetry.csv"), rows)
-    plots.symmetry_figure(table, (a, b), names, writer.path("symmetry.png"),
+    plots.symmetry_figure(table, (pa, pb), names, writer.path("symmetry.png"),
                           f"{scene.name}: symmetry breaking of {names[0]} and {names[1]}")
     writer.stats["symmetry"] = rows

@@ -1,0 +1,161 @@
+"""Penalty gap contact at the impact tips: one scalar gap coordinate per tip.
+
+Each end of the beam (x = -L: ``x1``, x = +L: ``x3``, the discrete model's names) meets a
+pair of impact tips, one above and one below, at the spring seats' axis. The beam side of a
+tip is the contact patch on its face, coupled by a distributing (RBE3) row that averages
+the vertical displacement of the patch nodes: it transmits the contact force as a uniform
+nodal load and adds no stiffness between patch nodes. The gap coordinate of a tip is
+
+    s_i = r_i . u = mean uz(beam patches at tip i) - mean uz(tube seats at tip i),
+
+(the tube term only in the ``assembly`` layout, where the tips are bolted to the tube; in
+``beam-grounded`` the tips are fixed). The top and bottom patches are averaged together:
+the beam's through-thickness squeeze under a tip load is ~1e-9 of its vertical motion, so
+one scalar gap per tip results. The tip acts as a two-sided clearance on s_i with normal
++z (upper tip) and -z (lower tip):
+
+    f_i(s) = k_g (s - g)  for s > g,   0 for |s| <= g,   k_g (s + g)  for s < -g,
+
+applied to the structure as r_i f_i (u' = K u + sum_i r_i f_i(r_i . u) in the equation of
+motion). The *tied* (closed-gap) linearization is K + k_g sum_i r_i r_i^T: one tip of each
+pair closed, the stiffest linear state, whose modes sit beside the open-gap ones.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+TIPS = (("x1", "left"), ("x3", "right"))  # gap coordinate name, beam end
+
+
+@dataclass(frozen=True, eq=False)
+class ContactPair:
+    """One impact-tip clearance: gap coordinate s = row . u, two-sided stop |s| <= gap."""
+
+    name: str  # "x1" (left tip, x = -L) or "x3" (right tip, x = +L)
+    row: np.ndarray  # (n_dofs,) distributing row: s = row @ u [m]
+    normal: tuple[float, float, float]  # unit normal of the upper tip (the lower one is its opposite)
+    gap: float  # m, clearance g on either side
+    k_g: float  # N/m, penalty stiffness of a closed tip
+    centre: tuple[float, float, float]  # m, centroid of the beam-side patches
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.gap) and self.gap >= 0.0):
+            raise ValueError(f"contact {self.name}: gap must be >= 0 m, got {self.gap!r}")
+        if not (np.isfinite(self.k_g) and self.k_g > 0.0):
+            raise ValueError(f"contact {self.name}: k_g must be > 0 N/m, got {self.k_g!r}")
+
+    def force(self, s: np.ndarray) -> np.ndarray:
+        """N, the tip force on the beam for gap coordinate s (positive: pushes s down)."""
+        s = np.asarray(s, dtype=float)
+        return self.k_g * (np.maximum(s - self.gap, 0.0) + np.minimum(s + self.gap, 0.0))
+
+
+def _mean_uz_row(fe, names: list[str]) -> np.ndarray:
+    """(n_dofs,) row averaging uz over the nodes of the named sets (each node once)."""
+    nodes = np.unique(np.concatenate([fe.mesh.node_sets[n] for n in names]))
+    row = np.zeros(fe.n_dofs)
+    row[fe.solid.nodal_dofs[2, nodes]] = 1.0 / len(nodes)
+    return row
+
+
+def contact_pairs(fe, gap: float | None = None, k_g: float | None = None) -> list[ContactPair]:
+    """The two tip clearances of an assembled model (gap and k_g default to the model's)."""
+    layout = fe.model.layout
+    if layout == "beam-free":
+        raise ValueError("layout 'beam-free' has no impact tips (use 'beam-grounded' or 'assembly')")
+    gap = fe.model.gap if gap is None else gap
+    k_g = fe.model.k_g if k_g is None else k_g
+    pairs = []
+    for name, end in TIPS:
+        beam = [f"beam_contact_{end}_top", f"beam_contact_{end}_bottom"]
+        row = _mean_uz_row(fe, beam)
+        if layout == "assembly":
+            row = row - _mean_uz_row(fe, [f"tube_seat_{end}_top", f"tube_seat_{end}_bottom"])
+        nodes = np.concatenate([fe.mesh.node_sets[n] for n in beam])
+        centre = tuple(float(c) for c in fe.mesh.points[nodes].mean(axis=0))
+        pairs.append(ContactPair(name, row, (0.0, 0.0, 1.0), float(gap), float(k_g), centre))
+    return pairs
+
+
+def contact_rows(pairs: list[ContactPair]) -> np.ndarray:
+    """(n_tips, n_dofs) the gap coordinates' rows, s = R u."""
+    return np.vstack([p.row for p in pairs])
+
+
+def tied_stiffness(K: sp.spmatrix, pairs: list[ContactPair]) -> sp.csr_matrix:
+    """N/m, closed-gap linearization K + sum_i k_g r_i r_i^T (sparse: rows touch patch DOFs only)."""
+    out = sp.csr_matrix(K, copy=True)
+    for p in pairs:
+        r = sp.csr_matrix(p.row)
+        out = out + p.k_g * (r.T @ r)
+    return out.tocsr()
+
+
+@dataclass(frozen=True, eq=False)
+class GapModes:
+    """Open- or closed-gap modes of the 3-D model, flagged by whether the tips see them."""
+
+    state: str  # "open" or "closed"
+    freq_hz: np.ndarray  # (n,) Hz
+    phi: np.ndarray  # (n_dofs, n) mass-normalized
+    tip_motion: np.ndarray  # (2, n) gap coordinates of each mode, R phi [m / sqrt(kg)]
+    coupled: np.ndarray  # (n,) bool: the mode moves a gap coordinate (an in-plane, tip-excited mode)
+
+
+def gap_modes(fe, pairs: list[ContactPair], state: str, n_modes: int = 20, coupling_tol: float = 1e-4
+              ) -> GapModes:
+    """Lowest ``n_modes`` modes with the tips open (K) or tied (K + k_g sum r r^T).
+
+    Lanczos shift-invert (ARPACK, eigenvalues to ~1e-12) so that the reduced models' errors
+    can be measured against them. A mode is *coupled* when |R phi| exceeds ``coupling_tol``
+    of the largest over the modes: the others (out-of-plane, surge) cannot be excited by the
+    tips and no planar reduced model has them. (The uncoupled modes' |R phi| is ~1e-6 of the
+    coupled ones' in the open state: the eigensolver's residual; the weakest coupled is 2e-2.)
+    """
+    from fem.modal import modal_analysis
+
+    if state not in ("open", "closed"):
+        raise ValueError(f"state must be 'open' or 'closed', got {state!r}")
+    K = fe.K if state == "open" else tied_stiffness(fe.K, pairs)
+    res = modal_analysis(K, fe.M, n_modes=n_modes, shift_hz=1.0, method="lanczos")
+    R = contact_rows(pairs)
+    tip = R @ res.phi
+    size = np.linalg.norm(tip, axis=0)
+    return GapModes(state, res.freq_hz, res.phi, tip, size > coupling_tol * max(size.max(), 1e-300))
+
+
+def point_rows(fe) -> dict[str, np.ndarray]:
+    """Rows of the three points the discrete model has: x1, x3 (the tips' gap coordinates on the
+    beam side) and x2 (mid-span vertical motion: mean uz of the middle sensors beam_s3, beam_s4)."""
+    rows = {name: _mean_uz_row(fe, [f"beam_contact_{end}_top", f"beam_contact_{end}_bottom"])
+            for name, end in TIPS}
+    rows["x2"] = _mean_uz_row(fe, ["beam_s3", "beam_s4"])
+    return {k: rows[k] for k in ("x1", "x2", "x3")}
+
+
+def mirror_map(fe, tol: float = 1e-8) -> tuple[np.ndarray, np.ndarray]:
+    """(perm, sign): the reflection y -> -y of a DOF vector, u_mirror = sign * u[perm].
+
+    Raises ValueError if the mesh is not symmetric about y = 0.
+    """
+    from scipy.spatial import cKDTree
+
+    loc = fe.solid.dof_location
+    comp = fe.solid.dof_component
+    scale = float(np.ptp(loc, axis=0).max())
+    key = np.column_stack([loc, comp * scale * 10.0])
+    mirrored = key.copy()
+    mirrored[:, 1] *= -1.0
+    dist, perm = cKDTree(key).query(mirrored)
+    if np.max(dist) > tol * scale:
+        raise ValueError(f"the mesh is not symmetric about y = 0 (max mismatch {np.max(dist):.3g} m)")
+    sign = np.where(comp == 1, -1.0, 1.0)
+    return perm, sign
+
+
+__all__ = ["ContactPair", "GapModes", "gap_modes", "contact_pairs", "contact_rows", "tied_stiffness", "point_rows",
+           "mirror_map", "TIPS"]

@@ -1,0 +1,265 @@
+"""Reduced-order model of the 3-D assembly: Craig-Bampton on the tips' gap coordinates.
+
+The 3-D model (:mod:`fem.model`) is reduced onto its two gap coordinates ``x1``, ``x3``
+(:mod:`fem.contact`) and ``n_modes`` fixed-interface modes,
+
+    q = [x1, x3, eta_1 .. eta_n],      Mr q'' + Cr q' + Kr q + B^T f(B q) = 0,
+
+with B picking x1 and x3 and f the two-sided penalty stops of the tips, so the reduced
+model is a :class:`reduced.gaps.GapSystem` and every solver of the discrete model (exact,
+explicit, DOP853 ringdowns, HB backbones) runs on it unchanged. Damping is what the
+discrete model has: dashpots ``c_points`` at its three points x1, x2 (mid-span), x3, plus an
+optional mass-proportional part ``alpha`` Mr.
+
+The matrices, the DOF map (the interface rows and point rows on the full DOFs, the
+constraint and fixed-interface modes for expansion) and provenance go to ``rom.npz``
+(:meth:`ReducedModel.save`), so a ringdown never rebuilds the 3-D model: a built model is
+also kept in a cache folder keyed by the specification and the source of the code that
+builds it (``$BEARINGSHAFT_CACHE``, default ``~/.cache/bearingshaft``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import time
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+
+import numpy as np
+
+from reduced.gaps import GapSystem, two_sided_stops
+
+ROM_LAYOUTS = ("beam-grounded", "assembly")
+POINTS = ("x1", "x2", "x3")  # the discrete model's three points: left tip, mid-span, right tip
+RIGID_TOL = 1e-6  # relative error allowed on the in-plane rigid mass and inertia (see cb_check)
+
+
+@dataclass(frozen=True, slots=True)
+class RomSpec:
+    """How to build a reduced model (scene ``[model] kind = "rom"``), SI units."""
+
+    layout: str = "beam-grounded"  # beam-grounded (tips fixed) | assembly (tips on the tube)
+    n_modes: int = 5  # fixed-interface modes kept (the coupled ones when planar)
+    cutoff_hz: float = 0.0  # Hz, keep only modes below this as well (0: no cut-off)
+    planar: bool = True  # keep only modes the tips' in-plane contact can excite
+    k_g: float = 3.502e7  # N/m, tip contact stiffness
+    gap: float = 2.54e-4  # m, tip clearance
+    c_points: float = 4.0  # N s/m, dashpot at each of x1, x2, x3 (the discrete model's c)
+    alpha: float = 0.0  # 1/s, mass-proportional damping alpha Mr
+    element_size: float = 0.3  # m, 3-D mesh size (the mesh study's default)
+    element: str = "hex20"  # hex8 | hex20 | hex27
+    rom_file: str = ""  # load this rom.npz instead of building (k_g, gap, damping still apply)
+
+    def __post_init__(self) -> None:
+        if self.layout not in ROM_LAYOUTS:
+            raise ValueError(f"layout must be one of {', '.join(ROM_LAYOUTS)}, got {self.layout!r}")
+        if isinstance(self.n_modes, bool) or not isinstance(self.n_modes, int) or self.n_modes < 0:
+            raise ValueError(f"n_modes must be an integer >= 0, got {self.n_modes!r}")
+        for name in ("cutoff_hz", "k_g", "gap", "c_points", "alpha", "element_size"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"{name} must be a finite number, got {v!r}")
+            if v < 0:
+                raise ValueError(f"{name} must be >= 0, got {v!r}")
+        if not self.k_g > 0:
+            raise ValueError(f"k_g must be > 0, got {self.k_g!r}")
+        if not self.element_size > 0:
+            raise ValueError(f"element_size must be > 0, got {self.element_size!r}")
+        if self.element not in ("hex8", "hex20", "hex27"):
+            raise ValueError(f"element must be hex8, hex20 or hex27, got {self.element!r}")
+
+    # -- the interface a scene uses --------------------------------------------------------
+    @property
+    def point_names(self) -> tuple[str, ...]:
+        return POINTS
+
+    def reduced(self, progress: bool = False) -> ReducedModel:
+        """The reduced model: from ``rom_file``, the cache, or built (and cached)."""
+        if self.rom_file:
+            path = Path(self.rom_file)
+            if not path.exists():
+                raise ValueError(f"rom_file: no such file {self.rom_file!r}")
+            return ReducedModel.load(path).with_contact(self)
+        return cached_rom(self, progress)
+
+    def system(self) -> GapSystem:
+        return self.reduced().system()
+
+    def fe_model(self):
+        """The 3-D model this reduction starts from (:class:`fem.model.AssemblyModel`)."""
+        from fem.model import AssemblyModel
+
+        return AssemblyModel(layout=self.layout, gap=self.gap, k_g=self.k_g,
+                             element_size=self.element_size, element=self.element)
+
+
+@dataclass(frozen=True, eq=False)
+class ReducedModel:
+    """Reduced matrices on q = [x1, x3, eta_1..n] with the map back to the 3-D model."""
+
+    M: np.ndarray  # (n, n) kg
+    K: np.ndarray  # (n, n) N/m
+    C: np.ndarray  # (n, n) N s/m
+    P: np.ndarray  # (3, n) rows of the points x1, x2, x3 in q
+    omega_fixed: np.ndarray  # (n - 2,) rad/s, fixed-interface frequencies
+    k_g: float  # N/m
+    gap: float  # m
+    dof_names: tuple[str, ...]
+    checks: list[dict] = field(default_factory=list)  # cb_check rows
+    info: dict = field(default_factory=dict)  # provenance: spec, sizes, timings, commit
+    Psi: np.ndarray | None = None  # (N, 2) constraint modes (for expansion to the 3-D mesh)
+    Phi: np.ndarray | None = None  # (N, n - 2) fixed-interface modes
+
+    @property
+    def n(self) -> int:
+        return self.M.shape[0]
+
+    @property
+    def n_modes(self) -> int:
+        return self.n - 2
+
+    def system(self) -> GapSystem:
+        """The reduced model with its two tip clearances, |x1| <= g and |x3| <= g."""
+        rows = np.zeros((2, self.n))
+        rows[0, 0] = rows[1, 1] = 1.0
+        stops = two_sided_stops(rows, self.k_g, self.gap, ("x1", "x3"))
+        return GapSystem(M=self.M, C=self.C, K=self.K, dof_names=self.dof_names, **stops)
+
+    @property
+    def point_rows(self) -> np.ndarray:
+        return self.P
+
+    def with_contact(self, spec: RomSpec) -> ReducedModel:
+        """The same reduction with the contact and damping of ``spec`` (no rebuild)."""
+        C = spec.c_points * self.P.T @ self.P + spec.alpha * self.M
+        info = {**self.info, "spec": {**self.info.get("spec", {}), "k_g": spec.k_g, "gap": spec.gap,
+                                      "c_points": spec.c_points, "alpha": spec.alpha}}
+        return ReducedModel(self.M, self.K, 0.5 * (C + C.T), self.P, self.omega_fixed, spec.k_g, spec.gap,
+                            self.dof_names, self.checks, info, self.Psi, self.Phi)
+
+    def save(self, path: str | Path) -> None:
+        """``rom.npz``: matrices, DOF map, checks and provenance (JSON)."""
+        arrays = {"M": self.M, "K": self.K, "C": self.C, "P": self.P, "omega_fixed": self.omega_fixed,
+                  "k_g": self.k_g, "gap": self.gap, "dof_names": np.array(self.dof_names),
+                  "checks_json": json.dumps(self.checks), "info_json": json.dumps(self.info)}
+        if self.Psi is not None:
+            arrays["Psi"] = self.Psi
+            arrays["Phi"] = self.Phi
+        for key, val in self.info.get("dof_map", {}).items():
+            arrays[f"map_{key}"] = np.asarray(val)
+        tmp = Path(str(path) + ".tmp.npz")
+        np.savez_compressed(tmp, **arrays)
+        tmp.replace(path)
+
+    @classmethod
+    def load(cls, path: str | Path) -> ReducedModel:
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                info = json.loads(str(z["info_json"]))
+                return cls(M=z["M"], K=z["K"], C=z["C"], P=z["P"], omega_fixed=z["omega_fixed"],
+                           k_g=float(z["k_g"]), gap=float(z["gap"]), dof_names=tuple(str(s) for s in z["dof_names"]),
+                           checks=json.loads(str(z["checks_json"])), info=info,
+                           Psi=z["Psi"] if "Psi" in z else None, Phi=z["Phi"] if "Phi" in z else None)
+        except (OSError, KeyError, ValueError) as exc:
+            raise ValueError(f"{path}: not a reduced model file ({exc})") from None
+
+
+def _sparse_rows(rows: np.ndarray) -> dict[str, np.ndarray]:
+    """The nonzeros of rows as (row, dof, weight) arrays: the DOF map kept in rom.npz."""
+    r, d = np.nonzero(rows)
+    return {"row": r, "dof": d, "weight": rows[r, d]}
+
+
+def build_rom(spec: RomSpec, fe=None, progress: bool = False) -> tuple[ReducedModel, object]:
+    """Mesh and assemble the 3-D model (unless ``fe`` is given), reduce it; (rom, fe)."""
+    from fem.contact import contact_pairs, contact_rows, point_rows
+    from fem.model import build_system
+    from reduced.craig_bampton import cb_check, craig_bampton
+
+    t0 = time.perf_counter()
+    if fe is None:
+        if progress:
+            print(f"building the 3-D model ({spec.layout}, element size {spec.element_size} m)", flush=True)
+        fe = build_system(spec.fe_model())
+    t_fe = time.perf_counter() - t0
+    pairs = contact_pairs(fe, gap=spec.gap, k_g=spec.k_g)
+    T = contact_rows(pairs)
+    cb = craig_bampton(fe.K, fe.M, T, n_modes=spec.n_modes, cutoff_hz=spec.cutoff_hz or None,
+                       boundary_names=("x1", "x3"), coupled_only=spec.planar)
+    prow = point_rows(fe)
+    P = cb.reduce_rows(np.vstack([prow[p] for p in POINTS]))
+    # in-plane rigid motions of the whole model: heave (uz) and pitch (theta_y) about the origin
+    R = fe.rigid_modes(np.arange(fe.n_dofs), (0.0, 0.0, 0.0))[:, [2, 4]]
+    checks = cb_check(cb, rigid=R, M_rigid=fe.M, rigid_tol=RIGID_TOL)
+    C = spec.c_points * P.T @ P + spec.alpha * cb.M
+    info = {
+        "spec": asdict(spec),
+        "n_full_dofs": int(fe.n_dofs),
+        "n_boundary": 2,
+        "n_modes": int(cb.nq),
+        "contact_centres_m": [list(p.centre) for p in pairs],
+        "timing_s": {"fe": t_fe, "craig_bampton": cb.stats["wall_s"], "total": time.perf_counter() - t0},
+        "cb_stats": cb.stats,
+        "source_hash": source_hash(),
+        "dof_map": {f"interface_{k}": v for k, v in _sparse_rows(T).items()}
+        | {f"points_{k}": v for k, v in _sparse_rows(np.vstack([prow[p] for p in POINTS])).items()},
+    }
+    names = ("x1", "x3", *(f"eta{i + 1}" for i in range(cb.nq)))
+    rom = ReducedModel(cb.M, cb.K, 0.5 * (C + C.T), P, cb.omega_fixed, spec.k_g, spec.gap, names, checks,
+                       {k: v for k, v in info.items() if k != "dof_map"} | {"dof_map": _listify(info["dof_map"])},
+                       cb.Psi, cb.Phi)
+    return rom, fe
+
+
+def _listify(d: dict) -> dict:
+    return {k: np.asarray(v).tolist() for k, v in d.items()}
+
+
+def source_hash() -> str:
+    """sha256 of the code that builds a reduced model (geometry, fem, this reduction)."""
+    root = Path(__file__).resolve().parent.parent
+    h = hashlib.sha256()
+    files = sorted([*root.glob("geometry/*.py"), *root.glob("fem/*.py"), root / "reduced" / "craig_bampton.py",
+                    root / "reduced" / "rom.py"])
+    for f in files:
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def cache_dir() -> Path:
+    return Path(os.environ.get("BEARINGSHAFT_CACHE", Path.home() / ".cache" / "bearingshaft"))
+
+
+def _cache_key(spec: RomSpec) -> str:
+    build = {f.name: getattr(spec, f.name) for f in fields(spec)
+             if f.name not in ("k_g", "gap", "c_points", "alpha", "rom_file")}
+    h = hashlib.sha256(json.dumps(build, sort_keys=True).encode() + source_hash().encode())
+    return h.hexdigest()[:20]
+
+
+def cached_rom(spec: RomSpec, progress: bool = False) -> ReducedModel:
+    """The reduced model of ``spec`` from the cache, built and stored there if absent.
+
+    The contact (k_g, gap) and damping do not enter the reduction (the interface is the
+    gap coordinate itself), so they are applied after loading.
+    """
+    path = cache_dir() / f"rom-{_cache_key(spec)}.npz"
+    if path.exists():
+        try:
+            return ReducedModel.load(path).with_contact(spec)
+        except ValueError:
+            path.unlink(missing_ok=True)
+    rom, _ = build_rom(spec, progress=progress)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        rom.save(path)
+    except OSError:
+        pass  # a read-only home: the model is simply rebuilt next time
+    return rom
+
+
+__all__ = ["RomSpec", "ReducedModel", "build_rom", "cached_rom", "POINTS", "ROM_LAYOUTS"]
