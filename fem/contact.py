@@ -97,35 +97,44 @@ def tied_stiffness(K: sp.spmatrix, pairs: list[ContactPair]) -> sp.csr_matrix:
 
 @dataclass(frozen=True, eq=False)
 class GapModes:
-    """Open- or closed-gap modes of the 3-D model, flagged by whether the tips see them."""
+    """Open- or closed-gap modes of the 3-D model, flagged by whether the tips can excite them."""
 
     state: str  # "open" or "closed"
     freq_hz: np.ndarray  # (n,) Hz
     phi: np.ndarray  # (n_dofs, n) mass-normalized
     tip_motion: np.ndarray  # (2, n) gap coordinates of each mode, R phi [m / sqrt(kg)]
-    coupled: np.ndarray  # (n,) bool: the mode moves a gap coordinate (an in-plane, tip-excited mode)
+    symmetric: np.ndarray  # (n,) phi^T M (mirror phi): +1 symmetric in y (in-plane), -1 antisymmetric
+    coupled: np.ndarray  # (n,) bool: an in-plane mode the tips can excite
 
 
-def gap_modes(fe, pairs: list[ContactPair], state: str, n_modes: int = 20, coupling_tol: float = 1e-4
-              ) -> GapModes:
+def gap_modes(fe, pairs: list[ContactPair], state: str, n_modes: int = 20, Psi: np.ndarray | None = None,
+              tip_tol: float = 1e-5, mass_tol: float = 1e-6) -> GapModes:
     """Lowest ``n_modes`` modes with the tips open (K) or tied (K + k_g sum r r^T).
 
     Lanczos shift-invert (ARPACK, eigenvalues to ~1e-12) so that the reduced models' errors
-    can be measured against them. A mode is *coupled* when |R phi| exceeds ``coupling_tol``
-    of the largest over the modes: the others (out-of-plane, surge) cannot be excited by the
-    tips and no planar reduced model has them. (The uncoupled modes' |R phi| is ~1e-6 of the
-    coupled ones' in the open state: the eigensolver's residual; the weakest coupled is 2e-2.)
+    can be measured against them. A mode is *coupled* when it is symmetric in y (the tips act
+    in the plane y = 0; the mirror test gives +-1 to 1e-6) and it moves a gap coordinate
+    (|R phi| > ``tip_tol`` of the largest) or, given the constraint modes ``Psi``, has mass
+    coupling |Psi^T M phi| > ``mass_tol`` sqrt(max diag Psi^T M Psi) (the reduced model's own
+    criterion: it catches rigid-like modes whose relative tip motion is small). Symmetric
+    modes that are neither (surge, z-antisymmetric tube modes) sit at 1e-9 of these scales.
     """
     from fem.modal import modal_analysis
 
     if state not in ("open", "closed"):
         raise ValueError(f"state must be 'open' or 'closed', got {state!r}")
     K = fe.K if state == "open" else tied_stiffness(fe.K, pairs)
-    res = modal_analysis(K, fe.M, n_modes=n_modes, shift_hz=1.0, method="lanczos")
+    res = modal_analysis(K, fe.M, n_modes=n_modes, shift_hz=0.1, method="lanczos")
     R = contact_rows(pairs)
     tip = R @ res.phi
     size = np.linalg.norm(tip, axis=0)
-    return GapModes(state, res.freq_hz, res.phi, tip, size > coupling_tol * max(size.max(), 1e-300))
+    moves = size > tip_tol * max(size.max(), 1e-300)
+    if Psi is not None:
+        scale = np.sqrt(np.max(np.einsum("ij,ij->j", Psi, fe.M @ Psi)))
+        moves |= np.linalg.norm(Psi.T @ (fe.M @ res.phi), axis=0) > mass_tol * scale
+    perm, sign = mirror_map(fe)
+    sym = np.einsum("ij,ij->j", res.phi, fe.M @ (sign[:, None] * res.phi[perm]))
+    return GapModes(state, res.freq_hz, res.phi, tip, sym, moves & (sym > 0.5))
 
 
 def point_rows(fe) -> dict[str, np.ndarray]:

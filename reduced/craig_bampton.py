@@ -134,6 +134,7 @@ def craig_bampton(
     coupled_only: bool = False,
     coupling_tol: float = 1e-6,
     dense: bool | None = None,
+    mode_filter=None,
 ) -> CBModel:
     """Reduce (K, M) onto the interface rows T and fixed-interface modes.
 
@@ -145,6 +146,8 @@ def craig_bampton(
     cutoff_hz : keep only modes at or below this frequency
     coupled_only : count and keep only modes with |M_bq[:, j]| > coupling_tol sqrt(max M_bb)
     dense : solve the fixed-interface problem densely (default: N <= DENSE_MAX or all modes)
+    mode_filter : with ``coupled_only``, a function of the modes Phi (N, k) returning a (k,) bool
+        mask of the modes allowed as well (e.g. the symmetric ones, whose coupling is not noise)
     """
     t0 = time.perf_counter()
     T = np.atleast_2d(np.asarray(T, dtype=float))
@@ -179,6 +182,8 @@ def craig_bampton(
         f_hz = np.sqrt(np.clip(w2, 0, None)) / (2 * np.pi)
         c = np.linalg.norm(Psi.T @ (M @ Phi), axis=0) / Mbb_scale
         ok = c > coupling_tol if coupled_only else np.ones(len(w2), bool)
+        if coupled_only and mode_filter is not None and len(w2):
+            ok &= np.asarray(mode_filter(Phi), bool)
         if cutoff_hz is not None:
             ok &= f_hz <= cutoff_hz
         keep = np.flatnonzero(ok)

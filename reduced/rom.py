@@ -175,7 +175,7 @@ def _sparse_rows(rows: np.ndarray) -> dict[str, np.ndarray]:
 
 def build_rom(spec: RomSpec, fe=None, progress: bool = False) -> tuple[ReducedModel, object]:
     """Mesh and assemble the 3-D model (unless ``fe`` is given), reduce it; (rom, fe)."""
-    from fem.contact import contact_pairs, contact_rows, point_rows
+    from fem.contact import contact_pairs, contact_rows, mirror_map, point_rows
     from fem.model import build_system
     from reduced.craig_bampton import cb_check, craig_bampton
 
@@ -187,8 +187,15 @@ def build_rom(spec: RomSpec, fe=None, progress: bool = False) -> tuple[ReducedMo
     t_fe = time.perf_counter() - t0
     pairs = contact_pairs(fe, gap=spec.gap, k_g=spec.k_g)
     T = contact_rows(pairs)
+    symmetric = None
+    if spec.planar:  # the tips act in the plane y = 0: only modes symmetric in y can couple
+        perm, sign = mirror_map(fe)
+
+        def symmetric(Phi):
+            return np.einsum("ij,ij->j", Phi, fe.M @ (sign[:, None] * Phi[perm])) > 0.5
+
     cb = craig_bampton(fe.K, fe.M, T, n_modes=spec.n_modes, cutoff_hz=spec.cutoff_hz or None,
-                       boundary_names=("x1", "x3"), coupled_only=spec.planar)
+                       boundary_names=("x1", "x3"), coupled_only=spec.planar, mode_filter=symmetric)
     prow = point_rows(fe)
     P = cb.reduce_rows(np.vstack([prow[p] for p in POINTS]))
     # in-plane rigid motions of the whole model: heave (uz) and pitch (theta_y) about the origin
