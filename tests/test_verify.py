@@ -1,0 +1,95 @@
+"""Identification of the three-mass model from a Craig-Bampton model, and the verify stage."""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+
+import numpy as np
+import pytest
+
+from bearingshaft.cli import main
+from reduced.craig_bampton import craig_bampton
+from reduced.discrete import DiscreteParams
+from reduced.identify import identify_discrete
+
+TIPS = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # rows picking x1 and x3 of the three-mass model
+
+
+def own_cb(p: DiscreteParams):
+    """The three-mass model's own Craig-Bampton form on x1, x3 and its one interior mode."""
+    s = p.system()
+    return craig_bampton(s.K, s.M, TIPS, n_modes=1)
+
+
+def assert_same_params(a: DiscreteParams, b: DiscreteParams, rtol: float = 1e-12) -> None:
+    for f in dataclasses.fields(DiscreteParams):
+        assert getattr(a, f.name) == pytest.approx(getattr(b, f.name), rel=rtol, abs=0.0), f.name
+
+
+def test_cb_form_of_the_three_mass_model_is_the_documented_one():
+    p = DiscreteParams()
+    cb = own_cb(p)
+    Mbb = np.diag([p.m1, p.m3]) + p.m2 / 4 * np.ones((2, 2))
+    np.testing.assert_allclose(cb.M[:2, :2], Mbb, rtol=1e-13)
+    np.testing.assert_allclose(np.abs(cb.M[:2, 2]), np.sqrt(p.m2) / 2 * np.ones(2), rtol=1e-13)
+    np.testing.assert_allclose(cb.K[:2, :2], 2 * p.k_s * np.eye(2), rtol=1e-13, atol=1e-9)
+    assert cb.omega_fixed[0] ** 2 == pytest.approx(4 * p.a / p.m2, rel=1e-13)
+
+
+@pytest.mark.parametrize("p", [DiscreteParams(),
+                               DiscreteParams(m1=0.5, m2=1.1, m3=0.83, k_s=7.2e3, kappa=6.1e4, L=0.2, c=2.5)],
+                         ids=["table1", "asymmetric"])
+def test_identification_of_the_own_cb_model_is_exact(p):
+    cb = own_cb(p)
+    q, residuals = identify_discrete(cb.M, cb.K, p.L, k_g=p.k_g, g=p.g, c=p.c)
+    assert_same_params(q, p)
+    assert all(abs(v) < 1e-12 for v in residuals.values()), residuals
+
+
+def test_identification_uses_the_first_mode_and_ignores_its_scale():
+    p = DiscreteParams(m1=0.7, m3=0.6)
+    cb = own_cb(p)
+    S = np.diag([1.0, 1.0, -3.0])  # eta -> -3 eta: sign and normalization of the mode
+    M, K = S @ cb.M @ S, S @ cb.K @ S
+    q, residuals = identify_discrete(np.pad(M, (0, 1)) + np.diag([0, 0, 0, 1.0]),
+                                     np.pad(K, (0, 1)) + np.diag([0, 0, 0, 1e9]), p.L, k_g=p.k_g, g=p.g, c=p.c)
+    assert_same_params(q, p)
+    assert residuals["M_qq"] == pytest.approx(8.0)  # the mode is no longer mass-normalized: reported
+
+
+def test_residuals_report_what_the_three_mass_form_cannot_carry():
+    p = DiscreteParams()
+    cb = own_cb(p)
+    K = cb.K.copy()
+    K[0, 1] = K[1, 0] = -0.01 * 2 * p.k_s
+    M = cb.M.copy()
+    M[0, 1] = M[1, 0] = 1.05 * p.m2 / 4
+    _, residuals = identify_discrete(M, K, p.L, k_g=p.k_g, g=p.g, c=p.c)
+    assert residuals["K_bb01"] == pytest.approx(-0.01, rel=1e-12)
+    assert residuals["M_bb01"] == pytest.approx(0.05, rel=1e-12)
+
+
+def test_identification_refuses_an_antisymmetric_first_mode():
+    p = DiscreteParams()
+    cb = own_cb(p)
+    M = cb.M.copy()
+    M[1, 2] = M[2, 1] = -M[0, 2]
+    with pytest.raises(ValueError, match="first fixed-interface mode"):
+        identify_discrete(M, cb.K, p.L, k_g=p.k_g, g=p.g, c=p.c)
+
+
+def test_verify_cli_writes_its_files(tmp_path):
+    out = tmp_path / "verify"
+    assert main(["verify", "--scene", "verify-reduction", "--out", str(out), "--no-progress"]) == 0
+    for name in ("identified.csv", "verify.csv", "nnm_backbones.csv", "residuals.csv", "verify.png", "verify.md"):
+        assert (out / name).stat().st_size > 0, name
+    with open(out / "verify.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [(r["state"], int(r["mode"])) for r in rows] == [(s, i) for s in ("open", "closed") for i in (1, 2, 3)]
+    for r in rows:  # one fixed-interface mode: Rayleigh-Ritz upper bounds, close to the full model
+        assert 0.0 <= float(r["reduced_rel"]) < 0.05
+    with open(out / "identified.csv") as fh:
+        ident = {r["parameter"]: float(r["identified"]) for r in csv.DictReader(fh)}
+    assert ident["L"] == pytest.approx(DiscreteParams().L, rel=1e-9)
+    assert ident["m1"] == pytest.approx(ident["m3"], rel=1e-6)  # the beam is symmetric
