@@ -98,7 +98,19 @@ def _ringdowns(systems: dict, vs: VerifySpec, progress: bool) -> dict:
     return out
 
 
-def _figure(path, title: str, freq_rows: list[dict], backbones: dict, runs: dict, points: dict,
+def _spectrograms(runs: dict, models: dict, vs: VerifySpec) -> dict:
+    """{(start, model): Spectrogram of x1}."""
+    return {(start, name): spectrogram(r.t, r.x @ models[name][1][0], vs.window_s, SPECTROGRAM_OVERLAP)
+            for (start, name), r in runs.items()}
+
+
+def _peak_hz(S, fmax_hz: float, frame: int) -> float:
+    """Hz, the strongest frequency below fmax_hz in one frame of a spectrogram."""
+    keep = S.freq_hz <= fmax_hz
+    return float(S.freq_hz[keep][np.argmax(S.power[keep, frame])])
+
+
+def _figure(path, title: str, freq_rows: list[dict], backbones: dict, runs: dict, spectra: dict,
             vs: VerifySpec) -> None:
     fig = plt.figure(figsize=(16, 19), constrained_layout=True)
     grid = fig.add_gridspec(4, 3, height_ratios=[1.15, 1, 1, 1])
@@ -117,8 +129,8 @@ def _figure(path, title: str, freq_rows: list[dict], backbones: dict, runs: dict
     styles = ("-", "--", ":")
     for name in MODELS:
         for k, (E, f) in backbones[name].items():
-            ax.semilogx(E, f, color=COLORS[name], ls=styles[k - 1], lw=1.3,
-                        label=f"{LABELS[name]}, NNM {k}")
+            ax.semilogx(E, f, color=COLORS[name], ls=styles[k - 1], lw=3.0 if name == "reduced" else 1.3,
+                        alpha=0.5 if name == "reduced" else 1.0, label=f"{LABELS[name]}, NNM {k}")
     for r in freq_rows:
         ax.axhline(r["full_hz"], color="k", lw=0.5, ls=(0, (1, 3)))
     ax.set_xlim(1e-4, vs.energy_max_J)
@@ -133,7 +145,7 @@ def _figure(path, title: str, freq_rows: list[dict], backbones: dict, runs: dict
         for j, name in enumerate(MODELS):
             ax = fig.add_subplot(grid[i + 1, j])
             res = runs[start, name]
-            S = spectrogram(res.t, res.x @ points[name][1][0], vs.window_s, SPECTROGRAM_OVERLAP)
+            S = spectra[start, name]
             keep = S.freq_hz <= vs.fmax_hz
             db = 10.0 * np.log10(np.maximum(S.power[keep], 1e-300))
             top = float(np.max(db))
@@ -175,9 +187,11 @@ def _report(scene: Scene, facts: dict, id_rows: list[dict], residuals: dict, fre
                   [[r["state"], r["mode"], f"{r['full_hz']:.2f}", f"{r['reduced_hz']:.2f}",
                     f"{r['identified_hz']:.2f}", f"{r['table1_hz']:.2f}", f"{100 * r['reduced_rel']:+.2f} %",
                     f"{100 * r['identified_rel']:+.2f} %", f"{100 * r['table1_rel']:+.2f} %"] for r in freq_rows])
-    ring = _table(["start", "model", "E0 [J]", "E(end) [J]", "impacts", "energy balance error"],
+    ring = _table(["start", "model", "E0 [J]", "E(end) [J]", "x1 peak, first window [Hz]",
+                   "x1 peak, last window [Hz]", "contact events", "energy balance error"],
                   [[r["start"], LABELS[r["model"]], f"{r['energy_J_initial']:.4g}", f"{r['energy_J_final']:.3g}",
-                    r["n_events"], f"{r['energy_balance_error']:.1e}"] for r in ring_rows])
+                    f"{r['peak_hz_first']:.0f}", f"{r['peak_hz_last']:.0f}", r["n_events"],
+                    f"{r['energy_balance_error']:.1e}"] for r in ring_rows])
     return f"""# {scene.name}: reduced 3-D model against the three-mass model
 
 {scene.description}
@@ -212,10 +226,13 @@ What the differences mean:
   x2 = (x1 + x3)/2 of the three-mass model, so the sum m1 + m2 + m3 of the identified model is
   {f['id_mass']:.4f} kg, not {f['heave_mass']:.4f} kg.
 * **Springs.** The heave stiffness sum(K_bb)/4 = {f['k_heave']:.2f} N/m per spring is Table 1's k_s to
-  {100 * (f['k_heave'] / f['table1_k_s'] - 1):+.3f} %. What trace(K_bb)/4 adds on top
-  ({f['k_s']:.2f} N/m) is the coupling K_bb[0,1] = {f['K01']:.2f} N/m: the 3-D springs also resist the
-  beam's rotation at their seats (a rotational stiffness -K_bb[0,1] L^2 = {f['k_rot']:.3g} N m/rad in all),
-  which the point springs of the three-mass model do not have. It stiffens the pitch mode only.
+  {100 * (f['k_heave'] / f['table1_k_s'] - 1):+.3f} %. What trace(K_bb)/4 ({f['k_s']:.2f} N/m) adds on top is the
+  coupling K_bb[0,1] = {f['K01']:.2f} N/m, which stiffens pitch only (K_bb[0,0] - K_bb[0,1] = {f['k_pitch']:.1f} N/m
+  against 2 k_s = {2 * f['table1_k_s']:.0f} N/m): the 3-D springs, glued to the beam, resist its rotation by
+  their bending and lateral stiffness, a rotational stiffness 4 L^2 |K_bb[0,1]| = {f['k_rot']:.2f} N m/rad in all
+  that the point springs of the three-mass model do not have. The three-mass form has one k_s for heave and
+  pitch; trace(K_bb)/4 splits the difference (sum(K_bb)/4 would give heave exactly and pitch
+  {100 * f['pitch_k_miss']:+.2f} % in stiffness).
 * **Bending.** The first fixed-interface mode (tips held) at {f['f_fixed_hz']:.2f} Hz fixes a = m2 omega_1^2/4;
   kappa = a L^2 = {f['kappa']:.1f} N m/rad against Table 1's {f['table1_kappa']:.0f}
   ({100 * (f['kappa'] / f['table1_kappa'] - 1):+.2f} %). The 3-D beam's EI was set from kappa by matching the
@@ -236,19 +253,31 @@ Relative differences against the full 3-D model.
 
 The reduced model bounds the full one from above (Rayleigh-Ritz) and is close to it in the open gap; its
 closed-gap error comes from keeping one fixed-interface mode (a tied tip needs the higher bending
-modes). The identified three-mass model repeats the reduced model up to the residuals above (open mode 2,
-pitch, loses the spring rotation stiffness and the mass coupling). Table 1's model differs from the 3-D beam
-mostly through its mass distribution: pitch {100 * f['t1_pitch_rel']:+.1f} % and the closed-gap modes.
+modes). The identified three-mass model repeats the reduced model up to the residuals above: in heave
+(open 1) its stiffness 4 k_s = trace(K_bb) = {4 * f['k_s']:.0f} N/m holds the rotation coupling that heave
+does not see (sum(K_bb) = {4 * f['k_heave']:.0f} N/m) and its mass m1 + m2 + m3 misses
+2 M_bb[0,1] - m2/2 = {f['heave_mass'] - f['id_mass']:.4f} kg;
+in pitch (open 2) it has 2 k_s = {2 * f['k_s']:.0f} N/m against K_bb[0,0] - K_bb[0,1] = {f['k_pitch']:.0f} N/m and
+m1 = {f['m1']:.4f} kg against M_bb[0,0] - M_bb[0,1] = {f['m_pitch']:.4f} kg. Table 1's model differs from the 3-D
+beam mostly through its mass distribution: pitch {100 * f['t1_pitch_rel']:+.1f} % (tip mass 0.629 kg against
+{f['m_pitch']:.4f} kg), closed-gap mode 1 (bending against tied tips) {100 * f['t1_closed1_rel']:+.1f} %, near
+sqrt(m2 identified / m2 Table 1) - 1 = {100 * (np.sqrt(f['m2'] / 1.258) - 1):+.1f} %.
 
 ## Ringdowns from the paper's three starts ({f['method']}, {f['duration_s']} s)
 
 Point values x0, v0 of Section 3 at x1, x2, x3, realized in the three lowest modes of each model
-(`reduced/initial.py`); damping: c = {f['c']} N s/m at each point.
+(`reduced/initial.py`); damping: c = {f['c']} N s/m at each point. Peaks: the strongest line of x1's
+spectrogram ({f['window_s']} s windows) in the first and last window, against the closed- and open-gap
+frequencies above (contact persists to the end of every run: E(end) is above the grazing energy of NNM 2,
+2 k_s g^2 = {f['grazing_J']:.3g} J).
 
 {ring}
 
 `verify.png`: frequency differences; the NNM frequency-energy curves of the three models; spectrograms of x1
-with each model's own HB backbones mapped onto time through its energy, f(E(t)).
+with each model's own HB backbones mapped onto time through its energy, f(E(t)). The same point values
+start the three models with different energies where the models' masses differ (impulse at x3: m3; symmetric
+start at x2: the mid-span's modal mass), and the reduced model's dashpots act at its points x1, x2, x3
+(C = c P^T P), not on its coordinates, so its decay differs from the three-mass models' c I.
 """
 
 
@@ -280,12 +309,15 @@ def verify_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
                 for e, fr in zip(E, f, strict=True)])
 
     runs = _ringdowns(models, vs, progress)
+    spectra = _spectrograms(runs, models, vs)
     ring_rows = [{"start": s, "model": m, "energy_J_initial": float(r.energy[0]),
                   "energy_J_final": float(r.energy[-1]), "n_events": r.stats.get("n_events", ""),
+                  "peak_hz_first": _peak_hz(spectra[s, m], vs.fmax_hz, 0),
+                  "peak_hz_last": _peak_hz(spectra[s, m], vs.fmax_hz, -1),
                   "energy_balance_error": float(r.energy_balance_error), "wall_s": r.stats.get("wall_s")}
                  for (s, m), r in runs.items()]
     _figure(writer.path("verify.png"), f"{scene.name}: reduced 3-D model ({rom.n_modes} fixed-interface mode) "
-            f"against the three-mass model", freq_rows, backbones, runs, models, vs)
+            f"against the three-mass model", freq_rows, backbones, runs, spectra, vs)
 
     R = fe.rigid_modes(np.arange(fe.n_dofs), (0.0, 0.0, 0.0))[:, [2, 4]]  # heave, pitch about the centre
     rigid = R.T @ (fe.M @ R)
@@ -298,9 +330,13 @@ def verify_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
              "table1_pitch": (table1.m1 + table1.m3) * table1.L**2, "beam_length": float(geom.beam_length),
              "m1": ident.m1, "m2": ident.m2, "id_mass": ident.m1 + ident.m2 + ident.m3,
              "k_heave": float(np.sum(Kbb) / 4), "k_s": ident.k_s, "table1_k_s": table1.k_s,
-             "K01": float(Kbb[0, 1]), "k_rot": float(-Kbb[0, 1] * L**2), "kappa": ident.kappa,
+             "K01": float(Kbb[0, 1]), "k_rot": float(-4 * L**2 * Kbb[0, 1]), "kappa": ident.kappa,
+             "k_pitch": float(Kbb[0, 0] - Kbb[0, 1]), "m_pitch": float(rom.M[0, 0] - rom.M[0, 1]),
+             "pitch_k_miss": float(np.sum(Kbb) / 2 / (Kbb[0, 0] - Kbb[0, 1]) - 1),
+             "t1_closed1_rel": next(r for r in freq_rows if r["state"] == "closed" and r["mode"] == 1)["table1_rel"],
              "table1_kappa": table1.kappa, "P_x2_eta": float(rom.P[1, 2]), "t1_pitch_rel": t1_pitch,
-             "method": vs.method, "duration_s": vs.duration_s, "c": spec.c_points}
+             "method": vs.method, "duration_s": vs.duration_s, "c": spec.c_points, "window_s": vs.window_s,
+             "grazing_J": table1.grazing_energy_nnm2}
     facts["wall_s"] = time.perf_counter() - t0
     writer.path("verify.md").write_text(_report(scene, facts, id_rows, residuals, freq_rows, ring_rows))
     writer.stats.update({"identified": {r["parameter"]: r["identified"] for r in id_rows},
