@@ -105,9 +105,12 @@ class SymmetrySpec:
     """Symmetry-breaking plot: |x_a - x_b| against time (Fig. 4)."""
 
     dofs: tuple[str, ...] = ("x1", "x3")  # the pair that a symmetric motion keeps equal
+    methods: tuple[str, ...] = ("exact", "explicit", "dop853")  # integrators compared
 
     def __post_init__(self) -> None:
         _check(len(self.dofs) == 2, f"dofs must name two DOFs, got {self.dofs!r}")
+        for m in self.methods:
+            _check(m in METHODS, f"methods: unknown method {m!r}")
 
 
 @dataclass(frozen=True, slots=True)

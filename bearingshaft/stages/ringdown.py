@@ -132,7 +132,7 @@ def symmetry_stage(scene: Scene, res: RingdownResult, writer: StageWriter, progr
     _, P = model_system(scene.model)
     pa, pb = (P[scene.model.point_names.index(n)] for n in names)
     runs = {res.method: res}
-    for other in ("exact", "explicit", "dop853"):
+    for other in scene.symmetry.methods:
         if other not in runs:
             runs[other] = run_ringdown(scene, scene.ringdown, other, progress)
     rows, table = [], {}
