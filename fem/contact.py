@@ -138,11 +138,20 @@ def gap_modes(fe, pairs: list[ContactPair], state: str, n_modes: int = 20, Psi: 
 
 
 def point_rows(fe) -> dict[str, np.ndarray]:
-    """Rows of the three points the discrete model has: x1, x3 (the tips' gap coordinates on the
-    beam side) and x2 (mid-span vertical motion: mean uz of the middle sensors beam_s3, beam_s4)."""
+    """Rows of the three points the discrete model has: x1, x3 (beam side of the tips' gap
+    coordinates) and x2 (mid-span vertical motion: mean uz of the middle sensors beam_s3, beam_s4).
+
+    In the ``assembly`` layout the points are taken relative to the tube, as the gaps are: x1,
+    x3 minus the tips' seats, x2 minus the mean of the tube sensors tube_s1..4 (their centroid is
+    the tube's centre). Whole-assembly motion on the bungees then leaves the points at rest.
+    """
     rows = {name: _mean_uz_row(fe, [f"beam_contact_{end}_top", f"beam_contact_{end}_bottom"])
             for name, end in TIPS}
     rows["x2"] = _mean_uz_row(fe, ["beam_s3", "beam_s4"])
+    if fe.model.layout == "assembly":
+        for name, end in TIPS:
+            rows[name] = rows[name] - _mean_uz_row(fe, [f"tube_seat_{end}_top", f"tube_seat_{end}_bottom"])
+        rows["x2"] = rows["x2"] - _mean_uz_row(fe, [f"tube_s{i}" for i in range(1, 5)])
     return {k: rows[k] for k in ("x1", "x2", "x3")}
 
 

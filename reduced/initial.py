@@ -2,7 +2,9 @@
 
 A scene gives the displacement and velocity of the three points x1, x2, x3 (the discrete
 model's masses). On a model whose points are rows P of its coordinates (P = I for the
-discrete model) they are realized in its lowest r = rows(P) open-gap modes Phi_r:
+discrete model) they are realized in its lowest r = rows(P) open-gap modes that move the
+points (|P phi| above ``MOVES`` of the largest; modes of a whole assembly swinging on its
+bungees move the tube and beam together and leave relative points at rest), Phi_r:
 
     x0 = Phi_r a,  P Phi_r a = d0,        v0 = Phi_r b,  P Phi_r b = w0,
 
@@ -18,6 +20,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import eigh
 
+MOVES = 1e-2  # a mode moves the points if |P phi| exceeds this fraction of the largest
+
 
 def initial_state(M: np.ndarray, K: np.ndarray, P: np.ndarray, x0_points, v0_points
                   ) -> tuple[np.ndarray, np.ndarray]:
@@ -30,8 +34,12 @@ def initial_state(M: np.ndarray, K: np.ndarray, P: np.ndarray, x0_points, v0_poi
     if n < r:
         raise ValueError(f"the model has {n} coordinates, fewer than its {r} points: keep at least "
                          f"{r - n} fixed-interface mode(s)")
-    _, phi = eigh(K, M, subset_by_index=[0, r - 1])
+    _, phi = eigh(K, M, subset_by_index=[0, min(n, r + 20) - 1])
+    size = np.linalg.norm(P @ phi, axis=0)
+    phi = phi[:, np.flatnonzero(size > MOVES * size.max())[:r]]
     A = P @ phi
+    if A.shape[1] < r:
+        raise ValueError(f"fewer than {r} of the model's lowest modes move its points")
     if np.linalg.cond(A) > 1e10:
         raise ValueError("the lowest modes cannot set the point values independently (P Phi is singular)")
     return phi @ np.linalg.solve(A, d0), phi @ np.linalg.solve(A, w0)
