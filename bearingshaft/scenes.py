@@ -72,13 +72,16 @@ class RingdownSpec:
     duration_s: float = 2.0  # s
     sample_rate_hz: float = 20000.0  # Hz, output sampling
     dt_s: float | None = None  # s, explicit step (default: omega_dt / omega_max)
-    omega_dt: float = 0.05  # rad, explicit step as a fraction of the closed-gap period
+    omega_dt: float = 0.05  # rad, explicit step: omega_ref dt
+    step_basis: str = "top"  # omega_ref: "top" closed-gap frequency, or "contact" (the three lowest
+    # modes that move the gaps, as the discrete model has; top mode capped at omega_max dt = 1)
     rtol: float = 1e-10  # dop853 relative tolerance
     atol: float | None = None  # m, dop853 absolute tolerance (default rtol x gap)
 
     def __post_init__(self) -> None:
         _check(self.method in METHODS, f"method must be one of {', '.join(METHODS)}, got {self.method!r}")
         _positive(self, "duration_s", "sample_rate_hz", "omega_dt", "rtol")
+        _check(self.step_basis in ("top", "contact"), f"step_basis must be top or contact, got {self.step_basis!r}")
         if self.dt_s is not None:
             _positive(self, "dt_s")
         if self.atol is not None:

@@ -39,22 +39,21 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from reduced.discrete import DiscreteParams, linear_modes  # noqa: E402
-from reduced.explicit import DEFAULT_OMEGA_DT, stability_limit  # noqa: E402
+from reduced.discrete import DiscreteParams  # noqa: E402
+from reduced.explicit import DEFAULT_OMEGA_DT, TOP_CAP, contact_omega, stability_limit  # noqa: E402
 from reduced.initial import initial_state  # noqa: E402
 from reduced.integrate import ringdown  # noqa: E402
 from reduced.rom import RomSpec, build_rom  # noqa: E402
 from reduced.studies import relative_error  # noqa: E402
 
-STEP_CAP = 1.0  # omega_max dt of the contact step at most: half the textbook limit 2, clear of the
-# 1.6 - 1.8 where switching contact has been seen to go unstable (reduced.explicit)
+STEP_CAP = TOP_CAP  # omega_max dt of the contact step at most (reduced.explicit, step_basis "contact")
 V0_POINTS = (0.0, 0.0, 200.0)  # m/s at x1, x2, x3: the rom-impulse scene
 
 
 def contact_step(system) -> tuple[float, float, float]:
-    """(dt, omega_c, omega_max): omega_c dt = 0.05 on the third closed-gap mode, capped for stability."""
+    """(dt, omega_c, omega_max): the step of ``step_basis = "contact"`` (reduced.explicit)."""
     omega_max, _ = stability_limit(system)
-    omega_c = float(linear_modes(system, "closed").omega[2])
+    omega_c = contact_omega(system)
     return min(DEFAULT_OMEGA_DT / omega_c, STEP_CAP / omega_max), omega_c, omega_max
 
 

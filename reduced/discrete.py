@@ -110,3 +110,14 @@ def linear_modes(system: GapSystem, state: str = "open") -> LinearModes:
         raise ValueError(f"state must be 'open' or 'closed', got {state!r}")
     lam, phi = eigh(K, system.M)
     return LinearModes(state, np.sqrt(np.clip(lam, 0.0, None)), phi)
+
+
+def gap_moving_modes(system: GapSystem, state: str = "open", n: int = 3, tol: float = 1e-2) -> np.ndarray:
+    """Indices of the lowest ``n`` modes of ``state`` that move the gaps (|B phi| > tol of the largest).
+
+    For the discrete model these are all its modes; for a reduced 3-D model they are the modes
+    the discrete model has (heave, pitch, bending), not an assembly's swinging on its bungees.
+    """
+    phi = linear_modes(system, state).phi
+    gaps = np.linalg.norm(system.B @ phi, axis=0)
+    return np.flatnonzero(gaps > tol * gaps.max())[:n]

@@ -23,6 +23,7 @@ def ringdown(
     *,
     dt: float | None = None,
     omega_dt: float | None = None,
+    step_basis: str = "top",
     rtol: float = 1e-10,
     atol: float | None = None,
     progress=None,
@@ -43,7 +44,8 @@ def ringdown(
         return integrate_exact(system, x0, v0, duration_s, sample_rate_hz, progress=progress)
     if method == "explicit":
         kw = {} if omega_dt is None else {"omega_dt": omega_dt}
-        return integrate_explicit(system, x0, v0, duration_s, sample_rate_hz, dt=dt, progress=progress, **kw)
+        return integrate_explicit(system, x0, v0, duration_s, sample_rate_hz, dt=dt, step_basis=step_basis,
+                                  progress=progress, **kw)
     if method == "dop853":
         return integrate_dop853(system, x0, v0, duration_s, sample_rate_hz, rtol=rtol, atol=atol,
                                 progress=progress)

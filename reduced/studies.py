@@ -14,7 +14,14 @@ import numpy as np
 from reduced.discrete import DiscreteParams, linear_modes
 from reduced.dop853 import integrate_dop853
 from reduced.exact import ExactIntegratorError
-from reduced.explicit import DEFAULT_OMEGA_DT, StepTooLargeError, stability_limit
+from reduced.explicit import (
+    DEFAULT_OMEGA_DT,
+    SWITCHING_SAFETY,
+    TOP_CAP,
+    StepTooLargeError,
+    contact_omega,
+    stability_limit,
+)
 from reduced.gaps import GapSystem
 from reduced.initial import initial_state
 from reduced.integrate import ringdown
@@ -127,21 +134,29 @@ def rom_case(rom: ReducedModel, spec: RomSpec) -> CaseFactory:
     return make
 
 
+def _explicit_dt(system: GapSystem, step_basis: str) -> float:
+    """s, the explicit integrator's default step for ``step_basis`` (before output rounding)."""
+    omega, dt_crit = stability_limit(system)
+    if step_basis == "top":
+        return min(DEFAULT_OMEGA_DT / omega, SWITCHING_SAFETY * dt_crit)
+    return min(DEFAULT_OMEGA_DT / contact_omega(system), TOP_CAP / omega, SWITCHING_SAFETY * dt_crit)
+
+
 def _stiff_row(make: CaseFactory, kg: float, g: float, v: float, cc: float, method: str, duration_s: float,
-               sample_rate_hz: float, max_steps: float) -> dict:
+               sample_rate_hz: float, max_steps: float, step_basis: str = "top") -> dict:
     row = {"k_g": kg, "gap": g, "speed": v, "c": cc, "method": method, "duration_s": duration_s}
     empty = dict.fromkeys(STIFF_FIELDS[6:-1], "")
     try:
         system, x0, v0 = make(kg, g, v, cc)
         if method == "explicit":  # refuse before running what would take too long
-            omega, _ = stability_limit(system)
-            n_pred = duration_s * omega / DEFAULT_OMEGA_DT
+            dt = _explicit_dt(system, step_basis)
+            n_pred = duration_s / dt
             if n_pred > max_steps:
                 raise StepTooLargeError(
-                    f"{n_pred:.3g} explicit steps (omega_max = {omega:.3g} rad/s at omega dt = "
-                    f"{DEFAULT_OMEGA_DT}) exceed the study's budget of {max_steps:.3g} steps")
+                    f"{n_pred:.3g} explicit steps (dt = {dt:.3g} s, step basis {step_basis!r}) exceed the "
+                    f"study's budget of {max_steps:.3g} steps")
         t0 = time.perf_counter()
-        res = ringdown(system, x0, v0, duration_s, sample_rate_hz, method)
+        res = ringdown(system, x0, v0, duration_s, sample_rate_hz, method, step_basis=step_basis)
         wall = time.perf_counter() - t0
         ok = np.all(np.isfinite(res.x)) and np.all(np.isfinite(res.v))
         row.update({
@@ -173,6 +188,7 @@ def stiff_cases(
     long_duration_s: float = 0.0,
     long_methods: tuple[str, ...] | None = None,
     max_steps: float = math.inf,
+    step_basis: str = "top",
 ) -> list[dict]:
     """Run every combination; each row has a result or the reason it was refused.
 
@@ -184,7 +200,8 @@ def stiff_cases(
     With ``long_duration_s`` > 0 the nominal case (first k_g, gap ``NOMINAL_GAP``, speed
     ``NOMINAL_SPEED``) is also run that long for every c by ``long_methods`` (default
     ``methods``). Explicit runs predicted to need more than ``max_steps`` steps are refused
-    without running. Rows carry ``duration_s`` besides the :data:`STIFF_FIELDS`.
+    without running; ``step_basis`` is the explicit integrator's (:mod:`reduced.explicit`).
+    Rows carry ``duration_s`` besides the :data:`STIFF_FIELDS`.
     """
     make = discrete_case(base) if isinstance(base, DiscreteParams) else base
     combos = [(kg, g, v, cc, m, duration_s) for kg, g, v, cc, m in product(k_g, gap, speed, c, methods)]
@@ -193,7 +210,7 @@ def stiff_cases(
                    for cc, m in product(c, long_methods or methods)]
     rows = []
     for i, (kg, g, v, cc, method, dur) in enumerate(combos):
-        rows.append(_stiff_row(make, kg, g, v, cc, method, dur, sample_rate_hz, max_steps))
+        rows.append(_stiff_row(make, kg, g, v, cc, method, dur, sample_rate_hz, max_steps, step_basis))
         if progress:
             progress((i + 1) / len(combos))
     return rows
@@ -211,6 +228,7 @@ def rom_convergence(
     repeats: int = 3,
     budget_s: float = 2.0,
     progress=None,
+    step_basis: str = "top",
 ) -> list[dict]:
     """One row per mode count: frequency errors, ringdown error, build and run times.
 
@@ -226,7 +244,7 @@ def rom_convergence(
     point motion x P^T over the window against the largest mode count, all by the exact
     integrator (``explicit_ringdown_error``: the explicit run against the same reference).
     Run times are the best of ``repeats`` (fewer once ``budget_s`` is spent
-    on one setting); the explicit run uses its default step, omega_max dt = 0.05.
+    on one setting); the explicit run uses its default step for ``step_basis``.
     """
     counts = sorted(roms)
     runs, rows = {}, []
@@ -234,7 +252,8 @@ def rom_convergence(
         rom = roms[n]
         system = rom.system()
         x0, v0 = initial_state(rom.M, rom.K, rom.P, x0_points, v0_points)
-        run = lambda method, s=system, x0=x0, v0=v0: ringdown(s, x0, v0, window_s, sample_rate_hz, method)  # noqa: E731
+        run = lambda method, s=system, x0=x0, v0=v0: ringdown(  # noqa: E731
+            s, x0, v0, window_s, sample_rate_hz, method, step_basis=step_basis)
         if i == 0:
             run("exact"), run("explicit")  # compile the kernels before timing
         t_exact, ref = _best_of(repeats, lambda run=run: run("exact"), budget_s)

@@ -8,7 +8,7 @@ from tqdm import tqdm
 from bearingshaft import plots
 from bearingshaft.output import StageWriter, write_rows
 from bearingshaft.scenes import RingdownSpec, Scene
-from reduced.discrete import DiscreteParams, linear_modes
+from reduced.discrete import DiscreteParams, gap_moving_modes, linear_modes
 from reduced.gaps import GapSystem
 from reduced.initial import initial_state
 from reduced.integrate import ringdown
@@ -56,7 +56,7 @@ def run_ringdown(scene: Scene, spec: RingdownSpec, method: str, progress: bool) 
     try:
         return ringdown(
             system, x0, v0, spec.duration_s, spec.sample_rate_hz, method, dt=spec.dt_s, omega_dt=spec.omega_dt,
-            rtol=spec.rtol, atol=spec.atol, progress=bar,
+            step_basis=spec.step_basis, rtol=spec.rtol, atol=spec.atol, progress=bar,
         )
     finally:
         bar.close()
@@ -65,13 +65,6 @@ def run_ringdown(scene: Scene, spec: RingdownSpec, method: str, progress: bool) 
 def point_series(x: np.ndarray, P: np.ndarray, names: tuple[str, ...], name: str) -> np.ndarray:
     """The displacement of point ``name`` over time from DOF histories x (n_t, n)."""
     return x @ P[names.index(name)]
-
-
-def gap_modes_of(system: GapSystem, n: int) -> np.ndarray:
-    """Indices of the lowest ``n`` open-gap modes that move the gaps (|B phi| > 1e-2 of the largest)."""
-    phi = linear_modes(system, "open").phi
-    gaps = np.linalg.norm(system.B @ phi, axis=0)
-    return np.flatnonzero(gaps > 1e-2 * gaps.max())[:n]
 
 
 def backbone_curves(model, system: GapSystem | None = None, n_modes: int = 3
@@ -84,7 +77,7 @@ def backbone_curves(model, system: GapSystem | None = None, n_modes: int = 3
 
     system = model.system() if system is None else system
     curves: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    for mode in gap_modes_of(system, n_modes):
+    for mode in gap_moving_modes(system, "open", n_modes):
         b = nnm_branch(system, int(mode), H=1)
         order = np.argsort(b.energy_J, kind="stable")
         curves[f"NNM {mode + 1}, HB H=1"] = (b.energy_J[order], b.freq_hz[order])
@@ -123,7 +116,7 @@ def ringdown_stage(scene: Scene, writer: StageWriter, progress: bool, method: st
     if scene.spectrogram is not None:
         sp = scene.spectrogram
         S = spectrogram(res.t, point_series(res.x, P, scene.model.point_names, sp.dof), sp.window_s, sp.overlap)
-        f_open = linear_modes(system, "open").freq_hz[gap_modes_of(system, 3)]
+        f_open = linear_modes(system, "open").freq_hz[gap_moving_modes(system, "open", 3)]
         plots.spectrogram_figure(
             S, (res.t, res.energy), backbone_curves(scene.model, system), writer.path("spectrogram.png"),
             f"{scene.name}: spectrogram of {sp.dof} ({method}); open-gap "
