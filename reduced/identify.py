@@ -23,7 +23,7 @@ couple them), unequal tip stiffnesses, unequal modal couplings, and K_bq, M_qq -
 any Craig-Bampton model).
 
 Reference: Craig and Bampton, AIAA J. 6 (1968); the discrete model: Table 1 and Eq. 9 of
-the paper (``/work/shared/paper``).
+the paper (Goldberg et al., Section 3).
 """
 
 from __future__ import annotations
