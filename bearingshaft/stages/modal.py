@@ -187,16 +187,11 @@ def _nodal_field(result, mode: int) -> np.ndarray:
 
 
 def _write_vtu(result, chosen, names, path: Path) -> None:
-    import meshio
+    from fem.vtu import write_vtu
 
-    mesh = result.system.mesh
-    data = {}
-    for i, name in zip(chosen, names, strict=True):
-        f = result.modes.freq_hz[i]
-        key = f"mode{i + 1:02d}_{name.replace(' ', '_')}_{f:.2f}Hz"
-        data[key] = _nodal_field(result, i).astype(np.float32)
-    meshio.Mesh(mesh.points.astype(np.float32), [("hexahedron", mesh.hexes.astype(np.int32))],
-                point_data=data, cell_data={"part": [mesh.cell_part.astype(np.int32)]}).write(str(path))
+    fields = {f"mode{i + 1:02d}_{name.replace(' ', '_')}_{result.modes.freq_hz[i]:.2f}Hz": result.modes.phi[:, i]
+              for i, name in zip(chosen, names, strict=True)}
+    write_vtu(result.system, fields, path)
 
 
 def _pictures(result, chosen, names, path: Path) -> str:
