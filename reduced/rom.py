@@ -112,6 +112,8 @@ class ReducedModel:
     info: dict = field(default_factory=dict)  # provenance: spec, sizes, timings, commit
     Psi: np.ndarray | None = None  # (N, 2) constraint modes (for expansion to the 3-D mesh)
     Phi: np.ndarray | None = None  # (N, n - 2) fixed-interface modes
+    dof_map: dict = field(default_factory=dict)  # interface and point rows on the full DOFs:
+    # {interface,points}_{row,dof,weight} arrays (row r of T is sum_k weight_k u[dof_k] over row == r)
 
     @property
     def n(self) -> int:
@@ -138,7 +140,7 @@ class ReducedModel:
         info = {**self.info, "spec": {**self.info.get("spec", {}), "k_g": spec.k_g, "gap": spec.gap,
                                       "c_points": spec.c_points, "alpha": spec.alpha}}
         return ReducedModel(self.M, self.K, 0.5 * (C + C.T), self.P, self.omega_fixed, spec.k_g, spec.gap,
-                            self.dof_names, self.checks, info, self.Psi, self.Phi)
+                            self.dof_names, self.checks, info, self.Psi, self.Phi, self.dof_map)
 
     def save(self, path: str | Path) -> None:
         """``rom.npz``: matrices, DOF map, checks and provenance (JSON)."""
@@ -148,7 +150,7 @@ class ReducedModel:
         if self.Psi is not None:
             arrays["Psi"] = self.Psi
             arrays["Phi"] = self.Phi
-        for key, val in self.info.get("dof_map", {}).items():
+        for key, val in self.dof_map.items():
             arrays[f"map_{key}"] = np.asarray(val)
         tmp = Path(str(path) + ".tmp.npz")
         np.savez_compressed(tmp, **arrays)
@@ -162,7 +164,8 @@ class ReducedModel:
                 return cls(M=z["M"], K=z["K"], C=z["C"], P=z["P"], omega_fixed=z["omega_fixed"],
                            k_g=float(z["k_g"]), gap=float(z["gap"]), dof_names=tuple(str(s) for s in z["dof_names"]),
                            checks=json.loads(str(z["checks_json"])), info=info,
-                           Psi=z["Psi"] if "Psi" in z else None, Phi=z["Phi"] if "Phi" in z else None)
+                           Psi=z["Psi"] if "Psi" in z else None, Phi=z["Phi"] if "Phi" in z else None,
+                           dof_map={k[4:]: z[k] for k in z.files if k.startswith("map_")})
         except (OSError, KeyError, ValueError) as exc:
             raise ValueError(f"{path}: not a reduced model file ({exc})") from None
 
@@ -211,18 +214,13 @@ def build_rom(spec: RomSpec, fe=None, progress: bool = False) -> tuple[ReducedMo
         "timing_s": {"fe": t_fe, "craig_bampton": cb.stats["wall_s"], "total": time.perf_counter() - t0},
         "cb_stats": cb.stats,
         "source_hash": source_hash(),
-        "dof_map": {f"interface_{k}": v for k, v in _sparse_rows(T).items()}
-        | {f"points_{k}": v for k, v in _sparse_rows(np.vstack([prow[p] for p in POINTS])).items()},
     }
+    dof_map = {f"interface_{k}": v for k, v in _sparse_rows(T).items()} | {
+        f"points_{k}": v for k, v in _sparse_rows(np.vstack([prow[p] for p in POINTS])).items()}
     names = ("x1", "x3", *(f"eta{i + 1}" for i in range(cb.nq)))
     rom = ReducedModel(cb.M, cb.K, 0.5 * (C + C.T), P, cb.omega_fixed, spec.k_g, spec.gap, names, checks,
-                       {k: v for k, v in info.items() if k != "dof_map"} | {"dof_map": _listify(info["dof_map"])},
-                       cb.Psi, cb.Phi)
+                       info, cb.Psi, cb.Phi, dof_map)
     return rom, fe
-
-
-def _listify(d: dict) -> dict:
-    return {k: np.asarray(v).tolist() for k, v in d.items()}
 
 
 def source_hash() -> str:

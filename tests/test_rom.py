@@ -132,6 +132,10 @@ def test_rom_file_round_trip(tmp_path, rom5):
     assert np.array_equal(back.M, rom5.M) and np.array_equal(back.K, rom5.K) and np.array_equal(back.P, rom5.P)
     assert back.dof_names == rom5.dof_names and back.checks == rom5.checks
     assert back.info["n_full_dofs"] == 2511
+    # the DOF map: each interface row averages uz over its 30 patch nodes
+    m = back.dof_map
+    assert np.array_equal(np.bincount(m["interface_row"]), [30, 30])
+    assert np.allclose(m["interface_weight"], 1 / 30) and np.all(m["interface_dof"] < 2511)
     other = back.with_contact(RomSpec(k_g=1e9, gap=0.0, c_points=0.0))
     assert other.system().k[0] == 1e9 and not np.any(other.C)
     (tmp_path / "bad.npz").write_bytes(b"not a file")
