@@ -173,7 +173,7 @@ def test_reduce_and_ringdown_cli(tmp_path, monkeypatch):
     checks = (out / "cb_check.csv").read_text().splitlines()
     assert len(checks) == 6 and all(line.endswith("True") for line in checks[1:])
     assert ReducedModel.load(out / "rom.npz").n == 4
-    assert (out / "gap_modes.vtu").stat().st_size > 1000
+    assert (out / "gap_modes.vtu").stat().st_size > 1000 and (out / "gap_modes.png").exists()
     assert main(["ringdown", "--scene", str(scene), "--out", str(out), "--no-progress"]) == 0
     assert (out / "ringdown.npz").exists()
 

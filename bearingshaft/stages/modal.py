@@ -181,11 +181,6 @@ def _mac_files(result, chosen, names, spec, writer: StageWriter) -> None:
     plt.close(fig)
 
 
-def _nodal_field(result, mode: int) -> np.ndarray:
-    dofs = result.system.solid.nodal_dofs  # (3, n_nodes)
-    return result.modes.phi[dofs, mode].T  # (n_nodes, 3)
-
-
 def _write_vtu(result, chosen, names, path: Path) -> None:
     from fem.vtu import write_vtu
 
@@ -195,61 +190,9 @@ def _write_vtu(result, chosen, names, path: Path) -> None:
 
 
 def _pictures(result, chosen, names, path: Path) -> str:
-    """Render the modes with pyvista off screen; fall back to matplotlib if VTK cannot render."""
-    mesh = result.system.mesh
-    try:
-        import pyvista as pv
+    """Render the modes with pyvista off screen (matplotlib if VTK cannot render)."""
+    from bearingshaft.render import render_shapes
 
-        pv.OFF_SCREEN = True
-        # VTK probes for an X display before falling back to off-screen rendering and
-        # prints a warning that means nothing here
-        import vtk
-
-        vtk.vtkObject.GlobalWarningDisplayOff()
-
-        def part_grid(part):
-            hexes = mesh.hexes[mesh.part_cells(part)]
-            cells = np.hstack([np.full((len(hexes), 1), 8), hexes]).ravel()
-            return pv.UnstructuredGrid(cells, np.full(len(hexes), pv.CellType.HEXAHEDRON), mesh.points)
-
-        grids = {p: part_grid(p) for p in mesh.part_names}
-        pl = pv.Plotter(off_screen=True, shape=(2, 3), window_size=(1500, 900))
-        for k, (i, name) in enumerate(zip(chosen, names, strict=True)):
-            u = _nodal_field(result, i)
-            ub = u[mesh.part_nodes("beam")]
-            # largest beam displacement drawn as 40 % of the beam's smaller side: visible
-            # translations without a roll rotation of radians
-            scale = 0.4 * min(result.system.model.beam_section) / max(np.abs(ub).max(), 1e-300)
-            pl.subplot(k // 3, k % 3)
-            for part, grid in grids.items():
-                g = grid.copy()
-                g.points = mesh.points + scale * u
-                g["|u|"] = np.linalg.norm(u, axis=1)
-                surf = g.extract_surface(algorithm="dataset_surface")
-                if part == "beam":
-                    pl.add_mesh(surf, scalars="|u|", cmap="viridis", show_scalar_bar=False,
-                                clim=(0.0, float(np.linalg.norm(ub, axis=1).max())))
-                else:  # the tube see-through, so that the beam inside shows
-                    pl.add_mesh(surf, color="lightgrey", opacity=0.15, show_edges=False)
-            pl.add_text(f"{name}  {result.modes.freq_hz[i]:.2f} Hz", font_size=10)
-            pl.camera_position = "iso"
-            pl.camera.zoom(1.3)
-        pl.screenshot(str(path))
-        pl.close()
-        return "pyvista"
-    except Exception as exc:  # no OpenGL context: fall back, and say so in the stats
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        fig = plt.figure(figsize=(15, 9))
-        for k, (i, name) in enumerate(zip(chosen, names, strict=True)):
-            u = _nodal_field(result, i)
-            X = mesh.points + 0.08 * np.ptp(mesh.points) / np.abs(u).max() * u
-            ax = fig.add_subplot(2, 3, k + 1, projection="3d")
-            ax.scatter(*X[::7].T, s=1, c=np.linalg.norm(u, axis=1)[::7])
-            ax.set_title(f"{name} {result.modes.freq_hz[i]:.2f} Hz")
-        fig.savefig(path, dpi=100)
-        plt.close(fig)
-        return f"matplotlib (pyvista failed: {exc})"
+    shapes = [(f"{name}  {result.modes.freq_hz[i]:.2f} Hz", result.modes.phi[:, i])
+              for i, name in zip(chosen, names, strict=True)]
+    return render_shapes(result.system, shapes, path)

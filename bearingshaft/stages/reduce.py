@@ -4,7 +4,8 @@ Writes ``rom.npz`` (reduced matrices, DOF map, provenance), ``cb_check.csv`` (py
 identities, rigid-body mass and inertia, upper bounds on the full model's frequencies) and
 ``gap_modes.csv``: the open- and closed-gap (tied) frequencies of the full 3-D model beside
 the reduced model's, for the modes the tips can excite, and ``gap_modes.vtu``: the reduced
-model's lowest open- and closed-gap modes expanded to the mesh (unit peak), for ParaView.
+model's lowest open- and closed-gap modes expanded to the mesh (unit peak), for ParaView, and
+``gap_modes.png``: the three of each that move the gaps, rendered off screen.
 """
 
 from __future__ import annotations
@@ -28,17 +29,25 @@ def full_gap_modes(fe, spec, n_modes: int = N_FULL_MODES, Psi: np.ndarray | None
     return {s: gap_modes(fe, pairs, s, n_modes, Psi=Psi) for s in ("open", "closed")}
 
 
-def _write_mode_vtu(rom, fe, system, path, n: int = 6) -> None:
-    """The reduced model's lowest open- and closed-gap modes expanded to the 3-D mesh (ParaView)."""
+def _mode_files(rom, fe, system, writer: StageWriter, n: int = 6) -> str:
+    """The reduced model's lowest open- and closed-gap modes expanded to the 3-D mesh (unit peak):
+    ``gap_modes.vtu`` (n of each) and ``gap_modes.png`` (the three lowest that move the gaps)."""
+    from bearingshaft.render import render_shapes
     from fem.vtu import write_vtu
+    from reduced.discrete import gap_moving_modes
 
-    fields = {}
+    fields, shapes = {}, []
     for state in ("open", "closed"):
         lm = linear_modes(system, state)
+        shown = set(gap_moving_modes(system, state, 3).tolist())
         for i in range(min(n, system.n)):
             u = rom.Psi @ lm.phi[:2, i] + rom.Phi @ lm.phi[2:, i]
-            fields[f"{state}{i + 1}_{lm.freq_hz[i]:.2f}Hz"] = u / np.max(np.abs(u))
-    write_vtu(fe, fields, path)
+            u = u / np.max(np.abs(u))
+            fields[f"{state}{i + 1}_{lm.freq_hz[i]:.2f}Hz"] = u
+            if i in shown:
+                shapes.append((f"{state} gap, mode {i + 1}: {lm.freq_hz[i]:.2f} Hz", u))
+    write_vtu(fe, fields, writer.path("gap_modes.vtu"))
+    return render_shapes(fe, shapes, writer.path("gap_modes.png"))
 
 
 def reduce_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
@@ -57,7 +66,7 @@ def reduce_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
             if state == "open" and f > ELASTIC_HZ and j == i:
                 bound.append(rows[-1]["relative_error"])
     write_rows(writer.path("gap_modes.csv"), rows)
-    _write_mode_vtu(rom, fe, system, writer.path("gap_modes.vtu"))
+    writer.stats["pictures"] = _mode_files(rom, fe, system, writer)
     # Rayleigh-Ritz: a reduced frequency bounds the full one of the same rank from above. Checked on
     # the elastic modes: below ELASTIC_HZ (springs, bungees) the full solver's eigenvalues carry ~1e-5.
     checks = list(rom.checks) + [{
