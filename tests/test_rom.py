@@ -195,3 +195,24 @@ def test_bad_rom_scenes_are_refused_in_one_line(tmp_path, capsys, body, message)
     err = capsys.readouterr().err.strip()
     assert message in err and "\n" not in err
     assert not (tmp_path / "o").exists()
+
+
+def test_ringdown_from_a_rom_file_never_builds_the_3d_model(tmp_path, rom5):
+    import subprocess
+    import sys
+
+    rom5.save(tmp_path / "rom.npz")
+    scene = tmp_path / "from-file.toml"
+    scene.write_text(f'[model]\nkind = "rom"\nrom_file = "{tmp_path / "rom.npz"}"\n[initial]\n'
+                     'v0_m_s = [0.0, 0.0, 200.0]\n[ringdown]\nduration_s = 0.01\n', encoding="utf-8")
+    code = (
+        "import sys\n"
+        "from bearingshaft.cli import main\n"
+        f"rc = main(['ringdown', '--scene', {str(scene)!r}, '--out', {str(tmp_path / 'out')!r}, '--no-progress'])\n"
+        "assert rc == 0, rc\n"
+        "print(sorted(m for m in ('gmsh', 'skfem', 'fem.model') if m in sys.modules))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines()[-1] == "[]"
+    assert (tmp_path / "out" / "ringdown.npz").exists()
