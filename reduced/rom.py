@@ -43,7 +43,7 @@ class RomSpec:
 
     layout: str = "beam-grounded"  # beam-grounded (tips fixed) | assembly (tips on the tube)
     n_modes: int = 5  # fixed-interface modes kept (the coupled ones when planar)
-    cutoff_hz: float = 0.0  # Hz, keep only modes below this as well (0: no cut-off)
+    cutoff_hz: float = 0.0  # Hz, keep the modes below this, at most n_modes of them (0: no cut-off)
     planar: bool = True  # keep only modes the tips' in-plane contact can excite
     k_g: float = 3.502e7  # N/m, tip contact stiffness
     gap: float = 2.54e-4  # m, tip clearance

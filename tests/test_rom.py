@@ -216,3 +216,11 @@ def test_ringdown_from_a_rom_file_never_builds_the_3d_model(tmp_path, rom5):
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip().splitlines()[-1] == "[]"
     assert (tmp_path / "out" / "ringdown.npz").exists()
+
+
+def test_modes_by_cut_off_frequency(fe):
+    # coupled fixed-interface modes: 582.7, 2028.3, 4467.6 Hz, ...; n_modes is then an upper limit
+    rom = build_rom(RomSpec(n_modes=50, cutoff_hz=3000.0), fe=fe)[0]
+    assert rom.n_modes == 2
+    assert np.allclose(rom.omega_fixed / (2 * np.pi), [582.69, 2028.30], rtol=1e-5)
+    assert build_rom(RomSpec(n_modes=1, cutoff_hz=3000.0), fe=fe)[0].n_modes == 1
