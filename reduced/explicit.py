@@ -64,67 +64,62 @@ def contact_omega(system: GapSystem, n: int = 3) -> float:
 
 
 @nb.njit(cache=True)
-def _contact_force(x, B, offset, side, k, out):
-    m, n = B.shape
-    for r in range(n):
-        out[r] = 0.0
-    for j in range(m):
-        s = 0.0
-        for r in range(n):
-            s += B[j, r] * x[r]
-        s -= offset[j]
-        if side[j] * s > 0.0:
-            f = k[j] * s
-            for r in range(n):
-                out[r] += B[j, r] * f
-
-
-@nb.njit(cache=True)
-def _cd_kernel(G, Mm, K, C, B, offset, side, k, x, vh, dt, n_steps, every, out_x, out_v, out_W,
+def _cd_kernel(A, dtGK, dtGB, L, B, offset, side, k, x, vh, dt, n_steps, every, out_x, out_v, out_W,
                W, pw_old, i0):
     """Advance n_steps; x = x_n, vh = v_{n+1/2} on entry and exit; stores every `every` steps.
 
-    W accumulates the dissipated work by the trapezoidal rule on p_n = v_n^T C v_n
-    (pw_old is p_n at entry).
+    v_{n+3/2} = A v_{n+1/2} - dt G K x_{n+1} - dt G B^T f(B x_{n+1}) with G = (M + dt/2 C)^-1 and
+    A = G (M - dt/2 C), all formed once: two n x n products a step. W accumulates the
+    dissipated work by the trapezoidal rule on p_n = v_n^T C v_n = |L^T v_n|^2 (C = L L^T;
+    pw_old is p_n at entry).
     """
     n = x.shape[0]
-    F = np.empty(n)
-    rhs = np.empty(n)
+    m = B.shape[0]
+    r = L.shape[1]
+    f = np.empty(m)
     vnew = np.empty(n)
     v_int = np.empty(n)
     io = i0
     for step in range(1, n_steps + 1):
-        for r in range(n):
-            x[r] += dt * vh[r]
-        _contact_force(x, B, offset, side, k, F)
-        for r in range(n):
-            acc = -F[r]
-            for c in range(n):
-                acc -= K[r, c] * x[c]
-            rhs[r] = dt * acc
-            for c in range(n):
-                rhs[r] += Mm[r, c] * vh[c]
-        for r in range(n):
+        for i in range(n):
+            x[i] += dt * vh[i]
+        for j in range(m):
+            s = -offset[j]
+            for i in range(n):
+                s += B[j, i] * x[i]
+            f[j] = k[j] * s if side[j] * s > 0.0 else 0.0
+        for i in range(n):
             acc = 0.0
             for c in range(n):
-                acc += G[r, c] * rhs[c]
-            vnew[r] = acc
-        for r in range(n):
-            v_int[r] = 0.5 * (vh[r] + vnew[r])
-            vh[r] = vnew[r]
+                acc += A[i, c] * vh[c] - dtGK[i, c] * x[c]
+            for j in range(m):
+                acc -= dtGB[i, j] * f[j]
+            vnew[i] = acc
+        for i in range(n):
+            v_int[i] = 0.5 * (vh[i] + vnew[i])
+            vh[i] = vnew[i]
         pw_new = 0.0
-        for r in range(n):
-            for c in range(n):
-                pw_new += v_int[r] * C[r, c] * v_int[c]
+        for q in range(r):
+            s = 0.0
+            for i in range(n):
+                s += L[i, q] * v_int[i]
+            pw_new += s * s
         W += 0.5 * dt * (pw_old + pw_new)
         pw_old = pw_new
         if step % every == 0:
-            for r in range(n):
-                out_x[io, r] = x[r]
-                out_v[io, r] = v_int[r]
+            for i in range(n):
+                out_x[io, i] = x[i]
+                out_v[io, i] = v_int[i]
             out_W[io] = W
             io += 1
     return W, pw_old, io
+
+
+def _damping_factor(C: np.ndarray) -> np.ndarray:
+    """(n, r) L with C = L L^T (r = rank of C, 0 for no damping)."""
+    lam, U = np.linalg.eigh(0.5 * (C + C.T))
+    keep = lam > 1e-14 * max(lam.max(initial=0.0), 1e-300)
+    return np.ascontiguousarray(U[:, keep] * np.sqrt(lam[keep]))
 
 
 def integrate_explicit(
@@ -193,7 +188,10 @@ def integrate_explicit(
     n = system.n
     M, C, K = system.M, system.C, system.K
     G = np.linalg.inv(M + 0.5 * dt_run * C)
-    Mm = M - 0.5 * dt_run * C
+    A = G @ (M - 0.5 * dt_run * C)
+    dtGK = dt_run * (G @ K)
+    dtGB = np.ascontiguousarray(dt_run * (G @ system.B.T))
+    L = _damping_factor(C)
     x = np.asarray(x0, float).copy()
     v = np.asarray(v0, float).copy()
     a0 = np.linalg.solve(M, -(K @ x) - system.contact_force(x) - C @ v)
@@ -202,13 +200,13 @@ def integrate_explicit(
     out_v = np.empty((ts.size, n))
     out_W = np.empty(ts.size)
     out_x[0], out_v[0], out_W[0] = x, v, 0.0
-    W, pw, io = 0.0, float(v @ C @ v), 1
+    W, pw, io = 0.0, float(np.sum((v @ L) ** 2)), 1
     per_chunk = max(1, (ts.size - 1) // chunks)
     done = 0
     while done < ts.size - 1:
         nout = min(per_chunk, ts.size - 1 - done)
         W, pw, io = _cd_kernel(
-            G, Mm, K, C, system.B, system.offset, system.side, system.k, x, vh, dt_run,
+            A, dtGK, dtGB, L, system.B, system.offset, system.side, system.k, x, vh, dt_run,
             nout * every, every, out_x, out_v, out_W, W, pw, io,
         )
         done += nout
