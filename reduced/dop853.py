@@ -76,12 +76,7 @@ def integrate_dop853(
                 a = Minv @ (Fs - Ks @ x - system.C @ v)
                 return np.concatenate([v, a, [v @ system.C @ v]])
 
-            funcs = []
-            for j in range(system.m):
-                f = lambda t, zz, j=j: system.penetration(zz[:n])[j]  # noqa: E731
-                f.terminal = True
-                f.direction = -1.0 if active[j] else 1.0
-                funcs.append(f)
+            funcs = system.crossing_events(active)
             t_eval = ts[i:]
             sol = solve_ivp(leg, (t0, ts[-1]), z, method="DOP853", t_eval=t_eval[t_eval >= t0],
                             rtol=rtol, atol=atol, events=funcs)
@@ -95,9 +90,7 @@ def integrate_dop853(
                 je = int(np.argmin([e[0] if e.size else np.inf for e in sol.t_events]))
                 t0 = float(sol.t_events[je][0])
                 z = sol.y_events[je][0].copy()
-                flipped = not active[je]
-                active = system.contact_state(z[:n], z[n : 2 * n], atol=1e-9 * x_scale)
-                active[je] = flipped  # the stop that fired has crossed, whatever round-off says
+                active = system.state_after_crossing(active, je, z[:n], z[n : 2 * n], 1e-9 * x_scale)
                 n_events += 1
                 if progress is not None:
                     progress(t0 / ts[-1])

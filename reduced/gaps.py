@@ -136,6 +136,25 @@ class GapSystem:
         rate = self.side * (self.B @ np.asarray(v))
         return (pen > atol) | ((np.abs(pen) <= atol) & (rate > 0.0))
 
+    def crossing_events(self, active: np.ndarray) -> list:
+        """``solve_ivp`` events, one per stop, on a state y with y[:n] = x: terminal, firing when
+        an open stop closes or a closed one opens (the restart points of a leg-by-leg integration)."""
+        events = []
+        for j in range(self.m):
+            ev = lambda t, y, j=j: self.side[j] * (self.B[j] @ y[: self.n] - self.offset[j])  # noqa: E731
+            ev.terminal, ev.direction = True, (-1.0 if active[j] else 1.0)
+            events.append(ev)
+        return events
+
+    def state_after_crossing(self, active: np.ndarray, j: int, x: np.ndarray, v: np.ndarray,
+                             atol: float) -> np.ndarray:
+        """The contact state after stop ``j`` crossed at (x, v): stop j flipped, whatever
+        round-off says at the threshold, the others by :meth:`contact_state` with ``atol``."""
+        flipped = not active[j]
+        new = self.contact_state(x, v, atol=atol)
+        new[j] = flipped
+        return new
+
     def state_matrices(self, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(K_s, F_s): with the stops in ``active`` closed, M x'' + C x' + K_s x = F_s."""
         Ks = self.K.copy()

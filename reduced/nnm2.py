@@ -113,11 +113,7 @@ def period_by_integration(p: DiscreteParams, x0: float, rtol: float = 1e-13) -> 
         def rhs(t, y, Ks=Ks, Fs=Fs):
             return np.concatenate([y[n:], Minv @ (Fs - Ks @ y[:n])])
 
-        events = []
-        for j in range(system.m):
-            ev = lambda t, y, j=j: system.penetration(y[:n])[j]  # noqa: E731
-            ev.terminal, ev.direction = True, (-1.0 if active[j] else 1.0)
-            events.append(ev)
+        events = system.crossing_events(active)
         turn = lambda t, y: y[n]  # noqa: E731  x1' = 0
         turn.terminal, turn.direction = True, (-1.0 if passed_minimum else 1.0)
         events.append(turn)
@@ -133,6 +129,4 @@ def period_by_integration(p: DiscreteParams, x0: float, rtol: float = 1e-13) -> 
                 return t0
             passed_minimum = True
         else:
-            flipped = not active[je]
-            active = system.contact_state(z[:n], z[n:], atol=1e-10 * x0)
-            active[je] = flipped  # the stop that fired has crossed, whatever round-off says
+            active = system.state_after_crossing(active, je, z[:n], z[n:], 1e-10 * x0)
