@@ -81,11 +81,18 @@ def staged_output(out_dir: str | Path, scene_name: str, scene_source: str, stage
     (package version, git commit, platform, and per-stage statistics and file lists).
     """
     out = Path(out_dir)
+    created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
     scratch = Path(tempfile.mkdtemp(prefix=f".{stage}.partial-", dir=out))
     writer = StageWriter(scratch)
     try:
-        yield writer
+        try:
+            yield writer
+        except BaseException:
+            shutil.rmtree(scratch, ignore_errors=True)
+            if created and not any(out.iterdir()):
+                out.rmdir()  # a first run that failed leaves no folder behind
+            raise
         files = sorted(p.name for p in scratch.iterdir())
         for name in files:
             target = out / name

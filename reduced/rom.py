@@ -51,7 +51,8 @@ class RomSpec:
     alpha: float = 0.0  # 1/s, mass-proportional damping alpha Mr
     element_size: float = 0.3  # m, 3-D mesh size (the mesh study's default)
     element: str = "hex20"  # hex8 | hex20 | hex27
-    rom_file: str = ""  # load this rom.npz instead of building (k_g, gap, damping still apply)
+    rom_file: str = ""  # load this rom.npz (path from the working directory) instead of building;
+    # k_g, gap and damping still apply
 
     def __post_init__(self) -> None:
         if self.layout not in ROM_LAYOUTS:
@@ -70,6 +71,8 @@ class RomSpec:
             raise ValueError(f"element_size must be > 0, got {self.element_size!r}")
         if self.element not in ("hex8", "hex20", "hex27"):
             raise ValueError(f"element must be hex8, hex20 or hex27, got {self.element!r}")
+        if self.rom_file and not Path(self.rom_file).is_file():
+            raise ValueError(f"rom_file: no such file {self.rom_file!r}")
 
     # -- the interface a scene uses --------------------------------------------------------
     @property
