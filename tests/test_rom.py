@@ -131,7 +131,7 @@ def test_rom_file_round_trip(tmp_path, rom5):
     back = ReducedModel.load(tmp_path / "rom.npz")
     assert np.array_equal(back.M, rom5.M) and np.array_equal(back.K, rom5.K) and np.array_equal(back.P, rom5.P)
     assert back.dof_names == rom5.dof_names and back.checks == rom5.checks
-    assert back.info["n_full_dofs"] == 2511
+    assert back.info["n_full_dofs"] == 2511 and len(back.info["source_hash"]) == 16
     # the DOF map: each interface row averages uz over its 30 patch nodes
     m = back.dof_map
     assert np.array_equal(np.bincount(m["interface_row"]), [30, 30])
@@ -172,7 +172,8 @@ def test_reduce_and_ringdown_cli(tmp_path, monkeypatch):
     assert main(["reduce", "--scene", str(scene), "--out", str(out), "--no-progress"]) == 0
     checks = (out / "cb_check.csv").read_text().splitlines()
     assert len(checks) == 6 and all(line.endswith("True") for line in checks[1:])
-    assert ReducedModel.load(out / "rom.npz").n == 4
+    saved = ReducedModel.load(out / "rom.npz")
+    assert saved.n == 4 and saved.info["provenance"]["scene"] == "rom-short"
     assert (out / "gap_modes.vtu").stat().st_size > 1000 and (out / "gap_modes.png").exists()
     assert main(["ringdown", "--scene", str(scene), "--out", str(out), "--no-progress"]) == 0
     assert (out / "ringdown.npz").exists()

@@ -75,7 +75,14 @@ def reduce_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
         "value": float(min(bound, default=0.0)), "tolerance": -1e-9}]
     checks[-1]["passed"] = checks[-1]["value"] >= checks[-1]["tolerance"]
     write_rows(writer.path("cb_check.csv"), checks, ["check", "value", "tolerance", "passed"])
-    rom = type(rom)(**{**rom.__dict__, "checks": checks})
+    from datetime import UTC, datetime
+
+    from bearingshaft import __version__
+    from bearingshaft.output import git_commit
+
+    provenance = {"scene": scene.name, "package_version": __version__, "git_commit": git_commit(),
+                  "created_utc": datetime.now(UTC).isoformat(timespec="seconds")}
+    rom = type(rom)(**{**rom.__dict__, "checks": checks, "info": {**rom.info, "provenance": provenance}})
     rom.save(writer.path("rom.npz"))
     from reduced.rom import _cache_key
 
