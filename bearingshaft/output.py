@@ -52,14 +52,20 @@ def _jsonable(obj):
     return obj
 
 
-def write_rows(path: str | Path, rows: list[dict], fields: list[str] | None = None) -> None:
-    """CSV of dict rows; columns ``fields`` (default: the first row's keys; others dropped)."""
+def write_rows(path: str | Path, rows: list[dict], fields: list[str] | None = None,
+               float_format: str | None = None) -> None:
+    """CSV of dict rows; columns ``fields`` (default: the first row's keys; others dropped);
+    floats written with ``float_format`` (e.g. ".4g") if given, else in full."""
     with open(path, "w", newline="") as fh:
         if not rows and fields is None:
             return
         w = csv.DictWriter(fh, fieldnames=fields or list(rows[0]), extrasaction="ignore")
         w.writeheader()
-        w.writerows(rows)
+        if float_format is None:
+            w.writerows(rows)
+        else:
+            w.writerows({k: format(v, float_format) if isinstance(v, float) else v for k, v in r.items()}
+                        for r in rows)
 
 
 class StageWriter:

@@ -16,7 +16,6 @@ difference between the two sets of frequencies.
 from __future__ import annotations
 
 import argparse
-import csv
 import dataclasses
 import sys
 import time
@@ -26,6 +25,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bearingshaft.output import write_rows  # noqa: E402
 from fem.modal import baseline_modal, modal_analysis  # noqa: E402
 from fem.model import AssemblyModel, build_system  # noqa: E402
 from geometry.build import build_mesh  # noqa: E402
@@ -72,11 +72,7 @@ def main(argv=None) -> int:
                 ours["assembly_s"] + ours["eigensolution_s"])
             r["max_rel_freq_diff"] = diff
     out.mkdir(parents=True, exist_ok=True)
-    with open(out / "modal_speed.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: (f"{v:.4g}" if isinstance(v, float) else v) for k, v in r.items()})
+    write_rows(out / "modal_speed.csv", rows, float_format=".4g")
     return 0
 
 

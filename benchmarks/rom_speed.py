@@ -29,7 +29,6 @@ Writes rom_speed.csv and rom_speed.png.
 from __future__ import annotations
 
 import argparse
-import csv
 import sys
 import time
 from dataclasses import replace
@@ -39,8 +38,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bearingshaft.output import write_rows  # noqa: E402
 from reduced.discrete import DiscreteParams  # noqa: E402
-from reduced.explicit import DEFAULT_OMEGA_DT, TOP_CAP, contact_omega, stability_limit  # noqa: E402
+from reduced.explicit import DEFAULT_OMEGA_DT, TOP_CAP, default_step, stability_limit  # noqa: E402
 from reduced.initial import initial_state  # noqa: E402
 from reduced.integrate import ringdown  # noqa: E402
 from reduced.rom import RomSpec, build_rom  # noqa: E402
@@ -52,9 +52,8 @@ V0_POINTS = (0.0, 0.0, 200.0)  # m/s at x1, x2, x3: the rom-impulse scene
 
 def contact_step(system) -> tuple[float, float, float]:
     """(dt, omega_c, omega_max): the step of ``step_basis = "contact"`` (reduced.explicit)."""
-    omega_max, _ = stability_limit(system)
-    omega_c = contact_omega(system)
-    return min(DEFAULT_OMEGA_DT / omega_c, STEP_CAP / omega_max), omega_c, omega_max
+    dt, omega_max, omega_c, _ = default_step(system, step_basis="contact")
+    return dt, omega_c, omega_max
 
 
 def timed_run(system, x0, v0, duration_s, fs, dt, max_steps, repeats):
@@ -125,11 +124,7 @@ def main(argv=None) -> int:
         r["wall_ratio"] = r["wall_2s_s"] / base["wall_2s_s"]
         r["steps_per_s_ratio"] = r["steps_per_s"] / base["steps_per_s"]
     out.mkdir(parents=True, exist_ok=True)
-    with open(out / "rom_speed.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: (f"{v:.4g}" if isinstance(v, float) else v) for k, v in r.items()})
+    write_rows(out / "rom_speed.csv", rows, float_format=".4g")
     figure(rows, out / "rom_speed.png", T, W)
     print(f"wrote {out / 'rom_speed.csv'} and {out / 'rom_speed.png'}")
     return 0

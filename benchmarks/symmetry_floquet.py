@@ -17,13 +17,13 @@ Run: python benchmarks/symmetry_floquet.py [out_dir]   (about 20 s on one core)
 
 from __future__ import annotations
 
-import csv
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from bearingshaft.output import write_rows
 from reduced._blas import single_thread_blas
 from reduced.backbones import nnm_branch
 from reduced.discrete import DiscreteParams
@@ -36,13 +36,6 @@ RATE_HZ = 20000.0
 CHUNK_S = 5e-4  # symmetrisation interval of the reference trajectory
 WINDOW_S = 0.05  # window of the growth-rate fits
 BREAK_M = 1e-6  # m, |x1 - x3| that counts as broken symmetry (0.4 % of the gap, ~1e-4 of the motion)
-
-
-def _write(path: Path, rows: list[dict]) -> None:
-    with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
 
 
 def main(argv=None) -> int:
@@ -107,7 +100,7 @@ def main(argv=None) -> int:
                 "transverse_lyapunov_1_s": float(predicted),
             }
         )
-    _write(out / "symmetry_growth.csv", rows)
+    write_rows(out / "symmetry_growth.csv", rows)
 
     # 3. Floquet multipliers of NNM 1 and 3 at energies along the ringdown
     cons = conservative(system)
@@ -137,7 +130,7 @@ def main(argv=None) -> int:
                     "eigvec": "antisymmetric" if anti > sym else "symmetric",
                 }
             )
-    _write(out / "symmetry_floquet.csv", frows)
+    write_rows(out / "symmetry_floquet.csv", frows)
 
     # the break: first time |x1 - x3| exceeds the solver tolerance, and BREAK_M
     i_tol = int(np.argmax(asym > r.tolerance)) if np.any(asym > r.tolerance) else -1
@@ -169,7 +162,7 @@ def main(argv=None) -> int:
                 ),
             }
         )
-    _write(out / "symmetry_cumulative.csv", crow)
+    write_rows(out / "symmetry_cumulative.csv", crow)
     # seeded asymmetry: the same instability must amplify a deliberate seed, breaking
     # symmetry earlier by the time the transverse growth needs to cover the head start
     seeds = []
@@ -185,11 +178,11 @@ def main(argv=None) -> int:
                 "ln_head_start": float(np.log(seed / summary["asymmetry_at_0.05s_m"])),
             }
         )
-    _write(out / "symmetry_seeds.csv", seeds)
+    write_rows(out / "symmetry_seeds.csv", seeds)
     print("seeded asymmetry (seed, t_break, ln head start):")
     for sd in seeds:
         print(f"  {sd['seed_m']:.0e}  {sd['t_break_s']:.4f}  {sd['ln_head_start']:.2f}")
-    _write(out / "symmetry_summary.csv", [summary])
+    write_rows(out / "symmetry_summary.csv", [summary])
     print("cumulative log growth from t = 0.05 s (t, E, measured, transverse):")
     for c in crow:
         print(

@@ -51,6 +51,24 @@ def stability_limit(system: GapSystem) -> tuple[float, float]:
     return omega, dt_crit
 
 
+def default_step(system: GapSystem, omega_dt: float = DEFAULT_OMEGA_DT, step_basis: str = "top"
+                 ) -> tuple[float, float, float, float]:
+    """(dt, omega_max, omega_ref, dt_limit): the step :func:`integrate_explicit` takes unless given one,
+    before it is rounded to the output interval (see its docstring for ``step_basis``)."""
+    if step_basis not in STEP_BASES:
+        raise ValueError(f"step_basis must be one of {', '.join(STEP_BASES)}, got {step_basis!r}")
+    if not (0.0 < omega_dt <= SWITCHING_SAFETY * 2.0):
+        raise StepTooLargeError(f"omega_dt must be in (0, {2 * SWITCHING_SAFETY}], got {omega_dt!r}")
+    omega, dt_crit = stability_limit(system)
+    limit = SWITCHING_SAFETY * dt_crit
+    if omega <= 0:
+        return math.inf, omega, omega, limit
+    if step_basis == "top":
+        return min(omega_dt / omega, limit), omega, omega, limit
+    omega_ref = contact_omega(system)
+    return min(omega_dt / omega_ref, TOP_CAP / omega, limit), omega, omega_ref, limit
+
+
 def contact_omega(system: GapSystem, n: int = 3) -> float:
     """rad/s, the top closed-gap frequency of the system seen through its ``n`` lowest open-gap
     modes that move the gaps (Phi_n: for the discrete model all its modes):
@@ -151,12 +169,9 @@ def integrate_explicit(
     It is then shortened so that the output interval 1 / sample_rate_hz is a whole number of steps.
     """
     t_wall = time.perf_counter()
-    if step_basis not in STEP_BASES:
-        raise ValueError(f"step_basis must be one of {', '.join(STEP_BASES)}, got {step_basis!r}")
-    omega, dt_crit = stability_limit(system)
-    omega_ref = omega if step_basis == "top" else contact_omega(system)
-    limit = SWITCHING_SAFETY * dt_crit
     if dt is not None:
+        omega, dt_crit = stability_limit(system)
+        omega_ref, limit = omega, SWITCHING_SAFETY * dt_crit
         if not (dt > 0.0 and math.isfinite(dt)):
             raise StepTooLargeError(f"dt must be a positive number of seconds, got {dt!r}")
         if dt > limit:
@@ -167,14 +182,9 @@ def integrate_explicit(
             )
         dt_target = dt
     else:
-        if not (0.0 < omega_dt <= SWITCHING_SAFETY * 2.0):
-            raise StepTooLargeError(f"omega_dt must be in (0, {2 * SWITCHING_SAFETY}], got {omega_dt!r}")
+        dt_target, omega, omega_ref, limit = default_step(system, omega_dt, step_basis)
         if omega <= 0:
             dt_target = 1.0 / sample_rate_hz
-        elif step_basis == "top":
-            dt_target = min(omega_dt / omega, limit)
-        else:
-            dt_target = min(omega_dt / omega_ref, TOP_CAP / omega, limit)
     h_out = 1.0 / sample_rate_hz
     every = max(1, math.ceil(h_out / dt_target * (1.0 - 1e-12)))
     dt_run = h_out / every

@@ -14,14 +14,7 @@ import numpy as np
 from reduced.discrete import DiscreteParams, linear_modes
 from reduced.dop853 import integrate_dop853
 from reduced.exact import ExactIntegratorError
-from reduced.explicit import (
-    DEFAULT_OMEGA_DT,
-    SWITCHING_SAFETY,
-    TOP_CAP,
-    StepTooLargeError,
-    contact_omega,
-    stability_limit,
-)
+from reduced.explicit import StepTooLargeError, default_step
 from reduced.gaps import GapSystem
 from reduced.initial import initial_state
 from reduced.integrate import ringdown
@@ -134,14 +127,6 @@ def rom_case(rom: ReducedModel, spec: RomSpec) -> CaseFactory:
     return make
 
 
-def _explicit_dt(system: GapSystem, step_basis: str) -> float:
-    """s, the explicit integrator's default step for ``step_basis`` (before output rounding)."""
-    omega, dt_crit = stability_limit(system)
-    if step_basis == "top":
-        return min(DEFAULT_OMEGA_DT / omega, SWITCHING_SAFETY * dt_crit)
-    return min(DEFAULT_OMEGA_DT / contact_omega(system), TOP_CAP / omega, SWITCHING_SAFETY * dt_crit)
-
-
 def _stiff_row(make: CaseFactory, kg: float, g: float, v: float, cc: float, method: str, duration_s: float,
                sample_rate_hz: float, max_steps: float, step_basis: str = "top") -> dict:
     row = {"k_g": kg, "gap": g, "speed": v, "c": cc, "method": method, "duration_s": duration_s}
@@ -149,7 +134,7 @@ def _stiff_row(make: CaseFactory, kg: float, g: float, v: float, cc: float, meth
     try:
         system, x0, v0 = make(kg, g, v, cc)
         if method == "explicit":  # refuse before running what would take too long
-            dt = _explicit_dt(system, step_basis)
+            dt = default_step(system, step_basis=step_basis)[0]
             n_pred = duration_s / dt
             if n_pred > max_steps:
                 raise StepTooLargeError(
