@@ -112,12 +112,24 @@ def linear_modes(system: GapSystem, state: str = "open") -> LinearModes:
     return LinearModes(state, np.sqrt(np.clip(lam, 0.0, None)), phi)
 
 
-def gap_moving_modes(system: GapSystem, state: str = "open", n: int = 3, tol: float = 1e-2) -> np.ndarray:
-    """Indices of the lowest ``n`` modes of ``state`` that move the gaps (|B phi| > tol of the largest).
+def moving_modes(K: np.ndarray, M: np.ndarray, rows: np.ndarray, n: int, tol: float = 1e-2,
+                 search: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(omega, phi, index): the lowest ``n`` modes of (K, M), mass-normalized, that move ``rows``.
 
-    For the discrete model these are all its modes; for a reduced 3-D model they are the modes
-    the discrete model has (heave, pitch, bending), not an assembly's swinging on its bungees.
+    A mode moves the rows if |rows phi| exceeds ``tol`` of the largest over the ``search``
+    lowest modes (default: all). For a gap system these are the modes the discrete model has
+    (heave, pitch, bending), not an assembly's swinging on its bungees.
     """
-    phi = linear_modes(system, state).phi
-    gaps = np.linalg.norm(system.B @ phi, axis=0)
-    return np.flatnonzero(gaps > tol * gaps.max())[:n]
+    size = K.shape[0] if search is None else min(search, K.shape[0])
+    lam, phi = eigh(K, M, subset_by_index=[0, size - 1])
+    moves = np.linalg.norm(np.atleast_2d(rows) @ phi, axis=0)
+    idx = np.flatnonzero(moves > tol * moves.max())[:n]
+    return np.sqrt(np.clip(lam[idx], 0.0, None)), phi[:, idx], idx
+
+
+def gap_moving_modes(system: GapSystem, state: str = "open", n: int = 3, tol: float = 1e-2) -> np.ndarray:
+    """Indices of the lowest ``n`` modes of ``state`` that move the gaps (:func:`moving_modes` on B)."""
+    if state not in ("open", "closed"):
+        raise ValueError(f"state must be 'open' or 'closed', got {state!r}")
+    K = system.K if state == "open" else system.closed_stiffness()
+    return moving_modes(K, system.M, system.B, n, tol)[2]

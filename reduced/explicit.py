@@ -74,9 +74,9 @@ def contact_omega(system: GapSystem, n: int = 3) -> float:
     modes that move the gaps (Phi_n: for the discrete model all its modes):
     omega^2 = max eig(Phi_n^T K_closed Phi_n), with Phi_n mass-normalized. It grows with k_g as
     the discrete model's omega_max does, so a stiff penalty is still resolved."""
-    from reduced.discrete import gap_moving_modes, linear_modes
+    from reduced.discrete import moving_modes
 
-    phi = linear_modes(system, "open").phi[:, gap_moving_modes(system, "open", n)]
+    _, phi, _ = moving_modes(system.K, system.M, system.B, n)
     lam = np.linalg.eigvalsh(phi.T @ system.closed_stiffness() @ phi)
     return float(np.sqrt(max(lam[-1], 0.0)))
 

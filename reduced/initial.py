@@ -18,7 +18,8 @@ near the point, and their energy grows without bound as modes are added (an impu
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import eigh
+
+from reduced.discrete import moving_modes
 
 MOVES = 1e-2  # a mode moves the points if |P phi| exceeds this fraction of the largest
 
@@ -34,9 +35,7 @@ def initial_state(M: np.ndarray, K: np.ndarray, P: np.ndarray, x0_points, v0_poi
     if n < r:
         raise ValueError(f"the model has {n} coordinates, fewer than its {r} points: keep at least "
                          f"{r - n} fixed-interface mode(s)")
-    _, phi = eigh(K, M, subset_by_index=[0, min(n, r + 20) - 1])
-    size = np.linalg.norm(P @ phi, axis=0)
-    phi = phi[:, np.flatnonzero(size > MOVES * size.max())[:r]]
+    _, phi, _ = moving_modes(K, M, P, r, MOVES, search=r + 20)
     A = P @ phi
     if A.shape[1] < r:
         raise ValueError(f"fewer than {r} of the model's lowest modes move its points")

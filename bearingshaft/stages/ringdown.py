@@ -7,7 +7,7 @@ from tqdm import tqdm
 
 from bearingshaft import plots
 from bearingshaft.output import StageWriter, write_rows
-from bearingshaft.scenes import RingdownSpec, Scene
+from bearingshaft.scenes import Scene
 from reduced.discrete import DiscreteParams, gap_moving_modes, linear_modes
 from reduced.gaps import GapSystem
 from reduced.initial import initial_state
@@ -48,9 +48,9 @@ def scene_initial_state(scene: Scene, system: GapSystem, P: np.ndarray) -> tuple
     return initial_state(system.M, system.K, P, init.x0_m, init.v0_m_s)
 
 
-def run_ringdown(scene: Scene, spec: RingdownSpec, method: str, progress: bool) -> RingdownResult:
-    """The scene's system from its initial state, by ``method``, with a progress bar."""
-    system, P = model_system(scene.model, progress)
+def run_ringdown(scene: Scene, system: GapSystem, P: np.ndarray, method: str, progress: bool) -> RingdownResult:
+    """The scene's ringdown of ``system`` (points P) from its initial state, by ``method``, with a progress bar."""
+    spec = scene.ringdown
     x0, v0 = scene_initial_state(scene, system, P)
     bar = _Bar(f"{scene.name}: {method}", progress)
     try:
@@ -98,7 +98,7 @@ def reference_check(scene: Scene, res: RingdownResult, P: np.ndarray, writer: St
     """
     from reduced.studies import relative_error
 
-    ref = run_ringdown(scene, scene.ringdown, "exact", progress)
+    ref = run_ringdown(scene, res.system, P, "exact", progress)
     pts, pts_ref = res.x @ P.T, ref.x @ P.T
     rows = []
     for window in (REFERENCE_WINDOW_S, scene.ringdown.duration_s):
@@ -132,15 +132,14 @@ def growth_rate(t: np.ndarray, d: np.ndarray, lo: float, hi: float) -> float:
 def ringdown_stage(scene: Scene, writer: StageWriter, progress: bool, method: str | None = None) -> None:
     spec = scene.ringdown
     method = method or spec.method
-    res = run_ringdown(scene, spec, method, progress)
+    system, P = model_system(scene.model, progress)
+    res = run_ringdown(scene, system, P, method, progress)
     res.save(writer.path("ringdown.npz"))
     plots.ringdown_figure(res, writer.path("ringdown.png"), f"{scene.name}: {scene.description}")
     writer.stats.update(
         {"method": method, "duration_s": spec.duration_s, "energy_J_initial": float(res.energy[0]),
          "energy_balance_error": res.energy_balance_error, **res.stats}
     )
-    system = res.system
-    _, P = model_system(scene.model)
     if progress:
         print(f"[{scene.name}] {method}: {res.stats.get('n_steps', res.stats.get('n_events'))} "
               f"{'steps' if 'n_steps' in res.stats else 'events'} in {res.stats['wall_s']:.3g} s, "
@@ -158,18 +157,17 @@ def ringdown_stage(scene: Scene, writer: StageWriter, progress: bool, method: st
             sp.fmax_hz, sp.db_range,
         )
     if scene.symmetry is not None:
-        symmetry_stage(scene, res, writer, progress)
+        symmetry_stage(scene, res, P, writer, progress)
 
 
-def symmetry_stage(scene: Scene, res: RingdownResult, writer: StageWriter, progress: bool) -> None:
+def symmetry_stage(scene: Scene, res: RingdownResult, P: np.ndarray, writer: StageWriter, progress: bool) -> None:
     """Fig. 4: when does |x_a - x_b| first exceed each method's tolerance?"""
     names = scene.symmetry.dofs
-    _, P = model_system(scene.model)
     pa, pb = (P[scene.model.point_names.index(n)] for n in names)
     runs = {res.method: res}
     for other in scene.symmetry.methods:
         if other not in runs:
-            runs[other] = run_ringdown(scene, scene.ringdown, other, progress)
+            runs[other] = run_ringdown(scene, res.system, P, other, progress)
     rows, table = [], {}
     for method, r in runs.items():
         d = np.abs(r.x @ (pa - pb))
