@@ -203,7 +203,8 @@ def build_rom(spec: RomSpec, fe=None, progress: bool = False) -> tuple[ReducedMo
     cb = craig_bampton(fe.K, fe.M, T, n_modes=spec.n_modes, cutoff_hz=spec.cutoff_hz or None,
                        boundary_names=("x1", "x3"), coupled_only=spec.planar, mode_filter=symmetric)
     prow = point_rows(fe)
-    P = cb.reduce_rows(np.vstack([prow[p] for p in POINTS]))
+    rows = np.vstack([prow[p] for p in POINTS])
+    P = cb.reduce_rows(rows)
     # in-plane rigid motions of the whole model: heave (uz) and pitch (theta_y) about the origin
     R = fe.rigid_modes(np.arange(fe.n_dofs), (0.0, 0.0, 0.0))[:, [2, 4]]
     checks = cb_check(cb, rigid=R, M_rigid=fe.M, rigid_tol=RIGID_TOL)
@@ -219,7 +220,7 @@ def build_rom(spec: RomSpec, fe=None, progress: bool = False) -> tuple[ReducedMo
         "source_hash": source_hash(),
     }
     dof_map = {f"interface_{k}": v for k, v in _sparse_rows(T).items()} | {
-        f"points_{k}": v for k, v in _sparse_rows(np.vstack([prow[p] for p in POINTS])).items()}
+        f"points_{k}": v for k, v in _sparse_rows(rows).items()}
     names = ("x1", "x3", *(f"eta{i + 1}" for i in range(cb.nq)))
     rom = ReducedModel(cb.M, cb.K, 0.5 * (C + C.T), P, cb.omega_fixed, spec.k_g, spec.gap, names, checks,
                        info, cb.Psi, cb.Phi, dof_map)
@@ -249,25 +250,36 @@ def _cache_key(spec: RomSpec) -> str:
     return h.hexdigest()[:20]
 
 
+def _cache_path(spec: RomSpec) -> Path:
+    return cache_dir() / f"rom-{_cache_key(spec)}.npz"
+
+
+def store_in_cache(rom: ReducedModel, spec: RomSpec) -> None:
+    """Keep ``rom`` where :func:`cached_rom` looks for ``spec`` (a read-only cache is skipped:
+    the model is then rebuilt when next needed)."""
+    path = _cache_path(spec)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        rom.save(path)
+    except OSError:
+        pass
+
+
 def cached_rom(spec: RomSpec, progress: bool = False) -> ReducedModel:
     """The reduced model of ``spec`` from the cache, built and stored there if absent.
 
     The contact (k_g, gap) and damping do not enter the reduction (the interface is the
     gap coordinate itself), so they are applied after loading.
     """
-    path = cache_dir() / f"rom-{_cache_key(spec)}.npz"
+    path = _cache_path(spec)
     if path.exists():
         try:
             return ReducedModel.load(path).with_contact(spec)
         except ValueError:
             path.unlink(missing_ok=True)
     rom, _ = build_rom(spec, progress=progress)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        rom.save(path)
-    except OSError:
-        pass  # a read-only home: the model is simply rebuilt next time
+    store_in_cache(rom, spec)
     return rom
 
 
-__all__ = ["RomSpec", "ReducedModel", "build_rom", "cached_rom", "POINTS", "ROM_LAYOUTS"]
+__all__ = ["RomSpec", "ReducedModel", "build_rom", "cached_rom", "store_in_cache", "POINTS", "ROM_LAYOUTS"]

@@ -10,12 +10,16 @@ model's lowest open- and closed-gap modes expanded to the mesh (unit peak), for 
 
 from __future__ import annotations
 
+from dataclasses import replace
+from datetime import UTC, datetime
+
 import numpy as np
 
-from bearingshaft.output import StageWriter, write_rows
+from bearingshaft import __version__
+from bearingshaft.output import StageWriter, git_commit, write_rows
 from bearingshaft.scenes import Scene
 from reduced.discrete import linear_modes
-from reduced.rom import build_rom, cache_dir
+from reduced.rom import build_rom, store_in_cache
 
 N_FULL_MODES = 24  # full-model modes computed per contact state (the coupled ones are compared)
 ELASTIC_HZ = 100.0  # Hz, the upper-bound check starts here (the beam's first bending mode is ~730 Hz)
@@ -75,22 +79,11 @@ def reduce_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
         "value": float(min(bound, default=0.0)), "tolerance": -1e-9}]
     checks[-1]["passed"] = checks[-1]["value"] >= checks[-1]["tolerance"]
     write_rows(writer.path("cb_check.csv"), checks, ["check", "value", "tolerance", "passed"])
-    from datetime import UTC, datetime
-
-    from bearingshaft import __version__
-    from bearingshaft.output import git_commit
-
     provenance = {"scene": scene.name, "package_version": __version__, "git_commit": git_commit(),
                   "created_utc": datetime.now(UTC).isoformat(timespec="seconds")}
-    rom = type(rom)(**{**rom.__dict__, "checks": checks, "info": {**rom.info, "provenance": provenance}})
+    rom = replace(rom, checks=checks, info={**rom.info, "provenance": provenance})
     rom.save(writer.path("rom.npz"))
-    from reduced.rom import _cache_key
-
-    try:  # the ringdowns of this scene then load it instead of rebuilding
-        cache_dir().mkdir(parents=True, exist_ok=True)
-        rom.save(cache_dir() / f"rom-{_cache_key(spec)}.npz")
-    except OSError:
-        pass
+    store_in_cache(rom, spec)  # the ringdowns of this scene then load it instead of rebuilding
     failed = [c["check"] for c in checks if not c["passed"]]
     writer.stats.update({"n_full_dofs": rom.info["n_full_dofs"], "n_modes": rom.n_modes,
                          "timing_s": rom.info["timing_s"], "checks_failed": failed, "gap_modes": rows})
