@@ -85,8 +85,8 @@ class CBModel:
         return np.sqrt(np.clip(w2, 0.0, None)) / (2 * np.pi)
 
 
-def null_space_basis(T: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray]:
-    """(Z, pivots): sparse Z (N, N - nb) with T Z = 0, eliminating one pivot DOF per row.
+def null_space_basis(T: np.ndarray) -> sp.csr_matrix:
+    """Sparse Z (N, N - nb) with T Z = 0, eliminating one pivot DOF per row.
 
     The pivots come from a column-pivoted QR of T on its nonzero columns, so T_p is well
     conditioned; u_p = -T_p^-1 T_r u_r.
@@ -103,11 +103,12 @@ def null_space_basis(T: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray]:
     Z = sp.vstack([sp.csr_matrix(G), sp.identity(N - nb, format="csr")]).tocsr()
     order = np.concatenate([piv, rest])  # row i of the stacked Z is DOF order[i]
     P = sp.csr_matrix((np.ones(N), (order, np.arange(N))), shape=(N, N))
-    return (P @ Z).tocsr(), piv
+    return (P @ Z).tocsr()
 
 
-def _fixed_interface_modes(K, M, Z, k: int, dense: bool, shift: float):
-    """Lowest k eigenpairs (w2, Phi) of Z^T K Z y = w2 Z^T M Z y, Phi = Z y."""
+def _fixed_interface_modes(K, M, Z, k: int, dense: bool, shift: float = 1.0):
+    """Lowest k eigenpairs (w2, Phi) of Z^T K Z y = w2 Z^T M Z y, Phi = Z y, mass-normalized
+    (sparse: shift-invert about -shift, K being positive definite)."""
     Kz = (Z.T @ K @ Z) if sp.issparse(K) else Z.T @ (Z.T @ np.asarray(K)).T
     Mz = (Z.T @ M @ Z) if sp.issparse(M) else Z.T @ (Z.T @ np.asarray(M)).T
     n = Z.shape[1]
@@ -121,7 +122,8 @@ def _fixed_interface_modes(K, M, Z, k: int, dense: bool, shift: float):
         w2, Y = spla.eigsh(Kz, k=k, M=Mz, sigma=-shift, which="LM", v0=v0, tol=1e-12)
         order = np.argsort(w2)
         w2, Y = w2[order], Y[:, order]
-    return w2, Z @ Y
+    Phi = Z @ Y
+    return w2, Phi / np.sqrt(np.einsum("ij,ij->j", Phi, M @ Phi))
 
 
 def craig_bampton(
@@ -157,7 +159,7 @@ def craig_bampton(
         raise ValueError(f"T must have {N} columns, got {T.shape[1]}")
     if n_modes is not None and n_modes < 0:
         raise ValueError(f"n_modes must be >= 0, got {n_modes}")
-    Z, _ = null_space_basis(T)
+    Z = null_space_basis(T)
     if sp.issparse(K):
         lu = spla.splu(sp.csc_matrix(K))
         KiT = lu.solve(T.T.copy())
@@ -175,10 +177,8 @@ def craig_bampton(
     else:
         k = min(n_avail, n_modes if not coupled_only else 2 * n_modes + 20)
     Mbb_scale = np.sqrt(np.max(np.diag(Psi.T @ (M @ Psi))))
-    shift = 1.0
     while True:
-        w2, Phi = _fixed_interface_modes(K, M, Z, max(k, 1), dense, shift) if k > 0 else (np.zeros(0), np.zeros((N, 0)))
-        Phi = Phi / np.sqrt(np.einsum("ij,ij->j", Phi, M @ Phi)) if k > 0 else Phi
+        w2, Phi = _fixed_interface_modes(K, M, Z, k, dense) if k > 0 else (np.zeros(0), np.zeros((N, 0)))
         f_hz = np.sqrt(np.clip(w2, 0, None)) / (2 * np.pi)
         c = np.linalg.norm(Psi.T @ (M @ Phi), axis=0) / Mbb_scale
         ok = c > coupling_tol if coupled_only else np.ones(len(w2), bool)
@@ -205,7 +205,7 @@ def craig_bampton(
     Mr, Kr = 0.5 * (Mr + Mr.T), 0.5 * (Kr + Kr.T)
     names = boundary_names or tuple(f"b{i}" for i in range(nb))
     stats = {"wall_s": time.perf_counter() - t0, "static_s": t_static, "n_full": N, "n_boundary": nb,
-             "n_modes": len(keep), "n_computed": len(w2) if k else 0, "n_uncoupled_skipped": dropped,
+             "n_modes": len(keep), "n_computed": len(w2), "n_uncoupled_skipped": dropped,
              "eig": "dense" if dense else "sparse shift-invert"}
     return CBModel(Mr, Kr, Psi, Phi, np.sqrt(np.clip(w2, 0, None)), tuple(names), stats)
 
