@@ -314,19 +314,20 @@ def nnm_branch(system: GapSystem, mode: int, **options) -> NNMBranch:
 
 
 def hb_backbones(
-    system: GapSystem, harmonics: int = 1, energy_max_J: float = 1e5
+    system: GapSystem, harmonics: int = 1, energy_max_J: float = 1e5, modes=None
 ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """{"NNM 1": (energy_J, freq_hz), ...} of every NNM by HB, sorted by energy.
+    """{"NNM 1": (energy_J, freq_hz), ...} of the NNMs ``modes`` (0-based; default every one)
+    by HB, sorted by energy.
 
     The paper's Fig. 2 curves with ``harmonics = 1``. Where a branch folds back in energy
     (an internal resonance at H > 1) the points are still returned sorted by energy, so
     use a one-harmonic branch for overlays.
     """
     out = {}
-    for mode in range(system.n):
-        b = nnm_branch(system, mode, H=harmonics, energy_max_J=energy_max_J)
+    for mode in range(system.n) if modes is None else modes:
+        b = nnm_branch(system, int(mode), H=harmonics, energy_max_J=energy_max_J)
         order = np.argsort(b.energy_J, kind="stable")
-        out[f"NNM {mode + 1}"] = (b.energy_J[order], b.freq_hz[order])
+        out[f"NNM {int(mode) + 1}"] = (b.energy_J[order], b.freq_hz[order])
     return out
 
 

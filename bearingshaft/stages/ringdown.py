@@ -73,14 +73,11 @@ def backbone_curves(model, system: GapSystem | None = None, n_modes: int = 3
     modes move the gaps (an assembly's swinging on its bungees does not), and the exact NNM 2 of
     a symmetric discrete model."""
     from reduced import nnm2
-    from reduced.backbones import nnm_branch
+    from reduced.backbones import hb_backbones
 
     system = model.system() if system is None else system
-    curves: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    for mode in gap_moving_modes(system, "open", n_modes):
-        b = nnm_branch(system, int(mode), H=1)
-        order = np.argsort(b.energy_J, kind="stable")
-        curves[f"NNM {mode + 1}, HB H=1"] = (b.energy_J[order], b.freq_hz[order])
+    curves = {f"{name}, HB H=1": c
+              for name, c in hb_backbones(system, 1, modes=gap_moving_modes(system, "open", n_modes)).items()}
     if isinstance(model, DiscreteParams) and model.m1 == model.m3:
         E = np.logspace(-4, 5, 400)
         curves["NNM 2, exact"] = (E, nnm2.frequency_from_energy(model, E))

@@ -25,7 +25,7 @@ from bearingshaft.plots import plt
 from bearingshaft.scenes import Scene, VerifySpec, load_scene
 from bearingshaft.stages.reduce import full_gap_modes
 from bearingshaft.stages.ringdown import _Bar
-from reduced.backbones import nnm_branch
+from reduced.backbones import hb_backbones
 from reduced.discrete import DiscreteParams, linear_modes
 from reduced.gaps import GapSystem
 from reduced.identify import RESIDUAL_MEANING, identify_discrete
@@ -70,12 +70,9 @@ def _backbones(systems: dict[str, GapSystem], energy_max_J: float, progress: boo
     bar = _Bar("NNM backbones", progress)
     try:
         for i, (name, system) in enumerate(systems.items()):
-            out[name] = {}
-            for mode in range(N_COMPARE):
-                b = nnm_branch(system, mode, H=1, energy_max_J=energy_max_J)
-                order = np.argsort(b.energy_J, kind="stable")
-                out[name][mode + 1] = (b.energy_J[order], b.freq_hz[order])
-                bar((i * N_COMPARE + mode + 1) / (len(systems) * N_COMPARE))
+            curves = hb_backbones(system, 1, energy_max_J, modes=range(N_COMPARE))
+            out[name] = {int(key.split()[1]): c for key, c in curves.items()}
+            bar((i + 1) / len(systems))
     finally:
         bar.close()
     return out
