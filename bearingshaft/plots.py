@@ -10,8 +10,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from reduced.result import RingdownResult  # noqa: E402
-from reduced.spectrogram import Spectrogram, curve_in_time  # noqa: E402
+from reduced.transient.result import RingdownResult  # noqa: E402
+from reduced.transient.spectrogram import Spectrogram, curve_in_time  # noqa: E402
 
 CURVE_STYLES = ("-", "--", "-.", ":")
 

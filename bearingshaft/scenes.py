@@ -5,7 +5,7 @@ to run, a table absent is a stage skipped (and so never built). Layout::
 
     name = "discrete-impulse"          # optional, defaults to the file name
     description = "..."
-    [model]          kind = "discrete" (DiscreteParams), "rom" (reduced.rom.RomSpec: the 3-D
+    [model]          kind = "discrete" (DiscreteParams), "rom" (reduced.models.rom.RomSpec: the 3-D
                      model reduced to its tips) or "assembly" (fem.model.AssemblyModel)
     [initial]        x0_m, v0_m_s at the points x1, x2, x3
     [ringdown]       integrator and run length                      -> stage ringdown
@@ -32,9 +32,9 @@ from dataclasses import dataclass, field, fields
 from importlib import resources
 from pathlib import Path
 
-from reduced.discrete import DiscreteParams
-from reduced.integrate import METHODS
-from reduced.rom import RomSpec
+from reduced.models.discrete import DiscreteParams
+from reduced.models.rom import RomSpec
+from reduced.transient.integrate import METHODS
 
 
 class SceneError(ValueError):
@@ -54,7 +54,7 @@ def _positive(obj, *names: str) -> None:
 
 @dataclass(frozen=True, slots=True)
 class InitialSpec:
-    """Initial state of the ringdown at the points x1, x2, x3 (see :mod:`reduced.initial`).
+    """Initial state of the ringdown at the points x1, x2, x3 (see :mod:`reduced.models.initial`).
 
     For the discrete model the points are its DOFs. A reduced model takes the point values
     in its lowest three open-gap modes (heave, pitch, first bending), as the discrete model.

@@ -3,7 +3,7 @@
     PYTHONPATH=. python benchmarks/rom_speed.py [--modes 1 2 5 10 20 50] [--out results/rom-speed]
 
 A 2 s central-difference ringdown of the beam-grounded reduced model from v(0) = [0, 0, 200]
-m/s at the points (:func:`reduced.initial.initial_state`), for each number of fixed-interface
+m/s at the points (:func:`reduced.models.initial.initial_state`), for each number of fixed-interface
 modes, with the discrete three-mass model's 2 s run (default step) in the same process as
 the baseline. Two steps per model:
 
@@ -39,19 +39,19 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bearingshaft.output import write_rows  # noqa: E402
-from reduced.discrete import DiscreteParams  # noqa: E402
-from reduced.explicit import DEFAULT_OMEGA_DT, TOP_CAP, default_step, stability_limit  # noqa: E402
-from reduced.initial import initial_state  # noqa: E402
-from reduced.integrate import ringdown  # noqa: E402
-from reduced.rom import RomSpec, build_rom  # noqa: E402
+from reduced.models.discrete import DiscreteParams  # noqa: E402
+from reduced.models.initial import initial_state  # noqa: E402
+from reduced.models.rom import RomSpec, build_rom  # noqa: E402
 from reduced.studies import relative_error  # noqa: E402
+from reduced.transient.explicit import DEFAULT_OMEGA_DT, TOP_CAP, default_step, stability_limit  # noqa: E402
+from reduced.transient.integrate import ringdown  # noqa: E402
 
-STEP_CAP = TOP_CAP  # omega_max dt of the contact step at most (reduced.explicit, step_basis "contact")
+STEP_CAP = TOP_CAP  # omega_max dt of the contact step at most (reduced.transient.explicit, step_basis "contact")
 V0_POINTS = (0.0, 0.0, 200.0)  # m/s at x1, x2, x3: the rom-impulse scene
 
 
 def contact_step(system) -> tuple[float, float, float]:
-    """(dt, omega_c, omega_max): the step of ``step_basis = "contact"`` (reduced.explicit)."""
+    """(dt, omega_c, omega_max): the step of ``step_basis = "contact"`` (reduced.transient.explicit)."""
     dt, omega_max, omega_c, _ = default_step(system, step_basis="contact")
     return dt, omega_c, omega_max
 

@@ -6,7 +6,7 @@ Three measurements, written to results/discrete-fep/symmetry.csv and symmetry_*.
    over 50 ms windows is the *measured* growth rate of the asymmetry;
 2. the transverse Lyapunov exponent along the same motion kept exactly symmetric: the
    state is symmetrised every 0.5 ms and an antisymmetric perturbation is carried by the
-   exact tangent flow (products of segment exponentials, reduced.flow); its log growth
+   exact tangent flow (products of segment exponentials, reduced.transient.flow); its log growth
    over the same windows is the *predicted* rate at which round-off asymmetry grows;
 3. Floquet multipliers of the symmetric NNMs (1 and 3) by shooting at energies along the
    ringdown, with the symmetry class of the eigenvector of the largest multiplier: the
@@ -25,11 +25,11 @@ import numpy as np
 
 from bearingshaft.output import write_rows
 from reduced._blas import single_thread_blas
-from reduced.backbones import nnm_branch
-from reduced.discrete import DiscreteParams
-from reduced.exact import integrate_exact
-from reduced.flow import Flow
-from reduced.shooting import conservative, shooting_branch
+from reduced.models.discrete import DiscreteParams
+from reduced.periodic.backbones import nnm_branch
+from reduced.periodic.shooting import conservative, shooting_branch
+from reduced.transient.exact import integrate_exact
+from reduced.transient.flow import Flow
 
 DURATION_S = 2.0
 RATE_HZ = 20000.0

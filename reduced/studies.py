@@ -11,14 +11,15 @@ from itertools import product
 
 import numpy as np
 
-from reduced.discrete import DiscreteParams, linear_modes
-from reduced.dop853 import integrate_dop853
-from reduced.exact import ExactIntegratorError
-from reduced.explicit import StepTooLargeError, default_step
-from reduced.gaps import GapSystem
-from reduced.initial import initial_state
-from reduced.integrate import ringdown
-from reduced.rom import ReducedModel, RomSpec
+from reduced.models.discrete import DiscreteParams
+from reduced.models.gaps import GapSystem
+from reduced.models.initial import initial_state
+from reduced.models.modes import linear_modes
+from reduced.models.rom import ReducedModel, RomSpec
+from reduced.transient.dop853 import integrate_dop853
+from reduced.transient.exact import ExactIntegratorError
+from reduced.transient.explicit import StepTooLargeError, default_step
+from reduced.transient.integrate import ringdown
 
 
 def relative_error(x: np.ndarray, x_ref: np.ndarray) -> float:
@@ -115,7 +116,7 @@ def rom_case(rom: ReducedModel, spec: RomSpec) -> CaseFactory:
     """Cases of a reduced model: the dashpots c at x1, x2, x3 (``c_points``), v(x3) = speed.
 
     The velocity is given at the points and realized in the three lowest open-gap modes
-    (:func:`reduced.initial.initial_state`), which do not depend on the contact, so the
+    (:func:`reduced.models.initial.initial_state`), which do not depend on the contact, so the
     unit-speed state is formed once and scaled.
     """
     _, v_unit = initial_state(rom.M, rom.K, rom.P, np.zeros(3), np.array([0.0, 0.0, 1.0]))
@@ -185,7 +186,7 @@ def stiff_cases(
     With ``long_duration_s`` > 0 the nominal case (first k_g, gap ``NOMINAL_GAP``, speed
     ``NOMINAL_SPEED``) is also run that long for every c by ``long_methods`` (default
     ``methods``). Explicit runs predicted to need more than ``max_steps`` steps are refused
-    without running; ``step_basis`` is the explicit integrator's (:mod:`reduced.explicit`).
+    without running; ``step_basis`` is the explicit integrator's (:mod:`reduced.transient.explicit`).
     Rows carry ``duration_s`` besides the :data:`STIFF_FIELDS`.
     """
     make = discrete_case(base) if isinstance(base, DiscreteParams) else base

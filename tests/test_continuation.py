@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from reduced.backbones import nnm_branch
-from reduced.continuation import continue_branch
-from reduced.discrete import DiscreteParams
+from reduced.models.discrete import DiscreteParams
+from reduced.periodic.backbones import nnm_branch
+from reduced.periodic.continuation import continue_branch
 
 SYS = DiscreteParams().system()
 

@@ -7,8 +7,8 @@ import pytest
 import scipy.linalg as sla
 import scipy.sparse as sp
 
-from reduced.craig_bampton import cb_check, craig_bampton
-from reduced.discrete import DiscreteParams
+from reduced.models.craig_bampton import cb_check, craig_bampton
+from reduced.models.discrete import DiscreteParams
 
 
 def spring_chain(n: int, k: float = 1e4, m: float = 0.1, seed: int = 1):
@@ -71,7 +71,7 @@ def test_sparse_path_matches_dense():
     T = np.zeros((2, 60))
     T[0, 10], T[1, 50] = 1.0, 1.0
     dense = craig_bampton(K, M, T, n_modes=5)
-    from reduced import craig_bampton as cbmod
+    from reduced.models import craig_bampton as cbmod
 
     sparse = cbmod.craig_bampton(sp.csr_matrix(K), sp.csr_matrix(M), T, n_modes=5)
     assert np.allclose(sparse.omega_fixed, dense.omega_fixed, rtol=1e-10)

@@ -7,8 +7,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from reduced import nnm2
-from reduced.discrete import DiscreteParams, linear_modes
+from reduced.models.discrete import DiscreteParams
+from reduced.models.modes import linear_modes
+from reduced.periodic import nnm2
 
 P = DiscreteParams()
 

@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 from scipy.special import ellipk
 
-from reduced import nnm2
-from reduced.backbones import hb_backbones, nnm_branch
-from reduced.discrete import DiscreteParams, linear_modes
-from reduced.gaps import GapSystem
-from reduced.hb import (
+from reduced.models.discrete import DiscreteParams
+from reduced.models.gaps import GapSystem
+from reduced.models.modes import linear_modes
+from reduced.periodic import nnm2
+from reduced.periodic.backbones import hb_backbones, nnm_branch
+from reduced.periodic.hb import (
     CubicForce,
     HarmonicBalance,
     NewtonError,

@@ -10,9 +10,9 @@ import pytest
 from bearingshaft.output import StageWriter
 from bearingshaft.scenes import parse_scene
 from bearingshaft.stages.fep import fep_stage
-from reduced import nnm2
-from reduced.backbones import hb_point_at_energy, nnm_branch
-from reduced.discrete import DiscreteParams
+from reduced.models.discrete import DiscreteParams
+from reduced.periodic import nnm2
+from reduced.periodic.backbones import hb_point_at_energy, nnm_branch
 
 SCENE = """
 [model]

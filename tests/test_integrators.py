@@ -9,12 +9,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from reduced.discrete import DiscreteParams, linear_modes
-from reduced.dop853 import integrate_dop853
-from reduced.explicit import StepTooLargeError, stability_limit
-from reduced.gaps import GapSystem
-from reduced.integrate import ringdown
+from reduced.models.discrete import DiscreteParams
+from reduced.models.gaps import GapSystem
+from reduced.models.modes import linear_modes
 from reduced.studies import fit_order, relative_error
+from reduced.transient.dop853 import integrate_dop853
+from reduced.transient.explicit import StepTooLargeError, stability_limit
+from reduced.transient.integrate import ringdown
 
 P = DiscreteParams()
 IMPULSE = (np.zeros(3), np.array([0.0, 0.0, 200.0]))
@@ -138,7 +139,7 @@ def test_non_finite_initial_state_refused(method, bad):
 def test_grazing_touch_is_not_missed():
     # Start 1e-9 gaps inside the stop: the contact lasts ~1e-5 of a period. A missed event
     # would leave the stop force off and change the period by ~1e-6 relative.
-    from reduced import nnm2
+    from reduced.periodic import nnm2
 
     x0 = P.g * (1 + 1e-9)
     p = replace(P, c=0.0)

@@ -9,10 +9,11 @@ import scipy.linalg as sla
 from bearingshaft.cli import main
 from fem.contact import ContactPair, contact_pairs, contact_rows, gap_modes, mirror_map, tied_stiffness
 from fem.model import AssemblyModel, build_system
-from reduced.craig_bampton import cb_check, craig_bampton
-from reduced.discrete import DiscreteParams, linear_modes
-from reduced.initial import initial_state
-from reduced.rom import ReducedModel, RomSpec, build_rom
+from reduced.models.craig_bampton import cb_check, craig_bampton
+from reduced.models.discrete import DiscreteParams
+from reduced.models.initial import initial_state
+from reduced.models.modes import linear_modes
+from reduced.models.rom import ReducedModel, RomSpec, build_rom
 
 
 @pytest.fixture(scope="module")

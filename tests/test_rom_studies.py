@@ -7,12 +7,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from reduced.discrete import DiscreteParams
-from reduced.explicit import DEFAULT_OMEGA_DT
-from reduced.initial import initial_state
-from reduced.integrate import ringdown
-from reduced.rom import RomSpec, build_rom
+from reduced.models.discrete import DiscreteParams
+from reduced.models.initial import initial_state
+from reduced.models.rom import RomSpec, build_rom
 from reduced.studies import STIFF_FIELDS, fit_order, relative_error, rom_case, rom_convergence, stiff_cases
+from reduced.transient.explicit import DEFAULT_OMEGA_DT
+from reduced.transient.integrate import ringdown
 
 SPEC = RomSpec()  # beam-grounded, planar, Table-1 contact, c = 4 N s/m at the points
 MODES = (1, 2, 5, 10)

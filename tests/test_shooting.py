@@ -5,11 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from reduced import nnm2
-from reduced.discrete import DiscreteParams, linear_modes
-from reduced.exact import integrate_exact
-from reduced.flow import Flow
-from reduced.shooting import conservative, shoot
+from reduced.models.discrete import DiscreteParams
+from reduced.models.modes import linear_modes
+from reduced.periodic import nnm2
+from reduced.periodic.shooting import conservative, shoot
+from reduced.transient.exact import integrate_exact
+from reduced.transient.flow import Flow
 
 P = DiscreteParams()
 SYS = conservative(P.system())
@@ -70,8 +71,8 @@ def test_linear_orbits_have_unit_multipliers():
 def test_multiple_shooting_near_grazing(E):
     # just above grazing NNM 2 is violently unstable (|mu| ~ 50-150): multiple shooting
     # from the H = 15 HB orbit converges to the exact orbit
-    from reduced.backbones import nnm_branch
-    from reduced.shooting import shoot_multiple
+    from reduced.periodic.backbones import nnm_branch
+    from reduced.periodic.shooting import shoot_multiple
 
     b = nnm_branch(SYS, 1, H=15, energy_max_J=0.1)
     i = int(np.argmin(np.abs(np.log(b.energy_J / E))))

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from reduced.backbones import nnm_branch
-from reduced.discrete import DiscreteParams
-from reduced.flow import Flow
-from reduced.shooting import conservative, shoot
-from reduced.stability import compare, hill
+from reduced.models.discrete import DiscreteParams
+from reduced.periodic.backbones import nnm_branch
+from reduced.periodic.shooting import conservative, shoot
+from reduced.periodic.stability import compare, hill
+from reduced.transient.flow import Flow
 
 P = DiscreteParams()
 SYS = conservative(P.system())

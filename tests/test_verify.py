@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from bearingshaft.cli import main
-from reduced.craig_bampton import craig_bampton
-from reduced.discrete import DiscreteParams
-from reduced.identify import identify_discrete
+from reduced.models.craig_bampton import craig_bampton
+from reduced.models.discrete import DiscreteParams
+from reduced.models.identify import identify_discrete
 
 TIPS = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # rows picking x1 and x3 of the three-mass model
 

@@ -22,14 +22,14 @@ from tqdm import tqdm
 
 from bearingshaft.output import StageWriter, write_rows
 from bearingshaft.scenes import Scene
-from reduced import nnm2
 from reduced._blas import single_thread_blas
-from reduced.backbones import START_FRACTION, hb_point_at_energy, nnm_branch
-from reduced.discrete import linear_modes
-from reduced.flow import Flow
-from reduced.hb import NewtonError
-from reduced.shooting import conservative, shooting_branch
-from reduced.stability import compare, hill
+from reduced.models.modes import linear_modes
+from reduced.periodic import nnm2
+from reduced.periodic.backbones import START_FRACTION, hb_point_at_energy, nnm_branch
+from reduced.periodic.hb import NewtonError
+from reduced.periodic.shooting import conservative, shooting_branch
+from reduced.periodic.stability import compare, hill
+from reduced.transient.flow import Flow
 
 GRAZING_BAND = 10.0  # "near grazing": energies below this many times the grazing energy
 
@@ -37,7 +37,7 @@ GRAZING_BAND = 10.0  # "near grazing": energies below this many times the grazin
 def _hb_at(b, E_q):
     """HB frequency at exactly the energies E_q (nan where no piece of the branch covers
     E_q or Newton fails): from the nearest point of a covering piece, corrected onto the
-    energy by :func:`reduced.backbones.hb_point_at_energy`."""
+    energy by :func:`reduced.periodic.backbones.hb_point_at_energy`."""
     out = np.full(np.shape(E_q), np.nan)
     i_w = b.residual.hb.size
     for k, E in enumerate(E_q):

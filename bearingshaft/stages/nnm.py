@@ -8,8 +8,8 @@ from tqdm import tqdm
 from bearingshaft import plots
 from bearingshaft.output import StageWriter, write_rows
 from bearingshaft.scenes import Scene
-from reduced import nnm2
-from reduced.discrete import linear_modes
+from reduced.models.modes import linear_modes
+from reduced.periodic import nnm2
 
 CHECK_CHI = (1.000001, 1.0001, 1.01, 1.1, 2.0, 10.0, 100.0, 1000.0)  # x0 / g checked by integration
 

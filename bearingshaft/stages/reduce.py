@@ -18,8 +18,8 @@ import numpy as np
 from bearingshaft import __version__
 from bearingshaft.output import StageWriter, git_commit, write_rows
 from bearingshaft.scenes import Scene
-from reduced.discrete import linear_modes
-from reduced.rom import build_rom, store_in_cache
+from reduced.models.modes import linear_modes
+from reduced.models.rom import build_rom, store_in_cache
 
 N_FULL_MODES = 24  # full-model modes computed per contact state (the coupled ones are compared)
 ELASTIC_HZ = 100.0  # Hz, the upper-bound check starts here (the beam's first bending mode is ~730 Hz)
@@ -38,7 +38,7 @@ def _mode_files(rom, fe, system, writer: StageWriter, n: int = 6) -> str:
     ``gap_modes.vtu`` (n of each) and ``gap_modes.png`` (the three lowest that move the gaps)."""
     from bearingshaft.render import render_shapes
     from fem.vtu import write_vtu
-    from reduced.discrete import gap_moving_modes
+    from reduced.models.modes import gap_moving_modes
 
     fields, shapes = {}, []
     for state in ("open", "closed"):

@@ -8,12 +8,13 @@ from tqdm import tqdm
 from bearingshaft import plots
 from bearingshaft.output import StageWriter, write_rows
 from bearingshaft.scenes import Scene
-from reduced.discrete import DiscreteParams, gap_moving_modes, linear_modes
-from reduced.gaps import GapSystem
-from reduced.initial import initial_state
-from reduced.integrate import ringdown
-from reduced.result import RingdownResult
-from reduced.spectrogram import spectrogram
+from reduced.models.discrete import DiscreteParams
+from reduced.models.gaps import GapSystem
+from reduced.models.initial import initial_state
+from reduced.models.modes import gap_moving_modes, linear_modes
+from reduced.transient.integrate import ringdown
+from reduced.transient.result import RingdownResult
+from reduced.transient.spectrogram import spectrogram
 
 
 class _Bar:
@@ -43,7 +44,7 @@ def model_system(model, progress: bool = False) -> tuple[GapSystem, np.ndarray]:
 
 
 def scene_initial_state(scene: Scene, system: GapSystem, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(x0, v0) on the system's DOFs from the scene's point values (:mod:`reduced.initial`)."""
+    """(x0, v0) on the system's DOFs from the scene's point values (:mod:`reduced.models.initial`)."""
     init = scene.initial
     return initial_state(system.M, system.K, P, init.x0_m, init.v0_m_s)
 
@@ -72,8 +73,8 @@ def backbone_curves(model, system: GapSystem | None = None, n_modes: int = 3
     """Frequency-energy curves to overlay: HB (H = 1) of the lowest ``n_modes`` NNMs whose linear
     modes move the gaps (an assembly's swinging on its bungees does not), and the exact NNM 2 of
     a symmetric discrete model."""
-    from reduced import nnm2
-    from reduced.backbones import hb_backbones
+    from reduced.periodic import nnm2
+    from reduced.periodic.backbones import hb_backbones
 
     system = model.system() if system is None else system
     curves = {f"{name}, HB H=1": c

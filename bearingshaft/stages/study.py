@@ -60,7 +60,7 @@ def study_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
 
 
 def _step_basis(scene: Scene) -> str:
-    """The explicit step basis of the scene's ringdown (reduced.explicit), "top" without one."""
+    """The explicit step basis of the scene's ringdown (reduced.transient.explicit), "top" without one."""
     return scene.ringdown.step_basis if scene.ringdown is not None else "top"
 
 
@@ -142,7 +142,7 @@ def _rom_convergence(scene: Scene, writer: StageWriter, progress: bool) -> list[
 
     from bearingshaft.stages.reduce import full_gap_modes
     from fem.model import build_system
-    from reduced.rom import build_rom
+    from reduced.models.rom import build_rom
 
     rc, spec = scene.rom_convergence, scene.model
     fe = build_system(spec.fe_model())
@@ -173,7 +173,8 @@ def _rom_convergence(scene: Scene, writer: StageWriter, progress: bool) -> list[
         f"x1, x2, x3 against {ref} modes, all by the exact integrator from v(0) = {list(scene.initial.v0_m_s)} m/s "
         "at the points. Build = Craig-Bampton time (the shared 3-D assembly not included); run times are the best "
         f"of {rc.repeats} (one run once {CONVERGENCE_BUDGET_S:g} s is spent); explicit = central difference at "
-        f"its default step for step basis {_step_basis(scene)!r} (reduced.explicit; explicit error: against the "
+        f"its default step for step basis {_step_basis(scene)!r} (reduced.transient.explicit; "
+        "explicit error: against the "
         "exact run of the same model; "
         f"explicit ringdown error: against the exact {ref}-mode run).",
         "",

@@ -2,7 +2,7 @@
 
 The scene's reduced model (Craig-Bampton on the tips' gap coordinates x1, x3 and, for the
 comparison to be one to one, one fixed-interface mode: the first bending mode) is read as a
-three-mass model (:func:`reduced.identify.identify_discrete`). Four models are then compared:
+three-mass model (:func:`reduced.models.identify.identify_discrete`). Four models are then compared:
 the full 3-D model, the reduced model, the identified three-mass model and Table 1's.
 
 Writes ``identified.csv`` (parameters: Table 1, identified, relative difference),
@@ -25,14 +25,15 @@ from bearingshaft.plots import plt
 from bearingshaft.scenes import Scene, VerifySpec, load_scene
 from bearingshaft.stages.reduce import full_gap_modes
 from bearingshaft.stages.ringdown import _Bar
-from reduced.backbones import hb_backbones
-from reduced.discrete import DiscreteParams, linear_modes
-from reduced.gaps import GapSystem
-from reduced.identify import RESIDUAL_MEANING, identify_discrete
-from reduced.initial import initial_state
-from reduced.integrate import ringdown
-from reduced.rom import build_rom
-from reduced.spectrogram import curve_in_time, spectrogram
+from reduced.models.discrete import DiscreteParams
+from reduced.models.gaps import GapSystem
+from reduced.models.identify import RESIDUAL_MEANING, identify_discrete
+from reduced.models.initial import initial_state
+from reduced.models.modes import linear_modes
+from reduced.models.rom import build_rom
+from reduced.periodic.backbones import hb_backbones
+from reduced.transient.integrate import ringdown
+from reduced.transient.spectrogram import curve_in_time, spectrogram
 
 N_COMPARE = 3  # coupled modes compared per contact state (the three-mass model has three)
 STARTS = (("antisymmetric", "discrete-antisymmetric"), ("impulse", "discrete-impulse"),
@@ -199,7 +200,7 @@ Numbers from `bearingshaft verify --scene {scene.name}`; stage wall time {f['wal
 
 ## Identified three-mass parameters
 
-From the reduced matrices (`reduced/identify.py`): k_s = trace(K_bb)/4, m2 = (|M_bq[0]| + |M_bq[1]|)^2,
+From the reduced matrices (`reduced/models/identify.py`): k_s = trace(K_bb)/4, m2 = (|M_bq[0]| + |M_bq[1]|)^2,
 m1,3 = M_bb[i,i] - m2/4, a = m2 omega_1^2/4, kappa = a L^2 with L = {f['L']:.6g} m the half-distance
 between the contact centres; k_g, g, c are the scene's.
 
@@ -263,7 +264,7 @@ sqrt(m2 identified / m2 Table 1) - 1 = {100 * (np.sqrt(f['m2'] / 1.258) - 1):+.1
 ## Ringdowns from the paper's three starts ({f['method']}, {f['duration_s']} s)
 
 Point values x0, v0 of Section 3 at x1, x2, x3, realized in the three lowest modes of each model
-(`reduced/initial.py`); damping: c = {f['c']} N s/m at each point. Peaks: the strongest line of x1's
+(`reduced/models/initial.py`); damping: c = {f['c']} N s/m at each point. Peaks: the strongest line of x1's
 spectrogram ({f['window_s']} s windows) in the first and last window, against the closed- and open-gap
 frequencies above (contact persists to the end of every run: E(end) is above the grazing energy of NNM 2,
 2 k_s g^2 = {f['grazing_J']:.3g} J).

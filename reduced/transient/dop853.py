@@ -15,8 +15,8 @@ import time
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from reduced.gaps import GapSystem
-from reduced.result import RingdownResult, sample_times
+from reduced.models.gaps import GapSystem
+from reduced.transient.result import RingdownResult, sample_times
 
 
 def _rhs_factory(system: GapSystem):

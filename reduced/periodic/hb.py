@@ -1,7 +1,7 @@
 """Harmonic balance (HB) for M x'' + C x' + K x + f_nl(x) = 0 with alternating frequency/time.
 
 Layer 1 of the three-layer design (NLvib's ``HB_residual``): residuals with analytic
-Jacobians. Layer 2 is :func:`newton` (below), layer 3 :mod:`reduced.continuation`.
+Jacobians. Layer 2 is :func:`newton` (below), layer 3 :mod:`reduced.periodic.continuation`.
 
 Ansatz (real Fourier series in the phase tau = omega t, H harmonics)::
 
@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.linalg import LinAlgWarning, lu_factor, lu_solve
 
-from reduced.gaps import GapSystem
+from reduced.models.gaps import GapSystem
 
 SAMPLES_PER_COEFFICIENT = 32  # AFT samples per Fourier coefficient (gap forces need >> 2)
 

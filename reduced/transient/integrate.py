@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from reduced.dop853 import integrate_dop853
-from reduced.exact import integrate_exact
-from reduced.explicit import integrate_explicit
-from reduced.gaps import GapSystem
-from reduced.result import RingdownResult
+from reduced.models.gaps import GapSystem
+from reduced.transient.dop853 import integrate_dop853
+from reduced.transient.exact import integrate_exact
+from reduced.transient.explicit import integrate_explicit
+from reduced.transient.result import RingdownResult
 
 METHODS = ("exact", "explicit", "dop853")
 

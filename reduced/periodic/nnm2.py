@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from reduced.discrete import DiscreteParams
+from reduced.models.discrete import DiscreteParams
 
 
 def _require_symmetric(p: DiscreteParams) -> None:

@@ -26,8 +26,8 @@ import numba as nb
 import numpy as np
 from scipy.linalg import eigh
 
-from reduced.gaps import GapSystem
-from reduced.result import RingdownResult, sample_times
+from reduced.models.gaps import GapSystem
+from reduced.transient.result import RingdownResult, sample_times
 
 SWITCHING_SAFETY = 0.8  # of the textbook limit: CD with switching contact fails near 1.6
 DEFAULT_OMEGA_DT = 0.05  # rad: 2.6e-2 relative error over the 0.05 s work-precision window
@@ -74,7 +74,7 @@ def contact_omega(system: GapSystem, n: int = 3) -> float:
     modes that move the gaps (Phi_n: for the discrete model all its modes):
     omega^2 = max eig(Phi_n^T K_closed Phi_n), with Phi_n mass-normalized. It grows with k_g as
     the discrete model's omega_max does, so a stiff penalty is still resolved."""
-    from reduced.discrete import moving_modes
+    from reduced.models.modes import moving_modes
 
     _, phi, _ = moving_modes(system.K, system.M, system.B, n)
     lam = np.linalg.eigvalsh(phi.T @ system.closed_stiffness() @ phi)

@@ -30,8 +30,8 @@ import numba as nb
 import numpy as np
 from scipy.linalg import eig, eigh, solve
 
-from reduced.gaps import GapSystem
-from reduced.result import RingdownResult, sample_times
+from reduced.models.gaps import GapSystem
+from reduced.transient.result import RingdownResult, sample_times
 
 EPS = np.finfo(float).eps
 QTOL_REL = 64.0 * EPS  # q is a sum of ~2n terms: round-off of its evaluation, relative

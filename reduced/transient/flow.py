@@ -1,6 +1,6 @@
 """Exact flow map of an undamped or damped gap system and its derivative (the monodromy).
 
-Reuses the closed-form state decompositions of :mod:`reduced.exact` (``state_table``):
+Reuses the closed-form state decompositions of :mod:`reduced.transient.exact` (``state_table``):
 inside contact state s the state y = [x; v] obeys y' = A_s y + b_s, so over a segment of
 length tau
 
@@ -15,7 +15,7 @@ is continuous and the saltation matrix (Leine & Nijmeijer 2004)
 is the identity: the derivative of the flow is the plain product of the segment
 exponentials, ``Phi(T) = exp(A_{s_k} tau_k) ... exp(A_{s_1} tau_1)``, exact up to round-off.
 (A grazing segment, n^T f_- = 0, changes nothing either, since S = I whatever the
-denominator.) The events are located by a copy of the root march of :mod:`reduced.exact`;
+denominator.) The events are located by a copy of the root march of :mod:`reduced.transient.exact`;
 stops crossing within round-off of the same instant are switched together.
 """
 
@@ -26,7 +26,8 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from reduced.exact import (
+from reduced.models.gaps import GapSystem
+from reduced.transient.exact import (
     QTOL_REL,
     ExactIntegratorError,
     StateTable,
@@ -36,12 +37,11 @@ from reduced.exact import (
     _stop_series,
     state_table,
 )
-from reduced.gaps import GapSystem
 
 # The event march (a step that provably skips no root of q, Newton-like near one) and the
-# closed-form evaluation are reduced.exact's own kernels; the flow passes no round-off
+# closed-form evaluation are reduced.transient.exact's own kernels; the flow passes no round-off
 # noise bound (qnoise = dnoise = 0) and no rest floor.
-HMIN_PERIODS = 1e-9  # as in reduced.exact: smallest march step, in units of 1/omega_max
+HMIN_PERIODS = 1e-9  # as in reduced.transient.exact: smallest march step, in units of 1/omega_max
 MAX_SEGMENTS = 100_000  # per call: a hang guard (a period has tens of events)
 
 

@@ -6,7 +6,7 @@ The 3-D model (:mod:`fem.model`) is reduced onto its two gap coordinates ``x1``,
     q = [x1, x3, eta_1 .. eta_n],      Mr q'' + Cr q' + Kr q + B^T f(B q) = 0,
 
 with B picking x1 and x3 and f the two-sided penalty stops of the tips, so the reduced
-model is a :class:`reduced.gaps.GapSystem` and every solver of the discrete model (exact,
+model is a :class:`reduced.models.gaps.GapSystem` and every solver of the discrete model (exact,
 explicit, DOP853 ringdowns, HB backbones) runs on it unchanged. Damping is what the
 discrete model has: dashpots ``c_points`` at its three points x1, x2 (mid-span), x3, plus an
 optional mass-proportional part ``alpha`` Mr.
@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from reduced.gaps import GapSystem, two_sided_stops
+from reduced.models.gaps import GapSystem, two_sided_stops
 
 ROM_LAYOUTS = ("beam-grounded", "assembly")
 POINTS = ("x1", "x2", "x3")  # the discrete model's three points: left tip, mid-span, right tip
@@ -183,7 +183,7 @@ def build_rom(spec: RomSpec, fe=None, progress: bool = False) -> tuple[ReducedMo
     """Mesh and assemble the 3-D model (unless ``fe`` is given), reduce it; (rom, fe)."""
     from fem.contact import contact_pairs, contact_rows, mirror_map, point_rows
     from fem.model import build_system
-    from reduced.craig_bampton import cb_check, craig_bampton
+    from reduced.models.craig_bampton import cb_check, craig_bampton
 
     t0 = time.perf_counter()
     if fe is None:
@@ -229,10 +229,10 @@ def build_rom(spec: RomSpec, fe=None, progress: bool = False) -> tuple[ReducedMo
 
 def source_hash() -> str:
     """sha256 of the code that builds a reduced model (geometry, fem, this reduction)."""
-    root = Path(__file__).resolve().parent.parent
+    here = Path(__file__).resolve().parent
+    root = here.parent.parent
     h = hashlib.sha256()
-    files = sorted([*root.glob("geometry/*.py"), *root.glob("fem/*.py"), root / "reduced" / "craig_bampton.py",
-                    root / "reduced" / "rom.py"])
+    files = sorted([*root.glob("geometry/*.py"), *root.glob("fem/*.py"), here / "craig_bampton.py", here / "rom.py"])
     for f in files:
         h.update(f.name.encode())
         h.update(f.read_bytes())

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from reduced.discrete import moving_modes
+from reduced.models.modes import moving_modes
 
 MOVES = 1e-2  # a mode moves the points if |P phi| exceeds this fraction of the largest
 

@@ -7,17 +7,17 @@ eigenproblem
     (J2 lam^2 + J1 lam + J0) p = 0,   J0 = dR/dX,  J1 = 2 omega kron(Nab, M) [+ kron(I, C)],
                                       J2 = kron(I, M)
 
-(:meth:`reduced.hb.HarmonicBalance.hill_matrices`), solved as a 2 n (2H+1) linear
+(:meth:`reduced.periodic.hb.HarmonicBalance.hill_matrices`), solved as a 2 n (2H+1) linear
 eigenproblem. Each Floquet exponent appears 2H+1 times, shifted by i k omega; the 2n
 kept are those in the first zone |Im lam| <= omega / 2 (the classical criterion; a
 centring criterion on the eigenvectors' mean harmonic, Guillot et al. 2020, was tried and
 fails at H = 1, where the constant term always wins; an "unresolved eigenvector"
 filter admitted truncation artefacts). The trivial pair at +1 is dropped before judging
-stability (reduced.shooting.drop_trivial_pair); with the AFT Jacobian of a kinked force
+stability (reduced.periodic.shooting.drop_trivial_pair); with the AFT Jacobian of a kinked force
 that pair is itself split, by up to ~10 % in |mu| at H = 15 near 50 J on NNM 2, which
 sets how far Hill's multipliers can be trusted. Multipliers mu = exp(lam T).
 
-Floquet multipliers from :mod:`reduced.shooting` are the reference: Hill's method on a
+Floquet multipliers from :mod:`reduced.periodic.shooting` are the reference: Hill's method on a
 truncated series with AFT Jacobians of a non-smooth force is an approximation, most of
 all near grazing. :func:`compare` flags orbits where the two disagree on stability.
 """
@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import eig
 
-from reduced.hb import HarmonicBalance
+from reduced.periodic.hb import HarmonicBalance
 
 HILL_TOL = 1e-3  # max |mu| - 1 above this is unstable for Hill (truncation and AFT errors
 # of the exponents, ~1e-4 T^-1 on the converged branches, set this floor)
@@ -43,8 +43,8 @@ class HillResult:
 
     @property
     def max_multiplier(self) -> float:
-        """Largest |mu| without the trivial pair at +1 (see reduced.shooting)."""
-        from reduced.shooting import drop_trivial_pair
+        """Largest |mu| without the trivial pair at +1 (see reduced.periodic.shooting)."""
+        from reduced.periodic.shooting import drop_trivial_pair
 
         return float(np.max(np.abs(drop_trivial_pair(self.multipliers)), initial=1.0))
 

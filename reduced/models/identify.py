@@ -1,6 +1,6 @@
 """The paper's three-mass parameters read off a Craig-Bampton model on the two tips.
 
-The discrete model (:mod:`reduced.discrete`) written in Craig-Bampton form with boundary
+The discrete model (:mod:`reduced.models.discrete`) written in Craig-Bampton form with boundary
 x1, x3 and its one interior coordinate is exact. Holding x1, x3 and relaxing x2 (row 2 of K:
 -2a x1 + 4a x2 - 2a x3 = 0) gives the constraint modes x2 = (x1 + x3) / 2; holding the tips
 leaves one mode, x2 = eta / sqrt(m2) with omega_1^2 = 4a / m2. So, with a = kappa / L^2,
@@ -9,7 +9,7 @@ leaves one mode, x2 = eta / sqrt(m2) with omega_1^2 = 4a / m2. So, with a = kapp
     K_bb = 2 k_s I,                                      K_qq = omega_1^2 = 4 a / m2,
 
 (M_bq up to the sign of the mode; M_qq = 1). A reduced 3-D model on the same coordinates
-q = [x1, x3, eta_1] (:mod:`reduced.rom`, one fixed-interface mode) is read the same way:
+q = [x1, x3, eta_1] (:mod:`reduced.models.rom`, one fixed-interface mode) is read the same way:
 
     k_s = trace(K_bb) / 4,             m2 = (|M_bq[0]| + |M_bq[1]|)^2 / M_qq,
     m1 = M_bb[0, 0] - m2 / 4,           m3 = M_bb[1, 1] - m2 / 4,
@@ -32,7 +32,7 @@ import math
 
 import numpy as np
 
-from reduced.discrete import DiscreteParams
+from reduced.models.discrete import DiscreteParams
 
 
 def identify_discrete(M: np.ndarray, K: np.ndarray, L: float, *, k_g: float, g: float, c: float

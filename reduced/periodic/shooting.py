@@ -8,7 +8,7 @@ Gauss-Newton because they are one more than the unknowns and consistent):
     E(x0, v0) - E* = 0                   (the energy picks the orbit in the family)
 
 The Jacobian of the first block is [Phi(T) - I, f(y(T))] with Phi the monodromy from
-:class:`reduced.flow.Flow` (saltation matrices are identities for penalty stops). The
+:class:`reduced.transient.flow.Flow` (saltation matrices are identities for penalty stops). The
 orbit closes to machine precision; the Floquet multipliers are the eigenvalues of Phi.
 For a conservative system two are 1 (time shift and energy) and the others come in
 reciprocal, conjugate quadruples: the orbit is unstable when one leaves the unit circle.
@@ -22,9 +22,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from reduced._blas import single_thread_blas
-from reduced.exact import ExactIntegratorError
-from reduced.flow import Flow
-from reduced.gaps import GapSystem
+from reduced.models.gaps import GapSystem
+from reduced.transient.exact import ExactIntegratorError
+from reduced.transient.flow import Flow
 
 FLOQUET_TOL = 1e-6  # |mu| - 1 above this is unstable. The trivial pair at +1 is a Jordan
 # block whose eigenvalues split by ~sqrt(eps |Phi|) under round-off (1.5e-5 seen at
@@ -303,7 +303,7 @@ def shooting_branch(
 ):
     """Orbits at increasing energies along an NNM: natural-parameter continuation in energy.
 
-    ``guides`` are HB branches (:class:`reduced.backbones.NNMBranch`, best first) of the
+    ``guides`` are HB branches (:class:`reduced.periodic.backbones.NNMBranch`, best first) of the
     same NNM. At each energy the guesses tried are the previous orbit scaled to the new
     energy (a secant prediction from the last two orbits first; its period scaled by the
     first guide's frequency ratio, then unscaled), then

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from reduced.hb import NewtonError, newton
+from reduced.periodic.hb import NewtonError, newton
 
 
 class ContinuationError(RuntimeError):

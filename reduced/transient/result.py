@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from reduced.gaps import GapSystem
+from reduced.models.gaps import GapSystem
 
 
 @dataclass(eq=False)

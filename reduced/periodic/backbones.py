@@ -14,10 +14,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from reduced._blas import single_thread_blas
-from reduced.continuation import continue_branch
-from reduced.discrete import linear_modes
-from reduced.gaps import GapSystem
-from reduced.hb import HarmonicBalance, NewtonError, NNMResidual, default_samples, newton
+from reduced.models.gaps import GapSystem
+from reduced.models.modes import linear_modes
+from reduced.periodic.continuation import continue_branch
+from reduced.periodic.hb import HarmonicBalance, NewtonError, NNMResidual, default_samples, newton
 
 START_FRACTION = 0.3  # start amplitude as a fraction of the grazing amplitude (open gap)
 
@@ -102,7 +102,7 @@ def _nnm_branch(
 
     The branch starts at START_FRACTION of the amplitude at which the linear mode first
     touches a stop (or lower, at ``energy_start_J``), continued in log10 of the modal
-    amplitude (:class:`reduced.hb.NNMResidual`).
+    amplitude (:class:`reduced.periodic.hb.NNMResidual`).
 
     Internal resonances (tongues, H > 1): when a harmonic k >= 2 outgrows the fundamental
     (``tongue_ratio``), or the frequency falls while the energy rises and does not come back
@@ -347,8 +347,8 @@ def hb_point_at_energy(
     """The HB solution of ``res`` whose (mean) energy is ``energy_J``, from a nearby point.
 
     Newton on [R(y); (E(y) - E*) / E*] (square: the arclength row replaced by the energy),
-    with the analytic dE/dy of :meth:`reduced.hb.NNMResidual.energy_gradient`.
-    Raises :class:`reduced.hb.NewtonError` on failure. Used to compare HB with exact
+    with the analytic dE/dy of :meth:`reduced.periodic.hb.NNMResidual.energy_gradient`.
+    Raises :class:`reduced.periodic.hb.NewtonError` on failure. Used to compare HB with exact
     orbits at exactly the same energy, with no interpolation along the branch.
     """
 
