@@ -4,8 +4,10 @@ Subcommands follow the pipeline (geometry -> fem -> reduced -> results):
 ``modal`` (mesh and modal analysis), ``reduce`` (Craig-Bampton onto the tips),
 ``ringdown``, ``nnm``, ``study`` (error against run time, stiff cases), ``verify``
 (reduction against the discrete model), ``run`` (every stage of one or more scenes; all
-built-in scenes when none is named) and ``scenes``.
-Bad input gives a one-line message and exit code 2; nothing half-written is left behind.
+built-in scenes when none is named), ``check`` (validate scenes, their memory and the
+results folder without running anything) and ``scenes``.
+Bad input gives a one-line message and exit code 2, before any work starts; nothing
+half-written is left behind. Every command ends with a summary naming the results folder.
 """
 
 from __future__ import annotations
@@ -16,7 +18,9 @@ import sys
 from pathlib import Path
 
 from bearingshaft import __version__
-from bearingshaft.scenes import SceneError, builtin_names, load_scene
+from bearingshaft.budget import available_bytes, check_budget, estimates, human
+from bearingshaft.output import check_out_dir
+from bearingshaft.scenes import Scene, SceneError, builtin_names, load_scene
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
@@ -59,6 +63,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenes", nargs="*", metavar="SCENE", help="scene names or TOML files")
     p.add_argument("--out", metavar="DIR", help="parent folder of the results (default: results/)")
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
+    p = sub.add_parser("check", help="validate scenes, their memory estimates and --out without running")
+    p.add_argument("scenes", nargs="*", metavar="SCENE", help="scene names or TOML files (all built-in if none)")
+    p.add_argument("--scene", dest="scene_opt", metavar="NAME_OR_TOML", help="one scene (as for the stages)")
+    p.add_argument("--out", metavar="DIR", help="results folder to check (default: results/<scene>/)")
     sub.add_parser("scenes", help="list the built-in scenes")
     return parser
 
@@ -67,6 +75,27 @@ def _out_dir(arg: str | None, scene_name: str, parent: bool = False) -> Path:
     if arg is None:
         return Path("results") / scene_name
     return Path(arg) / scene_name if parent else Path(arg)
+
+
+def _validated(name: str, out_arg: str | None, parent: bool) -> tuple[Scene, Path]:
+    """A scene, its memory estimates and its results folder checked, before any work."""
+    scene = load_scene(name)
+    check_budget(scene)
+    out = _out_dir(out_arg, scene.name, parent)
+    check_out_dir(out)
+    return scene, out
+
+
+def _check(args) -> int:
+    names = ([args.scene_opt] if args.scene_opt else []) + args.scenes or builtin_names()
+    single = len(names) == 1 and args.scene_opt is not None
+    for name in names:
+        scene, out = _validated(name, args.out, parent=not single)
+        ests = estimates(scene)
+        peak = f"peak memory about {human(max(e.bytes for e in ests))}" if ests else "3-D model: memory not estimated"
+        print(f"{scene.name}: valid; stages {', '.join(scene.stages) or 'none'}; {peak} "
+              f"of {human(available_bytes())} available; results in {out}")
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -86,30 +115,38 @@ def main(argv: list[str] | None = None) -> int:
                 scene = load_scene(name)
                 print(f"{name:28s} {', '.join(scene.stages) or '-':24s} {scene.description}")
             return 0
+        if args.command == "check":
+            return _check(args)
         progress = not args.no_progress
         if args.command == "run":
             names = args.scenes or builtin_names()
-            scenes = [load_scene(n) for n in names]  # validate all before running any
-            for scene in scenes:
-                pipeline.run_scene(scene, _out_dir(args.out, scene.name, parent=True), progress=progress)
+            runs = [_validated(n, args.out, parent=True) for n in names]  # validate all before running any
+            for scene, out in runs:
+                pipeline.run_scene(scene, out, progress=progress)
             return 0
-        scene = load_scene(args.scene)
-        out = _out_dir(args.out, scene.name)
+        scene, out = _validated(args.scene, args.out, parent=False)
         options = {"method": getattr(args, "method", None)}
         pipeline.run_stage(scene, args.command, out, progress=progress, **options)
         return 0
     except (SceneError, UserError, ValueError) as exc:
-        print(f"bearingshaft: error: {exc}", file=sys.stderr)
+        print(f"bearingshaft: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except pipeline.StageUnavailable as exc:
         print(f"bearingshaft: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except (RuntimeError, FloatingPointError, ArithmeticError) as exc:
-        print(f"bearingshaft: failed: {exc}", file=sys.stderr)
+    except MemoryError:
+        print("bearingshaft: failed: out of memory (see `bearingshaft check` for the estimates)", file=sys.stderr)
+        return EXIT_FAILED
+    except (RuntimeError, FloatingPointError, ArithmeticError, OSError) as exc:
+        print(f"bearingshaft: failed: {_one_line(exc)}", file=sys.stderr)
         return EXIT_FAILED
     except KeyboardInterrupt:
         print("bearingshaft: interrupted; results folder left as it was", file=sys.stderr)
         return 130
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 if __name__ == "__main__":

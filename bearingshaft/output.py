@@ -9,7 +9,10 @@ folder as it was, never a half-written set of files that looks complete.
 from __future__ import annotations
 
 import csv
+import ctypes
+import fcntl
 import json
+import os
 import platform
 import shutil
 import subprocess
@@ -79,53 +82,174 @@ class StageWriter:
         return self.scratch / name
 
 
-@contextmanager
-def staged_output(out_dir: str | Path, scene_name: str, scene_source: str, stage: str):
-    """Yield a :class:`StageWriter`; on success move its files into ``out_dir``.
+def check_out_dir(out_dir: str | Path) -> Path:
+    """``out_dir`` as a results folder that can be written, or ValueError in one line.
 
-    ``out_dir`` also receives ``scene.toml`` (the case as read) and ``provenance.json``
-    (package version, git commit, platform, and per-stage statistics and file lists).
+    It must not be a file (nor /dev/null), nor lie under a file, and the nearest folder that
+    exists on its path must be writable (the results folder and its scratch siblings are
+    created there). Checked before any work starts.
     """
     out = Path(out_dir)
-    created = not out.exists()
-    out.mkdir(parents=True, exist_ok=True)
-    scratch = Path(tempfile.mkdtemp(prefix=f".{stage}.partial-", dir=out))
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {str(out_dir)!r}: is a file, not a folder")
+    parent = out.absolute().parent
+    probe = parent
+    while not probe.exists():
+        probe = probe.parent
+    if not probe.is_dir():
+        raise ValueError(f"--out {str(out_dir)!r}: {str(probe)!r} is a file, so no folder can be made under it")
+    if not os.access(probe, os.W_OK | os.X_OK) or (out.is_dir() and not os.access(out, os.W_OK | os.X_OK)):
+        raise ValueError(f"--out {str(out_dir)!r}: {str(out if out.is_dir() else probe)!r} is not writable")
+    try:  # access() says yes on read-only mounts and for root: try it
+        probe_file = tempfile.NamedTemporaryFile(dir=probe, prefix=".bearingshaft-probe-", delete=True)
+        probe_file.close()
+    except OSError as exc:
+        raise ValueError(f"--out {str(out_dir)!r}: cannot write in {str(probe)!r} ({exc.strerror})") from None
+    return out
+
+
+_RENAME_EXCHANGE = 2  # renameat2 flag (Linux >= 3.15): swap two paths in one atomic step
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap folders ``a`` and ``b`` atomically (Linux renameat2); False where not supported."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        fn = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    at_fdcwd = -100
+    return fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), _RENAME_EXCHANGE) == 0
+
+
+def _swap_in(new: Path, out: Path) -> None:
+    """Put the complete folder ``new`` at ``out``; the old ``out`` (if any) is removed.
+
+    With renameat2 the swap is one atomic step: a reader, or a kill at any moment, sees the
+    old folder or the new one. Elsewhere two renames leave a moment with no folder at all
+    (never a mixed one); the old folder is then kept aside under a dot name until removed.
+    """
+    if not out.exists():
+        new.rename(out)
+        return
+    if _exchange(new, out):
+        shutil.rmtree(new, ignore_errors=True)  # it now holds the old folder
+        return
+    aside = out.with_name(f".{out.name}.old-{os.getpid()}")
+    out.rename(aside)
+    new.rename(out)
+    shutil.rmtree(aside, ignore_errors=True)
+
+
+@contextmanager
+def folder_lock(out: Path):
+    """Hold an exclusive lock on results folder ``out`` (a ``.<name>.lock`` file beside it).
+
+    Writers of one folder take turns only while they merge their files in; the work itself
+    runs in parallel. A lock dies with its process, so a killed run never blocks the next.
+    """
+    lock_path = out.with_name(f".{out.name}.lock")
+    with open(lock_path, "a+b") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+def _remove_stale_scratch(out: Path) -> None:
+    """Scratch folders of runs that were killed (only called under the folder lock)."""
+    for p in out.parent.glob(f".{out.name}.*.partial-*"):
+        try:
+            pid = int(p.name.rsplit("-", 2)[-2])
+        except ValueError:
+            continue
+        if pid != os.getpid() and not _alive(pid):
+            shutil.rmtree(p, ignore_errors=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+@contextmanager
+def staged_output(out_dir: str | Path, scene_name: str, scene_source: str, stage: str):
+    """Yield a :class:`StageWriter`; on success swap a complete new results folder in.
+
+    The stage writes into a scratch folder beside ``out_dir`` (``.<name>.<stage>.partial-<pid>-*``).
+    When it finishes, under the folder's lock, the files of the current ``out_dir`` that the
+    stage did not write are linked into the scratch folder, ``scene.toml`` (the case as read)
+    and, last, ``provenance.json`` (package version, git commit, platform, per-stage
+    statistics and file lists, merged with the folder's) are written, and the scratch folder
+    is swapped in for ``out_dir`` atomically. A failure, an interrupt or a SIGKILL at any
+    moment leaves ``out_dir`` as it was (or absent, if it did not exist): never a mix of old
+    and new files under a provenance that looks complete.
+    """
+    out = check_out_dir(out_dir).absolute()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    scratch = Path(tempfile.mkdtemp(prefix=f".{out.name}.{stage}.partial-{os.getpid()}-", dir=out.parent))
     writer = StageWriter(scratch)
     try:
-        try:
-            yield writer
-        except BaseException:
-            shutil.rmtree(scratch, ignore_errors=True)
-            if created and not any(out.iterdir()):
-                out.rmdir()  # a first run that failed leaves no folder behind
-            raise
+        yield writer
         files = sorted(p.name for p in scratch.iterdir())
-        for name in files:
-            target = out / name
-            if target.is_dir():
-                shutil.rmtree(target)
-            (scratch / name).replace(target)
-        (out / "scene.toml").write_text(scene_source, encoding="utf-8")
-        prov_path = out / "provenance.json"
-        prov = json.loads(prov_path.read_text()) if prov_path.exists() else {}
-        prov.update(
-            {
-                "scene": scene_name,
-                "package": "bearingshaft",
-                "version": __version__,
-                "git_commit": git_commit(),
-                "python": platform.python_version(),
-                "numpy": np.__version__,
-                "machine": platform.machine(),
+        with folder_lock(out):
+            _remove_stale_scratch(out)
+            prov = {}
+            if out.is_dir():
+                for p in out.iterdir():
+                    if p.name in files or p.name in ("provenance.json", "scene.toml"):
+                        continue
+                    if p.is_dir():
+                        shutil.copytree(p, scratch / p.name, copy_function=_link_or_copy)
+                    else:
+                        _link_or_copy(p, scratch / p.name)
+                try:
+                    prov = json.loads((out / "provenance.json").read_text())
+                except (OSError, ValueError):
+                    prov = {}
+            (scratch / "scene.toml").write_text(scene_source, encoding="utf-8")
+            prov.update(
+                {
+                    "scene": scene_name,
+                    "package": "bearingshaft",
+                    "version": __version__,
+                    "git_commit": git_commit(),
+                    "python": platform.python_version(),
+                    "numpy": np.__version__,
+                    "machine": platform.machine(),
+                }
+            )
+            prov.setdefault("stages", {})[stage] = {
+                "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+                "files": files,
+                "stats": _jsonable(writer.stats),
             }
-        )
-        prov.setdefault("stages", {})[stage] = {
-            "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"),
-            "files": files,
-            "stats": _jsonable(writer.stats),
-        }
-        tmp = prov_path.with_suffix(".json.tmp")
-        tmp.write_text(json.dumps(prov, indent=2, sort_keys=True) + "\n", encoding="utf-8")
-        tmp.replace(prov_path)
+            (scratch / "provenance.json").write_text(json.dumps(prov, indent=2, sort_keys=True) + "\n",
+                                                     encoding="utf-8")
+            _fsync_tree(scratch)
+            _swap_in(scratch, out)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
+
+
+def _link_or_copy(src, dst) -> None:
+    """A hard link (the files are never changed in place), a copy where links are not allowed."""
+    try:
+        os.link(src, dst)
+    except OSError:
+        shutil.copy2(src, dst)
+
+
+def _fsync_tree(folder: Path) -> None:
+    """Flush the folder's files to disk before it is swapped in (a crash then finds them whole)."""
+    for p in folder.rglob("*"):
+        if p.is_file():
+            with open(p, "rb") as fh:
+                os.fsync(fh.fileno())

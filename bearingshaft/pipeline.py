@@ -7,10 +7,11 @@ output folder so a failure leaves nothing half-written.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from pathlib import Path
 
-from bearingshaft.output import StageWriter, staged_output
+from bearingshaft.output import StageWriter, check_out_dir, staged_output
 from bearingshaft.scenes import Scene
 
 
@@ -65,7 +66,8 @@ STAGES: dict[str, Callable] = {
 
 
 def run_stage(scene: Scene, stage: str, out_dir: str | Path, progress: bool = True, **options) -> None:
-    """Run one stage of ``scene`` into ``out_dir`` (refused if the scene lacks its table)."""
+    """Run one stage of ``scene`` into ``out_dir`` (refused if the scene lacks its table, or if
+    ``out_dir`` cannot be a results folder, before any work); print one summary line."""
     if stage not in scene.stages:
         tables = {"ringdown": "[ringdown]", "nnm": "[nnm]",
                   "study": "[work_precision], [stiff_cases] or [rom_convergence]",
@@ -75,13 +77,15 @@ def run_stage(scene: Scene, stage: str, out_dir: str | Path, progress: bool = Tr
             f"scene {scene.name!r} has no {tables.get(stage, stage)} table, so it has no {stage} stage "
             f"(its stages: {', '.join(scene.stages) or 'none'})"
         )
+    check_out_dir(out_dir)
+    t0 = time.perf_counter()
     with staged_output(out_dir, scene.name, scene.source, stage) as writer:
         STAGES[stage](scene, writer, progress, **options)
+        n_files = sum(1 for _ in writer.scratch.iterdir())
+    print(f"[{scene.name}] {stage}: {n_files} files in {out_dir} ({time.perf_counter() - t0:.1f} s)", flush=True)
 
 
 def run_scene(scene: Scene, out_dir: str | Path, progress: bool = True) -> None:
     """Every stage the scene asks for, in pipeline order."""
     for stage in scene.stages:
-        if progress:
-            print(f"[{scene.name}] {stage}", flush=True)
         run_stage(scene, stage, out_dir, progress=progress)

@@ -24,6 +24,7 @@ message naming the table and key.
 
 from __future__ import annotations
 
+import difflib
 import math
 import tomllib
 import types
@@ -41,6 +42,22 @@ class SceneError(ValueError):
     """A scene that cannot be read or is invalid; the message is one line."""
 
 
+MAX_COUNT = 100_000  # largest count (energies, orbits, repeats, modes) a scene may ask for
+MAX_MAGNITUDE = 1e100  # no SI quantity here comes near; squares of larger values (energies) overflow
+
+
+def suggest(word: str, known) -> str:
+    """' (did you mean X?)' for the closest of ``known`` to a misspelled ``word``, else ''."""
+    close = difflib.get_close_matches(str(word), list(known), n=1, cutoff=0.6)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def _show(value) -> str:
+    """A value as the user wrote it, cut short: messages stay one line."""
+    text = repr(value).replace("\n", " ")
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
 def _check(cond: bool, msg: str) -> None:
     if not cond:
         raise ValueError(msg)
@@ -50,6 +67,23 @@ def _positive(obj, *names: str) -> None:
     for name in names:
         v = getattr(obj, name)
         _check(v is not None and v > 0 and math.isfinite(v), f"{name} must be > 0, got {v!r}")
+
+
+def _each(obj, name: str, ok, allowed: str) -> None:
+    """Every value of the tuple field ``name`` satisfies ``ok``; else name the first that does not."""
+    for i, v in enumerate(getattr(obj, name)):
+        _check(ok(v), f"{name}[{i}] must be {allowed}, got {v!r}")
+
+
+def _tolerance(obj, *names: str) -> None:
+    """Relative tolerances lie in (0, 1): at rtol >= 1 a solver controls no digit."""
+    for name in names:
+        v = getattr(obj, name)
+        _check(0.0 < v < 1.0, f"{name} must be in (0, 1), got {v!r}")
+
+
+MAX_HARMONICS = 1000  # HB orders beyond this resolve nothing a 20 kHz ringdown shows
+EXPLICIT_OMEGA_DT_MAX = 1.6  # rad: 0.8 x the central-difference limit omega dt = 2 (reduced.transient.explicit)
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,6 +115,9 @@ class RingdownSpec:
     def __post_init__(self) -> None:
         _check(self.method in METHODS, f"method must be one of {', '.join(METHODS)}, got {self.method!r}")
         _positive(self, "duration_s", "sample_rate_hz", "omega_dt", "rtol")
+        _tolerance(self, "rtol")
+        _check(self.omega_dt <= EXPLICIT_OMEGA_DT_MAX, f"omega_dt must be <= {EXPLICIT_OMEGA_DT_MAX} "
+               f"(central difference is unstable past omega dt = 2), got {self.omega_dt!r}")
         _check(self.step_basis in ("top", "contact"), f"step_basis must be top or contact, got {self.step_basis!r}")
         if self.dt_s is not None:
             _positive(self, "dt_s")
@@ -112,8 +149,8 @@ class SymmetrySpec:
 
     def __post_init__(self) -> None:
         _check(len(self.dofs) == 2, f"dofs must name two DOFs, got {self.dofs!r}")
-        for m in self.methods:
-            _check(m in METHODS, f"methods: unknown method {m!r}")
+        _check(self.dofs[0] != self.dofs[1], f"dofs must name two different DOFs, got {self.dofs!r}")
+        _each(self, "methods", lambda m: m in METHODS, f"one of {', '.join(METHODS)}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -142,9 +179,12 @@ class FEPSpec:
     n_shooting: int = 60  # shooting orbits per NNM (log-spaced in energy)
 
     def __post_init__(self) -> None:
-        _check(all(h >= 1 for h in self.harmonics + self.convergence_harmonics), "harmonics must be >= 1")
-        _check(all(n > 2 * self.samples_study_harmonics for n in self.samples),
-               "samples must exceed 2 x samples_study_harmonics")
+        _each(self, "harmonics", lambda h: 1 <= h <= MAX_HARMONICS, f"in [1, {MAX_HARMONICS}]")
+        _each(self, "convergence_harmonics", lambda h: 1 <= h <= MAX_HARMONICS, f"in [1, {MAX_HARMONICS}]")
+        _check(1 <= self.samples_study_harmonics <= MAX_HARMONICS,
+               f"samples_study_harmonics must be in [1, {MAX_HARMONICS}], got {self.samples_study_harmonics!r}")
+        _each(self, "samples", lambda n: n > 2 * self.samples_study_harmonics,
+              f"> 2 x samples_study_harmonics = {2 * self.samples_study_harmonics} (AFT sampling theorem)")
         _positive(self, "energy_max_J")
         _check(self.n_shooting >= 2, f"n_shooting must be >= 2, got {self.n_shooting!r}")
 
@@ -162,7 +202,9 @@ class WorkPrecisionSpec:
     def __post_init__(self) -> None:
         _positive(self, "window_s", "sample_rate_hz")
         _check(len(self.explicit_omega_dt) >= 3, "explicit_omega_dt needs >= 3 values to fit an order")
-        _check(all(v > 0 for v in self.explicit_omega_dt + self.dop853_rtol), "steps and tolerances must be > 0")
+        _each(self, "explicit_omega_dt", lambda v: 0 < v <= EXPLICIT_OMEGA_DT_MAX,
+              f"in (0, {EXPLICIT_OMEGA_DT_MAX}] (central difference is unstable past omega dt = 2)")
+        _each(self, "dop853_rtol", lambda v: 0 < v < 1, "in (0, 1)")
         _check(self.repeats >= 1, f"repeats must be >= 1, got {self.repeats!r}")
 
 
@@ -182,9 +224,11 @@ class StiffCasesSpec:
 
     def __post_init__(self) -> None:
         _positive(self, "duration_s", "sample_rate_hz")
+        _each(self, "k_g", lambda v: v > 0, "> 0 N/m")
+        _each(self, "gap", lambda v: v >= 0, ">= 0 m")
+        _each(self, "c", lambda v: v >= 0, ">= 0 N s/m")
         _check(self.long_duration_s >= 0, f"long_duration_s must be >= 0, got {self.long_duration_s!r}")
-        for m in self.methods:
-            _check(m in METHODS, f"methods: unknown method {m!r}")
+        _each(self, "methods", lambda m: m in METHODS, f"one of {', '.join(METHODS)}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -215,9 +259,11 @@ class RomConvergenceSpec:
     repeats: int = 3  # best-of timing
 
     def __post_init__(self) -> None:
-        _check(len(self.modes) >= 2 and all(m >= 0 for m in self.modes), "modes needs >= 2 counts >= 0")
+        _check(len(self.modes) >= 2, f"modes needs >= 2 counts, got {self.modes!r}")
+        _each(self, "modes", lambda m: m >= 0, ">= 0")
         _positive(self, "window_s", "sample_rate_hz")
-        _check(self.n_compare >= 1 and self.repeats >= 1, "n_compare and repeats must be >= 1")
+        _check(self.n_compare >= 1, f"n_compare must be >= 1, got {self.n_compare!r}")
+        _check(self.repeats >= 1, f"repeats must be >= 1, got {self.repeats!r}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -275,6 +321,7 @@ class Scene:
     model_kind: str
     model: object  # DiscreteParams | RomSpec | fem.model.AssemblyModel
     source: str = field(repr=False)  # the TOML text as read, kept with every result
+    origin: str = field(default="", repr=False)  # where it was read from, for messages
     initial: InitialSpec = InitialSpec()
     modal: ModalSpec | None = None
     ringdown: RingdownSpec | None = None
@@ -311,25 +358,33 @@ def _coerce(value, typ, where: str):
     if origin is tuple:
         (inner, _) = typing.get_args(typ)
         if not isinstance(value, list):
-            raise SceneError(f"{where}: expected a list, got {value!r}")
+            raise SceneError(f"{where}: expected a list, got {_show(value)}")
+        if not value:
+            raise SceneError(f"{where}: the list is empty; give at least one value")
+        if len(value) > MAX_COUNT:
+            raise SceneError(f"{where}: {len(value)} values is too many (at most {MAX_COUNT})")
         return tuple(_coerce(v, inner, f"{where}[{i}]") for i, v in enumerate(value))
     if typ is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise SceneError(f"{where}: expected a number, got {value!r}")
-        if not math.isfinite(value):
-            raise SceneError(f"{where}: must be finite, got {value!r}")
+            raise SceneError(f"{where}: expected a number, got {_show(value)}")
+        if isinstance(value, float) and not math.isfinite(value):
+            raise SceneError(f"{where}: must be finite, got {_show(value)}")
+        if abs(value) > MAX_MAGNITUDE:
+            raise SceneError(f"{where}: {value!r} is out of range (|value| <= {MAX_MAGNITUDE:g})")
         return float(value)
     if typ is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise SceneError(f"{where}: expected an integer, got {value!r}")
+            raise SceneError(f"{where}: expected an integer, got {_show(value)}")
+        if abs(value) > MAX_COUNT:
+            raise SceneError(f"{where}: {value} is too large (at most {MAX_COUNT})")
         return value
     if typ is str:
         if not isinstance(value, str):
-            raise SceneError(f"{where}: expected a string, got {value!r}")
+            raise SceneError(f"{where}: expected a string, got {_show(value)}")
         return value
     if typ is bool:
         if not isinstance(value, bool):
-            raise SceneError(f"{where}: expected true or false, got {value!r}")
+            raise SceneError(f"{where}: expected true or false, got {_show(value)}")
         return value
     raise TypeError(f"unsupported field type {typ!r} at {where}")  # a bug, not bad input
 
@@ -337,12 +392,12 @@ def _coerce(value, typ, where: str):
 def from_table(cls: type, table: dict, where: str):
     """Build dataclass ``cls`` from a TOML table, naming ``where`` in every error."""
     if not isinstance(table, dict):
-        raise SceneError(f"{where}: expected a table, got {table!r}")
+        raise SceneError(f"{where}: expected a table, got {_show(table)}")
     hints = typing.get_type_hints(cls)
     known = [f.name for f in fields(cls)]
     for key in table:
         if key not in known:
-            raise SceneError(f"{where}: unknown key {key!r} (known: {', '.join(known)})")
+            raise SceneError(f"{where}: unknown key {key!r}{suggest(key, known)} (known: {', '.join(known)})")
     kwargs = {k: _coerce(v, hints[k], f"{where} {k}") for k, v in table.items()}
     try:
         return cls(**kwargs)
@@ -359,18 +414,28 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
     top = {"name", "description", "model", *SECTIONS}
     for key in data:
         if key not in top:
-            raise SceneError(f"{origin}: unknown key {key!r} (known: {', '.join(sorted(top))})")
+            raise SceneError(f"{origin}: unknown key {key!r}{suggest(key, top)} (known: {', '.join(sorted(top))})")
     name = data.get("name", default_name)
     description = data.get("description", "")
-    if not isinstance(name, str) or not name or "/" in name:
-        raise SceneError(f"{origin}: name must be a non-empty string without '/', got {name!r}")
+    if not isinstance(name, str) or not name or "/" in name or name.startswith(".") or len(name) > 200:
+        raise SceneError(f"{origin}: name must be a non-empty string without '/' or a leading '.', "
+                         f"got {_show(name)}")
     if not isinstance(description, str):
-        raise SceneError(f"{origin}: description must be a string")
-    model_table = dict(data.get("model", {}))
+        raise SceneError(f"{origin}: description must be a string, got {_show(description)}")
+    model_table = data.get("model", {})
+    if not isinstance(model_table, dict):
+        raise SceneError(f"{origin} [model]: expected a table, got {_show(model_table)}")
+    model_table = dict(model_table)
     kind = model_table.pop("kind", "discrete")
-    if kind not in MODEL_KINDS:
-        raise SceneError(f"{origin} [model] kind: unknown model {kind!r} (known: {', '.join(MODEL_KINDS)})")
-    model = from_table(model_class(kind), model_table, f"{origin} [model]")
+    if not isinstance(kind, str) or kind not in MODEL_KINDS:
+        raise SceneError(f"{origin} [model] kind: unknown model {_show(kind)}{suggest(kind, MODEL_KINDS)} "
+                         f"(known: {', '.join(MODEL_KINDS)})")
+    try:
+        model = from_table(model_class(kind), model_table, f"{origin} [model]")
+    except SceneError as exc:
+        if "kind" in data.get("model", {}):
+            raise
+        raise SceneError(f"{exc}; [model] kind is not given, so {kind!r} is assumed") from None
     sections = {
         key: from_table(cls, data[key], f"{origin} [{key}]") for key, cls in SECTIONS.items() if key in data
     }
@@ -378,7 +443,8 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
         other = [k for k in sections if k != "modal"]
         if other:
             raise SceneError(f"{origin}: model kind {kind!r} takes only a [modal] table, got [{other[0]}]")
-        return Scene(name=name, description=description, model_kind=kind, model=model, source=text, **sections)
+        return Scene(name=name, description=description, model_kind=kind, model=model, source=text, origin=origin,
+                     **sections)
     if "modal" in sections:
         raise SceneError(f"{origin}: [modal] needs a 3-D model (kind = \"assembly\"), not {kind!r}")
     if kind == "rom":
@@ -403,9 +469,15 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
     sym = sections.get("symmetry")
     if sym is not None and any(d not in dof_names for d in sym.dofs):
         raise SceneError(f"{origin} [symmetry] dofs: unknown DOF in {sym.dofs!r}")
+    if spec is not None and "ringdown" in sections and spec.window_s > sections["ringdown"].duration_s:
+        raise SceneError(f"{origin} [spectrogram] window_s: {spec.window_s!r} s is longer than the run "
+                         f"([ringdown] duration_s = {sections['ringdown'].duration_s!r} s)")
+    if "fep" in sections and "nnm" not in sections:
+        raise SceneError(f"{origin}: [fep] needs an [nnm] table (its energy range and grid)")
     if ("spectrogram" in sections or "symmetry" in sections) and "ringdown" not in sections:
         raise SceneError(f"{origin}: [spectrogram] and [symmetry] need a [ringdown] table")
-    return Scene(name=name, description=description, model_kind=kind, model=model, source=text, **sections)
+    return Scene(name=name, description=description, model_kind=kind, model=model, source=text, origin=origin,
+                     **sections)
 
 
 # -- built-in scenes ---------------------------------------------------------------------
@@ -423,11 +495,14 @@ def load_scene(name_or_path: str) -> Scene:
             text = path.read_text(encoding="utf-8")
         except OSError as exc:
             raise SceneError(f"{name_or_path}: cannot read scene file ({exc.strerror})") from None
+        except UnicodeDecodeError:
+            raise SceneError(f"{name_or_path}: not a text file (a scene is TOML in UTF-8)") from None
         return parse_scene(text, path.stem, str(path))
     if name_or_path not in builtin_names():
+        hint = suggest(name_or_path, builtin_names())
         raise SceneError(
-            f"unknown scene {name_or_path!r}: not a file, and no built-in scene has that name "
-            f"(built-in: {', '.join(builtin_names())})"
+            f"unknown scene {name_or_path!r}{hint}: not a file, and no built-in scene has that name"
+            + ("" if hint else f" (built-in: {', '.join(builtin_names())})")
         )
     text = (resources.files("bearingshaft") / "scenes" / f"{name_or_path}.toml").read_text(encoding="utf-8")
     return parse_scene(text, name_or_path, f"scene {name_or_path}")

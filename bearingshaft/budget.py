@@ -1,0 +1,125 @@
+"""Memory before allocation: what each stage of a scene will hold, checked before any work.
+
+Each estimate counts the arrays a stage keeps at its peak, from the scene alone (no model
+is built): samples x channels x 8 bytes for time histories, ((2H + 1) n)^2 x 8 bytes for
+harmonic-balance Jacobians. A scene whose estimate exceeds the memory available (Linux
+``MemAvailable``, less a margin) is refused in one line that gives the estimate and the key
+to change. The estimates are upper bounds within a small factor (``COPIES``), not a
+profile: their job is to stop a 149 GiB request before numpy makes it.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+from bearingshaft.scenes import Scene, SceneError
+
+COPIES = 3  # a stage holds its result, a derived series (energy, points) and a plotting copy
+HEADROOM = 0.8  # of the available memory a scene may plan to use
+JACOBIAN_COPIES = 4  # HB: Jacobian, its LU factors, the AFT blocks and a continuation copy
+FLOAT = 8  # bytes
+
+
+@dataclass(frozen=True, slots=True)
+class Estimate:
+    """Peak bytes one stage will hold, what they are, and the scene key that sizes them."""
+
+    stage: str
+    bytes: float
+    what: str
+    key: str  # "[table] key"
+
+
+def available_bytes() -> int:
+    """Bytes of memory available to a new allocation (MemAvailable on Linux)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_AVPHYS_PAGES")
+
+
+def human(n: float) -> str:
+    """Bytes in B, KiB, MiB, GiB or TiB."""
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if abs(n) < 1024 or unit == "PiB":
+            return f"{n:.3g} {unit}"
+        n /= 1024
+    return f"{n:.3g} PiB"
+
+
+def n_dofs(scene: Scene) -> int:
+    """DOFs of the scene's gap system, known before it is built (3-D models: 0)."""
+    if scene.model_kind == "discrete":
+        return 3
+    if scene.model_kind == "rom":
+        return scene.model.n_modes + 2
+    return 0
+
+
+def _history(samples: float, n: int, runs: int = 1) -> float:
+    """Bytes of ``runs`` sampled histories: t, x (n), v (n), dissipated, energy per sample."""
+    return runs * COPIES * samples * (2 * n + 3) * FLOAT
+
+
+def estimates(scene: Scene) -> list[Estimate]:
+    """What each stage of ``scene`` will hold at its peak."""
+    n = n_dofs(scene)
+    out: list[Estimate] = []
+    if scene.ringdown is not None:
+        r = scene.ringdown
+        samples = r.duration_s * r.sample_rate_hz + 1
+        runs = 1 + (len(set(scene.symmetry.methods) - {r.method}) if scene.symmetry is not None else 0)
+        runs += scene.model_kind == "rom" and r.method != "exact"  # the exact reference run
+        out.append(Estimate("ringdown", _history(samples, n, runs),
+                            f"{samples:.3g} samples x {2 * n + 3} channels x {runs} run(s)",
+                            "[ringdown] duration_s or sample_rate_hz"))
+    if scene.fep is not None:
+        H = max(scene.fep.harmonics + scene.fep.convergence_harmonics + (scene.fep.samples_study_harmonics,))
+        size = (2 * H + 1) * n
+        out.append(Estimate("nnm", JACOBIAN_COPIES * size**2 * FLOAT,
+                            f"HB Jacobians of {size} x {size} (H = {H})", "[fep] harmonics"))
+    if scene.nnm is not None:
+        out.append(Estimate("nnm", COPIES * scene.nnm.n_energy * 64 * FLOAT,
+                            f"{scene.nnm.n_energy} energies", "[nnm] n_energy"))
+    if scene.work_precision is not None:
+        w = scene.work_precision
+        runs = len(w.explicit_omega_dt) + len(w.dop853_rtol) + 1
+        samples = w.window_s * w.sample_rate_hz + 1
+        out.append(Estimate("study", _history(samples, n, runs),
+                            f"{runs} runs of {samples:.3g} samples", "[work_precision] window_s or sample_rate_hz"))
+    if scene.stiff_cases is not None:
+        s = scene.stiff_cases
+        samples = max(s.duration_s, s.long_duration_s) * s.sample_rate_hz + 1
+        out.append(Estimate("study", _history(samples, n, len(s.methods)),
+                            f"{len(s.methods)} runs of {samples:.3g} samples",
+                            "[stiff_cases] duration_s, long_duration_s or sample_rate_hz"))
+    if scene.rom_convergence is not None:
+        c = scene.rom_convergence
+        samples = c.window_s * c.sample_rate_hz + 1
+        out.append(Estimate("study", _history(samples, max(c.modes) + 2, len(c.modes)),
+                            f"{len(c.modes)} models of up to {max(c.modes) + 2} DOFs, {samples:.3g} samples",
+                            "[rom_convergence] window_s or sample_rate_hz"))
+    if scene.verify is not None:
+        v = scene.verify
+        samples = v.duration_s * v.sample_rate_hz + 1
+        out.append(Estimate("verify", _history(samples, n, 3 * 3),
+                            f"3 models x 3 ringdowns of {samples:.3g} samples",
+                            "[verify] duration_s or sample_rate_hz"))
+    return out
+
+
+def check_budget(scene: Scene, available: int | None = None) -> list[Estimate]:
+    """The scene's estimates, or :class:`SceneError` naming the key if one does not fit."""
+    avail = available_bytes() if available is None else available
+    ests = estimates(scene)
+    for e in ests:
+        if e.bytes > HEADROOM * avail:
+            raise SceneError(f"{scene.origin or scene.name} {e.key}: the {e.stage} stage would hold "
+                             f"{human(e.bytes)} ({e.what}), more than the {human(HEADROOM * avail)} it may use "
+                             f"of {human(avail)} available; lower {e.key.split('] ')[1]}")
+    return ests

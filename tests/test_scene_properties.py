@@ -1,0 +1,173 @@
+"""Property-based tests of the scene parser: every key of every built-in scene, mutated.
+
+Each case takes a built-in scene, mutates one key (of a table the scene has, or of the
+dataclass behind it) or one table, and runs ``bearingshaft check`` on it (validation only:
+the scene, its memory estimates and ``--out``; nothing is solved). Mutations that can never
+be valid (a wrong type, NaN, +-inf, an unknown key, a duplicated table) must be refused:
+exit 2, exactly one line on stderr naming the key, no results folder. Mutations that may
+be valid for some keys (negative, zero, huge, missing) must either pass or be refused in
+that same way; never a traceback, never another exit code, never a results folder.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import io
+import math
+import tempfile
+import tomllib
+from importlib import resources
+from pathlib import Path
+
+import pytest
+import tomli_w
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from bearingshaft.cli import main
+from bearingshaft.scenes import MODEL_KINDS, SECTIONS, builtin_names, model_class
+
+ALWAYS_INVALID = ("string", "bool", "list", "table", "nan", "inf", "-inf", "unknown", "duplicate")
+MAYBE_VALID = ("negative", "zero", "huge", "missing")
+
+
+def _scene_data(name: str) -> dict:
+    return tomllib.loads((resources.files("bearingshaft") / "scenes" / f"{name}.toml").read_text())
+
+
+def _targets() -> list[tuple[str, str, str, type | None]]:
+    """(scene, table, key, field type) for every field of every table of every built-in scene."""
+    out = []
+    for name in builtin_names():
+        data = _scene_data(name)
+        for table, cls in SECTIONS.items():
+            if table in data:
+                out += [(name, table, f.name, f.type) for f in dataclasses.fields(cls)]
+        kind = data.get("model", {}).get("kind", "discrete")
+        out += [(name, "model", f.name, f.type) for f in dataclasses.fields(model_class(kind))]
+        out.append((name, "model", "kind", "str"))
+    return out
+
+
+TARGETS = _targets()
+
+
+def _wrong_type(typ: str, kind: str):
+    """A value of the wrong type for a field annotated ``typ`` ('float', 'tuple[int, ...]', ...)."""
+    numeric = "float" in typ or "int" in typ
+    if kind == "string":
+        return "abc" if numeric or typ.startswith("tuple") else 3.5
+    if kind == "bool":
+        return True if typ != "bool" else 1.0
+    if kind == "list":
+        return [1.0] if not typ.startswith("tuple") else 1.0
+    return {"a": 1}  # table
+
+
+def _mutate(value, typ: str, kind: str):
+    """The mutated value of a field (None: delete it)."""
+    if kind in ("string", "bool", "list", "table"):
+        return _wrong_type(typ, kind)
+    is_list = typ.startswith("tuple")
+    is_int = "int" in typ and "float" not in typ
+    is_str = "str" in typ and not ("float" in typ or "int" in typ)
+    if is_str or typ == "bool":
+        return {"nan": math.nan, "inf": math.inf, "-inf": -math.inf, "negative": -1.0, "zero": 0,
+                "huge": 10**30}.get(kind, "")
+    special = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}
+    if kind in special:
+        v = special[kind]
+    elif kind == "negative":
+        v = -1 if is_int else -1.0
+    elif kind == "zero":
+        v = 0 if is_int else 0.0
+    else:  # huge
+        v = 10**12 if is_int else 1e300
+    if is_list:
+        base = list(value) if isinstance(value, (list, tuple)) and value else [v]
+        base[0] = v
+        return base
+    return v
+
+
+def _case_text(scene: str, table: str, key: str, typ, kind: str) -> tuple[str, str]:
+    """(TOML text of the mutated scene, the name the refusal must contain)."""
+    data = _scene_data(scene)
+    typ = str(typ)
+    if kind == "duplicate":
+        text = tomli_w.dumps(data, multiline_strings=False)
+        return text + f"\n[{table}]\n", table
+    tab = data.setdefault(table, {})
+    if kind == "unknown":
+        tab[f"{key}_typo"] = 1.0
+        return tomli_w.dumps(data), f"{key}_typo"
+    current = tab.get(key)
+    if current is None:
+        for f in dataclasses.fields(SECTIONS.get(table) or model_class(data.get("model", {}).get("kind", "discrete"))):
+            if f.name == key and f.default is not dataclasses.MISSING:
+                current = f.default
+    if kind == "missing":
+        tab.pop(key, None)
+    else:
+        tab[key] = _mutate(current, typ, kind)
+    return tomli_w.dumps(data), key
+
+
+def _check(text: str, must_name: str, must_refuse: bool) -> None:
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "case.toml"
+        path.write_text(text)
+        out = Path(tmp) / "results" / "out"
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+            rc = main(["check", "--scene", str(path), "--out", str(out)])
+        lines = err.getvalue().splitlines()
+        assert not out.exists(), "check must write nothing"
+        assert "Traceback" not in err.getvalue()
+        if must_refuse:
+            assert rc == 2, f"accepted ({rc}):\n{text}"
+        assert rc in (0, 2), f"exit {rc}: {err.getvalue()}"
+        if rc == 2:
+            assert len(lines) == 1, f"{len(lines)} lines: {err.getvalue()}"
+            assert must_name in lines[0], f"{lines[0]!r} does not name {must_name!r}"
+        else:
+            assert lines == [], err.getvalue()
+
+
+cases = st.tuples(st.sampled_from(TARGETS), st.sampled_from(ALWAYS_INVALID + MAYBE_VALID))
+
+
+def _run(case) -> None:
+    (scene, table, key, typ), kind = case
+    text, name = _case_text(scene, table, key, typ, kind)
+    _check(text, name, must_refuse=kind in ALWAYS_INVALID)
+
+
+@settings(max_examples=1000, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(cases)
+def test_every_mutated_key_is_refused_in_one_line_or_accepted(case):
+    _run(case)
+
+
+@pytest.mark.slow
+@settings(max_examples=20_000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(cases)
+def test_every_mutated_key_long_run(case):
+    _run(case)
+
+
+def test_every_target_and_mutation_once():
+    """Every (scene, key) with every always-invalid mutation: the exhaustive grid, not a sample."""
+    for target in TARGETS:
+        for kind in ALWAYS_INVALID:
+            _run((target, kind))
+
+
+def test_targets_cover_every_table_and_model_kind():
+    tables = {t for _, t, _, _ in TARGETS}
+    assert tables == {"model", *(s for s in SECTIONS if any(s in _scene_data(n) for n in builtin_names()))}
+    kinds = {_scene_data(n).get("model", {}).get("kind", "discrete") for n in builtin_names()}
+    assert kinds == set(MODEL_KINDS)
+    assert len(TARGETS) > 300
