@@ -16,21 +16,28 @@ from dataclasses import dataclass, fields
 PARTS = ("beam", "tube")
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, kw_only=True)
 class AssemblyGeometry:
-    """Dimensions and mesh controls of the beam and box tube (SI units)."""
+    """Dimensions and mesh controls of the beam and box tube (SI units).
 
-    L: float = 0.1614  # m, half-distance between the spring/tip axes (Table 1)
-    beam_length: float = 0.5167  # m, overall length of the impact beam
-    beam_width: float = 0.0219  # m, along y
-    beam_height: float = 0.0287  # m, along z (the bounce direction)
-    seat_diameter: float = 0.0182  # m, side of the square seat/contact patch (coil diameter)
-    spring_length: float = 0.0406  # m, installed length of a suspension spring
-    tube_clearance_y: float = 0.02  # m, lateral gap between beam side and tube inner wall
-    tube_overhang: float = 0.03  # m, tube length beyond each beam end
-    tube_wall: float = 0.00635  # m, wall thickness of the box tube (1/4 in)
-    element_size: float = 0.012  # m, target element edge along the long directions
-    wall_layers: int = 3  # elements through the tube wall (the paper: at least three)
+    The dimensions have no defaults on purpose: the one source of truth is the model that
+    asks for the mesh, :meth:`fem.model.AssemblyModel.geometry`, which derives the beam's
+    section from its mass and bending stiffness (kappa) and takes its length, seat and spring
+    sizes from the calibration against Table 2. A second set of defaults here would describe a
+    beam that no stage analyses. Only the meshing controls the model does not set have defaults.
+    """
+
+    L: float  # m, half-distance between the spring/tip axes (Table 1)
+    beam_length: float  # m, overall length of the impact beam
+    beam_width: float  # m, along y
+    beam_height: float  # m, along z (the bounce direction)
+    seat_diameter: float  # m, side of the square seat/contact patch (coil diameter)
+    spring_length: float  # m, installed length of a suspension spring
+    tube_clearance_y: float  # m, lateral gap between beam side and tube inner wall
+    tube_overhang: float  # m, tube length beyond each beam end
+    tube_wall: float  # m, wall thickness of the box tube
+    element_size: float  # m, target element edge along the long directions
+    wall_layers: int  # elements through the tube wall (the paper: at least three)
     section_layers: int = 2  # minimum elements across each beam sub-block in y and z
     parts: tuple[str, ...] = PARTS  # which solids to build
 

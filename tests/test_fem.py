@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy.linalg import eigh
@@ -15,7 +17,6 @@ from fem.model import AssemblyModel, build_system, spring_with_seat
 from fem.solid import assemble_solid
 from fem.springs import CoilSpring, rbe3_map, rigid_modes, spring_element
 from geometry.build import build_mesh
-from geometry.params import AssemblyGeometry
 
 COARSE = 0.3  # m, element size: one element per block along x; the pseudo-rigid modes are
 #               mesh-independent to 1e-5 (results/assembly-modal/mesh_convergence.csv)
@@ -23,8 +24,8 @@ COARSE = 0.3  # m, element size: one element per block along x; the pseudo-rigid
 
 # -- the free-free bar against Timoshenko ----------------------------------------------------
 def _bar_modes(element: str, size: float):
-    g = AssemblyGeometry(L=0.05, beam_length=0.2, beam_width=0.02, beam_height=0.02, seat_diameter=0.01,
-                         element_size=size, section_layers=2, parts=("beam",))
+    g = replace(AssemblyModel(layout="beam-free").geometry(), L=0.05, beam_length=0.2, beam_width=0.02,
+                beam_height=0.02, seat_diameter=0.01, element_size=size, section_layers=2)
     mesh = build_mesh(g)
     steel = Material(E=210e9, nu=0.3, rho=7850.0)
     s = assemble_solid(mesh.points, mesh.hexes, [(mesh.part_cells("beam"), steel)], element)

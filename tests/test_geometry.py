@@ -2,22 +2,30 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
+from fem.model import AssemblyModel
 from geometry.build import build_mesh
 from geometry.params import AssemblyGeometry
 
 COARSE = dict(element_size=0.08)
 
 
+def geometry(**kwargs) -> AssemblyGeometry:
+    """The apparatus as the model builds it (its one source of dimensions), coarsely meshed."""
+    return replace(AssemblyModel().geometry(), **{**COARSE, **kwargs})
+
+
 @pytest.fixture(scope="module")
 def mesh():
-    return build_mesh(AssemblyGeometry(**COARSE))
+    return build_mesh(geometry())
 
 
 def test_every_named_group_exists_and_is_not_empty(mesh):
-    g = AssemblyGeometry(**COARSE)
+    g = geometry()
     assert mesh.part_names == ("beam", "tube")
     expected = [f"{p}_seat_{s}" for p in ("beam", "tube") for s in g.seat_centres("beam")]
     expected += [f"beam_contact_{s}" for s in g.seat_centres("beam")]
@@ -31,19 +39,16 @@ def test_every_named_group_exists_and_is_not_empty(mesh):
 
 
 def test_meshed_volumes_equal_closed_forms(mesh):
-    g = AssemblyGeometry(**COARSE)
+    g = geometry()
     # trilinear hexahedra on straight blocks are exact: only round-off remains
     assert mesh.volume("beam") == pytest.approx(g.beam_volume, rel=1e-10)
     assert mesh.volume("tube") == pytest.approx(g.tube_volume, rel=1e-10)
     # beam mass at the paper's value with the section of fem.model
-    from fem.model import AssemblyModel
-
-    m = AssemblyModel()
-    assert 7850.0 * m.geometry().beam_volume == pytest.approx(2.516, rel=1e-12)
+    assert 7850.0 * AssemblyModel().geometry().beam_volume == pytest.approx(2.516, rel=1e-12)
 
 
 def test_three_hexahedra_through_the_tube_wall(mesh):
-    g = AssemblyGeometry(**COARSE)
+    g = geometry()
     top = g.tube_inner_height / 2
     p = mesh.points[mesh.part_nodes("tube")]
     # nodes on one vertical line through the top wall at a seat centre
@@ -52,7 +57,7 @@ def test_three_hexahedra_through_the_tube_wall(mesh):
 
 
 def test_only_the_parts_asked_for_are_built():
-    m = build_mesh(AssemblyGeometry(parts=("beam",), **COARSE))
+    m = build_mesh(geometry(parts=("beam",)))
     assert m.part_names == ("beam",)
     assert not any(k.startswith("tube") for k in m.node_sets)
 
@@ -88,13 +93,22 @@ def test_bad_geometry_is_refused_before_gmsh_runs(monkeypatch, kwargs, message):
 
     monkeypatch.setattr(gmsh, "initialize", boom)
     with pytest.raises(ValueError, match=message):
-        build_mesh(AssemblyGeometry(**kwargs))
+        build_mesh(geometry(**kwargs))
 
 
 def test_model_refuses_a_beam_inside_which_the_seats_do_not_fit():
-    from fem.model import AssemblyModel
-
     with pytest.raises(ValueError, match="must lie on the beam"):
         AssemblyModel(beam_length=0.3)
     with pytest.raises(ValueError, match="tube_mass must be > 0"):
         AssemblyModel(tube_mass=-1.0)
+
+
+def test_the_mesh_has_the_dimensions_of_the_model_that_asked_for_it():
+    # one source of truth: the beam meshed is the model's (length from the calibration, section
+    # from its mass and kappa), not a second set of nominal dimensions in geometry.params
+    m = AssemblyModel(layout="beam-free", element_size=0.1)
+    b, h = m.beam_section
+    p = build_mesh(m.geometry()).points
+    np.testing.assert_allclose(np.ptp(p, axis=0), [m.beam_length, b, h], rtol=1e-9)
+    with pytest.raises(TypeError, match="required keyword-only"):
+        AssemblyGeometry(element_size=0.1)  # no dimensions of its own to fall back on
