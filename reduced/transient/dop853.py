@@ -10,13 +10,17 @@ discontinuity of the force's derivative as a user of ``solve_ivp`` would.
 
 from __future__ import annotations
 
-import time
+import math
 
 import numpy as np
-from scipy.integrate import solve_ivp
+from scipy.integrate import DOP853
+from scipy.optimize import brentq
 
 from reduced.models.gaps import GapSystem
-from reduced.transient.result import RingdownResult, sample_times
+from reduced.transient import _checks as _check
+from reduced.transient.result import RingdownResult, RingdownStream, sample_count
+
+EPS = np.finfo(float).eps
 
 
 def _rhs_factory(system: GapSystem):
@@ -32,6 +36,152 @@ def _rhs_factory(system: GapSystem):
     return rhs
 
 
+def _last_sample_at_or_before(t: float, fs: float, N: int) -> int:
+    """Largest j < N with j / fs <= t (-1 if none): ``searchsorted(arange(N) / fs, t, "right") - 1``
+    without the grid."""
+    j = min(max(int(math.floor(t * fs)), -1), N - 1)
+    while j + 1 < N and (j + 1) / fs <= t:
+        j += 1
+    while j >= 0 and j / fs > t:
+        j -= 1
+    return j
+
+
+def _find_active_events(g, g_new, direction) -> np.ndarray:
+    """Events whose function changed sign in the step, in their direction (as ``solve_ivp``)."""
+    g, g_new = np.asarray(g), np.asarray(g_new)
+    up = (g <= 0) & (g_new >= 0)
+    down = (g >= 0) & (g_new <= 0)
+    mask = up & (direction > 0) | down & (direction < 0) | (up | down) & (direction == 0)
+    return np.nonzero(mask)[0]
+
+
+def stream_dop853(
+    system: GapSystem,
+    x0: np.ndarray,
+    v0: np.ndarray,
+    duration_s: float,
+    sample_rate_hz: float,
+    *,
+    rtol: float = 1e-10,
+    atol: float | None = None,
+    events: bool = False,
+    chunk_samples: int | None = None,
+    progress=None,
+) -> RingdownStream:
+    """DOP853 free response chunk by chunk (see :func:`integrate_dop853`).
+
+    SciPy's ``DOP853`` stepper is driven here exactly as ``solve_ivp`` drives it (the same
+    steps, dense output at the samples, events located by ``brentq`` on the dense output
+    to 4 eps), but it lives across chunks, so the samples do not depend on the chunking.
+    """
+    _check.gap_system(system)
+    n = system.n
+    x0 = _check.vector("x0", x0, n)
+    v0 = _check.vector("v0", v0, n)
+    duration_s = _check.positive("duration_s", duration_s, "s")
+    sample_rate_hz = _check.positive("sample_rate_hz", sample_rate_hz, "Hz")
+    rtol = _check.number("rtol", rtol, lo=0.0, hi=1.0)
+    x_scale = max(float(np.max(np.abs(system.offset), initial=0.0)), 1e-3)
+    atol = rtol * x_scale if atol is None else _check.positive("atol", atol, "m")
+    events = _check.flag("events", events)
+    _check.callback("progress", progress)
+    N = sample_count(duration_s, sample_rate_hz)
+    chunk_samples = N if chunk_samples is None else _check.integer("chunk_samples", chunk_samples)
+    fs = sample_rate_hz
+    T = (N - 1) / fs
+    z0 = np.concatenate([x0, v0, [0.0]])
+    stats = {"nfev": 0, "n_events": 0, "rtol": rtol, "atol": atol, "n_steps": 0, "n_legs": 1}
+    Minv = np.linalg.inv(system.M)
+
+    def blocks():
+        buf = np.empty((min(chunk_samples, N), 2 * n + 1))
+        j0, filled = 0, 0  # the buffer holds samples j0 .. j0 + filled - 1
+
+        def put(sol, upto: int):
+            """Samples j0 + filled .. upto from the dense output ``sol``; yields full buffers."""
+            nonlocal buf, j0, filled
+            while j0 + filled <= upto:
+                k = min(buf.shape[0] - filled, upto + 1 - j0 - filled)
+                tt = np.arange(j0 + filled, j0 + filled + k) / fs
+                buf[filled : filled + k] = sol(tt).T if sol is not None else z0
+                filled += k
+                if filled == buf.shape[0]:
+                    yield j0, buf[:, :n], buf[:, n : 2 * n], buf[:, 2 * n]
+                    j0 += filled
+                    filled = 0
+                    buf = np.empty((min(chunk_samples, N - j0), 2 * n + 1))
+
+        if N == 1:
+            yield from put(None, 0)
+            return
+        active = system.penetration(x0) > 0.0 if events else None
+        t0, z = 0.0, z0
+        shown = 0
+        while True:
+            if events:
+                Ks, Fs = system.state_matrices(active)
+
+                def leg(t, zz, Ks=Ks, Fs=Fs):
+                    x, v = zz[:n], zz[n : 2 * n]
+                    a = Minv @ (Fs - Ks @ x - system.C @ v)
+                    return np.concatenate([v, a, [v @ system.C @ v]])
+
+                funcs = system.crossing_events(active)
+                direction = np.array([f.direction for f in funcs])
+                g = [f(t0, z) for f in funcs]
+                fun = leg
+            else:
+                fun = _rhs_factory(system)
+            solver = DOP853(fun, t0, z, T, rtol=rtol, atol=atol, vectorized=False)
+            while True:
+                solver.step()
+                if solver.status == "failed":
+                    raise RuntimeError(f"DOP853 failed at t = {solver.t:.6g} s: step size too small")
+                finished = solver.status == "finished"
+                stats["n_steps"] += 1
+                t, sol = solver.t, None
+                je = -1
+                if events:
+                    g_new = [f(t, solver.y) for f in funcs]
+                    act = _find_active_events(g, g_new, direction)
+                    if act.size:
+                        sol = solver.dense_output()
+                        roots = np.array([brentq(lambda tt, f=funcs[e]: f(tt, sol(tt)), solver.t_old, t,
+                                                 xtol=4 * EPS, rtol=4 * EPS) for e in act])
+                        first = int(np.argsort(roots, kind="stable")[0])
+                        je, t = int(act[first]), float(roots[first])
+                    g = g_new
+                upto = _last_sample_at_or_before(t, fs, N)
+                if upto >= j0 + filled:
+                    if sol is None:
+                        sol = solver.dense_output()
+                    yield from put(sol, upto)
+                if progress is not None and int(1000 * t / T) > shown:
+                    shown = int(1000 * t / T)
+                    progress(t / T)
+                if je >= 0:
+                    z = sol(t)
+                    t0 = t
+                    active = system.state_after_crossing(active, je, z[:n], z[n : 2 * n], 1e-9 * x_scale)
+                    stats["n_events"] += 1
+                    stats["n_legs"] += 1
+                    stats["nfev"] += solver.nfev
+                    break
+                if finished:
+                    stats["nfev"] += solver.nfev
+                    if j0 + filled != N:
+                        raise RuntimeError(f"internal: {N - j0 - filled} DOP853 samples not filled")
+                    if filled:
+                        yield j0, buf[:filled, :n], buf[:filled, n : 2 * n], buf[:filled, 2 * n]
+                    return
+
+    def tolerance(amp: float) -> float:
+        return float(atol + rtol * amp)
+
+    return RingdownStream(system, "dop853", N, sample_rate_hz, chunk_samples, blocks(), tolerance, stats)
+
+
 def integrate_dop853(
     system: GapSystem,
     x0: np.ndarray,
@@ -44,71 +194,14 @@ def integrate_dop853(
     events: bool = False,
     progress=None,
 ) -> RingdownResult:
-    """DOP853 free response; ``atol`` defaults to rtol x (largest stop offset or 1e-3 m)."""
-    t_wall = time.perf_counter()
-    n = system.n
-    ts = sample_times(duration_s, sample_rate_hz)
-    x_scale = max(float(np.max(np.abs(system.offset), initial=0.0)), 1e-3)
-    if atol is None:
-        atol = rtol * x_scale
-    rhs = _rhs_factory(system)
-    z0 = np.concatenate([np.asarray(x0, float), np.asarray(v0, float), [0.0]])
-    nfev = 0
-    n_events = 0
-    if not events:
-        sol = solve_ivp(rhs, (0.0, ts[-1]), z0, method="DOP853", t_eval=ts, rtol=rtol, atol=atol)
-        if sol.status != 0:
-            raise RuntimeError(f"DOP853 failed: {sol.message}")
-        Z = sol.y.T
-        nfev = sol.nfev
-        n_steps = sol.t.size
-    else:
-        Z = np.empty((ts.size, 2 * n + 1))
-        Minv = np.linalg.inv(system.M)
-        active = system.penetration(z0[:n]) > 0.0
-        t0, z, i = 0.0, z0, 0
-        n_steps = 0
-        while True:
-            Ks, Fs = system.state_matrices(active)
+    """DOP853 free response of ``system`` from (x0, v0), held in memory.
 
-            def leg(t, zz, Ks=Ks, Fs=Fs):
-                x, v = zz[:n], zz[n : 2 * n]
-                a = Minv @ (Fs - Ks @ x - system.C @ v)
-                return np.concatenate([v, a, [v @ system.C @ v]])
-
-            funcs = system.crossing_events(active)
-            t_eval = ts[i:]
-            sol = solve_ivp(leg, (t0, ts[-1]), z, method="DOP853", t_eval=t_eval[t_eval >= t0],
-                            rtol=rtol, atol=atol, events=funcs)
-            k = len(sol.t)
-            if k:
-                Z[i : i + k] = np.asarray(sol.y).T
-            i += k
-            nfev += sol.nfev
-            n_steps += 1
-            if sol.status == 1:
-                je = int(np.argmin([e[0] if e.size else np.inf for e in sol.t_events]))
-                t0 = float(sol.t_events[je][0])
-                z = sol.y_events[je][0].copy()
-                active = system.state_after_crossing(active, je, z[:n], z[n : 2 * n], 1e-9 * x_scale)
-                n_events += 1
-                if progress is not None:
-                    progress(t0 / ts[-1])
-                continue
-            if sol.status != 0:
-                raise RuntimeError(f"DOP853 failed: {sol.message}")
-            break
-    if progress is not None:
-        progress(1.0)
-    x, v, W = Z[:, :n], Z[:, n : 2 * n], Z[:, 2 * n]
-    return RingdownResult(
-        system=system,
-        t=ts,
-        x=x,
-        v=v,
-        dissipated=W,
-        method="dop853",
-        tolerance=float(atol + rtol * np.max(np.abs(x))),
-        stats={"nfev": nfev, "n_events": n_events, "rtol": rtol, "atol": atol,
-               "wall_s": time.perf_counter() - t_wall, "n_steps": n_steps},
-    )
+    Parameters
+    ----------
+    rtol : relative tolerance, in (0, 1)
+    atol : m, absolute tolerance (> 0); default rtol x (largest stop offset or 1e-3 m)
+    events : restart at every stop crossing (the reference mode, see the module docstring)
+    progress : None or a callable taking the fraction done
+    """
+    return stream_dop853(system, x0, v0, duration_s, sample_rate_hz, rtol=rtol, atol=atol, events=events,
+                         progress=progress).collect()

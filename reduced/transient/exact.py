@@ -23,7 +23,7 @@ without a state change. The dissipated work int v^T C v dt is integrated in clos
 
 from __future__ import annotations
 
-import time
+import math
 from dataclasses import dataclass
 
 import numba as nb
@@ -31,7 +31,8 @@ import numpy as np
 from scipy.linalg import eig, eigh, solve
 
 from reduced.models.gaps import GapSystem
-from reduced.transient.result import RingdownResult, sample_times
+from reduced.transient import _checks as _check
+from reduced.transient.result import RingdownResult, RingdownStream, sample_count
 
 EPS = np.finfo(float).eps
 QTOL_REL = 64.0 * EPS  # q is a sum of ~2n terms: round-off of its evaluation, relative
@@ -112,23 +113,42 @@ def state_table(system: GapSystem) -> StateTable:
 
 
 @nb.njit(cache=True)
-def _phi1(z, tau):
-    """int_0^tau exp(z t) dt for complex z, accurate near z = 0."""
-    zt = z * tau
-    if abs(zt) < 1e-3:
-        return tau * (1.0 + zt / 2.0 + zt * zt / 6.0 + zt * zt * zt / 24.0)
-    return (np.exp(zt) - 1.0) / z
+def _work_setup(X, C, lam, n, G, Gz, az):
+    """Per segment: G[i, k] = a_i^T C a_k (v = sum_i a_i e^{lam_i t}, a_i = X[n:, i]), and for
+    the primitive of e^{(lam_i + lam_k) t}: Gz = G / (lam_i + lam_k), az = |lam_i + lam_k|."""
+    N = lam.shape[0]
+    CX = np.zeros((n, N), np.complex128)
+    for a in range(n):
+        for b in range(n):
+            if C[a, b] != 0.0:
+                for k in range(N):
+                    CX[a, k] += C[a, b] * X[n + b, k]
+    for i in range(N):
+        for k in range(i, N):
+            acc = 0.0 + 0.0j
+            for a in range(n):
+                acc += X[n + a, i] * CX[a, k]
+            G[i, k] = acc
+            z = lam[i] + lam[k]
+            az[i, k] = abs(z)
+            Gz[i, k] = acc / z if z != 0.0 else 0.0
 
 
 @nb.njit(cache=True)
-def _work(G, lam, tau):
-    """int_0^tau v^T C v dt given G[i, k] = a_i^T C a_k (v = sum_i a_i e^{lam_i t})."""
+def _work(G, Gz, az, lam, tau, e):
+    """int_0^tau v^T C v dt = sum_{i,k} G_ik (e^{(lam_i + lam_k) tau} - 1) / (lam_i + lam_k), with
+    e_i = e^{lam_i tau}; G is symmetric (upper triangle used); a Taylor series where |z tau| < 1e-3."""
     N = lam.shape[0]
     acc = 0.0 + 0.0j
     for i in range(N):
-        for k in range(N):
+        for k in range(i, N):
             if G[i, k] != 0.0:
-                acc += G[i, k] * _phi1(lam[i] + lam[k], tau)
+                zt = (lam[i] + lam[k]) * tau
+                if az[i, k] * tau < 1e-3:
+                    term = G[i, k] * tau * (1.0 + zt / 2.0 + zt * zt / 6.0 + zt * zt * zt / 24.0)
+                else:
+                    term = Gz[i, k] * (e[i] * e[k] - 1.0)
+                acc += term if k == i else 2.0 * term
     return acc.real
 
 
@@ -211,32 +231,62 @@ def _stop_series(B, j, sgn, offset_j, yp_s, X, coef):
 
 
 @nb.njit(cache=True)
-def _eval_state(yp, X, lam, tau, out):
-    N = lam.shape[0]
+def _exponentials(lam, tau, e):
+    """e_i = exp(lam_i tau)."""
+    for i in range(lam.shape[0]):
+        e[i] = np.exp(lam[i] * tau)
+
+
+@nb.njit(cache=True)
+def _eval_with(yp, X, e, out):
+    """y = y_p + Re sum_i X[:, i] e_i."""
+    N = e.shape[0]
     for r in range(N):
         acc = 0.0
         for i in range(N):
-            acc += (X[r, i] * np.exp(lam[i] * tau)).real
+            acc += (X[r, i] * e[i]).real
         out[r] = yp[r] + acc
 
 
 @nb.njit(cache=True)
+def _eval_state(yp, X, lam, tau, out):
+    """y(tau) = y_p + Re sum_i X[:, i] e^{lam_i tau}."""
+    e = np.empty(lam.shape[0], np.complex128)
+    _exponentials(lam, tau, e)
+    _eval_with(yp, X, e, out)
+
+
+BUFFER_FULL = 1  # _exact_kernel status: the sample buffer is full inside the present segment
+
+
+@nb.njit(cache=True)
 def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
-                  y, active, t, t_end, t_samples, i_samp, out_y, out_W, W, hmin, floor, max_events):
-    """March events from t to t_end; fills samples from index i_samp. Returns the new state."""
+                  y, active, t, t_end, t_samples, i_samp, t_after, out_y, out_W, W, hmin, floor, max_events,
+                  n_stuck):
+    """March events from t to t_end, filling the sample buffer ``t_samples`` from index i_samp.
+
+    (y, active, t, W) is the state at the start of a segment (an event or a piece boundary)
+    and is advanced in place segment by segment. When the buffer fills inside a segment that
+    still has samples before its end (the next sample, at ``t_after``, lies in it), the
+    kernel returns BUFFER_FULL *without* advancing that segment: called again with a new
+    buffer it recomputes the segment from the same state, so the samples do not depend on
+    the buffer size. Returns (t, W, i_samp, n_events, n_iter, status, n_stuck).
+    """
     n = B.shape[1]
     m = B.shape[0]
     N = 2 * n
     ns = t_samples.shape[0]
     X = np.empty((N, N), np.complex128)
     G = np.zeros((N, N), np.complex128)
+    Gz = np.zeros((N, N), np.complex128)
+    az = np.zeros((N, N))
     coef = np.empty(N, np.complex128)
+    e = np.empty(N, np.complex128)
     werr = np.empty(N)
     ytmp = np.empty(N)
     n_events = 0
     n_iter = 0
     status = 0
-    n_stuck = 0  # consecutive events with no progress in time
     while True:
         s = _state_index(active)
         if not valid[s]:
@@ -254,14 +304,7 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
             for r in range(N):
                 X[r, i] = V[s, r, i] * wi
         if damped:
-            for i in range(N):
-                for k in range(N):
-                    acc = 0.0 + 0.0j
-                    for a in range(n):
-                        for b in range(n):
-                            if C[a, b] != 0.0:
-                                acc += X[n + a, i] * C[a, b] * X[n + b, k]
-                    G[i, k] = acc
+            _work_setup(X, C, lam_s, n, G, Gz, az)
         tau_ev = t_end - t
         j_ev = -1
         for j in range(m):
@@ -288,16 +331,21 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
         t_next = t_end if j_ev < 0 else t + tau_ev
         while i_samp < ns and t_samples[i_samp] <= t_next:
             tau = max(t_samples[i_samp] - t, 0.0)
-            _eval_state(yp[s], X, lam_s, tau, ytmp)
+            _exponentials(lam_s, tau, e)
+            _eval_with(yp[s], X, e, ytmp)
             for r in range(N):
                 out_y[i_samp, r] = ytmp[r]
-            out_W[i_samp] = W + (_work(G, lam_s, tau) if damped else 0.0)
+            out_W[i_samp] = W + (_work(G, Gz, az, lam_s, tau, e) if damped else 0.0)
             i_samp += 1
-        _eval_state(yp[s], X, lam_s, tau_ev, ytmp)
+        if i_samp == ns and t_after <= t_next:
+            status = BUFFER_FULL
+            break
+        _exponentials(lam_s, tau_ev, e)
+        _eval_with(yp[s], X, e, ytmp)
         for r in range(N):
             y[r] = ytmp[r]
         if damped:
-            W += _work(G, lam_s, tau_ev)
+            W += _work(G, Gz, az, lam_s, tau_ev, e)
         n_stuck = n_stuck + 1 if tau_ev == 0.0 else 0
         if n_stuck > 8 * m:
             status = -4
@@ -317,7 +365,126 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
         if n_events >= max_events:
             status = -1
             break
-    return t, W, i_samp, n_events, n_iter, status
+    return t, W, i_samp, n_events, n_iter, status, n_stuck
+
+
+MAX_PIECE_S = 1.0  # s: the closed form is restarted from the state at least this often
+PIECES = 50  # ... and at least this many times a run (the progress granularity)
+
+
+def _check_status(status: int, t: float, max_events: int) -> None:
+    if status == -1:
+        raise ExactIntegratorError(
+            f"more than {max_events} contact events before t = {t:.6g} s: chattering at "
+            "a stop; raise max_events or damp the contact"
+        )
+    if status == -2:
+        raise ExactIntegratorError("the motion reached an infeasible contact state")
+    if status == -4:
+        raise ExactIntegratorError(
+            f"contact state flips back and forth at t = {t:.6g} s without progress (round-off "
+            "at a stop exceeds the event tolerance); use method 'explicit'"
+        )
+    if status == -3:
+        raise ExactIntegratorError(f"event search did not converge near t = {t:.6g} s")
+
+
+def stream_exact(
+    system: GapSystem,
+    x0: np.ndarray,
+    v0: np.ndarray,
+    duration_s: float,
+    sample_rate_hz: float,
+    *,
+    chunks: int = PIECES,
+    max_events: int = 50_000_000,
+    chunk_samples: int | None = None,
+    progress=None,
+) -> RingdownStream:
+    """Exact (event-driven, closed-form) free response of ``system`` from (x0, v0), chunk by chunk.
+
+    See :func:`integrate_exact`; the samples come in chunks of at most ``chunk_samples``
+    (default: the whole run in one). The run is cut into ``max(chunks, duration_s /
+    MAX_PIECE_S)`` equal pieces, at whose ends the closed form restarts from the state
+    (y, contact state, W): the piece grid fixes every arithmetic operation, so the samples
+    are the same bits whatever ``chunk_samples`` is.
+    """
+    _check.gap_system(system)
+    n = system.n
+    x0 = _check.vector("x0", x0, n)
+    v0 = _check.vector("v0", v0, n)
+    duration_s = _check.positive("duration_s", duration_s, "s")
+    sample_rate_hz = _check.positive("sample_rate_hz", sample_rate_hz, "Hz")
+    chunks = _check.integer("chunks", chunks)
+    max_events = _check.integer("max_events", max_events)
+    _check.callback("progress", progress)
+    N = sample_count(duration_s, sample_rate_hz)
+    chunk_samples = N if chunk_samples is None else _check.integer("chunk_samples", chunk_samples)
+    original, system = system, system.fold_zero_gap_tips()
+    table = state_table(system)
+    omega_max = system.omega_max()
+    hmin = HMIN_PERIODS / omega_max
+    y = np.concatenate([x0, v0])
+    active = system.penetration(y[:n]) > 0.0
+    # motion below REST_FLOOR of the initial one (in m) is round-off: see _first_root
+    x_scale = np.abs(system.B) @ (np.abs(y[:n]) + np.abs(y[n:]) / omega_max)
+    floor = REST_FLOOR * float(np.max(x_scale, initial=0.0))
+    t_last = (N - 1) / sample_rate_hz
+    t_end = max(duration_s, t_last)
+    n_pieces = max(chunks, math.ceil(t_end / MAX_PIECE_S))
+    stats = {"n_events": 0, "n_steps": 1, "n_march": 0, "n_states": int(table.valid.sum()),
+             "cond_V": float(np.max(table.cond)), "n_pieces": n_pieces}
+    offset_max = float(np.max(np.abs(system.offset), initial=0.0))
+
+    def blocks():
+        nonlocal y, active
+        t, W, n_events, n_iter = 0.0, 0.0, 0, 0
+        j0 = 0
+        k = min(chunk_samples, N)
+        ts = np.arange(j0, j0 + k) / sample_rate_hz
+        out_y, out_W = np.empty((k, 2 * n)), np.empty(k)
+        i = 0
+        for c in range(n_pieces):
+            # np.linspace(0, t_end, n_pieces + 1)[c + 1], one bound at a time (the same bits)
+            bound = t_end if c == n_pieces - 1 else (c + 1) * (t_end / n_pieces)
+            n_stuck = 0
+            while True:
+                t_after = (j0 + k) / sample_rate_hz if j0 + k < N else np.inf
+                t, W, i, ne, ni, status, n_stuck = _exact_kernel(
+                    table.lam, table.V, table.Vinv, table.yp, table.valid, system.B, system.offset,
+                    system.side, system.tip, system.C, not system.undamped, y, active, t, bound, ts, i, t_after,
+                    out_y, out_W, W, hmin, floor, max_events - n_events, n_stuck,
+                )
+                n_events += ne
+                n_iter += ni
+                stats.update(n_events=n_events, n_steps=n_events + 1, n_march=n_iter)
+                if status == BUFFER_FULL:
+                    yield j0, *_finite(out_y, out_W, n)
+                    j0 += k
+                    k = min(chunk_samples, N - j0)
+                    ts = np.arange(j0, j0 + k) / sample_rate_hz
+                    out_y, out_W = np.empty((k, 2 * n)), np.empty(k)
+                    i = 0
+                    continue
+                _check_status(status, t, max_events)
+                break
+            if progress is not None:
+                progress((c + 1) / n_pieces)
+        if i != k or j0 + k != N:  # the last sample sits on t_end up to round-off
+            raise ExactIntegratorError(f"internal: {N - j0 - i} samples not filled")
+        yield j0, *_finite(out_y, out_W, n)
+
+    def tolerance(amp: float) -> float:
+        # evaluating V diag(e^{lam t}) V^-1 y loses cond(V) eps |y| at each event
+        return float(np.max(table.cond)) * EPS * max(amp, offset_max)
+
+    return RingdownStream(original, "exact", N, sample_rate_hz, chunk_samples, blocks(), tolerance, stats)
+
+
+def _finite(out_y: np.ndarray, out_W: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    if not np.all(np.isfinite(out_y)):
+        raise ExactIntegratorError("non-finite state: the contact states are ill-conditioned")
+    return out_y[:, :n], out_y[:, n:], out_W
 
 
 def integrate_exact(
@@ -327,7 +494,7 @@ def integrate_exact(
     duration_s: float,
     sample_rate_hz: float,
     *,
-    chunks: int = 50,
+    chunks: int = PIECES,
     max_events: int = 50_000_000,
     progress=None,
 ) -> RingdownResult:
@@ -337,72 +504,14 @@ def integrate_exact(
     ----------
     system : the gap system (every contact state must be a stable oscillator)
     x0, v0 : (n,) initial displacement [m] and velocity [m/s]
-    duration_s : s, length of the run
+    duration_s : s, length of the run (> 0)
     sample_rate_hz : Hz, output sampling (the solution itself is exact between samples)
-    chunks : the run is split into this many pieces to drive ``progress`` (a callable
-        taking the fraction done)
+    chunks : the run is split into at least this many pieces (and pieces of at most
+        ``MAX_PIECE_S``), at whose ends the closed form restarts and ``progress`` (a
+        callable taking the fraction done) is called
+    max_events : refuse (ExactIntegratorError) a run with more contact events than this
+
+    The whole run is held in memory; :func:`stream_exact` gives it chunk by chunk.
     """
-    t_wall = time.perf_counter()
-    n = system.n
-    original, system = system, system.fold_zero_gap_tips()
-    table = state_table(system)
-    omega_max = system.omega_max()
-    hmin = HMIN_PERIODS / omega_max
-    y = np.concatenate([np.asarray(x0, float), np.asarray(v0, float)])
-    active = system.penetration(y[:n]) > 0.0
-    # motion below REST_FLOOR of the initial one (in m) is round-off: see _first_root
-    x_scale = np.abs(system.B) @ (np.abs(y[:n]) + np.abs(y[n:]) / omega_max)
-    floor = REST_FLOOR * float(np.max(x_scale, initial=0.0))
-    ts = sample_times(duration_s, sample_rate_hz)
-    out_y = np.empty((ts.size, 2 * n))
-    out_W = np.empty(ts.size)
-    t, W, i_samp, n_events, n_iter = 0.0, 0.0, 0, 0, 0
-    bounds = np.linspace(0.0, max(duration_s, ts[-1]), chunks + 1)
-    for c in range(chunks):
-        t, W, i_samp, ne, ni, status = _exact_kernel(
-            table.lam, table.V, table.Vinv, table.yp, table.valid, system.B, system.offset,
-            system.side, system.tip, system.C, not system.undamped, y, active, t, bounds[c + 1], ts,
-            i_samp, out_y, out_W, W, hmin, floor, max_events - n_events,
-        )
-        n_events += ne
-        n_iter += ni
-        if status == -1:
-            raise ExactIntegratorError(
-                f"more than {max_events} contact events before t = {t:.6g} s: chattering at "
-                "a stop; raise max_events or damp the contact"
-            )
-        if status == -2:
-            raise ExactIntegratorError("the motion reached an infeasible contact state")
-        if status == -4:
-            raise ExactIntegratorError(
-                f"contact state flips back and forth at t = {t:.6g} s without progress (round-off "
-                "at a stop exceeds the event tolerance); use method 'explicit'"
-            )
-        if status == -3:
-            raise ExactIntegratorError(f"event search did not converge near t = {t:.6g} s")
-        if progress is not None:
-            progress((c + 1) / chunks)
-    if i_samp != ts.size:  # the last sample sits on t_end up to round-off
-        raise ExactIntegratorError(f"internal: {ts.size - i_samp} samples not filled")
-    if not np.all(np.isfinite(out_y)):
-        raise ExactIntegratorError("non-finite state: the contact states are ill-conditioned")
-    x, v = out_y[:, :n], out_y[:, n:]
-    amp = float(np.max(np.abs(x))) if x.size else 0.0
-    return RingdownResult(
-        system=original,
-        t=ts,
-        x=x,
-        v=v,
-        dissipated=out_W,
-        method="exact",
-        # evaluating V diag(e^{lam t}) V^-1 y loses cond(V) eps |y| at each event
-        tolerance=float(np.max(table.cond)) * EPS * max(amp, float(np.max(np.abs(system.offset), initial=0.0))),
-        stats={
-            "n_events": n_events,
-            "n_steps": n_events + 1,
-            "n_march": n_iter,
-            "n_states": int(table.valid.sum()),
-            "cond_V": float(np.max(table.cond)),
-            "wall_s": time.perf_counter() - t_wall,
-        },
-    )
+    return stream_exact(system, x0, v0, duration_s, sample_rate_hz, chunks=chunks, max_events=max_events,
+                        progress=progress).collect()

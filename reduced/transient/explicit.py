@@ -20,14 +20,14 @@ stability: omega_max dt = ``DEFAULT_OMEGA_DT``.
 from __future__ import annotations
 
 import math
-import time
 
 import numba as nb
 import numpy as np
 from scipy.linalg import eigh
 
 from reduced.models.gaps import GapSystem
-from reduced.transient.result import RingdownResult, sample_times
+from reduced.transient import _checks as _check
+from reduced.transient.result import RingdownResult, RingdownStream, sample_count
 
 SWITCHING_SAFETY = 0.8  # of the textbook limit: CD with switching contact fails near 1.6
 DEFAULT_OMEGA_DT = 0.05  # rad: 2.6e-2 relative error over the 0.05 s work-precision window
@@ -43,6 +43,7 @@ class StepTooLargeError(ValueError):
 
 def stability_limit(system: GapSystem) -> tuple[float, float]:
     """(omega_max [rad/s], dt_crit [s]) of the closed state, with damping in the top mode."""
+    _check.gap_system(system)
     lam, phi = eigh(system.closed_stiffness(), system.M)
     omega = math.sqrt(max(lam[-1], 0.0))
     top = phi[:, -1]
@@ -55,10 +56,11 @@ def default_step(system: GapSystem, omega_dt: float = DEFAULT_OMEGA_DT, step_bas
                  ) -> tuple[float, float, float, float]:
     """(dt, omega_max, omega_ref, dt_limit): the step :func:`integrate_explicit` takes unless given one,
     before it is rounded to the output interval (see its docstring for ``step_basis``)."""
-    if step_basis not in STEP_BASES:
-        raise ValueError(f"step_basis must be one of {', '.join(STEP_BASES)}, got {step_basis!r}")
-    if not (0.0 < omega_dt <= SWITCHING_SAFETY * 2.0):
-        raise StepTooLargeError(f"omega_dt must be in (0, {2 * SWITCHING_SAFETY}], got {omega_dt!r}")
+    _check.gap_system(system)
+    step_basis = _check.choice("step_basis", step_basis, STEP_BASES)
+    if not (_check._is_number(omega_dt) and 0.0 < omega_dt <= SWITCHING_SAFETY * 2.0):
+        raise StepTooLargeError(f"omega_dt must be a finite number in (0, {2 * SWITCHING_SAFETY:g}] rad "
+                                f"(central difference is unstable past omega dt = 2), got {_check.show(omega_dt)}")
     omega, dt_crit = stability_limit(system)
     limit = SWITCHING_SAFETY * dt_crit
     if omega <= 0:
@@ -76,6 +78,8 @@ def contact_omega(system: GapSystem, n: int = 3) -> float:
     the discrete model's omega_max does, so a stiff penalty is still resolved."""
     from reduced.models.modes import moving_modes
 
+    _check.gap_system(system)
+    n = _check.integer("n", n, lo=1, hi=system.n)
     _, phi, _ = moving_modes(system.K, system.M, system.B, n)
     lam = np.linalg.eigvalsh(phi.T @ system.closed_stiffness() @ phi)
     return float(np.sqrt(max(lam[-1], 0.0)))
@@ -140,6 +144,108 @@ def _damping_factor(C: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(U[:, keep] * np.sqrt(lam[keep]))
 
 
+def stream_explicit(
+    system: GapSystem,
+    x0: np.ndarray,
+    v0: np.ndarray,
+    duration_s: float,
+    sample_rate_hz: float,
+    *,
+    dt: float | None = None,
+    omega_dt: float = DEFAULT_OMEGA_DT,
+    step_basis: str = "top",
+    chunks: int = 50,
+    chunk_samples: int | None = None,
+    progress=None,
+) -> RingdownStream:
+    """Central-difference free response, chunk by chunk (see :func:`integrate_explicit`).
+
+    Between chunks the scheme's whole state is carried: x_n, the half-step velocity
+    v_{n+1/2}, the dissipated work W and the dissipation rate p_n of its trapezoidal rule,
+    so the samples are the same bits as those of an unchunked run.
+    """
+    _check.gap_system(system)
+    n = system.n
+    x0 = _check.vector("x0", x0, n)
+    v0 = _check.vector("v0", v0, n)
+    duration_s = _check.positive("duration_s", duration_s, "s")
+    sample_rate_hz = _check.positive("sample_rate_hz", sample_rate_hz, "Hz")
+    step_basis = _check.choice("step_basis", step_basis, STEP_BASES)
+    chunks = _check.integer("chunks", chunks)
+    _check.callback("progress", progress)
+    N = sample_count(duration_s, sample_rate_hz)
+    chunk_samples = N if chunk_samples is None else _check.integer("chunk_samples", chunk_samples)
+    if dt is not None:
+        dt = _check.positive("dt", dt, "s")
+        omega, dt_crit = stability_limit(system)
+        omega_ref, limit = omega, SWITCHING_SAFETY * dt_crit
+        if dt > limit:
+            raise StepTooLargeError(
+                f"dt = {dt:.3g} s exceeds the stable step {limit:.3g} s "
+                f"({SWITCHING_SAFETY} x 2/omega_max with damping; omega_max = {omega:.4g} rad/s "
+                "in the closed-gap state)"
+            )
+        dt_target = dt
+    else:
+        dt_target, omega, omega_ref, limit = default_step(system, omega_dt, step_basis)
+        if omega <= 0:
+            dt_target = 1.0 / sample_rate_hz
+    h_out = 1.0 / sample_rate_hz
+    every = max(1, math.ceil(h_out / dt_target * (1.0 - 1e-12)))
+    dt_run = h_out / every
+    n_steps = (N - 1) * every
+    if n_steps > MAX_STEPS:
+        raise StepTooLargeError(
+            f"{n_steps:.3g} steps needed (dt = {dt_run:.3g} s): more than {MAX_STEPS:.0e}; "
+            "shorten the run (duration_s) or soften the contact"
+        )
+    M, C, K = system.M, system.C, system.K
+    G = np.linalg.inv(M + 0.5 * dt_run * C)
+    A = G @ (M - 0.5 * dt_run * C)
+    dtGK = dt_run * (G @ K)
+    dtGB = np.ascontiguousarray(dt_run * (G @ system.B.T))
+    L = _damping_factor(C)
+    stats = {"n_steps": n_steps, "dt": dt_run, "omega_max": omega, "omega_dt": omega * dt_run,
+             "step_basis": step_basis, "omega_ref": omega_ref, "omega_ref_dt": omega_ref * dt_run, "dt_stable": limit}
+
+    def blocks():
+        x, v = x0.copy(), v0.copy()
+        a0 = np.linalg.solve(M, -(K @ x) - system.contact_force(x) - C @ v)
+        vh = v + 0.5 * dt_run * a0
+        W, pw = 0.0, float(np.sum((v @ L) ** 2))
+        per_piece = max(1, (N - 1) // chunks)  # samples between progress calls
+        done = 0  # samples filled after the first
+        j0 = 0
+        while j0 < N:
+            k = min(chunk_samples, N - j0)
+            out_x, out_v, out_W = np.empty((k, n)), np.empty((k, n)), np.empty(k)
+            io = 0
+            if j0 == 0:
+                out_x[0], out_v[0], out_W[0] = x, v, 0.0
+                io = 1
+            while io < k:
+                # stop at the buffer's end and at the next progress mark, whichever comes first
+                nout = min(k - io, per_piece - done % per_piece)
+                W, pw, io = _cd_kernel(A, dtGK, dtGB, L, system.B, system.offset, system.side, system.k, x, vh,
+                                       dt_run, nout * every, every, out_x, out_v, out_W, W, pw, io)
+                done += nout
+                if not np.all(np.isfinite(x)):
+                    raise FloatingPointError(
+                        f"central difference diverged before t = {done * h_out:.4g} s (dt = {dt_run:.3g} s)"
+                    )
+                if progress is not None and (done % per_piece == 0 or done == N - 1):
+                    progress(done / (N - 1))
+            yield j0, out_x, out_v, out_W
+            j0 += k
+        if progress is not None and N == 1:
+            progress(1.0)
+
+    def tolerance(amp: float) -> float:
+        return float(np.finfo(float).eps * amp)
+
+    return RingdownStream(system, "explicit", N, sample_rate_hz, chunk_samples, blocks(), tolerance, stats)
+
+
 def integrate_explicit(
     system: GapSystem,
     x0: np.ndarray,
@@ -167,82 +273,8 @@ def integrate_explicit(
       For the discrete model both bases give the same step.
 
     It is then shortened so that the output interval 1 / sample_rate_hz is a whole number of steps.
+    ``progress`` (a callable taking the fraction done) is called ``chunks`` times.
+    The whole run is held in memory; :func:`stream_explicit` gives it chunk by chunk.
     """
-    t_wall = time.perf_counter()
-    if dt is not None:
-        omega, dt_crit = stability_limit(system)
-        omega_ref, limit = omega, SWITCHING_SAFETY * dt_crit
-        if not (dt > 0.0 and math.isfinite(dt)):
-            raise StepTooLargeError(f"dt must be a positive number of seconds, got {dt!r}")
-        if dt > limit:
-            raise StepTooLargeError(
-                f"dt = {dt:.3g} s exceeds the stable step {limit:.3g} s "
-                f"({SWITCHING_SAFETY} x 2/omega_max with damping; omega_max = {omega:.4g} rad/s "
-                "in the closed-gap state)"
-            )
-        dt_target = dt
-    else:
-        dt_target, omega, omega_ref, limit = default_step(system, omega_dt, step_basis)
-        if omega <= 0:
-            dt_target = 1.0 / sample_rate_hz
-    h_out = 1.0 / sample_rate_hz
-    every = max(1, math.ceil(h_out / dt_target * (1.0 - 1e-12)))
-    dt_run = h_out / every
-    ts = sample_times(duration_s, sample_rate_hz)
-    n_steps = (ts.size - 1) * every
-    if n_steps > MAX_STEPS:
-        raise StepTooLargeError(
-            f"{n_steps:.3g} steps needed (dt = {dt_run:.3g} s): more than {MAX_STEPS:.0e}; "
-            "shorten the run or soften the contact"
-        )
-    n = system.n
-    M, C, K = system.M, system.C, system.K
-    G = np.linalg.inv(M + 0.5 * dt_run * C)
-    A = G @ (M - 0.5 * dt_run * C)
-    dtGK = dt_run * (G @ K)
-    dtGB = np.ascontiguousarray(dt_run * (G @ system.B.T))
-    L = _damping_factor(C)
-    x = np.asarray(x0, float).copy()
-    v = np.asarray(v0, float).copy()
-    a0 = np.linalg.solve(M, -(K @ x) - system.contact_force(x) - C @ v)
-    vh = v + 0.5 * dt_run * a0
-    out_x = np.empty((ts.size, n))
-    out_v = np.empty((ts.size, n))
-    out_W = np.empty(ts.size)
-    out_x[0], out_v[0], out_W[0] = x, v, 0.0
-    W, pw, io = 0.0, float(np.sum((v @ L) ** 2)), 1
-    per_chunk = max(1, (ts.size - 1) // chunks)
-    done = 0
-    while done < ts.size - 1:
-        nout = min(per_chunk, ts.size - 1 - done)
-        W, pw, io = _cd_kernel(
-            A, dtGK, dtGB, L, system.B, system.offset, system.side, system.k, x, vh, dt_run,
-            nout * every, every, out_x, out_v, out_W, W, pw, io,
-        )
-        done += nout
-        if not np.all(np.isfinite(x)):
-            raise FloatingPointError(
-                f"central difference diverged before t = {done * h_out:.4g} s (dt = {dt_run:.3g} s)"
-            )
-        if progress is not None:
-            progress(done / (ts.size - 1))
-    return RingdownResult(
-        system=system,
-        t=ts,
-        x=out_x,
-        v=out_v,
-        dissipated=out_W,
-        method="explicit",
-        tolerance=float(np.finfo(float).eps * np.max(np.abs(out_x))),
-        stats={
-            "n_steps": n_steps,
-            "dt": dt_run,
-            "omega_max": omega,
-            "omega_dt": omega * dt_run,
-            "step_basis": step_basis,
-            "omega_ref": omega_ref,
-            "omega_ref_dt": omega_ref * dt_run,
-            "dt_stable": limit,
-            "wall_s": time.perf_counter() - t_wall,
-        },
-    )
+    return stream_explicit(system, x0, v0, duration_s, sample_rate_hz, dt=dt, omega_dt=omega_dt,
+                           step_basis=step_basis, chunks=chunks, progress=progress).collect()

@@ -1,22 +1,87 @@
-"""One entry point for the three ringdown integrators."""
+"""One entry point for the three ringdown integrators, in memory or streamed to disk.
+
+- :func:`ringdown` returns a :class:`RingdownResult` (short runs, held in memory) or, with
+  ``out=path``, writes the run into an .npz as it is computed and returns a
+  :class:`~reduced.transient.store.RingdownFile` read lazily (long runs: memory
+  independent of the duration);
+- :func:`ringdown_stream` gives the run as a :class:`RingdownStream` of chunks, for
+  analyses that need no file (two runs compared sample by sample);
+- :func:`ringdown_peak_bytes` and :func:`ringdown_disk_bytes` say beforehand what a run
+  will allocate and write, so a caller can refuse it before any work.
+"""
 
 from __future__ import annotations
 
-import numpy as np
+from pathlib import Path
 
 from reduced.models.gaps import GapSystem
-from reduced.transient.dop853 import integrate_dop853
-from reduced.transient.exact import integrate_exact
-from reduced.transient.explicit import integrate_explicit
-from reduced.transient.result import RingdownResult
+from reduced.transient import _checks as _check
+from reduced.transient.dop853 import stream_dop853
+from reduced.transient.exact import stream_exact
+from reduced.transient.explicit import DEFAULT_OMEGA_DT, stream_explicit
+from reduced.transient.result import RingdownResult, RingdownStream, sample_count
+from reduced.transient.store import RingdownFile, npz_disk_bytes
 
 METHODS = ("exact", "explicit", "dop853")
+FLOAT = 8  # bytes
+CHUNK_BYTES = 8 * 2**20  # bytes of samples (t, x, v, W) in one chunk of a streamed run
+MIN_CHUNK_SAMPLES = 1024
+IN_MEMORY_MAX_BYTES = 4 * 2**30  # default cap of an in-memory ringdown; beyond it, stream with out=
+# Peak = fixed + per-sample bytes x samples held. Measured with tracemalloc
+# (tests/test_long_ringdown.py) and rounded up: besides the samples (t, x, v, W: 2n + 2 floats)
+# the energy E(x, v) of a chunk makes temporaries of about 3 m + 6 floats a sample (penetration,
+# its square, the kinetic and elastic terms, E0 - E - W), and a stream holds two chunks at once
+# (the consumer's and the one being filled).
+ENERGY_TEMPORARIES = (3, 6)  # floats a sample: 3 x stops + 6
+STREAM_CHUNKS_HELD = 2
+FIXED_BYTES = 2 * 2**20  # imports aside: kernels' scratch, the DOP853 stages, the writer
 
 
-def ringdown(
+def default_chunk_samples(n_dofs: int) -> int:
+    """Samples in a chunk of a streamed run of ``n_dofs`` DOFs: ``CHUNK_BYTES`` of t, x, v, W."""
+    return max(MIN_CHUNK_SAMPLES, CHUNK_BYTES // (FLOAT * (2 * n_dofs + 2)))
+
+
+def ringdown_peak_bytes(n_dofs: int, duration_s: float, sample_rate_hz: float, method: str = "exact", *,
+                        n_stops: int = 4, streamed: bool = True, chunk_samples: int | None = None) -> int:
+    """Bytes a ringdown allocates at its peak (an upper estimate; the interpreter, NumPy, SciPy
+    and numba themselves, about 200 MB, are not counted).
+
+    peak = FIXED + bytes_per_sample x samples_held + state tables, with
+    bytes_per_sample = 8 (2 n + 2 + 3 m + 6) (the samples t, x, v, W and the temporaries of
+    their energy), samples_held = N = floor(duration_s sample_rate_hz) + 1 in memory, or two
+    chunks (``chunk_samples``, default :func:`default_chunk_samples`) when ``streamed``
+    (``ringdown(..., out=path)``); the exact method adds its state table,
+    3 x 2^m (2n)^2 complex numbers. ``n_stops`` is m (4 for two two-sided tips).
+    """
+    n = _check.integer("n_dofs", n_dofs)
+    N = sample_count(duration_s, sample_rate_hz)
+    method = _check.choice("method", method, METHODS)
+    m = _check.integer("n_stops", n_stops, lo=0, hi=16)
+    streamed = _check.flag("streamed", streamed)
+    per_sample = FLOAT * (2 * n + 2 + ENERGY_TEMPORARIES[0] * m + ENERGY_TEMPORARIES[1])
+    if streamed:
+        k = default_chunk_samples(n) if chunk_samples is None else _check.integer("chunk_samples", chunk_samples)
+        held = STREAM_CHUNKS_HELD * min(k, N)
+    else:
+        held = N
+    table = 3 * 2**m * (2 * n) ** 2 * 16 if method == "exact" else 4 * n * n * FLOAT
+    return int(FIXED_BYTES + table + per_sample * held)
+
+
+def ringdown_disk_bytes(n_dofs: int, duration_s: float, sample_rate_hz: float) -> int:
+    """Bytes of ``ringdown.npz`` for a run: 8 (2 n + 3) N (t, x, v, energy and dissipated,
+    stored uncompressed, see :mod:`reduced.transient.store`) plus about 5 kB of headers and
+    small members."""
+    n = _check.integer("n_dofs", n_dofs)
+    N = sample_count(duration_s, sample_rate_hz)
+    return npz_disk_bytes({"t": (N,), "x": (N, n), "v": (N, n), "energy": (N,), "dissipated": (N,)})
+
+
+def ringdown_stream(
     system: GapSystem,
-    x0: np.ndarray,
-    v0: np.ndarray,
+    x0,
+    v0,
     duration_s: float,
     sample_rate_hz: float,
     method: str = "exact",
@@ -27,26 +92,93 @@ def ringdown(
     rtol: float = 1e-10,
     atol: float | None = None,
     progress=None,
-) -> RingdownResult:
-    """Free response of ``system`` from (x0, v0) by ``method`` (exact | explicit | dop853)."""
-    x0 = np.asarray(x0, dtype=float)
-    v0 = np.asarray(v0, dtype=float)
-    for name, a in (("x0", x0), ("v0", v0)):
-        if a.shape != (system.n,):
-            raise ValueError(f"{name} must have {system.n} values, got shape {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"{name} must be finite, got {a.tolist()}")
-    if not (duration_s > 0 and np.isfinite(duration_s)):
-        raise ValueError(f"duration_s must be > 0, got {duration_s!r}")
-    if not (sample_rate_hz > 0 and np.isfinite(sample_rate_hz)):
-        raise ValueError(f"sample_rate_hz must be > 0, got {sample_rate_hz!r}")
+    chunk_samples: int | None = None,
+) -> RingdownStream:
+    """The free response of ``system`` from (x0, v0) by ``method``, as chunks (see :func:`ringdown`)."""
+    method = _check.choice("method", method, METHODS)
+    _check.gap_system(system)
+    if chunk_samples is None:
+        chunk_samples = default_chunk_samples(system.n)
+    chunk_samples = _check.integer("chunk_samples", chunk_samples)
+    if method != "explicit":  # options of another method are still checked: a typo is not ignored
+        if dt is not None:
+            _check.positive("dt", dt, "s")
+        if omega_dt is not None:
+            _check.positive("omega_dt", omega_dt, "rad")
+        _check.choice("step_basis", step_basis, ("top", "contact"))
+    if method != "dop853":
+        _check.number("rtol", rtol, lo=0.0, hi=1.0)
+        if atol is not None:
+            _check.positive("atol", atol, "m")
     if method == "exact":
-        return integrate_exact(system, x0, v0, duration_s, sample_rate_hz, progress=progress)
+        return stream_exact(system, x0, v0, duration_s, sample_rate_hz, chunk_samples=chunk_samples,
+                            progress=progress)
     if method == "explicit":
-        kw = {} if omega_dt is None else {"omega_dt": omega_dt}
-        return integrate_explicit(system, x0, v0, duration_s, sample_rate_hz, dt=dt, step_basis=step_basis,
-                                  progress=progress, **kw)
-    if method == "dop853":
-        return integrate_dop853(system, x0, v0, duration_s, sample_rate_hz, rtol=rtol, atol=atol,
-                                progress=progress)
-    raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+        return stream_explicit(system, x0, v0, duration_s, sample_rate_hz, dt=dt,
+                               omega_dt=DEFAULT_OMEGA_DT if omega_dt is None else omega_dt,
+                               step_basis=step_basis, chunk_samples=chunk_samples, progress=progress)
+    return stream_dop853(system, x0, v0, duration_s, sample_rate_hz, rtol=rtol, atol=atol,
+                         chunk_samples=chunk_samples, progress=progress)
+
+
+def ringdown(
+    system: GapSystem,
+    x0,
+    v0,
+    duration_s: float,
+    sample_rate_hz: float,
+    method: str = "exact",
+    *,
+    dt: float | None = None,
+    omega_dt: float | None = None,
+    step_basis: str = "top",
+    rtol: float = 1e-10,
+    atol: float | None = None,
+    progress=None,
+    out: str | Path | None = None,
+    chunk_samples: int | None = None,
+    max_memory_bytes: float = IN_MEMORY_MAX_BYTES,
+) -> RingdownResult | RingdownFile:
+    """Free response of ``system`` from (x0, v0) by ``method`` (exact | explicit | dop853).
+
+    Parameters
+    ----------
+    system : the gap system; x0, v0 : (n,) m and m/s
+    duration_s : s (> 0); sample_rate_hz : Hz (> 0), output grid t_k = k / sample_rate_hz
+    dt, omega_dt, step_basis : explicit step (:func:`~reduced.transient.explicit.integrate_explicit`)
+    rtol, atol : DOP853 tolerances, rtol in (0, 1), atol > 0 m
+    progress : None or a callable taking the fraction done
+    out : None: the run is returned in memory (:class:`RingdownResult`), refused when
+        :func:`ringdown_peak_bytes` exceeds ``max_memory_bytes``; a path: the run is written
+        there as an .npz while it is computed (memory independent of the duration) and
+        returned as a :class:`~reduced.transient.store.RingdownFile`
+    chunk_samples : samples a chunk when streaming (default :func:`default_chunk_samples`);
+        it never changes the samples, only the memory
+
+    Every argument is checked before any work (a ValueError naming it).
+    """
+    method = _check.choice("method", method, METHODS)
+    _check.gap_system(system)
+    N = sample_count(duration_s, sample_rate_hz)
+    if out is None:
+        max_memory_bytes = _check.positive("max_memory_bytes", max_memory_bytes)
+        need = ringdown_peak_bytes(system.n, duration_s, sample_rate_hz, method, n_stops=min(system.m, 16),
+                                   streamed=False)
+        if need > max_memory_bytes:
+            raise _check.InvalidArgument(
+                f"duration_s x sample_rate_hz = {N:.3g} samples: held in memory the ringdown needs "
+                f"{need / 2**30:.3g} GiB, more than max_memory_bytes = {max_memory_bytes / 2**30:.3g} GiB; "
+                "pass out='ringdown.npz' to stream it to disk, or lower duration_s or sample_rate_hz")
+    elif not isinstance(out, (str, Path)) or not str(out):
+        raise _check.InvalidArgument(f"out must be None or a file path, got {_check.show(out)}")
+    else:
+        parent = Path(out).parent
+        if not parent.is_dir():
+            raise _check.InvalidArgument(f"out must be a path in an existing folder, got {_check.show(str(out))}")
+    stream = ringdown_stream(system, x0, v0, duration_s, sample_rate_hz, method, dt=dt, omega_dt=omega_dt,
+                             step_basis=step_basis, rtol=rtol, atol=atol, progress=progress,
+                             chunk_samples=N if out is None else chunk_samples)
+    if out is None:
+        return stream.collect()
+    return stream.save(out)
+

@@ -1,13 +1,30 @@
-"""The result object every ringdown integrator returns."""
+"""What the ringdown integrators return: in memory, as a stream of chunks, or on disk.
+
+- :class:`RingdownStream`: the samples of a run as they are computed, chunk by chunk
+  (single pass, memory independent of the run length); every integrator produces one.
+- :class:`RingdownResult`: the whole run in memory (``res.t``, ``res.x``, ...), collected
+  from a stream: the API of short runs.
+- :class:`~reduced.transient.store.RingdownFile`: the run streamed into ``ringdown.npz``
+  and read back lazily: the API of long runs.
+
+All three offer ``chunks()``, ``energy_balance_error``, ``tolerance`` and ``stats``, so code
+that reads a run chunk by chunk (figures, spectrograms, comparisons) works for any of them.
+"""
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from reduced.models.gaps import GapSystem
+from reduced.transient._checks import integer, number
+from reduced.transient.store import HISTORIES, Chunk, NpzStreamWriter, RingdownFile
+
+TIMING_STATS = ("wall_s",)  # wall-clock stats: provenance only, never written into a science file
 
 
 @dataclass(eq=False)
@@ -40,6 +57,11 @@ class RingdownResult:
         return self.system.energy(self.x, self.v)
 
     @property
+    def energy0(self) -> float:
+        """J, energy of the first sample."""
+        return float(self.system.energy(self.x[0], self.v[0])) if self.t.size else 0.0
+
+    @property
     def energy_balance_error(self) -> float:
         """max_t |E(0) - E(t) - W(t)| / E(0): how well the run conserves energy."""
         E = self.energy
@@ -47,24 +69,155 @@ class RingdownResult:
             return 0.0
         return float(np.max(np.abs(E[0] - E - self.dissipated)) / E[0])
 
+    @property
+    def n_samples(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def sample_rate_hz(self) -> float:
+        return 1.0 / float(self.t[1] - self.t[0]) if self.t.size > 1 else float("inf")
+
+    def chunks(self, chunk_samples: int = 1 << 16, start: int = 0, stop: int | None = None) -> Iterator[Chunk]:
+        """Views of consecutive samples, as :meth:`RingdownFile.chunks` reads them."""
+        chunk_samples = integer("chunk_samples", chunk_samples)
+        stop = self.n_samples if stop is None else min(stop, self.n_samples)
+        for i in range(start, stop, chunk_samples):
+            j = min(i + chunk_samples, stop)
+            yield Chunk(i, self.t[i:j], self.x[i:j], self.v[i:j], self.dissipated[i:j], self.system)
+
     def save(self, path: str | Path) -> None:
-        """Write t, x, v, energy, dissipated and the stats to an .npz file."""
-        np.savez_compressed(
-            path,
-            t=self.t,
-            x=self.x,
-            v=self.v,
-            energy=self.energy,
-            dissipated=self.dissipated,
-            dof_names=np.array(self.system.dof_names),
-            method=self.method,
-            tolerance=self.tolerance,
-            energy_balance_error=self.energy_balance_error,
-            **{f"stat_{k}": v for k, v in self.stats.items() if np.isscalar(v)},
-        )
+        """Write t, x, v, energy, dissipated, the tolerance and the stats to an .npz file
+        (the format of :mod:`reduced.transient.store`; wall-clock stats are left out)."""
+        n, N = self.system.n, self.n_samples
+        with NpzStreamWriter(path, _history_shapes(N, n)) as w:
+            summary = _Summary()
+            for c in self.chunks():
+                _write_chunk(w, c, summary)
+            w.close(_small_members(self.system, self.method, self.tolerance, summary, self.sample_rate_hz,
+                                   self.stats))
+
+
+class RingdownStream:
+    """The samples of one ringdown, produced chunk by chunk as the integrator runs.
+
+    Iterate it once: each item is a :class:`Chunk` (fresh arrays, yours to keep). Memory is
+    that of one chunk (``chunk_samples`` samples) and the integrator's state, whatever the
+    length of the run. ``tolerance`` and the final ``stats`` (``wall_s``: time spent
+    integrating, not in the consumer) are set when the last chunk has been produced.
+    The chunking never changes the samples: each integrator carries its full state from
+    one chunk to the next (see their docstrings).
+    """
+
+    def __init__(self, system: GapSystem, method: str, n_samples: int, sample_rate_hz: float, chunk_samples: int,
+                 blocks: Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray]],
+                 tolerance: Callable[[float], float], stats: dict) -> None:
+        self.system = system
+        self.method = method
+        self.n_samples = n_samples
+        self.sample_rate_hz = sample_rate_hz
+        self.chunk_samples = chunk_samples
+        self.stats = stats
+        self.tolerance = float("nan")
+        self.finished = False
+        self._blocks = blocks
+        self._tolerance = tolerance
+        self._used = False
+        self.max_abs_x = 0.0
+
+    def __iter__(self) -> Iterator[Chunk]:
+        if self._used:
+            raise RuntimeError("a RingdownStream can be iterated once; start a new one")
+        self._used = True
+        wall = 0.0
+        t0 = time.perf_counter()
+        for start, x, v, W in self._blocks:
+            wall += time.perf_counter() - t0
+            if x.size:
+                self.max_abs_x = max(self.max_abs_x, float(np.max(np.abs(x))))
+            t = np.arange(start, start + x.shape[0]) / self.sample_rate_hz
+            yield Chunk(start, t, x, v, W, self.system)
+            t0 = time.perf_counter()
+        wall += time.perf_counter() - t0
+        self.tolerance = float(self._tolerance(self.max_abs_x))
+        self.stats["wall_s"] = wall
+        self.finished = True
+
+    def close(self) -> None:
+        """Stop the integrator early (the stream ends; ``finished`` stays False)."""
+        close = getattr(self._blocks, "close", None)
+        if close is not None:
+            close()
+
+    def collect(self) -> RingdownResult:
+        """The whole run in memory."""
+        n, N = self.system.n, self.n_samples
+        t = np.arange(N) / self.sample_rate_hz
+        x = v = W = None
+        for c in self:
+            if c.start == 0 and len(c) == N:  # one chunk: keep its arrays, no copy
+                x, v, W = c.x, c.v, c.dissipated
+                continue
+            if x is None:
+                x, v, W = np.empty((N, n)), np.empty((N, n)), np.empty(N)
+            x[c.start : c.start + len(c)] = c.x
+            v[c.start : c.start + len(c)] = c.v
+            W[c.start : c.start + len(c)] = c.dissipated
+        return RingdownResult(system=self.system, t=t, x=x, v=v, dissipated=W, method=self.method,
+                              tolerance=self.tolerance, stats=self.stats)
+
+    def save(self, path: str | Path) -> RingdownFile:
+        """Write the run into an .npz as it is computed; the file, read lazily."""
+        n, N = self.system.n, self.n_samples
+        summary = _Summary()
+        with NpzStreamWriter(path, _history_shapes(N, n)) as w:
+            for c in self:
+                _write_chunk(w, c, summary)
+            w.close(_small_members(self.system, self.method, self.tolerance, summary, self.sample_rate_hz,
+                                   self.stats))
+        return RingdownFile(path, self.system)
+
+
+def _history_shapes(N: int, n: int) -> dict:
+    shapes = {"t": (N,), "x": (N, n), "v": (N, n), "energy": (N,), "dissipated": (N,)}
+    return {k: (shapes[k], np.float64) for k in HISTORIES}
+
+
+@dataclass
+class _Summary:
+    """Running energy-balance error while chunks are written."""
+
+    E0: float | None = None
+    balance: float = 0.0
+
+
+def _write_chunk(w: NpzStreamWriter, c: Chunk, s: _Summary) -> None:
+    E = c.energy
+    if s.E0 is None and len(c):
+        s.E0 = float(E[0])
+    if len(c):
+        s.balance = max(s.balance, float(np.max(np.abs(s.E0 - E - c.dissipated))))
+    w.append("t", c.t)
+    w.append("x", c.x)
+    w.append("v", c.v)
+    w.append("energy", E)
+    w.append("dissipated", c.dissipated)
+
+
+def _small_members(system: GapSystem, method: str, tolerance: float, s: _Summary, sample_rate_hz: float,
+                   stats: dict) -> dict:
+    balance = 0.0 if not s.E0 else s.balance / s.E0
+    return {"dof_names": np.array(system.dof_names), "method": method, "tolerance": tolerance,
+            "energy_balance_error": balance, "sample_rate_hz": sample_rate_hz,
+            **{f"stat_{k}": v for k, v in stats.items() if np.isscalar(v) and k not in TIMING_STATS}}
+
+
+def sample_count(duration_s: float, sample_rate_hz: float) -> int:
+    """Samples on the grid 0, 1/fs, ..., up to duration (inclusive when it falls on the grid)."""
+    duration_s = number("duration_s", duration_s, lo=0.0, unit="s")
+    sample_rate_hz = number("sample_rate_hz", sample_rate_hz, lo=0.0, unit="Hz")
+    return int(np.floor(duration_s * sample_rate_hz * (1.0 + 1e-12))) + 1
 
 
 def sample_times(duration_s: float, sample_rate_hz: float) -> np.ndarray:
     """s, the output grid 0, 1/fs, ..., up to duration (inclusive when it falls on the grid)."""
-    n = int(np.floor(duration_s * sample_rate_hz * (1.0 + 1e-12))) + 1
-    return np.arange(n) / sample_rate_hz
+    return np.arange(sample_count(duration_s, sample_rate_hz)) / sample_rate_hz

@@ -1,0 +1,125 @@
+"""Argument checks shared by the public functions of :mod:`reduced.transient`.
+
+Every check runs before any work and raises :class:`InvalidArgument` (a ``ValueError``)
+with a one-line message naming the argument, the value given and what is allowed, e.g.
+``atol must be a finite number > 0 (m), got nan``. Booleans are refused where a number
+is expected (``True`` is an int to Python, never a tolerance to a user).
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+import numpy as np
+
+
+class InvalidArgument(ValueError):
+    """An argument of a transient function that cannot be used; the message is one line."""
+
+
+def show(value) -> str:
+    """``repr`` of a value cut to one short line for a message."""
+    text = repr(value).replace("\n", " ")
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+def number(name: str, value, *, lo: float | None = None, hi: float | None = None, lo_open: bool = True,
+           hi_open: bool = True, unit: str = "") -> float:
+    """``value`` as a float, refused unless a finite real number in the interval (lo, hi)
+    (``lo_open`` / ``hi_open`` say whether each end is excluded; None: unbounded)."""
+    parts = []
+    if lo is not None:
+        parts.append(f"{'>' if lo_open else '>='} {lo:g}")
+    if hi is not None:
+        parts.append(f"{'<' if hi_open else '<='} {hi:g}")
+    allowed = "a finite number" + (" " + " and ".join(parts) if parts else "") + (f" ({unit})" if unit else "")
+    if not _is_number(value):
+        raise InvalidArgument(f"{name} must be {allowed}, got {show(value)}")
+    v = float(value)
+    ok = math.isfinite(v)
+    if ok and lo is not None:
+        ok = v > lo if lo_open else v >= lo
+    if ok and hi is not None:
+        ok = v < hi if hi_open else v <= hi
+    if not ok:
+        raise InvalidArgument(f"{name} must be {allowed}, got {show(value)}")
+    return v
+
+
+def positive(name: str, value, unit: str = "") -> float:
+    """A finite number > 0."""
+    return number(name, value, lo=0.0, unit=unit)
+
+
+def integer(name: str, value, *, lo: int = 1, hi: int | None = None) -> int:
+    """An int (not a bool) in [lo, hi]."""
+    allowed = f"an integer >= {lo}" + (f" and <= {hi}" if hi is not None else "")
+    if not isinstance(value, (numbers.Integral,)) or isinstance(value, (bool, np.bool_)):
+        raise InvalidArgument(f"{name} must be {allowed}, got {show(value)}")
+    v = int(value)
+    if v < lo or (hi is not None and v > hi):
+        raise InvalidArgument(f"{name} must be {allowed}, got {show(value)}")
+    return v
+
+
+def choice(name: str, value, options: tuple[str, ...]) -> str:
+    """One of ``options``."""
+    if not isinstance(value, str) or value not in options:
+        raise InvalidArgument(f"{name} must be one of {', '.join(options)}, got {show(value)}")
+    return value
+
+
+def flag(name: str, value) -> bool:
+    """True or False (not a number or a string)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise InvalidArgument(f"{name} must be True or False, got {show(value)}")
+    return bool(value)
+
+
+def callback(name: str, value):
+    """None or a callable."""
+    if value is not None and not callable(value):
+        raise InvalidArgument(f"{name} must be None or a callable taking the fraction done, got {show(value)}")
+    return value
+
+
+def vector(name: str, value, n: int) -> np.ndarray:
+    """A finite float vector of n values (a copy)."""
+    try:
+        a = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InvalidArgument(f"{name} must be {n} finite numbers, got {show(value)}") from None
+    if a.shape != (n,):
+        raise InvalidArgument(f"{name} must have {n} values, got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise InvalidArgument(f"{name} must be finite, got {a.tolist()}")
+    return a
+
+
+def series(name: str, value, ndim: int = 1, min_len: int = 1) -> np.ndarray:
+    """A finite float array of ``ndim`` dimensions with at least ``min_len`` rows."""
+    try:
+        a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InvalidArgument(f"{name} must be an array of numbers, got {show(value)}") from None
+    if a.ndim != ndim:
+        raise InvalidArgument(f"{name} must be a {ndim}-D array, got shape {a.shape}")
+    if a.shape[0] < min_len:
+        raise InvalidArgument(f"{name} must have at least {min_len} samples, got {a.shape[0]}")
+    if not np.all(np.isfinite(a)):
+        raise InvalidArgument(f"{name} must be finite (it holds NaN or inf)")
+    return a
+
+
+def gap_system(value, name: str = "system"):
+    """A :class:`~reduced.models.gaps.GapSystem`."""
+    from reduced.models.gaps import GapSystem
+
+    if not isinstance(value, GapSystem):
+        raise InvalidArgument(f"{name} must be a reduced.GapSystem, got {type(value).__name__}")
+    return value
