@@ -155,23 +155,28 @@ def point_rows(fe) -> dict[str, np.ndarray]:
     return {k: rows[k] for k in ("x1", "x2", "x3")}
 
 
-def mirror_map(fe, tol: float = 1e-8) -> tuple[np.ndarray, np.ndarray]:
-    """(perm, sign): the reflection y -> -y of a DOF vector, u_mirror = sign * u[perm].
+def mirror_map(fe, tol: float = 1e-8, axis: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """(perm, sign): the reflection of a DOF vector in the plane through the origin normal to ``axis``
+    (1: y -> -y, the default; 0: x; 2: z), u_mirror = sign * u[perm].
 
-    Raises ValueError if the mesh is not symmetric about y = 0.
+    A mode is symmetric when phi^T M (sign * phi[perm]) = +1 and antisymmetric when it is -1.
+    Raises ValueError if the mesh is not symmetric about that plane.
     """
     from scipy.spatial import cKDTree
 
+    if axis not in (0, 1, 2):
+        raise ValueError(f"axis must be 0, 1 or 2, got {axis!r}")
     loc = fe.solid.dof_location
     comp = fe.solid.dof_component
     scale = float(np.ptp(loc, axis=0).max())
     key = np.column_stack([loc, comp * scale * 10.0])
     mirrored = key.copy()
-    mirrored[:, 1] *= -1.0
+    mirrored[:, axis] *= -1.0
     dist, perm = cKDTree(key).query(mirrored)
     if np.max(dist) > tol * scale:
-        raise ValueError(f"the mesh is not symmetric about y = 0 (max mismatch {np.max(dist):.3g} m)")
-    sign = np.where(comp == 1, -1.0, 1.0)
+        plane = "xyz"[axis]
+        raise ValueError(f"the mesh is not symmetric about {plane} = 0 (max mismatch {np.max(dist):.3g} m)")
+    sign = np.where(comp == axis, -1.0, 1.0)
     return perm, sign
 
 

@@ -79,3 +79,54 @@ def label_modes(phi: np.ndarray, M: sp.spmatrix, beam_dofs: np.ndarray, Phi_beam
     r, c = linear_sum_assignment(-score[cand])
     mode_index = {COMPONENT_LABELS[j]: int(cand[i]) for i, j in zip(r, c, strict=True)}
     return ModeLabels(mode_index=mode_index, score=score, rigid_fraction=rigid_fraction, relative_q=q.T)
+
+
+# (symmetry about y = 0, symmetry about z = 0) of each family of free-beam modes, and the
+# direction that holds most of its kinetic energy (None: torsion, shared by y and z)
+FREE_BEAM_SYMMETRY = {(1, -1): ("bending z", 2), (-1, 1): ("bending y", 1), (-1, -1): ("torsion", None),
+                      (1, 1): ("axial", 0)}
+SYMMETRY_TOL = 1e-3  # a mode of a mirror-symmetric mesh has phi^T M (mirror phi) = +-1 to ~1e-9
+
+
+@dataclass(frozen=True, eq=False)
+class FreeBeamMode:
+    """One elastic mode of the free beam: which family it belongs to and its order in that family."""
+
+    index: int  # into the modal result
+    family: str  # bending z | bending y | torsion | axial | other
+    order: int  # n = 1, 2, ... within its family, by frequency (0 for "other")
+
+
+def free_beam_families(fe, phi: np.ndarray, elastic: np.ndarray) -> list[FreeBeamMode]:
+    """Sort the elastic modes of the free beam into bending in z and y, torsion and axial modes.
+
+    The bar has mirror planes y = 0 and z = 0 and each mode is symmetric (+1) or antisymmetric
+    (-1) about each, s = phi^T M (mirror phi). A displacement field u(x) mirrored in y is
+    (u_x, -u_y, u_z)(x, -y, z): bending in z (u_z even in y) is (+1, -1), bending in y (-1, +1),
+    torsion (u_y = -z theta, u_z = y theta) (-1, -1), axial (u_x) (+1, +1). The symmetry class is
+    exact; the direction holding most of the kinetic energy (> 1/2) confirms it, so that a
+    higher-order section mode of the same class (far above the modes computed here) reads
+    "other". Orders count the modes of one family by ascending frequency.
+    """
+    from fem.contact import mirror_map
+
+    sym = []
+    for axis in (1, 2):
+        perm, sign = mirror_map(fe, axis=axis)
+        sym.append(np.einsum("ij,ij->j", phi, fe.M @ (sign[:, None] * phi[perm])))
+    sym = np.array(sym).T  # (n_modes, 2)
+    Mphi = fe.M @ phi
+    comp = fe.solid.dof_component
+    share = np.array([np.einsum("ij,ij->j", phi[comp == c], Mphi[comp == c]) for c in range(3)]).T
+    out, count = [], {}
+    for i in np.flatnonzero(elastic):
+        if not np.all(np.abs(np.abs(sym[i]) - 1.0) < SYMMETRY_TOL):  # degenerate pair mixed by the solver
+            out.append(FreeBeamMode(int(i), "other", 0))
+            continue
+        family, direction = FREE_BEAM_SYMMETRY[tuple(int(np.sign(s)) for s in sym[i])]
+        if direction is not None and share[i, direction] < 0.5 * share[i].sum():
+            out.append(FreeBeamMode(int(i), "other", 0))
+            continue
+        count[family] = count.get(family, 0) + 1
+        out.append(FreeBeamMode(int(i), family, count[family]))
+    return out

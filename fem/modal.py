@@ -22,11 +22,13 @@ from scipy.sparse.linalg import LinearOperator, eigsh, splu
 
 SOLVERS = ("pardiso", "superlu")
 GRAM_FLOOR = 1e-13  # relative floor of the Gram eigenvalues when orthonormalising a block
+SIGN_SEED = 20231  # seed of the fixed vector that sets each mode's sign (see _fix_signs)
 
 
 @dataclass(frozen=True, eq=False)
 class ModalResult:
-    """Natural frequencies and mass-normalised mode shapes (phi^T M phi = I)."""
+    """Natural frequencies and mass-normalised mode shapes (phi^T M phi = I), signs fixed by
+    :func:`_fix_signs`."""
 
     freq_hz: np.ndarray  # Hz, (n_modes,) ascending
     phi: np.ndarray  # (n_dofs, n_modes)
@@ -99,6 +101,17 @@ class PardisoFactor:
             self._call(-1, np.zeros((self.n, 1), order="F"))
         except Exception:
             pass
+
+
+def _fix_signs(phi: np.ndarray) -> np.ndarray:
+    """Each column with the sign that makes w^T phi > 0 for one fixed pseudo-random w.
+
+    An eigensolver returns +phi or -phi depending on round-off (MKL PARDISO's threads reorder
+    sums); a fixed rule makes written shapes reproducible. w is random so that no structured
+    mode (symmetric or antisymmetric about a plane, zero on a node) is orthogonal to it.
+    """
+    w = np.random.default_rng(SIGN_SEED).standard_normal(phi.shape[0])
+    return phi * np.where(w @ phi < 0.0, -1.0, 1.0)
 
 
 def _factorize(A: sp.csr_matrix, solver: str):
@@ -190,7 +203,7 @@ def modal_analysis(K: sp.spmatrix, M: sp.spmatrix, n_modes: int = 20, shift_hz: 
     order = np.argsort(lam)
     lam, phi = lam[order], phi[:, order]
     mnorm = np.sqrt(np.einsum("ij,ij->j", phi, M @ phi))
-    phi = phi / mnorm
+    phi = _fix_signs(phi / mnorm)
     Kphi = K @ phi
     res = np.linalg.norm(Kphi - (M @ phi) * lam, axis=0) / np.maximum(np.linalg.norm(Kphi, axis=0), 1e-300)
     elastic = lam > (2 * np.pi * shift_hz) ** 2
@@ -212,7 +225,7 @@ def baseline_modal(K: sp.spmatrix, M: sp.spmatrix, n_modes: int = 20, shift_hz: 
     t1 = time.perf_counter()
     order = np.argsort(lam)
     lam, phi = lam[order], phi[:, order]
-    phi = phi / np.sqrt(np.einsum("ij,ij->j", phi, M @ phi))
+    phi = _fix_signs(phi / np.sqrt(np.einsum("ij,ij->j", phi, M @ phi)))
     return ModalResult(freq_hz=np.sqrt(np.clip(lam, 0, None)) / (2 * np.pi), phi=phi, omega2=lam,
                        solver="scipy-eigsh-superlu", shift_hz=shift_hz, n_op=-1, n_iter=0,
                        timing={"factorize_s": float("nan"), "iterate_s": float("nan"), "total_s": t1 - t0})

@@ -3,19 +3,28 @@
 Files written (through the stage writer, so a failure leaves nothing half-written):
 
 - ``frequencies.csv``: ``mode,description,freq_hz,test_hz,error_pct`` for the six
-  pseudo-rigid modes in Table 2 order (for ``beam-free``: the elastic modes against beam
-  theory instead);
+  pseudo-rigid modes in Table 2 order; for ``beam-free``, every computed elastic mode
+  against beam theory instead: ``mode,description,freq_hz,theory,theory_hz,error_pct,
+  euler_bernoulli_hz,euler_bernoulli_error_pct`` (bending against Timoshenko with
+  Euler-Bernoulli beside it, torsion against St-Venant, axial against the rod; see
+  :mod:`fem.beam_theory` and :func:`fem.labels.free_beam_families`);
 - ``modes.csv``: every computed mode with its label scores;
 - ``mac_beam.csv``, ``mac_assembly.csv``, ``mac.png``: MAC on the sensor sets of Table 3
   (beam accelerometers; beam and tube). Test shapes come from ``[modal] test_shapes``
   (UFF dataset 55 or CSV); without them the FE auto-MAC is written and the files say so;
 - ``fe_shapes.uff``: the FE shapes at the sensors (dataset 55), for the test team;
 - ``mode_shapes.png`` (pyvista, off screen) and ``modes.vtu`` (ParaView).
+
+Numbers go to the digits that are converged, so that a rerun writes the same bytes (the
+threaded sparse Cholesky changes the last digits from run to run): frequencies to
+:data:`FREQ_DIGITS` significant digits, errors in percent to :data:`PCT_DECIMALS` decimals,
+scores and MAC to 4 decimals. Wall-clock timings go to ``provenance.json`` only.
 """
 
 from __future__ import annotations
 
 import csv
+import math
 from pathlib import Path
 
 import numpy as np
@@ -23,17 +32,30 @@ import numpy as np
 from bearingshaft.output import StageWriter
 from bearingshaft.scenes import Scene
 
+FREQ_DIGITS = 6  # significant digits of a frequency: the eigensolver's are good to ~1e-9
+PCT_DECIMALS = 3  # decimals of an error in percent (1e-5 relative, 10x the 6th digit's rounding)
+RIGID_FLOOR = 1e-2  # a mode below RIGID_FLOOR x shift_hz is a rigid-body mode, written 0 Hz: its
+# eigenvalue is the solver's noise, ~1e-5 sigma (fem.modal), i.e. f ~ 3e-3 shift_hz
+
+
+def _freq(f: float, shift_hz: float) -> str:
+    return "0" if f < RIGID_FLOOR * shift_hz else f"{f:.{FREQ_DIGITS}g}"
+
+
+def _pct(v: float) -> str:
+    return "" if not math.isfinite(v) else f"{v:+.{PCT_DECIMALS}f}"
+
 
 def _write_csv(path: Path, header: list[str], rows: list[list]) -> None:
+    """CSV of rows already formatted (strings and integers)."""
     with open(path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(header)
-        for r in rows:
-            w.writerow([f"{v:.6g}" if isinstance(v, float) else v for v in r])
+        w.writerows(rows)
 
 
 def modal_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
-    """Run the modal analysis of ``scene.model`` and write the correlation files."""
+    """Run the modal analysis of ``scene.model``, write the correlation files, print a summary."""
     from tqdm import tqdm
 
     from fem.analysis import analyse
@@ -65,22 +87,33 @@ def modal_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
     rows = []
     for i, f in enumerate(modes.freq_hz):
         sc = result.labels.score[i] if result.labels is not None else np.zeros(6)
-        rows.append([i + 1, float(f), *[float(v) for v in sc]])
+        rows.append([i + 1, _freq(float(f), spec.shift_hz), *[f"{abs(v):.4f}" for v in sc]])
     _write_csv(writer.path("modes.csv"), ["mode", "freq_hz", *[f"score_{c}" for c in COMPONENT_LABELS]], rows)
 
+    lines = [f"[{scene.name}] {len(modes.freq_hz)} modes of {system.n_dofs} DOFs ({model.layout}, {model.element}, "
+             f"element size {model.element_size:g} m)"]
     if result.labels is None:
-        _free_beam_table(result, writer)
-        chosen = list(range(6, min(12, len(modes.freq_hz))))
-        names = [f"elastic {i - 5}" for i in chosen]
+        table = _free_beam_table(result, writer)
+        chosen = [r["index"] for r in table if r["family"] != "other"][:6]
+        names = [r["description"] for r in table if r["family"] != "other"][:6]
+        lines += _free_beam_summary(table, model.layout)
     else:
         table = result.table2()
         _write_csv(writer.path("frequencies.csv"), ["mode", "description", "freq_hz", "test_hz", "error_pct"],
-                   [[r["mode"], r["description"], r["freq_hz"], r["test_hz"], r["error_pct"]] for r in table])
-        stats["max_abs_error_pct"] = max(abs(r["error_pct"]) for r in table)
+                   [[r["mode"], r["description"], _freq(r["freq_hz"], spec.shift_hz), f"{r['test_hz']:g}",
+                     _pct(r["error_pct"])] for r in table])
+        worst = max(table, key=lambda r: abs(r["error_pct"]))
+        stats["max_abs_error_pct"] = abs(worst["error_pct"])
         stats["label_purity"] = {n: round(result.labels.purity(n), 4) for n in TABLE2_ORDER}
         chosen = result.labelled_indices()
         names = list(TABLE2_ORDER)
-        _mac_files(result, chosen, names, spec, writer)
+        mac_note = _mac_files(result, chosen, names, spec, writer)
+        lines.append("  Table 2: " + ", ".join(f"{r['description']} {r['freq_hz']:.2f} Hz ({r['error_pct']:+.2f} %)"
+                                                for r in table))
+        lines.append(f"  worst error against Table 2: {worst['error_pct']:+.2f} % ({worst['description']}); "
+                     f"lowest label purity {min(stats['label_purity'].values()):.3f}")
+        lines.append(f"  MAC: {mac_note}; largest off-diagonal {stats['mac_beam_max_offdiag']:.3f} (beam sensors), "
+                     f"{stats['mac_assembly_max_offdiag']:.3f} (beam and tube)")
     step("pictures")
     if spec.vtu:
         _write_vtu(result, chosen, names, writer.path("modes.vtu"))
@@ -88,36 +121,70 @@ def modal_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
         stats["pictures"] = _pictures(result, chosen, names, writer.path("mode_shapes.png"))
     bar.update(1)
     bar.close()
+    lines.append("  files: " + ", ".join(sorted(p.name for p in writer.scratch.iterdir())))
+    print("\n".join(lines), flush=True)
 
 
-def _free_beam_table(result, writer: StageWriter) -> None:
-    """Bending modes of the free beam (found by their dominant direction) against Euler-Bernoulli."""
+def _free_beam_table(result, writer: StageWriter) -> list[dict]:
+    """Elastic modes of the free beam, sorted into families by symmetry, against beam theory."""
+    from fem.beam_theory import FAMILIES, free_beam_references
+    from fem.labels import free_beam_families
+
     model = result.system.model
+    modes = result.modes
     b, h = model.beam_section
-    l = model.beam_length
-    A = b * h
-    refs = []
-    for bl in (4.730041, 7.853205):
-        for name, I in (("bending z", b * h**3 / 12), ("bending y", h * b**3 / 12)):
-            refs.append((name, bl**2 / (2 * np.pi * l**2) * np.sqrt(model.E * I / (model.rho * A))))
-    # identify each elastic mode by the direction holding most of its kinetic energy
-    system, modes = result.system, result.modes
-    Mphi = system.M @ modes.phi
-    comp = system.solid.dof_component
-    share = np.array([[np.sum(modes.phi[comp == c, i] * Mphi[comp == c, i]) for c in range(3)]
-                      for i in range(modes.phi.shape[1])])
-    rows, k = [], 0
-    for axis, name in ((2, "bending z"), (1, "bending y")):
-        found = [i for i in range(6, len(modes.freq_hz)) if share[i, axis] > 0.8]
-        for n, (i, (_, ref)) in enumerate(zip(found, [r for r in refs if r[0] == name], strict=False)):
-            k += 1
-            f = float(modes.freq_hz[i])
-            rows.append([k, f"{name} {n + 1} (Euler-Bernoulli)", f, float(ref), 100 * (f - ref) / ref])
-    header = ["mode", "description", "freq_hz", "test_hz", "error_pct"]
-    _write_csv(writer.path("frequencies.csv"), header, rows)
+    found = free_beam_families(result.system, modes.phi, modes.freq_hz > modes.shift_hz)
+    counts = {f: sum(1 for m in found if m.family == f) for f in FAMILIES}
+    refs = free_beam_references(model.E, model.nu, model.rho, model.beam_length, b, h, counts)
+    table = []
+    for m in found:
+        f = float(modes.freq_hz[m.index])
+        row = {"index": m.index, "mode": m.index + 1, "family": m.family, "freq_hz": f,
+               "description": m.family if m.family == "other" else f"{m.family} {m.order}",
+               "theory": "", "theory_hz": math.nan, "error_pct": math.nan, "eb_hz": math.nan, "eb_error_pct": math.nan}
+        if m.family != "other":
+            theory, f_t, f_eb = refs[m.family][m.order - 1]
+            row.update(theory=theory, theory_hz=f_t, error_pct=100 * (f - f_t) / f_t, eb_hz=f_eb,
+                       eb_error_pct=100 * (f - f_eb) / f_eb)
+        table.append(row)
+    header = ["mode", "description", "freq_hz", "theory", "theory_hz", "error_pct", "euler_bernoulli_hz",
+              "euler_bernoulli_error_pct"]
+
+    def hz(v: float) -> str:
+        return "" if not math.isfinite(v) else f"{v:.{FREQ_DIGITS}g}"
+
+    _write_csv(writer.path("frequencies.csv"), header,
+               [[r["mode"], r["description"], hz(r["freq_hz"]), r["theory"], hz(r["theory_hz"]), _pct(r["error_pct"]),
+                 hz(r["eb_hz"]), _pct(r["eb_error_pct"])] for r in table])
+    writer.stats["beam_theory"] = {r["description"]: {"freq_hz": r["freq_hz"], "theory_hz": r["theory_hz"],
+                                                      "error_pct": r["error_pct"]} for r in table}
+    return table
 
 
-def _mac_files(result, chosen, names, spec, writer: StageWriter) -> None:
+def _free_beam_summary(table: list[dict], layout: str) -> list[str]:
+    """Summary lines: worst error per family against its theory, and the families not reached."""
+    from fem.beam_theory import FAMILIES
+
+    lines = []
+    for family in FAMILIES:
+        rows = [r for r in table if r["family"] == family]
+        if not rows:
+            lines.append(f"  {family}: no mode among those computed (raise [modal] n_modes)")
+            continue
+        worst = max(rows, key=lambda r: abs(r["error_pct"]))
+        text = (f"  {family}: {len(rows)} mode(s), worst {worst['error_pct']:+.3f} % against {worst['theory']} "
+                f"({worst['description']}: {worst['freq_hz']:.2f} Hz)")
+        if family.startswith("bending"):
+            eb = max(rows, key=lambda r: abs(r["eb_error_pct"]))
+            text += f"; Euler-Bernoulli would say {eb['eb_error_pct']:+.2f} %"
+        lines.append(text)
+    other = [r for r in table if r["family"] == "other"]
+    if other:
+        lines.append(f"  unclassified: modes {', '.join(str(r['mode']) for r in other)}")
+    return lines
+
+
+def _mac_files(result, chosen, names, spec, writer: StageWriter) -> str:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -179,6 +246,7 @@ def _mac_files(result, chosen, names, spec, writer: StageWriter) -> None:
     fig.suptitle("MAC: " + note, fontsize=10)
     fig.savefig(writer.path("mac.png"), dpi=120, bbox_inches="tight")
     plt.close(fig)
+    return note
 
 
 def _write_vtu(result, chosen, names, path: Path) -> None:
