@@ -15,6 +15,7 @@ import json
 import os
 import platform
 import shutil
+import signal
 import subprocess
 import tempfile
 from contextlib import contextmanager
@@ -112,7 +113,10 @@ _RENAME_EXCHANGE = 2  # renameat2 flag (Linux >= 3.15): swap two paths in one at
 
 
 def _exchange(a: Path, b: Path) -> bool:
-    """Swap folders ``a`` and ``b`` atomically (Linux renameat2); False where not supported."""
+    """Swap folders ``a`` and ``b`` atomically (Linux renameat2); False where not supported
+    (or turned off by ``$BEARINGSHAFT_NO_RENAME_EXCHANGE``, which the tests of the fallback use)."""
+    if os.environ.get("BEARINGSHAFT_NO_RENAME_EXCHANGE"):
+        return False
     try:
         libc = ctypes.CDLL(None, use_errno=True)
         fn = libc.renameat2
@@ -138,6 +142,7 @@ def _swap_in(new: Path, out: Path) -> None:
         return
     aside = out.with_name(f".{out.name}.old-{os.getpid()}")
     out.rename(aside)
+    _crash_point("aside")
     new.rename(out)
     shutil.rmtree(aside, ignore_errors=True)
 
@@ -159,13 +164,24 @@ def folder_lock(out: Path):
 
 
 def _remove_stale_scratch(out: Path) -> None:
-    """Scratch folders of runs that were killed (only called under the folder lock)."""
-    for p in out.parent.glob(f".{out.name}.*.partial-*"):
+    """Clear what killed runs left beside ``out`` (called under the folder lock only).
+
+    Their scratch folders are removed; an old folder set aside by a two-rename swap that
+    was cut between its renames is put back if ``out`` is missing, else removed.
+    """
+    for p in out.parent.glob(f".{out.name}.*"):
+        kind, _, rest = p.name[len(out.name) + 2:].partition("-")
+        if not p.is_dir() or not (kind.endswith("partial") or kind == "old"):
+            continue
         try:
-            pid = int(p.name.rsplit("-", 2)[-2])
+            pid = int(rest.split("-")[0])
         except ValueError:
             continue
-        if pid != os.getpid() and not _alive(pid):
+        if pid == os.getpid() or _alive(pid):
+            continue
+        if kind == "old" and not out.exists():
+            p.rename(out)
+        else:
             shutil.rmtree(p, ignore_errors=True)
 
 
@@ -177,6 +193,15 @@ def _alive(pid: int) -> bool:
     except PermissionError:
         return True
     return True
+
+
+CRASH_ENV = "BEARINGSHAFT_CRASH_AT"  # tests only: SIGKILL this process at the named point of a commit
+
+
+def _crash_point(name: str) -> None:
+    """Die here as a power cut or ``kill -9`` would, if the tests ask for it (see tests/test_results_folder.py)."""
+    if os.environ.get(CRASH_ENV) == name:
+        os.kill(os.getpid(), signal.SIGKILL)
 
 
 @contextmanager
@@ -199,6 +224,7 @@ def staged_output(out_dir: str | Path, scene_name: str, scene_source: str, stage
     try:
         yield writer
         files = sorted(p.name for p in scratch.iterdir())
+        _crash_point("written")
         with folder_lock(out):
             _remove_stale_scratch(out)
             prov = {}
@@ -210,11 +236,13 @@ def staged_output(out_dir: str | Path, scene_name: str, scene_source: str, stage
                         shutil.copytree(p, scratch / p.name, copy_function=_link_or_copy)
                     else:
                         _link_or_copy(p, scratch / p.name)
+                    _crash_point("linking")
                 try:
                     prov = json.loads((out / "provenance.json").read_text())
                 except (OSError, ValueError):
                     prov = {}
             (scratch / "scene.toml").write_text(scene_source, encoding="utf-8")
+            _crash_point("scene")
             prov.update(
                 {
                     "scene": scene_name,
@@ -234,7 +262,9 @@ def staged_output(out_dir: str | Path, scene_name: str, scene_source: str, stage
             (scratch / "provenance.json").write_text(json.dumps(prov, indent=2, sort_keys=True) + "\n",
                                                      encoding="utf-8")
             _fsync_tree(scratch)
+            _crash_point("provenance")
             _swap_in(scratch, out)
+            _crash_point("swapped")
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
 

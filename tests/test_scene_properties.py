@@ -114,7 +114,9 @@ def _case_text(scene: str, table: str, key: str, typ, kind: str) -> tuple[str, s
     return tomli_w.dumps(data), key
 
 
-def _check(text: str, must_name: str, must_refuse: bool) -> None:
+def _check(text: str, must_name: str, must_refuse: bool, table: str | None = None) -> None:
+    """``check`` on ``text``: refused in one line naming ``must_name`` (or, for a constraint
+    between keys of one table, naming that ``table``), or accepted; nothing written."""
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "case.toml"
         path.write_text(text)
@@ -130,16 +132,28 @@ def _check(text: str, must_name: str, must_refuse: bool) -> None:
         assert rc in (0, 2), f"exit {rc}: {err.getvalue()}"
         if rc == 2:
             assert len(lines) == 1, f"{len(lines)} lines: {err.getvalue()}"
-            assert must_name in lines[0], f"{lines[0]!r} does not name {must_name!r}"
+            named = must_name in lines[0] or (table is not None and f"[{table}]" in lines[0])
+            assert named, f"{lines[0]!r} does not name {must_name!r}"
         else:
             assert lines == [], err.getvalue()
 
 
-cases = st.tuples(st.sampled_from(TARGETS), st.sampled_from(ALWAYS_INVALID + MAYBE_VALID))
+# any value at all, of any TOML type: may be valid, must never crash the parser
+ANY_VALUE = st.one_of(
+    st.floats(), st.integers(min_value=-(2**63), max_value=2**63 - 1), st.booleans(), st.text(max_size=12),
+    st.lists(st.floats(), max_size=4), st.lists(st.integers(min_value=-(2**31), max_value=2**31), max_size=4),
+)
+cases = st.tuples(st.sampled_from(TARGETS), st.one_of(st.sampled_from(ALWAYS_INVALID + MAYBE_VALID),
+                                                      st.tuples(st.just("value"), ANY_VALUE)))
 
 
 def _run(case) -> None:
     (scene, table, key, typ), kind = case
+    if isinstance(kind, tuple):  # a drawn value in place of the key's
+        data = _scene_data(scene)
+        data.setdefault(table, {})[key] = kind[1]
+        _check(tomli_w.dumps(data), key, must_refuse=False, table=table)
+        return
     text, name = _case_text(scene, table, key, typ, kind)
     _check(text, name, must_refuse=kind in ALWAYS_INVALID)
 
