@@ -15,7 +15,10 @@ The matrices, the DOF map (the interface rows and point rows on the full DOFs, t
 constraint and fixed-interface modes for expansion) and provenance go to ``rom.npz``
 (:meth:`ReducedModel.save`), so a ringdown never rebuilds the 3-D model: a built model is
 also kept in a cache folder keyed by the specification and the source of the code that
-builds it (``$BEARINGSHAFT_CACHE``, default ``~/.cache/bearingshaft``).
+builds it (``$BEARINGSHAFT_CACHE``, default ``~/.cache/bearingshaft``): ``rom-<key>.npz``
+with its manifest ``rom-<key>.npz.json`` (hash of the inputs, sha256 of the file), checked
+on every read; a corrupt entry is reported in one line, removed and rebuilt
+(:mod:`reduced.cache`).
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from reduced.cache import atomic_write, load_entry, write_entry
 from reduced.models.gaps import GapSystem, two_sided_stops
 
 ROM_LAYOUTS = ("beam-grounded", "assembly")
@@ -81,11 +85,15 @@ class RomSpec:
 
     def reduced(self, progress: bool = False) -> ReducedModel:
         """The reduced model: from ``rom_file``, the cache, or built (and cached)."""
-        if self.rom_file:
+        if self.rom_file:  # the user's file: a bad one is refused, never silently rebuilt
             path = Path(self.rom_file)
             if not path.exists():
                 raise ValueError(f"rom_file: no such file {self.rom_file!r}")
-            return ReducedModel.load(path).with_contact(self)
+            try:
+                rom = ReducedModel.load(path)
+            except ValueError as exc:
+                raise ValueError(f"rom_file: {exc}") from None
+            return rom.with_contact(self)
         return cached_rom(self, progress)
 
     def system(self) -> GapSystem:
@@ -145,8 +153,8 @@ class ReducedModel:
         return ReducedModel(self.M, self.K, 0.5 * (C + C.T), self.P, self.omega_fixed, spec.k_g, spec.gap,
                             self.dof_names, self.checks, info, self.Psi, self.Phi, self.dof_map)
 
-    def save(self, path: str | Path) -> None:
-        """``rom.npz``: matrices, DOF map, checks and provenance (JSON)."""
+    def _write_npz(self, f) -> None:
+        """The ``rom.npz`` content (matrices, DOF map, checks and provenance as JSON) into file f."""
         arrays = {"M": self.M, "K": self.K, "C": self.C, "P": self.P, "omega_fixed": self.omega_fixed,
                   "k_g": self.k_g, "gap": self.gap, "dof_names": np.array(self.dof_names),
                   "checks_json": json.dumps(self.checks), "info_json": json.dumps(self.info)}
@@ -155,12 +163,19 @@ class ReducedModel:
             arrays["Phi"] = self.Phi
         for key, val in self.dof_map.items():
             arrays[f"map_{key}"] = np.asarray(val)
-        tmp = Path(str(path) + ".tmp.npz")
-        np.savez_compressed(tmp, **arrays)
-        tmp.replace(path)
+        np.savez_compressed(f, **arrays)
+
+    def save(self, path: str | Path) -> None:
+        """``rom.npz``: matrices, DOF map, checks and provenance (JSON), written atomically."""
+        atomic_write(path, self._write_npz)
 
     @classmethod
-    def load(cls, path: str | Path) -> ReducedModel:
+    def load(cls, path) -> ReducedModel:
+        """The model saved by :meth:`save`, from a path or a binary file object.
+
+        Raises ValueError (one line) whatever is wrong with the file: missing, truncated,
+        not a zip, a bad CRC or deflate stream, a missing array, bad JSON.
+        """
         try:
             with np.load(path, allow_pickle=False) as z:
                 info = json.loads(str(z["info_json"]))
@@ -169,8 +184,10 @@ class ReducedModel:
                            checks=json.loads(str(z["checks_json"])), info=info,
                            Psi=z["Psi"] if "Psi" in z else None, Phi=z["Phi"] if "Phi" in z else None,
                            dof_map={k[4:]: z[k] for k in z.files if k.startswith("map_")})
-        except (OSError, KeyError, ValueError) as exc:
-            raise ValueError(f"{path}: not a reduced model file ({exc})") from None
+        except Exception as exc:  # BadZipFile, zlib.error, EOFError, KeyError, ...: all mean a bad file
+            name = getattr(path, "name", path)
+            reason = " ".join(f"{type(exc).__name__}: {exc}".split())
+            raise ValueError(f"{name}: not a reduced model file ({reason})") from None
 
 
 def _sparse_rows(rows: np.ndarray) -> dict[str, np.ndarray]:
@@ -240,27 +257,39 @@ def source_hash() -> str:
 
 
 def cache_dir() -> Path:
+    """Folder of the reduced-model cache: ``$BEARINGSHAFT_CACHE``, default ``~/.cache/bearingshaft``."""
     return Path(os.environ.get("BEARINGSHAFT_CACHE", Path.home() / ".cache" / "bearingshaft"))
 
 
-def _cache_key(spec: RomSpec) -> str:
-    build = {f.name: getattr(spec, f.name) for f in fields(spec)
-             if f.name not in ("k_g", "gap", "c_points", "alpha", "rom_file")}
-    h = hashlib.sha256(json.dumps(build, sort_keys=True).encode() + source_hash().encode())
-    return h.hexdigest()[:20]
+def _cache_inputs(spec: RomSpec) -> dict:
+    """What a cached reduction depends on: the spec without contact, damping and rom_file."""
+    return {f.name: getattr(spec, f.name) for f in fields(spec)
+            if f.name not in ("k_g", "gap", "c_points", "alpha", "rom_file")}
 
 
-def _cache_path(spec: RomSpec) -> Path:
-    return cache_dir() / f"rom-{_cache_key(spec)}.npz"
+def _inputs_hash(spec: RomSpec) -> str:
+    """sha256 (hex) of the cache inputs and the source hash: recorded in the entry's manifest."""
+    h = hashlib.sha256(json.dumps(_cache_inputs(spec), sort_keys=True).encode() + source_hash().encode())
+    return h.hexdigest()
+
+
+def _cache_key(spec: RomSpec, inputs: str | None = None) -> str:
+    """The cache file's key: the first 20 hex digits of :func:`_inputs_hash` (``inputs`` if given)."""
+    return (inputs or _inputs_hash(spec))[:20]
+
+
+def _cache_path(spec: RomSpec, inputs: str | None = None) -> Path:
+    """``<cache_dir>/rom-<key>.npz`` (its manifest: the same name + ``.json``)."""
+    return cache_dir() / f"rom-{_cache_key(spec, inputs)}.npz"
 
 
 def store_in_cache(rom: ReducedModel, spec: RomSpec) -> None:
-    """Keep ``rom`` where :func:`cached_rom` looks for ``spec`` (a read-only cache is skipped:
-    the model is then rebuilt when next needed)."""
-    path = _cache_path(spec)
+    """Keep ``rom`` where :func:`cached_rom` looks for ``spec``, with its manifest (a read-only
+    cache is skipped: the model is then rebuilt when next needed)."""
+    inputs = _inputs_hash(spec)
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        rom.save(path)
+        write_entry(_cache_path(spec, inputs), rom._write_npz, inputs,
+                    info={"kind": "reduced model", "spec": _cache_inputs(spec), "source_hash": source_hash()})
     except OSError:
         pass
 
@@ -268,15 +297,15 @@ def store_in_cache(rom: ReducedModel, spec: RomSpec) -> None:
 def cached_rom(spec: RomSpec, progress: bool = False) -> ReducedModel:
     """The reduced model of ``spec`` from the cache, built and stored there if absent.
 
+    An entry whose manifest is missing, names other inputs or another checksum, or whose
+    file cannot be read, is reported in one line, removed and rebuilt (:mod:`reduced.cache`).
     The contact (k_g, gap) and damping do not enter the reduction (the interface is the
     gap coordinate itself), so they are applied after loading.
     """
-    path = _cache_path(spec)
-    if path.exists():
-        try:
-            return ReducedModel.load(path).with_contact(spec)
-        except ValueError:
-            path.unlink(missing_ok=True)
+    inputs = _inputs_hash(spec)
+    rom = load_entry(_cache_path(spec, inputs), inputs, ReducedModel.load)
+    if rom is not None:
+        return rom.with_contact(spec)
     rom, _ = build_rom(spec, progress=progress)
     store_in_cache(rom, spec)
     return rom
