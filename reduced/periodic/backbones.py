@@ -81,6 +81,177 @@ TONGUE_RATIO = 1.0  # a harmonic k >= 2 larger than the fundamental: an internal
 STEP_OVER_DW = (0.01, 0.02, 0.05, 0.1, 0.2, 0.35)  # tried relative frequency jumps past a tongue
 
 
+def _nnm_start(system: GapSystem, mode: int, H: int, N: int | None,
+               energy_start_J: float | None) -> tuple[NNMResidual, np.ndarray, float]:
+    """(residual, first point y0, omega0 [rad/s]) of NNM ``mode`` below its grazing amplitude."""
+    lin = linear_modes(system, "open")
+    phi = lin.phi[:, mode]
+    omega0 = float(lin.omega[mode])
+    hb = HarmonicBalance.for_system(system, H, N or default_samples(H))
+    res = NNMResidual(hb, omega0, int(np.argmax(np.abs(phi))))
+    a_g = grazing_amplitude(system, phi)
+    if not math.isfinite(a_g):  # the mode never touches a stop: any amplitude will do
+        a_g = 1.0
+    a0 = START_FRACTION * a_g
+    if energy_start_J is not None:  # linear energy 1/2 omega0^2 a^2
+        a0 = min(a0, math.sqrt(2.0 * energy_start_J) / omega0)
+    return res, res.start(phi, omega0, math.log10(a0)), omega0
+
+
+@dataclass(eq=False)
+class _TongueWatch:
+    """Bookkeeping of the continued pieces: the stop test, and the tongues met with their notes.
+
+    Used as ``stop`` of :func:`continue_branch`: stops at ``energy_max_J`` or, with H > 1, on
+    entering an internal resonance tongue (``in_tongue``). Call :meth:`reset` before each piece.
+    """
+
+    res: NNMResidual
+    energy_max_J: float
+    tongue_ratio: float
+    follow_steps: int
+    tongues: list = field(default_factory=list)
+    notes: list = field(default_factory=list)
+    in_tongue: bool = False
+    w_max: float = -np.inf  # highest relative frequency of this piece so far
+    E_prev: float = -np.inf  # J, energy of the previous point
+    count: int = 0  # points of this piece so far
+    bend_at: int | None = None  # point at which the frequency began to fall with rising energy
+    bend: tuple | None = None  # (harmonic, energy_J, w_max) there
+
+    def reset(self) -> None:
+        """Start a new piece: not in a tongue, no bend, no points."""
+        self.in_tongue = False
+        self.w_max, self.E_prev, self.count, self.bend_at, self.bend = -np.inf, -np.inf, 0, None, None
+
+    def __call__(self, y: np.ndarray) -> bool:
+        """Whether continuation stops at y (the energy reached, or a tongue entered)."""
+        hb = self.res.hb
+        i_w = hb.size
+        self.count += 1
+        E = self.res.energy(y)
+        if E >= self.energy_max_J:
+            return True
+        if hb.H > 1:
+            r, k = harmonic_ratio(hb, y[: hb.size])
+            if r > self.tongue_ratio:
+                self.in_tongue = True
+                return True
+            # on the backbone of a hardening gap system the frequency rises with the energy;
+            # a frequency that falls while the energy rises is the bend into a tongue: follow
+            # it for up to follow_steps points, hoping it returns above its highest frequency
+            if self.bend_at is None:
+                if y[i_w] < self.w_max * (1.0 - 1e-6) and E > self.E_prev:
+                    self.bend_at = self.count
+                    self.bend = (k, E, self.w_max)
+            elif y[i_w] > self.bend[2] and r < self.tongue_ratio / 3.0:
+                k0, E0, w0 = self.bend
+                self.followed(k0, E0, w0 * self.res.omega_ref / (2 * np.pi), E)
+                self.bend_at = None
+            elif self.count - self.bend_at > self.follow_steps:
+                self.in_tongue = True
+                return True
+        self.w_max = max(self.w_max, y[i_w])
+        self.E_prev = E
+        return False
+
+    def followed(self, k: int, E0: float, f0: float, E: float) -> None:
+        """Record a k:1 tongue entered at E0 [J], f0 [Hz] that the branch came back from at E."""
+        self.tongues.append({"harmonic": k, "energy_J": E0, "freq_hz": f0, "action": "followed",
+                             "energy_after_J": E})
+        self.notes.append(f"{k}:1 internal resonance at E = {E0:.4g} J: followed (the branch "
+                          f"returned at E = {E:.4g} J)")
+
+    def stepped_over(self, k: int, E_a: float, f_a: float, E_b: float) -> None:
+        """Record a k:1 tongue at E_a [J], f_a [Hz] stepped over to E_b [J]."""
+        self.tongues.append({"harmonic": k, "energy_J": E_a, "freq_hz": f_a, "action": "stepped over",
+                             "energy_after_J": E_b})
+        self.notes.append(f"{k}:1 internal resonance at E = {E_a:.4g} J, {f_a:.2f} Hz: stepped over to "
+                          f"E = {E_b:.4g} J")
+
+    def stopped(self, k: int, E_a: float, f_a: float) -> None:
+        """Record a k:1 tongue at E_a [J], f_a [Hz] that could not be stepped over."""
+        self.tongues.append({"harmonic": k, "energy_J": E_a, "freq_hz": f_a, "action": "stopped"})
+        self.notes.append(f"{k}:1 internal resonance at E = {E_a:.4g} J, {f_a:.2f} Hz: could not step over")
+
+
+def _last_backbone_point(hb: HarmonicBalance, Y: np.ndarray, tongue_ratio: float) -> int:
+    """Index in Y of the last point clearly off a tongue (small ratio, frequency at its running maximum)."""
+    i_w = hb.size
+    r = np.array([harmonic_ratio(hb, y[: hb.size])[0] for y in Y])
+    w_max = np.maximum.accumulate(Y[:, i_w])
+    keep = np.flatnonzero((r < tongue_ratio / 3.0) & (Y[:, i_w] >= w_max))
+    return int(keep[-1]) if keep.size else 0
+
+
+def _step_over_predictions(anchor: np.ndarray, backbone1: np.ndarray, n1: int):
+    """Predictor past a tongue: (w_t, log10 a, guess) for each jump of STEP_OVER_DW, two guesses each.
+
+    The frequency is fixed a little above the anchor's: the resonance sits at one frequency
+    (k omega = omega of the other mode), so a solve at fixed frequency past it stays well
+    conditioned, where one at fixed amplitude may not. The amplitude comes from the
+    one-harmonic backbone ``backbone1`` (its points y, ``n1`` coefficients each), scaled by the
+    anchor's frequency ratio to it; the guess is the anchor's shape, then the one-harmonic
+    solution with higher harmonics zero.
+    """
+    i_w, i_a = anchor.size - 3, anchor.size - 1  # y = [Psi, w, d, log10 a] (NNMResidual)
+    la1 = backbone1[:, n1 + 2]
+    bias = anchor[i_w] / float(np.interp(anchor[i_a], la1, backbone1[:, n1]))
+    w1 = backbone1[:, n1]
+    mono = np.maximum.accumulate(w1)  # the one-harmonic backbone, made monotone for inversion
+    for jump, kind in [(j, g) for j in STEP_OVER_DW for g in ("anchor", "one-harmonic")]:
+        w_t = anchor[i_w] * (1.0 + jump)
+        la = float(np.interp(w_t / bias, mono, la1))
+        if kind == "anchor":  # the anchor's shape at the predicted amplitude
+            guess = anchor.copy()
+        else:  # the one-harmonic solution at that amplitude, higher harmonics zero
+            guess = np.zeros_like(anchor)
+            for c in range(n1):
+                guess[c] = np.interp(la, la1, backbone1[:, c])
+        guess[i_w] = w_t
+        guess[i_a] = la
+        yield w_t, la, guess
+
+
+def _correct_at_frequency(res: NNMResidual, guess: np.ndarray, w_t: float) -> np.ndarray | None:
+    """Corrector: Newton on [R(y); w - w_t] from ``guess`` (w = omega / omega_ref); y, or None."""
+    i_w = res.hb.size
+
+    def fixed(z):
+        R, J = res(z)
+        e = np.zeros(z.size)
+        e[i_w] = 1.0
+        return np.concatenate([R, [z[i_w] - w_t]]), np.vstack([J, e])
+
+    try:
+        return newton(fixed, guess, max_iter=40, max_step=5.0).y
+    except NewtonError:
+        return None
+
+
+def _on_backbone(res: NNMResidual, y: np.ndarray, la: float, anchor: np.ndarray, E_a: float,
+                 tongue_ratio: float) -> bool:
+    """Whether y continues the backbone past the anchor: amplitude near la and above the anchor's,
+    more energy, a dominant fundamental."""
+    i_a = res.hb.size + 2
+    return (
+        abs(y[i_a] - la) < 0.5
+        and harmonic_ratio(res.hb, y[: res.hb.size])[0] < tongue_ratio / 3.0
+        and y[i_a] > anchor[i_a]
+        and res.energy(y) > E_a
+    )
+
+
+def _step_over(res: NNMResidual, anchor: np.ndarray, E_a: float, backbone1: np.ndarray, n1: int,
+               tongue_ratio: float) -> np.ndarray | None:
+    """The first corrected prediction past the tongue that lands on the backbone, or None."""
+    for w_t, la, guess in _step_over_predictions(anchor, backbone1, n1):
+        y = _correct_at_frequency(res, guess, w_t)
+        if y is not None and _on_backbone(res, y, la, anchor, E_a, tongue_ratio):
+            return y
+    return None
+
+
 def _nnm_branch(
     system: GapSystem,
     mode: int,
@@ -118,190 +289,53 @@ def _nnm_branch(
     lands, the run ends with action "stopped" (never a silent jump).
     """
     t0 = time.perf_counter()
-    lin = linear_modes(system, "open")
-    phi = lin.phi[:, mode]
-    omega0 = float(lin.omega[mode])
-    hb = HarmonicBalance.for_system(system, H, N or default_samples(H))
-    ref = int(np.argmax(np.abs(phi)))
-    res = NNMResidual(hb, omega0, ref)
-    a_g = grazing_amplitude(system, phi)
-    if not math.isfinite(a_g):  # the mode never touches a stop: any amplitude will do
-        a_g = 1.0
-    a0 = START_FRACTION * a_g
-    if energy_start_J is not None:  # linear energy 1/2 omega0^2 a^2
-        a0 = min(a0, math.sqrt(2.0 * energy_start_J) / omega0)
-    y0 = res.start(phi, omega0, math.log10(a0))
-    nX = hb.size
-    i_w, i_a = nX, nX + 2
-    in_tongue = {"flag": False}
-    tongues, notes = [], []
-
-    def ratio(y):
-        return harmonic_ratio(hb, y[:nX])
-
-    st = {}
-
-    def reset():
-        st.update(w_max=-np.inf, E_prev=-np.inf, count=0, bend_at=None, bend=None)
-
-    def stop(y):
-        st["count"] += 1
-        E = res.energy(y)
-        if E >= energy_max_J:
-            return True
-        if H > 1:
-            r, k = ratio(y)
-            if r > tongue_ratio:
-                in_tongue["flag"] = True
-                return True
-            # on the backbone of a hardening gap system the frequency rises with the energy;
-            # a frequency that falls while the energy rises is the bend into a tongue: follow
-            # it for up to follow_steps points, hoping it returns above its highest frequency
-            if st["bend_at"] is None:
-                if y[i_w] < st["w_max"] * (1.0 - 1e-6) and E > st["E_prev"]:
-                    st["bend_at"] = st["count"]
-                    st["bend"] = (k, E, st["w_max"])
-            elif y[i_w] > st["bend"][2] and r < tongue_ratio / 3.0:
-                k0, E0, w0 = st["bend"]
-                tongues.append(
-                    {
-                        "harmonic": k0,
-                        "energy_J": E0,
-                        "freq_hz": w0 * omega0 / (2 * np.pi),
-                        "action": "followed",
-                        "energy_after_J": E,
-                    }
-                )
-                notes.append(
-                    f"{k0}:1 internal resonance at E = {E0:.4g} J: followed (the branch "
-                    f"returned at E = {E:.4g} J)"
-                )
-                st["bend_at"] = None
-            elif st["count"] - st["bend_at"] > follow_steps:
-                in_tongue["flag"] = True
-                return True
-        st["w_max"] = max(st["w_max"], y[i_w])
-        st["E_prev"] = E
-        return False
-
+    res, ystart, omega0 = _nnm_start(system, mode, H, N, energy_start_J)
+    hb = res.hb
+    i_w, i_a = hb.size, hb.size + 2
+    watch = _TongueWatch(res, energy_max_J, tongue_ratio, follow_steps)
     backbone1 = None
-    pieces = []
+    pieces = []  # (Branch, indices of its points kept)
     steps_left = max_steps
-    ystart = y0
     for _ in range(max_tongues + 1):
-        in_tongue["flag"] = False
-        reset()
-        br = continue_branch(
-            res,
-            ystart,
-            param=i_a,
-            direction=1.0,
-            ds=ds,
-            ds_max=ds_max,
-            max_steps=steps_left,
-            max_angle_deg=max_angle_deg,
-            stop=stop,
-            monitor=(i_w,),
-            callback=res.energy,
-            progress=progress,
-        )
+        watch.reset()
+        br = continue_branch(res, ystart, param=i_a, direction=1.0, ds=ds, ds_max=ds_max, max_steps=steps_left,
+                             max_angle_deg=max_angle_deg, stop=watch, monitor=(i_w,), callback=res.energy,
+                             progress=progress)
         steps_left -= len(br.y)
-        if not in_tongue["flag"]:
+        if not watch.in_tongue:
             pieces.append((br, np.arange(len(br.y))))
             break
-        # keep the backbone up to the last point clearly off the tongue
-        r = np.array([ratio(y)[0] for y in br.y])
-        w_max = np.maximum.accumulate(br.y[:, i_w])
-        keep = np.flatnonzero((r < tongue_ratio / 3.0) & (br.y[:, i_w] >= w_max))
-        if keep.size == 0:
-            keep = np.array([0])
-        last = int(keep[-1])
-        k = ratio(br.y[-1])[1]
+        last = _last_backbone_point(hb, br.y, tongue_ratio)  # keep the backbone up to there
         pieces.append((br, np.arange(last + 1)))
-        anchor = br.y[last]
-        E_a = float(br.data[last])
+        k = harmonic_ratio(hb, br.y[-1][: hb.size])[1]
+        anchor, E_a = br.y[last], float(br.data[last])
         f_a = anchor[i_w] * omega0 / (2 * np.pi)
         if backbone1 is None:
-            backbone1 = (
-                _nnm_branch(system, mode, H=1, energy_max_J=energy_max_J, energy_start_J=energy_start_J)
-                .branches[0]
-                .y
-            )
-        n1 = system.n * 3  # size of an H = 1 coefficient vector
-        la1 = backbone1[:, n1 + 2]
-        bias = anchor[i_w] / float(np.interp(anchor[i_a], la1, backbone1[:, n1]))
-        landed = None
-        w1 = backbone1[:, n1]
-        mono = np.maximum.accumulate(w1)  # the one-harmonic backbone, made monotone for inversion
-        for jump, kind in [(j, g) for j in STEP_OVER_DW for g in ("anchor", "one-harmonic")]:
-            # fix the frequency a little above the anchor's: the resonance sits at one
-            # frequency (k omega = omega of the other mode), so a solve at fixed frequency
-            # past it stays well conditioned, where one at fixed amplitude may not
-            w_t = anchor[i_w] * (1.0 + jump)
-            la = float(np.interp(w_t / bias, mono, la1))
-            if kind == "anchor":  # the anchor's shape at the predicted amplitude
-                guess = anchor.copy()
-            else:  # the one-harmonic solution at that amplitude, higher harmonics zero
-                guess = np.zeros_like(anchor)
-                for c in range(n1):
-                    guess[c] = np.interp(la, la1, backbone1[:, c])
-            guess[i_w] = w_t
-            guess[i_a] = la
-
-            def fixed(z, w_t=w_t):
-                R, J = res(z)
-                e = np.zeros(z.size)
-                e[i_w] = 1.0
-                return np.concatenate([R, [z[i_w] - w_t]]), np.vstack([J, e])
-
-            try:
-                sol = newton(fixed, guess, max_iter=40, max_step=5.0)
-            except NewtonError:
-                continue
-            # accept only a point on this backbone: amplitude near the prediction and above
-            # the anchor's, more energy, a dominant fundamental
-            if (
-                abs(sol.y[i_a] - la) < 0.5
-                and ratio(sol.y)[0] < tongue_ratio / 3.0
-                and sol.y[i_a] > anchor[i_a]
-                and res.energy(sol.y) > E_a
-            ):
-                landed = sol.y
-                break
+            one = _nnm_branch(system, mode, H=1, energy_max_J=energy_max_J, energy_start_J=energy_start_J)
+            backbone1 = one.branches[0].y
+        landed = _step_over(res, anchor, E_a, backbone1, system.n * 3, tongue_ratio)  # n * 3: H = 1 size
         if landed is None or steps_left <= 0:
-            tongues.append({"harmonic": k, "energy_J": E_a, "freq_hz": f_a, "action": "stopped"})
-            notes.append(f"{k}:1 internal resonance at E = {E_a:.4g} J, {f_a:.2f} Hz: could not step over")
+            watch.stopped(k, E_a, f_a)
             break
-        E_b = res.energy(landed)
-        tongues.append(
-            {"harmonic": k, "energy_J": E_a, "freq_hz": f_a, "action": "stepped over", "energy_after_J": E_b}
-        )
-        notes.append(
-            f"{k}:1 internal resonance at E = {E_a:.4g} J, {f_a:.2f} Hz: stepped over to E = {E_b:.4g} J"
-        )
+        watch.stepped_over(k, E_a, f_a, res.energy(landed))
         ystart = landed
+    return _assemble_branch(res, mode, pieces, energy_max_J, watch, time.perf_counter() - t0)
+
+
+def _assemble_branch(res: NNMResidual, mode: int, pieces: list, energy_max_J: float, watch: _TongueWatch,
+                     wall_s: float) -> NNMBranch:
+    """The :class:`NNMBranch` of the kept points of each piece, numbered by segment."""
+    hb = res.hb
     Y = np.concatenate([b.y[idx] for b, idx in pieces])
     E = np.concatenate([np.asarray(b.data)[idx] for b, idx in pieces])
     seg = np.concatenate([np.full(idx.size, i) for i, (_, idx) in enumerate(pieces)])
     X = np.array([res.X_omega(y)[0] for y in Y])
-    omega = Y[:, i_w] * omega0
+    omega = Y[:, hb.size] * res.omega_ref
+    notes = watch.notes
     if pieces[-1][0].status != "stop" or E[-1] < energy_max_J:
         notes.append(f"stopped early ({pieces[-1][0].status}) at E = {E[-1]:.3g} J")
-    return NNMBranch(
-        mode,
-        H,
-        hb.N,
-        E,
-        omega / (2 * np.pi),
-        X,
-        omega,
-        seg,
-        [b for b, _ in pieces],
-        res,
-        time.perf_counter() - t0,
-        tongues,
-        notes,
-    )
+    return NNMBranch(mode, hb.H, hb.N, E, omega / (2 * np.pi), X, omega, seg, [b for b, _ in pieces], res, wall_s,
+                     watch.tongues, notes)
 
 
 def nnm_branch(system: GapSystem, mode: int, **options) -> NNMBranch:

@@ -84,6 +84,12 @@ class GapForce:
         w = np.where(closed, s.k, 0.0)
         return (w * d) @ s.B, w
 
+    def potential(self, xs: np.ndarray) -> np.ndarray:
+        """J, (N,) the stops' energy sum_j k_j max(penetration_j, 0)^2 / 2 at the samples xs (N, n)."""
+        s = self.system
+        pen = np.maximum(s.penetration(xs), 0.0)
+        return 0.5 * (pen**2) @ s.k
+
 
 @dataclass(frozen=True, eq=False)
 class CubicForce:
@@ -100,6 +106,45 @@ class CubicForce:
 
     def __call__(self, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return self.gamma * xs**3, 3.0 * self.gamma * xs**2
+
+    def potential(self, xs: np.ndarray) -> np.ndarray:
+        """J, (N,) sum_i gamma_i x_i^4 / 4 at the samples xs (N, n)."""
+        return 0.25 * (xs**4) @ self.gamma
+
+
+# -- the harmonic basis -----------------------------------------------------------------------
+def _phases(N: int) -> np.ndarray:
+    """(N,) the equally spaced phases tau_i = 2 pi i / N of one period."""
+    return 2.0 * np.pi * np.arange(N) / N
+
+
+def _synthesis_matrix(H: int, tau: np.ndarray) -> np.ndarray:
+    """(N, 2H+1) E with x(tau_i) = sum_h E[i, h] X_h: columns 1, cos tau, sin tau, ..., sin H tau."""
+    E = np.ones((tau.size, 2 * H + 1))
+    for k in range(1, H + 1):
+        E[:, 2 * k - 1] = np.cos(k * tau)
+        E[:, 2 * k] = np.sin(k * tau)
+    return E
+
+
+def _projection_matrix(H: int, tau: np.ndarray) -> np.ndarray:
+    """(2H+1, N) P, the trapezoidal Fourier coefficients of N samples: P E = I for N > 2H."""
+    N = tau.size
+    P = np.full((2 * H + 1, N), 1.0 / N)
+    for k in range(1, H + 1):
+        P[2 * k - 1] = 2.0 / N * np.cos(k * tau)
+        P[2 * k] = 2.0 / N * np.sin(k * tau)
+    return P
+
+
+def _derivative_matrix(H: int) -> np.ndarray:
+    """(2H+1, 2H+1) Nab, d/dtau on the coefficient rows: (c_k, s_k) -> (k s_k, -k c_k)."""
+    Nab = np.zeros((2 * H + 1, 2 * H + 1))
+    for k in range(1, H + 1):
+        # x = c cos + s sin  ->  dx/dtau = (k s) cos + (-k c) sin
+        Nab[2 * k - 1, 2 * k] = k
+        Nab[2 * k, 2 * k - 1] = -k
+    return Nab
 
 
 # -- the harmonic balance operator ---------------------------------------------------------
@@ -128,21 +173,10 @@ class HarmonicBalance:
             raise ValueError(f"H must be >= 0, got {H}")
         if N <= 2 * H:
             raise ValueError(f"N must exceed 2H = {2 * H} for the projection to invert synthesis, got {N}")
-        tau = 2.0 * np.pi * np.arange(N) / N
-        E = np.ones((N, 2 * H + 1))
-        P = np.full((2 * H + 1, N), 1.0 / N)
-        Nab = np.zeros((2 * H + 1, 2 * H + 1))
-        for k in range(1, H + 1):
-            E[:, 2 * k - 1] = np.cos(k * tau)
-            E[:, 2 * k] = np.sin(k * tau)
-            P[2 * k - 1] = 2.0 / N * np.cos(k * tau)
-            P[2 * k] = 2.0 / N * np.sin(k * tau)
-            # x = c cos + s sin  ->  dx/dtau = (k s) cos + (-k c) sin
-            Nab[2 * k - 1, 2 * k] = k
-            Nab[2 * k, 2 * k - 1] = -k
-        object.__setattr__(self, "E", E)
-        object.__setattr__(self, "P", P)
-        object.__setattr__(self, "Nab", Nab)
+        tau = _phases(N)
+        object.__setattr__(self, "E", _synthesis_matrix(H, tau))
+        object.__setattr__(self, "P", _projection_matrix(H, tau))
+        object.__setattr__(self, "Nab", _derivative_matrix(H))
         object.__setattr__(self, "Qr", np.asarray(self.force.Q, float))
 
     @classmethod
@@ -152,7 +186,7 @@ class HarmonicBalance:
             system.M, system.K, GapForce(system), H, N or default_samples(H), system.C if damped else None
         )
 
-    # -- sizes and helpers ----------------------------------------------------------------
+    # -- sizes and layout -----------------------------------------------------------------
     @property
     def n(self) -> int:
         return self.M.shape[0]
@@ -180,18 +214,30 @@ class HarmonicBalance:
     def time_series(self, X: np.ndarray, omega: float | None = None, N: int | None = None):
         """x at N phases (N, n); with ``omega``, also the velocity dx/dt (N, n)."""
         Xm = self.unpack(X)
-        if N is None:
-            E = self.E
-        else:  # synthesis only: any N >= 1 will do
-            tau = 2.0 * np.pi * np.arange(N) / N
-            k = self.harmonic_numbers()
-            E = np.where(np.arange(2 * self.H + 1) % 2 == 1, np.cos(np.outer(tau, k)), np.sin(np.outer(tau, k)))
-            E[:, 0] = 1.0
+        E = self.E if N is None else _synthesis_matrix(self.H, _phases(N))  # synthesis only: any N >= 1
         x = E @ Xm
         if omega is None:
             return x
         return x, omega * (E @ (self.Nab @ Xm))
 
+    # -- AFT: F(X) and dF/dX ----------------------------------------------------------------
+    def aft(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """F(X) (size,) and dF/dX (size, size) by alternating frequency/time."""
+        f, w = self.force(self.E @ self.unpack(X))
+        return (self.P @ f).ravel(), self._aft_jacobian(w)
+
+    def _aft_jacobian(self, w: np.ndarray) -> np.ndarray:
+        """dF/dX = sum_r kron(P diag(w_r) E, Q_r) (size, size) from the force weights w (N, r)."""
+        dF = np.zeros((self.size, self.size))
+        for r in range(self.Qr.shape[0]):
+            wr = w[:, r]
+            if not np.any(wr):
+                continue
+            G = (self.P * wr) @ self.E
+            dF += np.kron(G, self.Qr[r])
+        return dF
+
+    # -- the linear part and the residual -----------------------------------------------------
     def linear_operator(self, omega: float) -> np.ndarray:
         """A(omega) = kron(I, K) + omega^2 kron(Nab^2, M) + omega kron(Nab, C)."""
         I = np.eye(2 * self.H + 1)
@@ -200,52 +246,32 @@ class HarmonicBalance:
             A += omega * np.kron(self.Nab, self.C)
         return A
 
-    # -- AFT ------------------------------------------------------------------------------
-    def aft(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """F(X) (size,) and dF/dX (size, size) by alternating frequency/time."""
-        xs = self.E @ self.unpack(X)
-        f, w = self.force(xs)
-        F = (self.P @ f).ravel()
-        dF = np.zeros((self.size, self.size))
-        for r in range(self.Qr.shape[0]):
-            wr = w[:, r]
-            if not np.any(wr):
-                continue
-            G = (self.P * wr) @ self.E
-            dF += np.kron(G, self.Qr[r])
-        return F, dF
-
-    def residual(self, X: np.ndarray, omega: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """R(X, omega) (size,), dR/dX (size, size), dR/domega (size,)  (Eq. 4)."""
-        X = np.asarray(X, float)
-        F, dF = self.aft(X)
-        A = self.linear_operator(omega)
+    def _linear_operator_domega(self, omega: float) -> np.ndarray:
+        """dA/domega = 2 omega kron(Nab^2, M) + kron(Nab, C) (size, size)."""
         dA = 2.0 * omega * np.kron(self.Nab @ self.Nab, self.M)
         if self.C is not None:
             dA += np.kron(self.Nab, self.C)
-        return A @ X + F, A + dF, dA @ X
+        return dA
+
+    def residual(self, X: np.ndarray, omega: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """R(X, omega) = A(omega) X + F(X) (size,), dR/dX = A + dF/dX, dR/domega = dA/domega X (Eq. 4)."""
+        X = np.asarray(X, float)
+        F, dF = self.aft(X)
+        A = self.linear_operator(omega)
+        return A @ X + F, A + dF, self._linear_operator_domega(omega) @ X
 
     # -- post-processing ------------------------------------------------------------------
     def energy(self, X: np.ndarray, omega: float, potential=None) -> float:
         """J, mean over the AFT samples of T + V (constant along an exact conservative orbit).
 
-        ``potential(xs) -> (N,)`` is the nonlinear potential; by default that of a
-        :class:`GapForce` (zero otherwise).
+        ``potential(xs) -> (N,)`` is the nonlinear potential; by default the force's own
+        ``potential`` method (:class:`GapForce`, :class:`CubicForce`; zero if it has none).
         """
         x, v = self.time_series(X, omega)
         kin = 0.5 * np.einsum("ij,jk,ik->i", v, self.M, v)
         lin = 0.5 * np.einsum("ij,jk,ik->i", x, self.K, x)
-        if potential is None:
-            if isinstance(self.force, GapForce):
-                s = self.force.system
-                pen = np.maximum(s.penetration(x), 0.0)
-                nl = 0.5 * (pen**2) @ s.k
-            elif isinstance(self.force, CubicForce):
-                nl = 0.25 * (x**4) @ self.force.gamma
-            else:
-                nl = 0.0
-        else:
-            nl = potential(x)
+        potential = potential or getattr(self.force, "potential", None)
+        nl = 0.0 if potential is None else potential(x)
         return float(np.mean(kin + lin + nl))
 
     def hill_matrices(self, X: np.ndarray, omega: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -311,13 +337,11 @@ class NNMResidual:
         F, dF = hb.aft(a * Psi)
         A = hb.linear_operator(omega)
         DM = np.kron(hb.Nab, hb.M)
-        N2M = np.kron(hb.Nab @ hb.Nab, hb.M)
         R = np.empty(nX + 2)
         J = np.zeros((nX + 2, nX + 3))
         R[:nX] = (A @ Psi + F / a - delta * omega * (DM @ Psi)) / wr**2
         J[:nX, :nX] = (A + dF - delta * omega * DM) / wr**2
-        dA_dw = 2.0 * omega * N2M + (np.kron(hb.Nab, hb.C) if hb.C is not None else 0.0)
-        J[:nX, nX] = (dA_dw @ Psi - delta * (DM @ Psi)) / wr
+        J[:nX, nX] = (hb._linear_operator_domega(omega) @ Psi - delta * (DM @ Psi)) / wr
         J[:nX, nX + 1] = -omega * (DM @ Psi) / wr
         J[:nX, nX + 2] = np.log(10.0) * (dF @ Psi - F / a) / wr**2
         # phase: the fundamental sine coefficient of DOF ref
