@@ -427,7 +427,10 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
         raise SceneError(f"{origin} [model]: expected a table, got {_show(model_table)}")
     model_table = dict(model_table)
     kind = model_table.pop("kind", "discrete")
-    if not isinstance(kind, str) or kind not in MODEL_KINDS:
+    if not isinstance(kind, str):
+        raise SceneError(f"{origin} [model] kind: expected a string (one of {', '.join(MODEL_KINDS)}), "
+                         f"got {_show(kind)}")
+    if kind not in MODEL_KINDS:
         raise SceneError(f"{origin} [model] kind: unknown model {_show(kind)}{suggest(kind, MODEL_KINDS)} "
                          f"(known: {', '.join(MODEL_KINDS)})")
     try:
