@@ -1,5 +1,13 @@
 """Accuracy studies of the ringdown integrators: work-precision, stiff/extreme cases, and
-the reduced model's convergence with its number of fixed-interface modes."""
+the reduced model's convergence with its number of fixed-interface modes.
+
+Every public function checks its arguments before any work and raises :class:`ValueError`
+with one line naming the function, the argument, the value given and what is allowed
+(a NaN, a negative stiffness, an empty list, a tolerance >= 1 or a number given as a bool
+or a string never reaches a solver). Results hold no wall-clock time except in the
+``runtime_s``/``*_s`` timing entries that :mod:`bearingshaft.stages.study` writes to
+``*_timing.*`` files, so a rerun reproduces the science files byte for byte.
+"""
 
 from __future__ import annotations
 
@@ -8,6 +16,7 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 from itertools import product
+from numbers import Integral, Real
 
 import numpy as np
 
@@ -18,13 +27,114 @@ from reduced.models.modes import linear_modes
 from reduced.models.rom import ReducedModel, RomSpec
 from reduced.transient.dop853 import integrate_dop853
 from reduced.transient.exact import ExactIntegratorError
-from reduced.transient.explicit import StepTooLargeError, default_step
-from reduced.transient.integrate import ringdown
+from reduced.transient.explicit import STEP_BASES, SWITCHING_SAFETY, StepTooLargeError, default_step
+from reduced.transient.integrate import METHODS, ringdown
+
+MAX_SAMPLES = 10_000_000  # samples of one study run (window x rate): 0.05 s at 20 kHz is 1000
+EXPLICIT_OMEGA_DT_MAX = 2.0 * SWITCHING_SAFETY  # rad: the explicit integrator refuses larger steps
+
+
+# -- argument checks: one line naming the function, the argument, its value and what is allowed --
+def _show(value) -> str:
+    text = np.array2string(value, threshold=8) if isinstance(value, np.ndarray) else repr(value)
+    text = " ".join(text.split())
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def _refuse(func: str, name: str, value, allowed: str) -> ValueError:
+    return ValueError(f"{func}: {name} = {_show(value)} is not allowed; {allowed}")
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, Real) and not isinstance(value, bool)
+
+
+def _number(func: str, name: str, value, allowed: str, ok=lambda v: True, finite: bool = True) -> float:
+    """A real number (not a bool or a string), finite unless ``finite`` is False, with ``ok(value)``."""
+    if not _is_number(value) or math.isnan(value) or (finite and math.isinf(value)) or not ok(float(value)):
+        raise _refuse(func, name, value, allowed)
+    return float(value)
+
+
+def _positive(func: str, name: str, value, unit: str = "") -> float:
+    return _number(func, name, value, f"must be a finite number > 0{unit}", lambda v: v > 0)
+
+
+def _count(func: str, name: str, value, minimum: int = 1) -> int:
+    if not isinstance(value, Integral) or isinstance(value, bool) or value < minimum:
+        raise _refuse(func, name, value, f"must be an integer >= {minimum}")
+    return int(value)
+
+
+def _numbers(func: str, name: str, values, allowed: str, ok, min_len: int = 1) -> tuple[float, ...]:
+    """A non-empty list/tuple/1-D array of finite numbers each satisfying ``ok``."""
+    if isinstance(values, np.ndarray) and values.ndim == 1:
+        values = values.tolist()
+    if not isinstance(values, (list, tuple)):
+        raise _refuse(func, name, values, f"must be a list of numbers {allowed}")
+    if len(values) < min_len:
+        raise _refuse(func, name, values, f"needs at least {min_len} value{'s' if min_len > 1 else ''} {allowed}")
+    for i, v in enumerate(values):
+        _number(func, f"{name}[{i}]", v, f"each must be a finite number {allowed}", ok)
+    return tuple(float(v) for v in values)
+
+
+def _choices(func: str, name: str, values, allowed: tuple[str, ...]) -> tuple[str, ...]:
+    what = f"must be a non-empty list of distinct names from {', '.join(allowed)}"
+    if not isinstance(values, (list, tuple)) or not values or len(set(values)) != len(values):
+        raise _refuse(func, name, values, what)
+    for i, v in enumerate(values):
+        if v not in allowed:
+            raise _refuse(func, f"{name}[{i}]", v, f"must be one of {', '.join(allowed)}")
+    return tuple(values)
+
+
+def _choice(func: str, name: str, value, allowed: tuple[str, ...]) -> str:
+    if not isinstance(value, str) or value not in allowed:
+        raise _refuse(func, name, value, f"must be one of {', '.join(allowed)}")
+    return value
+
+
+def _vector(func: str, name: str, value, n: int) -> np.ndarray:
+    try:
+        a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise _refuse(func, name, value, f"must be {n} finite numbers") from None
+    if a.shape != (n,) or not np.all(np.isfinite(a)) or isinstance(value, (str, bytes)) or (
+            isinstance(value, (list, tuple)) and any(isinstance(v, bool) for v in value)):
+        raise _refuse(func, name, value, f"must be {n} finite numbers")
+    return a
+
+
+def _callable_or_none(func: str, name: str, value) -> None:
+    if value is not None and not callable(value):
+        raise _refuse(func, name, value, "must be None or a callable taking the fraction done")
+
+
+def _samples(func: str, duration_s: float, sample_rate_hz: float, what: str = "duration_s") -> None:
+    n = duration_s * sample_rate_hz
+    if n < 1:
+        raise _refuse(func, "sample_rate_hz", sample_rate_hz,
+                      f"{what} x sample_rate_hz must give at least one sample after t = 0 ({what} = {duration_s:g} s)")
+    if n > MAX_SAMPLES:
+        raise _refuse(func, "sample_rate_hz", sample_rate_hz,
+                      f"{what} x sample_rate_hz must be <= {MAX_SAMPLES:.0e} samples ({what} = {duration_s:g} s "
+                      f"gives {n:.3g}); lower the rate or the duration")
 
 
 def relative_error(x: np.ndarray, x_ref: np.ndarray) -> float:
-    """max over samples and DOFs of |x - x_ref|, over max |x_ref| (relative max-norm)."""
-    return float(np.max(np.abs(x - x_ref)) / np.max(np.abs(x_ref)))
+    """max over samples and DOFs of |x - x_ref|, over max |x_ref| (relative max-norm).
+
+    ``x`` may hold NaN (a run that failed shows as NaN); ``x_ref`` must be finite, not all
+    zero, and of the same shape.
+    """
+    x, x_ref = np.asarray(x, dtype=float), np.asarray(x_ref, dtype=float)
+    if x.shape != x_ref.shape or x.size == 0:
+        raise _refuse("relative_error", "x", x, f"must be non-empty and have the shape of x_ref {x_ref.shape}")
+    scale = np.max(np.abs(x_ref))
+    if not np.isfinite(scale) or scale == 0:
+        raise _refuse("relative_error", "x_ref", x_ref, "must be finite and not all zero (it scales the error)")
+    return float(np.max(np.abs(x - x_ref)) / scale)
 
 
 def _best_of(repeats: int, fn, budget_s: float = math.inf):
@@ -41,8 +151,21 @@ def _best_of(repeats: int, fn, budget_s: float = math.inf):
 
 
 def fit_order(h: np.ndarray, err: np.ndarray, lo: float = 1e-12, hi: float = 1e-2) -> float:
-    """Slope of log(err) against log(h) over the points with lo < err < hi (asymptotic range)."""
-    h, err = np.asarray(h), np.asarray(err)
+    """Slope of log(err) against log(h) over the points with lo < err < hi (asymptotic range).
+
+    NaN when fewer than two points lie in that range (the arguments were valid, but the
+    steps never reached the asymptotic range: the caller says so).
+    """
+    func = "fit_order"
+    lo = _number(func, "lo", lo, "must be a finite number > 0", lambda v: v > 0)
+    hi = _number(func, "hi", hi, f"must be a finite number > lo = {lo:g}", lambda v: v > lo)
+    h = np.asarray(_numbers(func, "h", h, "> 0", lambda v: v > 0, min_len=2))
+    try:
+        err = np.asarray(err, dtype=float)
+    except (TypeError, ValueError):
+        raise _refuse(func, "err", err, f"must be {h.size} numbers >= 0 (NaN for a failed run)") from None
+    if err.shape != h.shape or np.any(err < 0) or np.any(np.isinf(err)):
+        raise _refuse(func, "err", err, f"must be {h.size} numbers >= 0, one per step h (NaN for a failed run)")
     sel = (err > lo) & (err < hi)
     if np.count_nonzero(sel) < 2:
         return float("nan")
@@ -65,7 +188,31 @@ def work_precision(
     The reference is the exact integrator; its own error is measured against DOP853 with
     every stop crossing located as an event (rtol = 1e-13), an independent method whose
     error (~1e-11 here) bounds what that comparison can show.
+
+    Arguments are checked first (ValueError, one line): ``window_s`` and ``sample_rate_hz``
+    > 0 with 1 to ``MAX_SAMPLES`` samples, at least two distinct ``explicit_omega_dt`` in
+    (0, ``EXPLICIT_OMEGA_DT_MAX``], ``dop853_rtol`` in (0, 1) (at rtol >= 1 DOP853 controls
+    no digit), ``repeats`` >= 1, x0 and v0 finite with one value per DOF, not both zero.
     """
+    func = "work_precision"
+    if not isinstance(system, GapSystem):
+        raise _refuse(func, "system", system, "must be a reduced.GapSystem")
+    v0_given = v0
+    x0, v0 = _vector(func, "x0", x0, system.n), _vector(func, "v0", v0, system.n)
+    if not (np.any(x0) or np.any(v0)):
+        raise _refuse(func, "v0", v0_given, "x0 and v0 must not both be zero (the error is relative to the motion)")
+    window_s = _positive(func, "window_s", window_s, " s")
+    sample_rate_hz = _positive(func, "sample_rate_hz", sample_rate_hz, " Hz")
+    _samples(func, window_s, sample_rate_hz, "window_s")
+    explicit_omega_dt = _numbers(func, "explicit_omega_dt", explicit_omega_dt,
+                                 f"in (0, {EXPLICIT_OMEGA_DT_MAX:g}] rad (central difference is unstable past 2)",
+                                 lambda v: 0 < v <= EXPLICIT_OMEGA_DT_MAX, min_len=2)
+    if len(set(explicit_omega_dt)) < 2:
+        raise _refuse(func, "explicit_omega_dt", explicit_omega_dt, "needs two distinct steps to fit an order")
+    dop853_rtol = _numbers(func, "dop853_rtol", dop853_rtol,
+                           "in (0, 1) (a relative tolerance >= 1 controls no digit)", lambda v: 0 < v < 1, min_len=0)
+    repeats = _count(func, "repeats", repeats)
+    _callable_or_none(func, "progress", progress)
     run = lambda method, **kw: ringdown(system, x0, v0, window_s, sample_rate_hz, method, **kw)  # noqa: E731
     run("exact")  # compile the kernels before timing
     run("explicit", omega_dt=0.5)
@@ -104,6 +251,8 @@ STIFF_FIELDS = ["k_g", "gap", "speed", "c", "method", "status", "energy_J", "ene
 
 def discrete_case(base: DiscreteParams) -> CaseFactory:
     """Cases of the three-mass model: v(0) = [0, 0, speed] on its coordinates."""
+    if not isinstance(base, DiscreteParams):
+        raise _refuse("discrete_case", "base", base, "must be a reduced.DiscreteParams")
 
     def make(k_g: float, gap: float, speed: float, c: float):
         system = replace(base, k_g=k_g, g=gap, c=c).system()
@@ -119,6 +268,10 @@ def rom_case(rom: ReducedModel, spec: RomSpec) -> CaseFactory:
     (:func:`reduced.models.initial.initial_state`), which do not depend on the contact, so the
     unit-speed state is formed once and scaled.
     """
+    if not isinstance(rom, ReducedModel):
+        raise _refuse("rom_case", "rom", rom, "must be a reduced.ReducedModel")
+    if not isinstance(spec, RomSpec):
+        raise _refuse("rom_case", "spec", spec, "must be a reduced.RomSpec")
     _, v_unit = initial_state(rom.M, rom.K, rom.P, np.zeros(3), np.array([0.0, 0.0, 1.0]))
 
     def make(k_g: float, gap: float, speed: float, c: float):
@@ -129,7 +282,7 @@ def rom_case(rom: ReducedModel, spec: RomSpec) -> CaseFactory:
 
 
 def _stiff_row(make: CaseFactory, kg: float, g: float, v: float, cc: float, method: str, duration_s: float,
-               sample_rate_hz: float, max_steps: float, step_basis: str = "top") -> dict:
+               sample_rate_hz: float, max_steps: float, step_basis: str = "top", progress=None) -> dict:
     row = {"k_g": kg, "gap": g, "speed": v, "c": cc, "method": method, "duration_s": duration_s}
     empty = dict.fromkeys(STIFF_FIELDS[6:-1], "")
     try:
@@ -142,7 +295,8 @@ def _stiff_row(make: CaseFactory, kg: float, g: float, v: float, cc: float, meth
                     f"{n_pred:.3g} explicit steps (dt = {dt:.3g} s, step basis {step_basis!r}) exceed the "
                     f"study's budget of {max_steps:.3g} steps")
         t0 = time.perf_counter()
-        res = ringdown(system, x0, v0, duration_s, sample_rate_hz, method, step_basis=step_basis)
+        res = ringdown(system, x0, v0, duration_s, sample_rate_hz, method, step_basis=step_basis,
+                       progress=progress)
         wall = time.perf_counter() - t0
         ok = np.all(np.isfinite(res.x)) and np.all(np.isfinite(res.v))
         row.update({
@@ -188,15 +342,54 @@ def stiff_cases(
     ``methods``). Explicit runs predicted to need more than ``max_steps`` steps are refused
     without running; ``step_basis`` is the explicit integrator's (:mod:`reduced.transient.explicit`).
     Rows carry ``duration_s`` besides the :data:`STIFF_FIELDS`.
+
+    ``progress`` is called with the fraction done, also inside each run (the integrator
+    reports its chunks), so a long case moves the bar instead of stalling it; if it has a
+    ``describe`` method, that is called with a short label of the case being run.
+
+    Arguments are checked first (ValueError, one line): k_g > 0, gap >= 0, speed != 0
+    (the energy balance is relative to E(0)), c >= 0, each a non-empty list of finite
+    numbers; duration_s and sample_rate_hz > 0 with 1 to ``MAX_SAMPLES`` samples a run;
+    methods (and long_methods) non-empty lists from :data:`reduced.transient.integrate.METHODS`;
+    long_duration_s >= 0; max_steps > 0 (inf allowed); step_basis "top" or "contact".
     """
-    make = discrete_case(base) if isinstance(base, DiscreteParams) else base
+    func = "stiff_cases"
+    if isinstance(base, DiscreteParams):
+        make = discrete_case(base)
+    elif callable(base):
+        make = base
+    else:
+        raise _refuse(func, "base", base, "must be a reduced.DiscreteParams or a case factory (rom_case)")
+    k_g = _numbers(func, "k_g", k_g, "> 0 N/m", lambda v: v > 0)
+    gap = _numbers(func, "gap", gap, ">= 0 m", lambda v: v >= 0)
+    speed = _numbers(func, "speed", speed, "!= 0 m/s (the energy balance is relative to E(0))", lambda v: v != 0)
+    c = _numbers(func, "c", c, ">= 0 N s/m", lambda v: v >= 0)
+    duration_s = _positive(func, "duration_s", duration_s, " s")
+    sample_rate_hz = _positive(func, "sample_rate_hz", sample_rate_hz, " Hz")
+    _samples(func, duration_s, sample_rate_hz)
+    methods = _choices(func, "methods", methods, METHODS)
+    long_duration_s = _number(func, "long_duration_s", long_duration_s, "must be a finite number >= 0 s (0: none)",
+                              lambda v: v >= 0)
+    if long_duration_s > 0:
+        _samples(func, long_duration_s, sample_rate_hz, "long_duration_s")
+    if long_methods is not None:
+        long_methods = _choices(func, "long_methods", long_methods, METHODS)
+    max_steps = _number(func, "max_steps", max_steps, "must be a number > 0 (inf: no budget)", lambda v: v > 0,
+                        finite=False)
+    step_basis = _choice(func, "step_basis", step_basis, STEP_BASES)
+    _callable_or_none(func, "progress", progress)
+
     combos = [(kg, g, v, cc, m, duration_s) for kg, g, v, cc, m in product(k_g, gap, speed, c, methods)]
     if long_duration_s > 0:
         combos += [(k_g[0], NOMINAL_GAP, NOMINAL_SPEED, cc, m, long_duration_s)
                    for cc, m in product(c, long_methods or methods)]
+    describe = getattr(progress, "describe", None)
     rows = []
     for i, (kg, g, v, cc, method, dur) in enumerate(combos):
-        rows.append(_stiff_row(make, kg, g, v, cc, method, dur, sample_rate_hz, max_steps, step_basis))
+        if describe:
+            describe(f"{method}, k_g={kg:.3g}, g={g:.3g}, v={v:.3g}, c={cc:.3g}, {dur:g} s")
+        inner = (lambda f, i=i: progress((i + f) / len(combos))) if progress else None
+        rows.append(_stiff_row(make, kg, g, v, cc, method, dur, sample_rate_hz, max_steps, step_basis, inner))
         if progress:
             progress((i + 1) / len(combos))
     return rows
@@ -231,7 +424,40 @@ def rom_convergence(
     integrator (``explicit_ringdown_error``: the explicit run against the same reference).
     Run times are the best of ``repeats`` (fewer once ``budget_s`` is spent
     on one setting); the explicit run uses its default step for ``step_basis``.
+
+    Arguments are checked first (ValueError, one line): at least two mode counts (the
+    largest is the reference), each an integer >= 0 mapped to a ReducedModel; full_freq_hz
+    with "open" and "closed" arrays of positive frequencies; three finite point values in
+    x0_points and v0_points, not all zero; window_s, sample_rate_hz > 0 with 1 to
+    ``MAX_SAMPLES`` samples; n_compare, repeats >= 1; budget_s > 0 (inf allowed).
     """
+    func = "rom_convergence"
+    if not isinstance(roms, dict) or len(roms) < 2:
+        raise _refuse(func, "roms", roms, "must be a dict {n_modes: ReducedModel} with at least two mode counts "
+                      "(the largest is the reference)")
+    for n, rom in roms.items():
+        if not isinstance(n, Integral) or isinstance(n, bool) or n < 0:
+            raise _refuse(func, "roms key", n, "mode counts must be integers >= 0")
+        if not isinstance(rom, ReducedModel):
+            raise _refuse(func, f"roms[{n}]", rom, "must be a reduced.ReducedModel")
+    if not isinstance(full_freq_hz, dict):
+        raise _refuse(func, "full_freq_hz", full_freq_hz, 'must be a dict with "open" and "closed" frequencies [Hz]')
+    for state in ("open", "closed"):
+        _numbers(func, f"full_freq_hz[{state!r}]", full_freq_hz.get(state), "> 0 Hz", lambda v: v > 0)
+    v0_given = v0_points
+    x0_points = _vector(func, "x0_points", x0_points, 3)
+    v0_points = _vector(func, "v0_points", v0_points, 3)
+    if not (np.any(x0_points) or np.any(v0_points)):
+        raise _refuse(func, "v0_points", v0_given, "x0_points and v0_points must not both be zero")
+    window_s = _positive(func, "window_s", window_s, " s")
+    sample_rate_hz = _positive(func, "sample_rate_hz", sample_rate_hz, " Hz")
+    _samples(func, window_s, sample_rate_hz, "window_s")
+    n_compare = _count(func, "n_compare", n_compare)
+    repeats = _count(func, "repeats", repeats)
+    budget_s = _number(func, "budget_s", budget_s, "must be a number > 0 s (inf: no budget)", lambda v: v > 0,
+                       finite=False)
+    step_basis = _choice(func, "step_basis", step_basis, STEP_BASES)
+    _callable_or_none(func, "progress", progress)
     counts = sorted(roms)
     runs, rows = {}, []
     for i, n in enumerate(counts):
