@@ -117,6 +117,33 @@ def test_closed_gap_reduced_frequencies_match_the_tied_full_model(fe, rom5):
     assert f_full[0] == pytest.approx(524.17, rel=1e-4)
 
 
+def test_gap_modes_pair_by_mac_and_list_only_what_the_basis_holds(fe):
+    # the verify-reduction model (x1, x3 + the first bending mode) has three modes; the full
+    # model's higher coupled modes (2029 Hz, ...) must not be paired with its top one (they were,
+    # by index, with "errors" of -64 to -95 %)
+    from bearingshaft.stages.reduce import MAC_PAIR, compare_all
+
+    spec = RomSpec(n_modes=1)
+    rom = build_rom(spec, fe=fe)[0]
+    comps = compare_all(rom, fe, spec)
+    for state, c in comps.items():
+        # the reduced modes are an M-orthonormal basis of span[Psi, Phi]: a full mode's MAC with
+        # them sums to the share of it in the basis (Parseval), to round-off
+        np.testing.assert_allclose(c.mac.sum(axis=1), c.basis_fraction, atol=1e-10)
+        assert [r["reduced_mode"] for r in c.rows] == [1, 2, 3], state  # one-to-one, in rank order
+        assert all(r["mac"] > 0.998 for r in c.rows), c.rows
+        assert all(r["basis_fraction"] < 2e-3 for r in c.left_out)  # nothing near the 0.9 threshold
+        assert len(c.rows) + len(c.left_out) == len(c.full_hz) and len(c.unpaired) == 0
+    assert [r["full_hz"] for r in comps["open"].rows] == pytest.approx([17.979, 23.019, 731.36], rel=1e-4)
+    assert [r["full_hz"] for r in comps["closed"].rows] == pytest.approx([524.17, 1054.85, 1153.97], rel=1e-4)
+    assert max(abs(r["error_pct"]) for c in comps.values() for r in c.rows) < 2.0  # tied tips, one mode: 1.8 %
+    kinds = {r["kind"] for r in comps["open"].left_out}
+    assert kinds == {"out of plane", "not moved by the tips", "beyond the basis"}
+    beyond = [r["full_hz"] for r in comps["open"].left_out if r["kind"] == "beyond the basis"]
+    assert beyond[0] == pytest.approx(2028.85, rel=1e-4)  # second bending: moved by the tips, not kept
+    assert MAC_PAIR > 0.5  # above 0.5 a partner is unique both ways (Bessel's inequality)
+
+
 def test_reduced_stops_act_on_the_gap_coordinates(rom5):
     s = rom5.system()
     x = np.zeros(s.n)
@@ -164,13 +191,20 @@ def test_reduced_initial_state_takes_the_point_values_and_converges(fe, rom5):
         initial_state(r0.M, r0.K, r0.P, (0.0, 0.0, 0.0), (0.0, 0.0, 1.0))
 
 
-def test_reduce_and_ringdown_cli(tmp_path, monkeypatch):
+def test_reduce_and_ringdown_cli(tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("BEARINGSHAFT_CACHE", str(tmp_path / "cache"))
     scene = tmp_path / "rom-short.toml"
     scene.write_text('[model]\nkind = "rom"\nn_modes = 2\n[initial]\nv0_m_s = [0.0, 0.0, 200.0]\n'
                      '[ringdown]\nmethod = "explicit"\nduration_s = 0.02\n', encoding="utf-8")
     out = tmp_path / "out"
     assert main(["reduce", "--scene", str(scene), "--out", str(out), "--no-progress"]) == 0
+    printed = capsys.readouterr().out  # a summary even without progress bars
+    assert "[rom-short] reduced 2511 DOFs to 4" in printed and "open gap: 4 of the 24" in printed
+    assert main(["reduce", "--scene", str(scene), "--out", str(tmp_path / "again"), "--no-progress"]) == 0
+    for name in ("gap_modes.csv", "cb_check.csv"):  # a rerun writes the same bytes
+        assert (out / name).read_bytes() == (tmp_path / "again" / name).read_bytes(), name
+    assert (out / "gap_modes.csv").read_text().splitlines()[0] == ("state,full_mode,full_hz,reduced_mode,"
+                                                                    "reduced_hz,error_pct,mac,basis_fraction")
     checks = (out / "cb_check.csv").read_text().splitlines()
     assert len(checks) == 6 and all(line.endswith("True") for line in checks[1:])
     saved = ReducedModel.load(out / "rom.npz")

@@ -89,6 +89,12 @@ def test_verify_cli_writes_its_files(tmp_path):
     assert [(r["state"], int(r["mode"])) for r in rows] == [(s, i) for s in ("open", "closed") for i in (1, 2, 3)]
     for r in rows:  # one fixed-interface mode: Rayleigh-Ritz upper bounds, close to the full model
         assert 0.0 <= float(r["reduced_rel"]) < 0.05
+        assert float(r["reduced_mac"]) > 0.998  # paired by MAC with the full mode (reduce stage)
+    assert [int(r["full_mode"]) for r in rows] == [4, 5, 7, 5, 7, 8]  # heave, pitch, bending; tied: 524, 1055, 1154 Hz
+    md = (out / "verify.md").read_text()
+    assert "## Full-model modes the reduction leaves out" in md
+    assert "antisymmetric in y (out of plane)" in md and "beyond the 1 fixed-interface mode(s) kept" in md
+    assert "wall time" not in md  # timings go to provenance.json: a rerun writes the same verify.md
     with open(out / "identified.csv") as fh:
         ident = {r["parameter"]: float(r["identified"]) for r in csv.DictReader(fh)}
     assert ident["L"] == pytest.approx(DiscreteParams().L, rel=1e-9)

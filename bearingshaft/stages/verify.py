@@ -7,9 +7,13 @@ the full 3-D model, the reduced model, the identified three-mass model and Table
 
 Writes ``identified.csv`` (parameters: Table 1, identified, relative difference),
 ``residuals.csv`` (what the three-mass form cannot carry), ``verify.csv`` (open- and
-closed-gap frequencies of the lowest coupled modes, relative differences against the full
+closed-gap frequencies of the lowest full modes in the reduction basis, paired with the
+reduced model's by MAC as in the reduce stage, relative differences against the full
 model), ``nnm_backbones.csv`` (HB, H = 1, of the three NNMs of the reduced, identified and
-Table-1 models), ``verify.png`` and ``verify.md`` (the numbers, explained).
+Table-1 models), ``verify.png`` and ``verify.md`` (the numbers, explained, and the full
+modes the reduction leaves out, with the reason), and prints a summary.
+Numbers are written to their converged digits (a rerun writes the same bytes); the stage's
+wall time goes to ``provenance.json`` only.
 The ringdowns start from the paper's three initial conditions, read from the built-in scenes
 ``discrete-antisymmetric``, ``discrete-impulse`` and ``discrete-symmetric``.
 """
@@ -23,7 +27,7 @@ import numpy as np
 from bearingshaft.output import StageWriter, write_rows
 from bearingshaft.plots import plt
 from bearingshaft.scenes import Scene, VerifySpec, load_scene
-from bearingshaft.stages.reduce import full_gap_modes
+from bearingshaft.stages.reduce import GapModeComparison, compare_all, full_gap_modes, left_out_summary
 from bearingshaft.stages.ringdown import _Bar
 from reduced.models.discrete import DiscreteParams
 from reduced.models.gaps import GapSystem
@@ -51,18 +55,26 @@ def _rel(a: float, b: float) -> float:
     return float((a - b) / b)
 
 
-def _frequency_rows(full: dict, systems: dict[str, GapSystem]) -> list[dict]:
+def _frequency_rows(comps: dict[str, GapModeComparison], systems: dict[str, GapSystem]) -> list[dict]:
+    """The lowest N_COMPARE full modes in the reduction basis, each against its MAC partner in the
+    reduced model and against the three-mass models' modes of the same rank (they have no 3-D shape)."""
     rows = []
-    for state in ("open", "closed"):
-        g = full[state]
-        f_full = g.freq_hz[g.coupled][:N_COMPARE]
+    for state, c in comps.items():
         f = {k: linear_modes(s, state).freq_hz for k, s in systems.items()}
-        for i, ff in enumerate(f_full):
-            row = {"state": state, "mode": i + 1, "full_hz": float(ff)}
-            row |= {f"{k}_hz": float(f[k][i]) for k in MODELS}
-            row |= {f"{k}_rel": _rel(f[k][i], ff) for k in MODELS}
+        for i, pair in enumerate(c.rows[:N_COMPARE]):
+            ff = pair["full_hz"]
+            row = {"state": state, "mode": i + 1, "full_mode": pair["full_mode"], "full_hz": ff,
+                   "reduced_hz": pair["reduced_hz"], "identified_hz": float(f["identified"][i]),
+                   "table1_hz": float(f["table1"][i]), "reduced_mac": pair["mac"]}
+            row |= {f"{k}_rel": _rel(row[f"{k}_hz"], ff) for k in MODELS}
             rows.append(row)
     return rows
+
+
+def _digits(rows: list[dict], formats: dict[str, str], default: str = ".6g") -> list[dict]:
+    """Rows with floats as text to their converged digits: ``formats[key]`` or ``default``."""
+    return [{k: format(v, formats.get(k, default)) if isinstance(v, float) else v for k, v in r.items()}
+            for r in rows]
 
 
 def _backbones(systems: dict[str, GapSystem], energy_max_J: float, progress: bool) -> dict:
@@ -172,19 +184,36 @@ def _table(header: list[str], rows: list[list]) -> str:
     return "\n".join(lines)
 
 
+def _left_out_text(comps: dict[str, GapModeComparison], planar: bool) -> str:
+    """verify.md's account of the full modes outside the reduction basis, by state and reason."""
+    parts = []
+    for state, c in comps.items():
+        items = [f"  * {why}: {', '.join(f'{f:.6g}' for f in hz)} Hz" for why, hz in left_out_summary(c)]
+        kept = ", ".join(f"{r['full_hz']:.6g}" for r in c.rows)
+        head = (f"* **{state} gap**: of the {len(c.full_hz)} lowest full modes ({c.full_hz[0]:.4g} to "
+                f"{c.full_hz[-1]:.6g} Hz), the basis holds {kept} Hz (MAC >= {min(r['mac'] for r in c.rows):.4f})"
+                if c.rows else f"* **{state} gap**: none of the {len(c.full_hz)} lowest full modes is in the basis")
+        parts.append(head + "; it leaves out\n" + "\n".join(items) if items else head)
+        if len(c.unpaired):
+            parts.append(f"  * and the reduced model has {len(c.unpaired)} mode(s) with no full partner: "
+                         + ", ".join(f"{c.reduced.freq_hz[j]:.6g}" for j in c.unpaired) + " Hz")
+    return "\n".join(parts)
+
+
 def _report(scene: Scene, facts: dict, id_rows: list[dict], residuals: dict, freq_rows: list[dict],
-            ring_rows: list[dict]) -> str:
+            ring_rows: list[dict], comps: dict[str, GapModeComparison], planar: bool) -> str:
     f = facts
     ident = _table(["parameter", "unit", "Table 1", "identified", "relative difference"],
                    [[r["parameter"], r["unit"], f"{r['table1']:.6g}", f"{r['identified']:.6g}",
                      f"{100 * r['relative_difference']:+.2f} %"] for r in id_rows])
     res = _table(["residual", "value", "meaning"],
                  [[k, f"{v:+.3e}", RESIDUAL_MEANING[k]] for k, v in residuals.items()])
-    freq = _table(["state", "mode", "full 3-D [Hz]", "reduced [Hz]", "identified [Hz]", "Table 1 [Hz]",
-                   "reduced", "identified", "Table 1"],
-                  [[r["state"], r["mode"], f"{r['full_hz']:.2f}", f"{r['reduced_hz']:.2f}",
-                    f"{r['identified_hz']:.2f}", f"{r['table1_hz']:.2f}", f"{100 * r['reduced_rel']:+.2f} %",
-                    f"{100 * r['identified_rel']:+.2f} %", f"{100 * r['table1_rel']:+.2f} %"] for r in freq_rows])
+    freq = _table(["state", "mode", "full 3-D mode", "full 3-D [Hz]", "reduced [Hz]", "MAC", "identified [Hz]",
+                   "Table 1 [Hz]", "reduced", "identified", "Table 1"],
+                  [[r["state"], r["mode"], r["full_mode"], f"{r['full_hz']:.2f}", f"{r['reduced_hz']:.2f}",
+                    f"{r['reduced_mac']:.4f}", f"{r['identified_hz']:.2f}", f"{r['table1_hz']:.2f}",
+                    f"{100 * r['reduced_rel']:+.2f} %", f"{100 * r['identified_rel']:+.2f} %",
+                    f"{100 * r['table1_rel']:+.2f} %"] for r in freq_rows])
     ring = _table(["start", "model", "E0 [J]", "E(end) [J]", "x1 peak, first window [Hz]",
                    "x1 peak, last window [Hz]", "contact events", "energy balance error"],
                   [[r["start"], LABELS[r["model"]], f"{r['energy_J_initial']:.4g}", f"{r['energy_J_final']:.3g}",
@@ -196,7 +225,7 @@ def _report(scene: Scene, facts: dict, id_rows: list[dict], residuals: dict, fre
 
 Full 3-D model: {f['n_full_dofs']} DOFs ({f['layout']}), reduced by Craig-Bampton onto the tips' gap
 coordinates x1, x3 and {f['n_modes']} contact-coupled fixed-interface mode(s) (first: {f['f_fixed_hz']:.2f} Hz).
-Numbers from `bearingshaft verify --scene {scene.name}`; stage wall time {f['wall_s']:.1f} s.
+Numbers from `bearingshaft verify --scene {scene.name}`.
 
 ## Identified three-mass parameters
 
@@ -245,7 +274,10 @@ What the differences mean:
 ## Frequencies of the lowest coupled modes
 
 Open gap: tips free; closed gap: both tips tied to the ground by k_g (the HB backbones' limits).
-Relative differences against the full 3-D model.
+Relative differences against the full 3-D model. Each full mode ("full 3-D mode": its number among the
+full model's modes) is one the reduction basis [Psi, Phi] holds (at least 90 % of it in the mass norm) and
+is paired with the reduced mode of largest mass-weighted MAC (`bearingshaft/stages/reduce.py`,
+`gap_modes.csv`); the three-mass models, which have no 3-D shape, are taken rank for rank.
 
 {freq}
 
@@ -260,6 +292,20 @@ m1 = {f['m1']:.4f} kg against M_bb[0,0] - M_bb[0,1] = {f['m_pitch']:.4f} kg. Tab
 beam mostly through its mass distribution: pitch {100 * f['t1_pitch_rel']:+.1f} % (tip mass 0.629 kg against
 {f['m_pitch']:.4f} kg), closed-gap mode 1 (bending against tied tips) {100 * f['t1_closed1_rel']:+.1f} %, near
 sqrt(m2 identified / m2 Table 1) - 1 = {100 * (np.sqrt(f['m2'] / 1.258) - 1):+.1f} %.
+
+## Full-model modes the reduction leaves out
+
+The reduction keeps the two gap coordinates and {f['n_modes']} fixed-interface mode(s), {f['kept_rule']}.
+Of the full model's lowest modes (open and tied tips) it therefore represents only those listed above;
+the others (the basis holds at most {max(r['basis_fraction'] for c in comps.values() for r in c.left_out):.1e}
+of any of them; each with its share in `provenance.json`, `left_out`):
+
+{_left_out_text(comps, planar)}
+
+Out-of-plane modes (lateral, yaw, roll, bending in y, torsion) cannot be excited by the tips, which act
+in z on the plane y = 0; neither can the in-plane modes that do not move the tips (surge, axial and the
+modes antisymmetric in z). The modes moved by the tips but above the kept fixed-interface mode(s) would
+need more of them (the `rom-*` scenes keep 10: see their `gap_modes.csv`).
 
 ## Ringdowns from the paper's three starts ({f['method']}, {f['duration_s']} s)
 
@@ -283,28 +329,29 @@ def verify_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
     t0 = time.perf_counter()
     spec, vs = scene.model, scene.verify
     rom, fe = build_rom(spec, progress=progress)
-    full = full_gap_modes(fe, spec)
+    comps = compare_all(rom, fe, spec, full_gap_modes(fe, spec, Psi=rom.Psi))
     centres = np.asarray(rom.info["contact_centres_m"], float)
     L = 0.5 * float(np.linalg.norm(centres[1] - centres[0]))
     ident, residuals = identify_discrete(rom.M, rom.K, L, k_g=spec.k_g, g=spec.gap, c=spec.c_points)
     table1 = DiscreteParams()
     id_rows = [{"parameter": k, "unit": UNITS[k], "table1": getattr(table1, k), "identified": getattr(ident, k),
                 "relative_difference": _rel(getattr(ident, k), getattr(table1, k))} for k in UNITS]
-    write_rows(writer.path("identified.csv"), id_rows)
-    write_rows(writer.path("residuals.csv"), [{"residual": k, "value": v, "meaning": RESIDUAL_MEANING[k]}
-                                              for k, v in residuals.items()])
+    write_rows(writer.path("identified.csv"), _digits(id_rows, {"relative_difference": ".4g"}))
+    write_rows(writer.path("residuals.csv"), _digits([{"residual": k, "value": v, "meaning": RESIDUAL_MEANING[k]}
+                                                      for k, v in residuals.items()], {}, ".4g"))
 
     models = {"reduced": (rom.system(), rom.P), "identified": (ident.system(), np.eye(3)),
               "table1": (table1.system(), np.eye(3))}
     systems = {k: s for k, (s, _) in models.items()}
-    freq_rows = _frequency_rows(full, systems)
-    write_rows(writer.path("verify.csv"), freq_rows)
+    freq_rows = _frequency_rows(comps, systems)
+    write_rows(writer.path("verify.csv"), _digits(freq_rows, {"reduced_mac": ".6f", **{f"{k}_rel": ".4g"
+                                                                                     for k in MODELS}}))
 
     backbones = _backbones(systems, vs.energy_max_J, progress)
     write_rows(writer.path("nnm_backbones.csv"),
                [{"model": name, "nnm": k, "energy_J": float(e), "freq_hz": float(fr)}
                 for name, curves in backbones.items() for k, (E, f) in curves.items()
-                for e, fr in zip(E, f, strict=True)])
+                for e, fr in zip(E, f, strict=True)], float_format=".6g")
 
     runs = _ringdowns(models, vs, progress)
     spectra = _spectrograms(runs, models, vs)
@@ -334,15 +381,25 @@ def verify_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
              "t1_closed1_rel": next(r for r in freq_rows if r["state"] == "closed" and r["mode"] == 1)["table1_rel"],
              "table1_kappa": table1.kappa, "P_x2_eta": float(rom.P[1, 2]), "t1_pitch_rel": t1_pitch,
              "method": vs.method, "duration_s": vs.duration_s, "c": spec.c_points, "window_s": vs.window_s,
-             "grazing_J": table1.grazing_energy_nnm2}
-    facts["wall_s"] = time.perf_counter() - t0
-    writer.path("verify.md").write_text(_report(scene, facts, id_rows, residuals, freq_rows, ring_rows))
+             "grazing_J": table1.grazing_energy_nnm2,
+             "kept_rule": "chosen among the modes symmetric in y that the tips move (`planar`)" if spec.planar
+             else "the lowest ones, whether the tips move them or not"}
+    writer.path("verify.md").write_text(_report(scene, facts, id_rows, residuals, freq_rows, ring_rows, comps,
+                                                spec.planar))
     writer.stats.update({"identified": {r["parameter"]: r["identified"] for r in id_rows},
                          "residuals": residuals, "frequencies": freq_rows, "ringdowns": ring_rows,
-                         "facts": facts, "wall_s": time.perf_counter() - t0})
-    if progress:
-        worst = max(abs(r["reduced_rel"]) for r in freq_rows)
-        print(f"[{scene.name}] identified k_s {ident.k_s:.1f} N/m, kappa {ident.kappa:.0f} N m/rad, "
-              f"m = {ident.m1:.3f}, {ident.m2:.3f}, {ident.m3:.3f} kg; reduced vs full: worst "
-              f"{100 * worst:.2f} % over {len(freq_rows)} frequencies ({facts['wall_s']:.1f} s)")
+                         "facts": facts, "left_out": [r for c in comps.values() for r in c.left_out],
+                         "wall_s": time.perf_counter() - t0})
+    worst = max(freq_rows, key=lambda r: abs(r["reduced_rel"]))
+    worst_t1 = max(freq_rows, key=lambda r: abs(r["table1_rel"]))
+    n_left = {s: len(c.left_out) for s, c in comps.items()}
+    print(f"[{scene.name}] identified k_s {ident.k_s:.1f} N/m, kappa {ident.kappa:.0f} N m/rad, "
+          f"m = {ident.m1:.3f}, {ident.m2:.3f}, {ident.m3:.3f} kg (Table 1: worst "
+          f"{100 * max(abs(r['relative_difference']) for r in id_rows):.2f} %)\n"
+          f"  reduced against full 3-D: worst {100 * worst['reduced_rel']:+.2f} % ({worst['state']} {worst['mode']}) "
+          f"over {len(freq_rows)} frequencies; Table 1 model: worst {100 * worst_t1['table1_rel']:+.2f} % "
+          f"({worst_t1['state']} {worst_t1['mode']})\n"
+          f"  full modes outside the reduction (of the {len(comps['open'].full_hz)} lowest): {n_left['open']} open, "
+          f"{n_left['closed']} closed gap (verify.md says which and why)\n"
+          "  files: " + ", ".join(sorted(p.name for p in writer.scratch.iterdir())), flush=True)
 
