@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -10,32 +11,99 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from reduced.transient.result import RingdownResult  # noqa: E402
 from reduced.transient.spectrogram import Spectrogram, curve_in_time  # noqa: E402
 
 CURVE_STYLES = ("-", "--", "-.", ":")
+N_COLUMNS = 2000  # envelope bins of a time plot: finer than the ~1000 pixel columns of a 9 in, 120 dpi axis
+TITLE_CHARS = 95  # a title line of a 9 in wide figure at 10 pt
+ENERGY_FLOOR = 1e-6  # the energy panel shows down to this fraction of the initial energy
 
 
-def ringdown_figure(res: RingdownResult, path: Path, title: str) -> None:
-    """Displacements, energy and energy-balance error against time."""
+def wrap_title(title: str, width: int = TITLE_CHARS) -> str:
+    """The title broken into lines that fit the figure's width."""
+    return "\n".join(textwrap.wrap(title, width=width, break_long_words=False, break_on_hyphens=False)) or title
+
+
+class Envelope:
+    """Min and max of ``n_series`` time series in each of ``n_bins`` equal bins of samples, accumulated
+    chunk by chunk: what a dense line plot draws in each pixel column, in memory independent of
+    the record's length. A record of at most 2 n_bins samples is kept whole."""
+
+    def __init__(self, n_samples: int, sample_rate_hz: float, n_series: int, n_bins: int = N_COLUMNS) -> None:
+        self.n_samples = n_samples
+        self.fs = sample_rate_hz
+        self.per = 1 if n_samples <= 2 * n_bins else -(-n_samples // n_bins)
+        nb = -(-n_samples // self.per)
+        self.lo = np.full((nb, n_series), np.inf)
+        self.hi = np.full((nb, n_series), -np.inf)
+
+    def add(self, start: int, values: np.ndarray) -> None:
+        """Samples start .. start + len(values) - 1, shape (k, n_series) or (k,)."""
+        v = np.asarray(values, dtype=float).reshape(len(values), -1)
+        idx = (start + np.arange(v.shape[0])) // self.per
+        np.minimum.at(self.lo, idx, v)
+        np.maximum.at(self.hi, idx, v)
+
+    def lines(self) -> tuple[np.ndarray, np.ndarray]:
+        """(t, y): a line through each bin's min then max (the whole record when kept whole)."""
+        t0 = np.arange(self.lo.shape[0]) * self.per / self.fs
+        if self.per == 1:
+            return t0, self.lo
+        t = np.repeat(t0 + 0.5 * self.per / self.fs, 2)
+        y = np.empty((2 * self.lo.shape[0], self.lo.shape[1]))
+        y[0::2], y[1::2] = self.lo, self.hi
+        return t, y
+
+    def upper(self) -> tuple[np.ndarray, np.ndarray]:
+        """(t, y): each bin's max at its centre."""
+        return (np.arange(self.hi.shape[0]) + 0.5 * (self.per > 1)) * self.per / self.fs, self.hi
+
+
+def ringdown_envelopes(res, chunk_samples: int = 1 << 16) -> dict[str, Envelope]:
+    """Envelopes of x (every DOF), E, W and |E0 - E - W| / E0 from one pass over a run's chunks
+    (a RingdownResult, a RingdownFile or anything with ``chunks``, ``n_samples``, ``sample_rate_hz``)."""
+    n, N, fs = res.system.n, res.n_samples, res.sample_rate_hz
+    env = {"x": Envelope(N, fs, n), "E": Envelope(N, fs, 1), "W": Envelope(N, fs, 1), "balance": Envelope(N, fs, 1)}
+    E0 = None
+    for c in res.chunks(chunk_samples):
+        E = c.energy
+        if E0 is None:
+            E0 = float(E[0])
+        env["x"].add(c.start, c.x)
+        env["E"].add(c.start, E)
+        env["W"].add(c.start, c.dissipated)
+        env["balance"].add(c.start, np.abs(E0 - E - c.dissipated) / max(E0, 1e-300))
+    env["E0"] = E0
+    return env
+
+
+def ringdown_figure(res, path: Path, title: str, envelopes: dict | None = None) -> None:
+    """Displacements, energy and energy-balance error against time (min/max envelopes per pixel
+    column, so a run of any length is drawn in bounded memory)."""
+    env = envelopes or ringdown_envelopes(res)
     fig, ax = plt.subplots(3, 1, figsize=(9, 8), sharex=True, constrained_layout=True)
+    t, y = env["x"].lines()
     for i, name in enumerate(res.system.dof_names):
-        ax[0].plot(res.t, res.x[:, i] * 1e3, lw=0.6, label=name)
+        ax[0].plot(t, y[:, i] * 1e3, lw=0.6, label=name)
     gap = float(np.max(res.system.offset, initial=0.0))
     if gap > 0:
         for s in (1, -1):
             ax[0].axhline(s * gap * 1e3, color="k", lw=0.5, ls=":")
     ax[0].set_ylabel("displacement [mm]")
-    ax[0].legend(loc="upper right", ncol=3)
-    E = res.energy
-    ax[1].semilogy(res.t, np.maximum(E, 1e-300), label="E(t)")
-    ax[1].semilogy(res.t, np.maximum(res.dissipated, 1e-300), label="dissipated W(t)")
+    ax[0].legend(loc="upper right", ncol=min(len(res.system.dof_names), 6), fontsize=8)
+    E0 = env["E0"] or 1.0
+    floor = ENERGY_FLOOR * E0
+    for key, label in (("E", "E(t)"), ("W", "dissipated W(t)")):
+        t, y = env[key].lines()
+        ax[1].semilogy(t, np.maximum(y[:, 0], 0.1 * floor), label=label)
+    ax[1].set_ylim(floor, 2.0 * E0)
     ax[1].set_ylabel("energy [J]")
     ax[1].legend(loc="center right")
-    ax[2].semilogy(res.t, np.abs(E[0] - E - res.dissipated) / max(E[0], 1e-300) + 1e-18)
+    t, y = env["balance"].upper()
+    ax[2].semilogy(t, y[:, 0] + 1e-18)
     ax[2].set_ylabel("|E0 - E - W| / E0")
     ax[2].set_xlabel("time [s]")
-    ax[0].set_title(title)
+    ax[0].set_title(wrap_title(title), fontsize=10)
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
@@ -64,39 +132,47 @@ def spectrogram_figure(
         ax.plot(t_E, f_t, color=colors[i % len(colors)], ls=CURVE_STYLES[i % len(CURVE_STYLES)], lw=1.2,
                 label=label)
     ax.set_ylim(0, fmax_hz)
-    ax.set_xlim(spec.t[0], spec.t[-1])
+    if spec.t.size > 1:
+        ax.set_xlim(spec.t[0], spec.t[-1])
     ax.set_xlabel("time [s]")
     ax.set_ylabel("frequency [Hz]")
-    ax.set_title(title)
+    ax.set_title(wrap_title(title), fontsize=10)
     if curves:
         ax.legend(loc="upper right", fontsize=8, framealpha=0.6)
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
 
-def symmetry_figure(runs: dict[str, tuple[RingdownResult, float | None]], pair: tuple[np.ndarray, np.ndarray],
-                    names: tuple[str, str], path: Path, title: str) -> None:
-    """|x_a - x_b| against time for each method (points a, b as rows of the DOFs), tolerance, break time."""
+def symmetry_figure(points: Envelope, names: tuple[str, str], primary: str,
+                    runs: dict[str, tuple[Envelope, float, float | None]], seeded: list[Envelope],
+                    threshold_m: float, path: Path, title: str) -> None:
+    """Top: the two points (envelopes) of the ``primary`` run. Bottom: |x_a - x_b| of each run
+    (upper envelope), its solver tolerance (dotted) and break time (dashed), the seeded runs
+    (grey) and the break threshold (black)."""
     fig, ax = plt.subplots(2, 1, figsize=(9, 7), sharex=True, constrained_layout=True)
-    first = next(iter(runs.values()))[0]
-    a, b = pair
-    ax[0].plot(first.t, (first.x @ a) * 1e3, lw=0.6, label=names[0])
-    ax[0].plot(first.t, (first.x @ b) * 1e3, lw=0.6, ls="--", label=names[1])
-    ax[0].set_ylabel(f"displacement [mm] ({first.method})")
+    t, y = points.lines()
+    ax[0].plot(t, y[:, 0] * 1e3, lw=0.6, label=names[0])
+    ax[0].plot(t, y[:, 1] * 1e3, lw=0.6, ls="--", label=names[1])
+    ax[0].set_ylabel(f"displacement [mm] ({primary})")
     ax[0].legend(loc="upper right")
-    for i, (method, (res, t_break)) in enumerate(runs.items()):
+    for k, env in enumerate(seeded):
+        t, y = env.upper()
+        ax[1].semilogy(t, y[:, 0] + 1e-30, color="0.6", lw=0.6, label="seeded (exact)" if k == 0 else None)
+    for i, (method, (env, tolerance, t_break)) in enumerate(runs.items()):
         color = f"C{i}"
-        d = np.abs(res.x @ (a - b))
-        ax[1].semilogy(res.t, d + 1e-30, color=color, lw=0.6, label=f"{method}")
-        ax[1].axhline(res.tolerance, color=color, lw=0.8, ls=":")
+        t, y = env.upper()
+        ax[1].semilogy(t, y[:, 0] + 1e-30, color=color, lw=0.8, label=f"{method} (round-off)")
+        ax[1].axhline(tolerance, color=color, lw=0.8, ls=":")
         if t_break is not None:
             for axis in ax:
                 axis.axvline(t_break, color=color, ls="--", lw=1.0)
+    ax[1].axhline(threshold_m, color="k", lw=0.8)
     ax[1].set_ylim(1e-22, None)
     ax[1].set_ylabel(f"|{names[0]} - {names[1]}| [m]")
     ax[1].set_xlabel("time [s]")
-    ax[1].legend(loc="lower right", title="dotted: solver tolerance; dashed: break")
-    ax[0].set_title(title)
+    ax[1].legend(loc="lower right", fontsize=8,
+                 title=f"dotted: solver tolerance; black: break at {threshold_m:g} m; dashed: break", title_fontsize=8)
+    ax[0].set_title(wrap_title(title), fontsize=10)
     fig.savefig(path, dpi=120)
     plt.close(fig)
 

@@ -317,6 +317,16 @@ class RunComparison:
     freq_run: np.ndarray  # Hz, dominant frequency of each frame
     freq_ref: np.ndarray
     freq_resolution_hz: float  # Hz, one frequency bin
+    window_err: np.ndarray = field(repr=False, default=None)  # max |p - p_ref| in each energy window
+    window_ref: np.ndarray = field(repr=False, default=None)  # max |p_ref| in each energy window
+
+    def pointwise_error_until(self, t_s: float) -> float:
+        """max |p - p_ref| / max |p_ref| over the energy windows that end by ``t_s``."""
+        k = int(math.floor(t_s / self.energy_window_s * (1 + 1e-12)))
+        if k <= 0:
+            return math.nan
+        ref = float(np.max(self.window_ref[:k]))
+        return float(np.max(self.window_err[:k])) / ref if ref > 0 else math.nan
 
     @property
     def energy_envelope_error(self) -> float:
@@ -368,9 +378,12 @@ class ComparisonAccumulator:
         duration = (self.n_samples - 1) / fs
         self.energy_window_s = max(self.energy_window_s, duration / MAX_WINDOWS, 1.0 / fs)
         self._per_window = max(1, int(round(self.energy_window_s * fs)))
+        self.energy_window_s = self._per_window / fs
         n_win = -(-self.n_samples // self._per_window)
         self._Esum = np.zeros((2, n_win))
         self._Ecount = np.zeros(n_win)
+        self._werr = np.zeros(n_win)
+        self._wref = np.zeros(n_win)
         self._err = np.zeros(len(self.windows_s))
         self._ref = np.zeros(len(self.windows_s))
         self._ends = [int(math.floor(w * fs * (1 + 1e-12))) + 1 for w in self.windows_s]
@@ -389,6 +402,8 @@ class ComparisonAccumulator:
                 self._err[w] = max(self._err[w], float(np.max(np.abs(p[:k] - pr[:k]))))
                 self._ref[w] = max(self._ref[w], float(np.max(np.abs(pr[:k]))))
         idx = (i0 + np.arange(len(run))) // self._per_window
+        np.maximum.at(self._werr, idx, np.max(np.abs(p - pr), axis=1, initial=0.0))
+        np.maximum.at(self._wref, idx, np.max(np.abs(pr), axis=1, initial=0.0))
         for r, c in enumerate((run, ref)):
             np.add.at(self._Esum[r], idx, c.energy)
             n, self._closed[r] = stop_closures(self.system, c.x, self._closed[r])
@@ -413,6 +428,7 @@ class ComparisonAccumulator:
             windows_s=self.windows_s, pointwise_error=err, energy_window_s=self.energy_window_s,
             energy_t=centres, energy_run=E[0], energy_ref=E[1], closures_run=self._closures[0],
             closures_ref=self._closures[1], freq_t=t_f, freq_run=f_run, freq_ref=f_ref, freq_resolution_hz=res,
+            window_err=self._werr, window_ref=self._wref,
         )
 
 

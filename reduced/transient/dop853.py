@@ -147,7 +147,7 @@ def stream_dop853(
                     act = _find_active_events(g, g_new, direction)
                     if act.size:
                         sol = solver.dense_output()
-                        roots = np.array([brentq(lambda tt, f=funcs[e]: f(tt, sol(tt)), solver.t_old, t,
+                        roots = np.array([brentq(lambda tt, f=funcs[e], sol=sol: f(tt, sol(tt)), solver.t_old, t,
                                                  xtol=4 * EPS, rtol=4 * EPS) for e in act])
                         first = int(np.argsort(roots, kind="stable")[0])
                         je, t = int(act[first]), float(roots[first])
