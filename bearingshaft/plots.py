@@ -11,6 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from reduced.transient.compare import binned  # noqa: E402
 from reduced.transient.spectrogram import Spectrogram, curve_in_time  # noqa: E402
 
 CURVE_STYLES = ("-", "--", "-.", ":")
@@ -40,9 +41,13 @@ class Envelope:
     def add(self, start: int, values: np.ndarray) -> None:
         """Samples start .. start + len(values) - 1, shape (k, n_series) or (k,)."""
         v = np.asarray(values, dtype=float).reshape(len(values), -1)
-        idx = (start + np.arange(v.shape[0])) // self.per
-        np.minimum.at(self.lo, idx, v)
-        np.maximum.at(self.hi, idx, v)
+        if v.shape[0] == 0:
+            return
+        b, lo = binned(np.minimum, v, start, self.per)
+        hi = binned(np.maximum, v, start, self.per)[1]
+        sl = slice(b, b + lo.shape[0])
+        self.lo[sl] = np.minimum(self.lo[sl], lo)
+        self.hi[sl] = np.maximum(self.hi[sl], hi)
 
     def lines(self) -> tuple[np.ndarray, np.ndarray]:
         """(t, y): a line through each bin's min then max (the whole record when kept whole)."""
@@ -59,9 +64,10 @@ class Envelope:
         return (np.arange(self.hi.shape[0]) + 0.5 * (self.per > 1)) * self.per / self.fs, self.hi
 
 
-def ringdown_envelopes(res, chunk_samples: int = 1 << 16) -> dict[str, Envelope]:
+def ringdown_envelopes(res, chunk_samples: int = 1 << 16, also=None) -> dict[str, Envelope]:
     """Envelopes of x (every DOF), E, W and |E0 - E - W| / E0 from one pass over a run's chunks
-    (a RingdownResult, a RingdownFile or anything with ``chunks``, ``n_samples``, ``sample_rate_hz``)."""
+    (a RingdownResult, a RingdownFile or anything with ``chunks``, ``n_samples``, ``sample_rate_hz``);
+    ``also(chunk)`` is called on every chunk of that pass."""
     n, N, fs = res.system.n, res.n_samples, res.sample_rate_hz
     env = {"x": Envelope(N, fs, n), "E": Envelope(N, fs, 1), "W": Envelope(N, fs, 1), "balance": Envelope(N, fs, 1)}
     E0 = None
@@ -73,6 +79,8 @@ def ringdown_envelopes(res, chunk_samples: int = 1 << 16) -> dict[str, Envelope]
         env["E"].add(c.start, E)
         env["W"].add(c.start, c.dissipated)
         env["balance"].add(c.start, np.abs(E0 - E - c.dissipated) / max(E0, 1e-300))
+        if also is not None:
+            also(c)
     env["E0"] = E0
     return env
 

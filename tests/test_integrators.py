@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -161,3 +162,161 @@ def test_exact_energy_balance_any_velocity(speed, gap, k_g, c):
     p = replace(P, g=gap, k_g=k_g, c=c)
     res = ringdown(p.system(), np.zeros(3), np.array([0.0, 0.0, speed]), 0.01, 20000.0, "exact")
     assert res.energy_balance_error < 1e-9
+
+
+# -- DOP853 driven as solve_ivp drives it ----------------------------------------------------------
+def test_dop853_stream_is_solve_ivp_bit_for_bit():
+    # the stepper loop replaces solve_ivp so that a run can live across chunks; on its own
+    # terms (one call, t_eval = the samples) solve_ivp must give the same bits
+    from scipy.integrate import solve_ivp
+
+    from reduced.transient.dop853 import _rhs_factory
+
+    sys = P.system()
+    res = ringdown(sys, *IMPULSE, 0.003, 20000.0, "dop853", rtol=1e-9)
+    z0 = np.concatenate([*IMPULSE, [0.0]])
+    sol = solve_ivp(_rhs_factory(sys), (0.0, res.t[-1]), z0, method="DOP853", t_eval=res.t, rtol=1e-9,
+                    atol=1e-9 * 1e-3)  # the default: rtol x max(gap, 1 mm)
+    assert np.array_equal(sol.y[:3].T, res.x) and np.array_equal(sol.y[3:6].T, res.v)
+    assert np.array_equal(sol.y[6], res.dissipated)
+    assert res.stats["nfev"] == sol.nfev
+
+
+def test_dop853_events_restart_at_every_crossing_as_solve_ivp():
+    # the reference mode, leg by leg with solve_ivp's terminal events (the code this replaced)
+    from scipy.integrate import solve_ivp
+
+    sys = P.system()
+    n, fs, T = 3, 20000.0, 0.004
+    res = integrate_dop853(sys, *IMPULSE, T, fs, rtol=1e-11, events=True)
+    ts = np.arange(res.n_samples) / fs
+    Minv = np.linalg.inv(sys.M)
+    z, t0, i, active = np.concatenate([*IMPULSE, [0.0]]), 0.0, 0, sys.penetration(IMPULSE[0]) > 0
+    Z = np.empty((ts.size, 2 * n + 1))
+    while True:
+        Ks, Fs = sys.state_matrices(active)
+
+        def leg(t, zz, Ks=Ks, Fs=Fs):
+            x, v = zz[:n], zz[n:2 * n]
+            return np.concatenate([v, Minv @ (Fs - Ks @ x - sys.C @ v), [v @ sys.C @ v]])
+
+        sol = solve_ivp(leg, (t0, ts[-1]), z, method="DOP853", t_eval=ts[i:], rtol=1e-11,
+                        atol=1e-11 * 1e-3, events=sys.crossing_events(active))
+        k = len(sol.t)  # a leg between two samples returns none (and lists)
+        if k:
+            Z[i:i + k] = np.asarray(sol.y).T
+        i += k
+        if sol.status != 1:
+            break
+        je = int(np.argmin([e[0] if e.size else np.inf for e in sol.t_events]))
+        t0, z = float(sol.t_events[je][0]), sol.y_events[je][0].copy()
+        active = sys.state_after_crossing(active, je, z[:n], z[n:2 * n], 1e-9 * 1e-3)
+    assert res.stats["n_events"] > 20
+    assert np.array_equal(Z[:, :n], res.x) and np.array_equal(Z[:, 2 * n], res.dissipated)
+
+
+# -- spectrogram against SciPy's ShortTimeFFT ---------------------------------------------------------
+@pytest.mark.parametrize("n, window_s, overlap", [(40001, 0.05, 0.9), (1234, 0.01, 0.5), (101, 4e-4, 0.6)])
+def test_spectrogram_is_shorttimefft_inside_the_record(n, window_s, overlap):
+    from scipy.signal import ShortTimeFFT
+    from scipy.signal.windows import hann
+
+    from reduced.transient.spectrogram import spectrogram, spectrogram_chunks
+
+    fs = 20000.0
+    t = 0.3 + np.arange(n) / fs
+    y = np.sin(2 * np.pi * 700 * t) + 0.1 * np.random.default_rng(1).standard_normal(n) + 0.5
+    nwin = max(8, round(window_s * fs))
+    stft = ShortTimeFFT(hann(nwin, sym=False), hop=max(1, round(nwin * (1 - overlap))), fs=fs, scale_to="psd")
+    S = stft.spectrogram(y - y.mean())  # frames p_min .. p_max - 1
+    lo, hi = stft.lower_border_end[1] - stft.p_min, stft.upper_border_begin(n)[1] - stft.p_min
+    ref = S[:, lo:hi]
+    ours = spectrogram(t, y, window_s, overlap)
+    assert ours.power.shape == ref.shape
+    assert np.allclose(ours.t, stft.t(n)[lo:hi] + t[0], rtol=0, atol=1e-12)
+    assert np.max(np.abs(ours.power - ref)) < 1e-12 * np.max(ref)  # one FFT each: round-off
+    # fed in chunks of 333 samples: the same frames
+    chunked = spectrogram_chunks(((i, y[i:i + 333]) for i in range(0, n, 333)), n, fs, window_s, overlap,
+                                 mean=float(y.mean()), t0=0.3, max_frames=None)
+    assert np.max(np.abs(chunked.power - ours.power)) < 1e-12 * np.max(ref)
+
+
+def test_spectrogram_of_a_long_record_keeps_every_kth_frame():
+    from reduced.transient.spectrogram import spectrogram
+
+    fs, n = 20000.0, 40001
+    t = np.arange(n) / fs
+    y = np.sin(2 * np.pi * (300 + 200 * t) * t)
+    full = spectrogram(t, y, 0.05, 0.9)
+    thin = spectrogram(t, y, 0.05, 0.9, max_frames=50, fmax_hz=1500.0)
+    assert thin.power.shape[1] <= 50 and thin.hop % full.hop == 0
+    k = thin.hop // full.hop
+    first = int(np.argmin(np.abs(full.t - thin.t[0])))
+    assert np.array_equal(full.t[first::k][: thin.t.size], thin.t)
+    assert np.allclose(full.power[: thin.power.shape[0], first::k][:, : thin.t.size], thin.power, rtol=1e-12)
+    assert thin.freq_hz[-1] <= 1500.0
+    # the chirp's dominant frequency 300 + 400 t is found frame by frame to one bin (20 Hz)
+    assert np.max(np.abs(thin.dominant_freq_hz() - (300 + 400 * thin.t))) <= 20.0
+
+
+# -- largest Lyapunov exponent against known exponents ------------------------------------------------
+def _linear(c: float):
+    # equal masses and C = c I: every mode decays at c / (2 m); a 10 km gap is never reached
+    p = replace(P, m2=P.m1, m3=P.m1, g=1e4, c=max(c, 0.0))
+    sys = p.system()
+    if c < 0:
+        sys = replace(sys, C=c * np.eye(3))
+    return sys, np.array([1e-4, 0.0, -2e-4]), np.array([0.0, 0.1, 0.0])
+
+
+@pytest.mark.parametrize("c, method", [(4.0, "exact"), (0.0, "exact"), (-20.0, "explicit"), (-20.0, "dop853")])
+def test_lyapunov_exponent_of_a_linear_system_is_its_decay_rate(c, method):
+    from reduced.transient.compare import largest_lyapunov
+
+    sys, x0, v0 = _linear(c)
+    kw = {"rtol": 1e-10, "atol": 1e-20} if method == "dop853" else {}  # atol far below the 1e-13 m separation
+    est = largest_lyapunov(sys, x0, v0, 1.0, 5000.0, method, window_s=0.01, **kw)
+    rate = -c / (2 * P.m1)  # 1/s: -3.18 (damped), 0, +15.9 (negative damping)
+    # measured: 1e-5 relative (decaying), 3e-6 /s (undamped), 0.1 % (growing: fitted only after the
+    # 100-fold onset at 0.29 s, on window maxima that ripple with the 18 Hz mode)
+    assert est.exponent_per_s == pytest.approx(rate, abs=0.005 * abs(rate) + 1e-4)
+    assert est.chaotic == (c < 0)  # only the growing one separates 100-fold
+    assert math.isinf(est.saturation_s)  # D/|y| stays delta in a linear system
+
+
+def test_lyapunov_exponent_on_an_unstable_periodic_orbit_is_its_floquet_exponent():
+    # NNM 2 of the undamped model at 2.6 J: the antisymmetric orbit x(0) = [a, 0, -a] is periodic
+    # (its period in closed form, reduced.periodic.nnm2) and unstable; the monodromy matrix of
+    # the exact flow gives its largest multiplier, ln|mu| / T = 400 /s, independently of two runs
+    from scipy.optimize import brentq
+
+    from reduced.periodic import nnm2
+    from reduced.transient.compare import largest_lyapunov
+    from reduced.transient.flow import Flow
+
+    p = replace(P, c=0.0)
+    sys = p.system()
+    a = brentq(lambda a: float(sys.energy(np.array([a, 0.0, -a]), np.zeros(3))) - 2.6, 1e-6, 1e-1)
+    T = float(nnm2.period_from_amplitude(p, a))
+    x0 = np.array([a, 0.0, -a])
+    flow = Flow(sys)(x0, np.zeros(3), T, jacobian=True)
+    assert np.max(np.abs(flow.y[:3] - x0)) < 1e-12 * a  # periodic
+    floquet = np.log(np.max(np.abs(np.linalg.eigvals(flow.jacobian)))) / T
+    assert floquet == pytest.approx(400.0, rel=0.01)
+    for seed in (0, 1):
+        est = largest_lyapunov(sys, x0, np.zeros(3), 200 * T, 100 / T, window_s=T, seed=seed)
+        assert est.chaotic and est.saturation_s < 30 * T
+        assert est.exponent_per_s == pytest.approx(floquet, rel=0.02)
+
+
+def test_compare_runs_of_a_run_with_itself_and_stop_closures():
+    from reduced.transient.compare import compare_runs
+
+    sys = one_dof_stop()
+    res = ringdown(sys, np.zeros(1), np.ones(1), 0.4, 1e5, "exact")
+    c = compare_runs(sys, res.chunks(1000), res.chunks(777), res.n_samples, 1e5, np.eye(1), windows_s=(0.05, 0.4),
+                     window_s=0.02)
+    assert c.pointwise_error == (0.0, 0.0) and c.energy_envelope_error == 0.0
+    assert c.freq_agreement == 1.0 and c.freq_median_diff_hz == 0.0
+    # SDND101: the mass enters the stop at t = 0+ and again at 0.3299 s (contact tc + flight tf)
+    assert c.closures_run == c.closures_ref == 2

@@ -31,6 +31,7 @@ from reduced.transient.compare import (
     LineFit,
     LyapunovAccumulator,
     aligned,
+    binned,
     displaced_state,
 )
 from reduced.transient.exact import PIECES, stream_exact
@@ -295,12 +296,14 @@ def reference_check(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndar
 # -- the stage -----------------------------------------------------------------------------
 def _first_pass(res, P: np.ndarray, point: int | None) -> tuple[dict, float]:
     """Envelopes of the ringdown figure and the mean of one point's series, from one pass."""
-    env = plots.ringdown_envelopes(res)
-    total = 0.0
-    if point is not None:
-        for c in res.chunks():
-            total += float(np.sum(c.x @ P[point]))
-    return env, total / max(res.n_samples, 1)
+    total = [0.0]
+
+    def add(c) -> None:
+        if point is not None:
+            total[0] += float(np.sum(c.x @ P[point]))
+
+    env = plots.ringdown_envelopes(res, also=add)
+    return env, total[0] / max(res.n_samples, 1)
 
 
 def ringdown_stage(scene: Scene, writer: StageWriter, progress: bool, method: str | None = None) -> None:
@@ -327,7 +330,7 @@ def ringdown_stage(scene: Scene, writer: StageWriter, progress: bool, method: st
     if sp is not None:
         acc = StftAccumulator(res.n_samples, res.sample_rate_hz, sp.window_s, sp.overlap, mean=mean,
                               fmax_hz=sp.fmax_hz, max_frames=MAX_FRAMES)
-        for c in res.chunks():
+        for c in res.chunks(**({"fields": ("x",)} if isinstance(res, RingdownFile) else {})):
             acc.feed(c.start, c.x @ P[point])
         S = acc.result()
         f_open = linear_modes(system, "open").freq_hz[gap_moving_modes(system, "open", 3)]
@@ -365,7 +368,9 @@ class _Asymmetry:
         if self.t_break is None:
             over = np.flatnonzero(d > self.threshold)
             k = int(over[0]) if over.size else d.size
-            np.maximum.at(self.wmax, (start + np.arange(k)) // self.per, d[:k])
+            if k:
+                b, m = binned(np.maximum, d[:k], start, self.per)
+                self.wmax[b : b + m.size] = np.maximum(self.wmax[b : b + m.size], m)
             if over.size:
                 self.t_break = float(t[k])
                 self.k_break = start + k
@@ -452,7 +457,8 @@ def symmetry_stage(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndarr
                         points.add(c.start, np.column_stack([c.x @ pa, c.x @ pb]))
             return a, path
 
-        a, files[res.method] = follow(res.method, res.chunks(chunk))
+        a, files[res.method] = follow(res.method, res.chunks(chunk, **({"fields": ("x",)} if isinstance(
+            res, RingdownFile) else {})))
         runs[res.method] = (a, res.tolerance)
         x0, v0 = scene_initial_state(scene, system, P)
         for other in scene.symmetry.methods:
@@ -517,7 +523,8 @@ def symmetry_stage(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndarr
                      "t_break_max_s": "", "growth_fit_band_m": f"{band[0]:g} to {band[1]:g}",
                      "t_break_seed0_other_roundoff_s": "", "tolerance_m": _g(tol, 2),
                      "t_exceeds_tolerance_s": _g(t_tol[method], 6),
-                     "reproducible_across_machines": "no: round-off sets the break time and so the phase where the rate is fitted"})
+                     "reproducible_across_machines":
+                         "no: round-off sets the break time and so the phase where the rate is fitted"})
     write_rows(writer.path("symmetry.csv"), rows)
     seeds_text = (f"seeded ({SYMMETRY_SEEDS} x {SYMMETRY_PERTURBATION_M:g} m, antisymmetric): growth "
                   f"{rates[1]:.3g} /s [{rates[0]:.3g}, {rates[2]:.3g}], break at {BREAK_THRESHOLD_M:g} m: "

@@ -25,6 +25,9 @@ def show(value) -> str:
 
 
 def _is_number(value) -> bool:
+    """A real number, NumPy scalars and 0-d arrays included; booleans are not numbers."""
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        return value.dtype.kind in "iuf"
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
@@ -59,6 +62,8 @@ def positive(name: str, value, unit: str = "") -> float:
 def integer(name: str, value, *, lo: int = 1, hi: int | None = None) -> int:
     """An int (not a bool) in [lo, hi]."""
     allowed = f"an integer >= {lo}" + (f" and <= {hi}" if hi is not None else "")
+    if isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "iu":
+        value = value.item()
     if not isinstance(value, (numbers.Integral,)) or isinstance(value, (bool, np.bool_)):
         raise InvalidArgument(f"{name} must be {allowed}, got {show(value)}")
     v = int(value)

@@ -202,8 +202,8 @@ class LyapunovAccumulator:
         over = np.flatnonzero(D > self.saturation * S)
         k = int(over[0]) if over.size else D.size
         if k:
-            idx = (a.start + np.arange(k)) // self.per
-            np.maximum.at(self.Dmax, idx, D[:k])
+            b, m = binned(np.maximum, D[:k], a.start, self.per)
+            self.Dmax[b : b + m.size] = np.maximum(self.Dmax[b : b + m.size], m)
             self.n_seen = a.start + k
         if over.size:
             self.saturation_s = float(a.t[k])
@@ -401,16 +401,20 @@ class ComparisonAccumulator:
             if k:
                 self._err[w] = max(self._err[w], float(np.max(np.abs(p[:k] - pr[:k]))))
                 self._ref[w] = max(self._ref[w], float(np.max(np.abs(pr[:k]))))
-        idx = (i0 + np.arange(len(run))) // self._per_window
-        np.maximum.at(self._werr, idx, np.max(np.abs(p - pr), axis=1, initial=0.0))
-        np.maximum.at(self._wref, idx, np.max(np.abs(pr), axis=1, initial=0.0))
+        if len(run) == 0:
+            return
+        per = self._per_window
+        b, m = binned(np.maximum, np.max(np.abs(p - pr), axis=1), i0, per)
+        sl = slice(b, b + m.size)
+        self._werr[sl] = np.maximum(self._werr[sl], m)
+        self._wref[sl] = np.maximum(self._wref[sl], binned(np.maximum, np.max(np.abs(pr), axis=1), i0, per)[1])
+        self._Ecount[sl] += binned(np.add, np.ones(len(run)), i0, per)[1]
         for r, c in enumerate((run, ref)):
-            np.add.at(self._Esum[r], idx, c.energy)
+            self._Esum[r, sl] += binned(np.add, c.energy, i0, per)[1]
             n, self._closed[r] = stop_closures(self.system, c.x, self._closed[r])
             self._closures[r] += n
             if self._stft is not None:
                 self._stft[r].feed(i0, (p if r == 0 else pr)[:, self.freq_point])
-        np.add.at(self._Ecount, idx, 1.0)
 
     def result(self) -> RunComparison:
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -453,3 +457,12 @@ def compare_runs(system: GapSystem, run: Iterable[Chunk], ref: Iterable[Chunk], 
     for a, b in aligned(run, ref):
         acc.feed(a, b)
     return acc.result()
+
+
+def binned(op, values: np.ndarray, start: int, per: int) -> tuple[int, np.ndarray]:
+    """(first bin, op.reduceat of ``values`` (k, ...) over the bins of ``per`` samples): samples
+    start .. start + k - 1 fall in bins start // per ...; the first and last may be partial."""
+    k = values.shape[0]
+    first = start // per
+    edges = np.arange((first + 1) * per, start + k, per) - start
+    return first, op.reduceat(values, np.concatenate([[0], edges]), axis=0)

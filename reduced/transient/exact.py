@@ -90,6 +90,7 @@ def _decompose(system: GapSystem, Ks: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 def state_table(system: GapSystem) -> StateTable:
     """Decompose every feasible contact state; mirrored states share one decomposition."""
+    _check.gap_system(system)
     n, m = system.n, system.m
     S = 2**m
     lam = np.zeros((S, 2 * n), complex)
@@ -307,6 +308,7 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
             _work_setup(X, C, lam_s, n, G, Gz, az)
         tau_ev = t_end - t
         j_ev = -1
+        seg_iter = 0
         for j in range(m):
             sgn = -side[j] if active[j] else side[j]
             const = _stop_series(B, j, sgn, offset[j], yp[s], X, coef)
@@ -319,7 +321,7 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
                 qnoise += abs(pv) * werr[i]
                 dnoise += abs(pv) * abs(lam_s[i]) * werr[i]
             tj, it = _first_root(const, coef, lam_s, tau_ev, hmin, qnoise, dnoise, floor)
-            n_iter += it
+            seg_iter += it
             if tj < 0.0:
                 status = -3
                 break
@@ -338,8 +340,9 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
             out_W[i_samp] = W + (_work(G, Gz, az, lam_s, tau, e) if damped else 0.0)
             i_samp += 1
         if i_samp == ns and t_after <= t_next:
-            status = BUFFER_FULL
+            status = BUFFER_FULL  # the segment is searched again with the next buffer: count it then
             break
+        n_iter += seg_iter
         _exponentials(lam_s, tau_ev, e)
         _eval_with(yp[s], X, e, ytmp)
         for r in range(N):

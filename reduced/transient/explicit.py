@@ -171,6 +171,9 @@ def stream_explicit(
     duration_s = _check.positive("duration_s", duration_s, "s")
     sample_rate_hz = _check.positive("sample_rate_hz", sample_rate_hz, "Hz")
     step_basis = _check.choice("step_basis", step_basis, STEP_BASES)
+    if not (_check._is_number(omega_dt) and 0.0 < omega_dt <= SWITCHING_SAFETY * 2.0):
+        raise StepTooLargeError(f"omega_dt must be a finite number in (0, {2 * SWITCHING_SAFETY:g}] rad "
+                                f"(central difference is unstable past omega dt = 2), got {_check.show(omega_dt)}")
     chunks = _check.integer("chunks", chunks)
     _check.callback("progress", progress)
     N = sample_count(duration_s, sample_rate_hz)

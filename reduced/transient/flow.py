@@ -27,6 +27,7 @@ import numba as nb
 import numpy as np
 
 from reduced.models.gaps import GapSystem
+from reduced.transient import _checks as _check
 from reduced.transient.exact import (
     QTOL_REL,
     ExactIntegratorError,
@@ -158,6 +159,9 @@ class Flow:
     """
 
     def __init__(self, system: GapSystem, table: StateTable | None = None) -> None:
+        _check.gap_system(system)
+        if table is not None and not isinstance(table, StateTable):
+            raise _check.InvalidArgument(f"table must be None or a StateTable, got {type(table).__name__}")
         self.system = system
         self.table = table or state_table(system)
         self.hmin = HMIN_PERIODS / system.omega_max()
@@ -183,10 +187,12 @@ class Flow:
         return np.concatenate([v, a])
 
     def __call__(self, x0: np.ndarray, v0: np.ndarray, T: float, jacobian: bool = False) -> FlowResult:
-        if not T >= 0.0:
-            raise ValueError(f"T must be >= 0 s, got {T!r}")
+        """y(T) from (x0, v0) (T >= 0 s, finite) and, with ``jacobian``, dy(T)/dy(0)."""
+        T = _check.number("T", T, lo=0.0, lo_open=False, unit="s")
+        jacobian = _check.flag("jacobian", jacobian)
         tb = self.table
-        y = np.concatenate([np.asarray(x0, float), np.asarray(v0, float)])
+        n = self.system.n
+        y = np.concatenate([_check.vector("x0", x0, n), _check.vector("v0", v0, n)])
         active = self.initial_state(y[: self.system.n], y[self.system.n :])
         n_seg, status = _flow_kernel(
             tb.lam,

@@ -39,6 +39,7 @@ FIXED_BYTES = 2 * 2**20  # imports aside: kernels' scratch, the DOP853 stages, t
 
 def default_chunk_samples(n_dofs: int) -> int:
     """Samples in a chunk of a streamed run of ``n_dofs`` DOFs: ``CHUNK_BYTES`` of t, x, v, W."""
+    n_dofs = _check.integer("n_dofs", n_dofs)
     return max(MIN_CHUNK_SAMPLES, CHUNK_BYTES // (FLOAT * (2 * n_dofs + 2)))
 
 
@@ -160,6 +161,8 @@ def ringdown(
     method = _check.choice("method", method, METHODS)
     _check.gap_system(system)
     N = sample_count(duration_s, sample_rate_hz)
+    if chunk_samples is not None:
+        chunk_samples = _check.integer("chunk_samples", chunk_samples)
     if out is None:
         max_memory_bytes = _check.positive("max_memory_bytes", max_memory_bytes)
         need = ringdown_peak_bytes(system.n, duration_s, sample_rate_hz, method, n_stops=min(system.m, 16),

@@ -328,14 +328,20 @@ class RingdownFile:
     energy = property(lambda self: self._memmap("energy"), doc="J, (N,) memory-mapped")
     dissipated = property(lambda self: self._memmap("dissipated"), doc="J, (N,) memory-mapped")
 
-    def chunks(self, chunk_samples: int = 1 << 16, start: int = 0, stop: int | None = None) -> Iterator[Chunk]:
-        """Consecutive :class:`Chunk` of at most ``chunk_samples`` samples from ``start`` to ``stop``."""
+    def chunks(self, chunk_samples: int = 1 << 16, start: int = 0, stop: int | None = None,
+               fields: tuple[str, ...] = HISTORIES) -> Iterator[Chunk]:
+        """Consecutive :class:`Chunk` of at most ``chunk_samples`` samples from ``start`` to ``stop``;
+        only the histories in ``fields`` are read (the others are None)."""
         chunk_samples = integer("chunk_samples", chunk_samples)
+        for name in fields:
+            if name not in HISTORIES:
+                raise InvalidArgument(f"fields must name histories among {', '.join(HISTORIES)}, got {show(name)}")
         stop = self.n_samples if stop is None else min(stop, self.n_samples)
         for i in range(start, stop, chunk_samples):
             j = min(i + chunk_samples, stop)
-            yield Chunk(i, self.read("t", i, j), self.read("x", i, j), self.read("v", i, j),
-                        self.read("dissipated", i, j), self.system, self.read("energy", i, j))
+            a = {k: self.read(k, i, j) if k in fields else None for k in HISTORIES}
+            t = a["t"] if a["t"] is not None else np.arange(i, j) / self.sample_rate_hz
+            yield Chunk(i, t, a["x"], a["v"], a["dissipated"], self.system, a["energy"])
 
     @property
     def energy0(self) -> float:

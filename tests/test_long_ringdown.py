@@ -1,0 +1,162 @@
+"""Long ringdowns in bounded memory: chunked integration, the streamed .npz, lazy reading.
+
+A run is made "long" cheaply by a small chunk size: what matters is how many chunks it is
+cut into, not how many seconds it lasts.
+"""
+
+from __future__ import annotations
+
+import tracemalloc
+import zipfile
+
+import numpy as np
+import pytest
+
+from reduced.models.discrete import DiscreteParams
+from reduced.models.gaps import GapSystem
+from reduced.transient.integrate import (
+    default_chunk_samples,
+    ringdown,
+    ringdown_disk_bytes,
+    ringdown_peak_bytes,
+    ringdown_stream,
+)
+from reduced.transient.result import RingdownResult
+from reduced.transient.store import HISTORIES, RingdownFile
+
+P = DiscreteParams()
+IMPULSE = (np.zeros(3), np.array([0.0, 0.0, 200.0]))
+OLD_KEYS = {"t", "x", "v", "energy", "dissipated", "dof_names", "method", "tolerance", "energy_balance_error"}
+CASES = [("exact", 0.1, {}), ("explicit", 0.1, {}), ("dop853", 0.004, {"rtol": 1e-8})]
+
+
+@pytest.mark.parametrize("method, duration, kw", CASES)
+def test_streamed_run_equals_in_memory_run_bit_for_bit(tmp_path, method, duration, kw):
+    # Each integrator carries its whole state across chunks (exact: a fixed restart grid and a
+    # segment recomputed from its start when the buffer fills; explicit: x, v_{n+1/2}, W, p;
+    # DOP853: the stepper itself), so chunking changes no bit, not merely "to round-off".
+    sys = P.system()
+    mem = ringdown(sys, *IMPULSE, duration, 20000.0, method, **kw)
+    chunk = mem.n_samples // 16 - 3  # 17 chunks, boundaries anywhere between samples
+    f = ringdown(sys, *IMPULSE, duration, 20000.0, method, out=tmp_path / "r.npz", chunk_samples=chunk, **kw)
+    assert isinstance(mem, RingdownResult) and isinstance(f, RingdownFile)
+    assert mem.n_samples == f.n_samples == round(duration * 20000) + 1
+    for name in ("t", "x", "v", "dissipated"):
+        assert np.array_equal(getattr(mem, name), f.read(name)), name
+    assert np.array_equal(mem.energy, f.read("energy"))
+    assert f.energy_balance_error == mem.energy_balance_error
+    assert f.tolerance == mem.tolerance
+    assert f.method == method and f.dof_names == ("x1", "x2", "x3")
+    # the in-memory result saves the same file
+    mem.save(tmp_path / "m.npz")
+    assert (tmp_path / "m.npz").read_bytes() == (tmp_path / "r.npz").read_bytes()
+
+
+def test_streamed_npz_is_an_ordinary_npz(tmp_path):
+    res = ringdown(P.system(), *IMPULSE, 0.01, 20000.0, "exact", out=tmp_path / "r.npz", chunk_samples=50)
+    with zipfile.ZipFile(tmp_path / "r.npz") as zf:
+        assert zf.testzip() is None  # every CRC-32 right
+        assert {i.date_time for i in zf.infolist()} == {(1980, 1, 1, 0, 0, 0)}  # no wall clock
+    with np.load(tmp_path / "r.npz") as z:
+        assert OLD_KEYS <= set(z.files)
+        assert not any(k.endswith("wall_s") for k in z.files)  # timings live in provenance.json
+        assert z["x"].shape == (201, 3) and z["t"][-1] == pytest.approx(0.01)
+        assert str(z["method"]) == "exact" and int(z["stat_n_events"]) == res.stats["n_events"]
+        assert np.array_equal(z["x"], res.x)  # memory-mapped view
+        assert float(z["energy_balance_error"]) < 1e-11
+    # chunks of any size, from the file
+    parts = list(res.chunks(64))
+    assert [c.start for c in parts] == [0, 64, 128, 192]
+    assert np.array_equal(np.concatenate([c.v for c in parts]), res.v)
+    assert np.array_equal(np.concatenate([c.energy for c in parts]), res.energy)
+
+
+def test_a_run_written_by_savez_compressed_is_read_in_chunks(tmp_path):
+    mem = ringdown(P.system(), *IMPULSE, 0.01, 20000.0, "exact")
+    np.savez_compressed(tmp_path / "old.npz", t=mem.t, x=mem.x, v=mem.v, energy=mem.energy,
+                        dissipated=mem.dissipated, method="exact", tolerance=mem.tolerance)
+    f = RingdownFile(tmp_path / "old.npz")
+    assert f.sample_rate_hz == pytest.approx(20000.0)
+    assert np.array_equal(np.concatenate([c.x for c in f.chunks(30)]), mem.x)
+    assert np.array_equal(f.read("v", 17, 40), mem.v[17:40])
+
+
+@pytest.mark.filterwarnings("ignore:overflow encountered")
+def test_failed_stream_leaves_no_file(tmp_path):
+    # a run that overflows raises mid-stream: nothing (not even a partial file) remains
+    sys = GapSystem(M=np.eye(1), C=-2e4 * np.eye(1), K=1e4 * np.eye(1), B=np.eye(1), k=np.array([1e6]),
+                    offset=np.array([1.0]), side=np.array([1.0]), tip=np.array([0]), dof_names=("x",),
+                    stop_names=("stop",))  # negative damping: x grows like exp(1e4 t) and overflows
+    with pytest.raises(FloatingPointError):
+        ringdown(sys, np.zeros(1), np.ones(1), 1.0, 2000.0, "explicit", out=tmp_path / "r.npz", chunk_samples=16)
+    assert list(tmp_path.iterdir()) == []
+
+
+def _traced_peak(fn) -> int:
+    tracemalloc.start()
+    try:
+        fn()
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+@pytest.mark.parametrize("method", ["exact", "explicit"])
+def test_peak_memory_does_not_grow_with_duration(tmp_path, method):
+    # 4 000 and 8 000 chunks' worth of samples... cheaply: 200 kHz output, 1 000-sample chunks.
+    # The run's samples alone are 8 (2n + 3) N = 5.8 and 11.5 MB; the streamed peak is one or two
+    # chunks (72 kB each) and the integrator's tables, whatever N is.
+    sys = P.system()
+    fs, chunk = 200_000.0, 1000
+    for duration in (0.02, 0.04):  # compile and warm caches first
+        ringdown(sys, *IMPULSE, duration, fs, method, out=tmp_path / "w.npz", chunk_samples=chunk)
+    peaks = [_traced_peak(lambda d=d: ringdown(sys, *IMPULSE, d, fs, method, out=tmp_path / "r.npz",
+                                               chunk_samples=chunk)) for d in (0.04, 0.08)]
+    assert peaks[1] < 1.2 * peaks[0], f"peak grew from {peaks[0]} to {peaks[1]} bytes"
+    assert peaks[1] < 2e6  # far below the 11.5 MB of samples
+    # the estimate bounds the measured peak and the in-memory estimate exceeds the samples
+    est = ringdown_peak_bytes(3, 0.08, fs, method, chunk_samples=chunk)
+    assert peaks[1] <= est <= 10 * max(peaks[1], 1 << 20)
+    mem_peak = _traced_peak(lambda: ringdown(sys, *IMPULSE, 0.08, fs, method))
+    assert mem_peak > 3 * peaks[1]  # held in memory it does grow
+    assert mem_peak <= ringdown_peak_bytes(3, 0.08, fs, method, streamed=False)
+
+
+def test_estimates_of_memory_and_disk(tmp_path):
+    # a 1e4 s run at 20 kHz: 2e8 samples, 14.4 GB on disk, a few MB of memory when streamed
+    N = 200_000_001
+    disk = ringdown_disk_bytes(3, 1e4, 20000.0)
+    assert disk == pytest.approx(8 * 9 * N, rel=1e-6)
+    assert ringdown_peak_bytes(3, 1e4, 20000.0, streamed=True) < 64 * 2**20
+    assert ringdown_peak_bytes(3, 1e4, 20000.0, streamed=False) > 8 * 8 * N
+    assert default_chunk_samples(3) * 8 * 8 <= 8 * 2**20 + 64
+    # the estimate of the disk is the file's size to within its small members
+    f = ringdown(P.system(), *IMPULSE, 0.05, 20000.0, "explicit", out=tmp_path / "r.npz")
+    size = (tmp_path / "r.npz").stat().st_size
+    assert abs(ringdown_disk_bytes(3, 0.05, 20000.0) - size) < 4096
+    assert f.n_samples == 1001
+
+
+def test_in_memory_run_beyond_the_cap_is_refused_before_any_work():
+    with pytest.raises(ValueError, match=r"duration_s x sample_rate_hz = 2e\+08 samples.*out="):
+        ringdown(P.system(), *IMPULSE, 1e4, 20000.0, "exact")
+    with pytest.raises(ValueError, match="max_memory_bytes"):
+        ringdown(P.system(), *IMPULSE, 1.0, 20000.0, "exact", max_memory_bytes=1e3)
+
+
+def test_stream_can_be_stopped_early_and_is_single_use():
+    s = ringdown_stream(P.system(), *IMPULSE, 1.0, 20000.0, "exact", chunk_samples=100)
+    first = next(iter(s))
+    assert first.start == 0 and len(first) == 100
+    s.close()
+    assert not s.finished
+    with pytest.raises(RuntimeError, match="iterated once"):
+        next(iter(s))
+
+
+def test_every_history_is_readable_alone(tmp_path):
+    f = ringdown(P.system(), *IMPULSE, 0.01, 20000.0, "exact", out=tmp_path / "r.npz")
+    for name in HISTORIES:
+        (c,) = list(f.chunks(1000, fields=(name,)))
+        assert getattr(c, "_energy" if name == "energy" else name) is not None
+    assert np.array_equal(f.x, np.load(tmp_path / "r.npz")["x"])
