@@ -64,7 +64,7 @@ class Envelope:
         return (np.arange(self.hi.shape[0]) + 0.5 * (self.per > 1)) * self.per / self.fs, self.hi
 
 
-def ringdown_envelopes(res, chunk_samples: int = 1 << 16, also=None) -> dict[str, Envelope]:
+def ringdown_envelopes(res, chunk_samples: int | None = None, also=None) -> dict[str, Envelope]:
     """Envelopes of x (every DOF), E, W and |E0 - E - W| / E0 from one pass over a run's chunks
     (a RingdownResult, a RingdownFile or anything with ``chunks``, ``n_samples``, ``sample_rate_hz``);
     ``also(chunk)`` is called on every chunk of that pass."""

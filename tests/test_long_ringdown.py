@@ -160,3 +160,134 @@ def test_every_history_is_readable_alone(tmp_path):
         (c,) = list(f.chunks(1000, fields=(name,)))
         assert getattr(c, "_energy" if name == "energy" else name) is not None
     assert np.array_equal(f.x, np.load(tmp_path / "r.npz")["x"])
+
+
+# -- the ringdown stage: same files whatever the chunking, rerun after rerun, memory bounded -------------
+SCENE = """description = "symmetric start, {duration} s"
+[model]
+kind = "discrete"
+[initial]
+v0_m_s = [0.0, 200.0, 0.0]
+[ringdown]
+duration_s = {duration}
+sample_rate_hz = {fs}
+[spectrogram]
+window_s = 0.02
+[symmetry]
+dofs = ["x1", "x3"]
+methods = ["exact", "explicit"]
+"""
+SCIENCE = ("ringdown.npz", "symmetry.csv", "symmetry_seeds.csv")
+
+
+def _stage(tmp_path, name: str, duration: float = 0.6, fs: float = 20000.0):
+    from bearingshaft.output import StageWriter
+    from bearingshaft.scenes import parse_scene
+    from bearingshaft.stages.ringdown import ringdown_stage
+
+    scene = parse_scene(SCENE.format(duration=duration, fs=fs), name, f"{name}.toml")
+    out = tmp_path / name
+    out.mkdir()
+    writer = StageWriter(out)
+    ringdown_stage(scene, writer, progress=False)
+    return out, writer
+
+
+@pytest.fixture
+def small_chunks(monkeypatch):
+    """Streams and reads in chunks of about 1 000 samples instead of 1e5."""
+    import reduced.transient.integrate as integrate
+    import reduced.transient.store as store
+
+    monkeypatch.setattr(integrate, "CHUNK_BYTES", 1000 * 64)
+    monkeypatch.setattr(integrate, "MIN_CHUNK_SAMPLES", 16)
+    monkeypatch.setattr(store, "READ_CHUNK_SAMPLES", 999)
+
+
+def test_stage_files_do_not_depend_on_the_chunking_and_reruns_are_identical(tmp_path, monkeypatch):
+    a, wa = _stage(tmp_path, "a")
+    b, _ = _stage(tmp_path, "b")
+    import reduced.transient.integrate as integrate
+    import reduced.transient.store as store
+
+    monkeypatch.setattr(integrate, "CHUNK_BYTES", 1000 * 64)
+    monkeypatch.setattr(integrate, "MIN_CHUNK_SAMPLES", 16)
+    monkeypatch.setattr(store, "READ_CHUNK_SAMPLES", 999)
+    c, _ = _stage(tmp_path, "c")
+    for name in SCIENCE:
+        assert (a / name).read_bytes() == (b / name).read_bytes(), f"{name} differs on a rerun"
+        assert (a / name).read_bytes() == (c / name).read_bytes(), f"{name} depends on the chunk size"
+    # no timing in a science file; the timings are in the stage's stats (provenance.json)
+    for name in ("symmetry.csv", "symmetry_seeds.csv"):
+        assert "wall" not in (a / name).read_text() and "runtime" not in (a / name).read_text()
+    assert "symmetry_wall_s" in wa.stats and "wall_s" in wa.stats
+    assert {p.name for p in a.iterdir()} == {*SCIENCE, "ringdown.png", "spectrogram.png", "symmetry.png"}
+
+
+def test_symmetry_csv_leads_with_seeded_runs(tmp_path):
+    import csv
+
+    out, _ = _stage(tmp_path, "s", duration=0.8)
+    rows = list(csv.DictReader(open(out / "symmetry.csv")))
+    assert [r["case"] for r in rows] == ["seeded", "round-off", "round-off"]
+    seeded = rows[0]
+    assert seeded["perturbation_m"] == "1e-08" and seeded["runs"] == "5" and seeded["runs_broken"] == "5"
+    # the seeded break does not move when only round-off changes (another restart grid)
+    assert seeded["t_break_seed0_other_roundoff_s"] == next(
+        r["t_break_s"] for r in csv.DictReader(open(out / "symmetry_seeds.csv")) if r["seed"] == "0")
+    # measured on this scene: the 1e-8 m seeds break at 0.505-0.70 s, growing at 6.1 /s
+    assert 0.45 < float(seeded["t_break_min_s"]) <= float(seeded["t_break_s"]) <= float(seeded["t_break_max_s"]) < 0.75
+    assert 5.5 < float(seeded["growth_rate_per_s"]) < 7.0
+    assert all(r["reproducible_across_machines"].startswith("no") for r in rows[1:])
+
+
+def test_stage_peak_memory_does_not_grow_with_duration(tmp_path, small_chunks):
+    # 0.2 and 0.8 s at 400 kHz: 8e4 and 3.2e5 samples (5.8 and 23 MB of samples, plus the symmetry
+    # runs). The stage reads and writes ~1 000-sample chunks; what it holds besides is matplotlib's
+    # figures and caches, about 10 MB that vary by +-10 % from run to run whatever the duration.
+    _stage(tmp_path, "warm", 0.05, 400_000.0)
+    peaks = []
+    for k, duration in enumerate((0.2, 0.8)):
+        tracemalloc.start()
+        try:
+            _stage(tmp_path, f"m{k}", duration, 400_000.0)
+            peaks.append(tracemalloc.get_traced_memory()[1])
+        finally:
+            tracemalloc.stop()
+    samples = (tmp_path / "m1" / "ringdown.npz").stat().st_size
+    assert samples > 23e6
+    assert peaks[1] < 1.3 * peaks[0], f"stage peak grew from {peaks[0]} to {peaks[1]} bytes"
+    assert peaks[1] < 0.75 * samples
+
+
+def test_reference_check_finds_the_discrete_impulse_chaotic(tmp_path):
+    import csv
+
+    from bearingshaft.output import StageWriter
+    from bearingshaft.scenes import load_scene
+    from bearingshaft.stages.ringdown import reference_check
+
+    scene = load_scene("discrete-impulse")
+    scene = replace_ringdown(scene, duration_s=0.5)
+    res = ringdown(P.system(), *IMPULSE, 0.5, 20000.0, "explicit", out=tmp_path / "r.npz")
+    writer = StageWriter(tmp_path)
+    summary = reference_check(scene, res, np.eye(3), writer, progress=False)
+    # measured: exact runs 1e-9 apart stay together until ~0.12-0.15 s, then separate at 45-50 /s
+    assert summary["chaotic"] and 0.05 < summary["onset_s"] < 0.25
+    assert 25.0 < summary["lyapunov_exponent_per_s"][1] < 90.0
+    rows = {r["quantity"]: r for r in csv.DictReader(open(tmp_path / "reference.csv"))}
+    assert set(rows) >= {"pointwise_error_first_window", "pointwise_error_to_onset", "pointwise_error_whole_run",
+                         "energy_envelope_error", "dominant_frequency_agreement", "stop_closures_difference",
+                         "lyapunov_exponent", "separation_onset"}
+    first = rows["pointwise_error_first_window"]
+    # explicit at omega_max dt = 0.05: 2.6e-2 over 0.05 s (README); exact pairs differ by ~1e-9
+    assert 1e-3 < float(first["run_vs_exact"]) < 5e-2 and float(first["exact_pairs_max"]) < 1e-6
+    assert all(r["meaning"] for r in rows.values())
+    lyap = list(csv.DictReader(open(tmp_path / "lyapunov.csv")))
+    assert len(lyap) == 3 and all(r["chaotic"] == "True" for r in lyap)
+
+
+def replace_ringdown(scene, **kw):
+    from dataclasses import replace as dc_replace
+
+    return dc_replace(scene, ringdown=dc_replace(scene.ringdown, **kw))

@@ -527,7 +527,7 @@ def symmetry_stage(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndarr
                          "no: round-off sets the break time and so the phase where the rate is fitted"})
     write_rows(writer.path("symmetry.csv"), rows)
     seeds_text = (f"seeded ({SYMMETRY_SEEDS} x {SYMMETRY_PERTURBATION_M:g} m, antisymmetric): growth "
-                  f"{rates[1]:.3g} /s [{rates[0]:.3g}, {rates[2]:.3g}], break at {BREAK_THRESHOLD_M:g} m: "
+                  f"{rates[1]:.3g}/s [{rates[0]:.3g}, {rates[2]:.3g}], break at {BREAK_THRESHOLD_M:g} m: "
                   f"{breaks[1]:.3g} s [{breaks[0]:.3g}, {breaks[2]:.3g}] ({n_broken} of {SYMMETRY_SEEDS} broke)")
     plots.symmetry_figure(
         points, pair, res.method,

@@ -40,7 +40,7 @@ FIXED_BYTES = 2 * 2**20  # imports aside: kernels' scratch, the DOP853 stages, t
 def default_chunk_samples(n_dofs: int) -> int:
     """Samples in a chunk of a streamed run of ``n_dofs`` DOFs: ``CHUNK_BYTES`` of t, x, v, W."""
     n_dofs = _check.integer("n_dofs", n_dofs)
-    return max(MIN_CHUNK_SAMPLES, CHUNK_BYTES // (FLOAT * (2 * n_dofs + 2)))
+    return max(MIN_CHUNK_SAMPLES, CHUNK_BYTES // (FLOAT * (2 * n_dofs + 2)))  # the module's value at call time
 
 
 def ringdown_peak_bytes(n_dofs: int, duration_s: float, sample_rate_hz: float, method: str = "exact", *,

@@ -77,9 +77,11 @@ class RingdownResult:
     def sample_rate_hz(self) -> float:
         return 1.0 / float(self.t[1] - self.t[0]) if self.t.size > 1 else float("inf")
 
-    def chunks(self, chunk_samples: int = 1 << 16, start: int = 0, stop: int | None = None) -> Iterator[Chunk]:
+    def chunks(self, chunk_samples: int | None = None, start: int = 0, stop: int | None = None) -> Iterator[Chunk]:
         """Views of consecutive samples, as :meth:`RingdownFile.chunks` reads them."""
-        chunk_samples = integer("chunk_samples", chunk_samples)
+        from reduced.transient import store
+
+        chunk_samples = integer("chunk_samples", store.READ_CHUNK_SAMPLES if chunk_samples is None else chunk_samples)
         stop = self.n_samples if stop is None else min(stop, self.n_samples)
         for i in range(start, stop, chunk_samples):
             j = min(i + chunk_samples, stop)
@@ -174,7 +176,9 @@ class RingdownStream:
                 _write_chunk(w, c, summary)
             w.close(_small_members(self.system, self.method, self.tolerance, summary, self.sample_rate_hz,
                                    self.stats))
-        return RingdownFile(path, self.system)
+        f = RingdownFile(path, self.system)
+        f.stats = dict(self.stats)  # with the wall time, which the file leaves out
+        return f
 
 
 def _history_shapes(N: int, n: int) -> dict:

@@ -41,6 +41,7 @@ import numpy as np
 from reduced.transient._checks import InvalidArgument, integer, show
 
 HISTORIES = ("t", "x", "v", "energy", "dissipated")  # the per-sample members, in file order
+READ_CHUNK_SAMPLES = 1 << 16  # samples a chunk when a run is read back (about 4.7 MB for 3 DOFs)
 DOS_TIME, DOS_DATE = 0, (0 << 9) | (1 << 5) | 1  # 1980-01-01 00:00:00: no wall clock in the file
 ZIP64_VERSION = 45  # "version needed to extract" for zip64 (APPNOTE 4.4.3)
 UNIX = 3  # "version made by" host system
@@ -328,11 +329,11 @@ class RingdownFile:
     energy = property(lambda self: self._memmap("energy"), doc="J, (N,) memory-mapped")
     dissipated = property(lambda self: self._memmap("dissipated"), doc="J, (N,) memory-mapped")
 
-    def chunks(self, chunk_samples: int = 1 << 16, start: int = 0, stop: int | None = None,
+    def chunks(self, chunk_samples: int | None = None, start: int = 0, stop: int | None = None,
                fields: tuple[str, ...] = HISTORIES) -> Iterator[Chunk]:
-        """Consecutive :class:`Chunk` of at most ``chunk_samples`` samples from ``start`` to ``stop``;
-        only the histories in ``fields`` are read (the others are None)."""
-        chunk_samples = integer("chunk_samples", chunk_samples)
+        """Consecutive :class:`Chunk` of at most ``chunk_samples`` (default ``READ_CHUNK_SAMPLES``)
+        samples from ``start`` to ``stop``; only the histories in ``fields`` are read (the others are None)."""
+        chunk_samples = integer("chunk_samples", READ_CHUNK_SAMPLES if chunk_samples is None else chunk_samples)
         for name in fields:
             if name not in HISTORIES:
                 raise InvalidArgument(f"fields must name histories among {', '.join(HISTORIES)}, got {show(name)}")
