@@ -37,7 +37,7 @@ from reduced.transient.compare import (
 from reduced.transient.exact import PIECES, stream_exact
 from reduced.transient.integrate import default_chunk_samples, ringdown, ringdown_stream
 from reduced.transient.result import RingdownResult, RingdownStream
-from reduced.transient.spectrogram import MAX_FRAMES, StftAccumulator
+from reduced.transient.spectrogram import BATCH_FLOATS, MAX_FRAMES, StftAccumulator
 from reduced.transient.store import RingdownFile
 
 REFERENCE_WINDOW_S = 0.05  # s, pointwise comparison window at the start of the run
@@ -120,6 +120,42 @@ def stream_ringdown(scene: Scene, system: GapSystem, method: str, x0: np.ndarray
     spec = scene.ringdown
     return ringdown_stream(system, x0, v0, spec.duration_s, spec.sample_rate_hz, method, progress=progress,
                            **_options(scene))
+
+
+MATPLOTLIB_BYTES = 64 * 2**20  # figures being drawn, fonts, the HB backbones: measured 10-30 MB
+
+
+def stage_estimate(scene: Scene, n_dofs: int, n_stops: int = 4, method: str | None = None) -> dict[str, int]:
+    """What the ringdown stage of ``scene`` will hold and write, before any work (for a budget check).
+
+    Returns {"memory": bytes, "disk": bytes}. Memory: the stage streams every run, so it holds
+    at most ``streams`` runs' chunks at once (:func:`ringdown_peak_bytes`, streamed: 1, or
+    1 + REFERENCE_SEEDS + 1 during the reference check of a reduced model run by a method
+    other than exact), one chunk read back from ringdown.npz, the spectrogram's frames
+    (at most MAX_FRAMES x the rows up to fmax_hz) and ``MATPLOTLIB_BYTES``; none of it grows
+    with duration_s. Disk: ringdown.npz (:func:`ringdown_disk_bytes`) plus, while the
+    symmetry study runs, 8 bytes a sample for each method compared (temporary files).
+    """
+    from reduced.transient import store
+    from reduced.transient.integrate import ringdown_disk_bytes, ringdown_peak_bytes
+
+    spec = scene.ringdown
+    method = method or spec.method
+    run = ringdown_peak_bytes(n_dofs, spec.duration_s, spec.sample_rate_hz, method, n_stops=n_stops)
+    exact = ringdown_peak_bytes(n_dofs, spec.duration_s, spec.sample_rate_hz, "exact", n_stops=n_stops)
+    reference = scene.model_kind == "rom" and method != "exact"
+    streams = run + (REFERENCE_SEEDS + 1) * exact if reference else 2 * max(run, exact)
+    N = int(np.floor(spec.duration_s * spec.sample_rate_hz * (1 + 1e-12))) + 1
+    read = min(store.READ_CHUNK_SAMPLES, N) * 8 * (2 * n_dofs + 3)
+    frames = 0
+    if scene.spectrogram is not None:
+        sp = scene.spectrogram
+        rows = int(sp.fmax_hz * sp.window_s) + 2
+        frames = MAX_FRAMES * rows * 8 + 4 * BATCH_FLOATS * 8  # kept frames; one FFT batch and its copies
+    disk = ringdown_disk_bytes(n_dofs, spec.duration_s, spec.sample_rate_hz)
+    if scene.symmetry is not None:
+        disk += 8 * N * len({method, *scene.symmetry.methods})
+    return {"memory": int(MATPLOTLIB_BYTES + streams + read + frames), "disk": int(disk)}
 
 
 def point_series(x: np.ndarray, P: np.ndarray, names: tuple[str, ...], name: str) -> np.ndarray:

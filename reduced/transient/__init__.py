@@ -1,10 +1,20 @@
 """Time integration of a :class:`~reduced.models.gaps.GapSystem` and what reads its output.
 
-- :mod:`~reduced.transient.integrate`: :func:`ringdown`, one entry point for the three methods;
+- :mod:`~reduced.transient.integrate`: :func:`ringdown`, one entry point for the three methods, in
+  memory or streamed to disk (``out=``), :func:`ringdown_stream`, and the estimates
+  :func:`ringdown_peak_bytes` and :func:`ringdown_disk_bytes`;
 - :mod:`~reduced.transient.exact`: event-driven closed form in each contact state;
 - :mod:`~reduced.transient.explicit`: central difference in a numba kernel;
 - :mod:`~reduced.transient.dop853`: SciPy's DOP853, the independent reference;
 - :mod:`~reduced.transient.flow`: the exact flow map and its Jacobian (for shooting);
-- :mod:`~reduced.transient.result`: :class:`RingdownResult` and the sample grid;
-- :mod:`~reduced.transient.spectrogram`: STFT of a response with curves overlaid.
+- :mod:`~reduced.transient.result`: :class:`RingdownResult` (in memory), :class:`RingdownStream`
+  (chunks as they are computed) and the sample grid;
+- :mod:`~reduced.transient.store`: ``ringdown.npz`` written in one pass and read lazily
+  (:class:`RingdownFile`);
+- :mod:`~reduced.transient.spectrogram`: STFT of a response (from chunks) with curves overlaid;
+- :mod:`~reduced.transient.compare`: the largest Lyapunov exponent of a motion and the comparison
+  of two runs by what a chaotic motion keeps (energy envelope, dominant frequency, impacts).
+
+Every public function checks its arguments before any work (``ValueError`` naming the argument,
+the value and what is allowed; :mod:`~reduced.transient._checks`).
 """

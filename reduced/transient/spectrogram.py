@@ -31,7 +31,7 @@ from scipy.signal.windows import hann
 from reduced.transient import _checks as _check
 
 MAX_FRAMES = 4000  # frames of a long record's spectrogram (the hop grows to keep to this)
-BATCH_FLOATS = 1 << 21  # samples transformed at once (frames x n_win)
+BATCH_FLOATS = 1 << 18  # samples transformed at once (frames x n_win): 2 MB a copy
 LEADING_ZEROS = 1  # hann(n, sym=False)[0] == 0: a frame's first sample is never weighted
 
 
