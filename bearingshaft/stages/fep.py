@@ -13,6 +13,16 @@ Called at the end of the nnm stage when the scene has an [fep] table. Writes
   ``hb_convergence_timing.png`` (error against run time): wall-clock times, which change
   with machine load, live only in files whose name ends in ``_timing`` (the project's
   convention, tests/test_reproducible.py), so a rerun reproduces every other file.
+
+On another machine (other SIMD kernels in NumPy and OpenBLAS, so other last bits) the
+continuation takes other steps: measured with OpenBLAS's Sandy Bridge kernels and NumPy's
+AVX2/FMA paths disabled, fep.csv had 902 points instead of 905, one more shooting orbit
+near NNM 1's tongues failed, tongue energies moved by up to 0.3 %, ``energy_reached_J``
+(where the last step landed past ``energy_max_J``) by 2x and the maxima against shooting
+over the tongue region by 30 %; the converged numbers agreed: HB against the exact NNM 2
+relation to 5e-12 and against shooting above the last tongue to 4e-10 (relative). Writing
+the backbones on a fixed energy grid would make the point sets machine-independent; the
+path-dependent columns are reported as computed.
 """
 
 from __future__ import annotations
