@@ -1,17 +1,22 @@
 """Memory before allocation: what each stage of a scene will hold, checked before any work.
 
 Each estimate counts the arrays a stage keeps at its peak, from the scene alone (no model
-is built): samples x channels x 8 bytes for time histories, ((2H + 1) n)^2 x 8 bytes for
-harmonic-balance Jacobians. A scene whose estimate exceeds the memory available (Linux
-``MemAvailable``, less a margin) is refused in one line that gives the estimate and the key
-to change. The estimates are upper bounds within a small factor (``COPIES``), not a
-profile: their job is to stop a 149 GiB request before numpy makes it.
+is built): samples x channels x 8 bytes for time histories held in memory, ((2H + 1) n)^2
+x 8 bytes for harmonic-balance Jacobians; a ringdown streams its samples to disk in chunks
+(:func:`bearingshaft.stages.ringdown.stage_estimate`), so its memory does not grow with
+its duration and its disk use is checked against the space free where it writes. A scene
+whose estimate exceeds the memory available (Linux ``MemAvailable``, less a margin) is
+refused in one line that gives the estimate and the key to change. The estimates are upper
+bounds within a small factor (``COPIES``), not a profile: their job is to stop a 149 GiB
+request before numpy makes it.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
 from dataclasses import dataclass
+from pathlib import Path
 
 from bearingshaft.scenes import Scene, SceneError
 
@@ -29,6 +34,7 @@ class Estimate:
     bytes: float
     what: str
     key: str  # "[table] key"
+    disk: float = 0.0  # bytes written to the results folder
 
 
 def available_bytes() -> int:
@@ -71,13 +77,13 @@ def estimates(scene: Scene) -> list[Estimate]:
     n = n_dofs(scene)
     out: list[Estimate] = []
     if scene.ringdown is not None:
+        from bearingshaft.stages.ringdown import stage_estimate
+
         r = scene.ringdown
+        est = stage_estimate(scene, n)
         samples = r.duration_s * r.sample_rate_hz + 1
-        runs = 1 + (len(set(scene.symmetry.methods) - {r.method}) if scene.symmetry is not None else 0)
-        runs += scene.model_kind == "rom" and r.method != "exact"  # the exact reference run
-        out.append(Estimate("ringdown", _history(samples, n, runs),
-                            f"{samples:.3g} samples x {2 * n + 3} channels x {runs} run(s)",
-                            "[ringdown] duration_s or sample_rate_hz"))
+        out.append(Estimate("ringdown", est["memory"], f"{samples:.3g} samples streamed to disk in chunks",
+                            "[ringdown] sample_rate_hz", disk=est["disk"]))
     if scene.fep is not None:
         H = max(scene.fep.harmonics + scene.fep.convergence_harmonics + (scene.fep.samples_study_harmonics,))
         size = (2 * H + 1) * n
@@ -113,10 +119,26 @@ def estimates(scene: Scene) -> list[Estimate]:
     return out
 
 
-def check_budget(scene: Scene, available: int | None = None) -> list[Estimate]:
-    """The scene's estimates, or :class:`SceneError` naming the key if one does not fit."""
+def free_disk_bytes(out_dir: str | Path) -> int:
+    """Bytes free on the file system that holds (or will hold) ``out_dir``."""
+    probe = Path(out_dir).absolute()
+    while not probe.exists():
+        probe = probe.parent
+    return shutil.disk_usage(probe).free
+
+
+def check_budget(scene: Scene, out_dir: str | Path | None = None, available: int | None = None) -> list[Estimate]:
+    """The scene's estimates, or :class:`SceneError` naming the key if one does not fit in
+    memory (or, given ``out_dir``, on its disk)."""
     avail = available_bytes() if available is None else available
     ests = estimates(scene)
+    if out_dir is not None:
+        free = free_disk_bytes(out_dir)
+        for e in ests:
+            if e.disk > HEADROOM * free:
+                raise SceneError(f"{scene.origin or scene.name} {e.key}: the {e.stage} stage would write "
+                                 f"{human(e.disk)} ({e.what}), more than the {human(free)} free for {out_dir}; "
+                                 f"lower {e.key.split('] ')[1]}")
     for e in ests:
         if e.bytes > HEADROOM * avail:
             raise SceneError(f"{scene.origin or scene.name} {e.key}: the {e.stage} stage would hold "

@@ -80,9 +80,9 @@ def _out_dir(arg: str | None, scene_name: str, parent: bool = False) -> Path:
 def _validated(name: str, out_arg: str | None, parent: bool) -> tuple[Scene, Path]:
     """A scene, its memory estimates and its results folder checked, before any work."""
     scene = load_scene(name)
-    check_budget(scene)
     out = _out_dir(out_arg, scene.name, parent)
     check_out_dir(out)
+    check_budget(scene, out)
     return scene, out
 
 
