@@ -150,7 +150,7 @@ def stage_estimate(scene: Scene, n_dofs: int, n_stops: int = 4, method: str | No
     frames = 0
     if scene.spectrogram is not None:
         sp = scene.spectrogram
-        rows = int(sp.fmax_hz * sp.window_s) + 2
+        rows = int(min(sp.fmax_hz, spec.sample_rate_hz / 2) * sp.window_s) + 2  # bins up to Nyquist
         frames = MAX_FRAMES * rows * 8 + 4 * BATCH_FLOATS * 8  # kept frames; one FFT batch and its copies
     disk = ringdown_disk_bytes(n_dofs, spec.duration_s, spec.sample_rate_hz)
     if scene.symmetry is not None:
