@@ -83,7 +83,7 @@ def estimates(scene: Scene) -> list[Estimate]:
         est = stage_estimate(scene, n)
         samples = r.duration_s * r.sample_rate_hz + 1
         out.append(Estimate("ringdown", est["memory"], f"{samples:.3g} samples streamed to disk in chunks",
-                            "[ringdown] sample_rate_hz", disk=est["disk"]))
+                            "[ringdown] duration_s or sample_rate_hz", disk=est["disk"]))
     if scene.fep is not None:
         H = max(scene.fep.harmonics + scene.fep.convergence_harmonics + (scene.fep.samples_study_harmonics,))
         size = (2 * H + 1) * n

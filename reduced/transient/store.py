@@ -28,6 +28,7 @@ Reference: PKWARE, *APPNOTE.TXT - .ZIP File Format Specification*, 6.3.x, sectio
 from __future__ import annotations
 
 import io
+import math
 import os
 import struct
 import zipfile
@@ -191,7 +192,7 @@ def npz_disk_bytes(shapes: dict[str, tuple[int, ...]], small_bytes: int = 4096) 
     total = small_bytes + 200  # central directory end records
     for name, shape in shapes.items():
         total += 2 * (_LOCAL.size + len(name) + 4 + _Z64_CENTRAL.size) + 128  # headers and .npy header
-        total += 8 * int(np.prod(shape, dtype=np.int64))
+        total += 8 * math.prod(shape)  # Python ints: no int64 overflow for absurd requests
     return total
 
 
