@@ -30,6 +30,7 @@ import numba as nb
 import numpy as np
 from scipy.linalg import eig, eigh, solve
 
+from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
 from reduced.transient import _checks as _check
 from reduced.transient.result import RingdownResult, RingdownStream, sample_count
@@ -453,7 +454,7 @@ def stream_exact(
             n_stuck = 0
             while True:
                 t_after = (j0 + k) / sample_rate_hz if j0 + k < N else np.inf
-                t, W, i, ne, ni, status, n_stuck = _exact_kernel(
+                t, W, i, ne, ni, status, n_stuck = call_numba_kernel(_exact_kernel,
                     table.lam, table.V, table.Vinv, table.yp, table.valid, system.B, system.offset,
                     system.side, system.tip, system.C, not system.undamped, y, active, t, bound, ts, i, t_after,
                     out_y, out_W, W, hmin, floor, max_events - n_events, n_stuck,

@@ -25,6 +25,7 @@ import numba as nb
 import numpy as np
 from scipy.linalg import eigh
 
+from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
 from reduced.transient import _checks as _check
 from reduced.transient.result import RingdownResult, RingdownStream, sample_count
@@ -229,8 +230,9 @@ def stream_explicit(
             while io < k:
                 # stop at the buffer's end and at the next progress mark, whichever comes first
                 nout = min(k - io, per_piece - done % per_piece)
-                W, pw, io = _cd_kernel(A, dtGK, dtGB, L, system.B, system.offset, system.side, system.k, x, vh,
-                                       dt_run, nout * every, every, out_x, out_v, out_W, W, pw, io)
+                W, pw, io = call_numba_kernel(_cd_kernel, A, dtGK, dtGB, L, system.B, system.offset, system.side,
+                                              system.k, x, vh, dt_run, nout * every, every, out_x, out_v, out_W,
+                                              W, pw, io)
                 done += nout
                 if not np.all(np.isfinite(x)):
                     raise FloatingPointError(

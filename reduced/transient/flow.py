@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
 from reduced.transient import _checks as _check
 from reduced.transient.exact import (
@@ -194,7 +195,7 @@ class Flow:
         n = self.system.n
         y = np.concatenate([_check.vector("x0", x0, n), _check.vector("v0", v0, n)])
         active = self.initial_state(y[: self.system.n], y[self.system.n :])
-        n_seg, status = _flow_kernel(
+        n_seg, status = call_numba_kernel(_flow_kernel,
             tb.lam,
             tb.V,
             tb.Vinv,
