@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from reduced import _checks as _check
 from reduced._blas import single_thread_blas
 from reduced.models.gaps import GapSystem
 from reduced.models.modes import linear_modes
@@ -341,10 +342,40 @@ def _assemble_branch(res: NNMResidual, mode: int, pieces: list, energy_max_J: fl
 def nnm_branch(system: GapSystem, mode: int, **options) -> NNMBranch:
     """Continue NNM ``mode`` (0-based) by HB; see :func:`_nnm_branch` for the options.
 
-    Runs with single-threaded BLAS (:mod:`reduced._blas`): the matrices are small.
+    Runs with single-threaded BLAS (:mod:`reduced._blas`): the matrices are small. The
+    arguments are checked before any work (one-line ValueError naming the argument).
     """
+    _check_branch_options(system, mode, options)
     with single_thread_blas():
         return _nnm_branch(system, mode, **options)
+
+
+MAX_HARMONICS = 1000  # the scene parser's limit too (bearingshaft.scenes)
+
+
+def _check_branch_options(system: GapSystem, mode: int, options: dict) -> None:
+    """Refuse, in one line, the arguments of :func:`nnm_branch` that cannot be used."""
+    _check.gap_system(system)
+    _check.integer("mode", mode, lo=0, hi=system.n - 1)
+    known = ("H", "N", "energy_max_J", "energy_start_J", "ds", "ds_max", "max_steps", "max_angle_deg",
+             "tongue_ratio", "max_tongues", "follow_steps", "progress")
+    for key in options:
+        if key not in known:
+            raise _check.InvalidArgument(f"unknown option {key!r} (known: {', '.join(known)})")
+    H = _check.integer("H", options.get("H", 1), lo=1, hi=MAX_HARMONICS)
+    if options.get("N") is not None:
+        _check.integer("N", options["N"], lo=2 * H + 1)
+    for key in ("energy_max_J", "ds", "ds_max", "max_angle_deg", "tongue_ratio"):
+        if key in options:
+            _check.positive(key, options[key])
+    if options.get("energy_start_J") is not None:
+        _check.positive("energy_start_J", options["energy_start_J"], "J")
+    for key in ("max_steps", "follow_steps"):
+        if key in options:
+            _check.integer(key, options[key])
+    if "max_tongues" in options:
+        _check.integer("max_tongues", options["max_tongues"], lo=0)
+    _check.callback("progress", options.get("progress"))
 
 
 def hb_backbones(
@@ -357,6 +388,8 @@ def hb_backbones(
     (an internal resonance at H > 1) the points are still returned sorted by energy, so
     use a one-harmonic branch for overlays.
     """
+    _check.integer("harmonics", harmonics, lo=1, hi=MAX_HARMONICS)
+    _check.positive("energy_max_J", energy_max_J, "J")
     out = {}
     for mode in range(system.n) if modes is None else modes:
         b = nnm_branch(system, int(mode), H=harmonics, energy_max_J=energy_max_J)

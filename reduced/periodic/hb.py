@@ -49,6 +49,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.linalg import LinAlgWarning, lu_factor, lu_solve
 
+from reduced import _checks as _check
 from reduced.models.gaps import GapSystem
 
 SAMPLES_PER_COEFFICIENT = 32  # AFT samples per Fourier coefficient (gap forces need >> 2)
@@ -168,11 +169,11 @@ class HarmonicBalance:
     Qr: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        H, N = self.H, self.N
-        if H < 0:
-            raise ValueError(f"H must be >= 0, got {H}")
+        H = _check.integer("H", self.H, lo=0)
+        N = _check.integer("N", self.N, lo=1)
         if N <= 2 * H:
-            raise ValueError(f"N must exceed 2H = {2 * H} for the projection to invert synthesis, got {N}")
+            raise _check.InvalidArgument(f"N must exceed 2H = {2 * H} for the projection to invert synthesis, "
+                                         f"got {N}")
         tau = _phases(N)
         object.__setattr__(self, "E", _synthesis_matrix(H, tau))
         object.__setattr__(self, "P", _projection_matrix(H, tau))
@@ -182,6 +183,7 @@ class HarmonicBalance:
     @classmethod
     def for_system(cls, system: GapSystem, H: int, N: int | None = None, damped: bool = False):
         """HB of a gap system (conservative unless ``damped``)."""
+        H = _check.integer("H", H, lo=0)
         return cls(
             system.M, system.K, GapForce(system), H, N or default_samples(H), system.C if damped else None
         )

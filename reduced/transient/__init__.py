@@ -16,5 +16,5 @@
   of two runs by what a chaotic motion keeps (energy envelope, dominant frequency, impacts).
 
 Every public function checks its arguments before any work (``ValueError`` naming the argument,
-the value and what is allowed; :mod:`~reduced.transient._checks`).
+the value and what is allowed; :mod:`~reduced._checks`).
 """

@@ -36,8 +36,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from reduced import _checks as _check
 from reduced.models.gaps import GapSystem
-from reduced.transient import _checks as _check
 from reduced.transient.spectrogram import StftAccumulator
 from reduced.transient.store import Chunk
 

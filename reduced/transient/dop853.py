@@ -16,8 +16,8 @@ import numpy as np
 from scipy.integrate import DOP853
 from scipy.optimize import brentq
 
+from reduced import _checks as _check
 from reduced.models.gaps import GapSystem
-from reduced.transient import _checks as _check
 from reduced.transient.result import RingdownResult, RingdownStream, sample_count
 
 EPS = np.finfo(float).eps

@@ -30,9 +30,9 @@ import numba as nb
 import numpy as np
 from scipy.linalg import eig, eigh, solve
 
+from reduced import _checks as _check
 from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
-from reduced.transient import _checks as _check
 from reduced.transient.result import RingdownResult, RingdownStream, sample_count
 
 EPS = np.finfo(float).eps

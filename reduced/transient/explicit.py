@@ -25,9 +25,9 @@ import numba as nb
 import numpy as np
 from scipy.linalg import eigh
 
+from reduced import _checks as _check
 from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
-from reduced.transient import _checks as _check
 from reduced.transient.result import RingdownResult, RingdownStream, sample_count
 
 SWITCHING_SAFETY = 0.8  # of the textbook limit: CD with switching contact fails near 1.6

@@ -26,9 +26,9 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+from reduced import _checks as _check
 from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
-from reduced.transient import _checks as _check
 from reduced.transient.exact import (
     QTOL_REL,
     ExactIntegratorError,

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from reduced import _checks as _check
 from reduced.models.gaps import GapSystem
-from reduced.transient import _checks as _check
 from reduced.transient.dop853 import stream_dop853
 from reduced.transient.exact import stream_exact
 from reduced.transient.explicit import DEFAULT_OMEGA_DT, stream_explicit

@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from reduced._checks import integer, number
 from reduced.models.gaps import GapSystem
-from reduced.transient._checks import integer, number
 from reduced.transient.store import HISTORIES, Chunk, NpzStreamWriter, RingdownFile
 
 TIMING_STATS = ("wall_s",)  # wall-clock stats: provenance only, never written into a science file

@@ -28,7 +28,7 @@ from scipy.fft import rfft, rfftfreq
 from scipy.signal import ShortTimeFFT
 from scipy.signal.windows import hann
 
-from reduced.transient import _checks as _check
+from reduced import _checks as _check
 
 MAX_FRAMES = 4000  # frames of a long record's spectrogram (the hop grows to keep to this)
 BATCH_FLOATS = 1 << 18  # samples transformed at once (frames x n_win): 2 MB a copy

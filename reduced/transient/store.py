@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from reduced.transient._checks import InvalidArgument, integer, show
+from reduced._checks import InvalidArgument, integer, show
 
 HISTORIES = ("t", "x", "v", "energy", "dissipated")  # the per-sample members, in file order
 READ_CHUNK_SAMPLES = 1 << 16  # samples a chunk when a run is read back (about 4.7 MB for 3 DOFs)

@@ -1,4 +1,4 @@
-"""Argument checks shared by the public functions of :mod:`reduced.transient`.
+"""Argument checks shared by the public functions of :mod:`reduced` (transient, periodic).
 
 Every check runs before any work and raises :class:`InvalidArgument` (a ``ValueError``)
 with a one-line message naming the argument, the value given and what is allowed, e.g.
@@ -15,7 +15,7 @@ import numpy as np
 
 
 class InvalidArgument(ValueError):
-    """An argument of a transient function that cannot be used; the message is one line."""
+    """An argument of a public function that cannot be used; the message is one line."""
 
 
 def show(value) -> str:
