@@ -439,7 +439,7 @@ def _plot_cost(path, rows, wall, spec) -> None:
         t = [wall[(x["nnm"], x["harmonics"], x["samples"])] for x in r]
         ax.loglog(t, [x["max_err_vs_exact"] for x in r], style, label=label)
         for x, tx in zip(r, t, strict=True):
-            ax.annotate(f"{key[0].upper()}={x[key]}", (tx, x["max_err_vs_exact"]), fontsize=6)
+            ax.annotate(f"{'H' if key == 'harmonics' else 'N'}={x[key]}", (tx, x["max_err_vs_exact"]), fontsize=6)
     ax.set_xlabel("branch run time [s] (this run; varies with machine load)")
     ax.set_ylabel("max |f_HB / f_exact - 1|, NNM 2")
     ax.legend(fontsize=7)
