@@ -1,8 +1,9 @@
 """Accuracy studies of the ringdown integrators: work-precision, stiff/extreme cases, and
 the reduced model's convergence with its number of fixed-interface modes.
 
-Every public function checks its arguments before any work and raises :class:`ValueError`
-with one line naming the function, the argument, the value given and what is allowed
+Every public function checks its arguments before any work and raises
+:class:`reduced._checks.InvalidArgument` (a :class:`ValueError`, as in the rest of
+:mod:`reduced`) with one line naming the function, the argument, the value given and what is allowed
 (a NaN, a negative stiffness, an empty list, a tolerance >= 1 or a number given as a bool
 or a string never reaches a solver). Results hold no wall-clock time except in the
 ``runtime_s``/``*_s`` timing entries that :mod:`bearingshaft.stages.study` writes to
@@ -20,6 +21,7 @@ from numbers import Integral, Real
 
 import numpy as np
 
+from reduced._checks import InvalidArgument
 from reduced.models.discrete import DiscreteParams
 from reduced.models.gaps import GapSystem
 from reduced.models.initial import initial_state
@@ -41,8 +43,9 @@ def _show(value) -> str:
     return text if len(text) <= 80 else text[:77] + "..."
 
 
-def _refuse(func: str, name: str, value, allowed: str) -> ValueError:
-    return ValueError(f"{func}: {name} = {_show(value)} is not allowed; {allowed}")
+def _refuse(func: str, name: str, value, allowed: str) -> InvalidArgument:
+    """The one-line refusal (reduced._checks.InvalidArgument, a ValueError) naming function, argument, value."""
+    return InvalidArgument(f"{func}: {name} = {_show(value)} is not allowed; {allowed}")
 
 
 def _is_number(value) -> bool:

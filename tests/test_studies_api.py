@@ -15,6 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import reduced.studies as studies
+from reduced._checks import InvalidArgument
 from reduced.models.discrete import DiscreteParams
 from reduced.models.rom import ReducedModel
 from reduced.studies import fit_order, relative_error, rom_convergence, stiff_cases, work_precision
@@ -55,8 +56,9 @@ def no_work(monkeypatch):
 
 
 def refused(call, *names) -> str:
-    """The one-line message of the ValueError ``call()`` raises; it names every one of ``names``."""
-    with pytest.raises(ValueError) as info:
+    """The one-line message of the ValueError ``call()`` raises (reduced's InvalidArgument); it names every
+    one of ``names``."""
+    with pytest.raises(InvalidArgument) as info:
         call()
     msg = str(info.value)
     assert "\n" not in msg, msg
