@@ -227,6 +227,7 @@ class StiffCasesSpec:
         _each(self, "k_g", lambda v: v > 0, "> 0 N/m")
         _each(self, "gap", lambda v: v >= 0, ">= 0 m")
         _each(self, "c", lambda v: v >= 0, ">= 0 N s/m")
+        _each(self, "speed", lambda v: v != 0, "nonzero m/s (a run from rest has nothing to show)")
         _check(self.long_duration_s >= 0, f"long_duration_s must be >= 0, got {self.long_duration_s!r}")
         _each(self, "methods", lambda m: m in METHODS, f"one of {', '.join(METHODS)}")
 
