@@ -121,6 +121,14 @@ def series(name: str, value, ndim: int = 1, min_len: int = 1) -> np.ndarray:
     return a
 
 
+def run_args(system, x0, v0, duration_s, sample_rate_hz):
+    """(n, x0, v0, duration_s, sample_rate_hz) of a run, checked: what every integrator takes."""
+    gap_system(system)
+    n = system.n
+    return (n, vector("x0", x0, n), vector("v0", v0, n), positive("duration_s", duration_s, "s"),
+            positive("sample_rate_hz", sample_rate_hz, "Hz"))
+
+
 def gap_system(value, name: str = "system"):
     """A :class:`~reduced.models.gaps.GapSystem`."""
     from reduced.models.gaps import GapSystem

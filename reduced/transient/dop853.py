@@ -75,12 +75,7 @@ def stream_dop853(
     steps, dense output at the samples, events located by ``brentq`` on the dense output
     to 4 eps), but it lives across chunks, so the samples do not depend on the chunking.
     """
-    _check.gap_system(system)
-    n = system.n
-    x0 = _check.vector("x0", x0, n)
-    v0 = _check.vector("v0", v0, n)
-    duration_s = _check.positive("duration_s", duration_s, "s")
-    sample_rate_hz = _check.positive("sample_rate_hz", sample_rate_hz, "Hz")
+    n, x0, v0, duration_s, sample_rate_hz = _check.run_args(system, x0, v0, duration_s, sample_rate_hz)
     rtol = _check.number("rtol", rtol, lo=0.0, hi=1.0)
     x_scale = max(float(np.max(np.abs(system.offset), initial=0.0)), 1e-3)
     atol = rtol * x_scale if atol is None else _check.positive("atol", atol, "m")

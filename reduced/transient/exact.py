@@ -413,12 +413,7 @@ def stream_exact(
     (y, contact state, W): the piece grid fixes every arithmetic operation, so the samples
     are the same bits whatever ``chunk_samples`` is.
     """
-    _check.gap_system(system)
-    n = system.n
-    x0 = _check.vector("x0", x0, n)
-    v0 = _check.vector("v0", v0, n)
-    duration_s = _check.positive("duration_s", duration_s, "s")
-    sample_rate_hz = _check.positive("sample_rate_hz", sample_rate_hz, "Hz")
+    n, x0, v0, duration_s, sample_rate_hz = _check.run_args(system, x0, v0, duration_s, sample_rate_hz)
     chunks = _check.integer("chunks", chunks)
     max_events = _check.integer("max_events", max_events)
     _check.callback("progress", progress)

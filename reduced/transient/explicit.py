@@ -165,12 +165,7 @@ def stream_explicit(
     v_{n+1/2}, the dissipated work W and the dissipation rate p_n of its trapezoidal rule,
     so the samples are the same bits as those of an unchunked run.
     """
-    _check.gap_system(system)
-    n = system.n
-    x0 = _check.vector("x0", x0, n)
-    v0 = _check.vector("v0", v0, n)
-    duration_s = _check.positive("duration_s", duration_s, "s")
-    sample_rate_hz = _check.positive("sample_rate_hz", sample_rate_hz, "Hz")
+    n, x0, v0, duration_s, sample_rate_hz = _check.run_args(system, x0, v0, duration_s, sample_rate_hz)
     step_basis = _check.choice("step_basis", step_basis, STEP_BASES)
     if not (_check._is_number(omega_dt) and 0.0 < omega_dt <= SWITCHING_SAFETY * 2.0):
         raise StepTooLargeError(f"omega_dt must be a finite number in (0, {2 * SWITCHING_SAFETY:g}] rad "
