@@ -64,32 +64,55 @@ class Envelope:
         return (np.arange(self.hi.shape[0]) + 0.5 * (self.per > 1)) * self.per / self.fs, self.hi
 
 
-def ringdown_envelopes(res, chunk_samples: int | None = None, also=None) -> dict[str, Envelope]:
-    """Envelopes of x (every DOF), E, W and |E0 - E - W| / E0 from one pass over a run's chunks
-    (a RingdownResult, a RingdownFile or anything with ``chunks``, ``n_samples``, ``sample_rate_hz``);
-    ``also(chunk)`` is called on every chunk of that pass."""
+def ringdown_envelopes(res, chunk_samples: int | None = None, also=None, loads=None) -> dict[str, Envelope]:
+    """Envelopes of x (every DOF), E, W, the work of the loads W_ext and the energy-balance defect
+    |E0 + W_ext - E - W| [J] from one pass over a run's chunks (a RingdownResult, a RingdownFile or
+    anything with ``chunks``, ``n_samples``, ``sample_rate_hz``); with ``loads``
+    (:class:`reduced.models.loads.Loads`) also each load's force p_l(t). ``also(chunk)`` is
+    called on every chunk of that pass. ``env["scale"]`` is what the defect is divided by:
+    max(E0, max E, max |W_ext|), so a run from rest has a relative balance too."""
     n, N, fs = res.system.n, res.n_samples, res.sample_rate_hz
     env = {"x": Envelope(N, fs, n), "E": Envelope(N, fs, 1), "W": Envelope(N, fs, 1), "balance": Envelope(N, fs, 1)}
+    if loads is not None:
+        env["Wext"] = Envelope(N, fs, 1)
+        env["p"] = Envelope(N, fs, loads.n_loads)
     E0 = None
+    scale = 0.0
     for c in res.chunks(chunk_samples):
         E = c.energy
         if E0 is None:
             E0 = float(E[0])
+        ext = getattr(c, "external", None)
+        ext = np.zeros_like(E) if ext is None else ext
         env["x"].add(c.start, c.x)
         env["E"].add(c.start, E)
         env["W"].add(c.start, c.dissipated)
-        env["balance"].add(c.start, np.abs(E0 - E - c.dissipated) / max(E0, 1e-300))
+        env["balance"].add(c.start, np.abs(E0 + ext - E - c.dissipated))
+        scale = max(scale, float(np.max(E)), float(np.max(np.abs(ext))))
+        if loads is not None:
+            env["Wext"].add(c.start, ext)
+            env["p"].add(c.start, loads.values(c.t))
         if also is not None:
             also(c)
     env["E0"] = E0
+    env["scale"] = max(scale, E0 or 0.0)
     return env
 
 
-def ringdown_figure(res, path: Path, title: str, envelopes: dict | None = None) -> None:
+def ringdown_figure(res, path: Path, title: str, envelopes: dict | None = None, loads=None) -> None:
     """Displacements, energy and energy-balance error against time (min/max envelopes per pixel
-    column, so a run of any length is drawn in bounded memory)."""
-    env = envelopes or ringdown_envelopes(res)
-    fig, ax = plt.subplots(3, 1, figsize=(9, 8), sharex=True, constrained_layout=True)
+    column, so a run of any length is drawn in bounded memory); with ``loads`` (a forced run) a
+    first panel of the load forces and the work of the loads in the energy panel."""
+    env = envelopes or ringdown_envelopes(res, loads=loads)
+    forced = "p" in env
+    fig, axes = plt.subplots(3 + forced, 1, figsize=(9, 8 + 2 * forced), sharex=True, constrained_layout=True)
+    if forced:
+        t, y = env["p"].lines()
+        for i, name in enumerate(loads.points if loads is not None else range(y.shape[1])):
+            axes[0].plot(t, y[:, i], lw=0.8, label=f"load {i + 1} at {name}")
+        axes[0].set_ylabel("load [N]")
+        axes[0].legend(loc="upper right", fontsize=8)
+    ax = axes[forced:]
     t, y = env["x"].lines()
     for i, name in enumerate(res.system.dof_names):
         ax[0].plot(t, y[:, i] * 1e3, lw=0.6, label=name)
@@ -99,19 +122,20 @@ def ringdown_figure(res, path: Path, title: str, envelopes: dict | None = None) 
             ax[0].axhline(s * gap * 1e3, color="k", lw=0.5, ls=":")
     ax[0].set_ylabel("displacement [mm]")
     ax[0].legend(loc="upper right", ncol=min(len(res.system.dof_names), 6), fontsize=8)
-    E0 = env["E0"] or 1.0
-    floor = ENERGY_FLOOR * E0
-    for key, label in (("E", "E(t)"), ("W", "dissipated W(t)")):
+    top = env["scale"] or 1.0
+    floor = ENERGY_FLOOR * top
+    curves = (("E", "E(t)"), ("W", "dissipated W(t)")) + ((("Wext", "work of the loads W_ext(t)"),) if forced else ())
+    for key, label in curves:
         t, y = env[key].lines()
         ax[1].semilogy(t, np.maximum(y[:, 0], 0.1 * floor), label=label)
-    ax[1].set_ylim(floor, 2.0 * E0)
+    ax[1].set_ylim(floor, 2.0 * top)
     ax[1].set_ylabel("energy [J]")
     ax[1].legend(loc="center right")
     t, y = env["balance"].upper()
-    ax[2].semilogy(t, y[:, 0] + 1e-18)
-    ax[2].set_ylabel("|E0 - E - W| / E0")
+    ax[2].semilogy(t, y[:, 0] / top + 1e-18)
+    ax[2].set_ylabel("|E0 + W_ext - E - W| / E_max" if forced else "|E0 - E - W| / E0")
     ax[2].set_xlabel("time [s]")
-    ax[0].set_title(wrap_title(title), fontsize=10)
+    axes[0].set_title(wrap_title(title), fontsize=10)
     fig.savefig(path, dpi=120)
     plt.close(fig)
 

@@ -8,6 +8,8 @@ to run, a table absent is a stage skipped (and so never built). Layout::
     [model]          kind = "discrete" (DiscreteParams), "rom" (reduced.models.rom.RomSpec: the 3-D
                      model reduced to its tips) or "assembly" (fem.model.AssemblyModel)
     [initial]        x0_m, v0_m_s at the points x1, x2, x3
+    [[load]]         external forces (half_sine, harmonic, tabulated) at named points: a
+                     ringdown with loads is a forced transient (reduced.models.loads)
     [ringdown]       integrator and run length                      -> stage ringdown
     [spectrogram]    STFT of one DOF with the NNM curves overlaid  (with ringdown)
     [symmetry]       |x_a - x_b| against time                      (with ringdown)
@@ -34,6 +36,7 @@ from importlib import resources
 from pathlib import Path
 
 from reduced.models.discrete import DiscreteParams
+from reduced.models.loads import HalfSine, Harmonic, LoadError, Tabulated
 from reduced.models.rom import RomSpec
 from reduced.transient.integrate import METHODS
 
@@ -96,6 +99,100 @@ class InitialSpec:
 
     x0_m: tuple[float, ...] = (0.0, 0.0, 0.0)  # m, displacement of each point
     v0_m_s: tuple[float, ...] = (0.0, 0.0, 0.0)  # m/s, velocity of each point
+
+
+LOAD_DIRECTIONS = ("gap",)  # the models here move only along their gaps' direction
+
+
+@dataclass(frozen=True, slots=True)
+class HalfSineLoadSpec:
+    """A hammer blow: peak_N sin(pi (t - start_s) / duration_s) on [start_s, start_s + duration_s]."""
+
+    kind: str = "half_sine"
+    point: str = "x2"  # where it acts (the model's point names)
+    direction: str = "gap"  # the gap direction (the only one these models have)
+    peak_N: float = 0.0  # N
+    duration_s: float = 1e-3  # s
+    start_s: float = 0.0  # s
+
+    def signal(self, base: Path | None = None) -> HalfSine:
+        return HalfSine(self.peak_N, self.duration_s, self.start_s)
+
+
+@dataclass(frozen=True, slots=True)
+class HarmonicLoadSpec:
+    """A shaker: amplitude_N cos(2 pi freq_hz (t - start_s) + phase_deg) from start_s on."""
+
+    kind: str = "harmonic"
+    point: str = "x2"
+    direction: str = "gap"
+    amplitude_N: float = 0.0  # N
+    freq_hz: float = 100.0  # Hz
+    phase_deg: float = 0.0  # degrees
+    start_s: float = 0.0  # s
+
+    def signal(self, base: Path | None = None) -> Harmonic:
+        return Harmonic(self.amplitude_N, self.freq_hz, self.phase_deg, self.start_s)
+
+
+@dataclass(frozen=True, slots=True)
+class TabulatedLoadSpec:
+    """A measured force: CSV (time [s], force [N]) or UFF 58, piecewise linear, zero outside."""
+
+    kind: str = "tabulated"
+    point: str = "x2"
+    direction: str = "gap"
+    file: str = ""  # path from the working directory
+    start_s: float = 0.0  # s, added to the file's times
+
+    def signal(self, base: Path | None = None) -> Tabulated:
+        if not self.file:
+            raise LoadError("file must name a CSV or UFF 58 file of the force history")
+        sig = Tabulated.from_file(self.file)
+        if self.start_s:
+            sig = Tabulated(sig.t_s + self.start_s, sig.force_N, source=sig.source)
+        return sig
+
+
+LOAD_KINDS: dict[str, type] = {"half_sine": HalfSineLoadSpec, "harmonic": HarmonicLoadSpec,
+                               "tabulated": TabulatedLoadSpec}
+LoadSpec = HalfSineLoadSpec | HarmonicLoadSpec | TabulatedLoadSpec
+MAX_LOADS = 64  # loads in one scene
+
+
+def parse_loads(value, where: str, point_names: tuple[str, ...]) -> tuple[tuple, tuple]:
+    """([[load]] specs, their signals), every key checked; ``where`` names the file."""
+    if not isinstance(value, list) or not all(isinstance(t, dict) for t in value):
+        raise SceneError(f"{where} load: expected an array of tables ([[load]]), got {_show(value)}")
+    if not value:
+        raise SceneError(f"{where} load: the array is empty; give at least one [[load]] or none")
+    if len(value) > MAX_LOADS:
+        raise SceneError(f"{where} load: {len(value)} loads is too many (at most {MAX_LOADS})")
+    specs, signals = [], []
+    for i, table in enumerate(value):
+        at = f"{where} [[load]] {i + 1}"
+        kind = table.get("kind")
+        if not isinstance(kind, str):
+            raise SceneError(f"{at} kind: expected a string (one of {', '.join(LOAD_KINDS)}), got {_show(kind)}")
+        if kind not in LOAD_KINDS:
+            raise SceneError(f"{at} kind: unknown load {_show(kind)}{suggest(kind, LOAD_KINDS)} "
+                             f"(known: {', '.join(LOAD_KINDS)})")
+        spec = from_table(LOAD_KINDS[kind], table, f"{at} ({kind})")
+        if spec.point not in point_names:
+            raise SceneError(f"{at} point: unknown point {spec.point!r}{suggest(spec.point, point_names)} "
+                             f"(known: {', '.join(point_names)})")
+        if spec.direction not in LOAD_DIRECTIONS:
+            raise SceneError(f"{at} direction: {spec.direction!r} is not a direction of this model "
+                             f"(known: {', '.join(LOAD_DIRECTIONS)})")
+        try:
+            signal = spec.signal()
+        except LoadError as exc:
+            text = str(exc)
+            prefix = "file: " if kind == "tabulated" and not text.startswith("file") else ""
+            raise SceneError(f"{at} {prefix}{text}") from None
+        specs.append(spec)
+        signals.append(signal)
+    return tuple(specs), tuple(signals)
 
 
 @dataclass(frozen=True, slots=True)
@@ -324,6 +421,8 @@ class Scene:
     source: str = field(repr=False)  # the TOML text as read, kept with every result
     origin: str = field(default="", repr=False)  # where it was read from, for messages
     initial: InitialSpec = InitialSpec()
+    loads: tuple = ()  # [[load]] specs (HalfSineLoadSpec | HarmonicLoadSpec | TabulatedLoadSpec)
+    load_signals: tuple = field(default=(), repr=False)  # their time functions (reduced.models.loads)
     modal: ModalSpec | None = None
     ringdown: RingdownSpec | None = None
     spectrogram: SpectrogramSpec | None = None
@@ -412,7 +511,7 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{origin}: invalid TOML: {exc}") from None
-    top = {"name", "description", "model", *SECTIONS}
+    top = {"name", "description", "model", "load", *SECTIONS}
     for key in data:
         if key not in top:
             raise SceneError(f"{origin}: unknown key {key!r}{suggest(key, top)} (known: {', '.join(sorted(top))})")
@@ -444,7 +543,7 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
         key: from_table(cls, data[key], f"{origin} [{key}]") for key, cls in SECTIONS.items() if key in data
     }
     if not hasattr(model, "system"):  # a 3-D model: only [modal] applies
-        other = [k for k in sections if k != "modal"]
+        other = [k for k in sections if k != "modal"] + (["[load]"] if "load" in data else [])
         if other:
             raise SceneError(f"{origin}: model kind {kind!r} takes only a [modal] table, got [{other[0]}]")
         return Scene(name=name, description=description, model_kind=kind, model=model, source=text, origin=origin,
@@ -476,12 +575,26 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
     if spec is not None and "ringdown" in sections and spec.window_s > sections["ringdown"].duration_s:
         raise SceneError(f"{origin} [spectrogram] window_s: {spec.window_s!r} s is longer than the run "
                          f"([ringdown] duration_s = {sections['ringdown'].duration_s!r} s)")
+    loads, signals = (), ()
+    if "load" in data:
+        loads, signals = parse_loads(data["load"], origin, dof_names)
+        if "ringdown" not in sections:
+            raise SceneError(f"{origin} [[load]]: loads drive the ringdown stage; add a [ringdown] table")
+        for key in ("work_precision", "stiff_cases", "rom_convergence", "verify"):
+            if key in sections:
+                raise SceneError(f"{origin} [[load]]: [{key}] runs free ringdowns; put the loads in a scene "
+                                 "without it")
+        duration = sections["ringdown"].duration_s
+        for i, sig in enumerate(signals):
+            if sig.start_s >= duration:
+                raise SceneError(f"{origin} [[load]] {i + 1} start_s: the load starts at {sig.start_s!r} s, "
+                                 f"at or after the end of the run ([ringdown] duration_s = {duration!r} s)")
     if "fep" in sections and "nnm" not in sections:
         raise SceneError(f"{origin}: [fep] needs an [nnm] table (its energy range and grid)")
     if ("spectrogram" in sections or "symmetry" in sections) and "ringdown" not in sections:
         raise SceneError(f"{origin}: [spectrogram] and [symmetry] need a [ringdown] table")
     return Scene(name=name, description=description, model_kind=kind, model=model, source=text, origin=origin,
-                     **sections)
+                 loads=loads, load_signals=signals, **sections)
 
 
 # -- built-in scenes ---------------------------------------------------------------------

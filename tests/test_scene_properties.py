@@ -26,7 +26,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from bearingshaft.cli import main
-from bearingshaft.scenes import MODEL_KINDS, SECTIONS, builtin_names, model_class
+from bearingshaft.scenes import LOAD_KINDS, MODEL_KINDS, SECTIONS, builtin_names, model_class
 
 ALWAYS_INVALID = ("string", "bool", "list", "table", "nan", "inf", "-inf", "unknown", "duplicate")
 MAYBE_VALID = ("negative", "zero", "huge", "missing")
@@ -44,6 +44,8 @@ def _targets() -> list[tuple[str, str, str, type | None]]:
         for table, cls in SECTIONS.items():
             if table in data:
                 out += [(name, table, f.name, f.type) for f in dataclasses.fields(cls)]
+        for load in data.get("load", [])[:1]:  # [[load]]: the keys of the first load's kind
+            out += [(name, "load", f.name, f.type) for f in dataclasses.fields(LOAD_KINDS[load["kind"]])]
         kind = data.get("model", {}).get("kind", "discrete")
         out += [(name, "model", f.name, f.type) for f in dataclasses.fields(model_class(kind))]
         out.append((name, "model", "kind", "str"))
@@ -91,20 +93,32 @@ def _mutate(value, typ: str, kind: str):
     return v
 
 
+def _table(data: dict, table: str) -> dict:
+    """The table a key lives in: ``data[table]``, or the first ``[[load]]``."""
+    return data["load"][0] if table == "load" else data.setdefault(table, {})
+
+
+def _field_class(data: dict, table: str):
+    if table == "load":
+        return LOAD_KINDS[data["load"][0]["kind"]]
+    return SECTIONS.get(table) or model_class(data.get("model", {}).get("kind", "discrete"))
+
+
 def _case_text(scene: str, table: str, key: str, typ, kind: str) -> tuple[str, str]:
     """(TOML text of the mutated scene, the name the refusal must contain)."""
     data = _scene_data(scene)
     typ = str(typ)
     if kind == "duplicate":
         text = tomli_w.dumps(data, multiline_strings=False)
-        return text + f"\n[{table}]\n", table
-    tab = data.setdefault(table, {})
+        # a second [[load]] is legal TOML: an empty load, refused for its missing kind
+        return text + (f"\n[[{table}]]\n" if table == "load" else f"\n[{table}]\n"), table
+    tab = _table(data, table)
     if kind == "unknown":
         tab[f"{key}_typo"] = 1.0
         return tomli_w.dumps(data), f"{key}_typo"
     current = tab.get(key)
     if current is None:
-        for f in dataclasses.fields(SECTIONS.get(table) or model_class(data.get("model", {}).get("kind", "discrete"))):
+        for f in dataclasses.fields(_field_class(data, table)):
             if f.name == key and f.default is not dataclasses.MISSING:
                 current = f.default
     if kind == "missing":
@@ -151,7 +165,7 @@ def _run(case) -> None:
     (scene, table, key, typ), kind = case
     if isinstance(kind, tuple):  # a drawn value in place of the key's
         data = _scene_data(scene)
-        data.setdefault(table, {})[key] = kind[1]
+        _table(data, table)[key] = kind[1]
         _check(tomli_w.dumps(data), key, must_refuse=False, table=table)
         return
     text, name = _case_text(scene, table, key, typ, kind)
@@ -181,7 +195,7 @@ def test_every_target_and_mutation_once():
 
 def test_targets_cover_every_table_and_model_kind():
     tables = {t for _, t, _, _ in TARGETS}
-    assert tables == {"model", *(s for s in SECTIONS if any(s in _scene_data(n) for n in builtin_names()))}
+    assert tables == {"model", "load", *(s for s in SECTIONS if any(s in _scene_data(n) for n in builtin_names()))}
     kinds = {_scene_data(n).get("model", {}).get("kind", "discrete") for n in builtin_names()}
     assert kinds == set(MODEL_KINDS)
     assert len(TARGETS) > 300

@@ -24,6 +24,7 @@ from bearingshaft.scenes import Scene
 from reduced.models.discrete import DiscreteParams
 from reduced.models.gaps import GapSystem
 from reduced.models.initial import initial_state
+from reduced.models.loads import Loads, point_loads
 from reduced.models.modes import gap_moving_modes, linear_modes
 from reduced.transient.compare import (
     MAX_WINDOWS,
@@ -94,10 +95,19 @@ def scene_initial_state(scene: Scene, system: GapSystem, P: np.ndarray, dx_point
     return initial_state(system.M, system.K, P, x_pts, v_pts)
 
 
-def _options(scene: Scene) -> dict:
+def scene_loads(scene: Scene, P: np.ndarray) -> Loads | None:
+    """The scene's [[load]] tables as loads on the system's DOFs (b_l = the row of P of the load's
+    point), or None for a free ringdown."""
+    if not scene.loads:
+        return None
+    return point_loads(scene.load_signals, [spec.point for spec in scene.loads], P, scene.model.point_names)
+
+
+def _options(scene: Scene, P: np.ndarray) -> dict:
     spec = scene.ringdown
+    loads = scene_loads(scene, P)
     return {"dt": spec.dt_s, "omega_dt": spec.omega_dt, "step_basis": spec.step_basis, "rtol": spec.rtol,
-            "atol": spec.atol}
+            "atol": spec.atol, **({"loads": loads} if loads is not None else {})}
 
 
 def run_ringdown(scene: Scene, system: GapSystem, P: np.ndarray, method: str, progress: bool,
@@ -109,17 +119,17 @@ def run_ringdown(scene: Scene, system: GapSystem, P: np.ndarray, method: str, pr
     bar = _Bar(f"{scene.name}: {method}", progress)
     try:
         return ringdown(system, x0, v0, spec.duration_s, spec.sample_rate_hz, method, progress=bar, out=out,
-                        **_options(scene))
+                        **_options(scene, P))
     finally:
         bar.close()
 
 
-def stream_ringdown(scene: Scene, system: GapSystem, method: str, x0: np.ndarray, v0: np.ndarray,
+def stream_ringdown(scene: Scene, system: GapSystem, P: np.ndarray, method: str, x0: np.ndarray, v0: np.ndarray,
                     progress=None) -> RingdownStream:
-    """The scene's ringdown from (x0, v0) by ``method``, as a stream of chunks."""
+    """The scene's ringdown (with its loads) from (x0, v0) by ``method``, as a stream of chunks."""
     spec = scene.ringdown
     return ringdown_stream(system, x0, v0, spec.duration_s, spec.sample_rate_hz, method, progress=progress,
-                           **_options(scene))
+                           **_options(scene, P))
 
 
 MATPLOTLIB_BYTES = 64 * 2**20  # figures being drawn, fonts, the HB backbones: measured 10-30 MB
@@ -197,6 +207,18 @@ def _spread(values: list[float]) -> tuple[float, float, float]:
     return float(np.min(v)), float(np.median(v)), float(np.max(v))
 
 
+def _displaced(scene: Scene, system: GapSystem, P: np.ndarray, x0: np.ndarray, v0: np.ndarray, k: int
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Seed k's start, LYAPUNOV_DELTA from (x0, v0) relative to its energy norm; a forced run from
+    rest is displaced relative to the static deflection under the largest load instead."""
+    if np.any(x0) or np.any(v0):
+        return displaced_state(system, x0, v0, LYAPUNOV_DELTA, k)
+    loads = scene_loads(scene, P)
+    x_ref = np.linalg.solve(system.K, loads.b.sum(axis=0) * loads.max_abs())
+    x, v = displaced_state(system, x_ref, np.zeros_like(x0), LYAPUNOV_DELTA, k)
+    return x0 + (x - x_ref), v0 + v
+
+
 def reference_check(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndarray, writer: StageWriter,
                     progress: bool) -> dict:
     """The run against the exact integrator on the same model: ``reference.csv``, ``lyapunov.csv``.
@@ -229,8 +251,8 @@ def reference_check(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndar
     window = scene.spectrogram.window_s if scene.spectrogram is not None else REFERENCE_WINDOW_S
     overlap = scene.spectrogram.overlap if scene.spectrogram is not None else 0.9
     bar = _Bar(f"{scene.name}: exact reference", progress)
-    ref = stream_ringdown(scene, system, "exact", x0, v0, progress=bar)
-    seeds = [stream_ringdown(scene, system, "exact", *displaced_state(system, x0, v0, LYAPUNOV_DELTA, k))
+    ref = stream_ringdown(scene, system, P, "exact", x0, v0, progress=bar)
+    seeds = [stream_ringdown(scene, system, P, "exact", *_displaced(scene, system, P, x0, v0, k))
              for k in range(REFERENCE_SEEDS)]
 
     def comparison() -> ComparisonAccumulator:
@@ -330,7 +352,7 @@ def reference_check(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndar
 
 
 # -- the stage -----------------------------------------------------------------------------
-def _first_pass(res, P: np.ndarray, point: int | None) -> tuple[dict, float]:
+def _first_pass(res, P: np.ndarray, point: int | None, loads: Loads | None = None) -> tuple[dict, float]:
     """Envelopes of the ringdown figure and the mean of one point's series, from one pass."""
     total = [0.0]
 
@@ -338,7 +360,7 @@ def _first_pass(res, P: np.ndarray, point: int | None) -> tuple[dict, float]:
         if point is not None:
             total[0] += float(np.sum(c.x @ P[point]))
 
-    env = plots.ringdown_envelopes(res, also=add)
+    env = plots.ringdown_envelopes(res, also=add, loads=loads)
     return env, total[0] / max(res.n_samples, 1)
 
 
@@ -350,17 +372,23 @@ def ringdown_stage(scene: Scene, writer: StageWriter, progress: bool, method: st
     names = scene.model.point_names
     sp = scene.spectrogram
     point = names.index(sp.dof) if sp is not None else None
-    env, mean = _first_pass(res, P, point)
-    plots.ringdown_figure(res, writer.path("ringdown.png"), f"{scene.name}: {scene.description}", env)
+    loads = scene_loads(scene, P)
+    env, mean = _first_pass(res, P, point, loads)
+    plots.ringdown_figure(res, writer.path("ringdown.png"), f"{scene.name}: {scene.description}", env, loads)
+    forced = {}
+    if loads is not None:
+        t_W, W_ext = env["Wext"].upper()
+        forced = {"loads": [f"{spec_l.kind} at {spec_l.point}" for spec_l in scene.loads],
+                  "work_of_loads_J_max": float(np.max(W_ext)), "energy_J_max": env["scale"]}
     writer.stats.update(
-        {"method": method, "duration_s": spec.duration_s, "energy_J_initial": env["E0"],
+        {"method": method, "duration_s": spec.duration_s, "energy_J_initial": env["E0"], **forced,
          "energy_balance_error": res.energy_balance_error, "n_samples": res.n_samples,
          "ringdown_npz_bytes": writer.path("ringdown.npz").stat().st_size, **res.stats}
     )
     count = res.stats.get("n_steps", res.stats.get("n_events"))
     print(f"[{scene.name}] {method}: {count} {'steps' if 'n_steps' in res.stats else 'events'}, "
-          f"{res.n_samples} samples of {spec.duration_s:g} s, energy-balance error {res.energy_balance_error:.2g}",
-          flush=True)
+          f"{res.n_samples} samples of {spec.duration_s:g} s, energy-balance error {res.energy_balance_error:.2g}"
+          + (f" (with the work of the loads, {forced['work_of_loads_J_max']:.4g} J)" if forced else ""), flush=True)
     if scene.model_kind == "rom" and method != "exact":
         reference_check(scene, res, P, writer, progress)
     if sp is not None:
@@ -501,7 +529,7 @@ def symmetry_stage(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndarr
             if other in runs:
                 continue
             bar = _Bar(f"{scene.name}: {other}", progress)
-            stream = stream_ringdown(scene, system, other, x0, v0, progress=bar)
+            stream = stream_ringdown(scene, system, P, other, x0, v0, progress=bar)
             try:
                 a, files[other] = follow(other, stream)
             finally:
@@ -513,12 +541,13 @@ def symmetry_stage(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndarr
     # seeded exact runs, each followed until it breaks
     omega = float(linear_modes(system, "open").omega[gap_moving_modes(system, "open", 1)[0]])
     spec = scene.ringdown
+    loads = scene_loads(scene, P)
 
     def seeded_run(k: int, pieces: int = PIECES) -> _Asymmetry:
         dx, dv = _seed_perturbation(k, names, pair, SYMMETRY_PERTURBATION_M, omega)
         x0, v0 = scene_initial_state(scene, system, P, dx, dv)
         stream = stream_exact(system, x0, v0, spec.duration_s, spec.sample_rate_hz, chunks=pieces,
-                              chunk_samples=chunk)
+                              chunk_samples=chunk, **({"loads": loads} if loads is not None else {}))
         a = _Asymmetry(N, fs, BREAK_THRESHOLD_M, band)
         try:
             for c in stream:
