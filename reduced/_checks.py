@@ -136,3 +136,19 @@ def gap_system(value, name: str = "system"):
     if not isinstance(value, GapSystem):
         raise InvalidArgument(f"{name} must be a reduced.GapSystem, got {type(value).__name__}")
     return value
+
+
+def loads(value, n: int, name: str = "loads"):
+    """None or a :class:`~reduced.models.loads.Loads` of at least one load on the system's n coordinates."""
+    if value is None:
+        return None
+    from reduced.models.loads import Loads
+
+    if not isinstance(value, Loads):
+        raise InvalidArgument(f"{name} must be None or a reduced.models.loads.Loads, got {type(value).__name__}")
+    if value.n_loads == 0:
+        raise InvalidArgument(f"{name} must hold at least one load (None for a free response), got none")
+    if value.n != n:
+        raise InvalidArgument(f"{name} must act on the system's {n} coordinates (b of shape (L, {n})), "
+                              f"got b of shape {value.b.shape}")
+    return value

@@ -100,6 +100,13 @@ class HalfSine:
         # P sin(w (t - t0 + s)) = Re(-i P e^{i w (t - t0)} e^{i w s})
         return Piece(F=-1j * self.peak_N * np.exp(1j * self.omega * (t - self.start_s)), omega=self.omega)
 
+    def pieces(self, ts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(F, omega, p0, p1) of :meth:`piece` at every time of ``ts`` at once."""
+        ts = np.asarray(ts, float)
+        on = (ts >= self.start_s) & (ts < self.end_s)
+        F = np.where(on, -1j * self.peak_N * np.exp(1j * self.omega * np.where(on, ts - self.start_s, 0.0)), 0.0)
+        return F, np.where(on, self.omega, 0.0), np.zeros(ts.shape), np.zeros(ts.shape)
+
     def work_scale(self) -> float:
         """N, the largest |p|."""
         return abs(self.peak_N)
@@ -142,6 +149,15 @@ class Harmonic:
             return ZERO
         phase = math.radians(self.phase_deg)
         return Piece(F=self.amplitude_N * np.exp(1j * (self.omega * (t - self.start_s) + phase)), omega=self.omega)
+
+    def pieces(self, ts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(F, omega, p0, p1) of :meth:`piece` at every time of ``ts`` at once."""
+        ts = np.asarray(ts, float)
+        on = ts >= self.start_s
+        phase = math.radians(self.phase_deg)
+        F = np.where(on, self.amplitude_N * np.exp(1j * (self.omega * np.where(on, ts - self.start_s, 0.0) + phase)),
+                     0.0)
+        return F, np.where(on, self.omega, 0.0), np.zeros(ts.shape), np.zeros(ts.shape)
 
     def work_scale(self) -> float:
         return abs(self.amplitude_N)
@@ -199,6 +215,16 @@ class Tabulated:
         k = int(np.searchsorted(self.t_s, t, side="right")) - 1
         slope = (self.force_N[k + 1] - self.force_N[k]) / (self.t_s[k + 1] - self.t_s[k])
         return Piece(p0=float(self.force_N[k] + slope * (t - self.t_s[k])), p1=float(slope))
+
+    def pieces(self, ts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(F, omega, p0, p1) of :meth:`piece` at every time of ``ts`` at once."""
+        ts = np.asarray(ts, float)
+        on = (ts >= self.t_s[0]) & (ts < self.t_s[-1])
+        k = np.clip(np.searchsorted(self.t_s, ts, side="right") - 1, 0, self.t_s.size - 2)
+        slope = (self.force_N[k + 1] - self.force_N[k]) / (self.t_s[k + 1] - self.t_s[k])
+        p0 = self.force_N[k] + slope * (ts - self.t_s[k])
+        zero = np.zeros(ts.shape)
+        return zero.astype(complex), zero, np.where(on, p0, 0.0), np.where(on, slope, 0.0)
 
     def work_scale(self) -> float:
         return float(np.max(np.abs(self.force_N)))
@@ -353,6 +379,24 @@ class Loads:
     def max_abs(self) -> float:
         """N, the largest |p_l| of any load."""
         return max((s.work_scale() for s in self.signals), default=0.0)
+
+    def omegas(self) -> np.ndarray:
+        """(L,) rad/s, the frequency of each load's harmonic term Re(F e^{i omega s}) (0: none)."""
+        return np.array([float(getattr(s, "omega", 0.0)) for s in self.signals])
+
+    def pieces_at(self, starts) -> PieceTable:
+        """The pieces that start at the times ``starts`` (increasing; each a breakpoint or the
+        start of a run), vectorized: what :meth:`piece_table` builds on its grid, for any grid
+        (a window [t_a, t_b) of a long run: ``starts = [t_a, *breakpoints in (t_a, t_b)]``)."""
+        starts = np.atleast_1d(np.asarray(starts, float))
+        P, L = starts.size, self.n_loads
+        F = np.zeros((P, L), complex)
+        omega = np.zeros((P, L))
+        p0 = np.zeros((P, L))
+        p1 = np.zeros((P, L))
+        for l, s in enumerate(self.signals):
+            F[:, l], omega[:, l], p0[:, l], p1[:, l] = s.pieces(starts)
+        return PieceTable(starts, F, omega, p0, p1)
 
 
 @dataclass(frozen=True, eq=False)

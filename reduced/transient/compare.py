@@ -47,7 +47,8 @@ MAX_WINDOWS = 10_000  # energy-envelope windows of a long run (the window length
 # -- chunk plumbing -------------------------------------------------------------------------
 def _slice(c: Chunk, i: int, j: int) -> Chunk:
     e = None if c._energy is None else c._energy[i:j]
-    return Chunk(c.start + i, c.t[i:j], c.x[i:j], c.v[i:j], c.dissipated[i:j], c.system, e)
+    return Chunk(c.start + i, c.t[i:j], c.x[i:j], c.v[i:j], c.dissipated[i:j], c.system, e,
+                 None if c.external is None else c.external[i:j])
 
 
 def aligned(*runs: Iterable[Chunk]) -> Iterator[tuple[Chunk, ...]]:

@@ -6,6 +6,14 @@ every stop crossing is located by ``solve_ivp``'s event search and the integrati
 restarted there, so each leg integrates a smooth (linear) vector field: this is the
 reference mode used to check the exact integrator. Without it, DOP853 steps over the
 discontinuity of the force's derivative as a user of ``solve_ivp`` would.
+
+External loads (``loads``): M x'' + C x' + K x + B^T f(B x) = f_ext(t) = sum_l b_l p_l(t), and
+the state gains W_ext' = v^T f_ext(t), the loads' work, integrated as the dissipated work is.
+The integration restarts at every load breakpoint (a start, an end, a tabulated sample),
+with or without ``events``: a pulse shorter than a step is never stepped over, and inside a
+leg the loads are the smooth piece p_l(t_a + s) = Re(F e^{i omega s}) + p0 + p1 s
+(:meth:`~reduced.models.loads.Loads.pieces_at`, the signal's own value on [t_a, t_b)), so each
+leg integrates a smooth vector field.
 """
 
 from __future__ import annotations
@@ -34,6 +42,18 @@ def _rhs_factory(system: GapSystem):
         return np.concatenate([v, a, [v @ C @ v]])
 
     return rhs
+
+
+def _load_piece(loads, ta: float):
+    """f_ext(t) = b^T (Re(F e^{i omega (t - ta)}) + p0 + p1 (t - ta)) on the piece that starts at ta."""
+    pc = loads.pieces_at([ta])
+    F, omega, p0, p1, b = pc.F[0], pc.omega[0], pc.p0[0], pc.p1[0], loads.b
+
+    def force(t):
+        s = t - ta
+        return ((F * np.exp(1j * omega * s)).real + p0 + p1 * s) @ b
+
+    return force
 
 
 def _last_sample_at_or_before(t: float, fs: float, N: int) -> int:
@@ -66,16 +86,19 @@ def stream_dop853(
     rtol: float = 1e-10,
     atol: float | None = None,
     events: bool = False,
+    loads=None,
     chunk_samples: int | None = None,
     progress=None,
 ) -> RingdownStream:
-    """DOP853 free response chunk by chunk (see :func:`integrate_dop853`).
+    """DOP853 response, free or forced, chunk by chunk (see :func:`integrate_dop853`).
 
     SciPy's ``DOP853`` stepper is driven here exactly as ``solve_ivp`` drives it (the same
     steps, dense output at the samples, events located by ``brentq`` on the dense output
     to 4 eps), but it lives across chunks, so the samples do not depend on the chunking.
     """
     n, x0, v0, duration_s, sample_rate_hz = _check.run_args(system, x0, v0, duration_s, sample_rate_hz)
+    loads = _check.loads(loads, n)
+    forced = loads is not None
     rtol = _check.number("rtol", rtol, lo=0.0, hi=1.0)
     x_scale = max(float(np.max(np.abs(system.offset), initial=0.0)), 1e-3)
     atol = rtol * x_scale if atol is None else _check.positive("atol", atol, "m")
@@ -85,12 +108,21 @@ def stream_dop853(
     chunk_samples = N if chunk_samples is None else _check.integer("chunk_samples", chunk_samples)
     fs = sample_rate_hz
     T = (N - 1) / fs
-    z0 = np.concatenate([x0, v0, [0.0]])
+    z0 = np.concatenate([x0, v0, [0.0, 0.0] if forced else [0.0]])
+    nz = z0.size
     stats = {"nfev": 0, "n_events": 0, "rtol": rtol, "atol": atol, "n_steps": 0, "n_legs": 1}
     Minv = np.linalg.inv(system.M)
+    breakpoints = loads.breakpoints(T) if forced else np.zeros(0)
+    if forced:
+        stats["n_loads"] = loads.n_loads
+
+    def out(j, b):
+        """A full or final buffer as a block: (start, x, v, W[, W_ext])."""
+        return (j, b[:, :n], b[:, n : 2 * n], b[:, 2 * n], b[:, 2 * n + 1]) if forced else \
+            (j, b[:, :n], b[:, n : 2 * n], b[:, 2 * n])
 
     def blocks():
-        buf = np.empty((min(chunk_samples, N), 2 * n + 1))
+        buf = np.empty((min(chunk_samples, N), nz))
         j0, filled = 0, 0  # the buffer holds samples j0 .. j0 + filled - 1
 
         def put(sol, upto: int):
@@ -102,10 +134,10 @@ def stream_dop853(
                 buf[filled : filled + k] = sol(tt).T if sol is not None else z0
                 filled += k
                 if filled == buf.shape[0]:
-                    yield j0, buf[:, :n], buf[:, n : 2 * n], buf[:, 2 * n]
+                    yield out(j0, buf)
                     j0 += filled
                     filled = 0
-                    buf = np.empty((min(chunk_samples, N - j0), 2 * n + 1))
+                    buf = np.empty((min(chunk_samples, N - j0), nz))
 
         if N == 1:
             yield from put(None, 0)
@@ -114,21 +146,38 @@ def stream_dop853(
         t0, z = 0.0, z0
         shown = 0
         while True:
+            t_bound = T
+            if forced:  # the leg ends at the next load breakpoint; its loads are the piece in force at t0
+                kb = int(np.searchsorted(breakpoints, t0, side="right"))
+                t_bound = float(breakpoints[kb]) if kb < breakpoints.size else T
+                force = _load_piece(loads, float(breakpoints[kb - 1]) if kb > 0 else 0.0)
             if events:
                 Ks, Fs = system.state_matrices(active)
-
-                def leg(t, zz, Ks=Ks, Fs=Fs):
-                    x, v = zz[:n], zz[n : 2 * n]
-                    a = Minv @ (Fs - Ks @ x - system.C @ v)
-                    return np.concatenate([v, a, [v @ system.C @ v]])
+                if forced:
+                    def leg(t, zz, Ks=Ks, Fs=Fs, force=force):
+                        x, v = zz[:n], zz[n : 2 * n]
+                        f = force(t)
+                        a = Minv @ (Fs - Ks @ x - system.C @ v + f)
+                        return np.concatenate([v, a, [v @ system.C @ v, v @ f]])
+                else:
+                    def leg(t, zz, Ks=Ks, Fs=Fs):
+                        x, v = zz[:n], zz[n : 2 * n]
+                        a = Minv @ (Fs - Ks @ x - system.C @ v)
+                        return np.concatenate([v, a, [v @ system.C @ v]])
 
                 funcs = system.crossing_events(active)
                 direction = np.array([f.direction for f in funcs])
                 g = [f(t0, z) for f in funcs]
                 fun = leg
+            elif forced:
+                def fun(t, zz, force=force):
+                    x, v = zz[:n], zz[n : 2 * n]
+                    f = force(t)
+                    a = Minv @ (f - system.K @ x - system.C @ v - system.contact_force(x))
+                    return np.concatenate([v, a, [v @ system.C @ v, v @ f]])
             else:
                 fun = _rhs_factory(system)
-            solver = DOP853(fun, t0, z, T, rtol=rtol, atol=atol, vectorized=False)
+            solver = DOP853(fun, t0, z, t_bound, rtol=rtol, atol=atol, vectorized=False)
             while True:
                 solver.step()
                 if solver.status == "failed":
@@ -163,18 +212,24 @@ def stream_dop853(
                     stats["n_legs"] += 1
                     stats["nfev"] += solver.nfev
                     break
+                if finished and t_bound < T:  # a load breakpoint: a new leg in the same contact state
+                    z, t0 = solver.y.copy(), t_bound
+                    stats["n_legs"] += 1
+                    stats["nfev"] += solver.nfev
+                    break
                 if finished:
                     stats["nfev"] += solver.nfev
                     if j0 + filled != N:
                         raise RuntimeError(f"internal: {N - j0 - filled} DOP853 samples not filled")
                     if filled:
-                        yield j0, buf[:filled, :n], buf[:filled, n : 2 * n], buf[:filled, 2 * n]
+                        yield out(j0, buf[:filled])
                     return
 
     def tolerance(amp: float) -> float:
         return float(atol + rtol * amp)
 
-    return RingdownStream(system, "dop853", N, sample_rate_hz, chunk_samples, blocks(), tolerance, stats)
+    return RingdownStream(system, "dop853", N, sample_rate_hz, chunk_samples, blocks(), tolerance, stats,
+                          loads=loads)
 
 
 def integrate_dop853(
@@ -187,16 +242,20 @@ def integrate_dop853(
     rtol: float = 1e-10,
     atol: float | None = None,
     events: bool = False,
+    loads=None,
     progress=None,
 ) -> RingdownResult:
-    """DOP853 free response of ``system`` from (x0, v0), held in memory.
+    """DOP853 response of ``system`` from (x0, v0), free or under ``loads``, held in memory.
 
     Parameters
     ----------
     rtol : relative tolerance, in (0, 1)
     atol : m, absolute tolerance (> 0); default rtol x (largest stop offset or 1e-3 m)
     events : restart at every stop crossing (the reference mode, see the module docstring)
+    loads : None (free response) or a :class:`~reduced.models.loads.Loads` on the system's n
+        coordinates: M x'' + C x' + K x + B^T f(B x) = f_ext(t); restarts at its breakpoints, and
+        its work int v^T f_ext dt (an extra state) is ``result.external``
     progress : None or a callable taking the fraction done
     """
     return stream_dop853(system, x0, v0, duration_s, sample_rate_hz, rtol=rtol, atol=atol, events=events,
-                         progress=progress).collect()
+                         loads=loads, progress=progress).collect()

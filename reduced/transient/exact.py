@@ -19,6 +19,30 @@ any velocity. Approaching a crossing, h tends to the Newton step, so the event i
 to round-off; a grazing touch (q' -> 0 at q -> 0) is passed by the floor ``hmin``
 without a state change. The dissipated work int v^T C v dt is integrated in closed form
 (products of exponentials), so the energy balance E(0) = E(t) + W(t) holds to round-off.
+
+External forcing (``loads``, :mod:`reduced.models.loads`): M x'' + C x' + K x + B^T f(B x) =
+sum_l b_l p_l(t). Between two load breakpoints (a start, an end, a tabulated sample), which
+become segment boundaries like the crossings, every load is one piece
+p_l(s) = Re(F_l e^{i omega_l s}) + p0_l + p1_l s, and in state s the particular solution is
+closed-form too:
+
+    y(tau) = y_p + Re sum_l Y_l e^{i omega_l tau} + P0 + P1 tau + sum_i V[:, i] w_i e^{lambda_i tau},
+    Y_l = (i omega_l I - A_s)^-1 g_l F_l = [H_l b_l; i omega_l H_l b_l] F_l,
+          H_l = (K_s - omega_l^2 M + i omega_l C)^-1,
+    P1 = -A_s^-1 g1 = [K_s^-1 h1; 0],  P0 = A_s^-1 (P1 - g0) = [K_s^-1 (h0 - C K_s^-1 h1); K_s^-1 h1],
+
+with g = [0; M^-1 f], h0 = sum_l b_l p0_l, h1 = sum_l b_l p1_l (the piece re-based to the
+segment start) and w = V^-1 (y(0) - y_p - y_part(0)). Re(Y e^{i omega tau}) is written as the
+two terms Y/2 e^{i omega tau} + conj(Y)/2 e^{-i omega tau} and P0 as a term with exponent 0, so
+y = y_p + P1 tau + sum_k X_k e^{z_k tau} over the extended exponents z = (lambda, +-i omega, 0):
+the root march applies unchanged to q_j = const + slope tau + Re sum coef e^{z tau} (Re z <= 0
+still, and the linear term has q'' = 0, so Q2 = sum |coef| |z|^2 e^{Re z tau_a} still bounds
+|q''|). An undamped resonance (i omega_l within ``RESONANCE_REL`` of an eigenvalue of a
+state) has no bounded particular solution and is refused (ExactIntegratorError), as is a
+load on a state with a rigid-body mode. The work of the loads,
+W_ext(t) = int v^T f_ext dt, is integrated in closed form from
+int_0^tau t^r e^{u t} dt (r = 0, 1; a Taylor series where |u tau| < ``TAYLOR_ZT``), so the
+balance E(t) = E(0) + W_ext(t) - W(t) holds to round-off under forcing as well.
 """
 
 from __future__ import annotations
@@ -42,6 +66,9 @@ MAX_MARCH_ITER = 10_000_000  # per stop per segment: a hang guard, never reached
 MAX_COND = 1e10  # refuse nearly defective (critically damped) states
 NOISE_FACTOR = 4.0  # margin on the propagated round-off bound of q and q'
 REST_FLOOR = 1e-15  # motion this small relative to the initial one is round-off at rest
+RESONANCE_REL = 1e-6  # |i omega - lambda| below this x omega: an undamped resonance, refused
+TAYLOR_ZT = 0.5  # |u tau| below which int_0^tau t^r e^{u t} dt is summed as a series ...
+TAYLOR_TERMS = 24  # ... of this many terms (0.5^24 / 24! ~ 1e-31: exact to round-off)
 
 
 class ExactIntegratorError(RuntimeError):
@@ -114,6 +141,79 @@ def state_table(system: GapSystem) -> StateTable:
     return StateTable(lam, V, Vinv, yp, valid, cond)
 
 
+@dataclass(frozen=True, eq=False)
+class ForcedTable:
+    """Particular solutions of every contact state per unit load (see the module docstring)."""
+
+    omega: np.ndarray  # (L,) rad/s, each load's harmonic frequency (0: no harmonic term)
+    Y: np.ndarray  # (S, 2n, L) complex, [H_l b_l; i omega_l H_l b_l], H_l = (K_s - omega_l^2 M + i omega_l C)^-1
+    Sb: np.ndarray  # (S, n, L), K_s^-1 b_l
+    SCSb: np.ndarray  # (S, n, L), K_s^-1 C K_s^-1 b_l
+    b: np.ndarray  # (L, n) load directions
+
+
+def forced_table(system: GapSystem, table: StateTable, loads) -> ForcedTable:
+    """Per-state particular solutions of ``loads`` (a :class:`~reduced.models.loads.Loads`) for the
+    exact integrator and the flow; refuses an undamped resonance or a state with a rigid-body mode."""
+    n = system.n
+    b = np.ascontiguousarray(loads.b, dtype=float)
+    omega = loads.omegas()
+    S, L = table.lam.shape[0], b.shape[0]
+    Y = np.zeros((S, 2 * n, L), complex)
+    Sb = np.zeros((S, n, L))
+    SCSb = np.zeros((S, n, L))
+    cache: dict[bytes, tuple] = {}
+    for active in system.feasible_states():
+        s = int(np.sum(active * (1 << np.arange(system.m))))
+        Ks, _ = system.state_matrices(active)
+        key = Ks.tobytes()
+        if key not in cache:
+            lam = table.lam[s]
+            if np.min(np.abs(lam)) <= 1e-9 * np.max(np.abs(lam)):
+                raise ExactIntegratorError(
+                    f"contact state {_state_name(system, active)} has a rigid-body mode: a load on it has no "
+                    "bounded particular solution; use method 'dop853' or 'explicit'")
+            for l in range(L):
+                if omega[l] > 0.0:
+                    i = int(np.argmin(np.abs(1j * omega[l] - lam)))
+                    if abs(1j * omega[l] - lam[i]) <= RESONANCE_REL * omega[l]:
+                        raise ExactIntegratorError(
+                            f"load {l + 1} ({loads.points[l]}) at {omega[l] / (2 * math.pi):.6g} Hz is at an undamped "
+                            f"resonance of contact state {_state_name(system, active)} (natural frequency "
+                            f"{abs(lam[i].imag) / (2 * math.pi):.6g} Hz): the exact closed form has no bounded "
+                            "particular solution there; use method 'dop853' or 'explicit'")
+            sb = solve(Ks, b.T)
+            scsb = solve(Ks, system.C @ sb)
+            y = np.zeros((2 * n, L), complex)
+            for l in range(L):
+                if omega[l] > 0.0:
+                    h = solve(Ks - omega[l] ** 2 * system.M + 1j * omega[l] * system.C, b[l].astype(complex))
+                    y[:n, l], y[n:, l] = h, 1j * omega[l] * h
+            cache[key] = (y, sb, scsb)
+        Y[s], Sb[s], SCSb[s] = cache[key]
+    return ForcedTable(omega, Y, Sb, SCSb, b)
+
+
+def _state_name(system: GapSystem, active: np.ndarray) -> str:
+    closed = [system.stop_names[j] for j in np.flatnonzero(active)]
+    return "(" + (", ".join(closed) + " closed" if closed else "all stops open") + ")"
+
+
+def free_forced_arrays(n: int) -> tuple:
+    """The forcing arguments of the kernels for a free run (no loads): empty arrays."""
+    return (np.zeros(0), np.zeros((1, 2 * n, 0), complex), np.zeros((1, n, 0)), np.zeros((1, n, 0)),
+            np.zeros((0, n)), np.zeros(1), np.zeros((1, 0), complex), np.zeros((1, 0)), np.zeros((1, 0)))
+
+
+def forced_arrays(ft: ForcedTable, pieces) -> tuple:
+    """The forcing arguments of the kernels: the table and the pieces (a PieceTable)."""
+    on = pieces.F != 0.0
+    if np.any(on & (pieces.omega != ft.omega[None, :])):
+        raise ExactIntegratorError("internal: a load piece's frequency differs from its load's")
+    return (ft.omega, ft.Y, ft.Sb, ft.SCSb, ft.b, np.ascontiguousarray(pieces.starts),
+            np.ascontiguousarray(pieces.F), np.ascontiguousarray(pieces.p0), np.ascontiguousarray(pieces.p1))
+
+
 @nb.njit(cache=True)
 def _work_setup(X, C, lam, n, G, Gz, az):
     """Per segment: G[i, k] = a_i^T C a_k (v = sum_i a_i e^{lam_i t}, a_i = X[n:, i]), and for
@@ -155,8 +255,8 @@ def _work(G, Gz, az, lam, tau, e):
 
 
 @nb.njit(cache=True)
-def _first_root(const, coef, lam, tau_limit, hmin, qnoise, dnoise, floor):
-    """First tau in [0, tau_limit) where q = const + Re sum coef e^{lam tau} turns positive.
+def _first_root(const, coef, lam, tau_limit, hmin, qnoise, dnoise, floor, slope):
+    """First tau in [0, tau_limit) where q = const + slope tau + Re sum coef e^{lam tau} turns positive.
 
     q is known to QTOL_REL x the size of its terms plus ``qnoise``, the round-off carried
     in from the modal coordinates w (q' likewise, with ``dnoise``); within that band a
@@ -168,7 +268,7 @@ def _first_root(const, coef, lam, tau_limit, hmin, qnoise, dnoise, floor):
     osc = 0.0
     for i in range(N):
         osc += abs(coef[i])
-    if osc < floor and abs(const) < floor:
+    if osc < floor and abs(const) < floor and (slope == 0.0 or abs(slope) * tau_limit < floor):
         return np.inf, 0
     qtol = QTOL_REL * (abs(const) + osc) + NOISE_FACTOR * qnoise
     tau = 0.0
@@ -176,7 +276,12 @@ def _first_root(const, coef, lam, tau_limit, hmin, qnoise, dnoise, floor):
         q = const
         d = 0.0
         dscale = 0.0
-        Q2 = 0.0
+        Q2 = 0.0  # the linear term (forcing) has q'' = 0: Q2 is unchanged by it
+        if slope != 0.0:
+            q += slope * tau
+            d = slope
+            dscale = abs(slope)
+            qtol = QTOL_REL * (abs(const) + osc + abs(slope) * tau) + NOISE_FACTOR * qnoise
         for i in range(N):
             e = coef[i] * np.exp(lam[i] * tau)
             q += e.real
@@ -243,7 +348,7 @@ def _exponentials(lam, tau, e):
 def _eval_with(yp, X, e, out):
     """y = y_p + Re sum_i X[:, i] e_i."""
     N = e.shape[0]
-    for r in range(N):
+    for r in range(X.shape[0]):
         acc = 0.0
         for i in range(N):
             acc += (X[r, i] * e[i]).real
@@ -258,34 +363,156 @@ def _eval_state(yp, X, lam, tau, out):
     _eval_with(yp, X, e, out)
 
 
+@nb.njit(cache=True)
+def _particular(s, sigma, ip, fz, fY, fSb, fSCSb, pF, pp0, pp1, n, X, z, slope, ypart, Fs, p0s, p1s):
+    """The forced terms of load piece ``ip`` in state s, re-based to a segment that starts ``sigma``
+    after the piece: columns 2n + 2l, 2n + 2l + 1 of X are Y_l / 2 and conj(Y_l) / 2 (z = +-i omega_l),
+    Y_l = fY[s, :, l] F_l e^{i omega_l sigma}; the last column is P0 (z = 0); ``slope`` is P1;
+    ``ypart`` the particular solution at tau = 0; (Fs, p0s, p1s) the re-based pieces."""
+    N = 2 * n
+    L = fz.shape[0]
+    for r in range(N):
+        ypart[r] = 0.0
+        slope[r] = 0.0
+    col = N
+    for l in range(L):
+        F = pF[ip, l]
+        if F != 0.0 and sigma != 0.0:
+            F = F * np.exp(1j * fz[l] * sigma)
+        Fs[l] = F
+        p1s[l] = pp1[ip, l]
+        p0s[l] = pp0[ip, l] + pp1[ip, l] * sigma
+        for r in range(N):
+            Y = fY[s, r, l] * F
+            X[r, col] = 0.5 * Y
+            X[r, col + 1] = 0.5 * np.conj(Y)
+            ypart[r] += Y.real
+        z[col] = 1j * fz[l]
+        z[col + 1] = -1j * fz[l]
+        col += 2
+    # x_p = K_s^-1 (h0 - C K_s^-1 h1) + K_s^-1 h1 tau, v_p = K_s^-1 h1
+    for r in range(n):
+        a0 = 0.0
+        a1 = 0.0
+        for l in range(L):
+            a0 += fSb[s, r, l] * p0s[l] - fSCSb[s, r, l] * p1s[l]
+            a1 += fSb[s, r, l] * p1s[l]
+        X[r, col] = a0
+        X[n + r, col] = a1
+        slope[r] = a1
+        ypart[r] += a0
+        ypart[n + r] += a1
+    z[col] = 0.0
+
+
+@nb.njit(cache=True)
+def _i0(u, eu, tau):
+    """int_0^tau e^{u t} dt with eu = e^{u tau}: (eu - 1) / u, or its series where |u tau| < TAYLOR_ZT."""
+    x = u * tau
+    if abs(x) < TAYLOR_ZT:
+        acc = 1.0 + 0.0j
+        for j in range(TAYLOR_TERMS, 0, -1):
+            acc = 1.0 + acc * x / (j + 1)
+        return tau * acc
+    return (eu - 1.0) / u
+
+
+@nb.njit(cache=True)
+def _i1(u, eu, tau):
+    """int_0^tau t e^{u t} dt = (tau eu - int_0^tau e^{u t} dt) / u, or tau^2 sum_j x^j / (j! (j + 2))."""
+    x = u * tau
+    if abs(x) < TAYLOR_ZT:
+        acc = 0.0 + 0.0j
+        term = 1.0 + 0.0j
+        for j in range(TAYLOR_TERMS):
+            acc += term / (j + 2)
+            term = term * x / (j + 1)
+        return tau * tau * acc
+    return (tau * eu - _i0(u, eu, tau)) / u
+
+
+@nb.njit(cache=True)
+def _ext_setup(X, fb, n, beta):
+    """beta[k, l] = a_k^T b_l with a_k = X[n:, k] the velocity part of term k."""
+    for k in range(X.shape[1]):
+        for l in range(fb.shape[0]):
+            acc = 0.0 + 0.0j
+            for r in range(n):
+                acc += X[n + r, k] * fb[l, r]
+            beta[k, l] = acc
+
+
+@nb.njit(cache=True)
+def _ext_work(beta, z, e, fz, Fs, p0s, p1s, tau, eiw):
+    """W_ext = int_0^tau v^T f_ext dt for v = sum_k a_k e^{z_k t} (a real sum) and f_ext = sum_l b_l
+    (F_l / 2 e^{i w_l t} + conj(F_l) / 2 e^{-i w_l t} + p0_l + p1_l t), with e_k = e^{z_k tau}."""
+    K = beta.shape[0]
+    L = beta.shape[1]
+    for l in range(L):
+        eiw[l] = np.exp(1j * fz[l] * tau) if Fs[l] != 0.0 else 1.0 + 0.0j
+    acc = 0.0 + 0.0j
+    for k in range(K):
+        for l in range(L):
+            bkl = beta[k, l]
+            if bkl == 0.0:
+                continue
+            term = 0.0 + 0.0j
+            if Fs[l] != 0.0:
+                w = 1j * fz[l]
+                term += 0.5 * Fs[l] * _i0(z[k] + w, e[k] * eiw[l], tau)
+                term += 0.5 * np.conj(Fs[l]) * _i0(z[k] - w, e[k] * np.conj(eiw[l]), tau)
+            if p0s[l] != 0.0:
+                term += p0s[l] * _i0(z[k], e[k], tau)
+            if p1s[l] != 0.0:
+                term += p1s[l] * _i1(z[k], e[k], tau)
+            acc += bkl * term
+    return acc.real
+
+
 BUFFER_FULL = 1  # _exact_kernel status: the sample buffer is full inside the present segment
 
 
 @nb.njit(cache=True)
 def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
                   y, active, t, t_end, t_samples, i_samp, t_after, out_y, out_W, W, hmin, floor, max_events,
-                  n_stuck):
+                  n_stuck, forced, fz, fY, fSb, fSCSb, fb, pstarts, pF, pp0, pp1, out_E, E):
     """March events from t to t_end, filling the sample buffer ``t_samples`` from index i_samp.
 
-    (y, active, t, W) is the state at the start of a segment (an event or a piece boundary)
-    and is advanced in place segment by segment. When the buffer fills inside a segment that
-    still has samples before its end (the next sample, at ``t_after``, lies in it), the
-    kernel returns BUFFER_FULL *without* advancing that segment: called again with a new
+    (y, active, t, W, E) is the state at the start of a segment (an event, a load breakpoint or a
+    piece boundary) and is advanced in place segment by segment. When the buffer fills inside a
+    segment that still has samples before its end (the next sample, at ``t_after``, lies in it),
+    the kernel returns BUFFER_FULL *without* advancing that segment: called again with a new
     buffer it recomputes the segment from the same state, so the samples do not depend on
-    the buffer size. Returns (t, W, i_samp, n_events, n_iter, status, n_stuck).
+    the buffer size. With ``forced``, the loads' pieces start at ``pstarts`` (the first at or before
+    t; see :func:`_particular`) and E is their work. Returns
+    (t, W, E, i_samp, n_events, n_iter, status, n_stuck).
     """
     n = B.shape[1]
     m = B.shape[0]
     N = 2 * n
+    L = fb.shape[0] if forced else 0
+    Kt = N + 2 * L + 1 if forced else N  # terms: the modes, then +-i omega_l per load, then P0
     ns = t_samples.shape[0]
-    X = np.empty((N, N), np.complex128)
-    G = np.zeros((N, N), np.complex128)
-    Gz = np.zeros((N, N), np.complex128)
-    az = np.zeros((N, N))
-    coef = np.empty(N, np.complex128)
-    e = np.empty(N, np.complex128)
+    X = np.empty((N, Kt), np.complex128)
+    G = np.zeros((Kt, Kt), np.complex128)
+    Gz = np.zeros((Kt, Kt), np.complex128)
+    az = np.zeros((Kt, Kt))
+    coef = np.empty(Kt, np.complex128)
+    e = np.empty(Kt, np.complex128)
+    z = np.zeros(Kt, np.complex128)
     werr = np.empty(N)
     ytmp = np.empty(N)
+    slope = np.zeros(N)
+    ypart = np.zeros(N)
+    beta = np.zeros((Kt, L), np.complex128)
+    Fs = np.zeros(L, np.complex128)
+    p0s = np.zeros(L)
+    p1s = np.zeros(L)
+    eiw = np.empty(L, np.complex128)
+    P = pstarts.shape[0]
+    ip = 0
+    if forced:
+        ip = max(np.searchsorted(pstarts, t, side="right") - 1, 0)
     n_events = 0
     n_iter = 0
     status = 0
@@ -295,24 +522,48 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
             status = -2
             break
         lam_s = lam[s]
-        # w = Vinv (y - yp);  X[:, i] = V[:, i] w_i;  werr bounds the round-off in w
+        zs = lam_s
+        t_lim = t_end
+        if forced:
+            while ip + 1 < P and pstarts[ip + 1] <= t:
+                ip += 1
+            if ip + 1 < P and pstarts[ip + 1] < t_end:
+                t_lim = pstarts[ip + 1]
+            _particular(s, t - pstarts[ip], ip, fz, fY, fSb, fSCSb, pF, pp0, pp1, n, X, z, slope, ypart,
+                        Fs, p0s, p1s)
+            for i in range(N):
+                z[i] = lam_s[i]
+            zs = z
+        # w = Vinv (y - yp - y_part(0));  X[:, i] = V[:, i] w_i;  werr bounds the round-off in w
         for i in range(N):
             wi = 0.0 + 0.0j
             err = 0.0
-            for r in range(N):
-                wi += Vinv[s, i, r] * (y[r] - yp[s, r])
-                err += abs(Vinv[s, i, r]) * (abs(y[r]) + abs(yp[s, r]))
+            if forced:
+                for r in range(N):
+                    wi += Vinv[s, i, r] * (y[r] - yp[s, r] - ypart[r])
+                    err += abs(Vinv[s, i, r]) * (abs(y[r]) + abs(yp[s, r]) + abs(ypart[r]))
+            else:
+                for r in range(N):
+                    wi += Vinv[s, i, r] * (y[r] - yp[s, r])
+                    err += abs(Vinv[s, i, r]) * (abs(y[r]) + abs(yp[s, r]))
             werr[i] = EPS * err
             for r in range(N):
                 X[r, i] = V[s, r, i] * wi
         if damped:
-            _work_setup(X, C, lam_s, n, G, Gz, az)
-        tau_ev = t_end - t
+            _work_setup(X, C, zs, n, G, Gz, az)
+        if forced:
+            _ext_setup(X, fb, n, beta)
+        tau_ev = t_lim - t
         j_ev = -1
         seg_iter = 0
         for j in range(m):
             sgn = -side[j] if active[j] else side[j]
             const = _stop_series(B, j, sgn, offset[j], yp[s], X, coef)
+            slope_j = 0.0
+            if forced:
+                for r in range(n):
+                    slope_j += B[j, r] * slope[r]
+                slope_j *= sgn
             qnoise = 0.0
             dnoise = 0.0
             for i in range(N):
@@ -321,7 +572,7 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
                     pv += B[j, r] * V[s, r, i]
                 qnoise += abs(pv) * werr[i]
                 dnoise += abs(pv) * abs(lam_s[i]) * werr[i]
-            tj, it = _first_root(const, coef, lam_s, tau_ev, hmin, qnoise, dnoise, floor)
+            tj, it = _first_root(const, coef, zs, tau_ev, hmin, qnoise, dnoise, floor, slope_j)
             seg_iter += it
             if tj < 0.0:
                 status = -3
@@ -331,31 +582,41 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
                 j_ev = j
         if status != 0:
             break
-        t_next = t_end if j_ev < 0 else t + tau_ev
+        t_next = t_lim if j_ev < 0 else t + tau_ev
         while i_samp < ns and t_samples[i_samp] <= t_next:
             tau = max(t_samples[i_samp] - t, 0.0)
-            _exponentials(lam_s, tau, e)
+            _exponentials(zs, tau, e)
             _eval_with(yp[s], X, e, ytmp)
+            if forced:
+                for r in range(n):
+                    ytmp[r] += slope[r] * tau
+                out_E[i_samp] = E + _ext_work(beta, zs, e, fz, Fs, p0s, p1s, tau, eiw)
             for r in range(N):
                 out_y[i_samp, r] = ytmp[r]
-            out_W[i_samp] = W + (_work(G, Gz, az, lam_s, tau, e) if damped else 0.0)
+            out_W[i_samp] = W + (_work(G, Gz, az, zs, tau, e) if damped else 0.0)
             i_samp += 1
         if i_samp == ns and t_after <= t_next:
             status = BUFFER_FULL  # the segment is searched again with the next buffer: count it then
             break
         n_iter += seg_iter
-        _exponentials(lam_s, tau_ev, e)
+        _exponentials(zs, tau_ev, e)
         _eval_with(yp[s], X, e, ytmp)
+        if forced:
+            for r in range(n):
+                ytmp[r] += slope[r] * tau_ev
+            E += _ext_work(beta, zs, e, fz, Fs, p0s, p1s, tau_ev, eiw)
         for r in range(N):
             y[r] = ytmp[r]
         if damped:
-            W += _work(G, Gz, az, lam_s, tau_ev, e)
+            W += _work(G, Gz, az, zs, tau_ev, e)
         n_stuck = n_stuck + 1 if tau_ev == 0.0 else 0
         if n_stuck > 8 * m:
             status = -4
             break
         t = t_next
         if j_ev < 0:
+            if t_lim < t_end:
+                continue  # a load breakpoint: the same contact state, a new piece
             break
         if active[j_ev]:
             active[j_ev] = False
@@ -369,7 +630,7 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
         if n_events >= max_events:
             status = -1
             break
-    return t, W, i_samp, n_events, n_iter, status, n_stuck
+    return t, W, E, i_samp, n_events, n_iter, status, n_stuck
 
 
 MAX_PIECE_S = 1.0  # s: the closed form is restarted from the state at least this often
@@ -400,20 +661,22 @@ def stream_exact(
     duration_s: float,
     sample_rate_hz: float,
     *,
+    loads=None,
     chunks: int = PIECES,
     max_events: int = 50_000_000,
     chunk_samples: int | None = None,
     progress=None,
 ) -> RingdownStream:
-    """Exact (event-driven, closed-form) free response of ``system`` from (x0, v0), chunk by chunk.
+    """Exact (event-driven, closed-form) response of ``system`` from (x0, v0), chunk by chunk.
 
     See :func:`integrate_exact`; the samples come in chunks of at most ``chunk_samples``
     (default: the whole run in one). The run is cut into ``max(chunks, duration_s /
     MAX_PIECE_S)`` equal pieces, at whose ends the closed form restarts from the state
-    (y, contact state, W): the piece grid fixes every arithmetic operation, so the samples
-    are the same bits whatever ``chunk_samples`` is.
+    (y, contact state, W, W_ext): the piece grid (and the load breakpoints) fix every
+    arithmetic operation, so the samples are the same bits whatever ``chunk_samples`` is.
     """
     n, x0, v0, duration_s, sample_rate_hz = _check.run_args(system, x0, v0, duration_s, sample_rate_hz)
+    loads = _check.loads(loads, n)
     chunks = _check.integer("chunks", chunks)
     max_events = _check.integer("max_events", max_events)
     _check.callback("progress", progress)
@@ -421,48 +684,63 @@ def stream_exact(
     chunk_samples = N if chunk_samples is None else _check.integer("chunk_samples", chunk_samples)
     original, system = system, system.fold_zero_gap_tips()
     table = state_table(system)
+    forced = loads is not None
+    ft = forced_table(system, table, loads) if forced else None
     omega_max = system.omega_max()
     hmin = HMIN_PERIODS / omega_max
     y = np.concatenate([x0, v0])
     active = system.penetration(y[:n]) > 0.0
     # motion below REST_FLOOR of the initial one (in m) is round-off: see _first_root
     x_scale = np.abs(system.B) @ (np.abs(y[:n]) + np.abs(y[n:]) / omega_max)
+    if forced:  # ... or of the static deflection under the largest load
+        pmax = np.array([s.work_scale() for s in loads.signals])
+        x_scale = x_scale + np.abs(system.B) @ (np.abs(ft.Sb[0]) @ pmax)
     floor = REST_FLOOR * float(np.max(x_scale, initial=0.0))
+    load_scale = float(np.max(np.abs(ft.Sb[0]) @ pmax)) if forced else 0.0  # m, largest static deflection
     t_last = (N - 1) / sample_rate_hz
     t_end = max(duration_s, t_last)
     n_pieces = max(chunks, math.ceil(t_end / MAX_PIECE_S))
+    breakpoints = loads.breakpoints(t_end) if forced else np.zeros(0)
     stats = {"n_events": 0, "n_steps": 1, "n_march": 0, "n_states": int(table.valid.sum()),
              "cond_V": float(np.max(table.cond)), "n_pieces": n_pieces}
+    if forced:
+        stats.update(n_loads=loads.n_loads, n_breakpoints=int(breakpoints.size))
     offset_max = float(np.max(np.abs(system.offset), initial=0.0))
+    free_args = free_forced_arrays(n)
 
     def blocks():
         nonlocal y, active
-        t, W, n_events, n_iter = 0.0, 0.0, 0, 0
+        t, W, E, n_events, n_iter = 0.0, 0.0, 0.0, 0, 0
         j0 = 0
         k = min(chunk_samples, N)
         ts = np.arange(j0, j0 + k) / sample_rate_hz
-        out_y, out_W = np.empty((k, 2 * n)), np.empty(k)
+        out_y, out_W, out_E = np.empty((k, 2 * n)), np.empty(k), np.empty(k if forced else 0)
         i = 0
         for c in range(n_pieces):
             # np.linspace(0, t_end, n_pieces + 1)[c + 1], one bound at a time (the same bits)
             bound = t_end if c == n_pieces - 1 else (c + 1) * (t_end / n_pieces)
+            if forced:  # the loads' pieces on [t, bound): t and the breakpoints in between
+                inside = breakpoints[np.searchsorted(breakpoints, t, "right"):np.searchsorted(breakpoints, bound)]
+                fargs = forced_arrays(ft, loads.pieces_at(np.concatenate([[t], inside])))
+            else:
+                fargs = free_args
             n_stuck = 0
             while True:
                 t_after = (j0 + k) / sample_rate_hz if j0 + k < N else np.inf
-                t, W, i, ne, ni, status, n_stuck = call_numba_kernel(_exact_kernel,
+                t, W, E, i, ne, ni, status, n_stuck = call_numba_kernel(_exact_kernel,
                     table.lam, table.V, table.Vinv, table.yp, table.valid, system.B, system.offset,
                     system.side, system.tip, system.C, not system.undamped, y, active, t, bound, ts, i, t_after,
-                    out_y, out_W, W, hmin, floor, max_events - n_events, n_stuck,
+                    out_y, out_W, W, hmin, floor, max_events - n_events, n_stuck, forced, *fargs, out_E, E,
                 )
                 n_events += ne
                 n_iter += ni
                 stats.update(n_events=n_events, n_steps=n_events + 1, n_march=n_iter)
                 if status == BUFFER_FULL:
-                    yield j0, *_finite(out_y, out_W, n)
+                    yield j0, *_finite(out_y, out_W, out_E, n, forced)
                     j0 += k
                     k = min(chunk_samples, N - j0)
                     ts = np.arange(j0, j0 + k) / sample_rate_hz
-                    out_y, out_W = np.empty((k, 2 * n)), np.empty(k)
+                    out_y, out_W, out_E = np.empty((k, 2 * n)), np.empty(k), np.empty(k if forced else 0)
                     i = 0
                     continue
                 _check_status(status, t, max_events)
@@ -471,18 +749,22 @@ def stream_exact(
                 progress((c + 1) / n_pieces)
         if i != k or j0 + k != N:  # the last sample sits on t_end up to round-off
             raise ExactIntegratorError(f"internal: {N - j0 - i} samples not filled")
-        yield j0, *_finite(out_y, out_W, n)
+        yield j0, *_finite(out_y, out_W, out_E, n, forced)
 
     def tolerance(amp: float) -> float:
-        # evaluating V diag(e^{lam t}) V^-1 y loses cond(V) eps |y| at each event
-        return float(np.max(table.cond)) * EPS * max(amp, offset_max)
+        # evaluating V diag(e^{lam t}) V^-1 y loses cond(V) eps |y| at each event, and under loads
+        # cond(V) eps |y - y_part|, y_part up to the static deflection under the largest load
+        return float(np.max(table.cond)) * EPS * max(amp, offset_max, load_scale)
 
-    return RingdownStream(original, "exact", N, sample_rate_hz, chunk_samples, blocks(), tolerance, stats)
+    return RingdownStream(original, "exact", N, sample_rate_hz, chunk_samples, blocks(), tolerance, stats,
+                          loads=loads)
 
 
-def _finite(out_y: np.ndarray, out_W: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _finite(out_y: np.ndarray, out_W: np.ndarray, out_E: np.ndarray, n: int, forced: bool) -> tuple:
     if not np.all(np.isfinite(out_y)):
         raise ExactIntegratorError("non-finite state: the contact states are ill-conditioned")
+    if forced:
+        return out_y[:, :n], out_y[:, n:], out_W, out_E
     return out_y[:, :n], out_y[:, n:], out_W
 
 
@@ -493,11 +775,16 @@ def integrate_exact(
     duration_s: float,
     sample_rate_hz: float,
     *,
+    loads=None,
     chunks: int = PIECES,
     max_events: int = 50_000_000,
     progress=None,
 ) -> RingdownResult:
-    """Exact (event-driven, closed-form) free response of ``system`` from (x0, v0).
+    """Exact (event-driven, closed-form) response of ``system`` from (x0, v0), free or forced.
+
+    M x'' + C x' + K x + B^T f(B x) = sum_l b_l p_l(t) (the right-hand side 0 without loads),
+    solved in closed form in every contact state between crossings and load breakpoints (the
+    module docstring gives the particular solutions).
 
     Parameters
     ----------
@@ -505,6 +792,10 @@ def integrate_exact(
     x0, v0 : (n,) initial displacement [m] and velocity [m/s]
     duration_s : s, length of the run (> 0)
     sample_rate_hz : Hz, output sampling (the solution itself is exact between samples)
+    loads : None (free response) or a :class:`~reduced.models.loads.Loads` on the system's n
+        coordinates; its work int v^T f_ext dt is ``result.external``. A load at an undamped
+        resonance of a contact state (|i omega - lambda| <= ``RESONANCE_REL`` omega) is refused
+        (ExactIntegratorError)
     chunks : the run is split into at least this many pieces (and pieces of at most
         ``MAX_PIECE_S``), at whose ends the closed form restarts and ``progress`` (a
         callable taking the fraction done) is called
@@ -512,5 +803,5 @@ def integrate_exact(
 
     The whole run is held in memory; :func:`stream_exact` gives it chunk by chunk.
     """
-    return stream_exact(system, x0, v0, duration_s, sample_rate_hz, chunks=chunks, max_events=max_events,
-                        progress=progress).collect()
+    return stream_exact(system, x0, v0, duration_s, sample_rate_hz, loads=loads, chunks=chunks,
+                        max_events=max_events, progress=progress).collect()

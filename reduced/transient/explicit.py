@@ -10,6 +10,12 @@ second-order accurate, damping centred, and explicit because (M + dt/2 C)^-1 is 
 matrix formed once (diagonal for the discrete model). It is started with
 v_{1/2} = v_0 + dt/2 a_0 and reports v_n = (v_{n-1/2} + v_{n+1/2}) / 2.
 
+External loads (``loads``) add dt (M + dt/2 C)^-1 f_ext(t_{n+1}) to the velocity update, i.e.
+f_n -> f_n - f_ext(t_n) with f_ext(t) = sum_l b_l p_l(t) evaluated by the signals themselves
+(right-continuous at a breakpoint: a jump in a load costs first order locally). Their work
+W_ext = int v^T f_ext dt is integrated by the trapezoidal rule on v_n^T f_ext(t_n), like the
+dissipated work. The stability rule is that of the free system (the loads do not depend on x).
+
 Stability: for the stiffest (closed) state with damping ratio xi in its top mode,
 dt < (2 / omega_max) (sqrt(1 + xi^2) - xi). Switching penalty contact has been seen to go
 unstable near omega_max dt = 1.6 - 1.8, so a user step is refused beyond
@@ -36,6 +42,7 @@ DEFAULT_OMEGA_DT = 0.05  # rad: 2.6e-2 relative error over the 0.05 s work-preci
 TOP_CAP = 1.0  # rad, omega_max dt with step_basis "contact": the top mode still gets 6 steps a period
 STEP_BASES = ("top", "contact")
 MAX_STEPS = 2_000_000_000  # refuse runs that would take more steps than this
+LOAD_BLOCK_STEPS = 1 << 16  # steps per kernel call of a forced run: the loads' values are tabulated per call
 
 
 class StepTooLargeError(ValueError):
@@ -88,17 +95,19 @@ def contact_omega(system: GapSystem, n: int = 3) -> float:
 
 @nb.njit(cache=True)
 def _cd_kernel(A, dtGK, dtGB, L, B, offset, side, k, x, vh, dt, n_steps, every, out_x, out_v, out_W,
-               W, pw_old, i0):
+               W, pw_old, i0, dtGb, b, P, out_E, E, pe_old):
     """Advance n_steps; x = x_n, vh = v_{n+1/2} on entry and exit; stores every `every` steps.
 
-    v_{n+3/2} = A v_{n+1/2} - dt G K x_{n+1} - dt G B^T f(B x_{n+1}) with G = (M + dt/2 C)^-1 and
-    A = G (M - dt/2 C), all formed once: two n x n products a step. W accumulates the
-    dissipated work by the trapezoidal rule on p_n = v_n^T C v_n = |L^T v_n|^2 (C = L L^T;
-    pw_old is p_n at entry).
+    v_{n+3/2} = A v_{n+1/2} - dt G K x_{n+1} - dt G B^T f(B x_{n+1}) + dt G b^T p(t_{n+1}) with
+    G = (M + dt/2 C)^-1 and A = G (M - dt/2 C), all formed once: two n x n products a step. W
+    accumulates the dissipated work by the trapezoidal rule on p_n = v_n^T C v_n = |L^T v_n|^2
+    (C = L L^T; pw_old is p_n at entry). With loads (b (L, n), dtGb = dt G b^T, P[i] the loads at
+    the i-th step's end), E accumulates their work likewise on v_n^T b^T p(t_n) (pe_old at entry).
     """
     n = x.shape[0]
     m = B.shape[0]
     r = L.shape[1]
+    nl = b.shape[0]
     f = np.empty(m)
     vnew = np.empty(n)
     v_int = np.empty(n)
@@ -117,6 +126,8 @@ def _cd_kernel(A, dtGK, dtGB, L, B, offset, side, k, x, vh, dt, n_steps, every, 
                 acc += A[i, c] * vh[c] - dtGK[i, c] * x[c]
             for j in range(m):
                 acc -= dtGB[i, j] * f[j]
+            for q in range(nl):
+                acc += dtGb[i, q] * P[step - 1, q]
             vnew[i] = acc
         for i in range(n):
             v_int[i] = 0.5 * (vh[i] + vnew[i])
@@ -129,13 +140,24 @@ def _cd_kernel(A, dtGK, dtGB, L, B, offset, side, k, x, vh, dt, n_steps, every, 
             pw_new += s * s
         W += 0.5 * dt * (pw_old + pw_new)
         pw_old = pw_new
+        if nl:
+            pe_new = 0.0
+            for q in range(nl):
+                s = 0.0
+                for i in range(n):
+                    s += b[q, i] * v_int[i]
+                pe_new += s * P[step - 1, q]
+            E += 0.5 * dt * (pe_old + pe_new)
+            pe_old = pe_new
         if step % every == 0:
             for i in range(n):
                 out_x[io, i] = x[i]
                 out_v[io, i] = v_int[i]
             out_W[io] = W
+            if nl:
+                out_E[io] = E
             io += 1
-    return W, pw_old, io
+    return W, pw_old, io, E, pe_old
 
 
 def _damping_factor(C: np.ndarray) -> np.ndarray:
@@ -155,17 +177,21 @@ def stream_explicit(
     dt: float | None = None,
     omega_dt: float = DEFAULT_OMEGA_DT,
     step_basis: str = "top",
+    loads=None,
     chunks: int = 50,
     chunk_samples: int | None = None,
     progress=None,
 ) -> RingdownStream:
-    """Central-difference free response, chunk by chunk (see :func:`integrate_explicit`).
+    """Central-difference response, free or forced, chunk by chunk (see :func:`integrate_explicit`).
 
     Between chunks the scheme's whole state is carried: x_n, the half-step velocity
-    v_{n+1/2}, the dissipated work W and the dissipation rate p_n of its trapezoidal rule,
-    so the samples are the same bits as those of an unchunked run.
+    v_{n+1/2}, the dissipated work W and the dissipation rate p_n of its trapezoidal rule
+    (and the loads' work and power), so the samples are the same bits as those of an
+    unchunked run.
     """
     n, x0, v0, duration_s, sample_rate_hz = _check.run_args(system, x0, v0, duration_s, sample_rate_hz)
+    loads = _check.loads(loads, n)
+    forced = loads is not None
     step_basis = _check.choice("step_basis", step_basis, STEP_BASES)
     if not (_check._is_number(omega_dt) and 0.0 < omega_dt <= SWITCHING_SAFETY * 2.0):
         raise StepTooLargeError(f"omega_dt must be a finite number in (0, {2 * SWITCHING_SAFETY:g}] rad "
@@ -204,30 +230,50 @@ def stream_explicit(
     dtGK = dt_run * (G @ K)
     dtGB = np.ascontiguousarray(dt_run * (G @ system.B.T))
     L = _damping_factor(C)
+    b = np.ascontiguousarray(loads.b) if forced else np.zeros((0, n))
+    dtGb = np.ascontiguousarray(dt_run * (G @ b.T))
     stats = {"n_steps": n_steps, "dt": dt_run, "omega_max": omega, "omega_dt": omega * dt_run,
              "step_basis": step_basis, "omega_ref": omega_ref, "omega_ref_dt": omega_ref * dt_run, "dt_stable": limit}
 
+    if forced:
+        stats["n_loads"] = loads.n_loads
+    no_loads = np.zeros((0, 0))
+
     def blocks():
         x, v = x0.copy(), v0.copy()
-        a0 = np.linalg.solve(M, -(K @ x) - system.contact_force(x) - C @ v)
+        rhs0 = -(K @ x) - system.contact_force(x) - C @ v
+        if forced:
+            f0 = loads.force(0.0)
+            rhs0 = rhs0 + f0
+        a0 = np.linalg.solve(M, rhs0)
         vh = v + 0.5 * dt_run * a0
         W, pw = 0.0, float(np.sum((v @ L) ** 2))
+        E, pe = 0.0, (float(v @ f0) if forced else 0.0)
         per_piece = max(1, (N - 1) // chunks)  # samples between progress calls
         done = 0  # samples filled after the first
         j0 = 0
         while j0 < N:
             k = min(chunk_samples, N - j0)
             out_x, out_v, out_W = np.empty((k, n)), np.empty((k, n)), np.empty(k)
+            out_E = np.empty(k if forced else 0)
             io = 0
             if j0 == 0:
                 out_x[0], out_v[0], out_W[0] = x, v, 0.0
+                if forced:
+                    out_E[0] = 0.0
                 io = 1
             while io < k:
                 # stop at the buffer's end and at the next progress mark, whichever comes first
                 nout = min(k - io, per_piece - done % per_piece)
-                W, pw, io = call_numba_kernel(_cd_kernel, A, dtGK, dtGB, L, system.B, system.offset, system.side,
-                                              system.k, x, vh, dt_run, nout * every, every, out_x, out_v, out_W,
-                                              W, pw, io)
+                if forced:  # and after LOAD_BLOCK_STEPS steps: the loads at each step are tabulated
+                    nout = min(nout, max(1, LOAD_BLOCK_STEPS // every))
+                    steps = done * every + np.arange(1, nout * every + 1)  # global step numbers
+                    P = np.ascontiguousarray(loads.values(steps * dt_run))
+                else:
+                    P = no_loads
+                W, pw, io, E, pe = call_numba_kernel(_cd_kernel, A, dtGK, dtGB, L, system.B, system.offset,
+                                                     system.side, system.k, x, vh, dt_run, nout * every, every,
+                                                     out_x, out_v, out_W, W, pw, io, dtGb, b, P, out_E, E, pe)
                 done += nout
                 if not np.all(np.isfinite(x)):
                     raise FloatingPointError(
@@ -235,7 +281,7 @@ def stream_explicit(
                     )
                 if progress is not None and (done % per_piece == 0 or done == N - 1):
                     progress(done / (N - 1))
-            yield j0, out_x, out_v, out_W
+            yield (j0, out_x, out_v, out_W, out_E) if forced else (j0, out_x, out_v, out_W)
             j0 += k
         if progress is not None and N == 1:
             progress(1.0)
@@ -243,7 +289,8 @@ def stream_explicit(
     def tolerance(amp: float) -> float:
         return float(np.finfo(float).eps * amp)
 
-    return RingdownStream(system, "explicit", N, sample_rate_hz, chunk_samples, blocks(), tolerance, stats)
+    return RingdownStream(system, "explicit", N, sample_rate_hz, chunk_samples, blocks(), tolerance, stats,
+                          loads=loads)
 
 
 def integrate_explicit(
@@ -256,10 +303,15 @@ def integrate_explicit(
     dt: float | None = None,
     omega_dt: float = DEFAULT_OMEGA_DT,
     step_basis: str = "top",
+    loads=None,
     chunks: int = 50,
     progress=None,
 ) -> RingdownResult:
-    """Central-difference free response of ``system`` from (x0, v0).
+    """Central-difference response of ``system`` from (x0, v0), free or under ``loads``.
+
+    M x'' + C x' + K x + B^T f(B x) = f_ext(t) = sum_l b_l p_l(t) (0 without loads); ``loads`` is
+    None or a :class:`~reduced.models.loads.Loads` on the system's n coordinates, and its work
+    int v^T f_ext dt is ``result.external`` (module docstring).
 
     The step is ``dt`` if given (refused beyond ``SWITCHING_SAFETY`` x the stability
     limit), else ``omega_dt / omega_ref`` with omega_ref by ``step_basis``:
@@ -277,4 +329,4 @@ def integrate_explicit(
     The whole run is held in memory; :func:`stream_explicit` gives it chunk by chunk.
     """
     return stream_explicit(system, x0, v0, duration_s, sample_rate_hz, dt=dt, omega_dt=omega_dt,
-                           step_basis=step_basis, chunks=chunks, progress=progress).collect()
+                           step_basis=step_basis, loads=loads, chunks=chunks, progress=progress).collect()

@@ -17,6 +17,18 @@ exponentials, ``Phi(T) = exp(A_{s_k} tau_k) ... exp(A_{s_1} tau_1)``, exact up t
 (A grazing segment, n^T f_- = 0, changes nothing either, since S = I whatever the
 denominator.) The events are located by a copy of the root march of :mod:`reduced.transient.exact`;
 stops crossing within round-off of the same instant are switched together.
+
+Under external loads (``Flow(system, loads=loads)``, for the Floquet multipliers of a forced
+periodic orbit by shooting) the flow runs from the absolute time t0 to t0 + T and each segment
+(also cut at the loads' breakpoints) is
+
+    y(tau) = y_part(tau) + exp(A_s tau) (y(0) - y_part(0)),
+
+with the closed-form particular solution y_part of the loads' piece (the module docstring of
+:mod:`reduced.transient.exact`). y_part does not depend on y(0), so dy(tau)/dy(0) is still
+exp(A_s tau), and the vector field is still continuous at a crossing (the loads do not depend
+on the contact state), so the saltation matrix is still I: the Jacobian is the same product of
+segment exponentials.
 """
 
 from __future__ import annotations
@@ -35,8 +47,12 @@ from reduced.transient.exact import (
     StateTable,
     _eval_state,
     _first_root,
+    _particular,
     _state_index,
     _stop_series,
+    forced_arrays,
+    forced_table,
+    free_forced_arrays,
     state_table,
 )
 
@@ -48,14 +64,38 @@ MAX_SEGMENTS = 100_000  # per call: a hang guard (a period has tens of events)
 
 
 @nb.njit(cache=True)
-def _flow_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, seg_state, seg_tau):
-    """March from 0 to T; y and active are updated in place. Returns (n_seg, status)."""
+def _eval_at(yp, X, z, slope, tau, forced, out):
+    """y(tau) = y_p + Re sum_k X[:, k] e^{z_k tau} (+ P1 tau with loads)."""
+    _eval_state(yp, X, z, tau, out)
+    if forced:
+        for r in range(slope.shape[0]):
+            out[r] += slope[r] * tau
+
+
+@nb.njit(cache=True)
+def _flow_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, seg_state, seg_tau,
+                 forced, fz, fY, fSb, fSCSb, fb, pstarts, pF, pp0, pp1):
+    """March from 0 to T; y and active are updated in place. Returns (n_seg, status).
+
+    With ``forced``, the loads' pieces start at ``pstarts`` (times from the start of the flow, the
+    first 0) and every piece boundary ends a segment (:func:`reduced.transient.exact._particular`).
+    """
     n = B.shape[1]
     m = B.shape[0]
     N = 2 * n
-    X = np.empty((N, N), np.complex128)
-    coef = np.empty(N, np.complex128)
+    L = fb.shape[0] if forced else 0
+    Kt = N + 2 * L + 1 if forced else N
+    X = np.empty((N, Kt), np.complex128)
+    coef = np.empty(Kt, np.complex128)
+    z = np.zeros(Kt, np.complex128)
     ytmp = np.empty(N)
+    slope = np.zeros(N)
+    ypart = np.zeros(N)
+    Fs = np.zeros(L, np.complex128)
+    p0s = np.zeros(L)
+    p1s = np.zeros(L)
+    P = pstarts.shape[0]
+    ip = 0
     t = 0.0
     n_seg = 0
     n_zero = 0
@@ -66,24 +106,45 @@ def _flow_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, s
         if not valid[s]:
             return n_seg, -2
         lam_s = lam[s]
+        zs = lam_s
+        t_lim = T
+        if forced:
+            while ip + 1 < P and pstarts[ip + 1] <= t:
+                ip += 1
+            if ip + 1 < P and pstarts[ip + 1] < T:
+                t_lim = pstarts[ip + 1]
+            _particular(s, t - pstarts[ip], ip, fz, fY, fSb, fSCSb, pF, pp0, pp1, n, X, z, slope, ypart,
+                        Fs, p0s, p1s)
+            for i in range(N):
+                z[i] = lam_s[i]
+            zs = z
         for i in range(N):
             wi = 0.0 + 0.0j
-            for r in range(N):
-                wi += Vinv[s, i, r] * (y[r] - yp[s, r])
+            if forced:
+                for r in range(N):
+                    wi += Vinv[s, i, r] * (y[r] - yp[s, r] - ypart[r])
+            else:
+                for r in range(N):
+                    wi += Vinv[s, i, r] * (y[r] - yp[s, r])
             for r in range(N):
                 X[r, i] = V[s, r, i] * wi
-        tau_ev = T - t
+        tau_ev = t_lim - t
         j_ev = -1
         for j in range(m):
             sgn = -side[j] if active[j] else side[j]
             const = _stop_series(B, j, sgn, offset[j], yp[s], X, coef)
-            tj, it = _first_root(const, coef, lam_s, tau_ev, hmin, 0.0, 0.0, 0.0)
+            slope_j = 0.0
+            if forced:
+                for r in range(n):
+                    slope_j += B[j, r] * slope[r]
+                slope_j *= sgn
+            tj, it = _first_root(const, coef, zs, tau_ev, hmin, 0.0, 0.0, 0.0, slope_j)
             if tj < 0.0:
                 return n_seg, -3
             if tj < tau_ev:
                 tau_ev = tj
                 j_ev = j
-        _eval_state(yp[s], X, lam_s, tau_ev, ytmp)
+        _eval_at(yp[s], X, zs, slope, tau_ev, forced, ytmp)
         if j_ev >= 0:
             # a crossing against the stop's own rate (closing while separating, or the
             # reverse) is a round-off root next to a crossing just made: not an event;
@@ -93,8 +154,8 @@ def _flow_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, s
                 rate += B[j_ev, r] * ytmp[n + r]
             rate = side[j_ev] * rate
             if (rate > 0.0) == active[j_ev] and rate != 0.0:
-                tau_ev = min(tau_ev + hmin, T - t)
-                _eval_state(yp[s], X, lam_s, tau_ev, ytmp)
+                tau_ev = min(tau_ev + hmin, t_lim - t)
+                _eval_at(yp[s], X, zs, slope, tau_ev, forced, ytmp)
                 j_ev = -2
         for r in range(N):
             y[r] = ytmp[r]
@@ -103,12 +164,14 @@ def _flow_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, s
         seg_state[n_seg] = s
         seg_tau[n_seg] = tau_ev
         n_seg += 1
-        t += tau_ev
+        t = t_lim if j_ev == -1 else t + tau_ev
         if j_ev == -2:
             if t >= T:
                 break
             continue
         if j_ev < 0:
+            if t_lim < T:
+                continue  # a load breakpoint: the same contact state, a new piece
             break
         active[j_ev] = not active[j_ev]
         if tau_ev == 0.0:
@@ -157,14 +220,20 @@ class Flow:
 
     The state table is decomposed once; each call marches the events with the numba
     kernel and, for the Jacobian, multiplies the segment exponentials (saltation = I).
+    With ``loads`` (a :class:`~reduced.models.loads.Loads`), ``flow(x0, v0, T, t0=t0)`` is the
+    forced flow from the absolute time t0 to t0 + T; the Jacobian is still the product of the
+    segment exponentials, as the particular solution does not depend on y(t0) (module docstring).
     """
 
-    def __init__(self, system: GapSystem, table: StateTable | None = None) -> None:
+    def __init__(self, system: GapSystem, table: StateTable | None = None, loads=None) -> None:
         _check.gap_system(system)
         if table is not None and not isinstance(table, StateTable):
             raise _check.InvalidArgument(f"table must be None or a StateTable, got {type(table).__name__}")
+        self.loads = _check.loads(loads, system.n)
         self.system = system
         self.table = table or state_table(system)
+        self._forced = None if self.loads is None else forced_table(system, self.table, self.loads)
+        self._free_args = free_forced_arrays(system.n)
         self.hmin = HMIN_PERIODS / system.omega_max()
         self._seg_state = np.empty(MAX_SEGMENTS, np.int64)
         self._seg_tau = np.empty(MAX_SEGMENTS)
@@ -179,22 +248,35 @@ class Flow:
         tb = self.table
         return ((tb.V[s] * np.exp(tb.lam[s] * tau)) @ tb.Vinv[s]).real
 
-    def vector_field(self, y: np.ndarray, active: np.ndarray | None = None) -> np.ndarray:
-        """y' = [v; -M^-1 (C v + K x + B^T f(B x))]."""
+    def vector_field(self, y: np.ndarray, active: np.ndarray | None = None, t: float = 0.0) -> np.ndarray:
+        """y' = [v; M^-1 (f_ext(t) - C v - K x - B^T f(B x))] (f_ext = 0 without loads)."""
         s = self.system
         n = s.n
         x, v = y[:n], y[n:]
-        a = np.linalg.solve(s.M, -(s.C @ v + s.K @ x + s.contact_force(x)))
+        rhs = -(s.C @ v + s.K @ x + s.contact_force(x))
+        if self.loads is not None:
+            rhs = rhs + self.loads.force(t)
+        a = np.linalg.solve(s.M, rhs)
         return np.concatenate([v, a])
 
-    def __call__(self, x0: np.ndarray, v0: np.ndarray, T: float, jacobian: bool = False) -> FlowResult:
-        """y(T) from (x0, v0) (T >= 0 s, finite) and, with ``jacobian``, dy(T)/dy(0)."""
+    def __call__(self, x0: np.ndarray, v0: np.ndarray, T: float, jacobian: bool = False,
+                 t0: float = 0.0) -> FlowResult:
+        """y(t0 + T) from (x0, v0) at t0 (T >= 0 s, t0 >= 0 s, finite) and, with ``jacobian``,
+        dy(t0 + T)/dy(t0). Without loads the flow is autonomous and t0 changes nothing."""
         T = _check.number("T", T, lo=0.0, lo_open=False, unit="s")
+        t0 = _check.number("t0", t0, lo=0.0, lo_open=False, unit="s")
         jacobian = _check.flag("jacobian", jacobian)
         tb = self.table
         n = self.system.n
         y = np.concatenate([_check.vector("x0", x0, n), _check.vector("v0", v0, n)])
         active = self.initial_state(y[: self.system.n], y[self.system.n :])
+        if self.loads is None:
+            fargs = self._free_args
+        else:  # the pieces on [t0, t0 + T], their starts counted from t0
+            bp = self.loads.breakpoints(t0 + T)
+            pieces = self.loads.pieces_at(np.concatenate([[t0], bp[bp > t0]]))
+            fargs = list(forced_arrays(self._forced, pieces))
+            fargs[5] = pieces.starts - t0
         n_seg, status = call_numba_kernel(_flow_kernel,
             tb.lam,
             tb.V,
@@ -210,6 +292,8 @@ class Flow:
             self.hmin,
             self._seg_state,
             self._seg_tau,
+            self.loads is not None,
+            *fargs,
         )
         if status == -1:
             raise ExactIntegratorError(f"more than {MAX_SEGMENTS} contact events in {T:.4g} s")

@@ -44,7 +44,8 @@ def default_chunk_samples(n_dofs: int) -> int:
 
 
 def ringdown_peak_bytes(n_dofs: int, duration_s: float, sample_rate_hz: float, method: str = "exact", *,
-                        n_stops: int = 4, streamed: bool = True, chunk_samples: int | None = None) -> int:
+                        n_stops: int = 4, streamed: bool = True, chunk_samples: int | None = None,
+                        forced: bool = False) -> int:
     """Bytes a ringdown allocates at its peak (an upper estimate; the interpreter, NumPy, SciPy
     and numba themselves, about 200 MB, are not counted).
 
@@ -53,14 +54,16 @@ def ringdown_peak_bytes(n_dofs: int, duration_s: float, sample_rate_hz: float, m
     their energy), samples_held = N = floor(duration_s sample_rate_hz) + 1 in memory, or two
     chunks (``chunk_samples``, default :func:`default_chunk_samples`) when ``streamed``
     (``ringdown(..., out=path)``); the exact method adds its state table,
-    3 x 2^m (2n)^2 complex numbers. ``n_stops`` is m (4 for two two-sided tips).
+    3 x 2^m (2n)^2 complex numbers. ``n_stops`` is m (4 for two two-sided tips). A ``forced``
+    run (``loads``) holds one float more a sample: the work of the loads.
     """
     n = _check.integer("n_dofs", n_dofs)
     N = sample_count(duration_s, sample_rate_hz)
     method = _check.choice("method", method, METHODS)
     m = _check.integer("n_stops", n_stops, lo=0, hi=16)
     streamed = _check.flag("streamed", streamed)
-    per_sample = FLOAT * (2 * n + 2 + ENERGY_TEMPORARIES[0] * m + ENERGY_TEMPORARIES[1])
+    forced = _check.flag("forced", forced)
+    per_sample = FLOAT * (2 * n + 2 + int(forced) + ENERGY_TEMPORARIES[0] * m + ENERGY_TEMPORARIES[1])
     if streamed:
         k = default_chunk_samples(n) if chunk_samples is None else _check.integer("chunk_samples", chunk_samples)
         held = STREAM_CHUNKS_HELD * min(k, N)
@@ -70,13 +73,17 @@ def ringdown_peak_bytes(n_dofs: int, duration_s: float, sample_rate_hz: float, m
     return int(FIXED_BYTES + table + per_sample * held)
 
 
-def ringdown_disk_bytes(n_dofs: int, duration_s: float, sample_rate_hz: float) -> int:
+def ringdown_disk_bytes(n_dofs: int, duration_s: float, sample_rate_hz: float, *, forced: bool = False) -> int:
     """Bytes of ``ringdown.npz`` for a run: 8 (2 n + 3) N (t, x, v, energy and dissipated,
-    stored uncompressed, see :mod:`reduced.transient.store`) plus about 5 kB of headers and
-    small members."""
+    stored uncompressed, see :mod:`reduced.transient.store`; 8 N more for ``external`` in a
+    ``forced`` run) plus about 5 kB of headers and small members."""
     n = _check.integer("n_dofs", n_dofs)
     N = sample_count(duration_s, sample_rate_hz)
-    return npz_disk_bytes({"t": (N,), "x": (N, n), "v": (N, n), "energy": (N,), "dissipated": (N,)})
+    forced = _check.flag("forced", forced)
+    shapes = {"t": (N,), "x": (N, n), "v": (N, n), "energy": (N,), "dissipated": (N,)}
+    if forced:
+        shapes["external"] = (N,)
+    return npz_disk_bytes(shapes)
 
 
 def ringdown_stream(
@@ -92,12 +99,14 @@ def ringdown_stream(
     step_basis: str = "top",
     rtol: float = 1e-10,
     atol: float | None = None,
+    loads=None,
     progress=None,
     chunk_samples: int | None = None,
 ) -> RingdownStream:
-    """The free response of ``system`` from (x0, v0) by ``method``, as chunks (see :func:`ringdown`)."""
+    """The response of ``system`` from (x0, v0) by ``method``, as chunks (see :func:`ringdown`)."""
     method = _check.choice("method", method, METHODS)
     _check.gap_system(system)
+    loads = _check.loads(loads, system.n)
     if chunk_samples is None:
         chunk_samples = default_chunk_samples(system.n)
     chunk_samples = _check.integer("chunk_samples", chunk_samples)
@@ -112,13 +121,13 @@ def ringdown_stream(
         if atol is not None:
             _check.positive("atol", atol, "m")
     if method == "exact":
-        return stream_exact(system, x0, v0, duration_s, sample_rate_hz, chunk_samples=chunk_samples,
+        return stream_exact(system, x0, v0, duration_s, sample_rate_hz, loads=loads, chunk_samples=chunk_samples,
                             progress=progress)
     if method == "explicit":
         return stream_explicit(system, x0, v0, duration_s, sample_rate_hz, dt=dt,
                                omega_dt=DEFAULT_OMEGA_DT if omega_dt is None else omega_dt,
-                               step_basis=step_basis, chunk_samples=chunk_samples, progress=progress)
-    return stream_dop853(system, x0, v0, duration_s, sample_rate_hz, rtol=rtol, atol=atol,
+                               step_basis=step_basis, loads=loads, chunk_samples=chunk_samples, progress=progress)
+    return stream_dop853(system, x0, v0, duration_s, sample_rate_hz, rtol=rtol, atol=atol, loads=loads,
                          chunk_samples=chunk_samples, progress=progress)
 
 
@@ -135,12 +144,15 @@ def ringdown(
     step_basis: str = "top",
     rtol: float = 1e-10,
     atol: float | None = None,
+    loads=None,
     progress=None,
     out: str | Path | None = None,
     chunk_samples: int | None = None,
     max_memory_bytes: float = IN_MEMORY_MAX_BYTES,
 ) -> RingdownResult | RingdownFile:
-    """Free response of ``system`` from (x0, v0) by ``method`` (exact | explicit | dop853).
+    """Response of ``system`` from (x0, v0) by ``method`` (exact | explicit | dop853), free or forced.
+
+    M x'' + C x' + K x + B^T f(B x) = f_ext(t) = sum_l b_l p_l(t), zero without ``loads``.
 
     Parameters
     ----------
@@ -148,6 +160,9 @@ def ringdown(
     duration_s : s (> 0); sample_rate_hz : Hz (> 0), output grid t_k = k / sample_rate_hz
     dt, omega_dt, step_basis : explicit step (:func:`~reduced.transient.explicit.integrate_explicit`)
     rtol, atol : DOP853 tolerances, rtol in (0, 1), atol > 0 m
+    loads : None (free response) or a :class:`~reduced.models.loads.Loads` on the system's n
+        coordinates; the work of the loads, int_0^t v^T f_ext dt, is the result's ``external``
+        and enters ``energy_balance_error``
     progress : None or a callable taking the fraction done
     out : None: the run is returned in memory (:class:`RingdownResult`), refused when
         :func:`ringdown_peak_bytes` exceeds ``max_memory_bytes``; a path: the run is written
@@ -160,13 +175,14 @@ def ringdown(
     """
     method = _check.choice("method", method, METHODS)
     _check.gap_system(system)
+    loads = _check.loads(loads, system.n)
     N = sample_count(duration_s, sample_rate_hz)
     if chunk_samples is not None:
         chunk_samples = _check.integer("chunk_samples", chunk_samples)
     if out is None:
         max_memory_bytes = _check.positive("max_memory_bytes", max_memory_bytes)
         need = ringdown_peak_bytes(system.n, duration_s, sample_rate_hz, method, n_stops=min(system.m, 16),
-                                   streamed=False)
+                                   streamed=False, forced=loads is not None)
         if need > max_memory_bytes:
             raise _check.InvalidArgument(
                 f"duration_s x sample_rate_hz = {N:.3g} samples: held in memory the ringdown needs "
@@ -179,7 +195,7 @@ def ringdown(
         if not parent.is_dir():
             raise _check.InvalidArgument(f"out must be a path in an existing folder, got {_check.show(str(out))}")
     stream = ringdown_stream(system, x0, v0, duration_s, sample_rate_hz, method, dt=dt, omega_dt=omega_dt,
-                             step_basis=step_basis, rtol=rtol, atol=atol, progress=progress,
+                             step_basis=step_basis, rtol=rtol, atol=atol, loads=loads, progress=progress,
                              chunk_samples=N if out is None else chunk_samples)
     if out is None:
         return stream.collect()

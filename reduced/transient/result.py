@@ -22,14 +22,19 @@ import numpy as np
 
 from reduced._checks import integer, number
 from reduced.models.gaps import GapSystem
-from reduced.transient.store import HISTORIES, Chunk, NpzStreamWriter, RingdownFile
+from reduced.transient.store import HISTORIES, OPTIONAL, Chunk, NpzStreamWriter, RingdownFile
 
 TIMING_STATS = ("wall_s",)  # wall-clock stats: provenance only, never written into a science file
 
 
+def zeros_view(N: int) -> np.ndarray:
+    """(N,) read-only zeros that take no memory: the work of the loads of a free run."""
+    return np.broadcast_to(np.float64(0.0), (N,))
+
+
 @dataclass(eq=False)
 class RingdownResult:
-    """Free response of a :class:`GapSystem` sampled on a uniform grid.
+    """Free or forced response of a :class:`GapSystem` sampled on a uniform grid.
 
     Attributes
     ----------
@@ -40,6 +45,9 @@ class RingdownResult:
     tolerance : m, the displacement accuracy the method aims at (used to judge when
         symmetric motions have split "by more than the solver tolerance")
     stats : solver diagnostics (n_steps, n_events, wall_s, dt, ...)
+    external : (N,) J, work done by the loads, W_ext(t) = int_0^t v^T f_ext dt (read-only
+        zeros for a free run)
+    loads : the :class:`~reduced.models.loads.Loads` of a forced run, None for a free one
     """
 
     system: GapSystem
@@ -50,6 +58,12 @@ class RingdownResult:
     method: str
     tolerance: float
     stats: dict = field(default_factory=dict)
+    external: np.ndarray | None = None
+    loads: object = None
+
+    def __post_init__(self) -> None:
+        if self.external is None:
+            self.external = zeros_view(self.t.shape[0])
 
     @property
     def energy(self) -> np.ndarray:
@@ -63,11 +77,13 @@ class RingdownResult:
 
     @property
     def energy_balance_error(self) -> float:
-        """max_t |E(0) - E(t) - W(t)| / E(0): how well the run conserves energy."""
+        """max_t |E(0) + W_ext(t) - W(t) - E(t)| / scale: how well the run keeps the energy balance.
+
+        scale = max(E(0), max_t E(t), max_t |W_ext(t)|) for a forced run (a run from rest is
+        not divided by zero), E(0) for a free one (whose energy never exceeds E(0)).
+        """
         E = self.energy
-        if E[0] == 0.0:
-            return 0.0
-        return float(np.max(np.abs(E[0] - E - self.dissipated)) / E[0])
+        return balance_error(E, self.dissipated, self.external, self.loads is not None)
 
     @property
     def n_samples(self) -> int:
@@ -85,14 +101,16 @@ class RingdownResult:
         stop = self.n_samples if stop is None else min(stop, self.n_samples)
         for i in range(start, stop, chunk_samples):
             j = min(i + chunk_samples, stop)
-            yield Chunk(i, self.t[i:j], self.x[i:j], self.v[i:j], self.dissipated[i:j], self.system)
+            yield Chunk(i, self.t[i:j], self.x[i:j], self.v[i:j], self.dissipated[i:j], self.system,
+                        external=self.external[i:j])
 
     def save(self, path: str | Path) -> None:
         """Write t, x, v, energy, dissipated, the tolerance and the stats to an .npz file
         (the format of :mod:`reduced.transient.store`; wall-clock stats are left out)."""
         n, N = self.system.n, self.n_samples
-        with NpzStreamWriter(path, _history_shapes(N, n)) as w:
-            summary = _Summary()
+        forced = self.loads is not None
+        with NpzStreamWriter(path, _history_shapes(N, n, forced)) as w:
+            summary = _Summary(forced=forced)
             for c in self.chunks():
                 _write_chunk(w, c, summary)
             w.close(_small_members(self.system, self.method, self.tolerance, summary, self.sample_rate_hz,
@@ -107,12 +125,13 @@ class RingdownStream:
     length of the run. ``tolerance`` and the final ``stats`` (``wall_s``: time spent
     integrating, not in the consumer) are set when the last chunk has been produced.
     The chunking never changes the samples: each integrator carries its full state from
-    one chunk to the next (see their docstrings).
+    one chunk to the next (see their docstrings). ``blocks`` yields (start, x, v, W) for a free
+    run and (start, x, v, W, W_ext) for a forced one (``loads`` given).
     """
 
     def __init__(self, system: GapSystem, method: str, n_samples: int, sample_rate_hz: float, chunk_samples: int,
-                 blocks: Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray]],
-                 tolerance: Callable[[float], float], stats: dict) -> None:
+                 blocks: Iterator[tuple[np.ndarray, ...]],
+                 tolerance: Callable[[float], float], stats: dict, loads=None) -> None:
         self.system = system
         self.method = method
         self.n_samples = n_samples
@@ -125,6 +144,7 @@ class RingdownStream:
         self._tolerance = tolerance
         self._used = False
         self.max_abs_x = 0.0
+        self.loads = loads
 
     def __iter__(self) -> Iterator[Chunk]:
         if self._used:
@@ -132,12 +152,12 @@ class RingdownStream:
         self._used = True
         wall = 0.0
         t0 = time.perf_counter()
-        for start, x, v, W in self._blocks:
+        for start, x, v, W, *ext in self._blocks:
             wall += time.perf_counter() - t0
             if x.size:
                 self.max_abs_x = max(self.max_abs_x, float(np.max(np.abs(x))))
             t = np.arange(start, start + x.shape[0]) / self.sample_rate_hz
-            yield Chunk(start, t, x, v, W, self.system)
+            yield Chunk(start, t, x, v, W, self.system, external=ext[0] if ext else zeros_view(x.shape[0]))
             t0 = time.perf_counter()
         wall += time.perf_counter() - t0
         self.tolerance = float(self._tolerance(self.max_abs_x))
@@ -153,25 +173,31 @@ class RingdownStream:
     def collect(self) -> RingdownResult:
         """The whole run in memory."""
         n, N = self.system.n, self.n_samples
+        forced = self.loads is not None
         t = np.arange(N) / self.sample_rate_hz
-        x = v = W = None
+        x = v = W = Wext = None
         for c in self:
             if c.start == 0 and len(c) == N:  # one chunk: keep its arrays, no copy
                 x, v, W = c.x, c.v, c.dissipated
+                Wext = c.external if forced else None
                 continue
             if x is None:
                 x, v, W = np.empty((N, n)), np.empty((N, n)), np.empty(N)
+                Wext = np.empty(N) if forced else None
             x[c.start : c.start + len(c)] = c.x
             v[c.start : c.start + len(c)] = c.v
             W[c.start : c.start + len(c)] = c.dissipated
+            if forced:
+                Wext[c.start : c.start + len(c)] = c.external
         return RingdownResult(system=self.system, t=t, x=x, v=v, dissipated=W, method=self.method,
-                              tolerance=self.tolerance, stats=self.stats)
+                              tolerance=self.tolerance, stats=self.stats, external=Wext, loads=self.loads)
 
     def save(self, path: str | Path) -> RingdownFile:
         """Write the run into an .npz as it is computed; the file, read lazily."""
         n, N = self.system.n, self.n_samples
-        summary = _Summary()
-        with NpzStreamWriter(path, _history_shapes(N, n)) as w:
+        forced = self.loads is not None
+        summary = _Summary(forced=forced)
+        with NpzStreamWriter(path, _history_shapes(N, n, forced)) as w:
             for c in self:
                 _write_chunk(w, c, summary)
             w.close(_small_members(self.system, self.method, self.tolerance, summary, self.sample_rate_hz,
@@ -181,35 +207,53 @@ class RingdownStream:
         return f
 
 
-def _history_shapes(N: int, n: int) -> dict:
-    shapes = {"t": (N,), "x": (N, n), "v": (N, n), "energy": (N,), "dissipated": (N,)}
-    return {k: (shapes[k], np.float64) for k in HISTORIES}
+def balance_error(E: np.ndarray, W: np.ndarray, Wext: np.ndarray, forced: bool) -> float:
+    """max_t |E(0) + W_ext - W - E| / scale, scale = max(E(0), max E, max |W_ext|) for a forced run
+    and E(0) for a free one (see :attr:`RingdownResult.energy_balance_error`); 0 for a zero scale."""
+    if not E.size:
+        return 0.0
+    scale = max(float(E[0]), float(np.max(E)), float(np.max(np.abs(Wext)))) if forced else float(E[0])
+    if scale == 0.0:
+        return 0.0
+    return float(np.max(np.abs(E[0] - E - W + Wext)) / scale)
+
+
+def _history_shapes(N: int, n: int, forced: bool = False) -> dict:
+    shapes = {"t": (N,), "x": (N, n), "v": (N, n), "energy": (N,), "dissipated": (N,), "external": (N,)}
+    return {k: (shapes[k], np.float64) for k in HISTORIES if forced or k not in OPTIONAL}
 
 
 @dataclass
 class _Summary:
-    """Running energy-balance error while chunks are written."""
+    """Running energy-balance error while chunks are written (see :func:`balance_error`)."""
 
+    forced: bool = False
     E0: float | None = None
     balance: float = 0.0
+    scale: float = 0.0
 
 
 def _write_chunk(w: NpzStreamWriter, c: Chunk, s: _Summary) -> None:
     E = c.energy
     if s.E0 is None and len(c):
         s.E0 = float(E[0])
+        s.scale = s.E0
     if len(c):
-        s.balance = max(s.balance, float(np.max(np.abs(s.E0 - E - c.dissipated))))
+        s.balance = max(s.balance, float(np.max(np.abs(s.E0 - E - c.dissipated + c.external))))
+        if s.forced:
+            s.scale = max(s.scale, float(np.max(E)), float(np.max(np.abs(c.external))))
     w.append("t", c.t)
     w.append("x", c.x)
     w.append("v", c.v)
     w.append("energy", E)
     w.append("dissipated", c.dissipated)
+    if s.forced:
+        w.append("external", c.external)
 
 
 def _small_members(system: GapSystem, method: str, tolerance: float, s: _Summary, sample_rate_hz: float,
                    stats: dict) -> dict:
-    balance = 0.0 if not s.E0 else s.balance / s.E0
+    balance = 0.0 if not s.scale else s.balance / s.scale
     return {"dof_names": np.array(system.dof_names), "method": method, "tolerance": tolerance,
             "energy_balance_error": balance, "sample_rate_hz": sample_rate_hz,
             **{f"stat_{k}": v for k, v in stats.items() if np.isscalar(v) and k not in TIMING_STATS}}

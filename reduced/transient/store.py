@@ -7,9 +7,11 @@ Format
 independent of the run length:
 
 - the five histories ``t`` (N,), ``x`` (N, n), ``v`` (N, n), ``energy`` (N,) and
-  ``dissipated`` (N,) are zip64 members *stored* (not deflated): their sizes are known
+  ``dissipated`` (N,), and for a forced run (``loads``) a sixth, ``external`` (N,) (the work
+  of the loads, int v^T f_ext dt; a file without it, a free run or an older file, reads it
+  as zeros), are zip64 members *stored* (not deflated): their sizes are known
   from N before the run starts, so each member's region is laid out up front and every
-  chunk of samples is written at its place in all five regions as it arrives (a CRC-32
+  chunk of samples is written at its place in all regions as it arrives (a CRC-32
   per member is carried along and patched into the headers at the end);
 - the small members (``dof_names``, ``method``, ``tolerance``, ``energy_balance_error``,
   ``sample_rate_hz``, ``stat_*``) follow, then the zip64 central directory.
@@ -41,7 +43,8 @@ import numpy as np
 
 from reduced._checks import InvalidArgument, integer, show
 
-HISTORIES = ("t", "x", "v", "energy", "dissipated")  # the per-sample members, in file order
+HISTORIES = ("t", "x", "v", "energy", "dissipated", "external")  # the per-sample members, in file order
+OPTIONAL = ("external",)  # histories a file may lack (free runs, older files): read as zeros
 READ_CHUNK_SAMPLES = 1 << 16  # samples a chunk when a run is read back (about 4.7 MB for 3 DOFs)
 DOS_TIME, DOS_DATE = 0, (0 << 9) | (1 << 5) | 1  # 1980-01-01 00:00:00: no wall clock in the file
 ZIP64_VERSION = 45  # "version needed to extract" for zip64 (APPNOTE 4.4.3)
@@ -234,7 +237,8 @@ class Chunk:
     """Consecutive samples ``start .. start + len(t)`` of a ringdown.
 
     Attributes: t (k,) s; x, v (k, n) m and m/s; dissipated (k,) J; energy (k,) J
-    (computed from x and v by ``system`` when not given).
+    (computed from x and v by ``system`` when not given); external (k,) J, the work of the
+    loads int_0^t v^T f_ext dt (zeros for a free run; None when not read).
     """
 
     start: int
@@ -244,6 +248,7 @@ class Chunk:
     dissipated: np.ndarray
     system: object = None
     _energy: np.ndarray | None = None
+    external: np.ndarray | None = None
 
     @property
     def energy(self) -> np.ndarray:
@@ -258,8 +263,9 @@ class Chunk:
 class RingdownFile:
     """A ringdown saved as ``ringdown.npz``, read lazily: memory independent of its length.
 
-    ``chunks()`` reads consecutive samples; ``t``, ``x``, ``v``, ``energy`` and
-    ``dissipated`` are read-only ``np.memmap`` views (pages are read as they are touched);
+    ``chunks()`` reads consecutive samples; ``t``, ``x``, ``v``, ``energy``, ``dissipated`` and
+    ``external`` are read-only ``np.memmap`` views (pages are read as they are touched; a file
+    without ``external`` gives a read-only view of zeros);
     the summaries (``energy_balance_error``, ``tolerance``, ``stats``) are the small members.
     A file written by ``np.savez_compressed`` (older runs) is read too, sequentially.
     """
@@ -272,7 +278,7 @@ class RingdownFile:
             self._arrays = _index(self.path)
         except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
             raise InvalidArgument(f"path {show(str(path))} is not a readable .npz file ({exc})") from None
-        missing = [k for k in HISTORIES if k not in self._arrays]
+        missing = [k for k in HISTORIES if k not in self._arrays and k not in OPTIONAL]
         if missing:
             raise InvalidArgument(f"path {show(str(path))} is not a ringdown file: no {', '.join(missing)}")
         self.system = system
@@ -293,7 +299,10 @@ class RingdownFile:
 
     # -- reading ---------------------------------------------------------------------------
     def read(self, name: str, start: int = 0, stop: int | None = None) -> np.ndarray:
-        """Rows start:stop of history ``name`` (a new array)."""
+        """Rows start:stop of history ``name`` (a new array; zeros for an optional history the file lacks)."""
+        if name in OPTIONAL and name not in self._arrays:
+            stop = self.n_samples if stop is None else min(stop, self.n_samples)
+            return np.zeros(max(0, stop - max(0, min(start, stop))))
         a = self._arrays[name]
         stop = a.shape[0] if stop is None else min(stop, a.shape[0])
         start = max(0, min(start, stop))
@@ -317,6 +326,8 @@ class RingdownFile:
         return data.reshape((stop - start, *a.shape[1:]))
 
     def _memmap(self, name: str) -> np.ndarray:
+        if name in OPTIONAL and name not in self._arrays:
+            return np.broadcast_to(np.float64(0.0), (self.n_samples,))
         a = self._arrays[name]
         if not a.stored:
             raise InvalidArgument(f"{self.path.name}: member {name} is compressed; read it with chunks()")
@@ -329,6 +340,12 @@ class RingdownFile:
     v = property(lambda self: self._memmap("v"), doc="m/s, (N, n) memory-mapped")
     energy = property(lambda self: self._memmap("energy"), doc="J, (N,) memory-mapped")
     dissipated = property(lambda self: self._memmap("dissipated"), doc="J, (N,) memory-mapped")
+    external = property(lambda self: self._memmap("external"), doc="J, (N,) memory-mapped (zeros: a free run)")
+
+    @property
+    def forced(self) -> bool:
+        """Whether the file holds the work of loads (a forced run)."""
+        return "external" in self._arrays
 
     def chunks(self, chunk_samples: int | None = None, start: int = 0, stop: int | None = None,
                fields: tuple[str, ...] = HISTORIES) -> Iterator[Chunk]:
@@ -343,7 +360,7 @@ class RingdownFile:
             j = min(i + chunk_samples, stop)
             a = {k: self.read(k, i, j) if k in fields else None for k in HISTORIES}
             t = a["t"] if a["t"] is not None else np.arange(i, j) / self.sample_rate_hz
-            yield Chunk(i, t, a["x"], a["v"], a["dissipated"], self.system, a["energy"])
+            yield Chunk(i, t, a["x"], a["v"], a["dissipated"], self.system, a["energy"], a["external"])
 
     @property
     def energy0(self) -> float:
