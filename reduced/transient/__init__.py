@@ -1,5 +1,9 @@
 """Time integration of a :class:`~reduced.models.gaps.GapSystem` and what reads its output.
 
+Free (ringdown) or forced: every integrator and the flow take ``loads`` (a
+:class:`~reduced.models.loads.Loads`), M x'' + C x' + K x + B^T f(B x) = sum_l b_l p_l(t), and
+report the loads' work int v^T f_ext dt (``external``) beside the dissipated work.
+
 - :mod:`~reduced.transient.integrate`: :func:`ringdown`, one entry point for the three methods, in
   memory or streamed to disk (``out=``), :func:`ringdown_stream`, and the estimates
   :func:`ringdown_peak_bytes` and :func:`ringdown_disk_bytes`;

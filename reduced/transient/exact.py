@@ -23,26 +23,35 @@ without a state change. The dissipated work int v^T C v dt is integrated in clos
 External forcing (``loads``, :mod:`reduced.models.loads`): M x'' + C x' + K x + B^T f(B x) =
 sum_l b_l p_l(t). Between two load breakpoints (a start, an end, a tabulated sample), which
 become segment boundaries like the crossings, every load is one piece
-p_l(s) = Re(F_l e^{i omega_l s}) + p0_l + p1_l s, and in state s the particular solution is
-closed-form too:
+p_l(s) = Re(F_l e^{i omega_l s}) + p0_l + p1_l s (re-based to the segment start), and in state
+s the solution is closed-form too:
 
-    y(tau) = y_p + Re sum_l Y_l e^{i omega_l tau} + P0 + P1 tau + sum_i V[:, i] w_i e^{lambda_i tau},
+    y(tau) = y_p + Re sum_l Y_l e^{i omega_l tau} + V eta(tau),
     Y_l = (i omega_l I - A_s)^-1 g_l F_l = [H_l b_l; i omega_l H_l b_l] F_l,
           H_l = (K_s - omega_l^2 M + i omega_l C)^-1,
-    P1 = -A_s^-1 g1 = [K_s^-1 h1; 0],  P0 = A_s^-1 (P1 - g0) = [K_s^-1 (h0 - C K_s^-1 h1); K_s^-1 h1],
+    eta_i' = lambda_i eta_i + g0_i + g1_i tau,   eta(0) = V^-1 (y(0) - y_p - Re sum_l Y_l),
 
-with g = [0; M^-1 f], h0 = sum_l b_l p0_l, h1 = sum_l b_l p1_l (the piece re-based to the
-segment start) and w = V^-1 (y(0) - y_p - y_part(0)). Re(Y e^{i omega tau}) is written as the
-two terms Y/2 e^{i omega tau} + conj(Y)/2 e^{-i omega tau} and P0 as a term with exponent 0, so
-y = y_p + P1 tau + sum_k X_k e^{z_k tau} over the extended exponents z = (lambda, +-i omega, 0):
-the root march applies unchanged to q_j = const + slope tau + Re sum coef e^{z tau} (Re z <= 0
-still, and the linear term has q'' = 0, so Q2 = sum |coef| |z|^2 e^{Re z tau_a} still bounds
-|q''|). An undamped resonance (i omega_l within ``RESONANCE_REL`` of an eigenvalue of a
-state) has no bounded particular solution and is refused (ExactIntegratorError), as is a
-load on a state with a rigid-body mode. The work of the loads,
-W_ext(t) = int v^T f_ext dt, is integrated in closed form from
-int_0^tau t^r e^{u t} dt (r = 0, 1; a Taylor series where |u tau| < ``TAYLOR_ZT``), so the
-balance E(t) = E(0) + W_ext(t) - W(t) holds to round-off under forcing as well.
+with g = V^-1 [0; M^-1 h] the modal loads of h0 = sum_l b_l p0_l, h1 = sum_l b_l p1_l. For a mode
+fast over the segment (|lambda| tau_max >= ``SLOW_LT``) eta_i is the exponential plus the
+polynomial particular solution P0 + P1 tau, P1 = -g1 / lambda = modal part of -A^-1 g1,
+P0 = -(g0 / lambda + g1 / lambda^2) = modal part of A^-1 (P1 - g0); a slow mode, whose
+exponential and quasi-static particular solution would cancel (a finely tabulated force on a
+soft suspension: K^-1 p' is metres per second where the motion is millimetres per second), is
+summed as its Taylor series of degree ``POLY_DEG`` instead (in a segment where a polynomial
+piece acts; otherwise every mode stays an exponential). So over a segment
+
+    y(tau) = y_p + Re sum_k X_k e^{z_k tau} + sum_m P_m tau^m,   z = (lambda_fast, +-i omega_l),
+
+Re(Y e^{i omega tau}) being written as Y/2 e^{i omega tau} + conj(Y)/2 e^{-i omega tau}. The root
+march applies to q_j = const + Re sum coef e^{z tau} + sum_m Q_m tau^m unchanged: Re z <= 0
+still, and |q''| <= sum |coef| |z|^2 e^{Re z tau_a} + sum_m m (m - 1) |Q_m| tau_max^(m - 2) on
+[tau_a, tau_max], so no crossing is stepped over. An undamped resonance (i omega_l within
+``RESONANCE_REL`` of an eigenvalue of a state) has no bounded particular solution and is
+refused (ExactIntegratorError), as is a load on a state with a rigid-body mode. The work of the
+loads W_ext(t) = int v^T f_ext dt, and the dissipated work, are integrated in closed form from
+the moments int_0^tau t^m e^{u t} dt (:func:`_moments`: recursions run in their stable
+directions, a series where |u tau| < ``TAYLOR_ZT``), so the balance
+E(t) = E(0) + W_ext(t) - W(t) holds to round-off under forcing as well.
 """
 
 from __future__ import annotations
@@ -68,7 +77,10 @@ NOISE_FACTOR = 4.0  # margin on the propagated round-off bound of q and q'
 REST_FLOOR = 1e-15  # motion this small relative to the initial one is round-off at rest
 RESONANCE_REL = 1e-6  # |i omega - lambda| below this x omega: an undamped resonance, refused
 TAYLOR_ZT = 0.5  # |u tau| below which int_0^tau t^r e^{u t} dt is summed as a series ...
-TAYLOR_TERMS = 24  # ... of this many terms (0.5^24 / 24! ~ 1e-31: exact to round-off)
+TAYLOR_TERMS = 17  # ... of at most this many terms (0.5^18 / 18! ~ 6e-22: exact to round-off)
+SLOW_LT = 1.0  # |lambda| tau below which a mode is slow over a segment: written as its Taylor series ...
+POLY_DEG = 20  # ... of this degree (1 / 21! ~ 2e-20: exact to round-off)
+MOMENT_TOP = 130  # start of the downward moment recursion: damps its start by prod |x| / m < 1e-40
 
 
 class ExactIntegratorError(RuntimeError):
@@ -143,12 +155,12 @@ def state_table(system: GapSystem) -> StateTable:
 
 @dataclass(frozen=True, eq=False)
 class ForcedTable:
-    """Particular solutions of every contact state per unit load (see the module docstring)."""
+    """Per-state data of the loads (see the module docstring)."""
 
     omega: np.ndarray  # (L,) rad/s, each load's harmonic frequency (0: no harmonic term)
     Y: np.ndarray  # (S, 2n, L) complex, [H_l b_l; i omega_l H_l b_l], H_l = (K_s - omega_l^2 M + i omega_l C)^-1
-    Sb: np.ndarray  # (S, n, L), K_s^-1 b_l
-    SCSb: np.ndarray  # (S, n, L), K_s^-1 C K_s^-1 b_l
+    U: np.ndarray  # (S, 2n, L) complex, modal loads V^-1 [0; M^-1 b_l]
+    Sb: np.ndarray  # (S, n, L), K_s^-1 b_l (static deflections: scales of the round-off)
     b: np.ndarray  # (L, n) load directions
 
 
@@ -160,8 +172,9 @@ def forced_table(system: GapSystem, table: StateTable, loads) -> ForcedTable:
     omega = loads.omegas()
     S, L = table.lam.shape[0], b.shape[0]
     Y = np.zeros((S, 2 * n, L), complex)
+    U = np.zeros((S, 2 * n, L), complex)
     Sb = np.zeros((S, n, L))
-    SCSb = np.zeros((S, n, L))
+    Minv_b = np.linalg.solve(system.M, b.T)
     cache: dict[bytes, tuple] = {}
     for active in system.feasible_states():
         s = int(np.sum(active * (1 << np.arange(system.m))))
@@ -182,16 +195,14 @@ def forced_table(system: GapSystem, table: StateTable, loads) -> ForcedTable:
                             f"resonance of contact state {_state_name(system, active)} (natural frequency "
                             f"{abs(lam[i].imag) / (2 * math.pi):.6g} Hz): the exact closed form has no bounded "
                             "particular solution there; use method 'dop853' or 'explicit'")
-            sb = solve(Ks, b.T)
-            scsb = solve(Ks, system.C @ sb)
             y = np.zeros((2 * n, L), complex)
             for l in range(L):
                 if omega[l] > 0.0:
                     h = solve(Ks - omega[l] ** 2 * system.M + 1j * omega[l] * system.C, b[l].astype(complex))
                     y[:n, l], y[n:, l] = h, 1j * omega[l] * h
-            cache[key] = (y, sb, scsb)
-        Y[s], Sb[s], SCSb[s] = cache[key]
-    return ForcedTable(omega, Y, Sb, SCSb, b)
+            cache[key] = (y, table.Vinv[s][:, n:] @ Minv_b, solve(Ks, b.T))
+        Y[s], U[s], Sb[s] = cache[key]
+    return ForcedTable(omega, Y, U, Sb, b)
 
 
 def _state_name(system: GapSystem, active: np.ndarray) -> str:
@@ -201,8 +212,8 @@ def _state_name(system: GapSystem, active: np.ndarray) -> str:
 
 def free_forced_arrays(n: int) -> tuple:
     """The forcing arguments of the kernels for a free run (no loads): empty arrays."""
-    return (np.zeros(0), np.zeros((1, 2 * n, 0), complex), np.zeros((1, n, 0)), np.zeros((1, n, 0)),
-            np.zeros((0, n)), np.zeros(1), np.zeros((1, 0), complex), np.zeros((1, 0)), np.zeros((1, 0)))
+    return (np.zeros(0), np.zeros((1, 2 * n, 0), complex), np.zeros((1, 2 * n, 0), complex), np.zeros((0, n)),
+            np.zeros(1), np.zeros((1, 0), complex), np.zeros((1, 0)), np.zeros((1, 0)))
 
 
 def forced_arrays(ft: ForcedTable, pieces) -> tuple:
@@ -210,8 +221,8 @@ def forced_arrays(ft: ForcedTable, pieces) -> tuple:
     on = pieces.F != 0.0
     if np.any(on & (pieces.omega != ft.omega[None, :])):
         raise ExactIntegratorError("internal: a load piece's frequency differs from its load's")
-    return (ft.omega, ft.Y, ft.Sb, ft.SCSb, ft.b, np.ascontiguousarray(pieces.starts),
-            np.ascontiguousarray(pieces.F), np.ascontiguousarray(pieces.p0), np.ascontiguousarray(pieces.p1))
+    return (ft.omega, ft.Y, ft.U, ft.b, np.ascontiguousarray(pieces.starts), np.ascontiguousarray(pieces.F),
+            np.ascontiguousarray(pieces.p0), np.ascontiguousarray(pieces.p1))
 
 
 @nb.njit(cache=True)
@@ -255,8 +266,8 @@ def _work(G, Gz, az, lam, tau, e):
 
 
 @nb.njit(cache=True)
-def _first_root(const, coef, lam, tau_limit, hmin, qnoise, dnoise, floor, slope):
-    """First tau in [0, tau_limit) where q = const + slope tau + Re sum coef e^{lam tau} turns positive.
+def _first_root(const, coef, lam, tau_limit, hmin, qnoise, dnoise, floor):
+    """First tau in [0, tau_limit) where q = const + Re sum coef e^{lam tau} turns positive.
 
     q is known to QTOL_REL x the size of its terms plus ``qnoise``, the round-off carried
     in from the modal coordinates w (q' likewise, with ``dnoise``); within that band a
@@ -268,7 +279,7 @@ def _first_root(const, coef, lam, tau_limit, hmin, qnoise, dnoise, floor, slope)
     osc = 0.0
     for i in range(N):
         osc += abs(coef[i])
-    if osc < floor and abs(const) < floor and (slope == 0.0 or abs(slope) * tau_limit < floor):
+    if osc < floor and abs(const) < floor:
         return np.inf, 0
     qtol = QTOL_REL * (abs(const) + osc) + NOISE_FACTOR * qnoise
     tau = 0.0
@@ -276,12 +287,7 @@ def _first_root(const, coef, lam, tau_limit, hmin, qnoise, dnoise, floor, slope)
         q = const
         d = 0.0
         dscale = 0.0
-        Q2 = 0.0  # the linear term (forcing) has q'' = 0: Q2 is unchanged by it
-        if slope != 0.0:
-            q += slope * tau
-            d = slope
-            dscale = abs(slope)
-            qtol = QTOL_REL * (abs(const) + osc + abs(slope) * tau) + NOISE_FACTOR * qnoise
+        Q2 = 0.0
         for i in range(N):
             e = coef[i] * np.exp(lam[i] * tau)
             q += e.real
@@ -364,109 +370,395 @@ def _eval_state(yp, X, lam, tau, out):
 
 
 @nb.njit(cache=True)
-def _particular(s, sigma, ip, fz, fY, fSb, fSCSb, pF, pp0, pp1, n, X, z, slope, ypart, Fs, p0s, p1s):
-    """The forced terms of load piece ``ip`` in state s, re-based to a segment that starts ``sigma``
-    after the piece: columns 2n + 2l, 2n + 2l + 1 of X are Y_l / 2 and conj(Y_l) / 2 (z = +-i omega_l),
-    Y_l = fY[s, :, l] F_l e^{i omega_l sigma}; the last column is P0 (z = 0); ``slope`` is P1;
-    ``ypart`` the particular solution at tau = 0; (Fs, p0s, p1s) the re-based pieces."""
+def _forced_segment(s, sigma, ip, tau_lim, y, yp_s, lam_s, V, Vinv, fz, fY, fU, pF, pp0, pp1, n, X, z, P,
+                    Fs, phi, gam, werr, ypart):
+    """A forced segment's closed form in state s (see the module docstring), with the loads' piece
+    ``ip`` re-based to the segment start (``sigma`` after the piece start):
+
+    y(tau) = y_p + Re sum_k X[:, k] e^{z_k tau} + sum_m P[m] tau^m,
+
+    the terms k < 2n the modes, then Y_l / 2 and conj(Y_l) / 2 (z = +-i omega_l) of the harmonic
+    loads fast over the segment (omega_l tau_lim >= SLOW_LT; Fs: their amplitudes, 0 for the
+    others), and P (real, degree POLY_DEG) the polynomial part. The loads' polynomial part is
+    phi[l, k] tau^k: p0 + p1 tau and the Taylor series of the slow harmonic loads. A fast mode
+    carries its exponential and the polynomial particular solution sum_k c_k tau^k
+    (c_D = -gam_D / lambda, c_k = ((k + 1) c_{k+1} - gam_k) / lambda, gam = V^-1 [0; M^-1 b] phi);
+    a slow mode (|lambda| tau_lim < SLOW_LT) its Taylor series m h_m = lambda h_{m-1} + gam_{m-1},
+    which cancels nothing. Fills X, z, P, Fs, phi and werr (the round-off of the modal
+    coordinates); returns whether there is a polynomial part.
+    """
     N = 2 * n
     L = fz.shape[0]
-    for r in range(N):
-        ypart[r] = 0.0
-        slope[r] = 0.0
-    col = N
+    M1 = P.shape[0]
+    poly = False
+    deg = -1
     for l in range(L):
         F = pF[ip, l]
         if F != 0.0 and sigma != 0.0:
             F = F * np.exp(1j * fz[l] * sigma)
+        for k in range(M1):
+            phi[l, k] = 0.0
+        phi[l, 0] = pp0[ip, l] + pp1[ip, l] * sigma
+        phi[l, 1] = pp1[ip, l]
+        if F != 0.0 and fz[l] * tau_lim < SLOW_LT:
+            # Re(F e^{i w tau}) = sum_k Re(F (i w)^k / k!) tau^k: to round-off for w tau < 1
+            c = F
+            for k in range(M1):
+                phi[l, k] += c.real
+                c = c * (1j * fz[l]) / (k + 1)
+            F = 0.0 + 0.0j
         Fs[l] = F
-        p1s[l] = pp1[ip, l]
-        p0s[l] = pp0[ip, l] + pp1[ip, l] * sigma
+        for k in range(M1):
+            if phi[l, k] != 0.0:
+                poly = True
+                deg = max(deg, k)
+    for r in range(N):
+        ypart[r] = 0.0
+    col = N
+    for l in range(L):
         for r in range(N):
-            Y = fY[s, r, l] * F
+            Y = fY[s, r, l] * Fs[l]
             X[r, col] = 0.5 * Y
             X[r, col + 1] = 0.5 * np.conj(Y)
             ypart[r] += Y.real
         z[col] = 1j * fz[l]
         z[col + 1] = -1j * fz[l]
         col += 2
-    # x_p = K_s^-1 (h0 - C K_s^-1 h1) + K_s^-1 h1 tau, v_p = K_s^-1 h1
-    for r in range(n):
-        a0 = 0.0
-        a1 = 0.0
-        for l in range(L):
-            a0 += fSb[s, r, l] * p0s[l] - fSCSb[s, r, l] * p1s[l]
-            a1 += fSb[s, r, l] * p1s[l]
-        X[r, col] = a0
-        X[n + r, col] = a1
-        slope[r] = a1
-        ypart[r] += a0
-        ypart[n + r] += a1
-    z[col] = 0.0
+    for m in range(M1):
+        for r in range(N):
+            P[m, r] = 0.0
+    for i in range(N):
+        lam = lam_s[i]
+        z[i] = lam
+        wi = 0.0 + 0.0j
+        err = 0.0
+        for r in range(N):
+            wi += Vinv[i, r] * (y[r] - yp_s[r] - ypart[r])
+            err += abs(Vinv[i, r]) * (abs(y[r]) + abs(yp_s[r]) + abs(ypart[r]))
+        werr[i] = EPS * err
+        if not poly:
+            for r in range(N):
+                X[r, i] = V[r, i] * wi
+            continue
+        for k in range(deg + 1):
+            g = 0.0 + 0.0j
+            for l in range(L):
+                g += fU[s, i, l] * phi[l, k]
+            gam[k] = g
+        if abs(lam) * tau_lim < SLOW_LT:
+            h = wi
+            for r in range(N):
+                X[r, i] = 0.0
+                P[0, r] += (V[r, i] * h).real
+            for m in range(1, M1):
+                h = lam * h
+                if m - 1 <= deg:
+                    h += gam[m - 1]
+                h = h / m
+                for r in range(N):
+                    P[m, r] += (V[r, i] * h).real
+        else:
+            c = -gam[deg] / lam
+            for r in range(N):
+                P[deg, r] += (V[r, i] * c).real
+            for k in range(deg - 1, -1, -1):
+                c = ((k + 1) * c - gam[k]) / lam
+                for r in range(N):
+                    P[k, r] += (V[r, i] * c).real
+            for r in range(N):
+                X[r, i] = V[r, i] * (wi - c)  # c is now c_0, the particular solution at tau = 0
+    return poly
 
 
 @nb.njit(cache=True)
-def _i0(u, eu, tau):
-    """int_0^tau e^{u t} dt with eu = e^{u tau}: (eu - 1) / u, or its series where |u tau| < TAYLOR_ZT."""
+def _first_root_forced(const, coef, lam, Qp, poly, tau_limit, hmin, qnoise, dnoise, floor):
+    """:func:`_first_root` for q = const + Re sum coef e^{lam tau} + sum_m Qp[m] tau^m (a forced
+    segment): |q''| <= sum |coef| |lam|^2 e^{Re(lam) tau_a} + sum_m m (m - 1) |Qp[m]| tau_limit^(m - 2)
+    on [tau_a, tau_limit], so the same march never steps over a root."""
+    N = lam.shape[0]
+    M = Qp.shape[0] - 1
+    osc = 0.0
+    for i in range(N):
+        osc += abs(coef[i])
+    Q2p = 0.0
+    pmax = 0.0
+    if poly:
+        tm = 1.0  # tau_limit^m
+        for m in range(M + 1):
+            pmax += abs(Qp[m]) * tm
+            tm *= tau_limit
+        tm = 1.0  # tau_limit^(m - 2)
+        for m in range(2, M + 1):
+            Q2p += m * (m - 1) * abs(Qp[m]) * tm
+            tm *= tau_limit
+    if osc < floor and abs(const) < floor and pmax < floor:
+        return np.inf, 0
+    tau = 0.0
+    for it in range(MAX_MARCH_ITER):
+        q = const
+        d = 0.0
+        dscale = 0.0
+        Q2 = Q2p
+        pscale = 0.0
+        for i in range(N):
+            e = coef[i] * np.exp(lam[i] * tau)
+            q += e.real
+            d += (lam[i] * e).real
+            dscale += abs(e) * abs(lam[i])
+            Q2 += abs(e) * abs(lam[i]) ** 2
+        if poly:
+            pv = Qp[M]
+            pd = M * Qp[M]
+            ps = abs(Qp[M])
+            pds = M * abs(Qp[M])
+            for m in range(M - 1, -1, -1):
+                pv = pv * tau + Qp[m]
+                ps = ps * tau + abs(Qp[m])
+                if m >= 1:
+                    pd = pd * tau + m * Qp[m]
+                    pds = pds * tau + m * abs(Qp[m])
+            q += pv
+            d += pd
+            pscale = ps
+            dscale += pds
+        qtol = QTOL_REL * (abs(const) + osc + pscale) + NOISE_FACTOR * qnoise
+        if q > -qtol:
+            dtol = QTOL_REL * dscale + NOISE_FACTOR * dnoise
+            if q > qtol and d >= -dtol:
+                return tau, it
+            if d > dtol:
+                return tau + max(-q, 0.0) / d, it
+        qn = -min(q, 0.0)
+        disc = np.sqrt(d * d + 2.0 * Q2 * qn)
+        if d > 0.0:
+            h = 2.0 * qn / (d + disc)
+        elif Q2 > 0.0:
+            h = (disc - d) / Q2
+        else:
+            return np.inf, it
+        tau += max(h, hmin)
+        if tau >= tau_limit:
+            return np.inf, it
+    return -1.0, MAX_MARCH_ITER
+
+
+@nb.njit(cache=True)
+def _stop_poly(B, j, sgn, P, Qp):
+    """Qp[m] = sgn B_j P[m, :n]: the polynomial part of q_j."""
+    n = B.shape[1]
+    for m in range(P.shape[0]):
+        acc = 0.0
+        for r in range(n):
+            acc += B[j, r] * P[m, r]
+        Qp[m] = sgn * acc
+
+
+@nb.njit(cache=True)
+def _add_poly(P, tau, n_rows, out):
+    """out[r] += sum_m P[m, r] tau^m (Horner), r < n_rows."""
+    M = P.shape[0] - 1
+    for r in range(n_rows):
+        acc = P[M, r]
+        for m in range(M - 1, -1, -1):
+            acc = acc * tau + P[m, r]
+        out[r] += acc
+
+
+@nb.njit(cache=True)
+def _series_terms(ax):
+    """Terms of the series of e^x - 1 (and kin) for |x| = ax < TAYLOR_ZT: ax^j / j! below 1e-18."""
+    if ax < 1e-3:
+        return 5
+    if ax < 0.05:
+        return 9
+    return TAYLOR_TERMS
+
+
+@nb.njit(cache=True)
+def _i0(u, ru, eu, tau):
+    """int_0^tau e^{u t} dt with ru = 1 / u and eu = e^{u tau}: (eu - 1) / u, or its series where
+    |u tau| < TAYLOR_ZT."""
     x = u * tau
-    if abs(x) < TAYLOR_ZT:
+    ax = abs(x)
+    if ax < TAYLOR_ZT:
         acc = 1.0 + 0.0j
-        for j in range(TAYLOR_TERMS, 0, -1):
+        for j in range(_series_terms(ax), 0, -1):
             acc = 1.0 + acc * x / (j + 1)
         return tau * acc
-    return (eu - 1.0) / u
+    return (eu - 1.0) * ru
 
 
 @nb.njit(cache=True)
-def _i1(u, eu, tau):
-    """int_0^tau t e^{u t} dt = (tau eu - int_0^tau e^{u t} dt) / u, or tau^2 sum_j x^j / (j! (j + 2))."""
+def _inv(u):
+    """1 / u (0 for u = 0, where the series branch is taken)."""
+    return 1.0 / u if u != 0.0 else 0.0 + 0.0j
+
+
+@nb.njit(cache=True)
+def _moments(u, tau, out):
+    """out[m] = int_0^tau t^m e^{u t} dt = tau^(m+1) J_m(u tau), m = 0 .. len(out) - 1.
+
+    J_m(x) = int_0^1 s^m e^{x s} ds by J_m = (e^x - m J_{m-1}) / x upward for m < |x| and
+    J_{m-1} = (e^x - x J_m) / m downward from m = MOMENT_TOP (started at 0) for m >= |x|: each
+    recursion run where it damps its errors (by m / |x|, resp. |x| / m), so every moment is
+    accurate to a few eps for any u.
+    """
+    M = out.shape[0] - 1
     x = u * tau
-    if abs(x) < TAYLOR_ZT:
-        acc = 0.0 + 0.0j
-        term = 1.0 + 0.0j
-        for j in range(TAYLOR_TERMS):
-            acc += term / (j + 2)
-            term = term * x / (j + 1)
-        return tau * tau * acc
-    return (tau * eu - _i0(u, eu, tau)) / u
+    ex = np.exp(x)
+    ax = abs(x)
+    ms = M + 1 if ax >= M + 1 else int(ax)
+    if ms >= 1:
+        J = (ex - 1.0) / x
+        out[0] = J
+        for m in range(1, ms):
+            J = (ex - m * J) / x
+            out[m] = J
+    if ms <= M:
+        J = 0.0 + 0.0j
+        for m in range(MOMENT_TOP, ms, -1):
+            J = (ex - x * J) / m
+            if m - 1 <= M:
+                out[m - 1] = J
+    tm = tau
+    for m in range(M + 1):
+        out[m] *= tm
+        tm *= tau
 
 
 @nb.njit(cache=True)
-def _ext_setup(X, fb, n, beta):
-    """beta[k, l] = a_k^T b_l with a_k = X[n:, k] the velocity part of term k."""
+def _ext_setup(X, z, fb, fz, n, beta, rp, rm):
+    """beta[k, l] = a_k^T b_l with a_k = X[n:, k] the velocity part of term k, and the inverses
+    rp = 1 / (z_k + i omega_l), rm = 1 / (z_k - i omega_l) of the exponents of v^T f_ext."""
     for k in range(X.shape[1]):
         for l in range(fb.shape[0]):
             acc = 0.0 + 0.0j
             for r in range(n):
                 acc += X[n + r, k] * fb[l, r]
             beta[k, l] = acc
+            rp[k, l] = _inv(z[k] + 1j * fz[l])
+            rm[k, l] = _inv(z[k] - 1j * fz[l])
 
 
 @nb.njit(cache=True)
-def _ext_work(beta, z, e, fz, Fs, p0s, p1s, tau, eiw):
-    """W_ext = int_0^tau v^T f_ext dt for v = sum_k a_k e^{z_k t} (a real sum) and f_ext = sum_l b_l
-    (F_l / 2 e^{i w_l t} + conj(F_l) / 2 e^{-i w_l t} + p0_l + p1_l t), with e_k = e^{z_k tau}."""
+def _ext_work(beta, z, e, fz, Fs, tau, eiw, rp, rm):
+    """int_0^tau v_E^T f_H dt for v_E = sum_k a_k e^{z_k t} (a real sum) and the fast harmonic
+    loads f_H = sum_l b_l (F_l / 2 e^{i w_l t} + conj(F_l) / 2 e^{-i w_l t}), e_k = e^{z_k tau}."""
     K = beta.shape[0]
     L = beta.shape[1]
-    for l in range(L):
-        eiw[l] = np.exp(1j * fz[l] * tau) if Fs[l] != 0.0 else 1.0 + 0.0j
     acc = 0.0 + 0.0j
-    for k in range(K):
-        for l in range(L):
+    for l in range(L):
+        if Fs[l] == 0.0:
+            continue
+        eiw[l] = np.exp(1j * fz[l] * tau)
+        w = 1j * fz[l]
+        for k in range(K):
             bkl = beta[k, l]
-            if bkl == 0.0:
-                continue
-            term = 0.0 + 0.0j
-            if Fs[l] != 0.0:
-                w = 1j * fz[l]
-                term += 0.5 * Fs[l] * _i0(z[k] + w, e[k] * eiw[l], tau)
-                term += 0.5 * np.conj(Fs[l]) * _i0(z[k] - w, e[k] * np.conj(eiw[l]), tau)
-            if p0s[l] != 0.0:
-                term += p0s[l] * _i0(z[k], e[k], tau)
-            if p1s[l] != 0.0:
-                term += p1s[l] * _i1(z[k], e[k], tau)
-            acc += bkl * term
+            if bkl != 0.0:
+                acc += bkl * (0.5 * Fs[l] * _i0(z[k] + w, rp[k, l], e[k] * eiw[l], tau)
+                              + 0.5 * np.conj(Fs[l]) * _i0(z[k] - w, rm[k, l], e[k] * np.conj(eiw[l]), tau))
     return acc.real
+
+
+@nb.njit(cache=True)
+def _work_exp(G, Gz, az, z, tau, e):
+    """int_0^tau v^T C v dt for v = sum_k a_k e^{z_k t}: :func:`_work` with the series of the
+    forced path (to TAYLOR_ZT); G, Gz, az from :func:`_work_setup`."""
+    K = z.shape[0]
+    acc = 0.0 + 0.0j
+    for i in range(K):
+        for k in range(i, K):
+            if G[i, k] != 0.0:
+                x = (z[i] + z[k]) * tau
+                if az[i, k] * tau < TAYLOR_ZT:
+                    s = 1.0 + 0.0j
+                    for j in range(_series_terms(az[i, k] * tau), 0, -1):
+                        s = 1.0 + s * x / (j + 1)
+                    term = G[i, k] * tau * s
+                else:
+                    term = Gz[i, k] * (e[i] * e[k] - 1.0)
+                acc += term if k == i else 2.0 * term
+    return acc.real
+
+
+@nb.njit(cache=True)
+def _poly_setup(X, P, C, fb, n, damped_, ACp, Cpp, Pb):
+    """With p_m = P[m, n:] the velocity part of the polynomial: ACp[k, m] = a_k^T C p_m,
+    Cpp[m, m'] = p_m^T C p_m' (damped), Pb[m, l] = p_m^T b_l."""
+    M1 = P.shape[0]
+    for m in range(M1):
+        for l in range(fb.shape[0]):
+            acc = 0.0
+            for r in range(n):
+                acc += P[m, n + r] * fb[l, r]
+            Pb[m, l] = acc
+    if not damped_:
+        return
+    Cp = np.empty(n)
+    for m in range(M1):
+        for a in range(n):
+            ca = 0.0
+            for b in range(n):
+                ca += C[a, b] * P[m, n + b]
+            Cp[a] = ca
+        for k in range(X.shape[1]):
+            acc = 0.0 + 0.0j
+            for a in range(n):
+                acc += X[n + a, k] * Cp[a]
+            ACp[k, m] = acc
+        for m2 in range(M1):
+            acc2 = 0.0
+            for a in range(n):
+                acc2 += P[m2, n + a] * Cp[a]
+            Cpp[m2, m] = acc2
+
+
+@nb.njit(cache=True)
+def _poly_work(ACp, Cpp, Pb, beta, phi, Fs, z, tau, MOM, damped_, N):
+    """(W, W_ext) of the polynomial parts over [0, tau], with v = v_E + v_P (v_E = sum_k a_k e^{z_k t},
+    v_P = sum_m p_m t^m) and f_ext = f_H + f_P (fast harmonic, f_P = sum_l b_l sum_k phi[l, k] t^k):
+    int (2 v_E^T C v_P + v_P^T C v_P) dt and int (v_E^T f_P + v_P^T f_H + v_P^T f_P) dt, from the
+    moments MOM[k, m] = int_0^tau t^m e^{z_k t} dt (:func:`_moments`)."""
+    K = z.shape[0]
+    M1 = Cpp.shape[0]
+    L = Pb.shape[1]
+    for k in range(K):
+        _moments(z[k], tau, MOM[k])
+    W = 0.0
+    if damped_:
+        acc = 0.0 + 0.0j
+        for k in range(K):
+            for m in range(M1):
+                if ACp[k, m] != 0.0:
+                    acc += ACp[k, m] * MOM[k, m]
+        W = 2.0 * acc.real
+        for m in range(M1):
+            for m2 in range(M1):
+                if Cpp[m, m2] != 0.0:
+                    W += Cpp[m, m2] * tau ** (m + m2 + 1) / (m + m2 + 1)
+    acc = 0.0 + 0.0j
+    for l in range(L):
+        for k in range(K):
+            if beta[k, l] != 0.0:
+                inner = 0.0 + 0.0j
+                for j in range(M1):
+                    if phi[l, j] != 0.0:
+                        inner += phi[l, j] * MOM[k, j]
+                acc += beta[k, l] * inner
+        if Fs[l] != 0.0:
+            # F/2 I_m(i w) + conj(F)/2 I_m(-i w) = Re(F I_m(i w)) for real p_m; i w_l is z[N + 2 l]
+            inner = 0.0 + 0.0j
+            for m in range(M1):
+                inner += Pb[m, l] * MOM[N + 2 * l, m]
+            acc += Fs[l] * inner
+    E = acc.real
+    for l in range(L):
+        for m in range(M1):
+            if Pb[m, l] != 0.0:
+                for j in range(M1):
+                    if phi[l, j] != 0.0:
+                        E += Pb[m, l] * phi[l, j] * tau ** (m + j + 1) / (m + j + 1)
+    return W, E
 
 
 BUFFER_FULL = 1  # _exact_kernel status: the sample buffer is full inside the present segment
@@ -475,7 +767,7 @@ BUFFER_FULL = 1  # _exact_kernel status: the sample buffer is full inside the pr
 @nb.njit(cache=True)
 def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
                   y, active, t, t_end, t_samples, i_samp, t_after, out_y, out_W, W, hmin, floor, max_events,
-                  n_stuck, forced, fz, fY, fSb, fSCSb, fb, pstarts, pF, pp0, pp1, out_E, E):
+                  n_stuck, forced, fz, fY, fU, fb, pstarts, pF, pp0, pp1, out_E, E):
     """March events from t to t_end, filling the sample buffer ``t_samples`` from index i_samp.
 
     (y, active, t, W, E) is the state at the start of a segment (an event, a load breakpoint or a
@@ -484,14 +776,15 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
     the kernel returns BUFFER_FULL *without* advancing that segment: called again with a new
     buffer it recomputes the segment from the same state, so the samples do not depend on
     the buffer size. With ``forced``, the loads' pieces start at ``pstarts`` (the first at or before
-    t; see :func:`_particular`) and E is their work. Returns
+    t; see :func:`_forced_segment`) and E is their work. Returns
     (t, W, E, i_samp, n_events, n_iter, status, n_stuck).
     """
     n = B.shape[1]
     m = B.shape[0]
     N = 2 * n
     L = fb.shape[0] if forced else 0
-    Kt = N + 2 * L + 1 if forced else N  # terms: the modes, then +-i omega_l per load, then P0
+    Kt = N + 2 * L  # terms: the modes, then +-i omega_l per load
+    M1 = POLY_DEG + 1 if forced else 1
     ns = t_samples.shape[0]
     X = np.empty((N, Kt), np.complex128)
     G = np.zeros((Kt, Kt), np.complex128)
@@ -502,17 +795,25 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
     z = np.zeros(Kt, np.complex128)
     werr = np.empty(N)
     ytmp = np.empty(N)
-    slope = np.zeros(N)
     ypart = np.zeros(N)
+    P = np.zeros((M1, N))
+    Qp = np.zeros(M1)
+    ACp = np.zeros((Kt, M1), np.complex128)
+    Cpp = np.zeros((M1, M1))
+    Pb = np.zeros((M1, L))
+    MOM = np.zeros((Kt, M1), np.complex128)
     beta = np.zeros((Kt, L), np.complex128)
+    rp = np.zeros((Kt, L), np.complex128)
+    rm = np.zeros((Kt, L), np.complex128)
     Fs = np.zeros(L, np.complex128)
-    p0s = np.zeros(L)
-    p1s = np.zeros(L)
+    phi = np.zeros((L, M1))
+    gam = np.zeros(M1, np.complex128)
     eiw = np.empty(L, np.complex128)
-    P = pstarts.shape[0]
+    NP = pstarts.shape[0]
     ip = 0
     if forced:
         ip = max(np.searchsorted(pstarts, t, side="right") - 1, 0)
+    poly = False
     n_events = 0
     n_iter = 0
     status = 0
@@ -525,45 +826,36 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
         zs = lam_s
         t_lim = t_end
         if forced:
-            while ip + 1 < P and pstarts[ip + 1] <= t:
+            while ip + 1 < NP and pstarts[ip + 1] <= t:
                 ip += 1
-            if ip + 1 < P and pstarts[ip + 1] < t_end:
+            if ip + 1 < NP and pstarts[ip + 1] < t_end:
                 t_lim = pstarts[ip + 1]
-            _particular(s, t - pstarts[ip], ip, fz, fY, fSb, fSCSb, pF, pp0, pp1, n, X, z, slope, ypart,
-                        Fs, p0s, p1s)
-            for i in range(N):
-                z[i] = lam_s[i]
+            poly = _forced_segment(s, t - pstarts[ip], ip, t_lim - t, y, yp[s], lam_s, V[s], Vinv[s], fz, fY, fU,
+                                   pF, pp0, pp1, n, X, z, P, Fs, phi, gam, werr, ypart)
             zs = z
-        # w = Vinv (y - yp - y_part(0));  X[:, i] = V[:, i] w_i;  werr bounds the round-off in w
-        for i in range(N):
-            wi = 0.0 + 0.0j
-            err = 0.0
-            if forced:
-                for r in range(N):
-                    wi += Vinv[s, i, r] * (y[r] - yp[s, r] - ypart[r])
-                    err += abs(Vinv[s, i, r]) * (abs(y[r]) + abs(yp[s, r]) + abs(ypart[r]))
-            else:
+        else:
+            # w = Vinv (y - yp);  X[:, i] = V[:, i] w_i;  werr bounds the round-off in w
+            for i in range(N):
+                wi = 0.0 + 0.0j
+                err = 0.0
                 for r in range(N):
                     wi += Vinv[s, i, r] * (y[r] - yp[s, r])
                     err += abs(Vinv[s, i, r]) * (abs(y[r]) + abs(yp[s, r]))
-            werr[i] = EPS * err
-            for r in range(N):
-                X[r, i] = V[s, r, i] * wi
+                werr[i] = EPS * err
+                for r in range(N):
+                    X[r, i] = V[s, r, i] * wi
         if damped:
             _work_setup(X, C, zs, n, G, Gz, az)
         if forced:
-            _ext_setup(X, fb, n, beta)
+            _ext_setup(X, zs, fb, fz, n, beta, rp, rm)
+            if poly:
+                _poly_setup(X, P, C, fb, n, damped, ACp, Cpp, Pb)
         tau_ev = t_lim - t
         j_ev = -1
         seg_iter = 0
         for j in range(m):
             sgn = -side[j] if active[j] else side[j]
             const = _stop_series(B, j, sgn, offset[j], yp[s], X, coef)
-            slope_j = 0.0
-            if forced:
-                for r in range(n):
-                    slope_j += B[j, r] * slope[r]
-                slope_j *= sgn
             qnoise = 0.0
             dnoise = 0.0
             for i in range(N):
@@ -572,7 +864,12 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
                     pv += B[j, r] * V[s, r, i]
                 qnoise += abs(pv) * werr[i]
                 dnoise += abs(pv) * abs(lam_s[i]) * werr[i]
-            tj, it = _first_root(const, coef, zs, tau_ev, hmin, qnoise, dnoise, floor, slope_j)
+            if forced:
+                if poly:
+                    _stop_poly(B, j, sgn, P, Qp)
+                tj, it = _first_root_forced(const, coef, zs, Qp, poly, tau_ev, hmin, qnoise, dnoise, floor)
+            else:
+                tj, it = _first_root(const, coef, lam_s, tau_ev, hmin, qnoise, dnoise, floor)
             seg_iter += it
             if tj < 0.0:
                 status = -3
@@ -588,12 +885,17 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
             _exponentials(zs, tau, e)
             _eval_with(yp[s], X, e, ytmp)
             if forced:
-                for r in range(n):
-                    ytmp[r] += slope[r] * tau
-                out_E[i_samp] = E + _ext_work(beta, zs, e, fz, Fs, p0s, p1s, tau, eiw)
+                Wp = 0.0
+                Ep = 0.0
+                if poly:
+                    _add_poly(P, tau, N, ytmp)
+                    Wp, Ep = _poly_work(ACp, Cpp, Pb, beta, phi, Fs, zs, tau, MOM, damped, N)
+                out_E[i_samp] = E + (_ext_work(beta, zs, e, fz, Fs, tau, eiw, rp, rm) + Ep)
+                out_W[i_samp] = W + ((_work_exp(G, Gz, az, zs, tau, e) if damped else 0.0) + Wp)
+            else:
+                out_W[i_samp] = W + (_work(G, Gz, az, zs, tau, e) if damped else 0.0)
             for r in range(N):
                 out_y[i_samp, r] = ytmp[r]
-            out_W[i_samp] = W + (_work(G, Gz, az, zs, tau, e) if damped else 0.0)
             i_samp += 1
         if i_samp == ns and t_after <= t_next:
             status = BUFFER_FULL  # the segment is searched again with the next buffer: count it then
@@ -602,13 +904,17 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
         _exponentials(zs, tau_ev, e)
         _eval_with(yp[s], X, e, ytmp)
         if forced:
-            for r in range(n):
-                ytmp[r] += slope[r] * tau_ev
-            E += _ext_work(beta, zs, e, fz, Fs, p0s, p1s, tau_ev, eiw)
+            Wp = 0.0
+            Ep = 0.0
+            if poly:
+                _add_poly(P, tau_ev, N, ytmp)
+                Wp, Ep = _poly_work(ACp, Cpp, Pb, beta, phi, Fs, zs, tau_ev, MOM, damped, N)
+            E += _ext_work(beta, zs, e, fz, Fs, tau_ev, eiw, rp, rm) + Ep
+            W += (_work_exp(G, Gz, az, zs, tau_ev, e) if damped else 0.0) + Wp
+        elif damped:
+            W += _work(G, Gz, az, zs, tau_ev, e)
         for r in range(N):
             y[r] = ytmp[r]
-        if damped:
-            W += _work(G, Gz, az, zs, tau_ev, e)
         n_stuck = n_stuck + 1 if tau_ev == 0.0 else 0
         if n_stuck > 8 * m:
             status = -4

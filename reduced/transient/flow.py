@@ -42,13 +42,17 @@ from reduced import _checks as _check
 from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
 from reduced.transient.exact import (
+    POLY_DEG,
     QTOL_REL,
     ExactIntegratorError,
     StateTable,
+    _add_poly,
     _eval_state,
     _first_root,
-    _particular,
+    _first_root_forced,
+    _forced_segment,
     _state_index,
+    _stop_poly,
     _stop_series,
     forced_arrays,
     forced_table,
@@ -64,38 +68,34 @@ MAX_SEGMENTS = 100_000  # per call: a hang guard (a period has tens of events)
 
 
 @nb.njit(cache=True)
-def _eval_at(yp, X, z, slope, tau, forced, out):
-    """y(tau) = y_p + Re sum_k X[:, k] e^{z_k tau} (+ P1 tau with loads)."""
-    _eval_state(yp, X, z, tau, out)
-    if forced:
-        for r in range(slope.shape[0]):
-            out[r] += slope[r] * tau
-
-
-@nb.njit(cache=True)
 def _flow_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, seg_state, seg_tau,
-                 forced, fz, fY, fSb, fSCSb, fb, pstarts, pF, pp0, pp1):
+                 forced, fz, fY, fU, fb, pstarts, pF, pp0, pp1):
     """March from 0 to T; y and active are updated in place. Returns (n_seg, status).
 
     With ``forced``, the loads' pieces start at ``pstarts`` (times from the start of the flow, the
-    first 0) and every piece boundary ends a segment (:func:`reduced.transient.exact._particular`).
+    first 0) and every piece boundary ends a segment
+    (:func:`reduced.transient.exact._forced_segment`).
     """
     n = B.shape[1]
     m = B.shape[0]
     N = 2 * n
     L = fb.shape[0] if forced else 0
-    Kt = N + 2 * L + 1 if forced else N
+    Kt = N + 2 * L
+    M1 = POLY_DEG + 1 if forced else 1
     X = np.empty((N, Kt), np.complex128)
     coef = np.empty(Kt, np.complex128)
     z = np.zeros(Kt, np.complex128)
     ytmp = np.empty(N)
-    slope = np.zeros(N)
+    werr = np.empty(N)
     ypart = np.zeros(N)
+    P = np.zeros((M1, N))
+    Qp = np.zeros(M1)
     Fs = np.zeros(L, np.complex128)
-    p0s = np.zeros(L)
-    p1s = np.zeros(L)
-    P = pstarts.shape[0]
+    phi = np.zeros((L, M1))
+    gam = np.zeros(M1, np.complex128)
+    NP = pstarts.shape[0]
     ip = 0
+    poly = False
     t = 0.0
     n_seg = 0
     n_zero = 0
@@ -109,42 +109,39 @@ def _flow_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, s
         zs = lam_s
         t_lim = T
         if forced:
-            while ip + 1 < P and pstarts[ip + 1] <= t:
+            while ip + 1 < NP and pstarts[ip + 1] <= t:
                 ip += 1
-            if ip + 1 < P and pstarts[ip + 1] < T:
+            if ip + 1 < NP and pstarts[ip + 1] < T:
                 t_lim = pstarts[ip + 1]
-            _particular(s, t - pstarts[ip], ip, fz, fY, fSb, fSCSb, pF, pp0, pp1, n, X, z, slope, ypart,
-                        Fs, p0s, p1s)
-            for i in range(N):
-                z[i] = lam_s[i]
+            poly = _forced_segment(s, t - pstarts[ip], ip, t_lim - t, y, yp[s], lam_s, V[s], Vinv[s], fz, fY, fU,
+                                   pF, pp0, pp1, n, X, z, P, Fs, phi, gam, werr, ypart)
             zs = z
-        for i in range(N):
-            wi = 0.0 + 0.0j
-            if forced:
-                for r in range(N):
-                    wi += Vinv[s, i, r] * (y[r] - yp[s, r] - ypart[r])
-            else:
+        else:
+            for i in range(N):
+                wi = 0.0 + 0.0j
                 for r in range(N):
                     wi += Vinv[s, i, r] * (y[r] - yp[s, r])
-            for r in range(N):
-                X[r, i] = V[s, r, i] * wi
+                for r in range(N):
+                    X[r, i] = V[s, r, i] * wi
         tau_ev = t_lim - t
         j_ev = -1
         for j in range(m):
             sgn = -side[j] if active[j] else side[j]
             const = _stop_series(B, j, sgn, offset[j], yp[s], X, coef)
-            slope_j = 0.0
             if forced:
-                for r in range(n):
-                    slope_j += B[j, r] * slope[r]
-                slope_j *= sgn
-            tj, it = _first_root(const, coef, zs, tau_ev, hmin, 0.0, 0.0, 0.0, slope_j)
+                if poly:
+                    _stop_poly(B, j, sgn, P, Qp)
+                tj, it = _first_root_forced(const, coef, zs, Qp, poly, tau_ev, hmin, 0.0, 0.0, 0.0)
+            else:
+                tj, it = _first_root(const, coef, lam_s, tau_ev, hmin, 0.0, 0.0, 0.0)
             if tj < 0.0:
                 return n_seg, -3
             if tj < tau_ev:
                 tau_ev = tj
                 j_ev = j
-        _eval_at(yp[s], X, zs, slope, tau_ev, forced, ytmp)
+        _eval_state(yp[s], X, zs, tau_ev, ytmp)
+        if poly:
+            _add_poly(P, tau_ev, N, ytmp)
         if j_ev >= 0:
             # a crossing against the stop's own rate (closing while separating, or the
             # reverse) is a round-off root next to a crossing just made: not an event;
@@ -155,7 +152,9 @@ def _flow_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, s
             rate = side[j_ev] * rate
             if (rate > 0.0) == active[j_ev] and rate != 0.0:
                 tau_ev = min(tau_ev + hmin, t_lim - t)
-                _eval_at(yp[s], X, zs, slope, tau_ev, forced, ytmp)
+                _eval_state(yp[s], X, zs, tau_ev, ytmp)
+                if poly:
+                    _add_poly(P, tau_ev, N, ytmp)
                 j_ev = -2
         for r in range(N):
             y[r] = ytmp[r]
@@ -276,7 +275,7 @@ class Flow:
             bp = self.loads.breakpoints(t0 + T)
             pieces = self.loads.pieces_at(np.concatenate([[t0], bp[bp > t0]]))
             fargs = list(forced_arrays(self._forced, pieces))
-            fargs[5] = pieces.starts - t0
+            fargs[4] = pieces.starts - t0
         n_seg, status = call_numba_kernel(_flow_kernel,
             tb.lam,
             tb.V,
