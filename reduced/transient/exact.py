@@ -266,6 +266,32 @@ def _work(G, Gz, az, lam, tau, e):
 
 
 @nb.njit(cache=True)
+def _march_step(q, d, qtol, dtol, Q2, tau, hmin):
+    """One step of the root march at tau, from q, q' (known to within qtol, dtol) and Q2 >= |q''|
+    ahead: (tau_root, True) at a crossing, else (tau + h, False) with h the largest step for which
+    q + q' h + Q2 h^2 / 2 < 0 (no root skipped), at least hmin; (inf, True) when q can never
+    reach the threshold (q' <= 0 and Q2 = 0)."""
+    if q > -qtol:
+        if q > qtol and d >= -dtol:
+            return tau, True
+        # At the threshold a crossing needs q' > 0 beyond its round-off; otherwise it is a
+        # tangential graze. A q just past the threshold but falling back (q' < 0) is the
+        # round-off of re-expanding the state right after a switch, not a crossing:
+        # deciding either by noise would flip the state back and forth forever.
+        if d > dtol:
+            return tau + max(-q, 0.0) / d, True
+    qn = -min(q, 0.0)
+    disc = np.sqrt(d * d + 2.0 * Q2 * qn)
+    if d > 0.0:
+        h = 2.0 * qn / (d + disc)
+    elif Q2 > 0.0:
+        h = (disc - d) / Q2
+    else:
+        return np.inf, True
+    return tau + max(h, hmin), False
+
+
+@nb.njit(cache=True)
 def _first_root(const, coef, lam, tau_limit, hmin, qnoise, dnoise, floor):
     """First tau in [0, tau_limit) where q = const + Re sum coef e^{lam tau} turns positive.
 
@@ -294,25 +320,9 @@ def _first_root(const, coef, lam, tau_limit, hmin, qnoise, dnoise, floor):
             d += (lam[i] * e).real
             dscale += abs(e) * abs(lam[i])
             Q2 += abs(e) * abs(lam[i]) ** 2
-        if q > -qtol:
-            dtol = QTOL_REL * dscale + NOISE_FACTOR * dnoise
-            if q > qtol and d >= -dtol:
-                return tau, it
-            # At the threshold a crossing needs q' > 0 beyond its round-off; otherwise it is a
-            # tangential graze. A q just past the threshold but falling back (q' < 0) is the
-            # round-off of re-expanding the state right after a switch, not a crossing:
-            # deciding either by noise would flip the state back and forth forever.
-            if d > dtol:
-                return tau + max(-q, 0.0) / d, it
-        qn = -min(q, 0.0)
-        disc = np.sqrt(d * d + 2.0 * Q2 * qn)
-        if d > 0.0:
-            h = 2.0 * qn / (d + disc)
-        elif Q2 > 0.0:
-            h = (disc - d) / Q2
-        else:
-            return np.inf, it
-        tau += max(h, hmin)
+        tau, found = _march_step(q, d, qtol, QTOL_REL * dscale + NOISE_FACTOR * dnoise, Q2, tau, hmin)
+        if found:
+            return tau, it
         if tau >= tau_limit:
             return np.inf, it
     return -1.0, MAX_MARCH_ITER
@@ -522,21 +532,9 @@ def _first_root_forced(const, coef, lam, Qp, poly, tau_limit, hmin, qnoise, dnoi
             pscale = ps
             dscale += pds
         qtol = QTOL_REL * (abs(const) + osc + pscale) + NOISE_FACTOR * qnoise
-        if q > -qtol:
-            dtol = QTOL_REL * dscale + NOISE_FACTOR * dnoise
-            if q > qtol and d >= -dtol:
-                return tau, it
-            if d > dtol:
-                return tau + max(-q, 0.0) / d, it
-        qn = -min(q, 0.0)
-        disc = np.sqrt(d * d + 2.0 * Q2 * qn)
-        if d > 0.0:
-            h = 2.0 * qn / (d + disc)
-        elif Q2 > 0.0:
-            h = (disc - d) / Q2
-        else:
-            return np.inf, it
-        tau += max(h, hmin)
+        tau, found = _march_step(q, d, qtol, QTOL_REL * dscale + NOISE_FACTOR * dnoise, Q2, tau, hmin)
+        if found:
+            return tau, it
         if tau >= tau_limit:
             return np.inf, it
     return -1.0, MAX_MARCH_ITER
