@@ -266,6 +266,19 @@ def _work(G, Gz, az, lam, tau, e):
 
 
 @nb.njit(cache=True)
+def _series_at(coef, lam, tau, q, d, dscale, Q2):
+    """Add the terms c_i e^{lam_i tau} to q, q' = Re sum lam_i c_i e^{lam_i tau}, the scale of q'
+    (sum |lam_i c_i e^{lam_i tau}|) and the bound Q2 = sum |lam_i|^2 |c_i e^{lam_i tau}| on |q''|."""
+    for i in range(lam.shape[0]):
+        e = coef[i] * np.exp(lam[i] * tau)
+        q += e.real
+        d += (lam[i] * e).real
+        dscale += abs(e) * abs(lam[i])
+        Q2 += abs(e) * abs(lam[i]) ** 2
+    return q, d, dscale, Q2
+
+
+@nb.njit(cache=True)
 def _march_step(q, d, qtol, dtol, Q2, tau, hmin):
     """One step of the root march at tau, from q, q' (known to within qtol, dtol) and Q2 >= |q''|
     ahead: (tau_root, True) at a crossing, else (tau + h, False) with h the largest step for which
@@ -310,16 +323,7 @@ def _first_root(const, coef, lam, tau_limit, hmin, qnoise, dnoise, floor):
     qtol = QTOL_REL * (abs(const) + osc) + NOISE_FACTOR * qnoise
     tau = 0.0
     for it in range(MAX_MARCH_ITER):
-        q = const
-        d = 0.0
-        dscale = 0.0
-        Q2 = 0.0
-        for i in range(N):
-            e = coef[i] * np.exp(lam[i] * tau)
-            q += e.real
-            d += (lam[i] * e).real
-            dscale += abs(e) * abs(lam[i])
-            Q2 += abs(e) * abs(lam[i]) ** 2
+        q, d, dscale, Q2 = _series_at(coef, lam, tau, const, 0.0, 0.0, 0.0)
         tau, found = _march_step(q, d, qtol, QTOL_REL * dscale + NOISE_FACTOR * dnoise, Q2, tau, hmin)
         if found:
             return tau, it
@@ -505,17 +509,8 @@ def _first_root_forced(const, coef, lam, Qp, poly, tau_limit, hmin, qnoise, dnoi
         return np.inf, 0
     tau = 0.0
     for it in range(MAX_MARCH_ITER):
-        q = const
-        d = 0.0
-        dscale = 0.0
-        Q2 = Q2p
         pscale = 0.0
-        for i in range(N):
-            e = coef[i] * np.exp(lam[i] * tau)
-            q += e.real
-            d += (lam[i] * e).real
-            dscale += abs(e) * abs(lam[i])
-            Q2 += abs(e) * abs(lam[i]) ** 2
+        q, d, dscale, Q2 = _series_at(coef, lam, tau, const, 0.0, 0.0, Q2p)
         if poly:
             pv = Qp[M]
             pd = M * Qp[M]
