@@ -20,6 +20,8 @@ Takes the meshes of :mod:`geometry` and hands sparse K, M with their DOF maps to
   :func:`~fem.analysis.analyse` -> :class:`~fem.analysis.ModalAnalysis` (Table 2 rows);
 - :mod:`fem.mac`: the modal assurance criterion, mode shapes read and written as universal
   files (dataset 55) or CSV;
+- :mod:`fem.uff`: test channels (time histories at a node and direction, with quantity and SI
+  unit) written and read as universal file dataset 58, bit for bit in binary records;
 - :mod:`fem.calibrate`: model updating of the open parameters against Table 2 (least
   squares in log parameters, with sensitivities);
 - :mod:`fem.contact`: the impact tips as one gap coordinate per tip (RBE3 rows), the tied

@@ -115,3 +115,42 @@ def test_load_as_a_table_not_an_array_is_refused(tmp_path):
     path.write_text(f'[model]\nkind = "discrete"\n[load]\n{HAMMER}\n[ringdown]\n')
     rc, lines = _check(str(path))
     assert rc == 2 and len(lines) == 1 and "array of tables" in lines[0]
+
+
+def test_uff58_channels_round_trip_bit_for_bit(tmp_path):
+    from fem.uff import TimeHistory, read_uff58, write_uff58
+
+    rng = np.random.default_rng(1)
+    chans = [TimeHistory("hammer", 1, -3, "force", rng.standard_normal(500), 5e-5),
+             TimeHistory("beam_s1:z", 101, 3, "acceleration", 1e3 * rng.standard_normal(500), 5e-5, 0.25),
+             TimeHistory("tip_lc1", 201, 3, "reaction_force", rng.standard_normal(500), 5e-5)]
+    write_uff58(tmp_path / "t.uff", chans)
+    back = read_uff58(tmp_path / "t.uff")
+    assert [(c.name, c.node, c.direction, c.quantity, c.unit) for c in back] == \
+        [(c.name, c.node, c.direction, c.quantity, c.unit) for c in chans]
+    for a, b in zip(chans, back):
+        assert np.array_equal(a.data, b.data) and a.dt_s == b.dt_s and a.t0_s == b.t0_s
+
+
+def test_tabulated_load_from_uff58_picks_the_excitation_force(tmp_path):
+    from fem.uff import TimeHistory, write_uff58
+
+    t_force = np.array([0.0, 1.0, 4.0, 1.0, 0.0])
+    write_uff58(tmp_path / "test.uff", [TimeHistory("beam_s1:z", 101, 3, "acceleration", np.ones(5), 1e-3),
+                                        TimeHistory("hammer", 1, -3, "force", t_force, 1e-3)])
+    scene = load_scene(_scene(tmp_path, f'kind = "tabulated"\nfile = "{tmp_path / "test.uff"}"'))
+    sig = scene.load_signals[0]
+    assert np.array_equal(sig.force_N, t_force) and sig(0.0025) == pytest.approx(2.5)
+
+
+@pytest.mark.parametrize("quantity,unit,key", [("acceleration", None, "forces"),
+                                               ("force", "kN", "unit 'kN'")])
+def test_uff58_without_a_usable_force_is_refused(tmp_path, quantity, unit, key):
+    from fem.uff import TimeHistory, write_uff58
+
+    write_uff58(tmp_path / "bad.uff", [TimeHistory("ch", 1, 3, quantity, np.ones(5), 1e-3)])
+    if unit:  # a hand-edited unit label
+        text = (tmp_path / "bad.uff").read_bytes().replace(b"N                   ", b"kN                  ", 1)
+        (tmp_path / "bad.uff").write_bytes(text)
+    rc, lines = _check(_scene(tmp_path, f'kind = "tabulated"\nfile = "{tmp_path / "bad.uff"}"'))
+    assert rc == 2 and len(lines) == 1 and key in lines[0], lines

@@ -279,31 +279,20 @@ def read_force_history(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _read_uff58_force(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    import pyuff
+    from fem.uff import UffError, read_uff58
 
     try:
-        sets = pyuff.UFF(str(path)).read_sets()
-    except Exception as exc:  # pyuff raises many types on a bad file
-        raise LoadError(f"file {str(path)!r}: not a readable UFF file ({type(exc).__name__})") from None
-    sets = [sets] if isinstance(sets, dict) else list(sets)
-    recs = [s for s in sets if s.get("type") == 58]
-    if not recs:
-        raise LoadError(f"file {str(path)!r}: no UFF 58 (function) record")
-    if len(recs) > 1:
-        forces = [s for s in recs if s.get("ordinate_spec_data_type") in (9, 13)]
-        if len(forces) != 1:
-            raise LoadError(f"file {str(path)!r}: {len(recs)} UFF 58 records and {len(forces)} of them are "
-                            "forces (ordinate type 13 or 9); keep exactly one force record")
-        recs = forces
-    rec = recs[0]
-    if rec.get("func_type") not in (1, None):
-        raise LoadError(f"file {str(path)!r}: the UFF 58 record is function type {rec.get('func_type')}, "
-                        "not a time response (1)")
-    t = np.asarray(rec["x"], float)
-    p = np.asarray(rec["data"])
-    if np.iscomplexobj(p):
-        raise LoadError(f"file {str(path)!r}: the UFF 58 record is complex; a force history is real")
-    return t, p.astype(float)
+        channels = read_uff58(path)
+    except UffError as exc:
+        raise LoadError(f"file {exc}") from None
+    forces = [c for c in channels if c.quantity in ("force", "reaction_force")]
+    excitation = [c for c in forces if c.quantity == "force"]
+    if len(excitation) == 1:
+        forces = excitation  # the hammer or shaker force among load-cell records
+    if len(forces) != 1:
+        raise LoadError(f"file {str(path)!r}: {len(channels)} UFF 58 records and {len(forces)} of them are "
+                        "forces (ordinate type 13 or 9); keep exactly one force record")
+    return forces[0].t, forces[0].data
 
 
 @dataclass(frozen=True, eq=False)
