@@ -24,6 +24,7 @@ COPIES = 3  # a stage holds its result, a derived series (energy, points) and a 
 HEADROOM = 0.8  # of the available memory a scene may plan to use
 JACOBIAN_COPIES = 4  # HB: Jacobian, its LU factors, the AFT blocks and a continuation copy
 FLOAT = 8  # bytes
+HILL_COPIES = 6  # FRC Hill: the real matrix, its Hessenberg/Schur work copies, complex eigenvalue output
 
 
 @dataclass(frozen=True, slots=True)
@@ -92,6 +93,13 @@ def estimates(scene: Scene) -> list[Estimate]:
     if scene.nnm is not None:
         out.append(Estimate("nnm", COPIES * scene.nnm.n_energy * 64 * FLOAT,
                             f"{scene.nnm.n_energy} energies", "[nnm] n_energy"))
+    if scene.frc is not None:
+        f = scene.frc
+        H = max((f.harmonics, *f.convergence_harmonics))
+        size = 2 * (2 * H + 1) * n  # Hill's method: the first-order form of the quadratic eigenproblem
+        out.append(Estimate("frc", HILL_COPIES * size**2 * FLOAT,
+                            f"Hill matrices of {size} x {size} (H = {H}, {n} DOFs)",
+                            "[frc] harmonics or convergence_harmonics"))
     if scene.work_precision is not None:
         w = scene.work_precision
         runs = len(w.explicit_omega_dt) + len(w.dop853_rtol) + 1

@@ -3,8 +3,8 @@
 Subcommands follow the pipeline (geometry -> fem -> reduced -> results):
 ``modal`` (mesh and modal analysis), ``reduce`` (Craig-Bampton onto the tips),
 ``ringdown``, ``nnm``, ``study`` (error against run time, stiff cases), ``verify``
-(reduction against the discrete model), ``run`` (every stage of one or more scenes; all
-built-in scenes when none is named), ``check`` (validate scenes, their memory and the
+(reduction against the discrete model), ``frc`` (forced-response curves), ``run`` (every
+stage of one or more scenes; all built-in scenes when none is named), ``check`` (validate scenes, their memory and the
 results folder without running anything) and ``scenes``.
 Bad input gives a one-line message and exit code 2, before any work starts; nothing
 half-written is left behind. Every command ends with a summary naming the results folder.
@@ -58,6 +58,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("study", help="error against run time, stiff and extreme cases")
     _add_common(p)
     p = sub.add_parser("verify", help="verify the reduced model against the discrete model")
+    _add_common(p)
+    p = sub.add_parser("frc", help="forced-response curves by harmonic balance, stepped sine and stability")
     _add_common(p)
     p = sub.add_parser("run", help="every stage of the named scenes (all built-in scenes if none)")
     p.add_argument("scenes", nargs="*", metavar="SCENE", help="scene names or TOML files")

@@ -55,6 +55,12 @@ def _verify(scene: Scene, writer: StageWriter, progress: bool, **_) -> None:
     verify_stage(scene, writer, progress)
 
 
+def _frc(scene: Scene, writer: StageWriter, progress: bool, **_) -> None:
+    from bearingshaft.stages.frc import frc_stage
+
+    frc_stage(scene, writer, progress)
+
+
 STAGES: dict[str, Callable] = {
     "modal": _modal,
     "reduce": _reduce,
@@ -62,6 +68,7 @@ STAGES: dict[str, Callable] = {
     "nnm": _nnm,
     "study": _study,
     "verify": _verify,
+    "frc": _frc,
 }
 
 
@@ -71,7 +78,7 @@ def run_stage(scene: Scene, stage: str, out_dir: str | Path, progress: bool = Tr
     if stage not in scene.stages:
         tables = {"ringdown": "[ringdown]", "nnm": "[nnm]",
                   "study": "[work_precision], [stiff_cases] or [rom_convergence]",
-                  "modal": "[modal]", "verify": "[verify]",
+                  "modal": "[modal]", "verify": "[verify]", "frc": "[frc]",
                   "reduce": '[model] kind = "rom"'}
         raise StageUnavailable(
             f"scene {scene.name!r} has no {tables.get(stage, stage)} table, so it has no {stage} stage "
