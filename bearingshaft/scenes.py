@@ -19,6 +19,7 @@ to run, a table absent is a stage skipped (and so never built). Layout::
     [stiff_cases]    stiff and extreme parameter sweep              -> stage study
     [rom_convergence] reduced model against its mode count          -> stage study (kind "rom")
     [verify]         reduction against the discrete model           -> stage verify (kind "rom")
+    [frc]            forced-response curves by HB, stepped sine, stability (issue 11) -> stage frc
 
 Unknown keys, wrong types and invalid values raise :class:`SceneError` with a one-line
 message naming the table and key.
@@ -380,6 +381,48 @@ class VerifySpec:
         _positive(self, "duration_s", "sample_rate_hz", "energy_max_J", "window_s", "fmax_hz")
 
 
+@dataclass(frozen=True, slots=True)
+class FRCSpec:
+    """Forced-response curves by HB under a harmonic load at one point, verified by a stepped
+    sine of the exact integrator (issue 11) -> stage frc (reduced.periodic.frc)."""
+
+    point: str = "x2"  # where the load P cos(2 pi f t) acts (a point name)
+    levels_N: tuple[float, ...] = (0.1, 1.0, 10.0)  # N, load amplitudes P: one curve each
+    freq_min_hz: float = 10.0  # Hz, each curve starts here (from rest at the lowest level)
+    freq_max_hz: float = 900.0  # Hz, and ends where it leaves the band
+    harmonics: int = 15  # H of the curves in frc.csv and frc.png
+    odd_harmonics: bool = True  # odd harmonics only (a half-wave symmetric response; stability sees all)
+    convergence_harmonics: tuple[int, ...] = (1, 3, 5, 9, 15, 21, 25, 31)  # H of the error-against-H study
+    convergence_level_N: float = 1.0  # N, the level of that study
+    max_steps: int = 3000  # continuation steps per curve at most
+    hill_points: int = 40  # Hill's method on at most this many points per curve (0: none)
+    shooting_points: int = 12  # Floquet multipliers by shooting on the exact flow, points per curve (0: none)
+    shooting_segments: int = 8  # segments of the multiple shooting
+    stepped_sine_points: int = 24  # frequencies per level, each swept up and down (0: no stepped sine)
+    stepped_sine_tol: float = 1e-6  # settled when the predicted distance to the periodic orbit is below this
+    stepped_sine_max_s: float = 10.0  # s, simulated time per frequency at most before "not settled"
+    backbone_scales: tuple[float, ...] = (1.0, 0.1, 0.01)  # damping and load scaled together (backbone check)
+
+    def __post_init__(self) -> None:
+        _each(self, "levels_N", lambda v: v > 0, "> 0 N")
+        _positive(self, "freq_min_hz", "freq_max_hz", "convergence_level_N", "stepped_sine_max_s")
+        _check(self.freq_max_hz > self.freq_min_hz,
+               f"freq_max_hz must exceed freq_min_hz = {self.freq_min_hz!r} Hz, got {self.freq_max_hz!r}")
+        _check(1 <= self.harmonics <= MAX_HARMONICS,
+               f"harmonics must be in [1, {MAX_HARMONICS}], got {self.harmonics!r}")
+        _each(self, "convergence_harmonics", lambda h: 1 <= h <= MAX_HARMONICS, f"in [1, {MAX_HARMONICS}]")
+        if self.odd_harmonics:
+            _check(self.harmonics % 2 == 1, f"harmonics must be odd with odd_harmonics = true, got {self.harmonics!r}")
+            _each(self, "convergence_harmonics", lambda h: h % 2 == 1, "odd with odd_harmonics = true")
+        _check(self.max_steps >= 1, f"max_steps must be >= 1, got {self.max_steps!r}")
+        _check(self.hill_points >= 0, f"hill_points must be >= 0, got {self.hill_points!r}")
+        _check(self.shooting_points >= 0, f"shooting_points must be >= 0, got {self.shooting_points!r}")
+        _check(self.shooting_segments >= 1, f"shooting_segments must be >= 1, got {self.shooting_segments!r}")
+        _check(self.stepped_sine_points >= 0, f"stepped_sine_points must be >= 0, got {self.stepped_sine_points!r}")
+        _tolerance(self, "stepped_sine_tol")
+        _each(self, "backbone_scales", lambda v: 0 < v <= 1, "in (0, 1] (damping and load scaled down together)")
+
+
 def _assembly_model():
     from fem.model import AssemblyModel  # imported only for 3-D scenes: no scikit-fem otherwise
 
@@ -405,9 +448,10 @@ SECTIONS: dict[str, type] = {
     "stiff_cases": StiffCasesSpec,
     "rom_convergence": RomConvergenceSpec,
     "verify": VerifySpec,
+    "frc": FRCSpec,
 }
 
-STAGES = ("modal", "reduce", "ringdown", "nnm", "study", "verify")
+STAGES = ("modal", "reduce", "ringdown", "nnm", "study", "verify", "frc")
 
 
 @dataclass(frozen=True, slots=True)
@@ -433,6 +477,7 @@ class Scene:
     stiff_cases: StiffCasesSpec | None = None
     rom_convergence: RomConvergenceSpec | None = None
     verify: VerifySpec | None = None
+    frc: FRCSpec | None = None
 
     @property
     def stages(self) -> tuple[str, ...]:
@@ -445,6 +490,7 @@ class Scene:
             "study": self.work_precision is not None or self.stiff_cases is not None
             or self.rom_convergence is not None,
             "verify": self.verify is not None,
+            "frc": self.frc is not None,
         }
         return tuple(s for s in STAGES if wanted[s])
 
@@ -591,6 +637,16 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
                                  f"at or after the end of the run ([ringdown] duration_s = {duration!r} s)")
     if "fep" in sections and "nnm" not in sections:
         raise SceneError(f"{origin}: [fep] needs an [nnm] table (its energy range and grid)")
+    frc = sections.get("frc")
+    if frc is not None:
+        if frc.point not in dof_names:
+            raise SceneError(f"{origin} [frc] point: unknown point {frc.point!r}{suggest(frc.point, dof_names)} "
+                             f"(known: {', '.join(dof_names)})")
+        damping = (model.c,) if kind == "discrete" else (model.c_points, model.alpha)
+        if not any(d > 0 for d in damping):
+            raise SceneError(f"{origin} [frc]: the model has no damping ([model] "
+                             f"{'c' if kind == 'discrete' else 'c_points or alpha'} = 0), so no forced response "
+                             "settles and the curves have no peak; give the model damping")
     if ("spectrogram" in sections or "symmetry" in sections) and "ringdown" not in sections:
         raise SceneError(f"{origin}: [spectrogram] and [symmetry] need a [ringdown] table")
     return Scene(name=name, description=description, model_kind=kind, model=model, source=text, origin=origin,
@@ -625,4 +681,4 @@ def load_scene(name_or_path: str) -> Scene:
     return parse_scene(text, name_or_path, f"scene {name_or_path}")
 
 
-__all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "builtin_names", "from_table"]
+__all__ = ["Scene", "SceneError", "FRCSpec", "load_scene", "parse_scene", "builtin_names", "from_table"]
