@@ -52,7 +52,6 @@ from reduced.periodic.backbones import nnm_branch
 from reduced.periodic.continuation import ContinuationError
 from reduced.periodic.frc import (
     HILL_TOL,
-    ForcedResidual,
     ShootingError,
     _synthesis,
     floquet_by_shooting,
@@ -60,9 +59,10 @@ from reduced.periodic.frc import (
     frc,
     hb_states,
     max_abs_over_period,
+    solution_at_frequency,
 )
 from reduced.periodic.frc import stepped_sine as run_stepped_sine
-from reduced.periodic.hb import NewtonError, _derivative_matrix, newton
+from reduced.periodic.hb import NewtonError, _derivative_matrix
 from reduced.transient.flow import Flow
 from reduced.transient.integrate import ringdown
 
@@ -140,41 +140,6 @@ def _sweep_freqs(spec, br, load_col: int) -> np.ndarray:
         pts += near + fill
     pts = np.array([f for f in pts if spec.freq_min_hz <= f <= spec.freq_max_hz])
     return np.unique(np.round(pts, 9))
-
-
-def hb_at_frequency(br, freq_hz: float, amplitude_ref: float | None = None, load_col: int = 0,
-                    stable_only: bool = True):
-    """(amplitudes (p,), index of the piece, X (2H+1, n)) of the HB solution exactly at ``freq_hz`` on
-    the piece of the curve bracketing it (stable at both ends if ``stable_only``) whose amplitude
-    at the load point is nearest ``amplitude_ref``: Newton at fixed frequency from the
-    interpolated point. (None, -1, None) where no such piece brackets the frequency."""
-    res = ForcedResidual(br.balance, br.x_ref, 2 * np.pi * br.freq_hz.max())
-    nz = res.size
-    lw = math.log(2 * np.pi * freq_hz / res.omega_ref)
-    f = br.freq_hz
-    best = (None, -1, None)
-    for i in range(len(f) - 1):
-        if not (min(f[i], f[i + 1]) <= freq_hz <= max(f[i], f[i + 1])) or f[i] == f[i + 1]:
-            continue
-        if stable_only and not (br.stable[i] and br.stable[i + 1]):
-            continue
-        t = (freq_hz - f[i]) / (f[i + 1] - f[i])
-        guess = ((1 - t) * br.z[i] + t * br.z[i + 1]) / br.x_ref
-
-        def fun(v):
-            R, J = res(np.append(v, lw))
-            return R, J[:, :nz]
-
-        try:
-            v = newton(fun, guess, tol=1e-12, max_iter=30).y
-        except NewtonError:
-            continue
-        X = br.balance.response(v * br.x_ref, 2 * np.pi * freq_hz)
-        amp = max_abs_over_period(X, br.point_rows)
-        if best[0] is None or (amplitude_ref is not None
-                               and abs(amp[load_col] - amplitude_ref) < abs(best[0][load_col] - amplitude_ref)):
-            best = (amp, i, X)
-    return best
 
 
 def orbit_amplitude(system, loads, orbit, rows) -> np.ndarray:
@@ -284,7 +249,7 @@ def _frc_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
                     row[f"amplitude_{nm}_m"] = sig(float(amp_ss[c]), DIGITS)
                 err, hb_amp = "", ""
                 if ss.response[j] in ("periodic", "settling") and not isinstance(br, Exception):
-                    a, _, _ = hb_at_frequency(br, float(f), float(amp_ss[load_col]), load_col)
+                    a, _, _ = solution_at_frequency(br, float(f), float(amp_ss[load_col]), load_col)
                     if a is not None:
                         hb_amp = sig(float(a[load_col]), DIGITS)
                         err = sig(float(np.max(np.abs(a / amp_ss - 1.0))), ERR_DIGITS)
@@ -384,11 +349,11 @@ def _frc_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
             row.update({"status": "failed", "n_points": 0})
         else:  # computed without stability: every piece counts, the nearest in amplitude is taken
             e_ss = [np.max(np.abs(a / amp - 1.0)) for f, amp in ref_ss
-                    for a in [hb_at_frequency(bc, f, float(amp[load_col]), load_col)[0]] if a is not None]
+                    for a in [solution_at_frequency(bc, f, float(amp[load_col]), load_col)[0]] if a is not None]
             # the exact orbit nearest this H's orbit at each target frequency: multiple shooting from it
             e_sh, fails = [], 0
             for f, a_ref in targets:
-                a, _, X = hb_at_frequency(bc, f, a_ref, load_col)
+                a, _, X = solution_at_frequency(bc, f, a_ref, load_col)
                 if a is None:
                     fails += 1
                     continue
@@ -679,4 +644,4 @@ def _plot_convergence(path, conv_rows, timing_rows, Pc) -> None:
     plt.close(fig)
 
 
-__all__ = ["frc_stage", "hb_at_frequency", "orbit_amplitude"]
+__all__ = ["frc_stage", "orbit_amplitude"]

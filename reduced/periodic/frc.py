@@ -784,6 +784,42 @@ def _frc(fb, f0, f1, rows, names, x_ref, ds, ds_max, max_steps, max_angle_deg, s
                      time.perf_counter() - t1, notes)
 
 
+def solution_at_frequency(br: FRCBranch, freq_hz: float, amplitude_ref: float | None = None, col: int = 0,
+                          stable_only: bool = True):
+    """(amplitudes (p,), index of the piece, X (2H+1, n)) of the HB solution exactly at ``freq_hz`` on
+    the piece of the curve bracketing it (stable at both ends if ``stable_only``) whose amplitude
+    at point ``col`` is nearest ``amplitude_ref``: Newton at fixed frequency from the
+    interpolated point. (None, -1, None) where no such piece brackets the frequency."""
+    res = ForcedResidual(br.balance, br.x_ref, 2 * np.pi * br.freq_hz.max())
+    nz = res.size
+    lw = math.log(2 * np.pi * freq_hz / res.omega_ref)
+    f = br.freq_hz
+    best = (None, -1, None)
+    for i in range(len(f) - 1):
+        if not (min(f[i], f[i + 1]) <= freq_hz <= max(f[i], f[i + 1])) or f[i] == f[i + 1]:
+            continue
+        if stable_only and not (br.stable[i] and br.stable[i + 1]):
+            continue
+        t = (freq_hz - f[i]) / (f[i + 1] - f[i])
+        guess = ((1 - t) * br.z[i] + t * br.z[i + 1]) / br.x_ref
+
+        def fun(v):
+            R, J = res(np.append(v, lw))
+            return R, J[:, :nz]
+
+        try:
+            v = newton(fun, guess, tol=1e-12, max_iter=30).y
+        except NewtonError:
+            continue
+        X = br.balance.response(v * br.x_ref, 2 * np.pi * freq_hz)
+        amp = max_abs_over_period(X, br.point_rows)
+        if best[0] is None or (amplitude_ref is not None
+                               and abs(amp[col] - amplitude_ref) < abs(best[0][col] - amplitude_ref)):
+            best = (amp, i, X)
+    return best
+
+
+
 # -- Floquet multipliers by shooting on the forced exact flow --------------------------------------
 @dataclass(frozen=True, eq=False)
 class ForcedOrbit:
@@ -1063,6 +1099,7 @@ __all__ = [
     "floquet_by_shooting",
     "hb_states",
     "stepped_sine",
+    "solution_at_frequency",
     "slowest_decay_rate",
     "SteppedSine",
     "RESPONSES",
