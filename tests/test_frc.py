@@ -22,7 +22,6 @@ from reduced.periodic.frc import (
     ForcedBalance,
     bifurcations,
     floquet_by_shooting,
-    forced_hill,
     frc,
     hb_states,
     linear_frf,
@@ -98,7 +97,8 @@ def test_contact_intervals_of_a_cosine():
     a[0], a[1] = -math.cos(0.3), 1.0
     alpha, beta = contact_intervals(a, _derivative_matrix(H), 64)
     assert alpha.size == 1
-    assert alpha[0] == pytest.approx(2 * np.pi - 0.3, abs=1e-14) and beta[0] == pytest.approx(2 * np.pi + 0.3, abs=1e-14)
+    assert alpha[0] == pytest.approx(2 * np.pi - 0.3, abs=1e-14)
+    assert beta[0] == pytest.approx(2 * np.pi + 0.3, abs=1e-14)
     # and a sin(3 tau) - 0.5: three intervals of equal length
     b = np.zeros(2 * H + 1)
     b[0], b[6] = -0.5, 1.0
@@ -338,19 +338,20 @@ def test_frc_stage_writes_its_files_and_reruns_byte_for_byte(tmp_path, monkeypat
     assert ss and max(float(r["rel_err_hb"]) for r in ss) < 1e-5
 
 
-def test_frc_scene_refusals(tmp_path):
+def test_frc_scene_refusals(tmp_path, capsys):
     from bearingshaft.cli import main
 
     data = tomllib.loads(_quick_scene())
-    for change, word in (({"point": "x9"}, "point"), ({"harmonics": 4}, "harmonics"),
-                         ({"freq_max_hz": 5.0}, "freq_max_hz"), ({"backbone_scales": [2.0]}, "backbone_scales")):
-        d = {**data, "frc": {**data["frc"], **change}}
-        path = tmp_path / "bad.toml"
+    path = tmp_path / "bad.toml"
+    for change, word in (({"point": "x9"}, "[frc] point"), ({"harmonics": 4}, "harmonics must be odd"),
+                         ({"freq_max_hz": 5.0}, "freq_max_hz"), ({"backbone_scales": [2.0]}, "backbone_scales[0]"),
+                         ({"model": {"kind": "discrete", "c": 0.0}}, "no damping")):
+        d = {**data, **{k: v for k, v in change.items() if k == "model"},
+             "frc": {**data["frc"], **{k: v for k, v in change.items() if k != "model"}}}
         path.write_text(tomli_w.dumps(d))
         assert main(["check", "--scene", str(path), "--out", str(tmp_path / "o")]) == 2
-    d = {**data, "model": {"kind": "discrete", "c": 0.0}}
-    path.write_text(tomli_w.dumps(d))
-    assert main(["check", "--scene", str(path), "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and word in err[0], err
     assert not (tmp_path / "o").exists()
 
 
