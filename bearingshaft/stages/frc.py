@@ -111,9 +111,10 @@ def _events(br, load_col: int) -> np.ndarray:
         return np.zeros(0)
     st, f = br.stable, br.freq_hz
     ev = list(f[br.folds])
-    change = np.flatnonzero(st[1:] != st[:-1])
-    if change.size:
-        ev += [f[change[0]], f[change[-1] + 1]]
+    for idx in br.pieces():
+        change = np.flatnonzero(st[idx][1:] != st[idx][:-1])
+        if change.size:
+            ev += [f[idx][change[0]], f[idx][change[-1] + 1]]
     if not ev:
         ev = [f[int(np.argmax(br.amplitude_m[:, load_col]))]]
     return np.unique(ev)
@@ -171,7 +172,8 @@ def _frc_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
             stats["curves"][f"{P:g} N"] = f"failed: {br}"
         else:
             stats["curves"][f"{P:g} N"] = {
-                "points": len(br.freq_hz), "status": br.status, "folds_hz": [sig(f, 6) for f in br.freq_hz[br.folds]],
+                "points": len(br.freq_hz), "status": br.status, "notes": br.notes,
+                "folds_hz": [sig(f, 6) for f in br.freq_hz[br.folds]],
                 "unstable_points": int(np.sum(~br.stable)), "wall_s": round(br.wall_s, 3),
                 "stability_wall_s": round(br.stability_wall_s, 3)}
         curves[P] = br
@@ -276,7 +278,8 @@ def _frc_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
                 for c, nm in enumerate(names):
                     rows_csv.append({"level": P, "method": "hb", "harmonics": H, "freq_hz": sig(br.freq_hz[i], DIGITS),
                                      "point": nm, "amplitude_m": sig(float(br.amplitude_m[i, c]), DIGITS),
-                                     "stable": _bool(br.stable[i]), "bifurcation": labels[i], "response": ""})
+                                     "stable": _bool(br.stable[i]), "bifurcation": labels[i], "response": "",
+                                     "segment": int(br.segment[i])})
                     for kk in range(min(br.H, 9) + 1):
                         a = float(br.harmonic_amplitude_m[i, c, kk])
                         if spec.odd_harmonics and kk % 2 == 0:
@@ -318,7 +321,7 @@ def _frc_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
                                      "freq_hz": sig(float(f), DIGITS), "point": nm,
                                      "amplitude_m": sig(float(ss.amplitude_m[j, c]), DIGITS),
                                      "stable": _bool(ss.response[j] != "not_settled"), "bifurcation": "",
-                                     "response": ss.response[j]})
+                                     "response": ss.response[j], "segment": ""})
     write_rows(writer.path("frc.csv"), rows_csv)
     write_rows(writer.path("frc_harmonics.csv"), harm_rows)
     write_rows(writer.path("frc_bifurcations.csv"), bif_rows,
@@ -368,7 +371,8 @@ def _frc_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
                 e_sh.append(float(np.max(np.abs(a / orbit_amplitude(system, loads, orb, rows) - 1.0))))
             fo = bc.freq_hz[bc.folds] if bc.folds else np.zeros(0)
             row.update({
-                "status": bc.status, "n_points": len(bc.freq_hz), "f_reached_hz": sig(float(bc.freq_hz[-1]), DIGITS),
+                "status": bc.status, "n_points": len(bc.freq_hz),
+                "f_reached_hz": sig(float(bc.freq_hz[bc.segment == 0][-1]), DIGITS),
                 "n_folds": len(bc.folds),
                 "highest_fold_hz": sig(float(fo.max()), DIGITS) if fo.size else "",
                 "lowest_fold_hz": sig(float(fo.min()), DIGITS) if fo.size else "",
@@ -536,12 +540,12 @@ def _plot_frc(path, curves, sweeps, bb, names, spec, title, load_col) -> None:
                 col = colors[P]
                 if isinstance(br, Exception):
                     continue
-                a = br.amplitude_m[:, c]
-                ax.plot(br.freq_hz, np.where(br.stable, a, np.nan), "-", color=col, lw=1.1,
-                        label=f"{P:g} N, HB H={br.H}")
-                uns = ~br.stable
-                edge = uns | np.roll(uns, 1) | np.roll(uns, -1)  # join the dashed pieces to the solid ones
-                ax.plot(br.freq_hz, np.where(edge, a, np.nan), "--", color=col, lw=0.7)
+                for idx in br.pieces():
+                    a, fr, stb = br.amplitude_m[idx, c], br.freq_hz[idx], br.stable[idx]
+                    ax.plot(fr, np.where(stb, a, np.nan), "-", color=col, lw=1.1, label=f"{P:g} N, HB H={br.H}")
+                    uns = ~stb
+                    edge = uns | np.roll(uns, 1) | np.roll(uns, -1)  # join the dashed pieces to the solid ones
+                    ax.plot(fr, np.where(edge, a, np.nan), "--", color=col, lw=0.7)
                 for d, mk in (("up", "^"), ("down", "v")):
                     ss = sweeps.get(P, {}).get(d)
                     if ss is None:

@@ -523,11 +523,20 @@ class FRCBranch:
     folds: list
     balance: ForcedBalance
     x_ref: float
-    status: str
+    status: str  # continue_branch's status of each piece, joined by "+" ("stop": left the band)
     n_rejected: int
     wall_s: float  # continuation and amplitudes
     stability_wall_s: float = 0.0  # monodromy and Hill
     notes: list = field(default_factory=list)
+    segment: np.ndarray | None = None  # (k,) continued piece of each point (0; 1 for a second piece, see frc)
+
+    def __post_init__(self) -> None:
+        if self.segment is None:
+            self.segment = np.zeros(len(self.freq_hz), int)
+
+    def pieces(self) -> list[np.ndarray]:
+        """Indices of the points of each continued piece (points of different pieces are not joined)."""
+        return [np.flatnonzero(self.segment == k) for k in np.unique(self.segment)]
 
     @property
     def max_multiplier(self) -> np.ndarray:
@@ -575,7 +584,9 @@ def frc(
     load : (n,) force direction b (a point's row for a force at that point)
     amplitude_N : N, P > 0
     f_min_hz, f_max_hz : Hz, the band; the curve starts at f_min and stops when it leaves the
-        band (above f_max, or below f_min after a fold)
+        band (above f_max, or below f_min after a fold). If it ends inside the band (the step
+        fell below its minimum in an internal-resonance tongue, or ``max_steps``), a second
+        piece is continued down from f_max (``FRCBranch.segment``; the notes say where each ended)
     H : harmonics; ``harmonics`` "all" or "odd" (half-wave symmetric response, module docstring)
     N : phases bracketing the extrema of each contact coordinate (default
         :func:`reduced.periodic.exact_hb.default_root_samples`)
@@ -736,22 +747,49 @@ def _frc(fb, f0, f1, rows, names, x_ref, ds, ds_max, max_steps, max_angle_deg, s
         t = tangent(res(y_new)[1], d / dn)
         return abs(float(t @ d)) < cos_secant * dn
 
-    y0 = _start(res, w0)
     # where a stop first closes the curve turns sharply (the stop force grows like the 3/2 power
     # of the excess amplitude): continue_branch's corner steps may fix a fundamental coefficient
     kp = list(fb.keep)
     corner = tuple(int(kp.index(h) * fb.u + r) for h in (1, 2) if h in kp for r in range(fb.u))
-    try:
-        br = continue_branch(res, y0, param=i_w, direction=1.0, ds=ds, ds_max=ds_max, max_steps=max_steps,
-                             max_angle_deg=max_angle_deg, stop=stop, progress=prog, monitor=corner, reject=reject)
-    except ContinuationError as exc:
-        raise ContinuationError(f"FRC at {fb.amplitude_N:g} N, H = {fb.H}: {exc}") from None
-    Y = br.y
-    if len(Y) > 1 and stop(Y[-1]):  # the last point lies just past the band
-        Y = Y[:-1]
+
+    def piece(w_start, direction, steps):
+        try:
+            return continue_branch(res, _start(res, w_start), param=i_w, direction=direction, ds=ds, ds_max=ds_max,
+                                   max_steps=steps, max_angle_deg=max_angle_deg, stop=stop, progress=prog,
+                                   monitor=corner, reject=reject)
+        except ContinuationError as exc:
+            raise ContinuationError(f"FRC at {fb.amplitude_N:g} N, H = {fb.H}: {exc}") from None
+
+    pieces = [piece(w0, 1.0, max_steps)]
+    notes = []
+    if pieces[0].status != "stop":
+        # the curve ended inside the band (an internal-resonance tongue it could not pass): take it
+        # up again from the top of the band, downwards, as a second segment (not joined to the first)
+        f_end = w1 * math.exp(pieces[0].y[-1][i_w]) / (2 * np.pi)
+        notes.append(f"segment 0 ended early ({pieces[0].status}) at {f_end:.4g} Hz; segment 1 continued "
+                     f"down from {f1:g} Hz")
+        try:
+            pieces.append(piece(w1 * (1.0 - 1e-9), -1.0, max_steps))
+        except ContinuationError as exc:
+            notes.append(f"segment 1 failed: {exc}")
+    Ys, seg, folds, n_rej, status = [], [], [], 0, []
+    for k, br in enumerate(pieces):
+        Y = br.y
+        if len(Y) > 1 and stop(Y[-1]):  # the last point lies just past the band
+            Y = Y[:-1]
+        folds += [i + sum(len(y) for y in Ys) for i, c in br.folds if c == i_w and i < len(Y)]
+        Ys.append(Y)
+        seg.append(np.full(len(Y), k))
+        n_rej += br.n_rejected
+        status.append(br.status)
+    if len(pieces) > 1 and pieces[1].status != "stop":
+        notes.append(f"segment 1 ended early ({pieces[1].status}) at "
+                     f"{w1 * math.exp(pieces[1].y[-1][i_w]) / (2 * np.pi):.4g} Hz")
+    Y = np.concatenate(Ys)
+    segment = np.concatenate(seg)
+    folds = sorted(set(folds))
     Z = Y[:, :i_w] * x_ref
     omega = w1 * np.exp(Y[:, i_w])
-    folds = sorted({i for i, c in br.folds if c == i_w and i < len(Y)})
     X = np.array([fb.response(z, w) for z, w in zip(Z, omega, strict=True)])
     amp = np.array([max_abs_over_period(x, rows) for x in X])
     harm = np.array([harmonic_amplitudes(x, rows) for x in X])
@@ -762,7 +800,7 @@ def _frc(fb, f0, f1, rows, names, x_ref, ds, ds_max, max_steps, max_angle_deg, s
         mu = np.array([multipliers_of(orbit_monodromy(fb.system, fb.contact(fb.full_q(z))[2], w))
                        for z, w in zip(Z, omega, strict=True)])
         stable = np.max(np.abs(mu), axis=1) <= 1.0 + STABILITY_TOL
-        bif = bifurcations(mu, STABILITY_TOL, folds)
+        bif = [b for b in bifurcations(mu, STABILITY_TOL, folds) if segment[b[0]] == segment[b[0] - 1]]
         k = len(Z)
         if hill_points is None or hill_points >= k:
             hidx = np.arange(k)
@@ -776,12 +814,9 @@ def _frc(fb, f0, f1, rows, names, x_ref, ds, ds_max, max_steps, max_angle_deg, s
         stable = np.ones(len(Z), bool)
         bif = [(i, "fold") for i in folds]
         hidx, hill = np.zeros(0, int), np.zeros((0, n2), complex)
-    notes = []
-    if br.status != "stop":
-        notes.append(f"continuation ended early ({br.status}) at {omega[-1] / (2 * np.pi):.4g} Hz")
     return FRCBranch(fb.amplitude_N, fb.H, "odd" if fb.odd else "all", omega / (2 * np.pi), omega, X, Z, names,
-                     rows, amp, harm, mu, stable, hidx, hill, bif, folds, fb, x_ref, br.status, br.n_rejected, wall,
-                     time.perf_counter() - t1, notes)
+                     rows, amp, harm, mu, stable, hidx, hill, bif, folds, fb, x_ref, "+".join(status), n_rej, wall,
+                     time.perf_counter() - t1, notes, segment)
 
 
 def solution_at_frequency(br: FRCBranch, freq_hz: float, amplitude_ref: float | None = None, col: int = 0,
@@ -797,6 +832,8 @@ def solution_at_frequency(br: FRCBranch, freq_hz: float, amplitude_ref: float | 
     best = (None, -1, None)
     for i in range(len(f) - 1):
         if not (min(f[i], f[i + 1]) <= freq_hz <= max(f[i], f[i + 1])) or f[i] == f[i + 1]:
+            continue
+        if br.segment[i] != br.segment[i + 1]:
             continue
         if stable_only and not (br.stable[i] and br.stable[i + 1]):
             continue
@@ -953,19 +990,24 @@ class SteppedSine:
         return np.array([r != "not_settled" for r in self.response])
 
 
-def slowest_decay_rate(system: GapSystem) -> float:
-    """1/s, the smallest -Re(lam) of the state matrices with every stop open and with one stop of
-    every tip closed: the slowest linear transient decays like exp(-rate t)."""
+def slowest_decay_rate(system: GapSystem, load: np.ndarray | None = None) -> float:
+    """1/s, the smallest -Re(lam) of the damped modes of the all-open and the closed state (those
+    the load moves, modal force above 1e-9 of the largest, if ``load`` is given): the slowest
+    linear transient a sweep starts decays like exp(-rate t). (A mode the load leaves
+    at rest, such as a reduced beam's antisymmetric bending with a node at every dashpot,
+    would otherwise set hours of settling.)"""
     rates = []
-    for active in (np.zeros(system.m, bool), None):
-        if active is None:
-            Ks = system.closed_stiffness()
-            n = system.n
-            Minv = np.linalg.inv(system.M)
-            A = np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ Ks, -Minv @ system.C]])
-        else:
-            A = state_matrix(system, active)
-        rates.append(float(np.min(-np.linalg.eigvals(A).real)))
+    n = system.n
+    Minv = np.linalg.inv(system.M)
+    for K in (system.K, system.closed_stiffness()):
+        A = np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ K, -Minv @ system.C]])
+        lam, V = np.linalg.eig(A)
+        keep = np.ones(lam.size, bool)
+        if load is not None:
+            # the modal force of the load on each eigenvector (left eigenvectors: rows of V^-1)
+            part = np.abs(np.linalg.inv(V)[:, n:] @ (Minv @ np.asarray(load, float)))
+            keep = part > 1e-9 * part.max()
+        rates.append(float(np.min(-lam[keep].real)))
     rate = min(rates)
     if not rate > 0.0:
         raise _check.InvalidArgument("system must be damped for a stepped sine to settle (a linear state has a "
@@ -1010,7 +1052,7 @@ def stepped_sine(system: GapSystem, load: np.ndarray, amplitude_N: float, freq_h
     n = system.n
     y = np.zeros(2 * n) if y0 is None else _check.vector("y0", y0, 2 * n)
     pair = [names.index(m) for m in mirror] if all(m in names for m in mirror) else None
-    t_min = math.log(1.0 / settle_tol) / slowest_decay_rate(system)
+    t_min = min(math.log(1.0 / settle_tol) / slowest_decay_rate(system, b), max_settle_s)
     out = {k: [] for k in ("amp", "resp", "err", "settle", "asym", "wall")}
     for i, f in enumerate(freqs):
         t0 = time.perf_counter()
