@@ -606,7 +606,10 @@ def _plot_backbone(path, bb_curves, bb, names, load_col, spec) -> None:
         ax.plot(f, amps[:, load_col], ":", color="k", lw=1.5, label=f"NNM {r + 1} backbone (nnm stage, H=1)")
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlim(spec.freq_min_hz, spec.freq_max_hz)
+    peaks = [_peak(bc, load_col) for bc in bb_curves.values()]
+    if peaks:  # around the peaks: off resonance the scaled load only shifts each curve down
+        ax.set_xlim(spec.freq_min_hz, min(1.5 * max(f for f, _ in peaks), spec.freq_max_hz))
+        ax.set_ylim(0.3 * min(a for _, a in peaks), 3.0 * max(a for _, a in peaks))
     ax.set_xlabel("excitation frequency [Hz]")
     ax.set_ylabel(f"max |{names[load_col]}| [m]")
     ax.set_title("FRC peaks (dots) approach the backbones as damping and load go to zero together (HB H=1)",
