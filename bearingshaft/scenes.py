@@ -597,10 +597,10 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
     if "modal" in sections:
         raise SceneError(f"{origin}: [modal] needs a 3-D model (kind = \"assembly\"), not {kind!r}")
     if kind == "rom":
-        for key in ("nnm", "fep", "work_precision"):
+        for key in ("work_precision",):  # [nnm] and [fep] run on a reduced model too (stages/fep.py)
             if key in sections:
                 raise SceneError(f"{origin}: [{key}] is for the discrete model; a reduced model has "
-                                 "[ringdown], [stiff_cases], [rom_convergence] and [verify]")
+                                 "[ringdown], [nnm], [fep], [stiff_cases], [rom_convergence] and [verify]")
     else:
         for key in ("rom_convergence", "verify"):
             if key in sections:

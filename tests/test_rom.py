@@ -220,7 +220,7 @@ def test_reduce_and_ringdown_cli(tmp_path, monkeypatch, capsys):
         ('[model]\nkind = "rom"\nn_modes = -1\n', "n_modes must be an integer >= 0"),
         ('[model]\nkind = "rom"\nlayout = "beam-free"\n', "layout must be one of"),
         ('[model]\nkind = "rom"\ngap = nan\n', "must be finite"),
-        ('[model]\nkind = "rom"\n[nnm]\n', "[nnm] is for the discrete model"),
+        ('[model]\nkind = "rom"\n[work_precision]\n', "[work_precision] is for the discrete model"),
         ('[model]\nkind = "rom"\nrom_file = "/no/such/rom.npz"\n', "rom_file: no such file"),
         ('[model]\nkind = "discrete"\n[verify]\n', "[verify] needs a reduced model"),
     ],

@@ -63,8 +63,18 @@ class NNMBranch:
         return sum(len(b.y) for b in self.branches)
 
 
-def harmonic_ratio(hb: HarmonicBalance, X: np.ndarray) -> tuple[float, int]:
-    """Largest mass-norm amplitude of a harmonic k >= 2 over that of the fundamental, and k."""
+TONGUE_MEASURES = ("displacement", "velocity")
+
+
+def harmonic_ratio(hb: HarmonicBalance, X: np.ndarray, measure: str | int = "displacement") -> tuple[float, int]:
+    """Largest mass-norm amplitude of a harmonic k >= 2 over that of the fundamental, and k.
+
+    ``measure = "velocity"`` weighs harmonic k by k (k a_k / a_1, the square root of its
+    kinetic energy over the fundamental's): a k:1 resonance with a mode far above the NNM
+    (a reduced model's local modes) holds most of the energy while its displacement is
+    still small (k a_k / a_1 = 1 at k = 11 is a displacement ratio of 0.09). ``measure`` may
+    also be a harmonic number k: that harmonic's velocity ratio k a_k / a_1.
+    """
     Xm = hb.unpack(X)
     amp = np.array(
         [
@@ -74,11 +84,17 @@ def harmonic_ratio(hb: HarmonicBalance, X: np.ndarray) -> tuple[float, int]:
     )
     if hb.H < 2 or amp[0] == 0.0:
         return 0.0, 1
+    if not isinstance(measure, str):  # one harmonic's velocity ratio
+        k = int(measure)
+        return float(k * amp[k - 1] / amp[0]), k
+    if measure == "velocity":
+        amp = amp * np.arange(1, hb.H + 1)
     k = int(np.argmax(amp[1:])) + 2
     return float(amp[k - 1] / amp[0]), k
 
 
 TONGUE_RATIO = 1.0  # a harmonic k >= 2 larger than the fundamental: an internal resonance
+STALL_FRACTION = 0.1  # tongue_measure "velocity": a frequency rising 10 times slower than before has stalled
 STEP_OVER_DW = (0.01, 0.02, 0.05, 0.1, 0.2, 0.35)  # tried relative frequency jumps past a tongue
 
 
@@ -111,6 +127,7 @@ class _TongueWatch:
     energy_max_J: float
     tongue_ratio: float
     follow_steps: int
+    velocity_watch: bool = False  # also enter a tongue when a harmonic's velocity ratio exceeds tongue_ratio
     tongues: list = field(default_factory=list)
     notes: list = field(default_factory=list)
     in_tongue: bool = False
@@ -119,11 +136,37 @@ class _TongueWatch:
     count: int = 0  # points of this piece so far
     bend_at: int | None = None  # point at which the frequency began to fall with rising energy
     bend: tuple | None = None  # (harmonic, energy_J, w_max) there
+    entered_by: int | None = None  # the harmonic whose velocity ratio entered the tongue (velocity_watch)
+    ys: list = field(default_factory=list)  # this piece's points (velocity_watch)
+    Es: list = field(default_factory=list)  # J, their energies
 
     def reset(self) -> None:
         """Start a new piece: not in a tongue, no bend, no points."""
         self.in_tongue = False
         self.w_max, self.E_prev, self.count, self.bend_at, self.bend = -np.inf, -np.inf, 0, None, None
+        self.entered_by, self.ys, self.Es = None, [], []
+
+    def stalled(self, k: int) -> bool:
+        """Whether the frequency has stalled since harmonic k's velocity ratio was last below
+        tongue_ratio / 3: its log-log slope against the energy since then is below
+        STALL_FRACTION of the slope over as wide an energy span just before (a tongue's
+        plateau, as opposed to the backbone's steady rise or its flattening at high energy,
+        where no harmonic grows)."""
+        hb, i_w = self.res.hb, self.res.hb.size
+        r = np.array([harmonic_ratio(hb, y[: hb.size], k)[0] for y in self.ys])
+        quiet = np.flatnonzero(r < self.tongue_ratio / 3.0)
+        if not quiet.size or quiet[-1] == len(self.ys) - 1:
+            return False
+        a = int(quiet[-1])
+        E, w = np.array(self.Es), np.array([y[i_w] for y in self.ys])
+        span = np.log(E[-1] / E[a])
+        before = np.flatnonzero(np.log(E[a] / E[: a + 1]) >= span)
+        b = int(before[-1]) if before.size else 0
+        if b == a or span <= 0.0:
+            return False
+        slope_now = np.log(w[-1] / w[a]) / span
+        slope_before = np.log(w[a] / w[b]) / np.log(E[a] / E[b])
+        return bool(slope_now < STALL_FRACTION * slope_before)
 
     def __call__(self, y: np.ndarray) -> bool:
         """Whether continuation stops at y (the energy reached, or a tongue entered)."""
@@ -138,6 +181,13 @@ class _TongueWatch:
             if r > self.tongue_ratio:
                 self.in_tongue = True
                 return True
+            if self.velocity_watch:
+                self.ys.append(y)
+                self.Es.append(E)
+                rv, kv = harmonic_ratio(hb, y[: hb.size], "velocity")
+                if rv > self.tongue_ratio and self.stalled(kv):
+                    self.in_tongue, self.entered_by = True, kv
+                    return True
             # on the backbone of a hardening gap system the frequency rises with the energy;
             # a frequency that falls while the energy rises is the bend into a tongue: follow
             # it for up to follow_steps points, hoping it returns above its highest frequency
@@ -176,10 +226,17 @@ class _TongueWatch:
         self.notes.append(f"{k}:1 internal resonance at E = {E_a:.4g} J, {f_a:.2f} Hz: could not step over")
 
 
-def _last_backbone_point(hb: HarmonicBalance, Y: np.ndarray, tongue_ratio: float) -> int:
-    """Index in Y of the last point clearly off a tongue (small ratio, frequency at its running maximum)."""
+def _last_backbone_point(hb: HarmonicBalance, Y: np.ndarray, tongue_ratio: float,
+                         measure: str | int = "displacement") -> int:
+    """Index in Y of the last point clearly off a tongue (small ratio, frequency at its running maximum).
+
+    With ``measure = "velocity"`` (or a harmonic number) the last point whose harmonics (or
+    that harmonic) carry little energy: a k:1 tongue with a much higher mode shows in the
+    energy before it shows in the displacements (a displacement ratio of 1/3 at k = 5 is
+    already 2.8 times the fundamental's kinetic energy); see :func:`_nnm_branch`.
+    """
     i_w = hb.size
-    r = np.array([harmonic_ratio(hb, y[: hb.size])[0] for y in Y])
+    r = np.array([harmonic_ratio(hb, y[: hb.size], measure)[0] for y in Y])
     w_max = np.maximum.accumulate(Y[:, i_w])
     keep = np.flatnonzero((r < tongue_ratio / 3.0) & (Y[:, i_w] >= w_max))
     return int(keep[-1]) if keep.size else 0
@@ -268,6 +325,7 @@ def _nnm_branch(
     tongue_ratio: float = TONGUE_RATIO,
     max_tongues: int = 60,
     follow_steps: int = 100,
+    tongue_measure: str = "displacement",
     progress=None,
 ) -> NNMBranch:
     """Continue NNM ``mode`` (0-based) by HB with H harmonics until energy >= energy_max_J.
@@ -288,12 +346,26 @@ def _nnm_branch(
     a higher energy is found; continuation restarts there. Each tongue is reported in
     ``tongues`` with action "stepped over" (or "followed"); if no jump
     lands, the run ends with action "stopped" (never a silent jump).
+
+    A step-over that finds no landing is retried from the last point quiet by energy
+    (velocity ratio, :func:`harmonic_ratio`, below tongue_ratio / 3): at a resonance with a
+    mode far above the NNM the anchor may already hold more energy than the backbone past
+    the tongue. ``tongue_measure = "velocity"`` (reduced models) also enters a tongue when
+    a harmonic's velocity ratio k a_k / a_1 exceeds ``tongue_ratio`` while the frequency
+    has stalled (:meth:`_TongueWatch.stalled`; an impact's own harmonics have velocity
+    ratios near 1/k... up to 1 without any resonance) and anchors it at the last point
+    where that harmonic's velocity ratio was below tongue_ratio / 3: a reduced
+    model's NNMs meet k:1 resonances with local modes 10-100 times their frequency, whose
+    displacements stay small, so that by displacement alone a tongue is entered unseen and
+    followed as if it were the backbone (seen: NNM 2 of rom-fep at H = 15 held 827 Hz from
+    12 to 99 J on its 11:1 resonance with the 9.1 kHz mode). The default "displacement"
+    is the 3-DOF model's (results/discrete-fep).
     """
     t0 = time.perf_counter()
     res, ystart, omega0 = _nnm_start(system, mode, H, N, energy_start_J)
     hb = res.hb
     i_w, i_a = hb.size, hb.size + 2
-    watch = _TongueWatch(res, energy_max_J, tongue_ratio, follow_steps)
+    watch = _TongueWatch(res, energy_max_J, tongue_ratio, follow_steps, tongue_measure == "velocity")
     backbone1 = None
     pieces = []  # (Branch, indices of its points kept)
     steps_left = max_steps
@@ -307,14 +379,28 @@ def _nnm_branch(
             pieces.append((br, np.arange(len(br.y))))
             break
         last = _last_backbone_point(hb, br.y, tongue_ratio)  # keep the backbone up to there
+        if watch.entered_by is not None:  # entered by a harmonic's energy: anchor where it was small
+            last = min(last, _last_backbone_point(hb, br.y, tongue_ratio, watch.entered_by))
         pieces.append((br, np.arange(last + 1)))
-        k = harmonic_ratio(hb, br.y[-1][: hb.size])[1]
+        k = watch.entered_by or harmonic_ratio(hb, br.y[-1][: hb.size])[1]
         anchor, E_a = br.y[last], float(br.data[last])
         f_a = anchor[i_w] * omega0 / (2 * np.pi)
         if backbone1 is None:
             one = _nnm_branch(system, mode, H=1, energy_max_J=energy_max_J, energy_start_J=energy_start_J)
             backbone1 = one.branches[0].y
         landed = _step_over(res, anchor, E_a, backbone1, system.n * 3, tongue_ratio)  # n * 3: H = 1 size
+        if landed is None:
+            # fallback: the anchor may already be in the tongue by energy (a high harmonic of
+            # a stiff mode: reduced models), so that every landing has less energy than it.
+            # Judge the landing against the last point quiet by energy, and keep the branch
+            # only up to there
+            quiet = _last_backbone_point(hb, br.y[: last + 1], tongue_ratio, "velocity")
+            E_q = float(br.data[quiet])
+            if quiet < last and E_q < E_a:
+                landed = _step_over(res, anchor, E_q, backbone1, system.n * 3, tongue_ratio)
+                if landed is not None:
+                    pieces[-1] = (br, np.arange(quiet + 1))
+                    E_a, f_a = E_q, br.y[quiet][i_w] * omega0 / (2 * np.pi)
         if landed is None or steps_left <= 0:
             watch.stopped(k, E_a, f_a)
             break
@@ -358,7 +444,7 @@ def _check_branch_options(system: GapSystem, mode: int, options: dict) -> None:
     _check.gap_system(system)
     _check.integer("mode", mode, lo=0, hi=system.n - 1)
     known = ("H", "N", "energy_max_J", "energy_start_J", "ds", "ds_max", "max_steps", "max_angle_deg",
-             "tongue_ratio", "max_tongues", "follow_steps", "progress")
+             "tongue_ratio", "max_tongues", "follow_steps", "tongue_measure", "progress")
     for key in options:
         if key not in known:
             raise _check.InvalidArgument(f"unknown option {key!r} (known: {', '.join(known)})")
@@ -375,6 +461,9 @@ def _check_branch_options(system: GapSystem, mode: int, options: dict) -> None:
             _check.integer(key, options[key])
     if "max_tongues" in options:
         _check.integer("max_tongues", options["max_tongues"], lo=0)
+    if options.get("tongue_measure", "displacement") not in TONGUE_MEASURES:
+        raise _check.InvalidArgument(f"tongue_measure must be one of {', '.join(TONGUE_MEASURES)}, "
+                                     f"got {options['tongue_measure']!r}")
     _check.callback("progress", options.get("progress"))
 
 

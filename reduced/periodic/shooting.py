@@ -102,17 +102,25 @@ def shoot(
     ref: int | None = None,
     tol: float = 1e-14,
     max_iter: int = 30,
+    stall: int | None = None,
+    max_events: int | None = None,
 ) -> PeriodicOrbit:
     """The periodic orbit of energy ``energy_J`` nearest the guess (x0, v0, period_s).
 
     ``flow`` must be the exact flow of an undamped system (see :func:`conservative`).
-    Raises :class:`ShootingError` if Gauss-Newton fails.
+    Raises :class:`ShootingError` if Gauss-Newton fails, or, with ``stall``, as soon as
+    ``stall`` iterations have not halved the residual (a guess outside the basin: on a
+    reduced model each iteration of a hopeless start costs up to 0.2 s). With
+    ``max_events``, an iterate whose period holds more contact events counts as a failed
+    flow (a chattering iterate far from any NNM orbit, which has a few impacts per period:
+    its flow costs ~1 ms an event).
     """
     with single_thread_blas():
-        return _shoot(flow, x0, v0, period_s, energy_J, ref=ref, tol=tol, max_iter=max_iter)
+        return _shoot(flow, x0, v0, period_s, energy_J, ref=ref, tol=tol, max_iter=max_iter, stall=stall,
+                      max_events=max_events)
 
 
-def _shoot(flow, x0, v0, period_s, energy_J, *, ref, tol, max_iter) -> PeriodicOrbit:
+def _shoot(flow, x0, v0, period_s, energy_J, *, ref, tol, max_iter, stall=None, max_events=None) -> PeriodicOrbit:
     t0 = time.perf_counter()
     system = flow.system
     if not system.undamped:
@@ -132,6 +140,8 @@ def _shoot(flow, x0, v0, period_s, energy_J, *, ref, tol, max_iter) -> PeriodicO
 
     def evaluate(x, v, T):
         fl = flow(x, v, T, jacobian=True)
+        if max_events is not None and fl.n_events > max_events:
+            raise ExactIntegratorError(f"{fl.n_events} contact events in one period (more than {max_events})")
         y0 = np.concatenate([x, v])
         r = np.concatenate(
             [(fl.y - y0) / rs, [v[ref] / (w * xs)], [(system.energy(x, v) - energy_J) / energy_J]]
@@ -143,6 +153,7 @@ def _shoot(flow, x0, v0, period_s, energy_J, *, ref, tol, max_iter) -> PeriodicO
     except ExactIntegratorError as exc:
         raise ShootingError(f"the flow failed at the initial guess: {exc}") from None
     best = None
+    history = []
     for it in range(1, max_iter + 1):
         J = np.zeros((2 * n + 2, 2 * n + 1))
         J[: 2 * n, : 2 * n] = (fl.jacobian - np.eye(2 * n)) / rs[:, None]
@@ -155,6 +166,9 @@ def _shoot(flow, x0, v0, period_s, energy_J, *, ref, tol, max_iter) -> PeriodicO
             best = (rn, x.copy(), v.copy(), T, fl, it)
         if rn < tol * 10.0:
             break
+        history.append(rn)
+        if stall is not None and len(history) > stall and rn > 0.5 * history[-1 - stall]:
+            raise ShootingError(f"stalled: residual {rn:.3g} after {it} iterations ({stall} without halving it)")
         dz = -np.linalg.lstsq(J, r, rcond=None)[0] * D
         if np.max(np.abs(dz[:n])) < 1e-16 * xs and it > 2:
             break
@@ -286,6 +300,28 @@ def shoot_multiple(
                          sum(fl.n_events for fl in segs), time.perf_counter() - t0)
 
 
+def _guide_point(g, E: float, at_energy: bool) -> tuple[np.ndarray, float]:
+    """(X, omega) of HB branch g nearest energy E in log; with ``at_energy`` corrected onto E
+    within the same piece of branch (kept if Newton converges within 5 % of its frequency)."""
+    i = int(np.argmin(np.abs(np.log(g.energy_J / E))))
+    if at_energy:
+        from reduced.periodic.backbones import hb_point_at_energy
+        from reduced.periodic.hb import NewtonError
+
+        seg = g.segment[i]
+        j = i - int(np.flatnonzero(g.segment == seg)[0])  # a piece keeps a prefix of its Branch's points
+        y0 = g.branches[seg].y[j]
+        try:
+            y = hb_point_at_energy(g.residual, y0, float(E))
+        except NewtonError:
+            y = None
+        if y is not None:
+            X, omega = g.residual.X_omega(y)
+            if abs(omega / g.omega[i] - 1.0) < 0.05:
+                return X, omega
+    return g.X[i], g.omega[i]
+
+
 def _mac(M, a, b) -> float:
     return float((a @ M @ b) ** 2 / ((a @ M @ a) * (b @ M @ b)))
 
@@ -300,6 +336,10 @@ def shooting_branch(
     max_iter: int = 25,
     max_substeps: int = 2,
     use_multiple: bool = False,
+    stall: int | None = None,
+    max_events: int | None = None,
+    pick: str = "first",
+    guide_at_energy: bool = False,
 ):
     """Orbits at increasing energies along an NNM: natural-parameter continuation in energy.
 
@@ -314,8 +354,19 @@ def shooting_branch(
     unstable (|mu| ~ 1e2) and single shooting has a small basin: when every guess fails,
     multiple shooting (:func:`shoot_multiple`) is tried from the guides' orbits if
     ``use_multiple`` (off by default, see the code), then the energy step from the
-    previous orbit is halved (in log) up to ``max_substeps`` times. Returns a list with a
-    :class:`PeriodicOrbit` or None per energy.
+    previous orbit is halved (in log) up to ``max_substeps`` times. ``stall`` and
+    ``max_events`` are passed to :func:`shoot` (give up a guess that does not halve the
+    residual in that many iterations; refuse iterates with more events per period).
+    ``pick = "nearest"`` tries every guess and keeps, of the accepted orbits, the one
+    nearest the first guide's frequency, instead of the first accepted ("first"): a reduced
+    model's exact flow has neighbouring orbit families that pass the shape test (seen on
+    rom-fep: NNM 3 at 65 J continued onto an orbit 0.3 % below the one every converged HB
+    branch agrees with to 1e-6). With ``guide_at_energy`` each guide's guess is its point
+    nearest in log energy corrected onto the energy E by Newton
+    (:func:`reduced.periodic.backbones.hb_point_at_energy`), not the point itself: on a
+    sparse branch (a few tens of points over nine decades) the nearest point can lie a
+    factor 2 away in energy; the first guide's frequency there is then the reference of
+    the frequency test and of ``pick``. Returns a list with a :class:`PeriodicOrbit` or None per energy.
     """
     g0 = guides[0]
     order = np.argsort(g0.energy_J)
@@ -346,27 +397,34 @@ def shooting_branch(
             ratio = f_guide(prev.energy_J) / f_guide(E)
             guesses.append((prev.x0 * sc, prev.v0 * sc, prev.period_s * ratio))
             guesses.append((prev.x0 * sc, prev.v0 * sc, prev.period_s))
-        for g in guides:
-            i = int(np.argmin(np.abs(np.log(g.energy_J / E))))
-            x, v = g.residual.hb.time_series(g.X[i], g.omega[i])
-            guesses.append((x[0], v[0], 2 * np.pi / g.omega[i]))
+        f_ref = f_guide(E)
+        for k, g in enumerate(guides):
+            X, omega = _guide_point(g, E, guide_at_energy)
+            x, v = g.residual.hb.time_series(X, omega)
+            guesses.append((x[0], v[0], 2 * np.pi / omega))
+            if k == 0 and guide_at_energy:
+                f_ref = omega / (2 * np.pi)  # the first guide at exactly E, not interpolated
         if prev is not None and E / prev.energy_J < 3.0:
             shape_ref = prev.x0  # the last exact orbit of this branch is the better shape
         else:
             i0 = int(np.argmin(np.abs(np.log(g0.energy_J / E))))
             shape_ref = g0.residual.hb.time_series(g0.X[i0])[0]
-        f_ref = f_guide(E)
+        found = []
         for x0, v0, T in guesses:
             if not T > 0.0:
                 continue
             try:
-                o = shoot(flow, x0, v0, T, E, max_iter=max_iter)
+                o = shoot(flow, x0, v0, T, E, max_iter=max_iter, stall=stall, max_events=max_events)
             except (ShootingError, RuntimeError):
                 continue
             # the same NNM: near the guide's frequency and the same shape (mass-weighted
             # MAC of the turning-point displacement; NNM 2 and NNM 3 are orthogonal)
             if abs(o.freq_hz / f_ref - 1.0) < max_rel_jump and _mac(flow.system.M, o.x0, shape_ref) > min_mac:
-                return o
+                if pick == "first":
+                    return o
+                found.append(o)
+        if found:
+            return min(found, key=lambda o: abs(o.freq_hz / f_ref - 1.0))
         # opt-in: multiple shooting from the guides' orbits (near grazing single shooting's
         # basin is too small). Off by default: in the discrete-fep run it also converged to
         # a neighbouring family 4.5 % off NNM 2 that passed even the strict shape test, and

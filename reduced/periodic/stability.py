@@ -53,19 +53,46 @@ class HillResult:
         return self.max_multiplier <= 1.0 + self.tol
 
 
-def hill(hb: HarmonicBalance, X: np.ndarray, omega: float, tol: float = HILL_TOL) -> HillResult:
-    """Floquet exponents and multipliers of the HB solution (X, omega) by Hill's method."""
+HILL_SOLVERS = ("qz", "standard")
+
+
+def hill(hb: HarmonicBalance, X: np.ndarray, omega: float, tol: float = HILL_TOL,
+         solver: str = "qz", strict_zone: bool = False) -> HillResult:
+    """Floquet exponents and multipliers of the HB solution (X, omega) by Hill's method.
+
+    ``solver``: "qz" solves the pencil (A, B) as it stands (QZ); "standard" multiplies by
+    B^-1 first, which is cheap because J2 = kron(I, M) is block diagonal, and solves
+    B^-1 A with the Hessenberg QR, about 3 times faster (1.2 s against 0.37 s at n = 12,
+    H = 15). Both give the same exponents up to round-off (the multipliers of a reduced
+    model agree to ~1e-5: Hill's eigenvalues are ill-conditioned); the 3-DOF results were
+    made with "qz" and are kept so, bit for bit.
+
+    The 2n exponents kept are those of smallest |Im lam|; with ``strict_zone`` only those in
+    the first zone itself, |Im lam| <= omega / 2 (at most 2n). A model with modes above
+    H omega (a reduced model's local modes, up to 78 kHz) has fewer than 2n exponents in the
+    first zone: the 2n smallest |Im| then include copies from the zone edge |Im| = omega,
+    truncation artefacts with |mu| up to 1.05 on orbits that Floquet finds stable.
+    """
+    if solver not in HILL_SOLVERS:
+        raise ValueError(f"solver must be one of {', '.join(HILL_SOLVERS)}, got {solver!r}")
     J0, J1, J2 = hb.hill_matrices(X, omega)
     nX = hb.size
     n = hb.n
     Z = np.zeros((nX, nX))
     I = np.eye(nX)
-    A = np.block([[Z, I], [-J0, -J1]])
-    B = np.block([[I, Z], [Z, J2]])
-    lam = eig(A, B, right=False)
+    if solver == "standard":
+        Minv = np.linalg.inv(hb.M)
+        J2inv = np.kron(np.eye(2 * hb.H + 1), Minv)  # J2 = kron(I, M)
+        lam = np.linalg.eigvals(np.block([[Z, I], [-J2inv @ J0, -J2inv @ J1]]))
+    else:
+        A = np.block([[Z, I], [-J0, -J1]])
+        B = np.block([[I, Z], [Z, J2]])
+        lam = eig(A, B, right=False)
     lam = lam[np.isfinite(lam)]
     # each exponent recurs shifted by i k omega: keep the copies in the first zone
     keep = np.argsort(np.abs(lam.imag), kind="stable")[: 2 * n]
+    if strict_zone:
+        keep = keep[np.abs(lam[keep].imag) <= 0.5 * omega * (1.0 + 1e-9)]
     lam = lam[keep]
     T = 2.0 * np.pi / omega
     mu = np.exp(lam * T)
@@ -96,4 +123,4 @@ def compare(energy_J, floquet_max, floquet_stable, hill_max, hill_stable) -> Sta
     return StabilityComparison(np.asarray(energy_J, float), fm, np.asarray(hill_max, float), fs, hs, agree)
 
 
-__all__ = ["HillResult", "hill", "compare", "StabilityComparison", "HILL_TOL"]
+__all__ = ["HillResult", "hill", "compare", "StabilityComparison", "HILL_TOL", "HILL_SOLVERS"]

@@ -1,0 +1,162 @@
+"""NNMs of the reduced model (scene rom-fep): HB backbones, shooting, stability and the fep stage.
+
+The reduced model is rom-fep's (beam-grounded, 10 planar modes: 12 coordinates), from the
+model cache (built once, about 8 s, if absent).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+
+import numpy as np
+import pytest
+
+from bearingshaft.output import StageWriter
+from bearingshaft.scenes import load_scene, parse_scene
+from bearingshaft.stages.fep import fep_model
+from bearingshaft.stages.nnm import nnm_stage
+from reduced.models.discrete import DiscreteParams
+from reduced.models.modes import gap_moving_modes, linear_modes
+from reduced.periodic import nnm2
+from reduced.periodic.backbones import START_FRACTION, grazing_amplitude, hb_point_at_energy, nnm_branch
+from reduced.periodic.hb import HarmonicBalance, NNMResidual
+from reduced.periodic.shooting import conservative, shoot
+from reduced.periodic.stability import hill
+from reduced.transient.flow import Flow
+
+
+@pytest.fixture(scope="module")
+def fm():
+    return fep_model(load_scene("rom-fep"))
+
+
+def test_the_nnms_followed_are_the_open_gap_modes_that_move_the_gaps(fm):
+    assert fm.kind == "rom" and fm.exact is None and fm.system.n == 12 and fm.system.undamped
+    assert fm.modes == (0, 1, 2)  # heave, pitch, first coupled bending, as the 3-DOF model's three
+    assert tuple(gap_moving_modes(fm.system, "open", 3)) == fm.modes
+    f = linear_modes(fm.system, "open").freq_hz[list(fm.modes)]
+    assert f == pytest.approx([17.98, 23.02, 731.36], abs=0.01)  # results/rom-impulse/gap_modes.csv
+    # the 3-DOF model: the same three NNMs, and its exact NNM 2 relation as the reference
+    d = fep_model(load_scene("discrete-fep"))
+    assert d.kind == "discrete" and d.modes == (0, 1, 2) and d.exact.nnm == 1
+    p = DiscreteParams()
+    assert d.exact.freq_hz(np.array([0.1, 10.0])) == pytest.approx(nnm2.frequency_from_energy(p, [0.1, 10.0]))
+    assert d.shooting == {} and d.branch == {} and d.hill == {}  # discrete-fep as it was
+
+
+@pytest.mark.parametrize("H", [1, 5])
+@pytest.mark.parametrize("k", [0, 1, 2])
+def test_rom_backbone_starts_at_the_linear_open_gap_frequency(fm, k, H):
+    """Below the grazing energy the HB orbit is the linear open-gap mode: its frequency is the
+    mode's to round-off, for every H, until the mode first touches a stop."""
+    mode = fm.modes[k]
+    lin = linear_modes(fm.system, "open")
+    omega = float(lin.omega[mode])
+    E_graze = 0.5 * omega**2 * grazing_amplitude(fm.system, lin.phi[:, mode]) ** 2  # J, linear modal energy
+    b = nnm_branch(fm.system, mode, H=H, energy_max_J=3.0 * E_graze, **fm.branch)
+    assert b.energy_J[0] == pytest.approx(START_FRACTION**2 * E_graze, rel=1e-9)
+    below = b.energy_J < 0.99 * E_graze
+    assert below.sum() >= 2
+    assert b.freq_hz[below] == pytest.approx(lin.freq_hz[mode], rel=1e-9)
+    assert b.freq_hz[-1] > lin.freq_hz[mode] * (1 + 1e-3)  # and hardens once the tips touch
+
+
+# (NNM, energy [J]): above the last tongue of each NNM and away from grazing, where rom-fep's
+# study (results/rom-fep/fep.md) found HB at H = 5 within 2e-6 of shooting
+HB_VS_SHOOTING = [(0, 1.3e3), (1, 3.0e3), (2, 2.0e2), (2, 1.2e3)]
+# HB against shooting: 1e-5. The study's H = 5 errors there are 1e-7 - 2e-6 (the truncation of
+# five harmonics and N = 512 AFT samples); exact orbits of neighbouring families of the reduced
+# model lie 1e-5 - 4e-5 apart (fep.md), so a tighter tolerance would also need the energies
+# chosen off those, and a looser one (1e-4) would accept a neighbour as the NNM
+HB_SHOOTING_RTOL = 1e-5
+
+
+@pytest.mark.parametrize(("k", "E"), HB_VS_SHOOTING)
+def test_hb_agrees_with_shooting_on_the_rom(fm, k, E):
+    b = nnm_branch(fm.system, fm.modes[k], H=5, energy_max_J=1.5 * E, **fm.branch)
+    i = int(np.argmin(np.abs(np.log(b.energy_J / E))))
+    seg = b.segment[i]
+    y0 = b.branches[seg].y[i - int(np.flatnonzero(b.segment == seg)[0])]
+    y = hb_point_at_energy(b.residual, y0, E)
+    X, omega = b.residual.X_omega(y)
+    x, v = b.residual.hb.time_series(X, omega)
+    orbit = shoot(Flow(fm.system), x[0], v[0], 2 * np.pi / omega, E)
+    assert orbit.energy_J == pytest.approx(E, rel=1e-12) and orbit.closure < 1e-9
+    f_hb = omega / (2 * np.pi)
+    assert f_hb == pytest.approx(orbit.freq_hz, rel=HB_SHOOTING_RTOL), f"{f_hb / orbit.freq_hz - 1:.2e}"
+    # stability: Hill on the HB orbit (first zone only, both solvers) and Floquet on the exact
+    # orbit agree; Hill's multipliers to 2 % (truncation at H = 5, AFT Jacobian of a kink)
+    qz = hill(b.residual.hb, X, omega, strict_zone=True)
+    std = hill(b.residual.hb, X, omega, **fm.hill)
+    assert std.max_multiplier == pytest.approx(qz.max_multiplier, rel=1e-4)  # Hill's eigenvalues: ill-conditioned
+    assert qz.stable == std.stable == orbit.stable
+    assert std.max_multiplier == pytest.approx(orbit.max_multiplier, rel=0.02)
+
+
+@pytest.mark.parametrize("system_of", ["discrete", "rom"])
+def test_nnm_residual_cached_operators_are_bit_for_bit_the_hb_operators(fm, system_of):
+    """NNMResidual builds its Kronecker products once and scatters the AFT Jacobian: the same
+    float operations as HarmonicBalance's, so the 3-DOF results do not move by a bit."""
+    system = conservative(DiscreteParams().system()) if system_of == "discrete" else fm.system
+    rng = np.random.default_rng(7)
+    for H in (1, 4):
+        hb = HarmonicBalance.for_system(system, H)
+        res = NNMResidual(hb, 2 * np.pi * 100.0, 0)
+        touched = 0
+        for _ in range(6):
+            y = rng.normal(size=res.size) * 1e-2
+            y[hb.size], y[hb.size + 1], y[hb.size + 2] = 1.0 + rng.random(), 0.0, -3.0 + 2.0 * rng.random()
+            _, J = res(y)
+            X, omega = res.X_omega(y)
+            _, J0, _ = hb.residual(X, omega)
+            assert np.array_equal(J[: hb.size, : hb.size], J0 / res.omega_ref**2)
+            touched += bool(np.any(hb.aft(X)[1]))
+        assert touched >= 2  # samples in contact: the AFT Jacobian is exercised
+
+
+SMALL = """
+[model]
+kind = "rom"
+n_modes = 10
+[nnm]
+[fep]
+harmonics = [1, 3]
+convergence_harmonics = [1, 3]
+samples_study_harmonics = 3
+samples = [128]
+energy_max_J = 1e4
+n_shooting = 3
+"""
+
+
+def test_nnm_stage_with_fep_on_a_reduced_model(tmp_path):
+    scene = parse_scene(SMALL, "rom-fep-small", "test")
+    assert scene.stages == ("reduce", "nnm")
+    writers = []
+    for run in ("a", "b"):  # twice: a rerun writes the same science files (tests/test_reproducible.py)
+        (tmp_path / run).mkdir()
+        writers.append(StageWriter(tmp_path / run))
+        nnm_stage(scene, writers[-1], progress=False)
+    science = sorted(p.name for p in (tmp_path / "a").iterdir() if not p.stem.endswith("_timing"))
+    assert science == sorted(p.name for p in (tmp_path / "b").iterdir() if not p.stem.endswith("_timing"))
+    for name in science:
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
+    w, tmp_path = writers[0], tmp_path / "a"
+    for name in ("linear_modes.csv", "fep.csv", "fep.png", "fep.md", "stability.csv", "tongues.csv",
+                 "hb_convergence.csv", "hb_convergence.png", "hb_convergence_timing.csv"):
+        assert (tmp_path / name).stat().st_size > 0, name
+    assert not (tmp_path / "nnm2_exact.csv").exists()  # the 3-DOF model's closed form only
+    assert "reduced model has no closed form" in w.stats["nnm2_exact"]
+    modes = list(csv.DictReader(open(tmp_path / "linear_modes.csv")))
+    assert len(modes) == 24 and "phi_eta10" in modes[0]
+    rows = list(csv.DictReader(open(tmp_path / "fep.csv")))
+    assert {r["nnm"] for r in rows} == {"1", "2", "3"} and {r["method"] for r in rows} == {"hb", "shooting"}
+    conv = list(csv.DictReader(open(tmp_path / "hb_convergence.csv")))
+    assert all(r["max_err_vs_exact"] == "" for r in conv)  # no closed form: shooting is the reference
+    far = {(r["nnm"], r["harmonics"]): float(r["max_err_vs_shooting_above_10x_grazing"]) for r in conv}
+    assert all(math.isfinite(e) for e in far.values())
+    md = (tmp_path / "fep.md").read_text()
+    assert "Reference: shooting on the exact flow" in md and "## Converged H" in md
+    assert w.stats["hb_reference"].startswith("shooting on the exact flow")
+    assert w.stats["nnm_linear_modes"] == {"NNM 1": 1, "NNM 2": 2, "NNM 3": 3}
