@@ -352,8 +352,9 @@ def _nnm_branch(
     mode far above the NNM the anchor may already hold more energy than the backbone past
     the tongue. ``tongue_measure = "velocity"`` (reduced models) also enters a tongue when
     a harmonic's velocity ratio k a_k / a_1 exceeds ``tongue_ratio`` while the frequency
-    has stalled (:meth:`_TongueWatch.stalled`; an impact's own harmonics have velocity
-    ratios near 1/k... up to 1 without any resonance) and anchors it at the last point
+    has stalled (:meth:`_TongueWatch.stalled`; the impacts alone give velocity ratios of
+    1/k, a triangle wave's, and NNM 1 climbs through its 3:1 resonance at a ratio of 0.99
+    with a rising frequency) and anchors it at the last point
     where that harmonic's velocity ratio was below tongue_ratio / 3: a reduced
     model's NNMs meet k:1 resonances with local modes 10-100 times their frequency, whose
     displacements stay small, so that by displacement alone a tongue is entered unseen and

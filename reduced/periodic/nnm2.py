@@ -26,6 +26,10 @@ check which one a direct integration of Eq. (9) confirms (ours, to 1e-12).
 The energy on NNM 2 (both outer masses, from rest at x0) is
 E = 2 k_s x0^2 + k_g (x0 - g)^2 for x0 > g, and the frequency is
 omega = 2 pi / (T_g + T_s) above the grazing energy 2 k_s g^2, omega_0 below it.
+
+Only the symmetric 3-DOF model has this relation. A reduced 3-D model has none: its NNM
+study (scene rom-fep, :mod:`bearingshaft.stages.fep`) takes shooting on the exact flow as
+the reference.
 """
 
 from __future__ import annotations
