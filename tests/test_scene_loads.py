@@ -128,7 +128,7 @@ def test_uff58_channels_round_trip_bit_for_bit(tmp_path):
     back = read_uff58(tmp_path / "t.uff")
     assert [(c.name, c.node, c.direction, c.quantity, c.unit) for c in back] == \
         [(c.name, c.node, c.direction, c.quantity, c.unit) for c in chans]
-    for a, b in zip(chans, back):
+    for a, b in zip(chans, back, strict=True):
         assert np.array_equal(a.data, b.data) and a.dt_s == b.dt_s and a.t0_s == b.t0_s
 
 
