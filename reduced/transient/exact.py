@@ -754,6 +754,33 @@ def _poly_work(ACp, Cpp, Pb, beta, phi, Fs, z, tau, MOM, damped_, N):
     return W, E
 
 
+@nb.njit(cache=True)
+def _piece_at(pstarts, ip, t, t_end):
+    """(ip, t_lim): the load piece holding t (advanced from ip) and where the segment must end,
+    the next breakpoint or t_end."""
+    NP = pstarts.shape[0]
+    while ip + 1 < NP and pstarts[ip + 1] <= t:
+        ip += 1
+    if ip + 1 < NP and pstarts[ip + 1] < t_end:
+        return ip, pstarts[ip + 1]
+    return ip, t_end
+
+
+@nb.njit(cache=True)
+def _modal_start(V_s, Vinv_s, y, yp_s, X, werr):
+    """Free segment start: w = Vinv (y - yp), X[:, i] = V[:, i] w_i, and werr bounds the round-off in w."""
+    N = y.shape[0]
+    for i in range(N):
+        wi = 0.0 + 0.0j
+        err = 0.0
+        for r in range(N):
+            wi += Vinv_s[i, r] * (y[r] - yp_s[r])
+            err += abs(Vinv_s[i, r]) * (abs(y[r]) + abs(yp_s[r]))
+        werr[i] = EPS * err
+        for r in range(N):
+            X[r, i] = V_s[r, i] * wi
+
+
 BUFFER_FULL = 1  # _exact_kernel status: the sample buffer is full inside the present segment
 
 
@@ -802,7 +829,6 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
     phi = np.zeros((L, M1))
     gam = np.zeros(M1, np.complex128)
     eiw = np.empty(L, np.complex128)
-    NP = pstarts.shape[0]
     ip = 0
     if forced:
         ip = max(np.searchsorted(pstarts, t, side="right") - 1, 0)
@@ -819,24 +845,12 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
         zs = lam_s
         t_lim = t_end
         if forced:
-            while ip + 1 < NP and pstarts[ip + 1] <= t:
-                ip += 1
-            if ip + 1 < NP and pstarts[ip + 1] < t_end:
-                t_lim = pstarts[ip + 1]
+            ip, t_lim = _piece_at(pstarts, ip, t, t_end)
             poly = _forced_segment(s, t - pstarts[ip], ip, t_lim - t, y, yp[s], lam_s, V[s], Vinv[s], fz, fY, fU,
                                    pF, pp0, pp1, n, X, z, P, Fs, phi, gam, werr, ypart)
             zs = z
         else:
-            # w = Vinv (y - yp);  X[:, i] = V[:, i] w_i;  werr bounds the round-off in w
-            for i in range(N):
-                wi = 0.0 + 0.0j
-                err = 0.0
-                for r in range(N):
-                    wi += Vinv[s, i, r] * (y[r] - yp[s, r])
-                    err += abs(Vinv[s, i, r]) * (abs(y[r]) + abs(yp[s, r]))
-                werr[i] = EPS * err
-                for r in range(N):
-                    X[r, i] = V[s, r, i] * wi
+            _modal_start(V[s], Vinv[s], y, yp[s], X, werr)
         if damped:
             _work_setup(X, C, zs, n, G, Gz, az)
         if forced:

@@ -51,6 +51,8 @@ from reduced.transient.exact import (
     _first_root,
     _first_root_forced,
     _forced_segment,
+    _modal_start,
+    _piece_at,
     _state_index,
     _stop_poly,
     _stop_series,
@@ -93,7 +95,6 @@ def _flow_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, s
     Fs = np.zeros(L, np.complex128)
     phi = np.zeros((L, M1))
     gam = np.zeros(M1, np.complex128)
-    NP = pstarts.shape[0]
     ip = 0
     poly = False
     t = 0.0
@@ -109,20 +110,12 @@ def _flow_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, s
         zs = lam_s
         t_lim = T
         if forced:
-            while ip + 1 < NP and pstarts[ip + 1] <= t:
-                ip += 1
-            if ip + 1 < NP and pstarts[ip + 1] < T:
-                t_lim = pstarts[ip + 1]
+            ip, t_lim = _piece_at(pstarts, ip, t, T)
             poly = _forced_segment(s, t - pstarts[ip], ip, t_lim - t, y, yp[s], lam_s, V[s], Vinv[s], fz, fY, fU,
                                    pF, pp0, pp1, n, X, z, P, Fs, phi, gam, werr, ypart)
             zs = z
         else:
-            for i in range(N):
-                wi = 0.0 + 0.0j
-                for r in range(N):
-                    wi += Vinv[s, i, r] * (y[r] - yp[s, r])
-                for r in range(N):
-                    X[r, i] = V[s, r, i] * wi
+            _modal_start(V[s], Vinv[s], y, yp[s], X, werr)
         tau_ev = t_lim - t
         j_ev = -1
         for j in range(m):
