@@ -150,6 +150,18 @@ def orbit_amplitude(system, loads, orbit, rows) -> np.ndarray:
     return np.max(np.abs(r.x @ rows.T), axis=0)
 
 
+def shooting_error(system, loads, X: np.ndarray, amplitude: np.ndarray, freq_hz: float, rows: np.ndarray,
+                   segments: int) -> float | None:
+    """max |a_HB / a_exact - 1| over the points ``rows``: the exact forced orbit is found by multiple
+    shooting (``segments`` segments) from the HB orbit X at ``freq_hz``; None if shooting fails."""
+    try:
+        orb = floquet_by_shooting(Flow(system, loads=loads), hb_states(X, 2 * np.pi * freq_hz, segments),
+                                  1.0 / freq_hz, tol=1e-10)
+    except (ShootingError, RuntimeError):
+        return None
+    return float(np.max(np.abs(amplitude / orbit_amplitude(system, loads, orb, rows) - 1.0)))
+
+
 def _frc_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
     spec = scene.frc
     system, rows = model_system(scene.model, progress)
@@ -361,14 +373,11 @@ def _frc_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
                     fails += 1
                     continue
                 loads = loads_c.setdefault(f, Loads(b[None, :], (Harmonic(Pc, f),)))
-                try:
-                    orb = floquet_by_shooting(Flow(system, loads=loads), hb_states(X, 2 * np.pi * f,
-                                                                                   spec.shooting_segments),
-                                              1.0 / f, tol=1e-10)
-                except (ShootingError, RuntimeError):
+                e = shooting_error(system, loads, X, a, f, rows, spec.shooting_segments)
+                if e is None:
                     fails += 1
                     continue
-                e_sh.append(float(np.max(np.abs(a / orbit_amplitude(system, loads, orb, rows) - 1.0))))
+                e_sh.append(e)
             fo = bc.freq_hz[bc.folds] if bc.folds else np.zeros(0)
             row.update({
                 "status": bc.status, "n_points": len(bc.freq_hz),
