@@ -1,0 +1,453 @@
+"""Test-model correlation of a hammer test: channels matched, errors measured, figures drawn.
+
+The model's channels (:class:`fem.uff.TimeHistory`, e.g. ``beam_s3:z``, ``tip_left_top``,
+``hammer``) are paired with a test file's channels by node and axis (:func:`match_channels`);
+a test channel along the opposite sense (direction code -d for the model's +d) is negated so
+that both members of a pair share the model's sign. Each pair is compared on the samples the
+two records have in common (:meth:`ChannelPair.aligned`): the model is run at the test's
+sampling, so the grids coincide and nothing is resampled.
+
+Error measures of one pair over a time window (:func:`channel_errors`), with m_k the model's
+and x_k the test's samples in the window (raw signals, no mean removed)::
+
+    rms_model = sqrt(mean(m_k^2)),   rms_test = sqrt(mean(x_k^2))
+    rms_rel_error = sqrt(mean((m_k - x_k)^2)) / rms_test          (>= 0)
+    peak_abs_model = max |m_k|,      peak_abs_test = max |x_k|
+    f_dominant_*_hz = argmax of the Welch PSD over fmin_hz <= f <= fmax_hz (below)
+    f_rel_error = (f_dominant_model_hz - f_dominant_test_hz) / f_dominant_test_hz   (signed)
+
+The Welch PSD (``scipy.signal.welch``) uses Hann segments of n_seg = min(N, round(fs /
+resolution_hz)) samples (bins ``resolution_hz`` apart, 2 Hz by default; the whole window as one
+segment when it is shorter), half overlapping, each segment's mean removed. The dominant
+frequency is the vertex of the parabola through the log PSD at the largest bin in the band and
+its two neighbours (when that bin is a local maximum; the bin's own frequency otherwise), which
+places a single tone to a small fraction of a bin. A rms_test of 0 gives rms_rel_error = inf
+(0 when the model is exactly 0 as well); a band without power gives NaN frequencies.
+
+All refusals are :class:`ChannelError` with a one-line message.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from scipy.signal import welch  # noqa: E402
+
+from bearingshaft.output import write_rows  # noqa: E402
+from bearingshaft.plots import Envelope, wrap_title  # noqa: E402
+from fem.uff import TimeHistory  # noqa: E402
+from reduced import _checks  # noqa: E402
+from reduced.transient.spectrogram import MAX_FRAMES, spectrogram  # noqa: E402
+
+DT_RTOL = 1e-9  # relative difference of two time steps still taken as the same sampling
+# fraction of a sample by which the two grids may be offset and still be read as one: a shift of
+# 1e-3 dt changes a tone at a quarter of the sample rate by 2 pi 0.25 1e-3 ~ 1.6e-3 relative, far
+# below what a test-model comparison resolves; more means the model was not run at the test's t0
+SAMPLE_OFFSET_TOL = 1e-3
+WELCH_RESOLUTION_HZ = 2.0  # Hz, default bin spacing of the Welch PSD (~0.5 s segments)
+FMIN_HZ = 5.0  # Hz, default lower edge of the dominant-frequency band: above the mean's leakage
+MAX_PANELS = 6  # channels of a default comparison figure
+CSV_DIGITS = 6  # significant digits in the errors CSV: reruns give byte-identical files
+EXCITATION = "force"  # quantity of the hammer (an input, not a prediction: not compared by default)
+COMPARE_KEY = "[hammer] compare = [...]"  # the scene key that lists the channels to compare
+
+ERROR_FIELDS = [
+    "name", "test_name", "node", "direction", "quantity", "unit", "flipped", "t_start_s", "t_end_s",
+    "n_samples", "rms_model", "rms_test", "rms_rel_error", "peak_abs_model", "peak_abs_test",
+    "f_dominant_model_hz", "f_dominant_test_hz", "f_rel_error", "f_resolution_hz",
+]
+
+
+class ChannelError(ValueError):
+    """Model and test channels that cannot be compared; the message is one line."""
+
+
+def _direction_label(d: int) -> str:
+    return "0 (scalar)" if d == 0 else f"{d:+d} ({'+-'[d < 0]}{'XYZ'[abs(d) - 1]})"
+
+
+def _describe(ch: TimeHistory) -> str:
+    return f"{ch.name!r} (node {ch.node}, direction {_direction_label(ch.direction)}, {ch.quantity} [{ch.unit}])"
+
+
+def _axis(ch: TimeHistory) -> tuple[int, int]:
+    return int(ch.node), abs(int(ch.direction))
+
+
+def _sense(d: int) -> int:
+    return -1 if d < 0 else 1
+
+
+def _unknown(kind: str, name: str, known: list[str]) -> ChannelError:
+    close = difflib.get_close_matches(name, known, n=1)
+    more = ", ..." if len(known) > 8 else ""
+    hint = f"did you mean {close[0]!r}?" if close else f"known: {', '.join(known[:8])}{more}"
+    return ChannelError(f"unknown {kind} {name!r}; {hint}")
+
+
+@dataclass(frozen=True, eq=False)
+class AlignedPair:
+    """Model and test samples at the same times ``t`` (s); ``test`` in the model's sense."""
+
+    t: np.ndarray  # s, (n,)
+    model: np.ndarray  # (n,), the model channel's unit
+    test: np.ndarray  # (n,), same unit and sign convention
+
+    @property
+    def sample_rate_hz(self) -> float:
+        return 1.0 / float(self.t[1] - self.t[0])
+
+
+@dataclass(frozen=True, eq=False)
+class ChannelPair:
+    """A model channel and the test channel at its node and axis.
+
+    ``test`` is the test channel with its data negated (and its direction set to the model's)
+    when it was measured along the opposite sense; ``flipped`` records that it was.
+    """
+
+    name: str  # the model channel's name
+    model: TimeHistory
+    test: TimeHistory  # sign-aligned with the model
+    flipped: bool
+
+    @property
+    def node(self) -> int:
+        return self.model.node
+
+    @property
+    def direction(self) -> int:
+        return self.model.direction
+
+    @property
+    def quantity(self) -> str:
+        return self.model.quantity
+
+    @property
+    def unit(self) -> str:
+        return self.model.unit
+
+    def _offset(self) -> int:
+        """Test sample index of model sample 0 (the grids coincide up to SAMPLE_OFFSET_TOL)."""
+        return int(round((self.model.t0_s - self.test.t0_s) / self.test.dt_s))
+
+    def common_range(self) -> tuple[int, int]:
+        """Model sample indices [i0, i1) that the test record also covers."""
+        k = self._offset()
+        return max(0, -k), min(self.model.data.size, self.test.data.size - k)
+
+    def aligned(self, window_s: tuple[float, float] | None = None) -> AlignedPair:
+        """Both records on their common time grid (the model's samples that the test also has),
+        optionally only the samples with window_s[0] <= t <= window_s[1] (s, absolute times)."""
+        i0, i1 = self.common_range()
+        k = self._offset()
+        t = self.model.t[i0:i1]
+        m = self.model.data[i0:i1]
+        x = self.test.data[i0 + k:i1 + k]
+        if window_s is not None:
+            a, b = _window(window_s)
+            eps = 1e-6 * self.model.dt_s  # a window edge on a sample keeps it despite rounding
+            keep = (t >= a - eps) & (t <= b + eps)
+            if np.count_nonzero(keep) < 2:
+                raise ChannelError(f"channel {self.name!r}: window_s = ({a:.6g}, {b:.6g}) s holds fewer than 2 of "
+                                   f"the common samples ({t[0]:.6g} .. {t[-1]:.6g} s)")
+            t, m, x = t[keep], m[keep], x[keep]
+        return AlignedPair(t=t, model=m, test=x)
+
+
+def _window(window_s) -> tuple[float, float]:
+    try:
+        a, b = (float(v) for v in window_s)
+    except (TypeError, ValueError):
+        raise ChannelError(f"window_s must be (t_start_s, t_end_s), got {window_s!r}") from None
+    if not (math.isfinite(a) and math.isfinite(b) and a < b):
+        raise ChannelError(f"window_s must be finite with t_start_s < t_end_s, got ({a!r}, {b!r})")
+    return a, b
+
+
+def match_channels(model: list[TimeHistory], test: list[TimeHistory], wanted: list[str] | None = None, *,
+                   source: str = "the test file") -> list[ChannelPair]:
+    """Pair each wanted model channel with the test channel at its node and axis.
+
+    A test channel matches a model channel at the same node whose direction code is +d or -d
+    (the model's being +d or -d) and whose quantity is the model's; along the opposite sense
+    its data are negated (``flipped``). Several test channels at one node and axis are
+    ambiguous only among those of the model's quantity (a file may hold a sensor's
+    acceleration and its integrated velocity).
+
+    Parameters
+    ----------
+    model, test : the channels of the model run and of the test file
+    wanted : names of model channels to compare, in this order (default: every model channel
+        but the excitation, quantity "force", i.e. the hammer: the model is driven by it)
+    source : how messages name the test file (e.g. its path)
+
+    Raises
+    ------
+    ChannelError (one line) for an unknown wanted name, a wanted channel the test lacks, a
+    quantity mismatch, ambiguous test channels, different sampling (relative dt difference
+    > 1e-9), grids offset by a fraction of a sample, no common samples or non-finite samples.
+    """
+    by_name: dict[str, TimeHistory] = {}
+    for ch in model:
+        if ch.name in by_name:
+            raise ChannelError(f"the model has two channels named {ch.name!r}")
+        by_name[ch.name] = ch
+    if wanted is None:
+        wanted = [ch.name for ch in model if ch.quantity != EXCITATION]
+    else:
+        wanted = list(dict.fromkeys(wanted))  # once each, in the given order
+        for name in wanted:
+            if name not in by_name:
+                raise _unknown("model channel", name, list(by_name))
+    if not wanted:
+        raise ChannelError("no model channel to compare")
+    at_axis: dict[tuple[int, int], list[TimeHistory]] = {}
+    for ch in test:
+        at_axis.setdefault(_axis(ch), []).append(ch)
+
+    pairs = []
+    missing = [name for name in wanted if not at_axis.get(_axis(by_name[name]))]
+    if missing:
+        ch = by_name[missing[0]]
+        others = f" and {len(missing) - 1} more" if len(missing) > 1 else ""
+        raise ChannelError(f"model channel {_describe(ch)}{others} not in {source} (no channel at node {ch.node}, "
+                           f"axis {'XYZ'[abs(ch.direction) - 1] if ch.direction else 'scalar'}); "
+                           f"{len(wanted) - len(missing)} of the {len(wanted)} wanted channels are there: list "
+                           f"the ones to compare in the scene key {COMPARE_KEY}")
+    for name in wanted:
+        m = by_name[name]
+        candidates = at_axis[_axis(m)]
+        same = [c for c in candidates if c.quantity == m.quantity]
+        if not same:
+            c = candidates[0]
+            raise ChannelError(f"model channel {m.name!r} (node {m.node}, direction "
+                               f"{_direction_label(m.direction)}) predicts {m.quantity} [{m.unit}] but test channel "
+                               f"{c.name!r} at its node and axis in {source} is {c.quantity} [{c.unit}]; give the "
+                               f"test as {m.quantity} or leave the channel out of {COMPARE_KEY}")
+        if len(same) > 1:
+            raise ChannelError(f"model channel {_describe(m)}: {len(same)} test channels at node {m.node} and its "
+                               f"axis in {source} are {m.quantity} ({', '.join(repr(c.name) for c in same)}): "
+                               f"ambiguous; keep one")
+        x = same[0]
+        if abs(x.dt_s - m.dt_s) > DT_RTOL * max(x.dt_s, m.dt_s):
+            raise ChannelError(f"channel {name!r}: the model is sampled at {1.0 / m.dt_s:.10g} Hz, test channel "
+                               f"{x.name!r} at {1.0 / x.dt_s:.10g} Hz; run the model at the test's sampling")
+        shift = (m.t0_s - x.t0_s) / x.dt_s
+        frac = abs(shift - round(shift))
+        if frac > SAMPLE_OFFSET_TOL:
+            raise ChannelError(f"channel {name!r}: the model starts at {m.t0_s:.10g} s, test channel {x.name!r} at "
+                               f"{x.t0_s:.10g} s, {frac:.3g} of a sample apart: the sample times differ; "
+                               f"run the model from the test's t0")
+        flipped = _sense(x.direction) != _sense(m.direction)
+        aligned = TimeHistory(x.name, x.node, m.direction, x.quantity, -x.data if flipped else x.data,
+                              x.dt_s, x.t0_s)
+        pair = ChannelPair(name=name, model=m, test=aligned, flipped=flipped)
+        i0, i1 = pair.common_range()
+        if i1 - i0 < 2:
+            raise ChannelError(f"channel {name!r}: the model spans {m.t[0]:.6g} .. {m.t[-1]:.6g} s, test channel "
+                               f"{x.name!r} {x.t[0]:.6g} .. {x.t[-1]:.6g} s: fewer than 2 common samples")
+        for label, ch in (("model", m), ("test", x)):
+            if not np.all(np.isfinite(ch.data)):
+                raise ChannelError(f"channel {name!r}: {label} channel {ch.name!r} has "
+                                   f"{np.count_nonzero(~np.isfinite(ch.data))} non-finite samples")
+        pairs.append(pair)
+    return pairs
+
+
+def _rms(y: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(y))))
+
+
+def dominant_freq_hz(y: np.ndarray, sample_rate_hz: float, fmin_hz: float = FMIN_HZ, fmax_hz: float | None = None,
+                     resolution_hz: float = WELCH_RESOLUTION_HZ) -> tuple[float, float]:
+    """(Hz, Hz): the dominant frequency of ``y`` in [fmin_hz, fmax_hz] and the Welch bin spacing.
+
+    Welch PSD, Hann segments of n_seg = min(N, round(fs / resolution_hz)) samples, half
+    overlapping, each segment's mean removed; the largest bin k in the band is refined by the
+    vertex of the parabola through ln P at k - 1, k, k + 1 (when k is a local maximum):
+    f = f_k + df (ln P_{k-1} - ln P_{k+1}) / (2 (ln P_{k-1} - 2 ln P_k + ln P_{k+1})).
+    NaN when the band holds no bin or no power.
+    """
+    y = np.asarray(y, dtype=float)
+    fs = float(sample_rate_hz)
+    if y.size < 2:
+        return math.nan, math.nan
+    n_seg = int(min(y.size, max(8, round(fs / resolution_hz))))
+    freq, P = welch(y, fs=fs, window="hann", nperseg=n_seg, noverlap=n_seg // 2, detrend="constant",
+                    scaling="density")
+    df = float(freq[1] - freq[0]) if freq.size > 1 else math.nan
+    hi = fs / 2.0 if fmax_hz is None else fmax_hz
+    band = np.flatnonzero((freq >= fmin_hz) & (freq <= hi))
+    if band.size == 0 or not np.max(P[band]) > 0.0:
+        return math.nan, df
+    k = int(band[np.argmax(P[band])])
+    f = float(freq[k])
+    if 0 < k < P.size - 1 and P[k - 1] > 0.0 and P[k + 1] > 0.0 and P[k] >= max(P[k - 1], P[k + 1]):
+        a, b, c = np.log(P[k - 1]), np.log(P[k]), np.log(P[k + 1])
+        curv = a - 2.0 * b + c
+        if curv < 0.0:
+            f += df * 0.5 * (a - c) / curv
+    return float(f), df
+
+
+def channel_errors(pairs: list[ChannelPair], window_s: tuple[float, float] | None = None,
+                   fmin_hz: float = FMIN_HZ, fmax_hz: float | None = None,
+                   resolution_hz: float = WELCH_RESOLUTION_HZ) -> list[dict]:
+    """One row of error measures per pair (the module docstring defines them; keys: ERROR_FIELDS).
+
+    Parameters
+    ----------
+    pairs : from :func:`match_channels`
+    window_s : (t_start_s, t_end_s), s, absolute times compared (default: each pair's whole overlap)
+    fmin_hz, fmax_hz : Hz, band searched for the dominant frequency (default fmax: fs / 2)
+    resolution_hz : Hz, Welch bin spacing asked for (coarser when the window is shorter than 1 / resolution_hz)
+    """
+    fmin_hz = _checks.number("fmin_hz", fmin_hz, lo=0.0, lo_open=False, unit="Hz")
+    if fmax_hz is not None:
+        fmax_hz = _checks.positive("fmax_hz", fmax_hz, "Hz")
+        if not fmax_hz > fmin_hz:
+            raise ChannelError(f"fmax_hz = {fmax_hz!r} Hz must exceed fmin_hz = {fmin_hz!r} Hz")
+    resolution_hz = _checks.positive("resolution_hz", resolution_hz, "Hz")
+    rows = []
+    for p in pairs:
+        a = p.aligned(window_s)
+        fs = a.sample_rate_hz
+        rms_m, rms_x = _rms(a.model), _rms(a.test)
+        rms_d = _rms(a.model - a.test)
+        if rms_d == 0.0:
+            rel = 0.0
+        elif rms_x == 0.0:
+            rel = math.inf
+        else:
+            rel = rms_d / rms_x
+        f_m, df = dominant_freq_hz(a.model, fs, fmin_hz, fmax_hz, resolution_hz)
+        f_x, _ = dominant_freq_hz(a.test, fs, fmin_hz, fmax_hz, resolution_hz)
+        f_rel = (f_m - f_x) / f_x if f_x > 0.0 else math.nan  # NaN propagates from either
+        rows.append({
+            "name": p.name, "test_name": p.test.name, "node": p.node, "direction": p.direction,
+            "quantity": p.quantity, "unit": p.unit, "flipped": p.flipped,
+            "t_start_s": float(a.t[0]), "t_end_s": float(a.t[-1]), "n_samples": int(a.t.size),
+            "rms_model": rms_m, "rms_test": rms_x, "rms_rel_error": rel,
+            "peak_abs_model": float(np.max(np.abs(a.model))), "peak_abs_test": float(np.max(np.abs(a.test))),
+            "f_dominant_model_hz": f_m, "f_dominant_test_hz": f_x, "f_rel_error": f_rel, "f_resolution_hz": df,
+        })
+    return rows
+
+
+def write_errors_csv(rows: list[dict], path: str | Path, digits: int = CSV_DIGITS) -> None:
+    """The rows of :func:`channel_errors` as CSV (columns ERROR_FIELDS), floats to ``digits``
+    significant digits so that a rerun writes the same bytes."""
+    write_rows(path, rows, ERROR_FIELDS, float_format=f".{int(digits)}g")
+
+
+def default_channels(pairs: list[ChannelPair], n: int = MAX_PANELS) -> list[str]:
+    """Names of up to ``n`` pairs to draw: the hammer (an excitation force) if compared, the tip
+    load cell of largest test rms, then the beam accelerometers (``beam_*``) of largest test rms,
+    then any other channel by test rms."""
+    def rms(p: ChannelPair) -> float:
+        a = p.aligned()
+        return _rms(a.test)
+
+    chosen: list[str] = []
+    force = [p for p in pairs if p.quantity == EXCITATION]
+    if force:
+        chosen.append(force[0].name)
+    cells = sorted((p for p in pairs if p.quantity == "reaction_force"), key=rms, reverse=True)
+    if cells:
+        chosen.append(cells[0].name)
+    rest = [p for p in pairs if p.name not in chosen]
+    rest.sort(key=lambda p: (not p.name.startswith("beam_"), -rms(p)))  # stable: ties keep their order
+    chosen += [p.name for p in rest]
+    return chosen[:n]
+
+
+def _select(pairs: list[ChannelPair], channels: list[str] | None) -> list[ChannelPair]:
+    by_name = {p.name: p for p in pairs}
+    if channels is None:
+        return [by_name[n] for n in default_channels(pairs)]
+    for n in channels:
+        if n not in by_name:
+            raise _unknown("compared channel", n, list(by_name))
+    return [by_name[n] for n in dict.fromkeys(channels)]
+
+
+def comparison_figure(pairs: list[ChannelPair], path: str | Path, title: str, channels: list[str] | None = None,
+                      window_s: tuple[float, float] | None = None) -> None:
+    """Model and test time histories overlaid, one panel per channel (default:
+    :func:`default_channels`), each titled with its rms_rel_error over the window. A long record
+    is drawn as its min/max per pixel column (:class:`bearingshaft.plots.Envelope`)."""
+    chosen = _select(pairs, channels)
+    if not chosen:
+        raise ChannelError("no channel to draw")
+    fig, axes = plt.subplots(len(chosen), 1, figsize=(9, 1.9 * len(chosen) + 1.0), sharex=True,
+                             constrained_layout=True, squeeze=False)
+    for ax, p in zip(axes[:, 0], chosen, strict=True):
+        a = p.aligned(window_s)
+        env = Envelope(a.t.size, a.sample_rate_hz, 2)
+        env.add(0, np.column_stack([a.model, a.test]))
+        t, y = env.lines()
+        t = t + a.t[0]
+        ax.plot(t, y[:, 1], color="k", lw=0.8, label="test" + (" (sign flipped)" if p.flipped else ""))
+        ax.plot(t, y[:, 0], color="C3", lw=0.8, alpha=0.85, label="model")
+        rms_x = _rms(a.test)
+        err = _rms(a.model - a.test) / rms_x if rms_x > 0 else math.inf
+        ax.set_title(f"{p.name} (node {p.node}, direction {_direction_label(p.direction)}): "
+                     f"rms error {100 * err:.3g} %", fontsize=9, loc="left")
+        ax.set_ylabel(f"{p.quantity.replace('_', ' ')}\n[{p.unit}]", fontsize=9)
+        ax.legend(loc="upper right", fontsize=7)
+        ax.set_xlim(a.t[0], a.t[-1])
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.suptitle(wrap_title(title), fontsize=10)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def spectrogram_pair_figure(pair: ChannelPair, path: str | Path, window_s: float, overlap: float, fmax_hz: float,
+                            db_range: float = 60.0, title: str | None = None,
+                            span_s: tuple[float, float] | None = None) -> None:
+    """Spectrograms of the model (left) and the test (right) of one channel on one colour scale.
+
+    ``window_s`` (s) and ``overlap`` are the STFT's (:func:`reduced.transient.spectrogram.spectrogram`:
+    Hann window, PSD scaling, mean removed); the colour scale spans ``db_range`` dB below the
+    larger of the two maxima. ``span_s`` (s, absolute times) limits the record drawn (default:
+    the common samples).
+    """
+    a = pair.aligned(span_s)
+    specs = []
+    for label, y in (("model", a.model), ("test", a.test)):
+        try:
+            specs.append(spectrogram(a.t, y, window_s, overlap, fmax_hz=fmax_hz, max_frames=MAX_FRAMES))
+        except _checks.InvalidArgument as exc:
+            raise ChannelError(f"channel {pair.name!r} ({label}): {exc}") from None
+    dbs = [10.0 * np.log10(np.maximum(s.power, 1e-300)) for s in specs]
+    top = max(float(np.max(d)) for d in dbs)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.8), sharey=True, constrained_layout=True)
+    for ax, s, db, label in zip(axes, specs, dbs, ("model", "test" + (" (sign flipped)" if pair.flipped else "")),
+                                strict=True):
+        mesh = ax.pcolormesh(s.t, s.freq_hz, db, shading="nearest", cmap="viridis", vmin=top - db_range, vmax=top,
+                             rasterized=True)
+        ax.set_title(label, fontsize=10)
+        ax.set_xlabel("time [s]")
+        ax.set_ylim(0, fmax_hz)
+    axes[0].set_ylabel("frequency [Hz]")
+    fig.colorbar(mesh, ax=axes, label=f"PSD [dB re 1 ({pair.unit})^2/Hz]")
+    head = title or f"{pair.name}: model and test spectrograms"
+    fig.suptitle(wrap_title(f"{head} (node {pair.node}, direction {_direction_label(pair.direction)}; "
+                            f"Hann {window_s:g} s, overlap {overlap:g})"), fontsize=10)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+__all__ = [
+    "ChannelError", "ChannelPair", "AlignedPair", "match_channels", "channel_errors", "dominant_freq_hz",
+    "write_errors_csv", "default_channels", "comparison_figure", "spectrogram_pair_figure", "ERROR_FIELDS",
+]
