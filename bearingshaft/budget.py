@@ -77,7 +77,19 @@ def estimates(scene: Scene) -> list[Estimate]:
     """What each stage of ``scene`` will hold at its peak."""
     n = n_dofs(scene)
     out: list[Estimate] = []
-    if scene.ringdown is not None:
+    if scene.hammer is not None:  # every level's record in memory: state, channels, energies
+        from bearingshaft.stages.ringdown import MATPLOTLIB_BYTES
+        from fem.rig import channel_names
+
+        r, h = scene.ringdown, scene.hammer
+        samples = r.duration_s * r.sample_rate_hz + 1
+        levels = len({*h.levels_N, h.peak_N}) + int(h.linear_check)
+        per = (2 * n + len(channel_names()) + 4) * FLOAT
+        exact = 3 * 2**4 * (2 * n) ** 2 * 16  # the exact integrator's state table (4 stops)
+        out.append(Estimate("hammer", int(MATPLOTLIB_BYTES + COPIES * samples * per + levels * samples * per + exact),
+                            f"{levels} records of {samples:.3g} samples x {n} DOFs",
+                            "[ringdown] duration_s or sample_rate_hz, or [hammer] levels_N"))
+    elif scene.ringdown is not None:
         from bearingshaft.stages.ringdown import stage_estimate
 
         r = scene.ringdown

@@ -2,7 +2,8 @@
 
 Subcommands follow the pipeline (geometry -> fem -> reduced -> results):
 ``modal`` (mesh and modal analysis), ``reduce`` (Craig-Bampton onto the tips),
-``ringdown``, ``nnm``, ``study`` (error against run time, stiff cases), ``verify``
+``ringdown``, ``hammer`` (the virtual hammer test, ``--test FILE.uff`` to compare a measured
+one), ``nnm``, ``study`` (error against run time, stiff cases), ``verify``
 (reduction against the discrete model), ``frc`` (forced-response curves), ``run`` (every
 stage of one or more scenes; all built-in scenes when none is named), ``check`` (validate scenes, their memory and the
 results folder without running anything) and ``scenes``.
@@ -53,6 +54,12 @@ def build_parser() -> argparse.ArgumentParser:
     _add_common(p)
     p.add_argument("--method", choices=("exact", "explicit", "dop853"),
                    help="integrator (default: the scene's, else exact)")
+    p = sub.add_parser("hammer", help="virtual hammer test of the apparatus, every rig channel (UFF 58 out); "
+                       "--test FILE.uff compares a measured test")
+    _add_common(p)
+    p.add_argument("--test", metavar="FILE.uff", help="a measured test (UFF 58 time histories): the model is run "
+                   "at its sampling, driven by its hammer channel, and compared channel for channel "
+                   "(default results folder: results/<scene>/test-<file name>/)")
     p = sub.add_parser("nnm", help="frequency-energy relations of the nonlinear normal modes")
     _add_common(p)
     p = sub.add_parser("study", help="error against run time, stiff and extreme cases")
@@ -126,8 +133,15 @@ def main(argv: list[str] | None = None) -> int:
             for scene, out in runs:
                 pipeline.run_scene(scene, out, progress=progress)
             return 0
+        test = getattr(args, "test", None)
+        if test is not None and args.out is None:  # a comparison never mixes with the scene's own files
+            args.out = str(Path("results") / load_scene(args.scene).name / f"test-{Path(test).stem}")
         scene, out = _validated(args.scene, args.out, parent=False)
         options = {"method": getattr(args, "method", None)}
+        if test is not None:
+            if not Path(test).is_file():
+                raise UserError(f"--test: no such file {test!r}")
+            options["test_file"] = test
         pipeline.run_stage(scene, args.command, out, progress=progress, **options)
         return 0
     except (SceneError, UserError, ValueError) as exc:

@@ -61,6 +61,12 @@ def _frc(scene: Scene, writer: StageWriter, progress: bool, **_) -> None:
     frc_stage(scene, writer, progress)
 
 
+def _hammer(scene: Scene, writer: StageWriter, progress: bool, test_file: str | None = None, **_) -> None:
+    from bearingshaft.stages.hammer import hammer_stage
+
+    hammer_stage(scene, writer, progress, test_file=test_file)
+
+
 STAGES: dict[str, Callable] = {
     "modal": _modal,
     "reduce": _reduce,
@@ -69,6 +75,7 @@ STAGES: dict[str, Callable] = {
     "study": _study,
     "verify": _verify,
     "frc": _frc,
+    "hammer": _hammer,
 }
 
 
@@ -78,7 +85,7 @@ def run_stage(scene: Scene, stage: str, out_dir: str | Path, progress: bool = Tr
     if stage not in scene.stages:
         tables = {"ringdown": "[ringdown]", "nnm": "[nnm]",
                   "study": "[work_precision], [stiff_cases] or [rom_convergence]",
-                  "modal": "[modal]", "verify": "[verify]", "frc": "[frc]",
+                  "modal": "[modal]", "verify": "[verify]", "frc": "[frc]", "hammer": "[hammer]",
                   "reduce": '[model] kind = "rom"'}
         raise StageUnavailable(
             f"scene {scene.name!r} has no {tables.get(stage, stage)} table, so it has no {stage} stage "

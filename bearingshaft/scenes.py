@@ -20,6 +20,9 @@ to run, a table absent is a stage skipped (and so never built). Layout::
     [rom_convergence] reduced model against its mode count          -> stage study (kind "rom")
     [verify]         reduction against the discrete model           -> stage verify (kind "rom")
     [frc]            forced-response curves by HB, stepped sine, stability (issue 11) -> stage frc
+    [hammer]         the virtual hammer test of the apparatus, channel for channel (issue 12)
+                     -> stage hammer (kind "rom", layout "assembly"; uses [ringdown] for the
+                     integrator and record, [spectrogram] for Fig. 11 with dof = a channel)
 
 Unknown keys, wrong types and invalid values raise :class:`SceneError` with a one-line
 message naming the table and key.
@@ -423,6 +426,49 @@ class FRCSpec:
         _each(self, "backbone_scales", lambda v: 0 < v <= 1, "in (0, 1] (damping and load scaled down together)")
 
 
+@dataclass(frozen=True, slots=True)
+class HammerSpec:
+    """A hammer blow on the beam of the reduced apparatus, recorded on every rig channel
+    (issue 12) -> stage hammer (reduced.models.rig). The record's length, sampling and
+    integrator are [ringdown]'s."""
+
+    location_m: tuple[float, ...] = ()  # m, point struck (default: the beam's top face at mid-span,
+    # under the tube's hole)
+    direction: tuple[float, ...] = (0.0, 0.0, -1.0)  # the blow's direction (default: straight down)
+    peak_N: float = 500.0  # N, the nominal blow: hammer.npz, hammer.uff, fig10.png, fig11.png
+    duration_s: float = 1e-3  # s, length of the half-sine
+    start_s: float = 0.01  # s, pre-trigger: the blow starts here
+    levels_N: tuple[float, ...] = (20.0, 100.0, 200.0, 500.0, 1000.0, 2000.0)  # N, the level sweep
+    force_file: str = ""  # a measured force history (CSV t_s,force_N or UFF 58) instead of the half-sine
+    seismic_mass_kg: float = 0.04  # kg, tip assembly above each load cell's gauge (fem.rig)
+    load_cell: str = "tip_left_top"  # the load cell of fig10.png
+    compare: tuple[str, ...] = ()  # channels compared with a measured test (default: all but the hammer)
+    compare_window_s: tuple[float, ...] = ()  # s, (start, end) of the error measures (default: the record)
+    linear_check: bool = False  # the open-gap response against the full 3-D model's modal superposition
+    linear_check_max_hz: float = 20000.0  # Hz, full-model modes up to this in that reference
+    backbone_modes: int = 3  # NNM backbones overlaid on fig11.png (0: none)
+
+    def __post_init__(self) -> None:
+        from fem.rig import TIP_CELLS
+
+        if self.location_m:
+            _check(len(self.location_m) == 3, f"location_m must be 3 numbers (x, y, z), got {self.location_m!r}")
+        _check(len(self.direction) == 3, f"direction must be 3 numbers, got {self.direction!r}")
+        _check(any(d != 0 for d in self.direction), "direction must not be the zero vector")
+        _positive(self, "peak_N", "duration_s", "linear_check_max_hz")
+        _check(self.start_s >= 0, f"start_s must be >= 0, got {self.start_s!r}")
+        _each(self, "levels_N", lambda v: v > 0, "> 0 N")
+        _check(self.seismic_mass_kg >= 0, f"seismic_mass_kg must be >= 0, got {self.seismic_mass_kg!r}")
+        _check(self.load_cell in TIP_CELLS, f"load_cell must be one of {', '.join(TIP_CELLS)}, got {self.load_cell!r}")
+        if self.force_file:
+            _check(Path(self.force_file).is_file(), f"force_file: no such file {self.force_file!r}")
+        if self.compare_window_s:
+            w = self.compare_window_s
+            _check(len(w) == 2 and 0 <= w[0] < w[1], f"compare_window_s must be (start, end), 0 <= start < end, "
+                   f"got {w!r}")
+        _check(self.backbone_modes >= 0, f"backbone_modes must be >= 0, got {self.backbone_modes!r}")
+
+
 def _assembly_model():
     from fem.model import AssemblyModel  # imported only for 3-D scenes: no scikit-fem otherwise
 
@@ -449,9 +495,10 @@ SECTIONS: dict[str, type] = {
     "rom_convergence": RomConvergenceSpec,
     "verify": VerifySpec,
     "frc": FRCSpec,
+    "hammer": HammerSpec,
 }
 
-STAGES = ("modal", "reduce", "ringdown", "nnm", "study", "verify", "frc")
+STAGES = ("modal", "reduce", "ringdown", "hammer", "nnm", "study", "verify", "frc")
 
 
 @dataclass(frozen=True, slots=True)
@@ -478,6 +525,7 @@ class Scene:
     rom_convergence: RomConvergenceSpec | None = None
     verify: VerifySpec | None = None
     frc: FRCSpec | None = None
+    hammer: HammerSpec | None = None
 
     @property
     def stages(self) -> tuple[str, ...]:
@@ -485,7 +533,8 @@ class Scene:
         wanted = {
             "modal": self.modal is not None,
             "reduce": self.model_kind == "rom",
-            "ringdown": self.ringdown is not None,
+            "ringdown": self.ringdown is not None and self.hammer is None,  # [hammer] records its own
+            "hammer": self.hammer is not None,
             "nnm": self.nnm is not None or self.fep is not None,
             "study": self.work_precision is not None or self.stiff_cases is not None
             or self.rom_convergence is not None,
@@ -612,6 +661,12 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
         if len(getattr(init, key)) != n:
             raise SceneError(f"{origin} [initial] {key}: needs {n} values ({', '.join(dof_names)}), "
                              f"got {len(getattr(init, key))}")
+    hammer = sections.get("hammer")
+    if hammer is not None:
+        _check_hammer(sections, kind, model, origin, "load" in data)
+        from fem.rig import channel_names
+
+        dof_names = channel_names()  # [spectrogram] dof names a channel of the rig
     spec = sections.get("spectrogram")
     if spec is not None and spec.dof not in dof_names:
         raise SceneError(f"{origin} [spectrogram] dof: unknown DOF {spec.dof!r} (known: {', '.join(dof_names)})")
@@ -653,6 +708,31 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
                  loads=loads, load_signals=signals, **sections)
 
 
+def _check_hammer(sections: dict, kind: str, model, origin: str, has_loads: bool) -> None:
+    """[hammer] needs a reduced model of the whole assembly, a [ringdown] and no other load or stage."""
+    if kind != "rom" or model.layout != "assembly":
+        raise SceneError(f"{origin} [hammer]: the virtual test needs the reduced apparatus ([model] kind = \"rom\", "
+                         "layout = \"assembly\")")
+    if "ringdown" not in sections:
+        raise SceneError(f"{origin} [hammer]: add a [ringdown] table (the record's duration_s, sample_rate_hz, "
+                         "method)")
+    if has_loads:
+        raise SceneError(f"{origin} [[load]]: [hammer] is the load of a virtual test; drop [[load]] or [hammer]")
+    for key in ("symmetry", "work_precision", "stiff_cases", "rom_convergence", "verify", "frc"):
+        if key in sections:
+            raise SceneError(f"{origin}: [{key}] does not go with [hammer]; put it in another scene")
+    h, rd = sections["hammer"], sections["ringdown"]
+    if h.start_s + h.duration_s > rd.duration_s:
+        raise SceneError(f"{origin} [hammer] start_s: the blow ends at {h.start_s + h.duration_s!r} s, after the "
+                         f"record ([ringdown] duration_s = {rd.duration_s!r} s)")
+    from fem.rig import channel_names
+
+    names = channel_names()
+    for c in h.compare:
+        if c not in names:
+            raise SceneError(f"{origin} [hammer] compare: unknown channel {c!r}{suggest(c, names)}")
+
+
 # -- built-in scenes ---------------------------------------------------------------------
 def builtin_names() -> list[str]:
     """Names of the scenes shipped with the package, sorted."""
@@ -681,4 +761,4 @@ def load_scene(name_or_path: str) -> Scene:
     return parse_scene(text, name_or_path, f"scene {name_or_path}")
 
 
-__all__ = ["Scene", "SceneError", "FRCSpec", "load_scene", "parse_scene", "builtin_names", "from_table"]
+__all__ = ["Scene", "SceneError", "FRCSpec", "HammerSpec", "load_scene", "parse_scene", "builtin_names", "from_table"]

@@ -28,7 +28,7 @@ import json
 import math
 import os
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -125,6 +125,10 @@ class ReducedModel:
     Phi: np.ndarray | None = None  # (N, n - 2) fixed-interface modes
     dof_map: dict = field(default_factory=dict)  # interface and point rows on the full DOFs:
     # {interface,points}_{row,dof,weight} arrays (row r of T is sum_k weight_k u[dof_k] over row == r)
+    output_names: tuple[str, ...] = ()  # the rig's measured motions (fem.rig): sensor axes, tube seats
+    output_rows: np.ndarray | None = None  # (len(output_names), n): each output is row @ q
+    mesh: dict = field(default_factory=dict)  # points, hexes, cell_part, beam_part, element: a point
+    # load anywhere on the beam without meshing again (point_load)
 
     @property
     def n(self) -> int:
@@ -150,8 +154,25 @@ class ReducedModel:
         C = spec.c_points * self.P.T @ self.P + spec.alpha * self.M
         info = {**self.info, "spec": {**self.info.get("spec", {}), "k_g": spec.k_g, "gap": spec.gap,
                                       "c_points": spec.c_points, "alpha": spec.alpha}}
-        return ReducedModel(self.M, self.K, 0.5 * (C + C.T), self.P, self.omega_fixed, spec.k_g, spec.gap,
-                            self.dof_names, self.checks, info, self.Psi, self.Phi, self.dof_map)
+        return replace(self, C=0.5 * (C + C.T), k_g=spec.k_g, gap=spec.gap, info=info)
+
+    def output(self, name: str) -> np.ndarray:
+        """(n,) the reduced row of a rig output (see ``output_names``): its value is row @ q."""
+        if name not in self.output_names:
+            raise KeyError(f"the reduced model has no output {name!r} (it has {len(self.output_names)})")
+        return self.output_rows[self.output_names.index(name)]
+
+    def point_load(self, location, direction) -> np.ndarray:
+        """(n,) reduced load of a unit force along ``direction`` at ``location`` (m) on the beam,
+        V^T b with b the consistent nodal load (:func:`fem.rig.point_load_vector`)."""
+        from fem.rig import point_load_vector
+
+        if not self.mesh or self.Psi is None:
+            raise ValueError("this reduced model keeps no mesh: rebuild it to apply a point load")
+        m = self.mesh
+        b = point_load_vector(m["points"], m["hexes"], str(m["element"]), m["cell_part"], int(m["beam_part"]),
+                              location, direction, self.Psi.shape[0])
+        return np.concatenate([np.asarray(b @ self.Psi).ravel(), np.asarray(b @ self.Phi).ravel()])
 
     def _write_npz(self, f) -> None:
         """The ``rom.npz`` content (matrices, DOF map, checks and provenance as JSON) into file f."""
@@ -163,6 +184,11 @@ class ReducedModel:
             arrays["Phi"] = self.Phi
         for key, val in self.dof_map.items():
             arrays[f"map_{key}"] = np.asarray(val)
+        if self.output_names:
+            arrays["output_names"] = np.array(self.output_names)
+            arrays["output_rows"] = self.output_rows
+        for key, val in self.mesh.items():
+            arrays[f"mesh_{key}"] = np.asarray(val)
         np.savez_compressed(f, **arrays)
 
     def save(self, path: str | Path) -> None:
@@ -183,7 +209,10 @@ class ReducedModel:
                            k_g=float(z["k_g"]), gap=float(z["gap"]), dof_names=tuple(str(s) for s in z["dof_names"]),
                            checks=json.loads(str(z["checks_json"])), info=info,
                            Psi=z["Psi"] if "Psi" in z else None, Phi=z["Phi"] if "Phi" in z else None,
-                           dof_map={k[4:]: z[k] for k in z.files if k.startswith("map_")})
+                           dof_map={k[4:]: z[k] for k in z.files if k.startswith("map_")},
+                           output_names=tuple(str(s) for s in z["output_names"]) if "output_names" in z else (),
+                           output_rows=z["output_rows"] if "output_rows" in z else None,
+                           mesh={k[5:]: z[k] for k in z.files if k.startswith("mesh_")})
         except Exception as exc:  # BadZipFile, zlib.error, EOFError, KeyError, ...: all mean a bad file
             name = getattr(path, "name", path)
             reason = " ".join(f"{type(exc).__name__}: {exc}".split())
@@ -239,9 +268,28 @@ def build_rom(spec: RomSpec, fe=None, progress: bool = False) -> tuple[ReducedMo
     dof_map = {f"interface_{k}": v for k, v in _sparse_rows(T).items()} | {
         f"points_{k}": v for k, v in _sparse_rows(rows).items()}
     names = ("x1", "x3", *(f"eta{i + 1}" for i in range(cb.nq)))
+    out_names, out_rows = _rig_outputs(fe, cb)
+    mesh = {"points": fe.mesh.points, "hexes": fe.mesh.hexes, "cell_part": fe.mesh.cell_part,
+            "beam_part": fe.mesh.part_names.index("beam"), "element": fe.solid.element}
     rom = ReducedModel(cb.M, cb.K, 0.5 * (C + C.T), P, cb.omega_fixed, spec.k_g, spec.gap, names, checks,
-                       info, cb.Psi, cb.Phi, dof_map)
+                       info, cb.Psi, cb.Phi, dof_map, out_names, out_rows, mesh)
     return rom, fe
+
+
+def _rig_outputs(fe, cb) -> tuple[tuple[str, ...], np.ndarray]:
+    """The rig's measured motions as reduced rows: every accelerometer axis (``beam_s1:x`` ..) and,
+    with the tube, each tip load cell's seat (``seat:tip_left_top`` ..): see :mod:`fem.rig`."""
+    from fem.rig import seat_rows, sensor_rows
+
+    parts = ("beam", "tube") if fe.model.layout == "assembly" else ("beam",)
+    dofs = sensor_rows(fe, parts)
+    names = list(dofs)
+    rows = [np.concatenate([cb.Psi[d], cb.Phi[d]]) for d in dofs.values()]
+    if fe.model.layout == "assembly":
+        for cell, r in seat_rows(fe).items():
+            names.append(f"seat:{cell}")
+            rows.append(cb.reduce_rows(r)[0])
+    return tuple(names), np.vstack(rows)
 
 
 def source_hash() -> str:
