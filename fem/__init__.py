@@ -28,6 +28,10 @@ Takes the meshes of :mod:`geometry` and hands sparse K, M with their DOF maps to
   (closed-gap) stiffness, point rows at x1, x2, x3, gap modes and the y-mirror map;
 - :mod:`fem.beam_theory`: Euler-Bernoulli, Timoshenko, torsion and axial frequencies of a
   free-free bar, the references of the ``beam-free`` scene;
+- :mod:`fem.rig`: the instrumented rig: channel names, UFF node and direction codes, sensor and
+  seat rows, and the hammer's consistent point load anywhere on the beam (from the mesh alone);
+- :mod:`fem.modal_response`: a modal model with non-proportional damping, its pole-residue FRF
+  and its exact half-sine response (the virtual hammer test's linear check);
 - :mod:`fem.vtu`: displacement fields on the hex mesh as VTU files for ParaView.
 
 Entry points: :func:`fem.analysis.analyse` (the ``modal`` stage) and

@@ -157,8 +157,9 @@ def _mode_files(rom, fe, system, writer: StageWriter, n: int = 6) -> str:
     fields, shapes = {}, []
     for state in STATES:
         lm = linear_modes(system, state)
-        shown = set(gap_moving_modes(system, state, 3).tolist())
-        for i in range(min(n, system.n)):
+        shown = gap_moving_modes(system, state, 3).tolist()  # not always among the lowest n: an
+        # assembly's swinging on its bungees and, without planar, its out-of-plane modes come first
+        for i in sorted({*range(min(n, system.n)), *shown}):
             u = expand(rom, lm.phi[:, i])
             u = u / np.max(np.abs(u))
             fields[f"{state}{i + 1}_{lm.freq_hz[i]:.2f}Hz"] = u

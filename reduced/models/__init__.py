@@ -6,6 +6,9 @@
 - :mod:`~reduced.models.modes`: open- and closed-gap linear modes, modes that move given rows;
 - :mod:`~reduced.models.craig_bampton`, :mod:`~reduced.models.rom`: the 3-D model reduced
   onto its tips, saved as ``rom.npz`` and cached;
+- :mod:`~reduced.models.rig`: the virtual rig: a reduced apparatus struck by a hammer, its
+  channels (accelerometers, tip load cells, the hammer) synthesised from the state;
+- :mod:`~reduced.models.loads`: external forces (half-sine, harmonic, tabulated);
 - :mod:`~reduced.models.identify`: a reduced model read back as the three-mass model;
 - :mod:`~reduced.models.initial`: initial states given at the points x1, x2, x3.
 """
