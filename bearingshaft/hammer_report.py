@@ -241,7 +241,8 @@ def write_markdown(path: Path, scene: Scene, rig: VirtualRig, rec, summary: dict
     s = summary[spec.peak_N]
     lines = [f"# Virtual hammer test: {scene.name}", "",
              f"Reduced apparatus: {rig.system.n} coordinates (x1, x3 and {rig.system.n - 2} fixed-interface modes), "
-             f"{len(rig.channels)} channels. Blow: {'measured history ' + spec.force_file if spec.force_file else 'half-sine'}"
+             f"{len(rig.channels)} channels. Blow: "
+             f"{'measured history ' + spec.force_file if spec.force_file else 'half-sine'}"
              f" of {spec.duration_s * 1e3:g} ms at {_where(rig)} along {tuple(round(d, 6) for d in rig.direction)}, "
              f"starting at {spec.start_s:g} s; record {scene.ringdown.duration_s:g} s at "
              f"{scene.ringdown.sample_rate_hz:g} Hz by the {scene.ringdown.method} integrator.", "",
@@ -408,8 +409,8 @@ def linear_check(scene: Scene, rom, rig: VirtualRig, writer: StageWriter, progre
 
     from bearingshaft.stages.hammer import run_record
     from fem.contact import point_rows
-    from fem.model import build_system
     from fem.modal_response import ModalModel
+    from fem.model import build_system
     from fem.rig import point_load_vector, seat_rows, sensor_rows
     from reduced.models.loads import HalfSine
     from reduced.models.rig import virtual_rig
@@ -441,7 +442,8 @@ def linear_check(scene: Scene, rom, rig: VirtualRig, writer: StageWriter, progre
     rom_data = rec.data[: len(names) + len(TIP_CELLS)]
     fs = 1.0 / (rec.t[1] - rec.t[0])
     chan = [*names, *TIP_CELLS]
-    windows = {"50ms": (rec.t >= spec.start_s) & (rec.t < spec.start_s + CHECK_WINDOW_S), "record": rec.t >= spec.start_s}
+    windows = {"50ms": (rec.t >= spec.start_s) & (rec.t < spec.start_s + CHECK_WINDOW_S),
+               "record": rec.t >= spec.start_s}
     bands = {"band": (band_limited(rom_data, fs), band_limited(ref_data, fs)), "raw": (rom_data, ref_data)}
     errors, near_zero = {}, np.zeros(len(chan), bool)
     for (b, (r_rom, r_ref)), (w, mask) in ((x, y) for x in bands.items() for y in windows.items()):
@@ -488,7 +490,8 @@ def _linear_figure(path: Path, t, rom_data, ref_data, names, worst: str, fs: flo
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(9, 7), constrained_layout=True)
     i = names.index(worst)
     keep = (t >= spec.start_s) & (t <= spec.start_s + CHECK_WINDOW_S)
-    a1.plot(t[keep] * 1e3, band_limited(ref_data[i], fs)[keep], color="k", lw=1.6, label="full 3-D, modal superposition")
+    a1.plot(t[keep] * 1e3, band_limited(ref_data[i], fs)[keep], color="k", lw=1.6,
+            label="full 3-D, modal superposition")
     a1.plot(t[keep] * 1e3, band_limited(rom_data[i], fs)[keep], color="tab:orange", lw=0.8, ls="--",
             label="reduced model, exact integrator")
     a1.set_xlabel("time [ms]")

@@ -135,5 +135,6 @@ def point_load_vector(points: np.ndarray, hexes: np.ndarray, element: str, cell_
     return sp.csr_matrix(d @ P)
 
 
-__all__ = ["channel_names", "AXES", "BEAM_SENSORS", "TUBE_SENSORS", "TIP_CELLS", "HAMMER_NODE", "sensor_node", "tip_node",
+__all__ = ["channel_names", "AXES", "BEAM_SENSORS", "TUBE_SENSORS", "TIP_CELLS", "HAMMER_NODE", "sensor_node",
+           "tip_node",
            "sensor_rows", "seat_rows", "unit_direction", "dominant_axis", "point_load_vector"]

@@ -279,7 +279,8 @@ def test_measured_test_is_compared_channel_for_channel(stage_run, built, tmp_pat
     model wrote itself gives it back the same force: every error is 0 to round-off over the
     first 50 ms (the record's last bits of time, re-read from the file, move the breakpoints by
     1e-19 s; the symmetric impacting motion is unstable and grows such differences by ~e^(250 t),
-    so a whole 0.15 s record would not say 0), while a file made by another model (gap 1.5 x) gives errors of order one. (A half-sine
+    so a whole 0.15 s record would not say 0), while a file made by another model (gap 1.5 x)
+    gives errors of order one. (A half-sine
     blow re-read from its 20 kHz samples is another force, linear between samples, whose 0.4 %
     less impulse moves the impacts: in an impacting ringdown that alone makes O(1) differences.)"""
     import csv
@@ -297,7 +298,8 @@ def test_measured_test_is_compared_channel_for_channel(stage_run, built, tmp_pat
         assert rc == 0, err
     for name in ("own", "other"):
         rc, out, err = _cli("hammer", "--scene", str(scenes["own"]), "--test",
-                            str(tmp_path / f"{name}-run" / "hammer.uff"), "--out", str(tmp_path / name), "--no-progress")
+                            str(tmp_path / f"{name}-run" / "hammer.uff"), "--out", str(tmp_path / name),
+                            "--no-progress")
         assert rc == 0, err
         assert "driven by the test's hammer channel" in out
         assert (tmp_path / name / "test_compare.png").stat().st_size > 0
