@@ -31,12 +31,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
-from bearingshaft.output import StageWriter, write_rows
+from bearingshaft.output import StageWriter
 from bearingshaft.scenes import HammerSpec, Scene
 from reduced.models.loads import HalfSine, Tabulated
 from reduced.models.rig import VirtualRig, virtual_rig
