@@ -15,6 +15,7 @@ import numpy as np  # noqa: E402
 from bearingshaft.output import StageWriter, write_rows  # noqa: E402
 from bearingshaft.plots import wrap_title  # noqa: E402
 from bearingshaft.scenes import Scene, SceneError  # noqa: E402
+from bearingshaft.stages.study import sig  # noqa: E402
 from fem.rig import TIP_CELLS  # noqa: E402
 from fem.uff import TimeHistory, write_uff58  # noqa: E402
 from reduced.models.rig import VirtualRig  # noqa: E402
@@ -24,15 +25,6 @@ DIGITS = 6  # significant digits of the science files
 EVENT_DIGITS = 4  # quantities set by where a crossing lands (peak forces, times of contact)
 SPECTRO_DB = 80.0  # dB shown below each spectrogram's peak
 END_SHARE_S = 0.1  # s, the energy "at the end" is the mean over the record's last 0.1 s
-
-
-def _sig(v, digits: int = DIGITS):
-    v = float(v)
-    if math.isnan(v):
-        return ""
-    if math.isinf(v):
-        return "inf" if v > 0 else "-inf"
-    return float(f"{v:.{digits}g}") + 0.0
 
 
 def histories(rig: VirtualRig, t: np.ndarray, data: np.ndarray) -> list[TimeHistory]:
@@ -65,16 +57,12 @@ def backbones(rig: VirtualRig, n_modes: int, energy_max_J: float) -> dict:
         return {}
     from bearingshaft.stages.hammer import coupled_subsystem
     from reduced.models.modes import gap_moving_modes
-    from reduced.periodic.backbones import nnm_branch
+    from reduced.periodic.backbones import hb_backbones
 
     sub = coupled_subsystem(rig.system)
-    out = {}
-    for mode in gap_moving_modes(sub, "open", n_modes):
-        b = nnm_branch(sub, int(mode), H=1, energy_max_J=max(10.0 * energy_max_J, 1e-3))
-        order = np.argsort(b.energy_J, kind="stable")
-        f0 = b.freq_hz[order][0]
-        out[f"NNM at {f0:.1f} Hz (HB, H=1)"] = (b.energy_J[order], b.freq_hz[order])
-    return out
+    curves = hb_backbones(sub, 1, energy_max_J=max(10.0 * energy_max_J, 1e-3),
+                          modes=gap_moving_modes(sub, "open", n_modes))
+    return {f"NNM at {f[0]:.1f} Hz (HB, H=1)": (E, f) for E, f in curves.values()}
 
 
 # -- figures ---------------------------------------------------------------------------------
@@ -200,14 +188,14 @@ def levels_files(writer: StageWriter, rig: VirtualRig, records: dict, summary: d
     """``levels.csv`` (one row per level) and ``levels.png`` (one spectrogram per level)."""
     rows = []
     for level, s in summary.items():
-        rows.append({"level_N": _sig(level), "impacts": s["impacts_total"],
+        rows.append({"level_N": sig(level, DIGITS), "impacts": s["impacts_total"],
                      **{f"impacts_{c}": s["impacts"][c] for c in TIP_CELLS},
-                     **{f"peak_contact_{c}_N": _sig(s["peak_contact_N"][c], EVENT_DIGITS) for c in TIP_CELLS},
-                     "gaps_open_after_s": _sig(s["gaps_open_after_s"], EVENT_DIGITS),
-                     "end_bungee_share": _sig(s["end_bungee_share"], 3),
-                     "end_mode_hz": _sig(s["end_modes"][0]["freq_hz"]), "end_mode": s["end_modes"][0]["label"],
-                     "end_mode_share_of_beam": _sig(s["end_modes"][0]["share"], 3),
-                     "hammer_work_J": _sig(s["hammer_work_J"]),
+                     **{f"peak_contact_{c}_N": sig(s["peak_contact_N"][c], EVENT_DIGITS) for c in TIP_CELLS},
+                     "gaps_open_after_s": sig(s["gaps_open_after_s"], EVENT_DIGITS),
+                     "end_bungee_share": sig(s["end_bungee_share"], 3),
+                     "end_mode_hz": sig(s["end_modes"][0]["freq_hz"], DIGITS), "end_mode": s["end_modes"][0]["label"],
+                     "end_mode_share_of_beam": sig(s["end_modes"][0]["share"], 3),
+                     "hammer_work_J": sig(s["hammer_work_J"], DIGITS),
                      "energy_balance_error": f"{s['energy_balance_error']:.1e}"})
     write_rows(writer.path("levels.csv"), rows)
     name = spectrogram_channel(scene)

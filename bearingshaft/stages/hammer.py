@@ -23,8 +23,7 @@ found with a guarantee, :mod:`reduced.transient.exact`). Files:
   and ``test_spectrogram.png`` (:mod:`bearingshaft.correlate`).
 
 Numbers in the science files are written to 6 significant digits (to 4 for the quantities
-that depend on where the exact integrator lands a crossing: a CPU's last-bit differences move
-impact forces by ~1e-12 relative, far below that).
+that depend on where the exact integrator lands a crossing), :mod:`bearingshaft.hammer_report`.
 """
 
 from __future__ import annotations
@@ -37,20 +36,11 @@ from tqdm import tqdm
 
 from bearingshaft.output import StageWriter
 from bearingshaft.scenes import HammerSpec, Scene
+from fem.rig import TIP_CELLS
 from reduced.models.loads import HalfSine, Tabulated
 from reduced.models.rig import VirtualRig, virtual_rig
 
-DIGITS = 6
 LABEL_MAX_HZ = 100.0  # Hz, the pseudo-rigid modes are searched below this (Table 2: 10.9 to 33.7 Hz)
-
-
-def _sig(v: float, digits: int = DIGITS):
-    v = float(v)
-    if math.isnan(v):
-        return ""
-    if math.isinf(v):
-        return "inf" if v > 0 else "-inf"
-    return float(f"{v:.{digits}g}") + 0.0
 
 
 # -- the run ------------------------------------------------------------------------------
@@ -83,14 +73,13 @@ def blow(spec: HammerSpec, level_N: float):
 def run_record(rig: VirtualRig, signal, scene: Scene, level_N: float, duration_s: float | None = None,
                sample_rate_hz: float | None = None) -> Record:
     """The rig from rest under ``signal``, on [ringdown]'s record (or the duration and rate given)."""
+    from bearingshaft.stages.ringdown import solver_options
     from reduced.transient.integrate import ringdown
 
     rd = scene.ringdown
     n = rig.system.n
     res = ringdown(rig.system, np.zeros(n), np.zeros(n), duration_s or rd.duration_s,
-                   sample_rate_hz or rd.sample_rate_hz, rd.method, loads=rig.loads(signal),
-                   **({"dt": rd.dt_s, "omega_dt": rd.omega_dt, "step_basis": rd.step_basis} if rd.method == "explicit"
-                      else {"rtol": rd.rtol, "atol": rd.atol} if rd.method == "dop853" else {}))
+                   sample_rate_hz or rd.sample_rate_hz, rd.method, loads=rig.loads(signal), **solver_options(rd))
     data = rig.channel_data(res.x, res.v, signal(res.t))
     return Record(level_N, res.t, data, res.x, res.v, res.energy, res.dissipated, res.external, dict(res.stats),
                   float(res.energy_balance_error))
@@ -110,8 +99,6 @@ def impacts(rig: VirtualRig, rec: Record) -> dict:
     pen = rig.system.penetration(rec.x)  # (N, 4) > 0 closed
     closed = pen > 0
     out = {}
-    from fem.rig import TIP_CELLS
-
     for j, cell in enumerate(TIP_CELLS):
         c = closed[:, j]
         starts = np.flatnonzero(c[1:] & ~c[:-1]) + 1

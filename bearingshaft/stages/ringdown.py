@@ -103,11 +103,15 @@ def scene_loads(scene: Scene, P: np.ndarray) -> Loads | None:
     return point_loads(scene.load_signals, [spec.point for spec in scene.loads], P, scene.model.point_names)
 
 
-def _options(scene: Scene, P: np.ndarray) -> dict:
-    spec = scene.ringdown
-    loads = scene_loads(scene, P)
+def solver_options(spec) -> dict:
+    """The integrator options of a [ringdown] table (each method checks the others' too)."""
     return {"dt": spec.dt_s, "omega_dt": spec.omega_dt, "step_basis": spec.step_basis, "rtol": spec.rtol,
-            "atol": spec.atol, **({"loads": loads} if loads is not None else {})}
+            "atol": spec.atol}
+
+
+def _options(scene: Scene, P: np.ndarray) -> dict:
+    loads = scene_loads(scene, P)
+    return {**solver_options(scene.ringdown), **({"loads": loads} if loads is not None else {})}
 
 
 def run_ringdown(scene: Scene, system: GapSystem, P: np.ndarray, method: str, progress: bool,
