@@ -6,7 +6,8 @@ Subcommands follow the pipeline (geometry -> fem -> reduced -> results):
 one), ``nnm``, ``study`` (error against run time, stiff cases), ``verify``
 (reduction against the discrete model), ``frc`` (forced-response curves), ``run`` (every
 stage of one or more scenes; all built-in scenes when none is named), ``check`` (validate scenes, their memory and the
-results folder without running anything) and ``scenes``.
+results folder without running anything), ``sweep`` (a scene over a design of parameter values, on Dask) and
+``scenes``.
 Bad input gives a one-line message and exit code 2, before any work starts; nothing
 half-written is left behind. Every command ends with a summary naming the results folder.
 """
@@ -77,6 +78,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scene", dest="scene_opt", metavar="NAME_OR_TOML", help="one scene (as for the stages)")
     p.add_argument("--out", metavar="DIR", help="results folder to check (default: results/<scene>/)")
     sub.add_parser("scenes", help="list the built-in scenes")
+    # -- issue 13: parameter sweeps on Dask (bearingshaft/sweep.py) --
+    p = sub.add_parser("sweep", help="run a scene over a design of parameter values on Dask (a local cluster, "
+                       "or --scheduler ADDRESS); sweep.parquet, sweep.csv, sweep.png")
+    _add_common(p)
+    p.add_argument("--vary", action="append", metavar="KEY=VALUES",
+                   help="a varied scene key and its values, repeatable: model.g=1e-4:1e-3:9:log (N values, log or "
+                   "lin), model.k_g=1e7,1e8,1e9 (a list), random design: model.c=0:8 (a range); replaces the "
+                   "scene's [sweep.vary]")
+    p.add_argument("--design", metavar="grid|zip|random", help="grid (product, default), zip, random (Latin "
+                   "hypercube)")
+    p.add_argument("--samples", metavar="N", help="cases of a random design")
+    p.add_argument("--seed", metavar="S", help="seed of a random design (default 0)")
+    p.add_argument("--workers", metavar="N", help="worker processes of the local cluster (default: one per core)")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="run on this Dask scheduler (tcp://host:8786) instead")
+    # -- end issue 13 --
     return parser
 
 
@@ -126,6 +142,10 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         if args.command == "check":
             return _check(args)
+        if args.command == "sweep":  # issue 13
+            from bearingshaft.sweep import sweep_command
+
+            return sweep_command(args, load_scene)
         progress = not args.no_progress
         if args.command == "run":
             names = args.scenes or builtin_names()

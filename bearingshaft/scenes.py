@@ -526,6 +526,7 @@ class Scene:
     verify: VerifySpec | None = None
     frc: FRCSpec | None = None
     hammer: HammerSpec | None = None
+    sweep: object | None = None  # [sweep]: bearingshaft.sweep.SweepSpec (issue 13); run by `bearingshaft sweep`
 
     @property
     def stages(self) -> tuple[str, ...]:
@@ -606,7 +607,7 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{origin}: invalid TOML: {exc}") from None
-    top = {"name", "description", "model", "load", *SECTIONS}
+    top = {"name", "description", "model", "load", "sweep", *SECTIONS}
     for key in data:
         if key not in top:
             raise SceneError(f"{origin}: unknown key {key!r}{suggest(key, top)} (known: {', '.join(sorted(top))})")
@@ -637,8 +638,12 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
     sections = {
         key: from_table(cls, data[key], f"{origin} [{key}]") for key, cls in SECTIONS.items() if key in data
     }
+    if "sweep" in data:  # issue 13: the table is read by bearingshaft.sweep, its cases checked by `sweep`
+        from bearingshaft.sweep import parse_sweep_table
+
+        sections["sweep"] = parse_sweep_table(data["sweep"], origin)
     if not hasattr(model, "system"):  # a 3-D model: only [modal] applies
-        other = [k for k in sections if k != "modal"] + (["[load]"] if "load" in data else [])
+        other = [k for k in sections if k not in ("modal", "sweep")] + (["[load]"] if "load" in data else [])
         if other:
             raise SceneError(f"{origin}: model kind {kind!r} takes only a [modal] table, got [{other[0]}]")
         return Scene(name=name, description=description, model_kind=kind, model=model, source=text, origin=origin,
