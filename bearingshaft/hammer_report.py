@@ -384,8 +384,10 @@ def linear_check(scene: Scene, rom, rig: VirtualRig, writer: StageWriter, progre
     to the same blow from its modes up to ``[hammer] linear_check_max_hz`` with the same
     damping (the dashpots c_points at x1, x2, x3 and alpha M projected on the modes:
     Cm = c Phi^T P^T P Phi + alpha I, not diagonal), written in closed form from the
-    pole-residue FRF (:class:`fem.modal_response.ModalModel`). Load cells read only their
-    seismic inertia here. Both are compared low-passed alike at BAND_HZ (and raw), the error
+    pole-residue FRF (:class:`fem.modal_response.ModalModel`), acquired through the same
+    anti-alias filter as the rig's channels (:mod:`reduced.models.daq`; computed at q fs with
+    q from its top mode, so its modes above fs/2 do not fold into the band). Load cells read
+    only their seismic inertia here. Both are compared low-passed alike at BAND_HZ (and raw), the error
     rms(a_rom - a_full) / rms(a_full) over the first CHECK_WINDOW_S after the blow (and over the
     whole record after it, where the phase of lightly damped kHz modes makes a 1e-5 frequency
     difference an O(1) RMS one). An accelerometer axis whose RMS is below NEAR_ZERO of its
@@ -400,6 +402,7 @@ def linear_check(scene: Scene, rom, rig: VirtualRig, writer: StageWriter, progre
     from fem.modal_response import ModalModel
     from fem.model import build_system
     from fem.rig import point_load_vector, seat_rows, sensor_rows
+    from reduced.models.daq import Acquisition, oversampling
     from reduced.models.loads import HalfSine
     from reduced.models.rig import virtual_rig
 
@@ -422,13 +425,15 @@ def linear_check(scene: Scene, rom, rig: VirtualRig, writer: StageWriter, progre
     level = spec.peak_N
     open_rig = virtual_rig(replace(rom, gap=1.0), rig.location, rig.direction, rig.seismic_mass_kg)
     rec = run_record(open_rig, HalfSine(level, spec.duration_s, spec.start_s), scene, level)
-    ref = ModalModel(omega, 0.5 * (Cm + Cm.T)).half_sine_response(rec.t, b_modal, R, level, spec.duration_s,
+    fs = scene.ringdown.sample_rate_hz
+    acq = Acquisition(fs, oversampling(float(omega.max()) / (2 * np.pi), fs))  # the same DAQ as the rig's
+    t_fine = np.arange(acq.oversample * (rec.t.size - 1) + 1 + acq.tail_samples) / acq.fine_rate_hz
+    ref = ModalModel(omega, 0.5 * (Cm + Cm.T)).half_sine_response(t_fine, b_modal, R, level, spec.duration_s,
                                                                   spec.start_s)
-    a_ref = ref.acceleration
+    a_ref = acq.acquire(ref.acceleration, rec.t.size)
     sign = np.array([1.0 if c.endswith("top") else -1.0 for c in TIP_CELLS])[:, None]
     ref_data = np.vstack([a_ref[: len(names)], -sign * rig.seismic_mass_kg * a_ref[len(names):]])
     rom_data = rec.data[: len(names) + len(TIP_CELLS)]
-    fs = 1.0 / (rec.t[1] - rec.t[0])
     chan = [*names, *TIP_CELLS]
     windows = {"50ms": (rec.t >= spec.start_s) & (rec.t < spec.start_s + CHECK_WINDOW_S),
                "record": rec.t >= spec.start_s}

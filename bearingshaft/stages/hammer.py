@@ -72,17 +72,35 @@ def blow(spec: HammerSpec, level_N: float):
 
 def run_record(rig: VirtualRig, signal, scene: Scene, level_N: float, duration_s: float | None = None,
                sample_rate_hz: float | None = None) -> Record:
-    """The rig from rest under ``signal``, on [ringdown]'s record (or the duration and rate given)."""
+    """The rig from rest under ``signal``, on [ringdown]'s record (or the duration and rate given).
+
+    The channels are acquired as a test's DAQ does (:class:`reduced.models.daq.Acquisition`):
+    computed from the exact state at q times the rate, q from the rig's highest frequency
+    over its contact states, low-passed by a linear-phase anti-alias filter (flat to 0.4 fs,
+    -100 dB from fs/2) and decimated; the integration runs on past the record by the
+    filter's half length so its last samples are exact too. The hammer channel is the force
+    applied, sampled as it is (the model's input: a record drives the model again with the same
+    force). The state (x, v) and the energies are the exact ones at the record's samples."""
     from bearingshaft.stages.ringdown import solver_options
+    from reduced.models.daq import Acquisition, oversampling
     from reduced.transient.integrate import ringdown
+    from reduced.transient.result import sample_count
 
     rd = scene.ringdown
     n = rig.system.n
-    res = ringdown(rig.system, np.zeros(n), np.zeros(n), duration_s or rd.duration_s,
-                   sample_rate_hz or rd.sample_rate_hz, rd.method, loads=rig.loads(signal), **solver_options(rd))
-    data = rig.channel_data(res.x, res.v, signal(res.t))
-    return Record(level_N, res.t, data, res.x, res.v, res.energy, res.dissipated, res.external, dict(res.stats),
-                  float(res.energy_balance_error))
+    fs = sample_rate_hz or rd.sample_rate_hz
+    n_out = sample_count(duration_s or rd.duration_s, fs)
+    acq = Acquisition(fs, oversampling(rig.system.omega_max() / (2 * math.pi), fs))
+    q = acq.oversample
+    fine_duration = (q * (n_out - 1) + acq.tail_samples) / acq.fine_rate_hz
+    res = ringdown(rig.system, np.zeros(n), np.zeros(n), fine_duration, acq.fine_rate_hz, rd.method,
+                   loads=rig.loads(signal), **solver_options(rd))
+    keep = slice(0, q * (n_out - 1) + 1, q)
+    fine = rig.channel_data(res.x, res.v, signal(res.t))
+    data = np.vstack([acq.acquire(fine[:-1], n_out), fine[-1:, keep]])  # the hammer: the applied force itself
+    stats = {**res.stats, "acquisition": acq.describe(), "oversample": q}
+    return Record(level_N, res.t[keep], data, res.x[keep], res.v[keep], res.energy[keep], res.dissipated[keep],
+                  res.external[keep], stats, float(res.energy_balance_error))
 
 
 def default_location(rom) -> tuple[float, float, float]:
