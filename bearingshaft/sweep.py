@@ -747,7 +747,7 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
             client.close()
         return
     n = workers or local_cores()
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                            silence_logs=logging.ERROR)
     client = Client(cluster)
     try:

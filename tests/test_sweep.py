@@ -1,0 +1,303 @@
+"""Sweeps on Dask (issue 13): the design, refusals before anything runs, closed-form metrics of a
+linear sweep, resume, failures as rows, and a worker killed mid-sweep.
+
+The closed form: with the gaps far away (g = 1 m, amplitudes of 1 mm) the 3-DOF model is
+linear, and x(0) = [d, 0, -d], v(0) = 0 starts its antisymmetric mode alone (m1 = m3, C = c I:
+the mode decouples). Its coordinate q = x1 = -x3 obeys m1 q'' + c q' + 2 k_s q = 0, so x1 rings at
+f_d = sqrt(2 k_s / m1 - sigma^2) / (2 pi), sigma = c / (2 m1), in every window, and its energy
+E = m1 q'^2 + 2 k_s q^2 is known at every sample.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import signal
+import threading
+import time
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from bearingshaft.cli import main
+from bearingshaft.scenes import load_scene, parse_scene
+from bearingshaft.sweep import (
+    SweepError,
+    SweepSpec,
+    build_plan,
+    case_complete,
+    design_points,
+    dominant_freq_hz,
+    parse_vary_option,
+    run_sweep,
+)
+
+M1, C, D = 0.629, 4.0, 1e-3  # kg, N s/m (Table 1), m: the start's amplitude
+LINEAR = f"""
+description = "linear antisymmetric mode"
+[model]
+kind = "discrete"
+g = 1.0
+[initial]
+x0_m = [{D}, 0.0, {-D}]
+[ringdown]
+duration_s = 4.0
+sample_rate_hz = 2000.0
+"""
+K_S = (8000.0, 14000.0, 20000.0, 30000.0)  # N/m: f_d = 25.4 to 49.2 Hz, 12 to 25 periods in a 0.5 s window
+
+
+def closed_form(k_s: float, t: np.ndarray) -> tuple[float, np.ndarray]:
+    """(f_d, E(t)) of the antisymmetric mode from x1 = d, v = 0."""
+    sigma = C / (2 * M1)
+    wd = math.sqrt(2 * k_s / M1 - sigma**2)
+    q = D * np.exp(-sigma * t) * (np.cos(wd * t) + sigma / wd * np.sin(wd * t))
+    dq = -D * np.exp(-sigma * t) * (wd + sigma**2 / wd) * np.sin(wd * t)
+    return wd / (2 * math.pi), M1 * dq**2 + 2 * k_s * q**2
+
+
+def plan_of(text: str, *vary: str, design: str = "grid", **kw):
+    scene = parse_scene(text, "lin", "lin.toml")
+    spec = SweepSpec(tuple(parse_vary_option(v) for v in vary), design, **kw)
+    return build_plan(scene, spec, "--vary")
+
+
+@pytest.fixture(scope="module")
+def client():
+    from bearingshaft.sweep import dask_client
+
+    with dask_client(workers=2) as (c, _):
+        yield c
+
+
+# -- the design --------------------------------------------------------------------------------
+@pytest.mark.parametrize("text, values", [
+    ("model.g=1e-4:1e-3:3:log", (1e-4, 10**-3.5, 1e-3)),
+    ("model.k_g=1e7,1e8", (1e7, 1e8)),
+    ("model.c=0:8:5", (0, 2, 4, 6, 8)),  # integer ends: integers (the parser takes them for a float key)
+    ("model.c=0.0:8.0:5", (0.0, 2.0, 4.0, 6.0, 8.0)),
+    ("ringdown.method=exact,explicit", ("exact", "explicit")),
+    ("fep.n_shooting=10:30:3", (10, 20, 30)),  # integer ends: integers
+    ("initial.v0_m_s[2]=200", (200,)),
+])
+def test_vary_values(text, values):
+    v = parse_vary_option(text)
+    if isinstance(values[0], str):
+        assert v.values == values
+    else:
+        assert v.values == pytest.approx(values, rel=1e-15)
+    assert [type(a) for a in v.values] == [type(b) for b in values]
+
+
+def test_random_design_is_a_latin_hypercube():
+    spec = SweepSpec((parse_vary_option("model.c=0.0:8.0"), parse_vary_option("model.k_g=1e6:1e9:log")), "random",
+                     samples=50, seed=3)
+    pts = np.array(design_points(spec))
+    assert pts.shape == (50, 2)
+    # one sample in each of the 50 strata of each key (linear strata for c, log strata for k_g)
+    assert sorted(np.floor(pts[:, 0] / 8 * 50).astype(int)) == list(range(50))
+    assert sorted(np.floor(np.log(pts[:, 1] / 1e6) / np.log(1e3) * 50).astype(int)) == list(range(50))
+    assert design_points(spec) == design_points(spec)  # seeded
+    assert design_points(dataclasses.replace(spec, seed=4)) != design_points(spec)
+
+
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(lo=st.floats(1e-12, 1e12), ratio=st.floats(1.0 + 1e-9, 1e6), n=st.integers(1, 60),
+       scale=st.sampled_from(["", ":lin", ":log"]))
+def test_ranges_keep_their_ends_and_order(lo, ratio, n, scale):
+    hi = lo * ratio
+    v = parse_vary_option(f"model.k_g={lo!r}:{hi!r}:{n}{scale}")
+    assert len(v.values) == n and v.values[0] == lo
+    if n > 1:
+        assert v.values[-1] == pytest.approx(hi, rel=1e-12)
+        assert all(b > a for a, b in zip(v.values, v.values[1:], strict=False))
+    assert all(lo * (1 - 1e-12) <= x <= hi * (1 + 1e-12) for x in v.values)
+
+
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(st.lists(st.floats(allow_nan=False, allow_infinity=False), min_size=1, max_size=8))
+def test_lists_round_trip(values):
+    v = parse_vary_option("model.k_g=" + ",".join(repr(x) for x in values))
+    assert v.values == tuple(values)
+
+
+@settings(max_examples=500, deadline=None, derandomize=True)
+@given(st.text(max_size=40))
+def test_any_vary_text_parses_or_is_refused_in_one_line(text):
+    try:
+        parse_vary_option(text)
+    except SweepError as exc:
+        assert "\n" not in str(exc) and str(exc).startswith("--vary")
+
+
+# -- refusals: one line, exit 2, before anything runs -------------------------------------------
+@pytest.mark.parametrize("argv, expected", [
+    (["--vary", "model.gap=1e-4,2e-4"], "[model]: unknown key 'gap'"),
+    (["--vary", "model.g=-1e-3,1e-3"], "g must be >= 0, got -0.001"),
+    (["--vary", "modle.g=1e-4"], "unknown table 'modle' (did you mean 'model'?)"),
+    (["--vary", "model.g=1e-4", "--design", "grd"], "unknown design 'grd' (did you mean 'grid'?)"),
+    (["--vary", "model.g=1e-4,2e-4", "--vary", "model.k_g=1e7", "--design", "zip"], "every key needs as many"),
+    (["--vary", "model.g=1e-4,2e-4", "--design", "random", "--samples", "4"], "the random design samples a range"),
+    (["--vary", "model.g=1e-4:1e-3", "--design", "grid"], "needs the values"),
+    (["--vary", "model.g=1e-4:1e-3:0"], "number of values must be an integer >= 1"),
+    (["--vary", "model.g=1e-4:1e-3:4:log", "--vary", "model.g=1e-4"], "model.g: the key is varied twice"),
+    (["--vary", "nnm.n_energy=10,20"], "the scene has no [nnm] table"),
+    (["--vary", "initial.v0_m_s[3]=1.0"], "v0_m_s has 3 values; [3] is not one"),
+    (["--vary", "ringdown.duration_s=1.0,nan"], "duration_s: must be finite"),
+    (["--vary", "ringdown.method=exact,rk4"], "method must be one of"),
+    (["--vary", "model.g=1e-4,1e-4"], "two cases have the same values"),
+    (["--vary", "model.g"], "expected KEY=VALUES"),
+    (["--vary", "model.g=1e-4", "--workers", "0"], "--workers: expected an integer >= 1"),
+    ([], "the scene has no [sweep] table; give --vary"),
+])
+def test_bad_sweep_is_one_line_exit_2_before_anything_runs(tmp_path, capsys, monkeypatch, argv, expected):
+    import bearingshaft.sweep as sweep
+
+    def no_cluster(*a, **k):
+        raise AssertionError("a cluster was started for a sweep that must be refused")
+
+    monkeypatch.setattr(sweep, "dask_client", no_cluster)
+    scene = tmp_path / "lin.toml"
+    scene.write_text(LINEAR)
+    out = tmp_path / "out"
+    assert main(["sweep", "--scene", str(scene), "--out", str(out), *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("bearingshaft: error: ") and err.count("\n") == 1, err
+    assert expected in err, err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("table, expected", [
+    ('[sweep]\ndesign = "grd"\n[sweep.vary]\n"model.g" = [1e-4]\n', "[sweep] design: unknown design 'grd'"),
+    ('[sweep]\nvary_ = 1\n', "[sweep]: unknown key 'vary_' (did you mean 'vary'?)"),
+    ('[sweep.vary]\n"model.g" = "1e-4:x:3"\n', "[sweep] vary model.g: 'x' is not a number"),
+    ('[sweep]\nsamples = -1\n', "[sweep] samples: expected an integer >= 0"),
+    ('[sweep]\noverlay = "nnm"\n', "[sweep] overlay: unknown overlay 'nnm'"),
+])
+def test_bad_sweep_table_is_refused_by_check(tmp_path, capsys, table, expected):
+    scene = tmp_path / "lin.toml"
+    scene.write_text(LINEAR + table)
+    assert main(["check", "--scene", str(scene), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert expected in err and err.count("\n") == 1, err
+
+
+def test_builtin_sweeps_validate_every_case():
+    gap_kg = load_scene("sweep-gap-kg")
+    plan = build_plan(gap_kg, gap_kg.sweep, "sweep-gap-kg [sweep]")
+    assert [len(v.values) for v in gap_kg.sweep.vary] == [15, 15] and len(plan.cases) == 225
+    energy = load_scene("sweep-energy")
+    plan = build_plan(energy, energy.sweep, "sweep-energy [sweep]")
+    assert len(plan.cases) >= 200 and len({c.case_id for c in plan.cases}) == len(plan.cases)
+    v = np.array([dict(c.values)["initial.v0_m_s[1]"] for c in plan.cases])
+    E0 = 0.5 * 1.258 * v**2  # J, m2 v^2 / 2
+    assert E0[0] < 2 * 8.03e3 * 2.54e-4**2 < 1e5 < E0[-1]  # from below grazing to above Fig. 4's 25160 J
+    assert energy.stages == ("ringdown",) and energy.symmetry is not None
+
+
+def test_dominant_frequency_of_a_damped_sinusoid():
+    fs, f0, sigma = 2000.0, 31.7, 3.2
+    t = np.arange(1000) / fs  # 0.5 s: 16 periods
+    y = np.exp(-sigma * t) * np.cos(2 * np.pi * f0 * t + 0.4)
+    # the negative-frequency image's leakage: ~1e-6 with 16 periods (see dominant_freq_hz)
+    assert dominant_freq_hz(y, fs, 5.0) == pytest.approx(f0, rel=5e-6)
+    assert math.isnan(dominant_freq_hz(np.zeros(100), fs, 5.0))
+
+
+# -- runs on a LocalCluster ---------------------------------------------------------------------
+def test_linear_sweep_matches_closed_form_and_resumes(tmp_path, client):
+    plan = plan_of(LINEAR, "model.k_s=" + ",".join(map(repr, K_S)))
+    out = tmp_path / "sweep"
+    res = run_sweep(plan, out, client=client, progress=False)
+    assert [r["status"] for r in res.rows] == ["ok"] * len(K_S), [r["message"] for r in res.rows]
+    fs, N = 2000.0, 8001
+    t = np.arange(N) / fs
+    for r, k_s in zip(res.rows, K_S, strict=True):
+        f_d, E = closed_form(k_s, t)
+        for w in ("early", "middle", "late"):
+            # 12-25 periods in each 0.5 s window: the estimator's bias is below 2e-6 there
+            assert r[f"freq_{w}_hz"] == pytest.approx(f_d, rel=1e-5), (w, k_s)
+        assert r["energy_J_initial"] == pytest.approx(2 * k_s * D**2, rel=1e-12)
+        # the first sample with E <= E0 / 100, from the closed form; the integrator is exact to ~1e-12
+        k = int(np.flatnonzero(E <= 1e-2 * E[0])[0])
+        assert abs(r["decay_time_s"] - t[k]) <= 1.0 / fs + 1e-12, (r["decay_time_s"], t[k])
+        assert r["impacts"] == 0 and r["peak_tip_force_N"] == 0.0 and r["gaps_open_after_s"] == 0.0
+        assert r["energy_balance_error"] < 1e-11
+        assert r["run_time_s"] > 0 and r["worker"].startswith("tcp://")
+    # the tables: one row per case, the varied key and every metric as columns
+    table = pq.read_table(out / "sweep.parquet").to_pylist()
+    assert [r["model.k_s"] for r in table] == list(K_S)
+    assert table[0]["freq_late_hz"] == res.rows[0]["freq_late_hz"]
+    lines = (out / "sweep.csv").read_text().splitlines()
+    assert len(lines) == 1 + len(K_S) and lines[0].startswith("case_id,model.k_s,")
+    assert (out / "sweep.png").stat().st_size > 0
+    for case in plan.cases:
+        assert case_complete(out / case.case_id, case)
+        assert (out / case.case_id / "scene.toml").read_text() == case.text
+    # resume: nothing runs again, the same numbers come back with the first run's run times
+    stamps = {c.case_id: (out / c.case_id / "provenance.json").stat().st_mtime_ns for c in plan.cases}
+    again = run_sweep(plan, out, client=client, progress=False)
+    assert all(r["resumed"] and r["status"] == "ok" for r in again.rows)
+    assert {c.case_id: (out / c.case_id / "provenance.json").stat().st_mtime_ns for c in plan.cases} == stamps
+    for a, b in zip(res.rows, again.rows, strict=True):
+        assert a["freq_early_hz"] == b["freq_early_hz"] and a["decay_time_s"] == b["decay_time_s"]
+        assert a["run_time_s"] == b["run_time_s"] and a["worker"] == b["worker"]
+
+
+def test_a_failing_case_is_a_row_and_the_sweep_goes_on(tmp_path, client):
+    text = LINEAR.replace("duration_s = 4.0", "duration_s = 0.2\nmethod = \"explicit\"")
+    # dt = 1e-3 s is past the central difference's stable step (omega_max dt = 2 at dt ~ 2e-4 s with the tips
+    # closed); the integrator refuses it when the stage starts, not the parser: that case fails, the other runs
+    plan = plan_of(text, "ringdown.dt_s=1e-5,1e-3")
+    res = run_sweep(plan, tmp_path / "s", client=client, progress=False)
+    ok, bad = res.rows
+    assert ok["status"] == "ok" and ok["energy_balance_error"] < 1e-2
+    assert bad["status"] == "failed" and "stable step" in bad["message"] and "\n" not in bad["message"]
+    assert not (tmp_path / "s" / bad["case_id"]).exists()
+    rows = pq.read_table(tmp_path / "s" / "sweep.parquet").to_pylist()
+    assert [r["status"] for r in rows] == ["ok", "failed"]
+
+
+def test_worker_killed_mid_sweep_loses_and_doubles_no_case(tmp_path, client):
+    """SIGKILL a worker process of the LocalCluster while it runs a case: Dask reruns that task on a
+    worker (the nanny restarts the dead one); every case ends in the table once, ok, with one
+    complete folder. (The module's cluster: after the restart it serves any later test as before.)"""
+    text = LINEAR.replace("duration_s = 4.0", "duration_s = 0.5")
+    plan = plan_of(text, "model.k_s=8000:20000:6")
+    out = tmp_path / "sweep"
+    killed = {}
+
+    def kill_one() -> None:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not killed:
+            done = [c for c in plan.cases if (out / c.case_id / "provenance.json").exists()]
+            busy = {w: keys for w, keys in client.processing().items() if keys}
+            if done and busy:
+                address, keys = next(iter(busy.items()))
+                pid = client.run(os.getpid, workers=[address])[address]
+                killed.update(address=address, keys=list(keys), pid=pid, done=len(done))
+                os.kill(pid, signal.SIGKILL)
+            time.sleep(0.05)
+
+    thread = threading.Thread(target=kill_one)
+    thread.start()
+    res = run_sweep(plan, out, client=client, progress=False)
+    thread.join()
+    assert killed and killed["done"] < len(plan.cases), killed  # killed mid-sweep, while running a case
+    ids = [r["case_id"] for r in res.rows]
+    assert ids == [c.case_id for c in plan.cases]  # each case once, none lost
+    assert all(r["status"] == "ok" for r in res.rows), [r["message"] for r in res.rows]
+    folders = sorted(p.name for p in out.iterdir() if p.is_dir())
+    assert folders == sorted(ids)  # no scratch folder of the killed attempt left, no extra folder
+    for c in plan.cases:
+        prov = json.loads((out / c.case_id / "provenance.json").read_text())
+        assert list(prov["stages"]) == ["ringdown"] and case_complete(out / c.case_id, c)
+    interrupted = [str(k).split("-")[2] for k in killed["keys"] if "bearingshaft-case-" in str(k)]
+    assert interrupted  # the killed worker was running a case: it is in the table once, ok
+    assert all(ids.count(cid) == 1 and res.rows[ids.index(cid)]["status"] == "ok" for cid in interrupted)
+    assert len(pq.read_table(out / "sweep.parquet")) == len(plan.cases)
