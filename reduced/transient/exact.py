@@ -66,6 +66,7 @@ from scipy.linalg import eig, eigh, solve
 from reduced import _checks as _check
 from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
+from reduced.transient import _modal
 from reduced.transient.result import RingdownResult, RingdownStream, sample_count
 
 EPS = np.finfo(float).eps
@@ -151,6 +152,106 @@ def state_table(system: GapSystem) -> StateTable:
         yp[s, :n] = solve(Ks, Fs, assume_a="sym") if np.any(Fs) else 0.0
         valid[s] = True
     return StateTable(lam, V, Vinv, yp, valid, cond)
+
+
+ZNEAR = 1e-2  # |z| below this x (|lam_i| + |lam_k|): a near-cancelling pair of the work integral
+
+
+def _kept_terms(lam: np.ndarray, undamped: bool, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(kept indices, kappa): one eigenvalue of each conjugate pair (Im > 0, kappa = 2) and every real
+    one (kappa = 1), sorted by |lam|; all 2n with kappa = 1 when the spectrum does not pair up."""
+    if undamped:
+        keep = np.arange(n)  # lam = [i omega, -i omega]
+        kappa = np.full(n, 2.0)
+    else:
+        up = np.flatnonzero(lam.imag > 0.0)
+        real = np.flatnonzero(lam.imag == 0.0)
+        down = np.flatnonzero(lam.imag < 0.0)
+        # LAPACK returns the pairs of a real matrix as exact conjugates, eigenvectors too
+        paired = up.size == down.size and all(np.any(lam[down] == np.conj(lam[i])) for i in up)
+        if not paired:
+            return np.arange(2 * n), np.ones(2 * n)
+        keep = np.concatenate([up, real])
+        kappa = np.concatenate([np.full(up.size, 2.0), np.ones(real.size)])
+    order = np.argsort(np.abs(lam[keep]), kind="stable")
+    return keep[order], kappa[order]
+
+
+def modal_table(system: GapSystem, table: StateTable) -> tuple:
+    """The free segments' tables of :mod:`reduced.transient._modal` for the states of ``table``.
+
+    For each state s: the K kept terms (:func:`_kept_terms`) lam, |lam|, U = kappa V[:, kept],
+    Uinv = Vinv[kept], |Uinv|, the stops' rows B U and |B U|, B y_p, and the work integral's
+    1/2 G / z, 1/2 H / z over the regular pairs, the diagonal of H (1/2 H_ii, z = 2 Re lam_i) and the
+    near-cancelling pairs (|z| < ZNEAR (|lam_i| + |lam_k|)) as lists (pointer, i, k, kind 0: G, 1: H,
+    coefficient, z), G = U_v^T C U_v, H = U_v^T C conj(U_v) (U_v: the velocity rows). States with
+    fewer terms are padded with zeros; an infeasible state has K = -1.
+    """
+    n, m = system.n, system.m
+    S, N = table.lam.shape
+    cache: dict[bytes, tuple] = {}
+    per_state: list = [None] * S
+    for s in range(S):
+        if not table.valid[s]:
+            continue
+        key = table.V[s].tobytes()
+        if key not in cache:
+            lam, V, Vinv = table.lam[s], table.V[s], table.Vinv[s]
+            keep, kappa = _kept_terms(lam, system.undamped, n)
+            lk = lam[keep]
+            U = V[:, keep] * kappa
+            Uinv = Vinv[keep]
+            Uv = U[n:]
+            CU = system.C @ Uv
+            G = 0.5 * (Uv.T @ CU)
+            H = 0.5 * (Uv.T @ np.conj(CU))
+            zG = lk[:, None] + lk[None, :]
+            zH = lk[:, None] + np.conj(lk)[None, :]
+            scale = ZNEAR * (np.abs(lk)[:, None] + np.abs(lk)[None, :])
+            K = lk.size
+            upper = np.triu(np.ones((K, K), bool))
+            regG = (np.abs(zG) >= scale) & (zG != 0.0)
+            regH = (np.abs(zH) >= scale) & (zH != 0.0) & ~np.eye(K, dtype=bool)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                Gz = np.where(regG, G / zG, 0.0)
+                Hz = np.where(regH, H / zH, 0.0)
+            irr = []
+            for i, k in zip(*np.nonzero(~regG & upper), strict=True):
+                irr.append((i, k, 0, G[i, k] * (2.0 if k > i else 1.0), zG[i, k]))
+            for i, k in zip(*np.nonzero(~regH & upper & ~np.eye(K, dtype=bool)), strict=True):
+                irr.append((i, k, 1, 2.0 * H[i, k], zH[i, k]))
+            cache[key] = (lk, U, Uinv, system.B @ U[:n], Gz, Hz, np.diag(H).real.copy(), 2.0 * lk.real, irr)
+        per_state[s] = cache[key]
+    Kmax = max(p[0].size for p in per_state if p is not None)
+    nK = np.full(S, -1, np.int64)
+    lam = np.zeros((S, Kmax), complex)
+    U = np.zeros((S, N, Kmax), complex)
+    Uinv = np.zeros((S, Kmax, N), complex)
+    BU = np.zeros((S, m, Kmax), complex)
+    Gz = np.zeros((S, Kmax, Kmax), complex)
+    Hz = np.zeros((S, Kmax, Kmax), complex)
+    hd = np.zeros((S, Kmax))
+    zd = np.zeros((S, Kmax))
+    Byp = np.zeros((S, m))
+    for s in range(S):  # one product per state: a mirrored state's is the exact negative
+        Byp[s] = system.B @ table.yp[s, :n]
+    ip = np.zeros(S + 1, np.int64)
+    irr: list = []
+    for s, p in enumerate(per_state):
+        if p is not None:
+            K = p[0].size
+            nK[s] = K
+            lam[s, :K], U[s, :, :K], Uinv[s, :K], BU[s, :, :K] = p[0], p[1], p[2], p[3]
+            Gz[s, :K, :K], Hz[s, :K, :K], hd[s, :K], zd[s, :K] = p[4], p[5], p[6], p[7]
+            irr.extend(p[8])
+        ip[s + 1] = len(irr)
+    ii = np.array([r[0] for r in irr], np.int64)
+    ik = np.array([r[1] for r in irr], np.int64)
+    ikind = np.array([r[2] for r in irr], np.int64)
+    icoef = np.array([r[3] for r in irr], complex)
+    iz = np.array([r[4] for r in irr], complex)
+    return (nK, lam, np.abs(lam), U, Uinv, np.abs(Uinv), np.ascontiguousarray(table.yp), BU, np.abs(BU),
+            np.ascontiguousarray(Byp), Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz)
 
 
 @dataclass(frozen=True, eq=False)
@@ -1019,7 +1120,26 @@ def stream_exact(
     if forced:
         stats.update(n_loads=loads.n_loads, n_breakpoints=int(breakpoints.size))
     offset_max = float(np.max(np.abs(system.offset), initial=0.0))
-    free_args = free_forced_arrays(n)
+
+    mt = modal_table(system, table)
+    damped = not system.undamped
+
+    def runs(t: float, bound: float) -> list:
+        """[(t_a, t_b, pieces or None)]: [t, bound) cut where the loads start or stop being all zero;
+        None for a free stretch (no load, or every load zero on it)."""
+        if not forced:
+            return [(t, bound, None)]
+        inside = breakpoints[np.searchsorted(breakpoints, t, "right"):np.searchsorted(breakpoints, bound)]
+        starts = np.concatenate([[t], inside])
+        pc = loads.pieces_at(starts)
+        zero = ~np.any((pc.F != 0.0) | (pc.p0 != 0.0) | (pc.p1 != 0.0), axis=1)
+        out, k0 = [], 0
+        for k in range(1, starts.size + 1):
+            if k == starts.size or zero[k] != zero[k0]:
+                t_b = bound if k == starts.size else float(starts[k])
+                out.append((float(starts[k0]), t_b, None if zero[k0] else starts[k0:k]))
+                k0 = k
+        return out
 
     def blocks():
         nonlocal y, active
@@ -1032,32 +1152,35 @@ def stream_exact(
         for c in range(n_pieces):
             # np.linspace(0, t_end, n_pieces + 1)[c + 1], one bound at a time (the same bits)
             bound = t_end if c == n_pieces - 1 else (c + 1) * (t_end / n_pieces)
-            if forced:  # the loads' pieces on [t, bound): t and the breakpoints in between
-                inside = breakpoints[np.searchsorted(breakpoints, t, "right"):np.searchsorted(breakpoints, bound)]
-                fargs = forced_arrays(ft, loads.pieces_at(np.concatenate([[t], inside])))
-            else:
-                fargs = free_args
             n_stuck = 0
-            while True:
-                t_after = (j0 + k) / sample_rate_hz if j0 + k < N else np.inf
-                t, W, E, i, ne, ni, status, n_stuck = call_numba_kernel(_exact_kernel,
-                    table.lam, table.V, table.Vinv, table.yp, table.valid, system.B, system.offset,
-                    system.side, system.tip, system.C, not system.undamped, y, active, t, bound, ts, i, t_after,
-                    out_y, out_W, W, hmin, floor, max_events - n_events, n_stuck, forced, *fargs, out_E, E,
-                )
-                n_events += ne
-                n_iter += ni
-                stats.update(n_events=n_events, n_steps=n_events + 1, n_march=n_iter)
-                if status == BUFFER_FULL:
-                    yield j0, *_finite(out_y, out_W, out_E, n, forced)
-                    j0 += k
-                    k = min(chunk_samples, N - j0)
-                    ts = np.arange(j0, j0 + k) / sample_rate_hz
-                    out_y, out_W, out_E = np.empty((k, 2 * n)), np.empty(k), np.empty(k if forced else 0)
-                    i = 0
-                    continue
-                _check_status(status, t, max_events)
-                break
+            for _, t_b, starts in runs(t, bound):
+                if starts is not None:  # the loads' pieces from t to t_b
+                    fargs = forced_arrays(ft, loads.pieces_at(starts))
+                while True:
+                    t_after = (j0 + k) / sample_rate_hz if j0 + k < N else np.inf
+                    if starts is None:
+                        t, W, i, ne, ni, status, n_stuck = call_numba_kernel(_modal._free_kernel,
+                            mt, system.offset, system.side, system.tip, damped, y, active, t, t_b, ts, i, t_after,
+                            out_y, out_W, W, hmin, floor, max_events - n_events, n_stuck, out_E, E)
+                    else:
+                        t, W, E, i, ne, ni, status, n_stuck = call_numba_kernel(_exact_kernel,
+                            table.lam, table.V, table.Vinv, table.yp, table.valid, system.B, system.offset,
+                            system.side, system.tip, system.C, damped, y, active, t, t_b, ts, i,
+                            t_after, out_y, out_W, W, hmin, floor, max_events - n_events, n_stuck, True, *fargs,
+                            out_E, E)
+                    n_events += ne
+                    n_iter += ni
+                    stats.update(n_events=n_events, n_steps=n_events + 1, n_march=n_iter)
+                    if status == BUFFER_FULL:
+                        yield j0, *_finite(out_y, out_W, out_E, n, forced)
+                        j0 += k
+                        k = min(chunk_samples, N - j0)
+                        ts = np.arange(j0, j0 + k) / sample_rate_hz
+                        out_y, out_W, out_E = np.empty((k, 2 * n)), np.empty(k), np.empty(k if forced else 0)
+                        i = 0
+                        continue
+                    _check_status(status, t, max_events)
+                    break
             if progress is not None:
                 progress((c + 1) / n_pieces)
         if i != k or j0 + k != N:  # the last sample sits on t_end up to round-off

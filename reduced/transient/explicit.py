@@ -94,24 +94,30 @@ def contact_omega(system: GapSystem, n: int = 3) -> float:
 
 
 @nb.njit(cache=True)
-def _cd_kernel(A, dtGK, dtGB, L, B, offset, side, k, x, vh, dt, n_steps, every, out_x, out_v, out_W,
-               W, pw_old, i0, dtGb, b, P, out_E, E, pe_old):
+def _cd_kernel(AT, dtGKT, dtGBT, L, B, offset, side, k, x, vh, dt, n_steps, every, out_x, out_v, out_W,
+               W, pw_old, i0, dtGbT, b, P, out_E, E, pe_old):
     """Advance n_steps; x = x_n, vh = v_{n+1/2} on entry and exit; stores every `every` steps.
 
     v_{n+3/2} = A v_{n+1/2} - dt G K x_{n+1} - dt G B^T f(B x_{n+1}) + dt G b^T p(t_{n+1}) with
-    G = (M + dt/2 C)^-1 and A = G (M - dt/2 C), all formed once: two n x n products a step. W
-    accumulates the dissipated work by the trapezoidal rule on p_n = v_n^T C v_n = |L^T v_n|^2
-    (C = L L^T; pw_old is p_n at entry). With loads (b (L, n), dtGb = dt G b^T, P[i] the loads at
-    the i-th step's end), E accumulates their work likewise on v_n^T b^T p(t_n) (pe_old at entry).
+    G = (M + dt/2 C)^-1 and A = G (M - dt/2 C), all formed once and passed transposed (AT = A^T,
+    dtGKT = (dt G K)^T, dtGBT = (dt G B^T)^T, dtGbT = (dt G b^T)^T): two n x n products a step,
+    accumulated column by column so that the loop over the rows is contiguous (SIMD) while each
+    row still sums its terms in the order c = 0, 1, ..., n - 1 (the same bits as the row-by-row
+    dot products). W accumulates the dissipated work by the trapezoidal rule on
+    p_n = v_n^T C v_n = |L^T v_n|^2 (C = L L^T; pw_old is p_n at entry). With loads (b (L, n),
+    P[i] the loads at the i-th step's end), E accumulates their work likewise on
+    v_n^T b^T p(t_n) (pe_old at entry).
     """
     n = x.shape[0]
     m = B.shape[0]
     r = L.shape[1]
     nl = b.shape[0]
     f = np.empty(m)
-    vnew = np.empty(n)
+    acc = np.empty(n)
     v_int = np.empty(n)
+    Ls = np.empty(r)
     io = i0
+    left = every  # steps to the next stored sample
     for step in range(1, n_steps + 1):
         for i in range(n):
             x[i] += dt * vh[i]
@@ -121,23 +127,33 @@ def _cd_kernel(A, dtGK, dtGB, L, B, offset, side, k, x, vh, dt, n_steps, every, 
                 s += B[j, i] * x[i]
             f[j] = k[j] * s if side[j] * s > 0.0 else 0.0
         for i in range(n):
-            acc = 0.0
-            for c in range(n):
-                acc += A[i, c] * vh[c] - dtGK[i, c] * x[c]
-            for j in range(m):
-                acc -= dtGB[i, j] * f[j]
-            for q in range(nl):
-                acc += dtGb[i, q] * P[step - 1, q]
-            vnew[i] = acc
+            acc[i] = 0.0
+        for c in range(n):
+            vc = vh[c]
+            xc = x[c]
+            for i in range(n):
+                acc[i] += AT[c, i] * vc - dtGKT[c, i] * xc
+        for j in range(m):
+            fj = f[j]
+            if fj != 0.0:  # an open stop adds exactly 0
+                for i in range(n):
+                    acc[i] -= dtGBT[j, i] * fj
+        for q in range(nl):
+            pq = P[step - 1, q]
+            for i in range(n):
+                acc[i] += dtGbT[q, i] * pq
         for i in range(n):
-            v_int[i] = 0.5 * (vh[i] + vnew[i])
-            vh[i] = vnew[i]
+            v_int[i] = 0.5 * (vh[i] + acc[i])
+            vh[i] = acc[i]
+        for q in range(r):
+            Ls[q] = 0.0
+        for i in range(n):
+            vi = v_int[i]
+            for q in range(r):
+                Ls[q] += L[i, q] * vi
         pw_new = 0.0
         for q in range(r):
-            s = 0.0
-            for i in range(n):
-                s += L[i, q] * v_int[i]
-            pw_new += s * s
+            pw_new += Ls[q] * Ls[q]
         W += 0.5 * dt * (pw_old + pw_new)
         pw_old = pw_new
         if nl:
@@ -149,7 +165,9 @@ def _cd_kernel(A, dtGK, dtGB, L, B, offset, side, k, x, vh, dt, n_steps, every, 
                 pe_new += s * P[step - 1, q]
             E += 0.5 * dt * (pe_old + pe_new)
             pe_old = pe_new
-        if step % every == 0:
+        left -= 1
+        if left == 0:
+            left = every
             for i in range(n):
                 out_x[io, i] = x[i]
                 out_v[io, i] = v_int[i]
@@ -228,10 +246,11 @@ def stream_explicit(
     G = np.linalg.inv(M + 0.5 * dt_run * C)
     A = G @ (M - 0.5 * dt_run * C)
     dtGK = dt_run * (G @ K)
-    dtGB = np.ascontiguousarray(dt_run * (G @ system.B.T))
+    AT, dtGKT = np.ascontiguousarray(A.T), np.ascontiguousarray(dtGK.T)
+    dtGBT = np.ascontiguousarray((dt_run * (G @ system.B.T)).T)
     L = _damping_factor(C)
     b = np.ascontiguousarray(loads.b) if forced else np.zeros((0, n))
-    dtGb = np.ascontiguousarray(dt_run * (G @ b.T))
+    dtGbT = np.ascontiguousarray((dt_run * (G @ b.T)).T)
     stats = {"n_steps": n_steps, "dt": dt_run, "omega_max": omega, "omega_dt": omega * dt_run,
              "step_basis": step_basis, "omega_ref": omega_ref, "omega_ref_dt": omega_ref * dt_run, "dt_stable": limit}
 
@@ -271,9 +290,9 @@ def stream_explicit(
                     P = np.ascontiguousarray(loads.values(steps * dt_run))
                 else:
                     P = no_loads
-                W, pw, io, E, pe = call_numba_kernel(_cd_kernel, A, dtGK, dtGB, L, system.B, system.offset,
+                W, pw, io, E, pe = call_numba_kernel(_cd_kernel, AT, dtGKT, dtGBT, L, system.B, system.offset,
                                                      system.side, system.k, x, vh, dt_run, nout * every, every,
-                                                     out_x, out_v, out_W, W, pw, io, dtGb, b, P, out_E, E, pe)
+                                                     out_x, out_v, out_W, W, pw, io, dtGbT, b, P, out_E, E, pe)
                 done += nout
                 if not np.all(np.isfinite(x)):
                     raise FloatingPointError(

@@ -1,0 +1,384 @@
+"""Private numba kernels of the exact integrator's free segments, in conjugate-pair modal form.
+
+In contact state s a free segment is (:mod:`reduced.transient.exact`)
+
+    y(tau) = y_p + Re sum_{i<K} U[:, i] w_i e^{lam_i tau},   w = Uinv (y(0) - y_p),
+
+with K kept terms: one eigenvalue of each conjugate pair (Im lam > 0) with its eigenvector
+doubled, and each real eigenvalue once (:func:`reduced.transient.exact.modal_table`). For a
+real y this is the 2n-term sum V diag(e^{lam tau}) V^-1 (y(0) - y_p) exactly, so a state, a
+stop function or the dissipated work costs K <= n exponentials instead of 2n.
+
+The next crossing is found by one march for all stops at once (the exponentials are shared):
+from tau_a the march steps by the smallest of the stops' safe steps, each the largest h with
+
+    q_j(tau_a) + q_j'(tau_a) h + 1/2 Q2_j h^2 < 0,   Q2_j = sum_i |c_ji| |lam_i|^2 e^{Re(lam_i) tau_a},
+
+Q2_j >= |q_j''| on [tau_a, inf) as Re(lam) <= 0, or the largest h of the same bound with the
+fast terms (|lam_i| h > ``FAST_LT``, the last ones: terms are sorted by |lam|) bounded by their
+amplitude instead, sum_fast (|c_ji| e^{Re(lam_i) tau_a} - Re(c_ji e^{lam_i tau_a})) added to
+q_j and their share taken out of q_j' and Q2_j: each bound holds for every h >= 0, so either
+step skips no root of any stop. A stop whose amplitude bound const_j + sum_i |c_ji|
+e^{Re(lam_i) tau_a} stays below its round-off band can never cross in the segment and leaves
+the march. Near a crossing the step tends to the Newton step, and the crossing is located to
+round-off as before (``_step``, the same decision rules as the single-stop march).
+
+The dissipated work over [0, tau] is closed-form (v = Re sum_i a_i e^{lam_i t}, a_i = U_v[:, i] w_i):
+
+    int_0^tau v^T C v dt = 1/2 Re sum_{i,k} [ G_ik I(lam_i + lam_k) + H_ik I(lam_i + conj(lam_k)) ],
+    G_ik = a_i^T C a_k,  H_ik = a_i^T C conj(a_k),  I(z) = int_0^tau e^{z t} dt,
+
+the regular terms (|z| >= ``ZNEAR`` (|lam_i| + |lam_k|), I(z) = (e_i e_k - 1) / z) as quadratic
+forms of p = w (e^{lam tau} - 1) (:func:`_work`), the diagonal of H (z = 2 Re lam_i) by expm1,
+and the few near-cancelling pairs by I(z) = tau phi1(z tau), a series where |z tau| < ``TAYLOR_ZT``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+EPS = np.finfo(float).eps
+QTOL_REL = 64.0 * EPS  # as reduced.transient.exact: round-off of q, relative to the size of its terms
+NOISE_FACTOR = 4.0  # as reduced.transient.exact: margin on the propagated round-off of q and q'
+MAX_MARCH_ITER = 10_000_000  # per segment: a hang guard, never reached in practice
+FAST_LT = 2.0  # |lam| h beyond which a term's amplitude bounds it better than its Taylor bound
+TAYLOR_ZT = 0.5  # |z tau| below which I(z) = int_0^tau e^{z t} dt is summed as a series ...
+TAYLOR_TERMS = 17  # ... of this many terms (0.5^18 / 18! ~ 6e-22: exact to round-off)
+BUFFER_FULL = 1  # kernel status: the sample buffer is full inside the present segment
+
+
+@nb.njit(cache=True)
+def _state_of(active):
+    """Index of a contact state: sum_j active_j 2^j."""
+    s = 0
+    for j in range(active.shape[0]):
+        if active[j]:
+            s += 1 << j
+    return s
+
+
+@nb.njit(cache=True)
+def _terms(lam, K, tau, e, ea):
+    """e_i = exp(lam_i tau) and ea_i = |e_i| = exp(Re(lam_i) tau), i < K."""
+    for i in range(K):
+        a = math.exp(lam[i].real * tau)
+        b = lam[i].imag * tau
+        e[i] = complex(a * math.cos(b), a * math.sin(b))
+        ea[i] = a
+
+
+@nb.njit(cache=True)
+def _phi_int(z, tau):
+    """I(z) = int_0^tau e^{z t} dt = tau (1 + z tau / 2 + (z tau)^2 / 6 + ...): a series for
+    |z tau| < TAYLOR_ZT, else (e^{z tau} - 1) / z."""
+    x = z * tau
+    if abs(x) < TAYLOR_ZT:
+        acc = 1.0 + 0.0j
+        for j in range(TAYLOR_TERMS, 0, -1):
+            acc = 1.0 + acc * x / (j + 1)
+        return tau * acc
+    return (np.exp(x) - 1.0) / z
+
+
+@nb.njit(cache=True)
+def _real_int(z, tau):
+    """int_0^tau e^{z t} dt for real z <= 0: expm1(z tau) / z, tau for z = 0."""
+    if z == 0.0:
+        return tau
+    return math.expm1(z * tau) / z
+
+
+@nb.njit(cache=True)
+def _terms_m1(lam, K, tau, e, em):
+    """e_i = exp(lam_i tau) and em_i = e_i - 1 to full relative accuracy (expm1 and half angles:
+    em = expm1(a) cos(b) - 2 sin^2(b / 2) + i e^a sin(b), a + i b = lam_i tau), i < K."""
+    for i in range(K):
+        a = lam[i].real * tau
+        b = 0.5 * lam[i].imag * tau
+        sh = math.sin(b)
+        ch = math.cos(b)
+        cb = 1.0 - 2.0 * sh * sh
+        sb = 2.0 * sh * ch
+        am1 = math.expm1(a)
+        ea = 1.0 + am1
+        e[i] = complex(ea * cb, ea * sb)
+        em[i] = complex(am1 * cb - 2.0 * sh * sh, ea * sb)
+
+
+@nb.njit(cache=True)
+def _work(s, K, w, em, tau, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz):
+    """int_0^tau v^T C v dt (module docstring) with p = w (e^{lam tau} - 1) (em = e - 1): over the regular
+    pairs e_i e_k - 1 = em_i em_k + em_i + em_k, so their part is Re(p^T Gz (p + 2 w) + p^T Hz conj(p + 2 w))
+    (Gz, Hz hold 1/2 G / z, 1/2 H / z there and 0 elsewhere), accurate however short tau is; plus
+    hd_i |w_i|^2 I(zd_i) for the diagonal of H and, for the near-cancelling pairs p of the state,
+    Re(icoef_p w_i (w_k or conj(w_k)) I(iz_p))."""
+    acc = 0.0
+    for i in range(K):
+        pi = w[i] * em[i]
+        g = 0.0 + 0.0j
+        h = 0.0 + 0.0j
+        for k in range(K):
+            rk = w[k] * em[k] + 2.0 * w[k]
+            g += Gz[s, i, k] * rk
+            h += Hz[s, i, k] * np.conj(rk)
+        acc += (pi * (g + h)).real
+        wi2 = w[i].real * w[i].real + w[i].imag * w[i].imag
+        acc += hd[s, i] * wi2 * _real_int(zd[s, i], tau)
+    for p in range(ip[s], ip[s + 1]):
+        i = ii[p]
+        k = ik[p]
+        wk = w[k] if ikind[p] == 0 else np.conj(w[k])
+        acc += (icoef[p] * w[i] * wk * _phi_int(iz[p], tau)).real
+    return acc
+
+
+@nb.njit(cache=True)
+def _eval(s, K, U, yp, w, e, out):
+    """y = y_p + Re sum_i U[:, i] w_i e_i."""
+    N = out.shape[0]
+    for r in range(N):
+        out[r] = 0.0
+    for i in range(K):
+        u = w[i] * e[i]
+        ur = u.real
+        ui = u.imag
+        for r in range(N):
+            out[r] += U[s, r, i].real * ur - U[s, r, i].imag * ui
+    for r in range(N):
+        out[r] += yp[s, r]
+
+
+@nb.njit(cache=True)
+def _start(s, K, y, Uinv, aUinv, yp, BU, aBU, Byp, lam, alam, offset, side, active, floor, w, werr, coef, lc, a0,
+           a1, a2, const, qtol, dnoise, live):
+    """Segment start in state s: w = Uinv (y - y_p) and werr (its round-off, EPS sum |Uinv| (|y| + |y_p|)),
+    then per stop j (signed so that q_j <= 0 until it changes state) q_j = const_j + Re sum_i coef_ji e^{lam_i tau},
+    lc = lam coef, a0 = |coef|, a1 = |lam| a0, a2 = |lam|^2 a0, the round-off band qtol_j of q_j and the
+    noise dnoise_j of q_j'. A stop whose motion is below ``floor`` (round-off at rest) is not live.
+    Returns the number of live stops."""
+    N = y.shape[0]
+    m = offset.shape[0]
+    for i in range(K):
+        acc = 0.0 + 0.0j
+        err = 0.0
+        for r in range(N):
+            acc += Uinv[s, i, r] * (y[r] - yp[s, r])
+            err += aUinv[s, i, r] * (abs(y[r]) + abs(yp[s, r]))
+        w[i] = acc
+        werr[i] = EPS * err
+    n_live = 0
+    for j in range(m):
+        sgn = -side[j] if active[j] else side[j]
+        cj = sgn * (Byp[s, j] - offset[j])
+        osc = 0.0
+        qn = 0.0
+        dn = 0.0
+        for i in range(K):
+            c = sgn * (BU[s, j, i] * w[i])
+            coef[j, i] = c
+            lc[j, i] = lam[s, i] * c
+            a = math.sqrt(c.real * c.real + c.imag * c.imag)
+            a0[j, i] = a
+            a1[j, i] = alam[s, i] * a
+            a2[j, i] = alam[s, i] * alam[s, i] * a
+            osc += a
+            qn += aBU[s, j, i] * werr[i]
+            dn += aBU[s, j, i] * alam[s, i] * werr[i]
+        const[j] = cj
+        qtol[j] = QTOL_REL * (abs(cj) + osc) + NOISE_FACTOR * qn
+        dnoise[j] = NOISE_FACTOR * dn
+        live[j] = not (osc < floor and abs(cj) < floor)
+        if live[j]:
+            n_live += 1
+    return n_live
+
+
+@nb.njit(cache=True)
+def _step(q, d, Q2):
+    """Largest h >= 0 with q + d h + Q2 h^2 / 2 < 0 for q <= 0 (inf when d <= 0 and Q2 = 0)."""
+    qn = -min(q, 0.0)
+    disc = math.sqrt(d * d + 2.0 * Q2 * qn)
+    if d > 0.0:
+        return 2.0 * qn / (d + disc)
+    if Q2 > 0.0:
+        return (disc - d) / Q2
+    return np.inf
+
+
+@nb.njit(cache=True)
+def _march(s, K, lam, alam, const, coef, lc, a0, a1, a2, qtol, dnoise, live, n_live, tau_limit, hmin, e, ea,
+           hprev):
+    """First crossing of any live stop in [0, tau_limit): (tau, j, n_iter), j = -1 if none, j = -2 if the
+    march did not end. See the module docstring; the decisions at a stop's threshold are those of
+    :func:`reduced.transient.exact._march_step`."""
+    m = const.shape[0]
+    best = tau_limit
+    j_best = -1
+    for j in range(m):
+        hprev[j] = 0.0
+    tau = 0.0
+    for it in range(MAX_MARCH_ITER):
+        if n_live == 0:
+            return best, j_best, it
+        _terms(lam[s], K, tau, e, ea)
+        h_all = np.inf
+        for j in range(m):
+            if not live[j]:
+                continue
+            i0 = K  # terms i >= i0 are bounded by their amplitude
+            hp = hprev[j]
+            while i0 > 0 and alam[s, i0 - 1] * hp > FAST_LT:
+                i0 -= 1
+            q = const[j]
+            d = 0.0
+            ds = 0.0
+            amp = 0.0
+            q2s = 0.0
+            q2f = 0.0
+            qf = 0.0
+            df = 0.0
+            for i in range(K):
+                r = (coef[j, i] * e[i]).real
+                dr = (lc[j, i] * e[i]).real
+                a = a0[j, i] * ea[i]
+                q += r
+                d += dr
+                ds += a1[j, i] * ea[i]
+                amp += a
+                if i < i0:
+                    q2s += a2[j, i] * ea[i]
+                else:
+                    q2f += a2[j, i] * ea[i]
+                    qf += a - r
+                    df += dr
+            qt = qtol[j]
+            dt = QTOL_REL * ds + dnoise[j]
+            root = -1.0
+            if q > -qt:
+                # at the threshold a crossing needs q' > 0 beyond its round-off; otherwise it is a
+                # graze, or the round-off of re-expanding the state right after a switch
+                if q > qt and d >= -dt:
+                    root = tau
+                elif d > dt:
+                    root = tau + max(-q, 0.0) / d
+            if root >= 0.0:
+                live[j] = False
+                n_live -= 1
+                if root < best or (root == best and j < j_best):
+                    best = root
+                    j_best = j
+                continue
+            if const[j] + amp < -qt:
+                h = np.inf  # its amplitude can never bring it to the threshold
+            else:
+                h = _step(q, d, q2s + q2f)
+                if i0 < K and q + qf < 0.0:
+                    h = max(h, _step(q + qf, d - df, q2s))
+            hprev[j] = h
+            h = max(h, hmin)
+            if tau + h >= best:
+                live[j] = False
+                n_live -= 1
+                continue
+            h_all = min(h_all, h)
+        if n_live == 0:
+            return best, j_best, it + 1
+        tau += h_all
+    return best, -2, MAX_MARCH_ITER
+
+
+@nb.njit(cache=True)
+def _free_kernel(tb, offset, side, tip, damped, y, active, t, t_end, t_samples, i_samp, t_after, out_y, out_W,
+                 W, hmin, floor, max_events, n_stuck, out_E, E):
+    """March events from t to t_end (no loads), filling the sample buffer ``t_samples`` from i_samp.
+
+    ``tb`` is the modal table (:func:`reduced.transient.exact.modal_table`). (y, active, t, W) is the
+    state at the start of a segment and is advanced in place; when the buffer fills inside a segment
+    that still has samples before its end (the next sample, at ``t_after``, lies in it), the kernel
+    returns BUFFER_FULL without advancing that segment, so the samples do not depend on the buffer
+    size. ``out_E`` (empty, or as long as the buffer) receives the loads' work E, constant here.
+    Returns (t, W, i_samp, n_events, n_iter, status, n_stuck).
+    """
+    (nK, lam, alam, U, Uinv, aUinv, yp, BU, aBU, Byp, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz) = tb
+    N = y.shape[0]
+    m = offset.shape[0]
+    Kmax = lam.shape[1]
+    ns = t_samples.shape[0]
+    has_E = out_E.shape[0] > 0
+    w = np.empty(Kmax, np.complex128)
+    werr = np.empty(Kmax)
+    e = np.empty(Kmax, np.complex128)
+    ea = np.empty(Kmax)
+    em = np.empty(Kmax, np.complex128)
+    coef = np.empty((m, Kmax), np.complex128)
+    lc = np.empty((m, Kmax), np.complex128)
+    a0 = np.empty((m, Kmax))
+    a1 = np.empty((m, Kmax))
+    a2 = np.empty((m, Kmax))
+    const = np.empty(m)
+    qtol = np.empty(m)
+    dnoise = np.empty(m)
+    live = np.empty(m, np.bool_)
+    hprev = np.empty(m)
+    ytmp = np.empty(N)
+    n_events = 0
+    n_iter = 0
+    status = 0
+    while True:
+        s = _state_of(active)
+        K = nK[s]
+        if K < 0:
+            status = -2
+            break
+        n_live = _start(s, K, y, Uinv, aUinv, yp, BU, aBU, Byp, lam, alam, offset, side, active, floor, w, werr,
+                        coef, lc, a0, a1, a2, const, qtol, dnoise, live)
+        tau_ev, j_ev, it = _march(s, K, lam, alam, const, coef, lc, a0, a1, a2, qtol, dnoise, live, n_live,
+                                  t_end - t, hmin, e, ea, hprev)
+        if j_ev == -2:
+            status = -3
+            break
+        t_next = t_end if j_ev < 0 else t + tau_ev
+        while i_samp < ns and t_samples[i_samp] <= t_next:
+            tau = max(t_samples[i_samp] - t, 0.0)
+            _terms_m1(lam[s], K, tau, e, em)
+            _eval(s, K, U, yp, w, e, ytmp)
+            out_W[i_samp] = W + (_work(s, K, w, em, tau, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz)
+                                 if damped else 0.0)
+            if has_E:
+                out_E[i_samp] = E
+            for r in range(N):
+                out_y[i_samp, r] = ytmp[r]
+            i_samp += 1
+        if i_samp == ns and t_after <= t_next:
+            status = BUFFER_FULL  # the segment is searched again with the next buffer: count it then
+            break
+        n_iter += it
+        _terms_m1(lam[s], K, tau_ev, e, em)
+        _eval(s, K, U, yp, w, e, ytmp)
+        if damped:
+            W += _work(s, K, w, em, tau_ev, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz)
+        for r in range(N):
+            y[r] = ytmp[r]
+        n_stuck = n_stuck + 1 if tau_ev == 0.0 else 0
+        if n_stuck > 8 * m:
+            status = -4
+            break
+        t = t_next
+        if j_ev < 0:
+            break
+        if active[j_ev]:
+            active[j_ev] = False
+        else:
+            # closing a stop opens its tip's other stop: at zero gap both cross together
+            for j in range(m):
+                if tip[j] == tip[j_ev]:
+                    active[j] = False
+            active[j_ev] = True
+        n_events += 1
+        if n_events >= max_events:
+            status = -1
+            break
+    return t, W, i_samp, n_events, n_iter, status, n_stuck
