@@ -4,6 +4,7 @@ the level sweep, the linear check, the comparison with a measured test and ``ham
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import matplotlib
@@ -366,7 +367,7 @@ def full_modes(fe, max_hz: float, progress: bool):
     """The full 3-D model's open-gap modes up to ``max_hz`` (at least one above it), shift-invert Lanczos."""
     from fem.modal import modal_analysis
 
-    k = 120
+    k = 24
     while True:
         if progress:
             print(f"  full 3-D modes: the lowest {k}", flush=True)
@@ -376,38 +377,34 @@ def full_modes(fe, max_hz: float, progress: bool):
         k *= 2
 
 
-def linear_check(scene: Scene, rom, rig: VirtualRig, writer: StageWriter, progress: bool) -> dict:
-    """The open-gap response of the reduced rig against the full 3-D model's modal superposition.
+@dataclass(frozen=True, eq=False)
+class FullReference:
+    """The full 3-D model's open-gap response to a blow, on the rig's channels but the hammer."""
 
-    Gaps too large to close (the reduced model's gap set to 1 m): every channel but the hammer
-    is compared, from the reduced model's exact integration, with the full model's response
-    to the same blow from its modes up to ``[hammer] linear_check_max_hz`` with the same
-    damping (the dashpots c_points at x1, x2, x3 and alpha M projected on the modes:
-    Cm = c Phi^T P^T P Phi + alpha I, not diagonal), written in closed form from the
-    pole-residue FRF (:class:`fem.modal_response.ModalModel`), acquired through the same
-    anti-alias filter as the rig's channels (:mod:`reduced.models.daq`; computed at q fs with
-    q from its top mode, so its modes above fs/2 do not fold into the band). Load cells read
-    only their seismic inertia here. Both are compared low-passed alike at BAND_HZ (and raw), the error
-    rms(a_rom - a_full) / rms(a_full) over the first CHECK_WINDOW_S after the blow (and over the
-    whole record after it, where the phase of lightly damped kHz modes makes a 1e-5 frequency
-    difference an O(1) RMS one). An accelerometer axis whose RMS is below NEAR_ZERO of its
-    sensor's largest axis (zero by symmetry, for a blow on the plane of symmetry) is judged
-    against that largest axis instead (``near_zero`` in ``linear_check.csv``).
-    ``linear_check.csv``, ``linear_check.png``.
-    """
-    from dataclasses import replace
+    names: list[str]  # accelerometer axes, then TIP_CELLS (their seismic inertia only: the gaps never close)
+    data: np.ndarray  # (len(names), N) acquired at the scene's rate, as the rig's channels
+    n_dofs: int
+    n_modes: int
+    top_hz: float
+    cond_V: float
 
-    from bearingshaft.stages.hammer import run_record
+
+def full_reference(scene: Scene, rig: VirtualRig, level_N: float, n_out: int, progress: bool) -> FullReference:
+    """The full 3-D model's response to the scene's half-sine blow of peak ``level_N`` at the rig's
+    location and direction, on ``n_out`` samples at [ringdown]'s rate, by modal superposition.
+
+    Its modes up to ``[hammer] linear_check_max_hz`` with the same damping (the dashpots
+    c_points at x1, x2, x3 and alpha M projected on the modes: Cm = c Phi^T P^T P Phi + alpha I,
+    not diagonal), in closed form from the pole-residue FRF (:class:`fem.modal_response.ModalModel`),
+    acquired through the same anti-alias filter as the rig's channels (:mod:`reduced.models.daq`:
+    computed at q fs with q from the top mode, so no mode above fs/2 folds into the band)."""
     from fem.contact import point_rows
     from fem.modal_response import ModalModel
     from fem.model import build_system
     from fem.rig import point_load_vector, seat_rows, sensor_rows
     from reduced.models.daq import Acquisition, oversampling
-    from reduced.models.loads import HalfSine
-    from reduced.models.rig import virtual_rig
 
-    spec = scene.hammer
-    model = scene.model
+    spec, model = scene.hammer, scene.model
     if progress:
         print(f"[{scene.name}] linear check: building the full 3-D model", flush=True)
     fe = build_system(model.fe_model())
@@ -422,32 +419,69 @@ def linear_check(scene: Scene, rom, rig: VirtualRig, writer: StageWriter, progre
     acc = sensor_rows(fe, ("beam", "tube"))
     names = [c.name for c in rig.channels if c.kind == "accelerometer"]
     R = np.vstack([phi[acc[n]] for n in names] + [r @ phi for r in seat_rows(fe).values()])
+    fs = scene.ringdown.sample_rate_hz
+    acq = Acquisition(fs, oversampling(float(omega.max()) / (2 * np.pi), fs))
+    t_fine = np.arange(acq.oversample * (n_out - 1) + 1 + acq.tail_samples) / acq.fine_rate_hz
+    ref = ModalModel(omega, 0.5 * (Cm + Cm.T)).half_sine_response(t_fine, b_modal, R, level_N, spec.duration_s,
+                                                                  spec.start_s)
+    a_ref = acq.acquire(ref.acceleration, n_out)
+    sign = np.array([1.0 if c.endswith("top") else -1.0 for c in TIP_CELLS])[:, None]
+    data = np.vstack([a_ref[: len(names)], -sign * rig.seismic_mass_kg * a_ref[len(names):]])
+    return FullReference([*names, *TIP_CELLS], data, fe.n_dofs, int(phi.shape[1]), float(omega.max() / (2 * np.pi)),
+                         float(ref.cond_V))
+
+
+def rms_errors(a: np.ndarray, ref: np.ndarray, names: list[str], mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """rms(a - ref) / rms(ref) per channel over the samples ``mask``, and which axes were near zero:
+    an accelerometer axis (``sensor:axis``) whose RMS is below NEAR_ZERO of its sensor's largest
+    (zero by symmetry for a blow on the plane of symmetry) is judged against that largest axis."""
+    rms_ref = np.sqrt(np.mean(ref[:, mask] ** 2, axis=1))
+    scale, near_zero = rms_ref.copy(), np.zeros(len(names), bool)
+    sensor = np.array([n.split(":")[0] if ":" in n else n for n in names])
+    for i, name in enumerate(names):
+        if ":" not in name:
+            continue
+        top = rms_ref[sensor == sensor[i]].max()
+        if rms_ref[i] < NEAR_ZERO * top:
+            scale[i], near_zero[i] = top, True
+    return np.sqrt(np.mean((a[:, mask] - ref[:, mask]) ** 2, axis=1)) / scale, near_zero
+
+
+def linear_check(scene: Scene, rom, rig: VirtualRig, writer: StageWriter, progress: bool) -> dict:
+    """The open-gap response of the reduced rig against the full 3-D model's modal superposition.
+
+    Gaps too large to close (the reduced model's gap set to 1 m): every channel but the hammer
+    is compared, from the reduced model's exact integration, with the full model's response
+    to the same blow (:func:`full_reference`; load cells read only their seismic inertia here).
+    Both are compared low-passed alike at BAND_HZ (and raw), the error rms(a_rom - a_full) /
+    rms(a_full) over the first CHECK_WINDOW_S after the blow (and over the whole record after
+    it, where the phase of lightly damped kHz modes makes a 1e-5 frequency difference an O(1)
+    RMS one), axes near zero by symmetry against their sensor's largest (:func:`rms_errors`,
+    ``near_zero`` in ``linear_check.csv``).
+    ``linear_check.csv``, ``linear_check.png``.
+    """
+    from dataclasses import replace
+
+    from bearingshaft.stages.hammer import run_record
+    from reduced.models.loads import HalfSine
+    from reduced.models.rig import virtual_rig
+
+    spec = scene.hammer
     level = spec.peak_N
     open_rig = virtual_rig(replace(rom, gap=1.0), rig.location, rig.direction, rig.seismic_mass_kg)
     rec = run_record(open_rig, HalfSine(level, spec.duration_s, spec.start_s), scene, level)
+    full = full_reference(scene, rig, level, rec.t.size, progress)
+    ref_data = full.data
+    rom_data = rec.data[: len(full.names)]
     fs = scene.ringdown.sample_rate_hz
-    acq = Acquisition(fs, oversampling(float(omega.max()) / (2 * np.pi), fs))  # the same DAQ as the rig's
-    t_fine = np.arange(acq.oversample * (rec.t.size - 1) + 1 + acq.tail_samples) / acq.fine_rate_hz
-    ref = ModalModel(omega, 0.5 * (Cm + Cm.T)).half_sine_response(t_fine, b_modal, R, level, spec.duration_s,
-                                                                  spec.start_s)
-    a_ref = acq.acquire(ref.acceleration, rec.t.size)
-    sign = np.array([1.0 if c.endswith("top") else -1.0 for c in TIP_CELLS])[:, None]
-    ref_data = np.vstack([a_ref[: len(names)], -sign * rig.seismic_mass_kg * a_ref[len(names):]])
-    rom_data = rec.data[: len(names) + len(TIP_CELLS)]
-    chan = [*names, *TIP_CELLS]
+    chan = full.names
     windows = {"50ms": (rec.t >= spec.start_s) & (rec.t < spec.start_s + CHECK_WINDOW_S),
                "record": rec.t >= spec.start_s}
     bands = {"band": (band_limited(rom_data, fs), band_limited(ref_data, fs)), "raw": (rom_data, ref_data)}
     errors, near_zero = {}, np.zeros(len(chan), bool)
     for (b, (r_rom, r_ref)), (w, mask) in ((x, y) for x in bands.items() for y in windows.items()):
-        rms_ref = np.sqrt(np.mean(r_ref[:, mask] ** 2, axis=1))
-        scale = rms_ref.copy()
-        for i, name in enumerate(names):  # an axis near zero (by symmetry) is judged against its sensor
-            sensor = [j for j, n in enumerate(names) if n.split(":")[0] == name.split(":")[0]]
-            top = rms_ref[sensor].max()
-            if rms_ref[i] < NEAR_ZERO * top:
-                scale[i], near_zero[i] = top, True
-        errors[(b, w)] = np.sqrt(np.mean((r_rom[:, mask] - r_ref[:, mask]) ** 2, axis=1)) / scale
+        errors[(b, w)], nz = rms_errors(r_rom, r_ref, chan, mask)
+        near_zero |= nz
     band_rows = [{"channel": c, "rms_rel_error": errors[("band", "50ms")][i]} for i, c in enumerate(chan)]
     out_rows = [{"channel": c, "near_zero": bool(near_zero[i]),
                  "rms_rel_error": f"{errors[('band', '50ms')][i]:.3g}",
@@ -459,11 +493,11 @@ def linear_check(scene: Scene, rom, rig: VirtualRig, writer: StageWriter, progre
     write_rows(writer.path("linear_check.csv"), out_rows)
     worst = max(band_rows, key=lambda r: r["rms_rel_error"])
     worst_raw = max(raw_rows, key=lambda r: r["rms_rel_error"])
-    _linear_figure(writer.path("linear_check.png"), rec.t, rom_data, ref_data, [*names, *TIP_CELLS], worst["channel"],
+    _linear_figure(writer.path("linear_check.png"), rec.t, rom_data, ref_data, chan, worst["channel"],
                    fs, band_rows, spec)
     text = (f"Gaps too large to close; {len(band_rows)} channels of the reduced model ({rig.system.n} coordinates) "
-            f"against the full 3-D model ({fe.n_dofs} DOFs) by modal superposition of its {phi.shape[1]} modes up to "
-            f"{spec.linear_check_max_hz:g} Hz (top {modes.freq_hz[keep][-1]:.5g} Hz) with the same damping "
+            f"against the full 3-D model ({full.n_dofs} DOFs) by modal superposition of its {full.n_modes} modes up "
+            f"to {spec.linear_check_max_hz:g} Hz (top {full.top_hz:.5g} Hz) with the same damping "
             f"(closed form, pole-residue FRF), {level:g} N blow, RMS over the first {1e3 * CHECK_WINDOW_S:g} ms after "
             f"the blow (axes near zero by symmetry against their sensor's largest axis). In the "
             f"{BAND_HZ:g} Hz band (both low-passed alike): worst {100 * worst['rms_rel_error']:.3g} % "
@@ -474,8 +508,8 @@ def linear_check(scene: Scene, rom, rig: VirtualRig, writer: StageWriter, progre
             f"{100 * worst_raw['rms_rel_error']:.3g} % ({worst_raw['channel']}). Over the whole record in the band: "
             f"worst {100 * rec_worst:.3g} % (the phase of lightly damped kHz modes: see linear_check.csv).")
     writer.stats["linear_check"] = {"worst": worst["rms_rel_error"], "worst_channel": worst["channel"],
-                                    "worst_raw": worst_raw["rms_rel_error"], "n_full_modes": int(phi.shape[1]),
-                                    "cond_V": ref.cond_V}
+                                    "worst_raw": worst_raw["rms_rel_error"], "n_full_modes": full.n_modes,
+                                    "cond_V": full.cond_V}
     return {"worst": worst["rms_rel_error"], "worst_channel": worst["channel"], "text": text}
 
 
