@@ -81,7 +81,10 @@ def build_parser() -> argparse.ArgumentParser:
     # -- issue 13: parameter sweeps on Dask (bearingshaft/sweep.py) --
     p = sub.add_parser("sweep", help="run a scene over a design of parameter values on Dask (a local cluster, "
                        "or --scheduler ADDRESS); sweep.parquet, sweep.csv, sweep.png")
-    _add_common(p)
+    p.add_argument("--scene", required=True, metavar="NAME_OR_TOML", help="built-in scene name or scene TOML file")
+    p.add_argument("--out", metavar="DIR", help="folder of the case folders and tables (default: "
+                   "results/<scene>/sweep/)")
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     p.add_argument("--vary", action="append", metavar="KEY=VALUES",
                    help="a varied scene key and its values, repeatable: model.g=1e-4:1e-3:9:log (N values, log or "
                    "lin), model.k_g=1e7,1e8,1e9 (a list), random design: model.c=0:8 (a range); replaces the "

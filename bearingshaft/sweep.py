@@ -379,6 +379,25 @@ def apply_values(scene: Scene, data: dict, values, where: str) -> dict:
     return data
 
 
+def base_value(scene: Scene, key: str):
+    """The value the scene itself gives ``key`` (its TOML, else the default), None if it has none."""
+    m = _KEY.match(key)
+    if m is None:
+        return None
+    table, name = m["table"], m["name"]
+    ti = int(m["ti"]) if m["ti"] is not None else None
+    data = tomllib.loads(scene.source)
+    try:
+        tab = data["load"][ti] if table == "load" else data.get(table, {})
+    except (KeyError, IndexError, TypeError):
+        return None
+    value = tab.get(name, _default(scene, table, ti, name)) if isinstance(tab, dict) else None
+    if m["i"] is not None:
+        i = int(m["i"])
+        value = value[i] if isinstance(value, list) and i < len(value) else None
+    return value
+
+
 def _show_values(values) -> str:
     return ", ".join(f"{k} = {v!r}" for k, v in values)
 

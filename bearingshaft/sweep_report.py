@@ -69,13 +69,18 @@ def write_plots(plan, result) -> list[str]:
     metrics = plotted_metrics(spec, rows)
     keys = [v.key for v in spec.vary]
     title = f"{plan.scene.name}: {len(rows)} cases ({spec.design} over {', '.join(keys)})"
+    from bearingshaft.sweep import base_value
+
+    base = [base_value(plan.scene, k) for k in keys]  # the scene's own values: marked on the plots
+    base = [b if isinstance(b, (int, float)) and not isinstance(b, bool) else None for b in base]
     if metrics and (len(keys) == 1 or spec.x):
         xkey = spec.x or keys[0]
         log_hint = spec.vary[0].log if not spec.x else False
-        _lines(rows, xkey, metrics, result.out / "sweep.png", title, _is_log([r.get(xkey) for r in rows], log_hint))
+        _lines(rows, xkey, metrics, result.out / "sweep.png", title, _is_log([r.get(xkey) for r in rows], log_hint),
+               None if spec.x else base[0])
         files.append("sweep.png")
     elif metrics and len(keys) == 2:
-        _maps(rows, spec, metrics, result.out / "sweep.png", title)
+        _maps(rows, spec, metrics, result.out / "sweep.png", title, base)
         files.append("sweep.png")
     if spec.overlay == "nnm_stability" and plan.scene.model_kind == "discrete":
         files += symmetry_break_figure(plan, rows, result.out)
@@ -87,7 +92,7 @@ def _grid(n: int) -> tuple[int, int]:
     return -(-n // cols), cols
 
 
-def _lines(rows, xkey, metrics, path: Path, title: str, logx: bool) -> None:
+def _lines(rows, xkey, metrics, path: Path, title: str, logx: bool, base=None) -> None:
     nr, nc = _grid(len(metrics))
     fig, axes = plt.subplots(nr, nc, figsize=(4.2 * nc, 3.2 * nr), squeeze=False, sharex=True)
     x = np.array([r.get(xkey, np.nan) for r in rows], float)
@@ -101,6 +106,8 @@ def _lines(rows, xkey, metrics, path: Path, title: str, logx: bool) -> None:
             ax.set_yscale("log")
         ax.set_ylabel(_label(m))
         ax.grid(True, alpha=0.3)
+        if base is not None:
+            ax.axvline(base, color="tab:red", lw=0.8, ls=":")
         missing = int(np.sum(~np.isfinite(y)))
         if missing:
             ax.set_title(f"{missing} cases without a value", fontsize=8)
@@ -108,7 +115,7 @@ def _lines(rows, xkey, metrics, path: Path, title: str, logx: bool) -> None:
         ax.set_xlabel(xkey)
     for ax in list(axes.flat)[len(metrics):]:
         ax.set_visible(False)
-    fig.suptitle(title, fontsize=10)
+    fig.suptitle(title + ("; red dotted: the scene's own value" if base is not None else ""), fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -124,7 +131,7 @@ def _edges(v: np.ndarray, log: bool) -> np.ndarray:
     return np.exp(e) if log else e
 
 
-def _maps(rows, spec, metrics, path: Path, title: str) -> None:
+def _maps(rows, spec, metrics, path: Path, title: str, base=(None, None)) -> None:
     (vx, vy) = spec.vary
     nr, nc = _grid(len(metrics))
     fig, axes = plt.subplots(nr, nc, figsize=(4.6 * nc, 3.8 * nr), squeeze=False)
@@ -148,6 +155,8 @@ def _maps(rows, spec, metrics, path: Path, title: str) -> None:
             ax.scatter(x[~ok], y[~ok], c="0.6", s=8, marker="x")
             im = ax.scatter(x[ok], y[ok], c=z[ok], s=14, norm=norm, cmap="viridis")
         fig.colorbar(im, ax=ax, label=_label(m))
+        if None not in base:
+            ax.plot(*base, "+", color="tab:red", ms=10, mew=1.5)
         if logx:
             ax.set_xscale("log")
         if logy:
@@ -158,7 +167,7 @@ def _maps(rows, spec, metrics, path: Path, title: str) -> None:
         ax.set_title(_label(m) + (f" (grey: {missing} without a value)" if missing else ""), fontsize=9)
     for ax in list(axes.flat)[len(metrics):]:
         ax.set_visible(False)
-    fig.suptitle(title, fontsize=10)
+    fig.suptitle(title + ("; red +: the scene's own values" if None not in base else ""), fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
