@@ -120,8 +120,8 @@ class GapSystem:
         """J, total mechanical energy for x, v of shape (..., n)."""
         x = np.asarray(x)
         v = np.asarray(v)
-        kin = 0.5 * np.einsum("...i,ij,...j->...", v, self.M, v)
-        lin = 0.5 * np.einsum("...i,ij,...j->...", x, self.K, x)
+        kin = 0.5 * np.sum((v @ self.M) * v, axis=-1)  # a BLAS product: einsum's three-operand loop is ~50x slower
+        lin = 0.5 * np.sum((x @ self.K) * x, axis=-1)
         pen = np.maximum(self.penetration(x), 0.0)
         return kin + lin + 0.5 * (pen**2) @ self.k
 
