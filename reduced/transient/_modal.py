@@ -45,6 +45,8 @@ QTOL_REL = 64.0 * EPS  # as reduced.transient.exact: round-off of q, relative to
 NOISE_FACTOR = 4.0  # as reduced.transient.exact: margin on the propagated round-off of q and q'
 MAX_MARCH_ITER = 10_000_000  # per segment: a hang guard, never reached in practice
 FAST_LT = 2.0  # |lam| h beyond which a term's amplitude bounds it better than its Taylor bound
+CUBIC_REACH = 4.0  # the cubic bound is tried first on [0, CUBIC_REACH x the quadratic bound's step] ...
+CUBIC_ITER = 3  # ... and on intervals moved this many times toward its step
 TAYLOR_ZT = 0.5  # |z tau| below which I(z) = int_0^tau e^{z t} dt is summed as a series ...
 TAYLOR_TERMS = 17  # ... of this many terms (0.5^18 / 18! ~ 6e-22: exact to round-off)
 BUFFER_FULL = 1  # kernel status: the sample buffer is full inside the present segment
@@ -109,22 +111,21 @@ def _terms_m1(lam, K, tau, e, em):
 
 
 @nb.njit(cache=True)
-def _work(s, K, w, em, tau, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz):
+def _work(s, K, w, em, tau, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz, rk):
     """int_0^tau v^T C v dt (module docstring) with p = w (e^{lam tau} - 1) (em = e - 1): over the regular
     pairs e_i e_k - 1 = em_i em_k + em_i + em_k, so their part is Re(p^T Gz (p + 2 w) + p^T Hz conj(p + 2 w))
     (Gz, Hz hold 1/2 G / z, 1/2 H / z there and 0 elsewhere), accurate however short tau is; plus
     hd_i |w_i|^2 I(zd_i) for the diagonal of H and, for the near-cancelling pairs p of the state,
-    Re(icoef_p w_i (w_k or conj(w_k)) I(iz_p))."""
+    Re(icoef_p w_i (w_k or conj(w_k)) I(iz_p)). rk: scratch (K,)."""
+    for k in range(K):
+        rk[k] = w[k] * em[k] + 2.0 * w[k]
     acc = 0.0
     for i in range(K):
         pi = w[i] * em[i]
         g = 0.0 + 0.0j
-        h = 0.0 + 0.0j
         for k in range(K):
-            rk = w[k] * em[k] + 2.0 * w[k]
-            g += Gz[s, i, k] * rk
-            h += Hz[s, i, k] * np.conj(rk)
-        acc += (pi * (g + h)).real
+            g += Gz[s, i, k] * rk[k] + Hz[s, i, k] * np.conj(rk[k])
+        acc += (pi * g).real
         wi2 = w[i].real * w[i].real + w[i].imag * w[i].imag
         acc += hd[s, i] * wi2 * _real_int(zd[s, i], tau)
     for p in range(ip[s], ip[s + 1]):
@@ -152,21 +153,24 @@ def _eval(s, K, U, yp, w, e, out):
 
 
 @nb.njit(cache=True)
-def _start(s, K, y, Uinv, aUinv, yp, BU, aBU, Byp, lam, alam, offset, side, active, floor, w, werr, coef, lc, a0,
-           a1, a2, const, qtol, dnoise, live):
+def _start(s, K, y, Uinv, aUinv, yp, BU, aBU, Byp, lam, alam, offset, side, active, floor, w, werr, coef, lc,
+           l2c, a0, a1, a2, a3, const, qtol, dnoise, live, dy, ay):
     """Segment start in state s: w = Uinv (y - y_p) and werr (its round-off, EPS sum |Uinv| (|y| + |y_p|)),
     then per stop j (signed so that q_j <= 0 until it changes state) q_j = const_j + Re sum_i coef_ji e^{lam_i tau},
-    lc = lam coef, a0 = |coef|, a1 = |lam| a0, a2 = |lam|^2 a0, the round-off band qtol_j of q_j and the
-    noise dnoise_j of q_j'. A stop whose motion is below ``floor`` (round-off at rest) is not live.
-    Returns the number of live stops."""
+    lc = lam coef, l2c = lam^2 coef, a0 = |coef|, a_k = |lam|^k a0 (k = 1, 2, 3), the round-off band qtol_j
+    of q_j and the noise dnoise_j of q_j'. A stop whose motion is below ``floor`` (round-off at rest) is not live.
+    dy, ay: scratch (2n,). Returns the number of live stops."""
     N = y.shape[0]
     m = offset.shape[0]
+    for r in range(N):
+        dy[r] = y[r] - yp[s, r]
+        ay[r] = abs(y[r]) + abs(yp[s, r])
     for i in range(K):
         acc = 0.0 + 0.0j
         err = 0.0
         for r in range(N):
-            acc += Uinv[s, i, r] * (y[r] - yp[s, r])
-            err += aUinv[s, i, r] * (abs(y[r]) + abs(yp[s, r]))
+            acc += Uinv[s, i, r] * dy[r]
+            err += aUinv[s, i, r] * ay[r]
         w[i] = acc
         werr[i] = EPS * err
     n_live = 0
@@ -180,10 +184,13 @@ def _start(s, K, y, Uinv, aUinv, yp, BU, aBU, Byp, lam, alam, offset, side, acti
             c = sgn * (BU[s, j, i] * w[i])
             coef[j, i] = c
             lc[j, i] = lam[s, i] * c
+            l2c[j, i] = lam[s, i] * lc[j, i]
             a = math.sqrt(c.real * c.real + c.imag * c.imag)
+            al = alam[s, i]
             a0[j, i] = a
-            a1[j, i] = alam[s, i] * a
-            a2[j, i] = alam[s, i] * alam[s, i] * a
+            a1[j, i] = al * a
+            a2[j, i] = al * al * a
+            a3[j, i] = al * al * al * a
             osc += a
             qn += aBU[s, j, i] * werr[i]
             dn += aBU[s, j, i] * alam[s, i] * werr[i]
@@ -209,11 +216,43 @@ def _step(q, d, Q2):
 
 
 @nb.njit(cache=True)
-def _march(s, K, lam, alam, const, coef, lc, a0, a1, a2, qtol, dnoise, live, n_live, tau_limit, hmin, e, ea,
-           hprev):
+def _cubic_step(q, d, Q2, d2, Q3):
+    """A safe step for q(h) <= q + d h + d2 h^2 / 2 + Q3 h^3 / 6 (and <= q + d h + Q2 h^2 / 2): the
+    quadratic bound's step, or min(H, step with the curvature d2 + Q3 H / 3) (the cubic term is at
+    most Q3 H / 3 h^2 / 2 on [0, H]), H moved ``CUBIC_ITER`` times toward that step (each move
+    gives a larger safe step)."""
+    h = _step(q, d, Q2)
+    if h == np.inf:
+        return h
+    H = CUBIC_REACH * h
+    for _ in range(CUBIC_ITER):
+        g = _step(q, d, max(d2 + Q3 * H / 3.0, 0.0))
+        if g >= H:  # no root on [0, H]
+            h = max(h, H)
+            H = 2.0 * H if g == np.inf else math.sqrt(g * H)
+        else:
+            h = max(h, g)
+            H = math.sqrt(g * H)
+    return h
+
+
+@nb.njit(cache=True)
+def _march(s, K, lam, alam, const, coef, lc, l2c, a0, a1, a2, a3, qtol, dnoise, live, n_live, tau_limit, hmin, e,
+           ea, hprev, hnext, P):
     """First crossing of any live stop in [0, tau_limit): (tau, j, n_iter), j = -1 if none, j = -2 if the
-    march did not end. See the module docstring; the decisions at a stop's threshold are those of
-    :func:`reduced.transient.exact._march_step`."""
+    march did not end (module docstring).
+
+    At tau, per live stop: the crossing is at tau when q > qtol and q' >= -dtol, at tau - q / q' when
+    |q| <= qtol and q' > dtol (the decisions of :func:`reduced.transient.exact._march_step`), or, when
+    q' > dtol, at tau + x with x the root of q + q' x + q'' x^2 / 2 if Q3 x^3 <= qtol
+    (Q3 = sum |lam|^3 |c e| bounds |q'''|): the Taylor remainder is then within the round-off band, so
+    the root is located as well as by stepping onto it. Otherwise the safe step is the largest of four
+    bounds, each valid for every h in its range: the quadratic one (Q2), the cubic one
+    q + q' h + q2 h^2 / 2 + Q3 h^3 / 6 (q2 = Re sum lam^2 c e exact; :func:`_cubic_step`), and both
+    again with the fast terms bounded by their amplitude. The cubic bounds are worked out only for
+    the stop whose step is the smallest (the others' quadratic steps are already longer), until
+    that stop's step is the smallest of the refined ones. P[j] keeps each stop's sums for that.
+    """
     m = const.shape[0]
     best = tau_limit
     j_best = -1
@@ -223,8 +262,12 @@ def _march(s, K, lam, alam, const, coef, lc, a0, a1, a2, qtol, dnoise, live, n_l
     for it in range(MAX_MARCH_ITER):
         if n_live == 0:
             return best, j_best, it
-        _terms(lam[s], K, tau, e, ea)
-        h_all = np.inf
+        if tau == 0.0:
+            for i in range(K):
+                e[i] = 1.0
+                ea[i] = 1.0
+        else:
+            _terms(lam[s], K, tau, e, ea)
         for j in range(m):
             if not live[j]:
                 continue
@@ -233,27 +276,40 @@ def _march(s, K, lam, alam, const, coef, lc, a0, a1, a2, qtol, dnoise, live, n_l
             while i0 > 0 and alam[s, i0 - 1] * hp > FAST_LT:
                 i0 -= 1
             q = const[j]
-            d = 0.0
             ds = 0.0
             amp = 0.0
-            q2s = 0.0
-            q2f = 0.0
-            qf = 0.0
-            df = 0.0
+            d_s = 0.0  # slow terms: q', q'' (exact), Q2, Q3
+            d2_s = 0.0
+            q2_s = 0.0
+            q3_s = 0.0
+            slack = 0.0  # fast terms: sum (|c e| - Re(c e)), q', q'', Q2, Q3
+            d_f = 0.0
+            d2_f = 0.0
+            q2_f = 0.0
+            q3_f = 0.0
             for i in range(K):
                 r = (coef[j, i] * e[i]).real
                 dr = (lc[j, i] * e[i]).real
+                d2r = (l2c[j, i] * e[i]).real
                 a = a0[j, i] * ea[i]
                 q += r
-                d += dr
                 ds += a1[j, i] * ea[i]
                 amp += a
                 if i < i0:
-                    q2s += a2[j, i] * ea[i]
+                    d_s += dr
+                    d2_s += d2r
+                    q2_s += a2[j, i] * ea[i]
+                    q3_s += a3[j, i] * ea[i]
                 else:
-                    q2f += a2[j, i] * ea[i]
-                    qf += a - r
-                    df += dr
+                    slack += a - r
+                    d_f += dr
+                    d2_f += d2r
+                    q2_f += a2[j, i] * ea[i]
+                    q3_f += a3[j, i] * ea[i]
+            d = d_s + d_f
+            d2 = d2_s + d2_f
+            Q2 = q2_s + q2_f
+            Q3 = q3_s + q3_f
             qt = qtol[j]
             dt = QTOL_REL * ds + dnoise[j]
             root = -1.0
@@ -264,6 +320,12 @@ def _march(s, K, lam, alam, const, coef, lc, a0, a1, a2, qtol, dnoise, live, n_l
                     root = tau
                 elif d > dt:
                     root = tau + max(-q, 0.0) / d
+            elif d > dt:
+                disc = d * d - 2.0 * d2 * q
+                if disc >= 0.0:
+                    x = -2.0 * q / (d + math.sqrt(disc))  # q + q' x + q'' x^2 / 2 = 0
+                    if Q3 * x * x * x <= qt:  # the cubic remainder is within the round-off band
+                        root = tau + x
             if root >= 0.0:
                 live[j] = False
                 n_live -= 1
@@ -273,17 +335,47 @@ def _march(s, K, lam, alam, const, coef, lc, a0, a1, a2, qtol, dnoise, live, n_l
                 continue
             if const[j] + amp < -qt:
                 h = np.inf  # its amplitude can never bring it to the threshold
+                P[j, 10] = 1.0
             else:
-                h = _step(q, d, q2s + q2f)
-                if i0 < K and q + qf < 0.0:
-                    h = max(h, _step(q + qf, d - df, q2s))
-            hprev[j] = h
-            h = max(h, hmin)
-            if tau + h >= best:
-                live[j] = False
-                n_live -= 1
-                continue
-            h_all = min(h_all, h)
+                h = _step(q, d, Q2)
+                if i0 < K and q + slack < 0.0:
+                    h = max(h, _step(q + slack, d_s, q2_s))
+                P[j, 0] = q
+                P[j, 1] = d
+                P[j, 2] = d2
+                P[j, 3] = Q2
+                P[j, 4] = Q3
+                P[j, 5] = q + slack if i0 < K else 1.0  # > 0: no partition
+                P[j, 6] = d_s
+                P[j, 7] = d2_s
+                P[j, 8] = q2_s
+                P[j, 9] = q3_s
+                P[j, 10] = 0.0  # not refined yet
+            hnext[j] = h
+        while True:  # refine the smallest step until it is a refined one
+            jm = -1
+            hm = np.inf
+            for j in range(m):
+                if live[j] and hnext[j] < hm:
+                    hm = hnext[j]
+                    jm = j
+            if jm < 0 or P[jm, 10] != 0.0 or tau + max(hm, hmin) >= best:
+                break
+            h = max(hm, _cubic_step(P[jm, 0], P[jm, 1], P[jm, 3], P[jm, 2], P[jm, 4]))
+            if P[jm, 5] < 0.0:
+                h = max(h, _cubic_step(P[jm, 5], P[jm, 6], P[jm, 8], P[jm, 7], P[jm, 9]))
+            hnext[jm] = h
+            P[jm, 10] = 1.0
+        h_all = np.inf
+        for j in range(m):
+            if live[j]:
+                hprev[j] = hnext[j]
+                h = max(hnext[j], hmin)
+                if tau + h >= best:  # no crossing of j before the best found
+                    live[j] = False
+                    n_live -= 1
+                else:
+                    h_all = min(h_all, h)
         if n_live == 0:
             return best, j_best, it + 1
         tau += h_all
@@ -315,7 +407,9 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, t_end, t_samples, 
     em = np.empty(Kmax, np.complex128)
     coef = np.empty((m, Kmax), np.complex128)
     lc = np.empty((m, Kmax), np.complex128)
+    l2c = np.empty((m, Kmax), np.complex128)
     a0 = np.empty((m, Kmax))
+    a3 = np.empty((m, Kmax))
     a1 = np.empty((m, Kmax))
     a2 = np.empty((m, Kmax))
     const = np.empty(m)
@@ -323,7 +417,12 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, t_end, t_samples, 
     dnoise = np.empty(m)
     live = np.empty(m, np.bool_)
     hprev = np.empty(m)
+    hnext = np.empty(m)
+    P = np.empty((m, 11))
     ytmp = np.empty(N)
+    dy = np.empty(N)
+    ay = np.empty(N)
+    rk = np.empty(Kmax, np.complex128)
     n_events = 0
     n_iter = 0
     status = 0
@@ -334,9 +433,9 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, t_end, t_samples, 
             status = -2
             break
         n_live = _start(s, K, y, Uinv, aUinv, yp, BU, aBU, Byp, lam, alam, offset, side, active, floor, w, werr,
-                        coef, lc, a0, a1, a2, const, qtol, dnoise, live)
-        tau_ev, j_ev, it = _march(s, K, lam, alam, const, coef, lc, a0, a1, a2, qtol, dnoise, live, n_live,
-                                  t_end - t, hmin, e, ea, hprev)
+                        coef, lc, l2c, a0, a1, a2, a3, const, qtol, dnoise, live, dy, ay)
+        tau_ev, j_ev, it = _march(s, K, lam, alam, const, coef, lc, l2c, a0, a1, a2, a3, qtol, dnoise, live, n_live,
+                                  t_end - t, hmin, e, ea, hprev, hnext, P)
         if j_ev == -2:
             status = -3
             break
@@ -345,7 +444,7 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, t_end, t_samples, 
             tau = max(t_samples[i_samp] - t, 0.0)
             _terms_m1(lam[s], K, tau, e, em)
             _eval(s, K, U, yp, w, e, ytmp)
-            out_W[i_samp] = W + (_work(s, K, w, em, tau, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz)
+            out_W[i_samp] = W + (_work(s, K, w, em, tau, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz, rk)
                                  if damped else 0.0)
             if has_E:
                 out_E[i_samp] = E
@@ -359,7 +458,7 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, t_end, t_samples, 
         _terms_m1(lam[s], K, tau_ev, e, em)
         _eval(s, K, U, yp, w, e, ytmp)
         if damped:
-            W += _work(s, K, w, em, tau_ev, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz)
+            W += _work(s, K, w, em, tau_ev, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz, rk)
         for r in range(N):
             y[r] = ytmp[r]
         n_stuck = n_stuck + 1 if tau_ev == 0.0 else 0
