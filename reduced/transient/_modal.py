@@ -86,17 +86,9 @@ def _phi_int(z, tau):
 
 
 @nb.njit(cache=True)
-def _real_int(z, tau):
-    """int_0^tau e^{z t} dt for real z <= 0: expm1(z tau) / z, tau for z = 0."""
-    if z == 0.0:
-        return tau
-    return math.expm1(z * tau) / z
-
-
-@nb.njit(cache=True)
-def _terms_m1(lam, K, tau, e, em):
+def _terms_m1(lam, K, tau, e, em, am1):
     """e_i = exp(lam_i tau) and em_i = e_i - 1 to full relative accuracy (expm1 and half angles:
-    em = expm1(a) cos(b) - 2 sin^2(b / 2) + i e^a sin(b), a + i b = lam_i tau), i < K."""
+    em = expm1(a) cos(b) - 2 sin^2(b / 2) + i e^a sin(b), a + i b = lam_i tau), am1_i = expm1(a), i < K."""
     for i in range(K):
         a = lam[i].real * tau
         b = 0.5 * lam[i].imag * tau
@@ -104,19 +96,20 @@ def _terms_m1(lam, K, tau, e, em):
         ch = math.cos(b)
         cb = 1.0 - 2.0 * sh * sh
         sb = 2.0 * sh * ch
-        am1 = math.expm1(a)
-        ea = 1.0 + am1
+        x = math.expm1(a)
+        ea = 1.0 + x
         e[i] = complex(ea * cb, ea * sb)
-        em[i] = complex(am1 * cb - 2.0 * sh * sh, ea * sb)
+        em[i] = complex(x * cb - 2.0 * sh * sh, ea * sb)
+        am1[i] = x
 
 
 @nb.njit(cache=True)
-def _work(s, K, w, em, tau, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz, rk):
+def _work(s, K, w, em, am1, tau, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz, rk):
     """int_0^tau v^T C v dt (module docstring) with p = w (e^{lam tau} - 1) (em = e - 1): over the regular
     pairs e_i e_k - 1 = em_i em_k + em_i + em_k, so their part is Re(p^T Gz (p + 2 w) + p^T Hz conj(p + 2 w))
     (Gz, Hz hold 1/2 G / z, 1/2 H / z there and 0 elsewhere), accurate however short tau is; plus
-    hd_i |w_i|^2 I(zd_i) for the diagonal of H and, for the near-cancelling pairs p of the state,
-    Re(icoef_p w_i (w_k or conj(w_k)) I(iz_p)). rk: scratch (K,)."""
+    hd_i |w_i|^2 I(zd_i) for the diagonal of H (zd_i = 2 Re lam_i, from am1_i = expm1(Re(lam_i) tau)) and,
+    for the near-cancelling pairs p of the state, Re(icoef_p w_i (w_k or conj(w_k)) I(iz_p)). rk: scratch (K,)."""
     for k in range(K):
         rk[k] = w[k] * em[k] + 2.0 * w[k]
     acc = 0.0
@@ -127,7 +120,9 @@ def _work(s, K, w, em, tau, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz, rk):
             g += Gz[s, i, k] * rk[k] + Hz[s, i, k] * np.conj(rk[k])
         acc += (pi * g).real
         wi2 = w[i].real * w[i].real + w[i].imag * w[i].imag
-        acc += hd[s, i] * wi2 * _real_int(zd[s, i], tau)
+        # int_0^tau e^{2 a t} dt = (e^{2 a tau} - 1) / (2 a) = am1 (2 + am1) / (2 a), am1 = expm1(a tau)
+        z = zd[s, i]
+        acc += hd[s, i] * wi2 * (tau if z == 0.0 else am1[i] * (2.0 + am1[i]) / z)
     for p in range(ip[s], ip[s + 1]):
         i = ii[p]
         k = ik[p]
@@ -154,10 +149,10 @@ def _eval(s, K, U, yp, w, e, out):
 
 @nb.njit(cache=True)
 def _start(s, K, y, Uinv, aUinv, yp, BU, aBU, Byp, lam, alam, offset, side, active, floor, w, werr, coef, lc,
-           l2c, a0, a1, a2, a3, const, qtol, dnoise, live, dy, ay):
+           l2c, a0, const, qtol, dnoise, live, dy, ay):
     """Segment start in state s: w = Uinv (y - y_p) and werr (its round-off, EPS sum |Uinv| (|y| + |y_p|)),
     then per stop j (signed so that q_j <= 0 until it changes state) q_j = const_j + Re sum_i coef_ji e^{lam_i tau},
-    lc = lam coef, l2c = lam^2 coef, a0 = |coef|, a_k = |lam|^k a0 (k = 1, 2, 3), the round-off band qtol_j
+    lc = lam coef, l2c = lam^2 coef, a0 = |coef|, the round-off band qtol_j
     of q_j and the noise dnoise_j of q_j'. A stop whose motion is below ``floor`` (round-off at rest) is not live.
     dy, ay: scratch (2n,). Returns the number of live stops."""
     N = y.shape[0]
@@ -186,11 +181,7 @@ def _start(s, K, y, Uinv, aUinv, yp, BU, aBU, Byp, lam, alam, offset, side, acti
             lc[j, i] = lam[s, i] * c
             l2c[j, i] = lam[s, i] * lc[j, i]
             a = math.sqrt(c.real * c.real + c.imag * c.imag)
-            al = alam[s, i]
             a0[j, i] = a
-            a1[j, i] = al * a
-            a2[j, i] = al * al * a
-            a3[j, i] = al * al * al * a
             osc += a
             qn += aBU[s, j, i] * werr[i]
             dn += aBU[s, j, i] * alam[s, i] * werr[i]
@@ -237,8 +228,8 @@ def _cubic_step(q, d, Q2, d2, Q3):
 
 
 @nb.njit(cache=True)
-def _march(s, K, lam, alam, const, coef, lc, l2c, a0, a1, a2, a3, qtol, dnoise, live, n_live, tau_limit, hmin, e,
-           ea, hprev, hnext, P):
+def _march(s, K, lam, alam, const, coef, lc, l2c, a0, qtol, dnoise, live, n_live, tau_limit, hmin, e, ea, hprev,
+           hnext, P):
     """First crossing of any live stop in [0, tau_limit): (tau, j, n_iter), j = -1 if none, j = -2 if the
     march did not end (module docstring).
 
@@ -292,20 +283,23 @@ def _march(s, K, lam, alam, const, coef, lc, l2c, a0, a1, a2, a3, qtol, dnoise, 
                 dr = (lc[j, i] * e[i]).real
                 d2r = (l2c[j, i] * e[i]).real
                 a = a0[j, i] * ea[i]
+                al = alam[s, i]
+                a1 = al * a
+                a2 = al * a1
                 q += r
-                ds += a1[j, i] * ea[i]
+                ds += a1
                 amp += a
                 if i < i0:
                     d_s += dr
                     d2_s += d2r
-                    q2_s += a2[j, i] * ea[i]
-                    q3_s += a3[j, i] * ea[i]
+                    q2_s += a2
+                    q3_s += al * a2
                 else:
                     slack += a - r
                     d_f += dr
                     d2_f += d2r
-                    q2_f += a2[j, i] * ea[i]
-                    q3_f += a3[j, i] * ea[i]
+                    q2_f += a2
+                    q3_f += al * a2
             d = d_s + d_f
             d2 = d2_s + d2_f
             Q2 = q2_s + q2_f
@@ -383,16 +377,18 @@ def _march(s, K, lam, alam, const, coef, lc, l2c, a0, a1, a2, a3, qtol, dnoise, 
 
 
 @nb.njit(cache=True)
-def _free_kernel(tb, offset, side, tip, damped, y, active, t, t_end, t_samples, i_samp, t_after, out_y, out_W,
+def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_samples, i_samp, t_after, out_y, out_W,
                  W, hmin, floor, max_events, n_stuck, out_E, E):
-    """March events from t to t_end (no loads), filling the sample buffer ``t_samples`` from i_samp.
+    """March events from t through the pieces ending at bounds[c], bounds[c + 1], ... (no loads), filling
+    the sample buffer ``t_samples`` from i_samp.
 
     ``tb`` is the modal table (:func:`reduced.transient.exact.modal_table`). (y, active, t, W) is the
-    state at the start of a segment and is advanced in place; when the buffer fills inside a segment
-    that still has samples before its end (the next sample, at ``t_after``, lies in it), the kernel
-    returns BUFFER_FULL without advancing that segment, so the samples do not depend on the buffer
-    size. ``out_E`` (empty, or as long as the buffer) receives the loads' work E, constant here.
-    Returns (t, W, i_samp, n_events, n_iter, status, n_stuck).
+    state at the start of a segment and is advanced in place; every piece bound ends a segment (the
+    closed form restarts there) and resets n_stuck. When the buffer fills inside a segment that still
+    has samples before its end (the next sample, at ``t_after``, lies in it), the kernel returns
+    BUFFER_FULL without advancing that segment, so the samples do not depend on the buffer size.
+    ``out_E`` (empty, or as long as the buffer) receives the loads' work E, constant here.
+    Returns (t, W, i_samp, n_events, n_iter, status, n_stuck, c): c the piece reached.
     """
     (nK, lam, alam, U, Uinv, aUinv, yp, BU, aBU, Byp, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz) = tb
     N = y.shape[0]
@@ -405,13 +401,11 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, t_end, t_samples, 
     e = np.empty(Kmax, np.complex128)
     ea = np.empty(Kmax)
     em = np.empty(Kmax, np.complex128)
+    am1 = np.empty(Kmax)
     coef = np.empty((m, Kmax), np.complex128)
     lc = np.empty((m, Kmax), np.complex128)
     l2c = np.empty((m, Kmax), np.complex128)
     a0 = np.empty((m, Kmax))
-    a3 = np.empty((m, Kmax))
-    a1 = np.empty((m, Kmax))
-    a2 = np.empty((m, Kmax))
     const = np.empty(m)
     qtol = np.empty(m)
     dnoise = np.empty(m)
@@ -426,6 +420,7 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, t_end, t_samples, 
     n_events = 0
     n_iter = 0
     status = 0
+    t_end = bounds[c]
     while True:
         s = _state_of(active)
         K = nK[s]
@@ -433,18 +428,18 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, t_end, t_samples, 
             status = -2
             break
         n_live = _start(s, K, y, Uinv, aUinv, yp, BU, aBU, Byp, lam, alam, offset, side, active, floor, w, werr,
-                        coef, lc, l2c, a0, a1, a2, a3, const, qtol, dnoise, live, dy, ay)
-        tau_ev, j_ev, it = _march(s, K, lam, alam, const, coef, lc, l2c, a0, a1, a2, a3, qtol, dnoise, live, n_live,
-                                  t_end - t, hmin, e, ea, hprev, hnext, P)
+                        coef, lc, l2c, a0, const, qtol, dnoise, live, dy, ay)
+        tau_ev, j_ev, it = _march(s, K, lam, alam, const, coef, lc, l2c, a0, qtol, dnoise, live, n_live, t_end - t,
+                                  hmin, e, ea, hprev, hnext, P)
         if j_ev == -2:
             status = -3
             break
         t_next = t_end if j_ev < 0 else t + tau_ev
         while i_samp < ns and t_samples[i_samp] <= t_next:
             tau = max(t_samples[i_samp] - t, 0.0)
-            _terms_m1(lam[s], K, tau, e, em)
+            _terms_m1(lam[s], K, tau, e, em, am1)
             _eval(s, K, U, yp, w, e, ytmp)
-            out_W[i_samp] = W + (_work(s, K, w, em, tau, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz, rk)
+            out_W[i_samp] = W + (_work(s, K, w, em, am1, tau, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz, rk)
                                  if damped else 0.0)
             if has_E:
                 out_E[i_samp] = E
@@ -455,10 +450,10 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, t_end, t_samples, 
             status = BUFFER_FULL  # the segment is searched again with the next buffer: count it then
             break
         n_iter += it
-        _terms_m1(lam[s], K, tau_ev, e, em)
+        _terms_m1(lam[s], K, tau_ev, e, em, am1)
         _eval(s, K, U, yp, w, e, ytmp)
         if damped:
-            W += _work(s, K, w, em, tau_ev, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz, rk)
+            W += _work(s, K, w, em, am1, tau_ev, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz, rk)
         for r in range(N):
             y[r] = ytmp[r]
         n_stuck = n_stuck + 1 if tau_ev == 0.0 else 0
@@ -467,7 +462,12 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, t_end, t_samples, 
             break
         t = t_next
         if j_ev < 0:
-            break
+            c += 1  # the piece's end: the next piece, or done
+            n_stuck = 0
+            if c == bounds.shape[0]:
+                break
+            t_end = bounds[c]
+            continue
         if active[j_ev]:
             active[j_ev] = False
         else:
@@ -480,4 +480,4 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, t_end, t_samples, 
         if n_events >= max_events:
             status = -1
             break
-    return t, W, i_samp, n_events, n_iter, status, n_stuck
+    return t, W, i_samp, n_events, n_iter, status, n_stuck, c

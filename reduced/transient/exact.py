@@ -61,7 +61,7 @@ from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
-from scipy.linalg import eig, eigh, solve
+from scipy.linalg import eigh, solve
 
 from reduced import _checks as _check
 from reduced.cache import call_numba_kernel
@@ -100,37 +100,53 @@ class StateTable:
     cond: np.ndarray  # (S,) condition number of V: the closed form loses cond eps |y|
 
 
-def _decompose(system: GapSystem, Ks: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    n = system.n
-    if system.undamped:
-        w2, phi = eigh(Ks, system.M)
-        if w2[0] <= 1e-12 * w2[-1]:
-            raise ExactIntegratorError(
-                "a contact state has a zero-frequency mode (stiffness singular); "
-                "the exact method needs every state to oscillate: use method 'explicit'"
-            )
-        w = np.sqrt(w2)
-        V = np.block([[phi, phi], [1j * w * phi, -1j * w * phi]]).astype(complex)
-        PM = phi.T @ system.M
-        Vinv = 0.5 * np.block([[PM, PM / (1j * w)[:, None]], [PM, -PM / (1j * w)[:, None]]])
-        lam = np.concatenate([1j * w, -1j * w])
-        return lam, V, Vinv
-    Minv = np.linalg.inv(system.M)
-    A = np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ Ks, -Minv @ system.C]])
-    lam, V = eig(A)
-    cond = np.linalg.cond(V)
-    if not np.isfinite(cond) or cond > MAX_COND:
+def _decompose_undamped(system: GapSystem, Ks: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """(lam, V, Vinv, cond(V)) of an undamped state from the real modes of (Ks, M): lam = +-i omega."""
+    w2, phi = eigh(Ks, system.M)
+    if w2[0] <= 1e-12 * w2[-1]:
         raise ExactIntegratorError(
-            f"a contact state is nearly defective (eigenvector condition {cond:.1e}, e.g. a "
-            "critically damped mode); use method 'explicit' or 'dop853'"
+            "a contact state has a zero-frequency mode (stiffness singular); "
+            "the exact method needs every state to oscillate: use method 'explicit'"
         )
-    if np.max(lam.real) > 1e-9 * np.max(np.abs(lam)):
-        raise ExactIntegratorError("a contact state is unstable (Re lambda > 0): check K and C")
-    return lam, V, np.linalg.inv(V)
+    w = np.sqrt(w2)
+    V = np.block([[phi, phi], [1j * w * phi, -1j * w * phi]]).astype(complex)
+    PM = phi.T @ system.M
+    Vinv = 0.5 * np.block([[PM, PM / (1j * w)[:, None]], [PM, -PM / (1j * w)[:, None]]])
+    lam = np.concatenate([1j * w, -1j * w])
+    return lam, V, Vinv, float(np.linalg.cond(V))
+
+
+def _decompose_damped(system: GapSystem, Ks_list: list[np.ndarray]) -> list[tuple]:
+    """[(lam, V, Vinv, cond(V))] of the damped states with stiffnesses ``Ks_list``: the eigenpairs of
+    A = [[0, I], [-M^-1 K_s, -M^-1 C]], all states in one stacked LAPACK call."""
+    n = system.n
+    Minv = np.linalg.inv(system.M)
+    A = np.zeros((len(Ks_list), 2 * n, 2 * n))
+    A[:, :n, n:] = np.eye(n)
+    A[:, n:, :n] = -np.matmul(Minv, np.stack(Ks_list))
+    A[:, n:, n:] = -Minv @ system.C
+    lam, V = np.linalg.eig(A)
+    sv = np.linalg.svd(V, compute_uv=False)
+    cond = sv[:, 0] / sv[:, -1]
+    for k in range(len(Ks_list)):
+        if not np.isfinite(cond[k]) or cond[k] > MAX_COND:
+            raise ExactIntegratorError(
+                f"a contact state is nearly defective (eigenvector condition {cond[k]:.1e}, e.g. a "
+                "critically damped mode); use method 'explicit' or 'dop853'"
+            )
+        if np.max(lam[k].real) > 1e-9 * np.max(np.abs(lam[k])):
+            raise ExactIntegratorError("a contact state is unstable (Re lambda > 0): check K and C")
+    Vinv = np.linalg.inv(V)
+    return [(lam[k], V[k], Vinv[k], float(cond[k])) for k in range(len(Ks_list))]
 
 
 def state_table(system: GapSystem) -> StateTable:
-    """Decompose every feasible contact state; mirrored states share one decomposition."""
+    """Decompose every feasible contact state; mirrored states share one decomposition.
+
+    The dense algebra runs on one BLAS thread (:func:`reduced._blas.single_thread_blas`): these
+    matrices are small, and threads on busy cores cost far more than they save."""
+    from reduced._blas import single_thread_blas
+
     _check.gap_system(system)
     n, m = system.n, system.m
     S = 2**m
@@ -139,18 +155,28 @@ def state_table(system: GapSystem) -> StateTable:
     Vinv = np.zeros((S, 2 * n, 2 * n), complex)
     yp = np.zeros((S, 2 * n))
     valid = np.zeros(S, bool)
-    cache: dict[bytes, tuple] = {}
     cond = np.ones(S)
-    for active in system.feasible_states():
-        s = int(np.sum(active * (1 << np.arange(m))))
-        Ks, Fs = system.state_matrices(active)
-        key = Ks.tobytes()
-        if key not in cache:
-            lam_k, V_k, Vinv_k = _decompose(system, Ks)
-            cache[key] = (lam_k, V_k, Vinv_k, float(np.linalg.cond(V_k)))
-        lam[s], V[s], Vinv[s], cond[s] = cache[key]
-        yp[s, :n] = solve(Ks, Fs, assume_a="sym") if np.any(Fs) else 0.0
-        valid[s] = True
+    with single_thread_blas():
+        keys: dict[bytes, int] = {}
+        unique: list[np.ndarray] = []
+        states = []
+        for active in system.feasible_states():
+            s = int(np.sum(active * (1 << np.arange(m))))
+            Ks, Fs = system.state_matrices(active)
+            key = Ks.tobytes()
+            if key not in keys:
+                keys[key] = len(unique)
+                unique.append(Ks)
+            states.append((s, keys[key]))
+            # LU: a mirrored state's Fs is the exact negative, and so is its y_p
+            yp[s, :n] = np.linalg.solve(Ks, Fs) if np.any(Fs) else 0.0
+        if system.undamped:
+            dec = [_decompose_undamped(system, Ks) for Ks in unique]
+        else:
+            dec = _decompose_damped(system, unique)
+        for s, k in states:
+            lam[s], V[s], Vinv[s], cond[s] = dec[k]
+            valid[s] = True
     return StateTable(lam, V, Vinv, yp, valid, cond)
 
 
@@ -1141,6 +1167,11 @@ def stream_exact(
                 k0 = k
         return out
 
+    # np.linspace(0, t_end, n_pieces + 1)[1:], one bound at a time (the same bits)
+    bounds = np.array([t_end if c == n_pieces - 1 else (c + 1) * (t_end / n_pieces) for c in range(n_pieces)])
+    # a free run without a progress bar goes through every piece in one kernel call
+    groups = [bounds] if not forced and progress is None else [bounds[c:c + 1] for c in range(n_pieces)]
+
     def blocks():
         nonlocal y, active
         t, W, E, n_events, n_iter = 0.0, 0.0, 0.0, 0, 0
@@ -1149,18 +1180,19 @@ def stream_exact(
         ts = np.arange(j0, j0 + k) / sample_rate_hz
         out_y, out_W, out_E = np.empty((k, 2 * n)), np.empty(k), np.empty(k if forced else 0)
         i = 0
-        for c in range(n_pieces):
-            # np.linspace(0, t_end, n_pieces + 1)[c + 1], one bound at a time (the same bits)
-            bound = t_end if c == n_pieces - 1 else (c + 1) * (t_end / n_pieces)
+        for c_done, g in enumerate(groups, 1):
+            bound = float(g[-1])
             n_stuck = 0
             for _, t_b, starts in runs(t, bound):
                 if starts is not None:  # the loads' pieces from t to t_b
                     fargs = forced_arrays(ft, loads.pieces_at(starts))
+                tb_ = g if len(g) > 1 else np.array([t_b])
+                c = 0
                 while True:
                     t_after = (j0 + k) / sample_rate_hz if j0 + k < N else np.inf
                     if starts is None:
-                        t, W, i, ne, ni, status, n_stuck = call_numba_kernel(_modal._free_kernel,
-                            mt, system.offset, system.side, system.tip, damped, y, active, t, t_b, ts, i, t_after,
+                        t, W, i, ne, ni, status, n_stuck, c = call_numba_kernel(_modal._free_kernel,
+                            mt, system.offset, system.side, system.tip, damped, y, active, t, tb_, c, ts, i, t_after,
                             out_y, out_W, W, hmin, floor, max_events - n_events, n_stuck, out_E, E)
                     else:
                         t, W, E, i, ne, ni, status, n_stuck = call_numba_kernel(_exact_kernel,
@@ -1182,7 +1214,7 @@ def stream_exact(
                     _check_status(status, t, max_events)
                     break
             if progress is not None:
-                progress((c + 1) / n_pieces)
+                progress(c_done / n_pieces)
         if i != k or j0 + k != N:  # the last sample sits on t_end up to round-off
             raise ExactIntegratorError(f"internal: {N - j0 - i} samples not filled")
         yield j0, *_finite(out_y, out_W, out_E, n, forced)
