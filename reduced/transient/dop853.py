@@ -67,6 +67,46 @@ def _last_sample_at_or_before(t: float, fs: float, N: int) -> int:
     return j
 
 
+DENSE_DEGREE = 7  # SciPy's DOP853 dense output is a polynomial of this degree in x = (t - t_old) / h
+_NODES = 0.5 - 0.5 * np.cos(np.pi * np.arange(DENSE_DEGREE + 1) / DENSE_DEGREE)  # Chebyshev-Lobatto, 0 .. 1
+_TO_POWER = np.linalg.inv(np.vander(_NODES, DENSE_DEGREE + 1, increasing=True))  # values at nodes -> a_k of x^k
+# power -> Bernstein coefficients on [0, 1]: b_k = sum_{i <= k} C(k, i) / C(D, i) a_i
+_TO_BERNSTEIN = np.array([[math.comb(k, i) / math.comb(DENSE_DEGREE, i) if i <= k else 0.0
+                           for i in range(DENSE_DEGREE + 1)] for k in range(DENSE_DEGREE + 1)])
+CRIT_IMAG = 1e-6  # a critical point of the stop polynomial with |Im x| below this is taken as real (x in [0, 1])
+
+
+def _polynomial_crossings(sol, t_old: float, t: float, system: GapSystem, direction: np.ndarray) -> list:
+    """[(x_a, x_b, n_cross, a)] per stop: the first crossing of the stop in its event direction by DOP853's
+    dense output over the step, bracketed in x = (t - t_old) / h between two points where that degree-7
+    polynomial (power coefficients a) is monotone (None if it has none), and how many crossings it has.
+
+    d_j g_j(x) (g_j = side (B_j x - o_j), d_j the direction) is interpolated exactly at 8 nodes; its
+    Bernstein coefficients bound it on [0, 1], so a stop whose coefficients are all negative cannot
+    cross. Otherwise the polynomial is cut at its critical points (roots of its derivative) into
+    monotone pieces, and a crossing is a piece rising through zero. A contact entered and left inside
+    one step (both ends open, the sign test of ``solve_ivp`` sees nothing) is found this way.
+    """
+    n = system.n
+    h = t - t_old
+    Z = sol(t_old + h * _NODES)
+    G = (direction * system.side)[:, None] * (system.B @ Z[:n] - system.offset[:, None])
+    A = G @ _TO_POWER.T
+    bern = A @ _TO_BERNSTEIN.T
+    out: list = [None] * system.m
+    for j in np.flatnonzero(bern.max(axis=1) >= 0.0):
+        a = A[j]
+        r = np.roots((a[1:] * np.arange(1, DENSE_DEGREE + 1))[::-1])
+        crit = np.sort(r.real[(np.abs(r.imag) <= CRIT_IMAG) & (r.real > 0.0) & (r.real < 1.0)])
+        xs = np.concatenate([[0.0], crit, [1.0]])
+        vals = np.polynomial.polynomial.polyval(xs, a)
+        rising = np.flatnonzero((vals[:-1] <= 0.0) & (vals[1:] >= 0.0) & (vals[:-1] < vals[1:]))
+        if rising.size:
+            k = int(rising[0])
+            out[j] = (float(xs[k]), float(xs[k + 1]), int(rising.size), a)
+    return out
+
+
 def _find_active_events(g, g_new, direction) -> np.ndarray:
     """Events whose function changed sign in the step, in their direction (as ``solve_ivp``)."""
     g, g_new = np.asarray(g), np.asarray(g_new)
@@ -74,6 +114,41 @@ def _find_active_events(g, g_new, direction) -> np.ndarray:
     down = (g >= 0) & (g_new <= 0)
     mask = up & (direction > 0) | down & (direction < 0) | (up | down) & (direction == 0)
     return np.nonzero(mask)[0]
+
+
+def _first_event(sol, t_old: float, t: float, act: np.ndarray, funcs: list, system: GapSystem,
+                 direction: np.ndarray) -> tuple[int, float]:
+    """(stop, time) of the first crossing in the step (t_old, t], or (-1, t).
+
+    As ``solve_ivp``: the stops whose event function changed sign between the step's ends (``act``),
+    each root by ``brentq`` on the dense output over the step, the earliest taken. Beyond it: a stop
+    that the dense output makes cross earlier, or more than once, in the step
+    (:func:`_polynomial_crossings`; a short contact entered and left between two steps' ends, which
+    the end test misses) is located by ``brentq`` on its monotone bracket instead.
+    """
+    poly = _polynomial_crossings(sol, t_old, t, system, direction)
+    found = [(p[0], j) for j, p in enumerate(poly) if p is not None]
+    first_poly = min(found) if found else None
+    if first_poly is not None:
+        j = first_poly[1]
+        x_a, x_b, count, _ = poly[j]
+        if not (j in act and count == 1):  # a crossing the end test misses or mislocates
+            h = t - t_old
+            ta, tb = t_old + h * x_a, t if x_b == 1.0 else t_old + h * x_b
+            f = funcs[j]
+            try:
+                root = brentq(lambda tt: f(tt, sol(tt)), ta, tb, xtol=4 * EPS, rtol=4 * EPS)
+            except ValueError:  # no sign change at the ends by round-off: the interpolant's own root
+                a = poly[j][3]
+                x = brentq(lambda x: np.polynomial.polynomial.polyval(x, a), x_a, x_b, xtol=4 * EPS)
+                root = t_old + h * x
+            return j, float(root)
+    if act.size:
+        roots = np.array([brentq(lambda tt, f=funcs[e]: f(tt, sol(tt)), t_old, t, xtol=4 * EPS, rtol=4 * EPS)
+                          for e in act])
+        first = int(np.argsort(roots, kind="stable")[0])
+        return int(act[first]), float(roots[first])
+    return -1, t
 
 
 def stream_dop853(
@@ -189,12 +264,8 @@ def stream_dop853(
                 if events:
                     g_new = [f(t, solver.y) for f in funcs]
                     act = _find_active_events(g, g_new, direction)
-                    if act.size:
-                        sol = solver.dense_output()
-                        roots = np.array([brentq(lambda tt, f=funcs[e], sol=sol: f(tt, sol(tt)), solver.t_old, t,
-                                                 xtol=4 * EPS, rtol=4 * EPS) for e in act])
-                        first = int(np.argsort(roots, kind="stable")[0])
-                        je, t = int(act[first]), float(roots[first])
+                    sol = solver.dense_output()
+                    je, t = _first_event(sol, solver.t_old, t, act, funcs, system, direction)
                     g = g_new
                 upto = _last_sample_at_or_before(t, fs, N)
                 if upto >= j0 + filled:
