@@ -77,10 +77,10 @@ class VirtualRig:
         """(n_channels, N) every channel at N samples of the state x, v (N, n) under hammer force p (N,)."""
         s = self.system
         x, v, p = np.atleast_2d(x), np.atleast_2d(v), np.atleast_1d(p)
-        rhs = p[:, None] * self.b[None, :] - v @ s.C - x @ s.K - s.contact_force(x)
-        a = np.linalg.solve(s.M, rhs.T)  # (n, N): q''
-        acc = self.acc_rows @ a
-        seat = self.seat_rows @ a
+        W = np.linalg.solve(s.M, np.vstack([self.acc_rows, self.seat_rows]).T).T  # rows of R M^-1 (M symmetric)
+        a = (np.outer(W @ self.b, p) - (W @ s.C) @ v.T - (W @ s.K) @ x.T  # R q'' for every row, (rows, N)
+             - W @ s.contact_force(x).T)
+        acc, seat = a[: len(self.acc_rows)], a[len(self.acc_rows):]
         stop = s.stop_force(x).T  # (4, N) compression of x1+, x1-, x3+, x3-: the tips in TIP_CELLS order
         sign = np.array([1.0 if c.endswith("top") else -1.0 for c in TIP_CELLS])[:, None]
         cells = stop - sign * self.seismic_mass_kg * seat
