@@ -950,7 +950,9 @@ def write_results(plan: SweepPlan, result: SweepResult) -> list[str]:
             "vary": {v.key: v.text for v in plan.spec.vary}, "samples": plan.spec.samples, "seed": plan.spec.seed,
             "cases": len(plan.cases), "ok": len(ok), "failed": result.n_failed, "resumed": result.n_resumed,
             "wall_s": round(result.wall_s, 3), "workers": result.workers, "where": result.where,
-            "case_run_time_s_sum": round(sum(r["run_time_s"] for r in ok if not r.get("resumed")), 3),
+            # resumed rows carry the run time of the run that made them (from the earlier sweep.parquet)
+            "case_run_time_s_sum": round(sum(r["run_time_s"] for r in ok if math.isfinite(r["run_time_s"] or
+                                                                                             math.nan)), 3),
             "package": "bearingshaft", "version": __version__, "git_commit": git_commit(), "files": files}
     _replace_file(result.out / "sweep_provenance.json",
                   lambda p: p.write_text(json.dumps(prov, indent=2, sort_keys=True) + "\n", encoding="utf-8"))

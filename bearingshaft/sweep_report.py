@@ -211,11 +211,12 @@ def nnm_stability(model, energy_min_J: float, energy_max_J: float, n: int = STAB
 
 
 def _ranges(rows: list[dict], nnm: int, eigvec: str) -> list[tuple[float, float]]:
-    """Energy intervals over which NNM ``nnm`` is unstable with an ``eigvec`` eigenvector (between
-    the neighbouring computed energies' geometric midpoints)."""
-    pts = [r for r in rows if r["nnm"] == nnm and r["found"]]
+    """Energy intervals over which NNM ``nnm`` is unstable with an ``eigvec`` eigenvector: each such
+    orbit stands for the energies up to the geometric midpoints with its neighbours on the grid
+    (an energy where shooting found no orbit is not shaded)."""
+    pts = [r for r in rows if r["nnm"] == nnm]
     E = np.array([r["energy_J"] for r in pts])
-    flag = np.array([r["unstable_eigvec"] == eigvec for r in pts])
+    flag = np.array([bool(r["found"]) and r["unstable_eigvec"] == eigvec for r in pts])
     out, start = [], None
     for i, f in enumerate(flag):
         lo = math.sqrt(E[i - 1] * E[i]) if i else E[i]
@@ -285,15 +286,18 @@ def symmetry_break_figure(plan, rows: list[dict], out: Path) -> list[str]:
                           label=f"NNM {nnm} " + (f"unstable, {k} eigenvector" if k else "stable"))
     ax.set_ylabel("NNM |mu| max")
     ax.set_xlabel("initial energy [J] (shaded above: the energies where NNM 1 / NNM 3 are unstable)")
-    ax.legend(fontsize=7, ncol=2)
+    ax.legend(fontsize=7, ncol=2, loc="upper left")
     ax.grid(True, alpha=0.3, which="both")
     axes[0].set_xscale("log")
     from bearingshaft.stages.ringdown import SYMMETRY_SEEDS
 
     seed = (f"seeded with a {perturbation:g} m antisymmetric perturbation at x1, x3 ({SYMMETRY_SEEDS} seeds)"
             if perturbation else "")
-    fig.suptitle(f"{plan.scene.name}: symmetry-break time against energy; {seed}; "
-                 f"red/purple: NNM 1/3 antisymmetrically unstable", fontsize=9)
+    from bearingshaft.plots import wrap_title
+
+    fig.suptitle(wrap_title(f"{plan.scene.name}: symmetry-break time against energy; {seed}; shaded red/purple: "
+                            "NNM 1/3 unstable with an antisymmetric eigenvector, orange: NNM 1 with a symmetric one",
+                            110), fontsize=9)
     fig.tight_layout()
     fig.savefig(out / "symmetry_break.png", dpi=110)
     plt.close(fig)
