@@ -104,21 +104,29 @@ def _terms_m1(lam, K, tau, e, em, am1):
 
 
 @nb.njit(cache=True)
-def _work(s, K, w, em, am1, tau, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz, rk):
+def _work(s, K, w, em, am1, tau, Wm, hd, zd, ip, ii, ik, ikind, icoef, iz, rk, gr, gi):
     """int_0^tau v^T C v dt (module docstring) with p = w (e^{lam tau} - 1) (em = e - 1): over the regular
-    pairs e_i e_k - 1 = em_i em_k + em_i + em_k, so their part is Re(p^T Gz (p + 2 w) + p^T Hz conj(p + 2 w))
-    (Gz, Hz hold 1/2 G / z, 1/2 H / z there and 0 elsewhere), accurate however short tau is; plus
+    pairs e_i e_k - 1 = em_i em_k + em_i + em_k, so their part is Re(p^T Gz r + p^T Hz conj(r)), r = p + 2 w
+    (Gz = A + i B, Hz = C + i D hold 1/2 G / z, 1/2 H / z there and 0 elsewhere), accurate however short
+    tau is: g = Gz r + Hz conj(r) = [(A + C) x + (D - B) y] + i [(B + D) x + (A - C) y] (r = x + i y), the four
+    real matrices transposed in Wm[s, 0..3] so that the sums over k run down contiguous rows; plus
     hd_i |w_i|^2 I(zd_i) for the diagonal of H (zd_i = 2 Re lam_i, from am1_i = expm1(Re(lam_i) tau)) and,
-    for the near-cancelling pairs p of the state, Re(icoef_p w_i (w_k or conj(w_k)) I(iz_p)). rk: scratch (K,)."""
+    for the near-cancelling pairs p of the state, Re(icoef_p w_i (w_k or conj(w_k)) I(iz_p)).
+    rk, gr, gi: scratch (K,)."""
+    for i in range(K):
+        gr[i] = 0.0
+        gi[i] = 0.0
     for k in range(K):
-        rk[k] = w[k] * em[k] + 2.0 * w[k]
+        r = w[k] * em[k] + 2.0 * w[k]
+        x = r.real
+        y = r.imag
+        for i in range(K):
+            gr[i] += Wm[s, 0, k, i] * x + Wm[s, 1, k, i] * y
+            gi[i] += Wm[s, 2, k, i] * x + Wm[s, 3, k, i] * y
     acc = 0.0
     for i in range(K):
         pi = w[i] * em[i]
-        g = 0.0 + 0.0j
-        for k in range(K):
-            g += Gz[s, i, k] * rk[k] + Hz[s, i, k] * np.conj(rk[k])
-        acc += (pi * g).real
+        acc += pi.real * gr[i] - pi.imag * gi[i]
         wi2 = w[i].real * w[i].real + w[i].imag * w[i].imag
         # int_0^tau e^{2 a t} dt = (e^{2 a tau} - 1) / (2 a) = am1 (2 + am1) / (2 a), am1 = expm1(a tau)
         z = zd[s, i]
@@ -132,19 +140,17 @@ def _work(s, K, w, em, am1, tau, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz, r
 
 
 @nb.njit(cache=True)
-def _eval(s, K, U, yp, w, e, out):
-    """y = y_p + Re sum_i U[:, i] w_i e_i."""
+def _eval(s, K, UT, yp, w, e, out):
+    """y = y_p + Re sum_i U[:, i] w_i e_i, with UT[s, 0] = Re U^T and UT[s, 1] = Im U^T (rows contiguous)."""
     N = out.shape[0]
     for r in range(N):
-        out[r] = 0.0
+        out[r] = yp[s, r]
     for i in range(K):
         u = w[i] * e[i]
         ur = u.real
         ui = u.imag
         for r in range(N):
-            out[r] += U[s, r, i].real * ur - U[s, r, i].imag * ui
-    for r in range(N):
-        out[r] += yp[s, r]
+            out[r] += UT[s, 0, i, r] * ur - UT[s, 1, i, r] * ui
 
 
 @nb.njit(cache=True)
@@ -390,7 +396,7 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
     ``out_E`` (empty, or as long as the buffer) receives the loads' work E, constant here.
     Returns (t, W, i_samp, n_events, n_iter, status, n_stuck, c): c the piece reached.
     """
-    (nK, lam, alam, U, Uinv, aUinv, yp, BU, aBU, Byp, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz) = tb
+    (nK, lam, alam, UT, Uinv, aUinv, yp, BU, aBU, Byp, Wm, hd, zd, ip, ii, ik, ikind, icoef, iz) = tb
     N = y.shape[0]
     m = offset.shape[0]
     Kmax = lam.shape[1]
@@ -417,6 +423,8 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
     dy = np.empty(N)
     ay = np.empty(N)
     rk = np.empty(Kmax, np.complex128)
+    gr = np.empty(Kmax)
+    gi = np.empty(Kmax)
     n_events = 0
     n_iter = 0
     status = 0
@@ -438,8 +446,8 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
         while i_samp < ns and t_samples[i_samp] <= t_next:
             tau = max(t_samples[i_samp] - t, 0.0)
             _terms_m1(lam[s], K, tau, e, em, am1)
-            _eval(s, K, U, yp, w, e, ytmp)
-            out_W[i_samp] = W + (_work(s, K, w, em, am1, tau, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz, rk)
+            _eval(s, K, UT, yp, w, e, ytmp)
+            out_W[i_samp] = W + (_work(s, K, w, em, am1, tau, Wm, hd, zd, ip, ii, ik, ikind, icoef, iz, rk, gr, gi)
                                  if damped else 0.0)
             if has_E:
                 out_E[i_samp] = E
@@ -451,9 +459,9 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
             break
         n_iter += it
         _terms_m1(lam[s], K, tau_ev, e, em, am1)
-        _eval(s, K, U, yp, w, e, ytmp)
+        _eval(s, K, UT, yp, w, e, ytmp)
         if damped:
-            W += _work(s, K, w, em, am1, tau_ev, Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz, rk)
+            W += _work(s, K, w, em, am1, tau_ev, Wm, hd, zd, ip, ii, ik, ikind, icoef, iz, rk, gr, gi)
         for r in range(N):
             y[r] = ytmp[r]
         n_stuck = n_stuck + 1 if tau_ev == 0.0 else 0

@@ -276,8 +276,11 @@ def modal_table(system: GapSystem, table: StateTable) -> tuple:
     ikind = np.array([r[2] for r in irr], np.int64)
     icoef = np.array([r[3] for r in irr], complex)
     iz = np.array([r[4] for r in irr], complex)
-    return (nK, lam, np.abs(lam), U, Uinv, np.abs(Uinv), np.ascontiguousarray(table.yp), BU, np.abs(BU),
-            np.ascontiguousarray(Byp), Gz, Hz, hd, zd, ip, ii, ik, ikind, icoef, iz)
+    UT = np.ascontiguousarray(np.stack([U.real, U.imag], axis=1).transpose(0, 1, 3, 2))  # (S, 2, K, N)
+    A, B, C, D = Gz.real, Gz.imag, Hz.real, Hz.imag  # see _modal._work
+    Wm = np.ascontiguousarray(np.stack([A + C, D - B, B + D, A - C], axis=1).transpose(0, 1, 3, 2))
+    return (nK, lam, np.abs(lam), UT, Uinv, np.abs(Uinv), np.ascontiguousarray(table.yp), BU, np.abs(BU),
+            np.ascontiguousarray(Byp), Wm, hd, zd, ip, ii, ik, ikind, icoef, iz)
 
 
 @dataclass(frozen=True, eq=False)
