@@ -6,8 +6,9 @@ per part with its own material. Two assembly paths give the same matrices:
 - ``"skfem"``: scikit-fem's vectorised :func:`skfem.asm` over every element;
 - ``"cached"``: the block-structured meshes of :mod:`geometry.build` hold only a few dozen
   distinct element shapes, so each shape's element matrices are computed once (by
-  scikit-fem, on a one-element mesh) and scattered to all elements of that shape. Exact,
-  not an approximation: elements with the same node offsets have identical matrices.
+  scikit-fem, in one assembly over a mesh of one element per shape) and scattered to all
+  elements of that shape (:mod:`fem._assembly`, numba, straight into CSR). Exact, not an
+  approximation: elements with the same node offsets have identical matrices.
 """
 
 from __future__ import annotations
@@ -30,7 +31,6 @@ ELEMENTS = {"hex8": ElementHex1, "hex20": ElementHexS2, "hex27": ElementHex2}
 # use 4 points per direction for hex20 (64 instead of 27 per element) for the same matrices.
 INTORDER = {"hex8": 3, "hex20": 5, "hex27": 5}
 KEY_DECIMALS = 10  # m, element shapes equal to 1e-10 m share their matrices
-CHUNK_ENTRIES = 20_000_000  # COO entries per assembly chunk (bounds memory)
 
 
 @dataclass(frozen=True, eq=False)
@@ -113,25 +113,23 @@ def assemble_solid(points: np.ndarray, hexes: np.ndarray, cell_material: list[tu
         ed = dof.element_dofs  # (n_local, n_cells)
         dofs = dof.nodal_dofs
         X = points[hexes]  # (n_cells, 8, 3)
-        rows_k, rows_m = [], []
+        shape = np.empty(len(hexes), dtype=np.int64)
+        Kes, Mes = [], []
         n_shapes = 0
         for cells, mat in cell_material:
             cells = np.asarray(cells)
             key = np.round(X[cells] - X[cells, :1], KEY_DECIMALS).reshape(len(cells), -1)
             uniq, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+            shape[cells] = n_shapes + inv.ravel()
             n_shapes += len(uniq)
-            Ke = np.empty((len(uniq), ed.shape[0], ed.shape[0]))
-            Me = np.empty_like(Ke)
-            for s, c in enumerate(cells[first]):
-                one = skfem_mesh(X[c] - X[c, 0], np.arange(8)[None, :])
-                b1 = Basis(one, e, intorder=INTORDER[element])
-                loc = b1.element_dofs[:, 0]
-                Ke[s] = asm(stiffness_form(mat), b1).toarray()[np.ix_(loc, loc)]
-                Me[s] = asm(mass_form(mat), b1).toarray()[np.ix_(loc, loc)]
-            rows_k.append((cells, inv.ravel(), Ke))
-            rows_m.append((cells, inv.ravel(), Me))
-        K = _scatter(rows_k, ed, n)
-        M = _scatter(rows_m, ed, n)
+            Ke, Me = _element_matrices(X[cells[first]], e, element, mat)
+            Kes.append(Ke)
+            Mes.append(Me)
+        from fem._assembly import scatter_pair
+
+        indptr, indices, kdata, mdata = scatter_pair(ed, shape, np.concatenate(Kes), np.concatenate(Mes), n)
+        K = sp.csr_matrix((kdata, indices, indptr), shape=(n, n))
+        M = sp.csr_matrix((mdata, indices.copy(), indptr.copy()), shape=(n, n))
     else:
         raise ValueError(f"method must be 'cached' or 'skfem', got {method!r}")
     comp, loc = dof_table(mesh, dof)
@@ -140,16 +138,18 @@ def assemble_solid(points: np.ndarray, hexes: np.ndarray, cell_material: list[tu
                          n_unique_shapes=n_shapes, timing={"assembly_s": time.perf_counter() - t0})
 
 
-def _scatter(blocks, ed: np.ndarray, n: int) -> sp.csr_matrix:
-    """Sum element matrices Ae[shape_of_cell] into an (n, n) CSR matrix, chunk by chunk."""
-    nl = ed.shape[0]
-    total = sp.csr_matrix((n, n))
-    per_chunk = max(1, CHUNK_ENTRIES // (nl * nl))
-    for cells, shape, Ae in blocks:
-        for i in range(0, len(cells), per_chunk):
-            c, s = cells[i:i + per_chunk], shape[i:i + per_chunk]
-            d = ed[:, c]  # (nl, nc)
-            rows = np.broadcast_to(d[:, None, :], (nl, nl, len(c))).transpose(2, 0, 1).ravel()
-            cols = np.broadcast_to(d[None, :, :], (nl, nl, len(c))).transpose(2, 0, 1).ravel()
-            total = total + sp.coo_matrix((Ae[s].ravel(), (rows, cols)), shape=(n, n)).tocsr()
-    return total
+def _element_matrices(Xs: np.ndarray, e, element: str, mat: Material) -> tuple[np.ndarray, np.ndarray]:
+    """(n_shapes, n_local, n_local) stiffness and mass of the elements with corner nodes ``Xs``
+    (n_shapes, 8, 3), each moved to its first node, in scikit-fem's local DOF order: one
+    scikit-fem assembly over a mesh of the disjoint elements (its quadrature loops run once
+    over the 60 x 60 local pairs for all shapes, not once per shape)."""
+    ns = len(Xs)
+    pts = (Xs - Xs[:, :1]).reshape(-1, 3)
+    one = skfem_mesh(pts, np.arange(8 * ns).reshape(ns, 8))
+    basis = Basis(one, e, intorder=INTORDER[element])
+    out = []
+    for form in (stiffness_form(mat), mass_form(mat)):
+        coo = form.coo_data(basis)  # data[j, i, e]: trial j (column), test i (row), element e
+        nu_, nv_ = coo.local_shape[1], coo.local_shape[0]
+        out.append(np.ascontiguousarray(coo.data.reshape(nu_, nv_, ns).transpose(2, 1, 0)))
+    return out[0], out[1]
