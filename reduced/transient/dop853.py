@@ -82,9 +82,10 @@ def _polynomial_crossings(sol, t_old: float, t: float, system: GapSystem, direct
     polynomial (power coefficients a) is monotone (None if it has none), and how many crossings it has.
 
     d_j g_j(x) (g_j = side (B_j x - o_j), d_j the direction) is interpolated exactly at 8 nodes; its
-    Bernstein coefficients bound it on [0, 1], so a stop whose coefficients are all negative cannot
-    cross. Otherwise the polynomial is cut at its critical points (roots of its derivative) into
-    monotone pieces, and a crossing is a piece rising through zero. A contact entered and left inside
+    Bernstein coefficients b_k bound it on [0, 1] and their sign changes bound its roots there (with the
+    same parity): no change, no crossing; one change, one crossing over the whole step (if rising).
+    Otherwise the polynomial is cut at its critical points (roots of its derivative) into monotone
+    pieces, and a crossing is a piece rising through zero. A contact entered and left inside
     one step (both ends open, the sign test of ``solve_ivp`` sees nothing) is found this way.
     """
     n = system.n
@@ -94,8 +95,18 @@ def _polynomial_crossings(sol, t_old: float, t: float, system: GapSystem, direct
     A = G @ _TO_POWER.T
     bern = A @ _TO_BERNSTEIN.T
     out: list = [None] * system.m
-    for j in np.flatnonzero(bern.max(axis=1) >= 0.0):
-        a = A[j]
+    for j in np.flatnonzero(bern[:, 1:].max(axis=1) >= 0.0):
+        # b_0 = d g(t_old) alone >= 0 is the round-off of a stop that has just switched: the polynomial
+        # is then below its chord to negative values, and cannot come back up past zero
+        a, b = A[j], bern[j]
+        if np.all(b != 0.0):
+            changes = np.count_nonzero(b[:-1] * b[1:] < 0.0)  # bounds the roots in (0, 1), same parity
+            if changes == 0:
+                continue
+            if changes == 1:  # one root: a crossing of the whole step if rising, none if falling
+                if b[0] < 0.0:
+                    out[j] = (0.0, 1.0, 1, a)
+                continue
         r = np.roots((a[1:] * np.arange(1, DENSE_DEGREE + 1))[::-1])
         crit = np.sort(r.real[(np.abs(r.imag) <= CRIT_IMAG) & (r.real > 0.0) & (r.real < 1.0)])
         xs = np.concatenate([[0.0], crit, [1.0]])
