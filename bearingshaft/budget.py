@@ -36,6 +36,7 @@ class Estimate:
     what: str
     key: str  # "[table] key"
     disk: float = 0.0  # bytes written to the results folder
+    advice: str = ""  # what to do when it does not fit (default: "lower <key>")
 
 
 def available_bytes() -> int:
@@ -97,6 +98,8 @@ def estimates(scene: Scene) -> list[Estimate]:
         samples = r.duration_s * r.sample_rate_hz + 1
         out.append(Estimate("ringdown", est["memory"], f"{samples:.3g} samples streamed to disk in chunks",
                             "[ringdown] duration_s or sample_rate_hz", disk=est["disk"]))
+    if scene.modal is not None:  # a 3-D model: mesh, K and M, the sparse Cholesky factor, Krylov basis
+        out.append(modal_estimate(scene.model, scene.modal.n_modes))
     if scene.fep is not None:
         H = max(scene.fep.harmonics + scene.fep.convergence_harmonics + (scene.fep.samples_study_harmonics,))
         size = (2 * H + 1) * n
@@ -139,6 +142,24 @@ def estimates(scene: Scene) -> list[Estimate]:
     return out
 
 
+def modal_estimate(model, n_modes: int) -> Estimate:
+    """Peak bytes of meshing, assembling and solving ``model`` (fem.model.AssemblyModel) for
+    ``n_modes`` modes; the DOFs are counted from the block grid, before any gmsh call
+    (:mod:`fem._modal_cost`, whose factor term is checked against measured peaks in
+    ``results/performance/modal_scaling.csv``)."""
+    from fem._modal_cost import count_dofs, modal_bytes
+
+    n = count_dofs(model.geometry(), model.element)
+    b = modal_bytes(n, n_modes)
+    # the key that sizes the largest term: the mesh (factor, matrices) or the modes (Krylov basis)
+    by_modes = b["krylov"] > b["factor"] + b["matrices"]
+    return Estimate("modal", int(b["total"]),
+                    f"{n:,} DOFs ({model.element}): K and M {human(b['matrices'])}, Cholesky factor "
+                    f"{human(b['factor'])}, Krylov basis {human(b['krylov'])} for {n_modes} modes",
+                    "[modal] n_modes" if by_modes else "[model] element_size",
+                    advice="lower n_modes" if by_modes else "raise element_size")
+
+
 def free_disk_bytes(out_dir: str | Path) -> int:
     """Bytes free on the file system that holds (or will hold) ``out_dir``."""
     probe = Path(out_dir).absolute()
@@ -163,5 +184,5 @@ def check_budget(scene: Scene, out_dir: str | Path | None = None, available: int
         if e.bytes > HEADROOM * avail:
             raise SceneError(f"{scene.origin or scene.name} {e.key}: the {e.stage} stage would hold "
                              f"{human(e.bytes)} ({e.what}), more than the {human(HEADROOM * avail)} it may use "
-                             f"of {human(avail)} available; lower {e.key.split('] ')[1]}")
+                             f"of {human(avail)} available; {e.advice or 'lower ' + e.key.split('] ')[1]}")
     return ests

@@ -1,0 +1,106 @@
+"""What a modal analysis will cost, known before meshing: DOFs from the block grid, memory.
+
+The meshes of :mod:`geometry.build` are transfinite: every block of the grid gets the
+divisions :func:`geometry.build._divisions` gives its edges, so the cells, nodes and edges,
+and hence the DOFs, follow from the geometry alone (:func:`count_dofs`, exact). The memory
+model (:func:`modal_bytes`) adds what the pipeline holds at its peak, the sparse Cholesky
+factor being the term that grows fastest; its coefficients are fitted to the peaks measured by
+``benchmarks/modal_scaling.py`` (``results/performance/modal_scaling.csv`` has both columns).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from geometry.build import _divisions, beam_grid, tube_grid
+from geometry.params import AssemblyGeometry
+
+FLOAT, INDEX = 8, 4  # bytes
+NNZ_PER_ROW = 150  # K (and M, same pattern) entries per row, hex20: measured 146 at 15k and 112k DOFs
+# Cholesky factor of K - sigma M (MKL PARDISO, METIS, VBSR), bytes = FACTOR_COEF * n**FACTOR_EXP,
+# PARDISO's own peak (iparm[15] + iparm[16]). Nested dissection on a 3-D mesh fills like n^(4/3);
+# the coefficient puts the curve through the 112,629-DOF apparatus (791,436 KiB). The 15,087-DOF
+# one measured 71,695 KiB (n^1.2 between the two: the thin tube walls fill less than a cube), so
+# the estimate is an upper bound that grows looser with n; modal_scaling.csv has both columns.
+FACTOR_COEF = 1.6e2
+FACTOR_EXP = 4 / 3
+KRYLOV_BLOCKS = 8  # the Krylov basis holds at most 8 blocks of n_modes + 8 columns (fem.modal)
+MAX_COUNTED = 20_000_000  # fine cells counted one by one; beyond, an upper bound (about 3 M DOFs of
+# hex20 is already far past any memory this estimate has to guard)
+MAX_DOFS = 10**30  # counts are capped here, so that any estimate stays a finite float
+OVERHEAD = 1.25  # Python, numba, scikit-fem DOF tables, mesh arrays, allocator slack
+
+
+def _part_cells(g: AssemblyGeometry, part: str) -> np.ndarray:
+    """Boolean (Nx, Ny, Nz) mask of the fine cells of ``part`` on its own block grid."""
+    grid = beam_grid(g) if part == "beam" else tube_grid(g)
+    div = [np.array(d) for d in _divs(g, part)]
+    block = [np.repeat(np.arange(len(dv)), dv) for dv in div]  # block index of each fine cell
+    if part == "beam":
+        mask = np.ones(tuple(len(b) for b in block), bool)
+    else:
+        _, ys, zs = grid
+        w, h = g.tube_inner_width / 2, g.tube_inner_height / 2
+        yc, zc = (ys[:-1] + ys[1:]) / 2, (zs[:-1] + zs[1:]) / 2
+        hollow = (np.abs(yc)[:, None] < w) & (np.abs(zc)[None, :] < h)  # (blocks y, blocks z)
+        mask = np.broadcast_to(~hollow[block[1]][:, block[2]][None], (len(block[0]), len(block[1]), len(block[2])))
+    return np.asarray(mask)
+
+
+def _used(mask: np.ndarray, axes: tuple[int, ...]) -> int:
+    """Entities of the grid used by a cell: vertices (axes = 0, 1, 2), edges along one axis
+    (the other two), faces (one) or cells (none); an entity is shared by the cells on each side
+    of it along ``axes``."""
+    m = mask
+    for a in axes:
+        pad = [(0, 0)] * 3
+        pad[a] = (1, 1)
+        p = np.pad(m, pad)
+        lo = [slice(None)] * 3
+        hi = [slice(None)] * 3
+        lo[a], hi[a] = slice(0, -1), slice(1, None)
+        m = p[tuple(lo)] | p[tuple(hi)]
+    return int(m.sum())
+
+
+def _divs(g: AssemblyGeometry, part: str) -> list[list[int]]:
+    grid = beam_grid(g) if part == "beam" else tube_grid(g)
+    return [[_divisions(float(b - a), g, along_x=(d == 0)) for a, b in zip(v[:-1], v[1:], strict=True)]
+            for d, v in enumerate(grid)]
+
+
+def count_dofs(g: AssemblyGeometry, element: str = "hex20") -> int:
+    """DOFs of the mesh :func:`geometry.build.build_mesh` would make of ``g`` (parts do not touch):
+    exact, or, past MAX_COUNTED cells, the DOFs of the full block grid (an upper bound, counted
+    without building the grid)."""
+    n = 0
+    for part in g.parts:
+        Nx, Ny, Nz = (sum(d) for d in _divs(g, part))
+        if Nx * Ny * Nz > MAX_COUNTED:
+            per = {"hex8": 1, "hex20": 4, "hex27": 8}[element]
+            n += per * (Nx + 1) * (Ny + 1) * (Nz + 1)
+            continue
+        mask = _part_cells(g, part)
+        nodes = _used(mask, (0, 1, 2))
+        if element == "hex8":
+            n += nodes
+            continue
+        edges = sum(_used(mask, tuple(a for a in range(3) if a != d)) for d in range(3))
+        n += nodes + edges
+        if element == "hex27":
+            n += sum(_used(mask, (d,)) for d in range(3)) + int(mask.sum())
+    return min(3 * n, MAX_DOFS)
+
+
+def modal_bytes(n_dofs: int, n_modes: int) -> dict:
+    """Peak bytes of mesh, assembly and modal analysis of ``n_dofs`` DOFs, by term."""
+    nnz = NNZ_PER_ROW * n_dofs
+    terms = {
+        # K, M, the upper triangle of K - sigma M handed to PARDISO, and the scatter's adjacency
+        "matrices": 2 * nnz * (FLOAT + INDEX) + nnz / 2 * (FLOAT + INDEX) + 60 * n_dofs / 3 * 2 * 8,
+        "factor": FACTOR_COEF * n_dofs**FACTOR_EXP,
+        # the Krylov basis V and M V, with the Ritz vectors and a block of products beside them
+        "krylov": (2 * KRYLOV_BLOCKS + 4) * (n_modes + 8) * n_dofs * FLOAT,
+    }
+    terms["total"] = OVERHEAD * sum(terms.values())
+    return terms
