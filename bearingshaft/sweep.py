@@ -510,6 +510,39 @@ def _missing_stages(folder: Path, case: Case) -> tuple[str, ...]:
     return tuple(s for s in case.stages if s not in done)
 
 
+MESH_STAGES = ("modal", "verify")  # stages that mesh the 3-D model: gmsh needs the main thread (signals)
+MAIN_THREAD_ERROR = "signal only works in main thread"
+
+
+def _run_stage(scene: Scene, case: Case, stage: str, folder: Path) -> None:
+    """One stage of a case, as a single run. A Dask worker runs tasks in a thread, where gmsh cannot
+    start (it installs a signal handler); a stage that meshes (MESH_STAGES, or one that finds it must
+    build a reduced model) then runs as ``python -m bearingshaft.cli STAGE`` in a child process."""
+    import threading
+
+    from bearingshaft.pipeline import run_stage
+
+    if threading.current_thread() is threading.main_thread() or stage not in MESH_STAGES:
+        try:
+            run_stage(scene, stage, folder, progress=False)
+            return
+        except ValueError as exc:
+            if MAIN_THREAD_ERROR not in str(exc):
+                raise
+    import subprocess
+    import sys
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="bearingshaft-case-") as tmp:
+        path = Path(tmp) / f"{case.name}.toml"
+        path.write_text(case.text, encoding="utf-8")
+        proc = subprocess.run([sys.executable, "-m", "bearingshaft.cli", stage, "--scene", str(path), "--out",
+                               str(folder), "--no-progress"], capture_output=True, text=True)
+    if proc.returncode != 0:
+        lines = [line for line in proc.stderr.splitlines() if line.strip()]
+        raise RuntimeError(lines[-1] if lines else f"{stage} stage: exit code {proc.returncode}")
+
+
 def run_case(case: Case, out_root: str, rom=None) -> dict:
     """Run (or find finished) one case into ``out_root/<case id>/``; its row of metrics.
 
@@ -530,10 +563,8 @@ def run_case(case: Case, out_root: str, rom=None) -> dict:
         missing = _missing_stages(folder, case)
         resumed = not missing
         with contextlib.redirect_stdout(io.StringIO()):  # the stages' summary lines: not on the worker's stdout
-            from bearingshaft.pipeline import run_stage
-
             for stage in missing:
-                run_stage(scene, stage, folder, progress=False)
+                _run_stage(scene, case, stage, folder)
         row.update(case_metrics(scene, folder))
         row.update(status="ok", resumed=resumed, message="")
     except Exception as exc:  # a failed case is a row of the table, not the end of the sweep
