@@ -34,6 +34,7 @@ from scipy.linalg import eigh
 from reduced import _checks as _check
 from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
+from reduced.transient import _cd
 from reduced.transient.result import RingdownResult, RingdownStream, sample_count
 
 SWITCHING_SAFETY = 0.8  # of the textbook limit: CD with switching contact fails near 1.6
@@ -94,7 +95,7 @@ def contact_omega(system: GapSystem, n: int = 3) -> float:
 
 
 @nb.njit(cache=True)
-def _cd_kernel(AT, dtGKT, dtGBT, L, B, offset, side, k, x, vh, dt, n_steps, every, out_x, out_v, out_W,
+def _cd_kernel(AT, dtGKT, dtGBT, LT, Bidx, Bval, offset, side, k, x, vh, dt, n_steps, every, out_x, out_v, out_W,
                W, pw_old, i0, dtGbT, b, P, out_E, E, pe_old):
     """Advance n_steps; x = x_n, vh = v_{n+1/2} on entry and exit; stores every `every` steps.
 
@@ -103,19 +104,21 @@ def _cd_kernel(AT, dtGKT, dtGBT, L, B, offset, side, k, x, vh, dt, n_steps, ever
     dtGKT = (dt G K)^T, dtGBT = (dt G B^T)^T, dtGbT = (dt G b^T)^T): two n x n products a step,
     accumulated column by column so that the loop over the rows is contiguous (SIMD) while each
     row still sums its terms in the order c = 0, 1, ..., n - 1 (the same bits as the row-by-row
-    dot products). W accumulates the dissipated work by the trapezoidal rule on
-    p_n = v_n^T C v_n = |L^T v_n|^2 (C = L L^T; pw_old is p_n at entry). With loads (b (L, n),
+    dot products). The stops' rows B_j x run over their nonzero entries only (Bval[j, t] at columns
+    Bidx[j, t], padded with zeros): a zero entry adds an exact 0. W accumulates the dissipated work by
+    the trapezoidal rule on p_n = v_n^T C v_n = |LT v_n|^2 (C = L L^T, LT = L^T; pw_old is p_n at
+    entry), each |(L^T v)_q| summed i = 0 .. n - 1 as before. With loads (b (L, n),
     P[i] the loads at the i-th step's end), E accumulates their work likewise on
     v_n^T b^T p(t_n) (pe_old at entry).
     """
     n = x.shape[0]
-    m = B.shape[0]
-    r = L.shape[1]
+    m = Bidx.shape[0]
+    nz = Bidx.shape[1]
+    r = LT.shape[0]
     nl = b.shape[0]
     f = np.empty(m)
     acc = np.empty(n)
     v_int = np.empty(n)
-    Ls = np.empty(r)
     io = i0
     left = every  # steps to the next stored sample
     for step in range(1, n_steps + 1):
@@ -123,8 +126,8 @@ def _cd_kernel(AT, dtGKT, dtGBT, L, B, offset, side, k, x, vh, dt, n_steps, ever
             x[i] += dt * vh[i]
         for j in range(m):
             s = -offset[j]
-            for i in range(n):
-                s += B[j, i] * x[i]
+            for t in range(nz):
+                s += Bval[j, t] * x[Bidx[j, t]]
             f[j] = k[j] * s if side[j] * s > 0.0 else 0.0
         for i in range(n):
             acc[i] = 0.0
@@ -145,15 +148,12 @@ def _cd_kernel(AT, dtGKT, dtGBT, L, B, offset, side, k, x, vh, dt, n_steps, ever
         for i in range(n):
             v_int[i] = 0.5 * (vh[i] + acc[i])
             vh[i] = acc[i]
-        for q in range(r):
-            Ls[q] = 0.0
-        for i in range(n):
-            vi = v_int[i]
-            for q in range(r):
-                Ls[q] += L[i, q] * vi
         pw_new = 0.0
         for q in range(r):
-            pw_new += Ls[q] * Ls[q]
+            s = 0.0
+            for i in range(n):
+                s += LT[q, i] * v_int[i]
+            pw_new += s * s
         W += 0.5 * dt * (pw_old + pw_new)
         pw_old = pw_new
         if nl:
@@ -176,6 +176,19 @@ def _cd_kernel(AT, dtGKT, dtGBT, L, B, offset, side, k, x, vh, dt, n_steps, ever
                 out_E[io] = E
             io += 1
     return W, pw_old, io, E, pe_old
+
+
+def _sparse_rows(B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(Bidx, Bval) (m, p): the nonzero entries of each row of B and their columns, p the most in a row
+    (shorter rows padded with the value 0 at column 0)."""
+    nnz = [np.flatnonzero(row) for row in B]
+    p = max(1, max(len(c) for c in nnz))
+    Bidx = np.zeros((B.shape[0], p), np.int64)
+    Bval = np.zeros((B.shape[0], p))
+    for j, c in enumerate(nnz):
+        Bidx[j, :len(c)] = c
+        Bval[j, :len(c)] = B[j, c]
+    return Bidx, Bval
 
 
 def _damping_factor(C: np.ndarray) -> np.ndarray:
@@ -257,6 +270,17 @@ def stream_explicit(
     if forced:
         stats["n_loads"] = loads.n_loads
     no_loads = np.zeros((0, 0))
+    small = n <= _cd.SMALL_N  # state in registers (reduced.transient._cd), zero-padded to SMALL_N DOFs
+    if small:
+        S = _cd.SMALL_N
+        kernel = _cd._cd_small
+        mats = (_cd.pad(AT, S, S), _cd.pad(dtGKT, S, S), _cd.pad(dtGBT, None, S), _cd.pad(L, S, None),
+                _cd.pad(system.B, None, S))
+        dtGbT_k, b_k = _cd.pad(dtGbT, None, S), _cd.pad(b, None, S)
+    else:
+        kernel = _cd_kernel
+        mats = (AT, dtGKT, dtGBT, np.ascontiguousarray(L.T), *_sparse_rows(system.B))
+        dtGbT_k, b_k = dtGbT, b
 
     def blocks():
         x, v = x0.copy(), v0.copy()
@@ -266,9 +290,11 @@ def stream_explicit(
             rhs0 = rhs0 + f0
         a0 = np.linalg.solve(M, rhs0)
         vh = v + 0.5 * dt_run * a0
+        xk, vk = (_cd.pad(x, _cd.SMALL_N, None), _cd.pad(vh, _cd.SMALL_N, None)) if small else (x, vh)
         W, pw = 0.0, float(np.sum((v @ L) ** 2))
         E, pe = 0.0, (float(v @ f0) if forced else 0.0)
-        per_piece = max(1, (N - 1) // chunks)  # samples between progress calls
+        # samples between progress calls (without a progress bar a buffer is filled in one kernel call)
+        per_piece = max(1, (N - 1) // chunks) if progress is not None else max(1, N - 1)
         done = 0  # samples filled after the first
         j0 = 0
         while j0 < N:
@@ -290,11 +316,11 @@ def stream_explicit(
                     P = np.ascontiguousarray(loads.values(steps * dt_run))
                 else:
                     P = no_loads
-                W, pw, io, E, pe = call_numba_kernel(_cd_kernel, AT, dtGKT, dtGBT, L, system.B, system.offset,
-                                                     system.side, system.k, x, vh, dt_run, nout * every, every,
-                                                     out_x, out_v, out_W, W, pw, io, dtGbT, b, P, out_E, E, pe)
+                W, pw, io, E, pe = call_numba_kernel(kernel, *mats, system.offset, system.side, system.k, xk, vk,
+                                                     dt_run, nout * every, every, out_x, out_v, out_W, W, pw, io,
+                                                     dtGbT_k, b_k, P, out_E, E, pe)
                 done += nout
-                if not np.all(np.isfinite(x)):
+                if not np.all(np.isfinite(xk)):
                     raise FloatingPointError(
                         f"central difference diverged before t = {done * h_out:.4g} s (dt = {dt_run:.3g} s)"
                     )
