@@ -35,10 +35,22 @@ IPARM = {
 
 @functools.cache
 def libmkl() -> ctypes.CDLL:
-    """The mkl_rt shared library (found once, as pypardiso finds it)."""
-    import pypardiso
+    """The mkl_rt shared library: ``PYPARDISO_MKL_RT``, then ``<prefix>/lib`` (where the mkl
+    wheel puts it), then pypardiso's own search (a recursive glob of the prefix, ~2 s); once."""
+    import sys
+    from pathlib import Path
 
-    lib = pypardiso.PyPardisoSolver(mtype=MTYPE_SPD).libmkl
+    lib = None
+    candidates = [os.environ.get("PYPARDISO_MKL_RT", "")] + sorted(
+        (str(p) for p in Path(sys.prefix, "lib").glob("libmkl_rt.so*")), key=len)
+    for path in filter(None, candidates):
+        with contextlib.suppress(OSError):
+            lib = ctypes.CDLL(path)
+            break
+    if lib is None:
+        import pypardiso
+
+        lib = pypardiso.PyPardisoSolver(mtype=MTYPE_SPD).libmkl
     lib.pardiso.argtypes = [ctypes.c_void_p] * 16  # every argument by pointer
     lib.pardiso.restype = None
     return lib
@@ -46,6 +58,8 @@ def libmkl() -> ctypes.CDLL:
 
 def has_pardiso() -> bool:
     try:
+        import pypardiso  # noqa: F401  (the dependency that brings MKL)
+
         libmkl()
     except (ImportError, OSError):
         return False

@@ -1,0 +1,192 @@
+"""The fast modal paths (issue 14) give the modes of the plain ones, converged mode by mode.
+
+- block shift-invert Krylov (fem.modal, the default) against a dense generalized eigensolver
+  and against scipy's eigsh, with every mode's residual under its bound;
+- a wrong or unconverged mode is caught by the residual test;
+- the numba scatter (fem._assembly) gives scikit-fem's own K and M;
+- the DOF count before meshing (fem._modal_cost) is the mesh's, and the budget refuses a mesh
+  that would not fit before any gmsh call.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from scipy.linalg import eigh
+
+from fem._modal_cost import count_dofs, modal_bytes
+from fem.modal import (
+    KRYLOV_TOL,
+    ROUNDOFF_FACTOR,
+    _block_krylov,
+    _factorize,
+    has_pardiso,
+    modal_analysis,
+    residual_test,
+)
+from fem.model import AssemblyModel, build_system
+
+EPS = np.finfo(float).eps
+
+
+@pytest.fixture(scope="module")
+def tiny():
+    """The apparatus, hex20, coarse: 1,5xx DOFs, small enough for a dense reference."""
+    return build_system(AssemblyModel(layout="beam-grounded", element_size=0.3))
+
+
+@pytest.fixture(scope="module")
+def dense_reference(tiny):
+    lam = eigh(tiny.K.toarray(), tiny.M.toarray(), eigvals_only=True, subset_by_index=[0, 15])
+    return lam
+
+
+def _bound(res, floors, tol=KRYLOV_TOL):
+    return np.maximum(tol, ROUNDOFF_FACTOR * floors)
+
+
+@pytest.mark.parametrize("solver", ["superlu", "pardiso"])
+def test_krylov_modes_match_the_dense_eigensolver_with_every_residual_under_its_bound(tiny, dense_reference, solver):
+    if solver == "pardiso" and not has_pardiso():
+        pytest.skip("pypardiso not installed")
+    r = modal_analysis(tiny.K, tiny.M, n_modes=16, shift_hz=1.0, solver=solver)
+    assert r.solver == f"{solver}/krylov"
+    assert r.converged.all()
+    assert np.all(r.residuals <= _bound(r.residuals, r.floors)), np.c_[r.residuals, r.floors]
+    # every elastic mode (> 100 Hz) converged to 1e-8 of its own size, the issue's target
+    elastic = r.freq_hz > 100
+    assert elastic.sum() >= 4 and np.all(r.residuals[elastic] <= 1e-8), r.residuals
+    # both solutions carry an absolute error ~ eps ||K|| / ||M|| (round-off of the pencil; the
+    # dense one too): measured 3e-10 relative at the first elastic mode, 4e-13 at the 16th;
+    # the soft-spring modes carry the same absolute error on values 1e6 times smaller
+    lam_ref = dense_reference
+    rel = np.abs(r.omega2 - lam_ref) / lam_ref
+    assert np.all(rel[elastic] < 1e-8), rel
+    assert np.all(np.abs(r.omega2 - lam_ref) < 1e-9 * lam_ref.max()), rel
+    # M-orthonormal shapes
+    G = r.phi.T @ (tiny.M @ r.phi)
+    assert np.abs(G - np.eye(16)).max() < 1e-10
+
+
+def test_krylov_agrees_with_scipy_eigsh_on_the_apparatus():
+    # an independent solver (ARPACK with SuperLU) on the 15,087-DOF apparatus with its tube
+    s = build_system(AssemblyModel())
+    r = modal_analysis(s.K, s.M, n_modes=16, shift_hz=1.0)
+    ref = modal_analysis(s.K, s.M, n_modes=16, shift_hz=1.0, method="lanczos", solver="superlu")
+    elastic = r.freq_hz > 100
+    # ARPACK stops with residuals ~5e-9 on these modes (ours: < 1e-9), so 1e-8 in frequency
+    np.testing.assert_allclose(r.freq_hz[elastic], ref.freq_hz[elastic], rtol=1e-8)
+    # the pseudo-rigid modes (0.4-34 Hz) agree to what double precision resolves for them
+    np.testing.assert_allclose(r.freq_hz[~elastic], ref.freq_hz[~elastic], rtol=1e-3)
+    assert np.all(r.residuals <= _bound(r.residuals, r.floors))
+    assert np.all(r.residuals[elastic] <= 1e-8)
+    # the Krylov residuals reach the round-off floor; ARPACK's stop ~100x above it
+    assert np.max(r.residuals / r.floors) < ROUNDOFF_FACTOR
+
+
+def test_an_unconverged_mode_is_reported_not_returned_as_converged(tiny):
+    K, M = tiny.K, tiny.M
+    sigma = -(2 * np.pi) ** 2
+    solve, _ = _factorize((K - sigma * M).tocsr(), "superlu")
+    lam, X, n_op, steps, conv = _block_krylov(K, M, solve, 16, sigma, 1e-10, seed=0, max_steps=1)
+    assert steps == 1 and not conv.all()
+    res, floors = residual_test(K, M, lam, X)
+    assert np.any(res > _bound(res, floors))
+
+
+def test_the_residual_test_catches_a_wrong_mode(tiny):
+    r = modal_analysis(tiny.K, tiny.M, n_modes=16, shift_hz=1.0, solver="superlu")
+    phi = r.phi.copy()
+    phi[:, 14] += 1e-6 * phi[:, 15]  # a mode contaminated by its neighbour at 1e-6
+    res, floors = residual_test(tiny.K, tiny.M, r.omega2, phi)
+    assert res[14] > 1e-8 and res[14] > ROUNDOFF_FACTOR * floors[14]
+    lam = r.omega2.copy()
+    lam[13] *= 1 + 1e-6  # a frequency off by 5e-7
+    res, floors = residual_test(tiny.K, tiny.M, lam, r.phi)
+    assert res[13] > 1e-8
+
+
+def test_the_subspace_and_lanczos_paths_are_kept():
+    # the two older methods stay available with their old signatures and meaning
+    n = 200
+    K = sp.diags([np.full(n - 1, -1e4), np.full(n, 2e4), np.full(n - 1, -1e4)], [-1, 0, 1], format="csr")
+    M = sp.identity(n, format="csr") * 0.1
+    lam_exact = 2e5 * (1 - np.cos(np.arange(1, 6) * np.pi / (n + 1)))  # 2 k / m (1 - cos(j pi / (n + 1)))
+    for method in ("krylov", "subspace", "lanczos"):
+        r = modal_analysis(K, M, n_modes=5, shift_hz=0.1, solver="superlu", method=method, tol=1e-12)
+        np.testing.assert_allclose(r.omega2, lam_exact, rtol=1e-9, err_msg=method)
+    with pytest.raises(ValueError, match="method must be one of"):
+        modal_analysis(K, M, n_modes=5, method="power")
+
+
+@pytest.mark.parametrize("element", ["hex8", "hex20", "hex27"])
+def test_shape_cached_scatter_gives_scikit_fem_matrices(element):
+    model = AssemblyModel(element=element, element_size=0.3)
+    a = build_system(model, method="cached")
+    b = build_system(model, method="skfem", mesh=a.mesh)
+    for A, B in ((a.K, b.K), (a.M, b.M)):
+        # same element integrals summed in another order: equal to round-off of the largest entry
+        assert abs(A - B).max() <= 1e-13 * abs(B).max()
+        assert A.has_sorted_indices
+
+
+@pytest.mark.parametrize("layout", ["assembly", "beam-grounded", "beam-free"])
+@pytest.mark.parametrize("element", ["hex8", "hex20", "hex27"])
+def test_dofs_counted_before_meshing_are_the_mesh_dofs(layout, element):
+    model = AssemblyModel(layout=layout, element=element, element_size=0.05)
+    assert count_dofs(model.geometry(), element) == build_system(model).n_dofs
+
+
+def test_budget_refuses_a_mesh_that_will_not_fit_before_meshing(monkeypatch):
+    import geometry.build
+    from bearingshaft.budget import check_budget, estimates
+    from bearingshaft.scenes import SceneError, parse_scene
+
+    def no_gmsh(*a, **k):
+        raise AssertionError("meshed before the budget check")
+
+    monkeypatch.setattr(geometry.build, "build_mesh", no_gmsh)
+    big = parse_scene('[model]\nkind = "assembly"\nelement_size = 0.002\n[modal]\n', "big", "big.toml")
+    with pytest.raises(SceneError, match=r"element_size.*modal stage would hold .* GiB .*DOFs.*raise element_size"):
+        check_budget(big, available=24 * 2**30)
+    small = parse_scene('[model]\nkind = "assembly"\n[modal]\n', "small", "small.toml")
+    (est,) = [e for e in estimates(small) if e.stage == "modal"]
+    assert "15,087 DOFs" in est.what and est.bytes < 2**30
+    # the estimate grows with the mesh, dominated by the factor past ~1e5 DOFs
+    b1, b2 = modal_bytes(10**5, 16), modal_bytes(10**6, 16)
+    assert b2["total"] > 10 * b1["total"] and b2["factor"] > b2["matrices"]
+
+
+def test_blas_threads_are_restored():
+    from fem._pardiso import _openblas_calls, _openblas_libs, blas_threads
+
+    libs = [c for c in map(_openblas_calls, _openblas_libs()) if c is not None]
+    before = [int(get()) for get, _ in libs]
+    with blas_threads(1):
+        assert all(int(get()) == 1 for get, _ in libs)
+    assert [int(get()) for get, _ in libs] == before
+
+
+def test_threads_follow_the_free_cores(monkeypatch):
+    from fem._pardiso import free_cores
+
+    monkeypatch.setenv("BEARINGSHAFT_THREADS", "3")
+    assert free_cores() == 3
+    monkeypatch.delenv("BEARINGSHAFT_THREADS")
+    import os
+
+    monkeypatch.setattr(os, "getloadavg", lambda: (100.0, 0.0, 0.0))
+    assert free_cores() == 1
+    monkeypatch.setattr(os, "getloadavg", lambda: (0.0, 0.0, 0.0))
+    assert free_cores() == (os.cpu_count() or 1)
+
+
+def test_model_dataclass_replace_keeps_the_count():
+    # element_size is the key the budget names: halving it multiplies the DOFs by ~8 at most
+    m = AssemblyModel(element_size=0.02)
+    n1 = count_dofs(m.geometry())
+    n2 = count_dofs(dataclasses.replace(m, element_size=0.01).geometry())
+    assert 2 < n2 / n1 < 8.5
