@@ -234,7 +234,8 @@ def figure(rows: list[dict], path: Path) -> None:
     tp = [r for r in rows if r["measurement"] == "throughput"]
     axes[0].bar([r["mode"] for r in tp], [r["cases_per_s"] for r in tp], color=["0.6", "tab:blue", "tab:green"])
     axes[0].set_ylabel("cases / s")
-    axes[0].set_title(f"{tp[0]['cases']} ringdown cases of ~{tp[0]['case_s']:.2g} s", fontsize=9)
+    axes[0].set_title(f"{tp[0]['cases']} ringdown cases of ~{tp[0]['case_s']:.2g} s (load average "
+                      f"{max(r['load_1min'] for r in tp):g} on {os.cpu_count()} cores)", fontsize=9)
     axes[0].tick_params(axis="x", labelsize=8)
     fl = [r for r in rows if r["measurement"] == "task_floor"]
     axes[1].semilogx([r["case_s"] for r in fl], [100 * r["overhead"] for r in fl], "o-")
