@@ -236,6 +236,9 @@ def test_linear_sweep_matches_closed_form_and_resumes(tmp_path, client):
     lines = (out / "sweep.csv").read_text().splitlines()
     assert len(lines) == 1 + len(K_S) and lines[0].startswith("case_id,model.k_s,")
     assert (out / "sweep.png").stat().st_size > 0
+    again_scene = load_scene(str(out / "sweep_scene.toml"))  # the sweep as run, as a scene: the same cases
+    assert [c.case_id for c in build_plan(again_scene, again_scene.sweep, "x").cases] == \
+        [c.case_id for c in plan.cases]
     for case in plan.cases:
         assert case_complete(out / case.case_id, case)
         assert (out / case.case_id / "scene.toml").read_text() == case.text
