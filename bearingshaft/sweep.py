@@ -1001,7 +1001,9 @@ def sweep_scene_text(plan: SweepPlan) -> str:
     table = {"design": s.design, **({"samples": s.samples, "seed": s.seed} if s.design == "random" else {}),
              **({"plots": list(s.plots)} if s.plots else {}), **({"x": s.x} if s.x else {}),
              **({"overlay": s.overlay} if s.overlay else {}),
-             "vary": {v.key: v.text if v.is_range else list(v.values) for v in s.vary}}
+             # ranges as written (LO:HI:N[:log]), lists as their values
+             "vary": {v.key: v.text if ":" in v.text and not v.text.startswith("[") else list(v.values)
+                      for v in s.vary}}
     data["sweep"] = table
     return tomli_w.dumps(data)
 
