@@ -332,3 +332,19 @@ def test_a_stage_that_needs_the_main_thread_runs_in_a_child_process(tmp_path, mo
     assert case_complete(folder, case)
     prov = json.loads((folder / "provenance.json").read_text())
     assert prov["stages"]["ringdown"]["stats"]["energy_balance_error"] < 1e-11
+
+
+def test_cli_sweep_on_an_existing_scheduler(tmp_path, client, capsys):
+    """``--scheduler ADDRESS``: the cases go to that cluster's workers; the command ends with its
+    summary line and exit code 0."""
+    scene = tmp_path / "lin.toml"
+    scene.write_text(LINEAR.replace("duration_s = 4.0", "duration_s = 0.1"))
+    out = tmp_path / "out"
+    argv = ["sweep", "--scene", str(scene), "--out", str(out), "--vary", "model.k_s=8000,9000", "--no-progress",
+            "--scheduler", client.scheduler.address]
+    assert main(argv) == 0
+    assert "2 of 2 cases ok (0 already done, 0 failed)" in capsys.readouterr().out
+    rows = pq.read_table(out / "sweep.parquet").to_pylist()
+    workers = set(client.nthreads())
+    assert [r["model.k_s"] for r in rows] == [8000, 9000] and all(r["worker"] in workers for r in rows)
+    assert main([*argv[:-2], "--workers", "2", "--scheduler", client.scheduler.address]) == 2  # one or the other
