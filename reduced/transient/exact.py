@@ -64,6 +64,7 @@ import numpy as np
 from scipy.linalg import eigh, solve
 
 from reduced import _checks as _check
+from reduced._blas import single_thread_blas
 from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
 from reduced.transient import _modal
@@ -143,10 +144,10 @@ def _decompose_damped(system: GapSystem, Ks_list: list[np.ndarray]) -> list[tupl
 def state_table(system: GapSystem) -> StateTable:
     """Decompose every feasible contact state; mirrored states share one decomposition.
 
-    The dense algebra runs on one BLAS thread (:func:`reduced._blas.single_thread_blas`): these
-    matrices are small, and threads on busy cores cost far more than they save."""
-    from reduced._blas import single_thread_blas
-
+    K_s = K + sum_j active_j k_j B_j^T B_j and F_s = sum_j active_j k_j o_j B_j for all states at once,
+    y_p = K_s^-1 F_s by stacked LU (a mirrored state's F_s is the exact negative of its twin's, and so
+    is its y_p). The dense algebra runs on one BLAS thread (:func:`reduced._blas.single_thread_blas`):
+    these matrices are small, and threads on busy cores cost far more than they save."""
     _check.gap_system(system)
     n, m = system.n, system.m
     S = 2**m
@@ -157,24 +158,28 @@ def state_table(system: GapSystem) -> StateTable:
     valid = np.zeros(S, bool)
     cond = np.ones(S)
     with single_thread_blas():
+        act = np.array(system.feasible_states(), dtype=float)  # (F, m)
+        index = (act @ (1 << np.arange(m))).astype(np.int64)
+        BB = system.k[:, None, None] * (system.B[:, :, None] * system.B[:, None, :])  # (m, n, n)
+        Ks_all = system.K + np.einsum("fj,jab->fab", act, BB)
+        Fs_all = np.einsum("fj,ja->fa", act, (system.k * system.offset)[:, None] * system.B)
         keys: dict[bytes, int] = {}
         unique: list[np.ndarray] = []
-        states = []
-        for active in system.feasible_states():
-            s = int(np.sum(active * (1 << np.arange(m))))
-            Ks, Fs = system.state_matrices(active)
+        which = np.empty(len(index), np.int64)
+        for f, Ks in enumerate(Ks_all):
             key = Ks.tobytes()
             if key not in keys:
                 keys[key] = len(unique)
                 unique.append(Ks)
-            states.append((s, keys[key]))
-            # LU: a mirrored state's Fs is the exact negative, and so is its y_p
-            yp[s, :n] = np.linalg.solve(Ks, Fs) if np.any(Fs) else 0.0
+            which[f] = keys[key]
+        has_f = np.any(Fs_all != 0.0, axis=1)
+        if np.any(has_f):
+            yp[index[has_f], :n] = np.linalg.solve(Ks_all[has_f], Fs_all[has_f][:, :, None])[:, :, 0]
         if system.undamped:
             dec = [_decompose_undamped(system, Ks) for Ks in unique]
         else:
             dec = _decompose_damped(system, unique)
-        for s, k in states:
+        for s, k in zip(index, which, strict=True):
             lam[s], V[s], Vinv[s], cond[s] = dec[k]
             valid[s] = True
     return StateTable(lam, V, Vinv, yp, valid, cond)
@@ -206,81 +211,90 @@ def _kept_terms(lam: np.ndarray, undamped: bool, n: int) -> tuple[np.ndarray, np
 def modal_table(system: GapSystem, table: StateTable) -> tuple:
     """The free segments' tables of :mod:`reduced.transient._modal` for the states of ``table``.
 
-    For each state s: the K kept terms (:func:`_kept_terms`) lam, |lam|, U = kappa V[:, kept],
-    Uinv = Vinv[kept], |Uinv|, the stops' rows B U and |B U|, B y_p, and the work integral's
-    1/2 G / z, 1/2 H / z over the regular pairs, the diagonal of H (1/2 H_ii, z = 2 Re lam_i) and the
+    For each state s: the K kept terms (:func:`_kept_terms`) lam, |lam|, U = kappa V[:, kept] (as
+    Re/Im of U^T), Uinv = Vinv[kept], |Uinv|, the stops' rows B U and |B U|, B y_p, and the work
+    integral's 1/2 G / z, 1/2 H / z over the regular pairs (as the four real matrices of
+    :func:`reduced.transient._modal._work`), the diagonal of H (1/2 H_ii, z = 2 Re lam_i) and the
     near-cancelling pairs (|z| < ZNEAR (|lam_i| + |lam_k|)) as lists (pointer, i, k, kind 0: G, 1: H,
-    coefficient, z), G = U_v^T C U_v, H = U_v^T C conj(U_v) (U_v: the velocity rows). States with
-    fewer terms are padded with zeros; an infeasible state has K = -1.
+    coefficient, z), G = U_v^T C U_v, H = U_v^T C conj(U_v) (U_v: the velocity rows). The distinct
+    decompositions are worked out together; states with fewer terms are padded with zeros; an
+    infeasible state has K = -1.
     """
-    n, m = system.n, system.m
-    S, N = table.lam.shape
-    cache: dict[bytes, tuple] = {}
-    per_state: list = [None] * S
-    for s in range(S):
-        if not table.valid[s]:
-            continue
+    n = system.n
+    S = table.lam.shape[0]
+    valid = np.flatnonzero(table.valid)
+    keys: dict[bytes, int] = {}
+    u_of = np.full(S, -1, np.int64)
+    reps: list[int] = []
+    for s in valid:
         key = table.V[s].tobytes()
-        if key not in cache:
-            lam, V, Vinv = table.lam[s], table.V[s], table.Vinv[s]
-            keep, kappa = _kept_terms(lam, system.undamped, n)
-            lk = lam[keep]
-            U = V[:, keep] * kappa
-            Uinv = Vinv[keep]
-            Uv = U[n:]
-            CU = system.C @ Uv
-            G = 0.5 * (Uv.T @ CU)
-            H = 0.5 * (Uv.T @ np.conj(CU))
-            zG = lk[:, None] + lk[None, :]
-            zH = lk[:, None] + np.conj(lk)[None, :]
-            scale = ZNEAR * (np.abs(lk)[:, None] + np.abs(lk)[None, :])
-            K = lk.size
-            upper = np.triu(np.ones((K, K), bool))
-            regG = (np.abs(zG) >= scale) & (zG != 0.0)
-            regH = (np.abs(zH) >= scale) & (zH != 0.0) & ~np.eye(K, dtype=bool)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                Gz = np.where(regG, G / zG, 0.0)
-                Hz = np.where(regH, H / zH, 0.0)
-            irr = []
-            for i, k in zip(*np.nonzero(~regG & upper), strict=True):
-                irr.append((i, k, 0, G[i, k] * (2.0 if k > i else 1.0), zG[i, k]))
-            for i, k in zip(*np.nonzero(~regH & upper & ~np.eye(K, dtype=bool)), strict=True):
-                irr.append((i, k, 1, 2.0 * H[i, k], zH[i, k]))
-            cache[key] = (lk, U, Uinv, system.B @ U[:n], Gz, Hz, np.diag(H).real.copy(), 2.0 * lk.real, irr)
-        per_state[s] = cache[key]
-    Kmax = max(p[0].size for p in per_state if p is not None)
+        if key not in keys:
+            keys[key] = len(reps)
+            reps.append(int(s))
+        u_of[s] = keys[key]
+    kept = [_kept_terms(table.lam[s], system.undamped, n) for s in reps]
+    Kmax = max(k.size for k, _ in kept)
+    nU = len(reps)
+    keep = np.zeros((nU, Kmax), np.int64)
+    kappa = np.zeros((nU, Kmax))  # 0: a padding term
+    nK_u = np.array([k.size for k, _ in kept])
+    for u, (k, kp) in enumerate(kept):
+        keep[u, :k.size], kappa[u, :k.size] = k, kp
+    lk = np.take_along_axis(table.lam[reps], keep, axis=1) * (kappa != 0.0)
+    Uk = np.take_along_axis(table.V[reps], keep[:, None, :], axis=2) * kappa[:, None, :]
+    Uinvk = np.take_along_axis(table.Vinv[reps], keep[:, :, None], axis=1) * (kappa != 0.0)[:, :, None]
+    Uv = Uk[:, n:, :]
+    CU = np.matmul(system.C, Uv)
+    G = 0.5 * np.matmul(Uv.transpose(0, 2, 1), CU)
+    H = 0.5 * np.matmul(Uv.transpose(0, 2, 1), np.conj(CU))
+    zG = lk[:, :, None] + lk[:, None, :]
+    zH = lk[:, :, None] + np.conj(lk)[:, None, :]
+    scale = ZNEAR * (np.abs(lk)[:, :, None] + np.abs(lk)[:, None, :])
+    real = (kappa != 0.0)[:, :, None] & (kappa != 0.0)[:, None, :]  # both terms real ones, not padding
+    offdiag = ~np.eye(Kmax, dtype=bool)
+    regG = (np.abs(zG) >= scale) & (zG != 0.0)
+    regH = (np.abs(zH) >= scale) & (zH != 0.0) & offdiag
+    with np.errstate(divide="ignore", invalid="ignore"):
+        Gz = np.where(regG & real, G / zG, 0.0)
+        Hz = np.where(regH & real, H / zH, 0.0)
+    upper = np.triu(np.ones((Kmax, Kmax), bool))
+    irrG = np.nonzero(~regG & upper & real)
+    irrH = np.nonzero(~regH & upper & offdiag & real)
+    # per distinct decomposition: (i, k, kind, coefficient, z), G's off-diagonal pairs doubled, H's too
+    irr_u: list[list] = [[] for _ in range(nU)]
+    for u, i, k in zip(*irrG, strict=True):
+        irr_u[u].append((i, k, 0, G[u, i, k] * (2.0 if k > i else 1.0), zG[u, i, k]))
+    for u, i, k in zip(*irrH, strict=True):
+        irr_u[u].append((i, k, 1, 2.0 * H[u, i, k], zH[u, i, k]))
+    A, B, C, D = Gz.real, Gz.imag, Hz.real, Hz.imag  # see _modal._work
+    Wm_u = np.stack([A + C, D - B, B + D, A - C], axis=1).transpose(0, 1, 3, 2)
+    UT_u = np.stack([Uk.real, Uk.imag], axis=1).transpose(0, 1, 3, 2)  # (U, 2, K, N)
+    BU_u = np.matmul(system.B, Uk[:, :n, :])
+
+    def per_state(a_u: np.ndarray) -> np.ndarray:
+        out = np.zeros((S,) + a_u.shape[1:], a_u.dtype)
+        out[valid] = a_u[u_of[valid]]
+        return np.ascontiguousarray(out)
+
     nK = np.full(S, -1, np.int64)
-    lam = np.zeros((S, Kmax), complex)
-    U = np.zeros((S, N, Kmax), complex)
-    Uinv = np.zeros((S, Kmax, N), complex)
-    BU = np.zeros((S, m, Kmax), complex)
-    Gz = np.zeros((S, Kmax, Kmax), complex)
-    Hz = np.zeros((S, Kmax, Kmax), complex)
-    hd = np.zeros((S, Kmax))
-    zd = np.zeros((S, Kmax))
-    Byp = np.zeros((S, m))
-    for s in range(S):  # one product per state: a mirrored state's is the exact negative
-        Byp[s] = system.B @ table.yp[s, :n]
+    nK[valid] = nK_u[u_of[valid]]
+    lam, BU = per_state(lk), per_state(BU_u)
+    Uinv = per_state(Uinvk)
+    Byp = np.einsum("sa,ja->sj", table.yp[:, :n], system.B)  # the same sums for every state: mirrors negate
     ip = np.zeros(S + 1, np.int64)
     irr: list = []
-    for s, p in enumerate(per_state):
-        if p is not None:
-            K = p[0].size
-            nK[s] = K
-            lam[s, :K], U[s, :, :K], Uinv[s, :K], BU[s, :, :K] = p[0], p[1], p[2], p[3]
-            Gz[s, :K, :K], Hz[s, :K, :K], hd[s, :K], zd[s, :K] = p[4], p[5], p[6], p[7]
-            irr.extend(p[8])
+    for s in range(S):
+        if u_of[s] >= 0:
+            irr.extend(irr_u[u_of[s]])
         ip[s + 1] = len(irr)
     ii = np.array([r[0] for r in irr], np.int64)
     ik = np.array([r[1] for r in irr], np.int64)
     ikind = np.array([r[2] for r in irr], np.int64)
     icoef = np.array([r[3] for r in irr], complex)
     iz = np.array([r[4] for r in irr], complex)
-    UT = np.ascontiguousarray(np.stack([U.real, U.imag], axis=1).transpose(0, 1, 3, 2))  # (S, 2, K, N)
-    A, B, C, D = Gz.real, Gz.imag, Hz.real, Hz.imag  # see _modal._work
-    Wm = np.ascontiguousarray(np.stack([A + C, D - B, B + D, A - C], axis=1).transpose(0, 1, 3, 2))
-    return (nK, lam, np.abs(lam), UT, Uinv, np.abs(Uinv), np.ascontiguousarray(table.yp), BU, np.abs(BU),
-            np.ascontiguousarray(Byp), Wm, hd, zd, ip, ii, ik, ikind, icoef, iz)
+    return (nK, lam, np.abs(lam), per_state(UT_u), Uinv, np.abs(Uinv), np.ascontiguousarray(table.yp), BU,
+            np.abs(BU), np.ascontiguousarray(Byp), per_state(Wm_u), per_state(np.diagonal(H, axis1=1, axis2=2).real),
+            per_state(2.0 * lk.real), ip, ii, ik, ikind, icoef, iz)
 
 
 @dataclass(frozen=True, eq=False)
@@ -1126,10 +1140,12 @@ def stream_exact(
     N = sample_count(duration_s, sample_rate_hz)
     chunk_samples = N if chunk_samples is None else _check.integer("chunk_samples", chunk_samples)
     original, system = system, system.fold_zero_gap_tips()
-    table = state_table(system)
     forced = loads is not None
-    ft = forced_table(system, table, loads) if forced else None
-    omega_max = system.omega_max()
+    with single_thread_blas():  # small dense problems: see state_table
+        table = state_table(system)
+        ft = forced_table(system, table, loads) if forced else None
+        omega_max = system.omega_max()
+        mt = modal_table(system, table)
     hmin = HMIN_PERIODS / omega_max
     y = np.concatenate([x0, v0])
     active = system.penetration(y[:n]) > 0.0
@@ -1150,7 +1166,6 @@ def stream_exact(
         stats.update(n_loads=loads.n_loads, n_breakpoints=int(breakpoints.size))
     offset_max = float(np.max(np.abs(system.offset), initial=0.0))
 
-    mt = modal_table(system, table)
     damped = not system.undamped
 
     def runs(t: float, bound: float) -> list:

@@ -1,0 +1,377 @@
+"""Speed of the ringdown integrators (issue 14), every ratio against a named baseline in the same process.
+
+    PYTHONPATH=. python benchmarks/integrator_speed.py [--repeats 5] [--baseline-commit fc521a5]
+        [--hammer-modes 60 120] [--no-dop853-2s] [--out results/performance]
+
+Measures, each a median of ``--repeats`` wall times (perf_counter; CPU times beside them, as the
+machine may be shared), in one process:
+
+1. the exact integrator on the 2 s ``discrete-impulse`` and ``rom-impulse`` ringdowns (20 kHz), and
+   per output sample on the ``hammer-test`` reduced model (apparatus, ``--hammer-modes``
+   fixed-interface modes; a 20 N blow that closes no gap: 0.06 s at 20 kHz, the marginal cost of a
+   sample = (t(0.06 s) - t(1 ms)) / (samples between)) beside one numpy N x K complex
+   matrix-vector product (what a sample must at least cost);
+2. the central-difference integrator on the same 2 s ringdowns (steps per second);
+3. the exact integrator against DOP853 restarted at every crossing (``integrate_dop853(...,
+   events=True)``, the independent reference) at equal error: on the 0.2 s window the error is the
+   max-norm error of x against the exact run (relative to max |x|); on the 2 s window no
+   double-precision method predicts the motion pointwise (a 4e-16 change of v(0) moves x by 20 %
+   of its range by 0.6 s), so there the error is the energy-balance error of each run. DOP853 is
+   run at rtol 1e-7 .. 1e-12; its time at an error is that of the fastest rtol that reaches it.
+
+The baseline of 1 and 2 is the code before issue 14 (``--baseline-commit``, loaded from git into a
+temporary module and run on the same models in the same process); its outputs are compared with
+today's (max |difference| over the first 0.2 s, where round-off has not yet been amplified, and
+bit for bit for the explicit scheme).
+
+Writes integrator_headline.csv (columns what, ours_s, baseline, baseline_s, ratio = baseline_s /
+ours_s, error, target, met: rows that can be concatenated with other headline tables),
+integrator_details.csv (every measurement), integrator_dop853.csv (the DOP853 scans),
+integrator_machine.csv (machine, versions, load) and integrator_speed.png.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import os
+import platform
+import subprocess
+import sys
+import time
+from functools import partial
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bearingshaft.output import git_commit, write_rows  # noqa: E402
+from reduced.studies import relative_error  # noqa: E402
+from reduced.transient.dop853 import integrate_dop853  # noqa: E402
+from reduced.transient.exact import integrate_exact  # noqa: E402
+from reduced.transient.explicit import integrate_explicit  # noqa: E402
+
+FS = 20000.0  # Hz, the scenes' output rate
+LONG_S = 2.0  # s, the ringdowns of the scenes
+WINDOW_S = 0.2  # s, the window where the motion is still predictable pointwise
+HAMMER_S = (1e-3, 0.06)  # s, the two records whose difference gives the cost of a sample
+HAMMER_BLOW_N = 20.0  # N: closes no gap (hammer-test levels.csv)
+DOP_RTOLS_SHORT = (1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12)
+DOP_RTOLS_LONG = (1e-8, 1e-9, 1e-10, 1e-11)
+ERROR_TARGETS = (1e-6, 1e-8)
+TARGET_RATIO = 1000.0  # exact vs DOP853 restarted at crossings, at equal error
+BASELINE = "exact before issue 14 ({}), same process"
+
+
+def load_baseline(commit: str) -> dict:
+    """{'exact': module, 'explicit': module} of reduced/transient at ``commit``, from git, in a cache
+    folder of their own (numba caches their kernels there); {} when git cannot give them."""
+    cache = Path(os.environ.get("BEARINGSHAFT_CACHE", Path.home() / ".cache" / "bearingshaft"))
+    folder = cache / f"integrator-baseline-{commit}"
+    folder.mkdir(parents=True, exist_ok=True)
+    out = {}
+    for name in ("exact", "explicit"):
+        path = folder / f"baseline_{name}.py"
+        if not path.exists():
+            try:
+                src = subprocess.run(["git", "show", f"{commit}:reduced/transient/{name}.py"], cwd=ROOT,
+                                     capture_output=True, text=True, check=True, timeout=30).stdout
+            except (OSError, subprocess.SubprocessError) as exc:
+                print(f"no baseline {name} at {commit}: {exc}", flush=True)
+                return {}
+            path.write_text(src)
+        spec = importlib.util.spec_from_file_location(f"baseline_{name}_{commit}", path)
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        out[name] = mod
+    return out
+
+
+def machine() -> list[dict]:
+    import numba
+    import scipy
+
+    cpu = "unknown"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    info = {"platform": platform.platform(), "cpu": cpu, "cores": os.cpu_count(),
+            "python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__,
+            "numba": numba.__version__, "git_commit": git_commit(),
+            "load_1min_start": os.getloadavg()[0], "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+    return [{"key": k, "value": v} for k, v in info.items()]
+
+
+def timed(fn, repeats: int) -> tuple[object, dict]:
+    """(last result, {median_s, min_s, max_s, cpu_median_s}) of ``repeats`` calls after one warm-up."""
+    fn()
+    walls, cpus, res = [], [], None
+    for _ in range(repeats):
+        c0, t0 = time.process_time(), time.perf_counter()
+        res = fn()
+        walls.append(time.perf_counter() - t0)
+        cpus.append(time.process_time() - c0)
+    return res, {"median_s": float(np.median(walls)), "min_s": float(np.min(walls)), "max_s": float(np.max(walls)),
+                 "cpu_median_s": float(np.median(cpus)), "repeats": repeats}
+
+
+def _matvecs(A: np.ndarray, u: np.ndarray, k: int) -> None:
+    for _ in range(k):
+        A @ u
+
+
+def scene_model(name: str):
+    from bearingshaft.scenes import load_scene
+    from bearingshaft.stages.ringdown import model_system, scene_initial_state
+
+    sc = load_scene(name)
+    system, P = model_system(sc.model)
+    x0, v0 = scene_initial_state(sc, system, P)
+    return system, x0, v0
+
+
+def head_diff(a, b, fs: float) -> float:
+    """max |x_a - x_b| / max |x_b| over the first WINDOW_S."""
+    k = int(WINDOW_S * fs) + 1
+    return float(np.max(np.abs(a.x[:k] - b.x[:k])) / np.max(np.abs(b.x[:k])))
+
+
+def exact_rows(base: dict, repeats: int, commit: str) -> tuple[list[dict], list[dict]]:
+    """Headline and detail rows of the exact and explicit 2 s ringdowns, ours against the baseline."""
+    heads, details = [], []
+    targets = {("exact", "discrete-impulse"): 0.03, ("exact", "rom-impulse"): 0.4}
+    rates = {"discrete-impulse": 5e7, "rom-impulse": 3e7}
+    for scene in ("discrete-impulse", "rom-impulse"):
+        system, x0, v0 = scene_model(scene)
+        kw = {"step_basis": "contact"} if scene == "rom-impulse" else {}
+        for method in ("exact", "explicit"):
+            ours = integrate_exact if method == "exact" else integrate_explicit
+            opts = {} if method == "exact" else kw
+            res, t = timed(partial(ours, system, x0, v0, LONG_S, FS, **opts), repeats)
+            row = {"scene": scene, "method": method, "code": "ours", **t, "n_events": res.stats.get("n_events", ""),
+                   "n_march": res.stats.get("n_march", ""), "n_steps": res.stats.get("n_steps", ""),
+                   "energy_balance_error": res.energy_balance_error}
+            details.append(row)
+            b_res, b_t = None, None
+            if method in base:
+                mod = base[method]
+                fn = mod.integrate_exact if method == "exact" else mod.integrate_explicit
+                b_res, b_t = timed(partial(fn, system, x0, v0, LONG_S, FS, **opts), repeats)
+                details.append({"scene": scene, "method": method, "code": f"baseline {commit}", **b_t,
+                                "n_events": b_res.stats.get("n_events", ""), "n_march": b_res.stats.get("n_march", ""),
+                                "n_steps": b_res.stats.get("n_steps", ""),
+                                "energy_balance_error": b_res.energy_balance_error})
+            if method == "exact":
+                err = f"energy balance {res.energy_balance_error:.2g}"
+                if b_res is not None:
+                    err += (f" (before: {b_res.energy_balance_error:.2g}); first {WINDOW_S:g} s differs from before "
+                            f"by {head_diff(res, b_res, FS):.2g} of max |x|")
+                target = targets[(method, scene)]
+                heads.append({"what": f"exact ringdown, {scene}, {LONG_S:g} s at {FS:g} Hz "
+                                      f"({res.stats['n_events']} events, {res.stats['n_march']} march steps)",
+                              "ours_s": t["median_s"], "baseline": BASELINE.format(commit),
+                              "baseline_s": b_t["median_s"] if b_t else "", "ratio": b_t["median_s"] / t["median_s"]
+                              if b_t else "", "error": err, "target": f"<= {target:g} s",
+                              "met": t["median_s"] <= target})
+            else:
+                steps = res.stats["n_steps"]
+                same = b_res is not None and np.array_equal(res.x, b_res.x) and np.array_equal(res.v, b_res.v) \
+                    and np.array_equal(res.dissipated, b_res.dissipated)
+                rate = rates[scene]
+                heads.append({"what": f"explicit (central difference) ringdown, {scene}, {LONG_S:g} s: {steps} steps, "
+                                      f"{steps / t['median_s']:.3g} steps/s",
+                              "ours_s": t["median_s"], "baseline": BASELINE.format(commit).replace("exact", "explicit"),
+                              "baseline_s": b_t["median_s"] if b_t else "",
+                              "ratio": b_t["median_s"] / t["median_s"] if b_t else "",
+                              "error": "bit for bit as before" if same else
+                              ("differs from before" if b_res is not None else ""),
+                              "target": f">= {rate:.0e} steps/s (<= {steps / rate:.3g} s)",
+                              "met": steps / t["median_s"] >= rate})
+            print(heads[-1], flush=True)
+    return heads, details
+
+
+def hammer_rows(base: dict, modes: list[int], repeats: int, commit: str) -> tuple[list[dict], list[dict]]:
+    """Per output sample of the exact integrator on the hammer-test model (no gap closes)."""
+    from bearingshaft.stages.hammer import default_location
+    from reduced.models.loads import HalfSine
+    from reduced.models.rig import virtual_rig
+    from reduced.models.rom import RomSpec
+
+    heads, details = [], []
+    for nm in modes:
+        rom = RomSpec(layout="assembly", planar=False, n_modes=nm).reduced(progress=False)
+        rig = virtual_rig(rom, default_location(rom), (0.0, 0.0, -1.0))
+        n = rig.system.n
+        loads = rig.loads(HalfSine(peak_N=HAMMER_BLOW_N, duration_s=1e-3, start_s=0.01))
+        z = np.zeros(n)
+        per = {}
+        for code, fn in (("ours", integrate_exact), *((("baseline", base["exact"].integrate_exact),) if base else ())):
+            walls = {}
+            for T in HAMMER_S:
+                res, t = timed(partial(fn, rig.system, z, z, T, FS, loads=loads), repeats)
+                walls[T] = t
+                details.append({"scene": f"hammer-test n_modes={nm}", "method": "exact", "code": code,
+                                "duration_s": T, **t, "n_events": res.stats["n_events"],
+                                "energy_balance_error": res.energy_balance_error, "n_dofs": n})
+            n_extra = round((HAMMER_S[1] - HAMMER_S[0]) * FS)
+            per[code] = (walls[HAMMER_S[1]]["median_s"] - walls[HAMMER_S[0]]["median_s"]) / n_extra
+            per[code + "_total"] = walls[HAMMER_S[1]]["median_s"]
+        K = n  # kept terms of a state: one of each conjugate pair
+        A = np.random.default_rng(0).standard_normal((2 * n, K)) + 1j
+        u = np.ones(K, complex)
+        _, tm = timed(partial(_matvecs, A, u, 100), repeats)
+        matvec = tm["median_s"] / 100
+        details.append({"scene": f"hammer-test n_modes={nm}", "method": f"numpy {2 * n} x {K} complex matvec",
+                        "code": "reference", **tm, "n_dofs": n})
+        heads.append({"what": f"exact, hammer-test model (n_modes = {nm}, {n} coordinates), cost of one output sample "
+                              f"(no impact; 0.06 s record: ours {per['ours_total']:.3g} s"
+                              + (f", before {per['baseline_total']:.3g} s)" if base else ")"),
+                      "ours_s": per["ours"], "baseline": BASELINE.format(commit) if base else "",
+                      "baseline_s": per.get("baseline", ""),
+                      "ratio": per["baseline"] / per["ours"] if base else "",
+                      "error": f"one numpy {2 * n} x {K} complex matvec: {matvec:.3g} s",
+                      "target": "a dense matvec (<= 4 x that matvec: the state and the work are two products)",
+                      "met": per["ours"] <= 4.0 * matvec})
+        print(heads[-1], flush=True)
+    return heads, details
+
+
+def dop853_rows(repeats: int, long_window: bool) -> tuple[list[dict], list[dict], list[dict]]:
+    """Exact against DOP853 restarted at every crossing, at equal error, on the 0.2 s and 2 s windows."""
+    system, x0, v0 = scene_model("discrete-impulse")
+    heads, details, scans = [], [], []
+    windows = [(WINDOW_S, DOP_RTOLS_SHORT, "max-norm error of x against the exact run")]
+    if long_window:
+        windows.append((LONG_S, DOP_RTOLS_LONG, "energy-balance error of the run"))
+    for T, rtols, measure in windows:
+        ref, t_ex = timed(lambda T=T: integrate_exact(system, x0, v0, T, FS), repeats)
+        ex_err = ref.energy_balance_error if T == LONG_S else 0.0
+        details.append({"scene": "discrete-impulse", "method": "exact", "code": "ours", "duration_s": T, **t_ex,
+                        "n_events": ref.stats["n_events"], "energy_balance_error": ref.energy_balance_error})
+        runs = {}
+        for rtol in rtols:
+            c0, t0 = time.process_time(), time.perf_counter()
+            res = integrate_dop853(system, x0, v0, T, FS, rtol=rtol, events=True)
+            wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+            err = res.energy_balance_error if T == LONG_S else relative_error(res.x, ref.x)
+            runs[rtol] = {"walls": [wall], "cpus": [cpu], "error": err}
+            scans.append({"window_s": T, "rtol": rtol, "wall_s": wall, "cpu_s": cpu, "error": err,
+                          "error_measure": measure, "energy_balance_error": res.energy_balance_error,
+                          "n_events": res.stats["n_events"], "exact_n_events": ref.stats["n_events"],
+                          "n_steps": res.stats["n_steps"]})
+            print(scans[-1], flush=True)
+        for target in ERROR_TARGETS:
+            ok = [r for r in rtols if runs[r]["error"] <= target]
+            if not ok:
+                heads.append({"what": f"exact vs DOP853 restarted at every crossing, discrete-impulse {T:g} s, "
+                                      f"error {target:g} ({measure})", "ours_s": t_ex["median_s"],
+                              "baseline": "DOP853 restarted at every crossing: no rtol tried reaches it",
+                              "baseline_s": "", "ratio": "", "error": "", "target": f">= {TARGET_RATIO:g}x",
+                              "met": False})
+                continue
+            rtol = max(ok)  # the loosest (fastest) rtol that reaches the error
+            run = runs[rtol]
+            while len(run["walls"]) < repeats:  # the median of repeats at the chosen rtol
+                c0, t0 = time.process_time(), time.perf_counter()
+                integrate_dop853(system, x0, v0, T, FS, rtol=rtol, events=True)
+                run["walls"].append(time.perf_counter() - t0)
+                run["cpus"].append(time.process_time() - c0)
+            t_dop = float(np.median(run["walls"]))
+            details.append({"scene": "discrete-impulse", "method": f"dop853 events rtol {rtol:g}", "code": "reference",
+                            "duration_s": T, "median_s": t_dop, "min_s": min(run["walls"]), "max_s": max(run["walls"]),
+                            "cpu_median_s": float(np.median(run["cpus"])), "repeats": len(run["walls"]),
+                            "energy_balance_error": ""})
+            heads.append({"what": f"exact vs DOP853 restarted at every crossing, discrete-impulse {T:g} s, error <= "
+                                  f"{target:g} ({measure})",
+                          "ours_s": t_ex["median_s"],
+                          "baseline": f"integrate_dop853(events=True) at rtol {rtol:g}, same process",
+                          "baseline_s": t_dop, "ratio": t_dop / t_ex["median_s"],
+                          "error": f"DOP853 {run['error']:.2g}; exact "
+                                   + (f"{ex_err:.2g}" if T == LONG_S else "the reference (round-off, ~1e-11)"),
+                          "target": f">= {TARGET_RATIO:g}x", "met": t_dop / t_ex["median_s"] >= TARGET_RATIO})
+            print(heads[-1], flush=True)
+    return heads, details, scans
+
+
+def figure(heads: list[dict], scans: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(14, 5), constrained_layout=True)
+    ax = axes[0]
+    rows = [h for h in heads if h["baseline_s"] != "" and "DOP853" not in h["what"]]
+    labels = [h["what"].split(",")[0] + "\n" + h["what"].split(",")[1].strip()[:28] for h in rows]
+    y = np.arange(len(rows))
+    ax.barh(y - 0.2, [h["baseline_s"] for h in rows], 0.4, label="before issue 14", color="0.6")
+    ax.barh(y + 0.2, [h["ours_s"] for h in rows], 0.4, label="now", color="C0")
+    for i, h in enumerate(rows):
+        ax.text(h["ours_s"], i + 0.2, f" {h['ratio']:.3g}x", va="center", fontsize=8)
+    ax.set_yticks(y, labels, fontsize=7)
+    ax.set_xscale("log")
+    ax.set_xlabel("wall time [s] (median; per output sample for the hammer rows)")
+    ax.legend(fontsize=8)
+    ax = axes[1]
+    for T, marker in ((WINDOW_S, "o"), (LONG_S, "s")):
+        pts = [s for s in scans if s["window_s"] == T]
+        if pts:
+            ax.loglog([s["wall_s"] for s in pts], [s["error"] for s in pts], marker=marker,
+                      label=f"DOP853 restarted at crossings, {T:g} s ({pts[0]['error_measure']})")
+            for s in pts:
+                ax.annotate(f"{s['rtol']:.0e}", (s["wall_s"], s["error"]), fontsize=6)
+    for h in heads:
+        if "DOP853" in h["what"] and h["baseline_s"] != "":
+            ax.axvline(h["ours_s"], color="k", lw=0.6, ls=":")
+    ax.set_xlabel("wall time [s]")
+    ax.set_ylabel("error")
+    ax.set_title("DOP853 restarted at every crossing against the exact run (dotted: exact's time)", fontsize=9)
+    ax.grid(True, which="both", lw=0.3)
+    ax.legend(fontsize=7)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=5, help="runs a median is taken of (>= 3)")
+    ap.add_argument("--baseline-commit", default="fc521a5", help="the code before issue 14")
+    ap.add_argument("--hammer-modes", type=int, nargs="*", default=[60, 120])
+    ap.add_argument("--no-dop853-2s", action="store_true", help="skip the 2 s DOP853 window (minutes a run)")
+    ap.add_argument("--out", default="results/performance")
+    args = ap.parse_args(argv)
+    if args.repeats < 3:
+        ap.error("--repeats must be >= 3")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    info = machine()
+    base = load_baseline(args.baseline_commit)
+    heads, details = exact_rows(base, args.repeats, args.baseline_commit)
+    h, d = hammer_rows(base, args.hammer_modes, args.repeats, args.baseline_commit)
+    heads += h
+    details += d
+    h, d, scans = dop853_rows(max(3, min(args.repeats, 3)), not args.no_dop853_2s)
+    heads += h
+    details += d
+    info.append({"key": "load_1min_end", "value": os.getloadavg()[0]})
+    fields = ["what", "ours_s", "baseline", "baseline_s", "ratio", "error", "target", "met"]
+    write_rows(out / "integrator_headline.csv", [{k: (f"{v:.4g}" if isinstance(v, float) else v)
+                                                  for k, v in r.items()} for r in heads], fields)
+    dfields = sorted({k for r in details for k in r}, key=lambda k: (k not in ("scene", "method", "code"), k))
+    write_rows(out / "integrator_details.csv", details, dfields, float_format=".5g")
+    write_rows(out / "integrator_dop853.csv", scans, float_format=".5g")
+    write_rows(out / "integrator_machine.csv", info)
+    figure(heads, scans, out / "integrator_speed.png")
+    print(f"wrote {out}/integrator_{{headline,details,dop853,machine}}.csv and integrator_speed.png")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
