@@ -348,3 +348,32 @@ def test_cli_sweep_on_an_existing_scheduler(tmp_path, client, capsys):
     workers = set(client.nthreads())
     assert [r["model.k_s"] for r in rows] == [8000, 9000] and all(r["worker"] in workers for r in rows)
     assert main([*argv[:-2], "--workers", "2", "--scheduler", client.scheduler.address]) == 2  # one or the other
+
+
+def test_hammer_and_frc_rows_are_the_stages_own_numbers():
+    """The hammer and frc extractors read what those stages wrote (here the committed results of
+    hammer-test and discrete-frc): the nominal blow's row of levels.csv, the scale-1 rows of
+    frc_backbone.csv."""
+    import csv
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    from bearingshaft.sweep import frc_metrics, hammer_metrics
+
+    folder = Path(__file__).resolve().parents[1] / "results"
+    stats = json.loads((folder / "hammer-test" / "provenance.json").read_text())["stages"]["hammer"]["stats"]
+    row = hammer_metrics(SimpleNamespace(hammer=SimpleNamespace(peak_N=500.0)), stats)
+    with open(folder / "hammer-test" / "levels.csv", newline="") as fh:
+        level = next(r for r in csv.DictReader(fh) if float(r["level_N"]) == 500.0)
+    assert row["impacts"] == int(level["impacts"])
+    # levels.csv writes 4 significant digits
+    assert row["peak_tip_force_N"] == pytest.approx(max(float(v) for k, v in level.items()
+                                                        if k.startswith("peak_contact_")), rel=1e-3)
+    assert row["gaps_open_after_s"] == pytest.approx(float(level["gaps_open_after_s"]), rel=1e-3)
+    frc = frc_metrics(folder / "discrete-frc")
+    with open(folder / "discrete-frc" / "frc_backbone.csv", newline="") as fh:
+        ones = [r for r in csv.DictReader(fh) if r["scale"] == "1.0"]
+    assert len(ones) == 3 and len(frc) == 6
+    for r in ones:
+        assert frc[f"frc_peak_hz_{float(r['level']):g}N"] == float(r["peak_freq_hz"])
+        assert frc[f"frc_peak_m_{float(r['level']):g}N"] == float(r["peak_amplitude_m"])
