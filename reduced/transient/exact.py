@@ -20,6 +20,14 @@ to round-off; a grazing touch (q' -> 0 at q -> 0) is passed by the floor ``hmin`
 without a state change. The dissipated work int v^T C v dt is integrated in closed form
 (products of exponentials), so the energy balance E(0) = E(t) + W(t) holds to round-off.
 
+Free segments (no load acting) run in :mod:`reduced.transient._modal`: the sum over the 2n
+modes is written over one mode of each conjugate pair (K <= n terms, :func:`modal_table`, the
+tables of every contact state worked out once a run), and one march serves all stops at once,
+stepping by the smallest of their safe steps; besides the bound above each stop's step may come
+from the cubic bound q + q' h + q'' h^2 / 2 + Q3 h^3 / 6 (Q3 bounds |q'''|) or from bounding the
+terms that are fast over the step by their amplitude, all of them valid for every h, so no
+crossing of any stop is stepped over. Segments with a load acting use the kernel below.
+
 External forcing (``loads``, :mod:`reduced.models.loads`): M x'' + C x' + K x + B^T f(B x) =
 sum_l b_l p_l(t). Between two load breakpoints (a start, an end, a tabulated sample), which
 become segment boundaries like the crossings, every load is one piece
