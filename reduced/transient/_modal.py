@@ -17,11 +17,14 @@ from tau_a the march steps by the smallest of the stops' safe steps, each the la
 Q2_j >= |q_j''| on [tau_a, inf) as Re(lam) <= 0, or the largest h of the same bound with the
 fast terms (|lam_i| h > ``FAST_LT``, the last ones: terms are sorted by |lam|) bounded by their
 amplitude instead, sum_fast (|c_ji| e^{Re(lam_i) tau_a} - Re(c_ji e^{lam_i tau_a})) added to
-q_j and their share taken out of q_j' and Q2_j: each bound holds for every h >= 0, so either
+q_j and their share taken out of q_j' and Q2_j, or the largest h of the cubic bound
+q + q' h + q'' h^2 / 2 + Q3 h^3 / 6 (q'' exact, Q3 = sum_i |c_ji| |lam_i|^3 e^{Re(lam_i) tau_a} >= |q'''|,
+:func:`_cubic_step`), with or without the fast terms: each bound holds for every h >= 0, so the
 step skips no root of any stop. A stop whose amplitude bound const_j + sum_i |c_ji|
 e^{Re(lam_i) tau_a} stays below its round-off band can never cross in the segment and leaves
-the march. Near a crossing the step tends to the Newton step, and the crossing is located to
-round-off as before (``_step``, the same decision rules as the single-stop march).
+the march. Near a crossing the step tends to the Newton step; the crossing is taken where q is
+within its round-off band (the decision rules of the single-stop march), or at the root of the
+Taylor quadratic once the cubic remainder Q3 x^3 is within that band (:func:`_march`).
 
 The dissipated work over [0, tau] is closed-form (v = Re sum_i a_i e^{lam_i t}, a_i = U_v[:, i] w_i):
 
