@@ -65,7 +65,7 @@ def _state_of(active):
     return s
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _terms(lam, K, tau, e, ea):
     """e_i = exp(lam_i tau) and ea_i = |e_i| = exp(Re(lam_i) tau), i < K."""
     for i in range(K):
@@ -88,7 +88,7 @@ def _phi_int(z, tau):
     return (np.exp(x) - 1.0) / z
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _terms_m1(lam, K, tau, e, em, am1):
     """e_i = exp(lam_i tau) and em_i = e_i - 1 to full relative accuracy (expm1 and half angles:
     em = expm1(a) cos(b) - 2 sin^2(b / 2) + i e^a sin(b), a + i b = lam_i tau), am1_i = expm1(a), i < K."""
@@ -106,16 +106,18 @@ def _terms_m1(lam, K, tau, e, em, am1):
         am1[i] = x
 
 
-@nb.njit(cache=True)
-def _work(s, K, w, em, am1, tau, Wm, hd, zd, ip, ii, ik, ikind, icoef, iz, rk, gr, gi):
-    """int_0^tau v^T C v dt (module docstring) with p = w (e^{lam tau} - 1) (em = e - 1): over the regular
-    pairs e_i e_k - 1 = em_i em_k + em_i + em_k, so their part is Re(p^T Gz r + p^T Hz conj(r)), r = p + 2 w
-    (Gz = A + i B, Hz = C + i D hold 1/2 G / z, 1/2 H / z there and 0 elsewhere), accurate however short
-    tau is: g = Gz r + Hz conj(r) = [(A + C) x + (D - B) y] + i [(B + D) x + (A - C) y] (r = x + i y), the four
-    real matrices transposed in Wm[s, 0..3] so that the sums over k run down contiguous rows; plus
-    hd_i |w_i|^2 I(zd_i) for the diagonal of H (zd_i = 2 Re lam_i, from am1_i = expm1(Re(lam_i) tau)) and,
-    for the near-cancelling pairs p of the state, Re(icoef_p w_i (w_k or conj(w_k)) I(iz_p)).
-    rk, gr, gi: scratch (K,)."""
+@nb.njit(cache=True, inline="always")
+def _work(s, K, w, em, am1, tau, Wm, Hd, gr, gi):
+    """int_0^tau v^T C v dt over the regular pairs and the diagonal of H (module docstring), with
+    p = w (e^{lam tau} - 1) (em = e - 1): the regular pairs' e_i e_k - 1 = em_i em_k + em_i + em_k, so
+    their part is Re(p^T Gz r + p^T Hz conj(r)), r = p + 2 w (Gz = A + i B, Hz = C + i D hold 1/2 G / z,
+    1/2 H / z there and 0 elsewhere), accurate however short tau is:
+    g = Gz r + Hz conj(r) = [(A + C) x + (D - B) y] + i [(B + D) x + (A - C) y] (r = x + i y), the four
+    real matrices transposed in Wm[s, 0..3] so that the sums over k run down contiguous rows; and
+    H's diagonal, 1/2 H_ii |w_i|^2 (e^{2 a tau} - 1) / (2 a) = Hd[s, 0, i] |w_i|^2 am1_i (2 + am1_i),
+    am1_i = expm1(a tau), a = Re lam_i, Hd[s, 0, i] = 1/2 H_ii / (2 a), or Hd[s, 1, i] |w_i|^2 tau with
+    Hd[s, 1, i] = 1/2 H_ii where a = 0 (the other entry 0). gr, gi: scratch (K,). The near-cancelling
+    pairs: :func:`_work_near`."""
     for i in range(K):
         gr[i] = 0.0
         gi[i] = 0.0
@@ -131,9 +133,14 @@ def _work(s, K, w, em, am1, tau, Wm, hd, zd, ip, ii, ik, ikind, icoef, iz, rk, g
         pi = w[i] * em[i]
         acc += pi.real * gr[i] - pi.imag * gi[i]
         wi2 = w[i].real * w[i].real + w[i].imag * w[i].imag
-        # int_0^tau e^{2 a t} dt = (e^{2 a tau} - 1) / (2 a) = am1 (2 + am1) / (2 a), am1 = expm1(a tau)
-        z = zd[s, i]
-        acc += hd[s, i] * wi2 * (tau if z == 0.0 else am1[i] * (2.0 + am1[i]) / z)
+        acc += wi2 * (Hd[s, 0, i] * (am1[i] * (2.0 + am1[i])) + Hd[s, 1, i] * tau)
+    return acc
+
+
+@nb.njit(cache=True)
+def _work_near(s, w, tau, ip, ii, ik, ikind, icoef, iz):
+    """The near-cancelling pairs p of state s: sum_p Re(icoef_p w_i (w_k or conj(w_k)) I(iz_p))."""
+    acc = 0.0
     for p in range(ip[s], ip[s + 1]):
         i = ii[p]
         k = ik[p]
@@ -142,7 +149,7 @@ def _work(s, K, w, em, am1, tau, Wm, hd, zd, ip, ii, ik, ikind, icoef, iz, rk, g
     return acc
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _eval(s, K, UT, yp, w, e, out):
     """y = y_p + Re sum_i U[:, i] w_i e_i, with UT[s, 0] = Re U^T and UT[s, 1] = Im U^T (rows contiguous)."""
     N = out.shape[0]
@@ -399,7 +406,7 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
     ``out_E`` (empty, or as long as the buffer) receives the loads' work E, constant here.
     Returns (t, W, i_samp, n_events, n_iter, status, n_stuck, c): c the piece reached.
     """
-    (nK, lam, alam, UT, Uinv, aUinv, yp, BU, aBU, Byp, Wm, hd, zd, ip, ii, ik, ikind, icoef, iz) = tb
+    (nK, lam, alam, UT, Uinv, aUinv, yp, BU, aBU, Byp, Wm, Hd, ip, ii, ik, ikind, icoef, iz) = tb
     N = y.shape[0]
     m = offset.shape[0]
     Kmax = lam.shape[1]
@@ -425,7 +432,6 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
     ytmp = np.empty(N)
     dy = np.empty(N)
     ay = np.empty(N)
-    rk = np.empty(Kmax, np.complex128)
     gr = np.empty(Kmax)
     gi = np.empty(Kmax)
     n_events = 0
@@ -438,6 +444,7 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
         if K < 0:
             status = -2
             break
+        near = ip[s + 1] > ip[s]
         n_live = _start(s, K, y, Uinv, aUinv, yp, BU, aBU, Byp, lam, alam, offset, side, active, floor, w, werr,
                         coef, lc, l2c, a0, const, qtol, dnoise, live, dy, ay)
         tau_ev, j_ev, it = _march(s, K, lam, alam, const, coef, lc, l2c, a0, qtol, dnoise, live, n_live, t_end - t,
@@ -450,7 +457,8 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
             tau = max(t_samples[i_samp] - t, 0.0)
             _terms_m1(lam[s], K, tau, e, em, am1)
             _eval(s, K, UT, yp, w, e, ytmp)
-            out_W[i_samp] = W + (_work(s, K, w, em, am1, tau, Wm, hd, zd, ip, ii, ik, ikind, icoef, iz, rk, gr, gi)
+            out_W[i_samp] = W + ((_work(s, K, w, em, am1, tau, Wm, Hd, gr, gi)
+                                  + (_work_near(s, w, tau, ip, ii, ik, ikind, icoef, iz) if near else 0.0))
                                  if damped else 0.0)
             if has_E:
                 out_E[i_samp] = E
@@ -464,7 +472,9 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
         _terms_m1(lam[s], K, tau_ev, e, em, am1)
         _eval(s, K, UT, yp, w, e, ytmp)
         if damped:
-            W += _work(s, K, w, em, am1, tau_ev, Wm, hd, zd, ip, ii, ik, ikind, icoef, iz, rk, gr, gi)
+            W += _work(s, K, w, em, am1, tau_ev, Wm, Hd, gr, gi)
+            if near:
+                W += _work_near(s, w, tau_ev, ip, ii, ik, ikind, icoef, iz)
         for r in range(N):
             y[r] = ytmp[r]
         n_stuck = n_stuck + 1 if tau_ev == 0.0 else 0

@@ -300,9 +300,13 @@ def modal_table(system: GapSystem, table: StateTable) -> tuple:
     ikind = np.array([r[2] for r in irr], np.int64)
     icoef = np.array([r[3] for r in irr], complex)
     iz = np.array([r[4] for r in irr], complex)
+    # H's diagonal, 1/2 H_ii |w_i|^2 (e^{2 a tau} - 1) / (2 a), a = Re lam_i: [1/2 H_ii / (2 a), 0], or [0, 1/2 H_ii]
+    # (times tau) where a = 0 (_modal._work)
+    hd, zd = np.diagonal(H, axis1=1, axis2=2).real, 2.0 * lk.real
+    with np.errstate(divide="ignore", invalid="ignore"):
+        Hd = np.stack([np.where(zd != 0.0, hd / zd, 0.0), np.where(zd != 0.0, 0.0, hd)], axis=1)
     return (nK, lam, np.abs(lam), per_state(UT_u), Uinv, np.abs(Uinv), np.ascontiguousarray(table.yp), BU,
-            np.abs(BU), np.ascontiguousarray(Byp), per_state(Wm_u), per_state(np.diagonal(H, axis1=1, axis2=2).real),
-            per_state(2.0 * lk.real), ip, ii, ik, ikind, icoef, iz)
+            np.abs(BU), np.ascontiguousarray(Byp), per_state(Wm_u), per_state(Hd), ip, ii, ik, ikind, icoef, iz)
 
 
 @dataclass(frozen=True, eq=False)
