@@ -55,6 +55,19 @@ TAYLOR_TERMS = 17  # ... of this many terms (0.5^18 / 18! ~ 6e-22: exact to roun
 BUFFER_FULL = 1  # kernel status: the sample buffer is full inside the present segment
 
 
+@nb.njit(cache=True, inline="always")
+def switch_stop(active, tip, j_ev):
+    """The contact state after stop ``j_ev`` crosses: an active stop opens; closing a stop opens
+    its tip's other stop (at zero gap both cross together) and activates it."""
+    if active[j_ev]:
+        active[j_ev] = False
+        return
+    for j in range(active.shape[0]):
+        if tip[j] == tip[j_ev]:
+            active[j] = False
+    active[j_ev] = True
+
+
 @nb.njit(cache=True)
 def _state_of(active):
     """Index of a contact state: sum_j active_j 2^j."""
@@ -489,14 +502,7 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
                 break
             t_end = bounds[c]
             continue
-        if active[j_ev]:
-            active[j_ev] = False
-        else:
-            # closing a stop opens its tip's other stop: at zero gap both cross together
-            for j in range(m):
-                if tip[j] == tip[j_ev]:
-                    active[j] = False
-            active[j_ev] = True
+        switch_stop(active, tip, j_ev)
         n_events += 1
         if n_events >= max_events:
             status = -1

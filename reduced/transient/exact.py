@@ -1087,14 +1087,7 @@ def _exact_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped,
             if t_lim < t_end:
                 continue  # a load breakpoint: the same contact state, a new piece
             break
-        if active[j_ev]:
-            active[j_ev] = False
-        else:
-            # closing a stop opens its tip's other stop: at zero gap both cross together
-            for j in range(m):
-                if tip[j] == tip[j_ev]:
-                    active[j] = False
-            active[j_ev] = True
+        _modal.switch_stop(active, tip, j_ev)
         n_events += 1
         if n_events >= max_events:
             status = -1
