@@ -75,6 +75,23 @@ def test_projection_inverts_synthesis():
         HarmonicBalance.for_system(SYS, 4, 8)
 
 
+@pytest.mark.parametrize(("H", "N"), [(1, 3), (4, 9), (4, 10), (7, 17), (15, 1024), (50, 4096)])
+def test_weighted_gram_by_fft_is_the_product(H, N):
+    # G = P diag(w) E from one FFT (trig product identities) against the O(N H^2) product, for
+    # random weights and gap-like ones (a stiffness on a short contact arc, zero elsewhere);
+    # the tolerance is round-off summed over N samples as a random walk (100 eps sqrt(N) |w|_inf);
+    # a wrong index or sign in the identities errs by O(|w|_inf)
+    hb = HarmonicBalance.for_system(SYS, H, N)
+    rng = np.random.default_rng(H * N)
+    arc = np.zeros(N)
+    arc[N // 7 : N // 7 + max(N // 20, 1)] = 3.5e7
+    for w in (rng.standard_normal(N), arc):
+        direct = (hb.P * w) @ hb.E
+        G = hb.weighted_gram(w)
+        assert np.max(np.abs(G - direct)) <= 100 * np.finfo(float).eps * np.sqrt(N) * np.max(np.abs(w))
+    assert not np.any(hb.weighted_gram(np.zeros(N)))
+
+
 def test_default_samples_grow_with_harmonics():
     assert default_samples(1) >= 96 and default_samples(50) >= 32 * 101
     assert all(default_samples(h) > 4 * h + 1 for h in (1, 5, 25, 50))
