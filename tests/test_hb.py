@@ -207,3 +207,7 @@ def test_energy_gradient_matches_finite_differences():
         ]
     )
     assert np.allclose(g, gf, rtol=1e-5, atol=1e-7 * np.abs(g).max())
+    # the energy computed alongside the gradient is energy() to round-off (other summation order)
+    E, g2 = res.energy_and_gradient(y)
+    assert E == pytest.approx(res.energy(y), rel=1e-13)
+    assert np.array_equal(g2, g)

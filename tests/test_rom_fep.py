@@ -96,8 +96,8 @@ def test_hb_agrees_with_shooting_on_the_rom(fm, k, E):
 
 @pytest.mark.parametrize("system_of", ["discrete", "rom"])
 def test_nnm_residual_cached_operators_are_bit_for_bit_the_hb_operators(fm, system_of):
-    """NNMResidual builds its Kronecker products once and scatters the AFT Jacobian: the same
-    float operations as HarmonicBalance's, so the 3-DOF results do not move by a bit."""
+    """NNMResidual builds its Kronecker products once: the same float operations as
+    HarmonicBalance's, so its Jacobian is bit for bit HarmonicBalance.residual's."""
     system = conservative(DiscreteParams().system()) if system_of == "discrete" else fm.system
     rng = np.random.default_rng(7)
     for H in (1, 4):

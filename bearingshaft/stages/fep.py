@@ -53,7 +53,7 @@ from reduced.models.gaps import GapSystem
 from reduced.models.modes import gap_moving_modes, linear_modes
 from reduced.periodic import nnm2
 from reduced.periodic.backbones import START_FRACTION, hb_point_at_energy, nnm_branch
-from reduced.periodic.hb import NewtonError
+from reduced.periodic.hb import NewtonError, default_samples
 from reduced.periodic.shooting import conservative, shooting_branch
 from reduced.periodic.stability import compare, hill
 from reduced.transient.flow import Flow
@@ -182,10 +182,14 @@ def _fep_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
     branches = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # LinAlgWarning from LU on rejected steps
+        done = {}  # (mode, H, samples): a study branch at the default N is the branch already computed
         for mode, H, N in jobs:
             bar.set_postfix_str(f"NNM {mode + 1}, H={H}" + (f", N={N}" if N else ""))
-            branches[(mode, H, N)] = nnm_branch(system, fm.modes[mode], H=H, N=N, energy_max_J=spec.energy_max_J,
-                                                **fm.branch)
+            key = (mode, H, N or default_samples(H))
+            if key not in done:
+                done[key] = nnm_branch(system, fm.modes[mode], H=H, N=N, energy_max_J=spec.energy_max_J,
+                                       **fm.branch)
+            branches[(mode, H, N)] = done[key]
             bar.update()
         # shooting along each NNM, guided by the best complete HB branches
         shots = {}
@@ -315,11 +319,14 @@ def _fep_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
         )
         for m in range(n)
     }
+    f_hb_of = {}  # id(branch): HB frequencies at the shooting energies (a shared branch once)
     for (mode, H, N), b in branches.items():
         energies, orbits, _ = shots[mode]
         E_sh = np.array([o.energy_J if o else np.nan for o in orbits])
         f_sh = np.array([o.freq_hz if o else np.nan for o in orbits])
-        f_hb = _hb_at(b, E_sh)
+        if id(b) not in f_hb_of:
+            f_hb_of[id(b)] = _hb_at(b, E_sh)
+        f_hb = f_hb_of[id(b)]
         e = np.abs(f_hb / f_sh - 1.0)
         errors[(mode, H, N)] = (E_sh, e)
         ok = np.isfinite(e)

@@ -133,7 +133,7 @@ def continue_branch(
     except NewtonError as exc:
         raise ContinuationError(f"start point not found: {exc}") from None
     y = start.y
-    _, J = fun(y)
+    J = start.jacobian[:-1]  # dR/dy at y (the fixed row dropped)
     t = tangent(J)
     if t[param] * direction < 0.0:
         t = -t
@@ -159,8 +159,7 @@ def continue_branch(
             ok = False
             try:
                 res = newton(corrector, yp, tol=tol, max_iter=max_iter, max_step=max_jump(ds))
-                _, Jn = fun(res.y)
-                tn = tangent(Jn, t)
+                tn = tangent(res.jacobian[:-1], t)  # newton's Jacobian is at res.y: the arclength row dropped
                 # a corner (the square-root onset of contact at grazing) turns the tangent by
                 # up to 90 degrees however short the step: accept it once the step is short
                 turn_ok = tn @ t >= cos_max or (ds <= corner_ds and tn @ t > 0.0)
@@ -250,8 +249,7 @@ def _corner_step(fun, y, t, coords, param, h, tol, max_iter, reject):
                     d = res.y - y
                     if np.linalg.norm(d) < 0.5 * hh or (reject is not None and reject(y, res.y)):
                         continue
-                    _, Jn = fun(res.y)
-                    tn = tangent(Jn, d / np.linalg.norm(d))
+                    tn = tangent(res.jacobian[:-1], d / np.linalg.norm(d))
                     if tn @ t < -0.5:  # back along the branch we came from
                         continue
                     return res, tn

@@ -223,6 +223,11 @@ class HarmonicBalance:
             return x
         return x, omega * (E @ (self.Nab @ Xm))
 
+    @functools.cached_property
+    def synthesis_derivative(self) -> np.ndarray:
+        """(N, 2H+1) E Nab: dx/dtau at the samples is E Nab X."""
+        return self.E @ self.Nab
+
     # -- AFT: F(X) and dF/dX ----------------------------------------------------------------
     def aft(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """F(X) (size,) and dF/dX (size, size) by alternating frequency/time."""
@@ -231,8 +236,9 @@ class HarmonicBalance:
 
     @functools.cached_property
     def _gram_index(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(i1, s1, i2, s2), each (2H+1, 2H+1), for :meth:`weighted_gram`: the product of basis
-        functions h and h' is 1/2 (s1 T[i1] + s2 T[i2]) with T = [cos 0 .. cos 2H, sin 0 .. sin 2H] tau."""
+        """(i1, s1, i2, s2), each (2H+1, 2H+1), for :meth:`weighted_gram`: c_h times the product of
+        basis functions h and h' is s1 T[i1] + s2 T[i2] with T = [cos 0 .. cos 2H, sin 0 .. sin 2H] tau
+        (the identities' 1/2 and c_h folded into s1, s2)."""
         H = self.H
         k = self.harmonic_numbers()
         sine = (np.arange(2 * H + 1) % 2 == 0) & (k > 0)
@@ -247,10 +253,12 @@ class HarmonicBalance:
         s1 = np.where(mixed, np.where(sj, 1.0, -1.0) * np.sign(d), 1.0)
         i2 = np.where(mixed, S0 + j + kk, j + kk)
         s2 = np.where(sj & sk, -1.0, 1.0)
-        return i1, s1, i2, s2
+        half_c = np.where(np.arange(2 * H + 1) == 0, 0.5, 1.0)[:, None]  # c_h / 2: c_0 = 1, else 2
+        return i1, half_c * s1, i2, half_c * s2
 
     def weighted_gram(self, w: np.ndarray) -> np.ndarray:
-        """G = P diag(w) E (2H+1, 2H+1) for sample weights w (N,), from the DFT of w.
+        """G = P diag(w) E (2H+1, 2H+1) for sample weights w (N,), from the DFT of w; for w (N, r),
+        one G per column (r, 2H+1, 2H+1).
 
         G[h, h'] = c_h / N sum_i w_i E[i, h] E[i, h'] (c_0 = 1, else 2), and the product of two
         basis functions is a sum of two harmonics of order <= 2H (the identities in
@@ -259,22 +267,27 @@ class HarmonicBalance:
         are one FFT: O(N log N + H^2) instead of the O(N H^2) product (150x at H = 50, N = 4096).
         Equal to the product to round-off (tests/test_hb.py).
         """
-        Fw = np.fft.fft(w)[: 2 * self.H + 1] / self.N  # A_m - i S_m
-        T = np.concatenate([Fw.real, -Fw.imag])
-        i1, s1, i2, s2 = self._gram_index
-        G = 0.5 * (s1 * T[i1] + s2 * T[i2])
-        G[1:] *= 2.0
+        w = np.asarray(w, float)
+        Fw = np.fft.fft(w.T)[..., : 2 * self.H + 1] / self.N  # A_m - i S_m, a row per column of w
+        T = np.concatenate([Fw.real, -Fw.imag], axis=-1)
+        i1, s1, i2, s2 = self._gram_index  # c_h / 2 folded into s1, s2
+        G = np.take(T, i1, axis=-1)
+        G *= s1
+        G2 = np.take(T, i2, axis=-1)
+        G2 *= s2
+        G += G2
         return G
 
     def _aft_jacobian(self, w: np.ndarray) -> np.ndarray:
-        """dF/dX = sum_r kron(P diag(w_r) E, Q_r) (size, size) from the force weights w (N, r)."""
-        dF = np.zeros((self.size, self.size))
-        for r in range(self.Qr.shape[0]):
-            wr = w[:, r]
-            if not np.any(wr):
-                continue
-            dF += np.kron(self.weighted_gram(wr), self.Qr[r])
-        return dF
+        """dF/dX = sum_r kron(P diag(w_r) E, Q_r) (size, size) from the force weights w (N, r):
+        the Gram matrices of the columns with any weight, contracted with their Q_r at once."""
+        act = np.flatnonzero(np.any(w, axis=0))
+        if act.size == 0:
+            return np.zeros((self.size, self.size))
+        G = self.weighted_gram(w[:, act])  # (r, h, h')
+        h, n = 2 * self.H + 1, self.n
+        dF = G.reshape(act.size, h * h).T @ self.Qr[act].reshape(act.size, n * n)  # (h h', i j)
+        return dF.reshape(h, h, n, n).transpose(0, 2, 1, 3).reshape(self.size, self.size)
 
     # -- the linear part and the residual -----------------------------------------------------
     def linear_operator(self, omega: float) -> np.ndarray:
@@ -369,40 +382,17 @@ class NNMResidual:
         return a * Psi, omega
 
     @functools.cached_property
-    def _operators(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list]:
-        """(kron(I, K), kron(Nab^2, M), kron(Nab, M), [(r, i, j, Q_r[i, j]) nonzero]), built once.
+    def _operators(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(kron(I, K), kron(Nab^2, M), kron(Nab, M)), built once.
 
         The Kronecker products do not change along a branch; rebuilding them at every call
         cost more than the LU on a 12-DOF reduced model. The sums below are the same float
-        operations in the same order as :meth:`HarmonicBalance.linear_operator`,
-        :meth:`HarmonicBalance._linear_operator_domega` and
-        :meth:`HarmonicBalance._aft_jacobian`, so the results are bit-for-bit theirs.
+        operations in the same order as :meth:`HarmonicBalance.linear_operator` and
+        :meth:`HarmonicBalance._linear_operator_domega`, so the results are bit-for-bit theirs.
         """
         hb = self.hb
         I = np.eye(2 * hb.H + 1)
-        nz = [(r, i, j, float(q)) for r in range(hb.Qr.shape[0]) for i, j in zip(*np.nonzero(hb.Qr[r]), strict=True)
-              for q in [hb.Qr[r, i, j]]]
-        return np.kron(I, hb.K), np.kron(hb.Nab @ hb.Nab, hb.M), np.kron(hb.Nab, hb.M), nz
-
-    def _aft(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`HarmonicBalance.aft`, with dF/dX scattered from the nonzeros of each Q_r
-        instead of summed Kronecker products (the same values: kron(G, Q_r) adds G[h, h'] Q_r[i, j]
-        at (h n + i, h' n + j) and zero elsewhere)."""
-        hb = self.hb
-        f, w = hb.force(hb.E @ hb.unpack(X))
-        n = hb.n
-        dF = np.zeros((hb.size, hb.size))
-        G = None
-        r_last = -1
-        for r, i, j, q in self._operators[3]:
-            wr = w[:, r]
-            if not np.any(wr):
-                continue
-            if r != r_last:
-                G = hb.weighted_gram(wr)
-                r_last = r
-            dF[i::n, j::n] += G * q
-        return (hb.P @ f).ravel(), dF
+        return np.kron(I, hb.K), np.kron(hb.Nab @ hb.Nab, hb.M), np.kron(hb.Nab, hb.M)
 
     def __call__(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """R (size+2,) and dR/dy (size+2, size+3)."""
@@ -410,8 +400,8 @@ class NNMResidual:
         n, nX = hb.n, hb.size
         Psi, omega, delta, a = self.split(y)
         if hb.C is None:
-            KI, NM2, DM, _ = self._operators
-            F, dF = self._aft(a * Psi)
+            KI, NM2, DM = self._operators
+            F, dF = hb.aft(a * Psi)
             A = KI + omega**2 * NM2
             dA = 2.0 * omega * NM2
         else:
@@ -448,9 +438,15 @@ class NNMResidual:
         return self.hb.energy(X, omega)
 
     def energy_gradient(self, y: np.ndarray) -> np.ndarray:
-        """dE/dy of :meth:`energy` (analytic: dU/dx is the nonlinear force itself).
+        """dE/dy of :meth:`energy` (:meth:`energy_and_gradient`)."""
+        return self.energy_and_gradient(y)[1]
+
+    def energy_and_gradient(self, y: np.ndarray) -> tuple[float, np.ndarray]:
+        """(E, dE/dy): :meth:`energy` (equal to round-off) and its analytic gradient from one
+        synthesis (dU/dx is the nonlinear force itself).
 
         With x_i = sum_h E[i,h] X_h and v_i = omega sum_h (E Nab)[i,h] X_h,
+        E = mean_i [v_i^T M v_i / 2 + x_i^T K x_i / 2 + U(x_i)] and
         dE/dX_h = mean_i [E[i,h] (K x_i + f(x_i)) + omega (E Nab)[i,h] M v_i].
         """
         hb = self.hb
@@ -458,16 +454,20 @@ class NNMResidual:
         Psi, omega, _, a = self.split(y)
         Xm = hb.unpack(a * Psi)
         x = hb.E @ Xm
-        G = hb.E @ hb.Nab
+        G = hb.synthesis_derivative
         v = omega * (G @ Xm)
         f, _ = hb.force(x)
         N = x.shape[0]
-        dX = (hb.E.T @ (x @ hb.K + f) + omega * (G.T @ (v @ hb.M))) / N
+        Kx, Mv = x @ hb.K, v @ hb.M
+        kin2 = np.sum(Mv * v, axis=1)
+        potential = getattr(hb.force, "potential", None)
+        E = float(np.mean(0.5 * kin2 + 0.5 * np.sum(Kx * x, axis=1) + (0.0 if potential is None else potential(x))))
+        dX = (hb.E.T @ (Kx + f) + omega * (G.T @ Mv)) / N
         g = np.zeros(nX + 3)
         g[:nX] = a * dX.ravel()
-        g[nX] = float(np.mean(np.einsum("ij,jk,ik->i", v, hb.M, v))) / omega * self.omega_ref
+        g[nX] = float(np.mean(kin2)) / omega * self.omega_ref
         g[nX + 2] = np.log(10.0) * float(dX.ravel() @ (a * Psi))
-        return g
+        return E, g
 
 
 # -- Newton ---------------------------------------------------------------------------------

@@ -407,7 +407,7 @@ def _march(s, K, lam, alam, const, coef, lc, l2c, a0, qtol, dnoise, live, n_live
 
 @nb.njit(cache=True)
 def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_samples, i_samp, t_after, out_y, out_W,
-                 W, hmin, floor, max_events, n_stuck, out_E, E):
+                 W, hmin, floor, max_events, n_stuck, out_E, E, seg_s, seg_tau):
     """March events from t through the pieces ending at bounds[c], bounds[c + 1], ... (no loads), filling
     the sample buffer ``t_samples`` from i_samp.
 
@@ -416,7 +416,10 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
     closed form restarts there) and resets n_stuck. When the buffer fills inside a segment that still
     has samples before its end (the next sample, at ``t_after``, lies in it), the kernel returns
     BUFFER_FULL without advancing that segment, so the samples do not depend on the buffer size.
-    ``out_E`` (empty, or as long as the buffer) receives the loads' work E, constant here.
+    ``out_E`` (empty, or as long as the buffer) receives the loads' work E, constant here. When
+    ``seg_s`` is not empty, segment k's contact state and length go to seg_s[k], seg_tau[k] (for the
+    flow's Jacobian, :func:`flow_jacobian`; a segment ends at an event or a bound, so with one bound
+    there are n_events + 1, and max_events must leave room for them).
     Returns (t, W, i_samp, n_events, n_iter, status, n_stuck, c): c the piece reached.
     """
     (nK, lam, alam, UT, Uinv, aUinv, yp, BU, aBU, Byp, Wm, Hd, ip, ii, ik, ikind, icoef, iz) = tb
@@ -450,6 +453,8 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
     n_events = 0
     n_iter = 0
     status = 0
+    n_seg = 0
+    rec = seg_s.shape[0] > 0
     t_end = bounds[c]
     while True:
         s = _state_of(active)
@@ -490,6 +495,10 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
                 W += _work_near(s, w, tau_ev, ip, ii, ik, ikind, icoef, iz)
         for r in range(N):
             y[r] = ytmp[r]
+        if rec:
+            seg_s[n_seg] = s
+            seg_tau[n_seg] = tau_ev
+            n_seg += 1
         n_stuck = n_stuck + 1 if tau_ev == 0.0 else 0
         if n_stuck > 8 * m:
             status = -4
@@ -508,3 +517,34 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
             status = -1
             break
     return t, W, i_samp, n_events, n_iter, status, n_stuck, c
+
+
+@nb.njit(cache=True)
+def flow_jacobian(tb, seg_s, seg_tau, n_seg, J):
+    """J <- exp(A_{s_k} tau_k) ... exp(A_{s_1} tau_1) J over the recorded segments, in place (2n, 2n) real.
+
+    exp(A_s tau) z = Re sum_{i<K} U[:, i] e^{lam_i tau} (Uinv z)_i for a real z (the kept-term form of
+    V diag(e^{lam tau}) V^-1, module docstring), applied to each column of J.
+    """
+    nK, lam, UT, Uinv = tb[0], tb[1], tb[3], tb[4]
+    N = J.shape[0]
+    Kmax = lam.shape[1]
+    Z = np.empty((Kmax, N), np.complex128)
+    e = np.empty(Kmax, np.complex128)
+    ea = np.empty(Kmax)
+    for k in range(n_seg):
+        s = seg_s[k]
+        K = nK[s]
+        _terms(lam[s], K, seg_tau[k], e, ea)
+        for i in range(K):
+            for c in range(N):
+                acc = 0.0 + 0.0j
+                for r in range(N):
+                    acc += Uinv[s, i, r] * J[r, c]
+                Z[i, c] = acc * e[i]
+        for r in range(N):
+            for c in range(N):
+                acc = 0.0
+                for i in range(K):
+                    acc += UT[s, 0, i, r] * Z[i, c].real - UT[s, 1, i, r] * Z[i, c].imag
+                J[r, c] = acc

@@ -938,6 +938,8 @@ def _modal_start(V_s, Vinv_s, y, yp_s, X, werr):
 
 
 BUFFER_FULL = 1  # _exact_kernel status: the sample buffer is full inside the present segment
+NO_SEGMENTS = np.zeros(0, np.int64)  # _modal._free_kernel records no segments (the flow's Jacobian does)
+NO_TAU = np.zeros(0)
 
 
 @nb.njit(cache=True)
@@ -1216,7 +1218,7 @@ def stream_exact(
                     if starts is None:
                         t, W, i, ne, ni, status, n_stuck, c = call_numba_kernel(_modal._free_kernel,
                             mt, system.offset, system.side, system.tip, damped, y, active, t, tb_, c, ts, i, t_after,
-                            out_y, out_W, W, hmin, floor, max_events - n_events, n_stuck, out_E, E)
+                            out_y, out_W, W, hmin, floor, max_events - n_events, n_stuck, out_E, E, NO_SEGMENTS, NO_TAU)
                     else:
                         t, W, E, i, ne, ni, status, n_stuck = call_numba_kernel(_exact_kernel,
                             table.lam, table.V, table.Vinv, table.yp, table.valid, system.B, system.offset,
