@@ -411,11 +411,16 @@ class NNMResidual:
             dA = hb._linear_operator_domega(omega)
         R = np.empty(nX + 2)
         J = np.zeros((nX + 2, nX + 3))
-        R[:nX] = (A @ Psi + F / a - delta * omega * (DM @ Psi)) / wr**2
-        J[:nX, :nX] = (A + dF - delta * omega * DM) / wr**2
-        J[:nX, nX] = (dA @ Psi - delta * (DM @ Psi)) / wr
-        J[:nX, nX + 1] = -omega * (DM @ Psi) / wr
-        J[:nX, nX + 2] = np.log(10.0) * (dF @ Psi - F / a) / wr**2
+        DMPsi, Fa = DM @ Psi, F / a
+        R[:nX] = (A @ Psi + Fa - delta * omega * DMPsi) / wr**2
+        Jx = J[:nX, :nX]
+        np.add(A, dF, out=Jx)  # (A + dF - delta omega DM) / wr^2, in place
+        if delta != 0.0:
+            Jx -= delta * omega * DM
+        Jx /= wr**2
+        J[:nX, nX] = (dA @ Psi - delta * DMPsi) / wr
+        J[:nX, nX + 1] = -omega * DMPsi / wr
+        J[:nX, nX + 2] = np.log(10.0) * (dF @ Psi - Fa) / wr**2
         # phase: the fundamental sine coefficient of DOF ref
         i_s1 = 2 * n + self.ref
         R[nX] = Psi[i_s1]
