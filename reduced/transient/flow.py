@@ -296,12 +296,7 @@ class Flow:
             True,
             *fargs,
         )
-        if status == -1:
-            raise ExactIntegratorError(f"more than {MAX_SEGMENTS} contact events in {T:.4g} s")
-        if status == -2:
-            raise ExactIntegratorError("the motion reached an infeasible contact state")
-        if status == -3:
-            raise ExactIntegratorError("event search did not converge")
+        _check_status(status, MAX_SEGMENTS, T)
         seg = (self._seg_state[:n_seg].copy(), self._seg_tau[:n_seg].copy())
         J = None
         if jacobian:
@@ -319,14 +314,7 @@ class Flow:
             self._modal, sy.offset, sy.side, sy.tip, self._damped, y, active, 0.0, np.array([T]), 0,
             NO_TAU, 0, np.inf, _NO_SAMPLES, NO_TAU, 0.0, self.hmin, 0.0, MAX_SEGMENTS - 1, 0, NO_TAU, 0.0,
             self._seg_state, self._seg_tau)
-        if status == -1:
-            raise ExactIntegratorError(f"more than {MAX_SEGMENTS - 1} contact events in {T:.4g} s")
-        if status == -2:
-            raise ExactIntegratorError("the motion reached an infeasible contact state")
-        if status == -3:
-            raise ExactIntegratorError("event search did not converge")
-        if status == -4:
-            raise ExactIntegratorError("stuck: a stop switching back and forth at one instant")
+        _check_status(status, MAX_SEGMENTS - 1, T)
         n_seg = n_ev + 1
         seg = (self._seg_state[:n_seg].copy(), self._seg_tau[:n_seg].copy())
         J = None
@@ -337,6 +325,16 @@ class Flow:
 
 
 _NO_SAMPLES = np.zeros((0, 0))
+_STATUS = {-2: "the motion reached an infeasible contact state", -3: "event search did not converge",
+           -4: "stuck: a stop switching back and forth at one instant"}
+
+
+def _check_status(status: int, max_events: int, T: float) -> None:
+    """Raise ExactIntegratorError for a kernel's failure status (-1: too many events)."""
+    if status == -1:
+        raise ExactIntegratorError(f"more than {max_events} contact events in {T:.4g} s")
+    if status in _STATUS:
+        raise ExactIntegratorError(_STATUS[status])
 
 
 __all__ = ["Flow", "FlowResult"]
