@@ -149,7 +149,8 @@ def main() -> None:
     col = "max_err_vs_shooting_above_last_tongue"
     err = (f"HB vs exact NNM 2 relation: ours {acc['max_err_vs_exact_ours']:.2g}, before "
            f"{acc['max_err_vs_exact_baseline']:.2g}; HB vs shooting above the last tongue: "
-           f"ours {acc[col + '_ours']:.2g}, before {acc[col + '_baseline']:.2g} (largest change of a tongue-independent error "
+           f"ours {acc[col + '_ours']:.2g}, before {acc[col + '_baseline']:.2g} "
+           f"(largest change of a tongue-independent error "
            f"{max(acc[c + '_maxdiff'] for c in STABLE_COLUMNS):.1g}); fep.csv {acc['fep_points_ours']} points "
            f"(before {acc['fep_points_baseline']})")
     write_rows(out_dir / "fep_headline.csv", [
