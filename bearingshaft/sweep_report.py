@@ -181,32 +181,20 @@ def nnm_stability(model, energy_min_J: float, energy_max_J: float, n: int = STAB
     whether its eigenvector is symmetric (x1 = x3) or antisymmetric (x1 = -x3): an
     antisymmetrically unstable orbit is one the symmetric motion leaves. Energies where shooting
     finds no orbit are rows with ``found`` = 0."""
-    from reduced._blas import single_thread_blas
-    from reduced.periodic.backbones import nnm_branch
-    from reduced.periodic.shooting import conservative, shooting_branch
-    from reduced.transient.flow import Flow
+    from reduced.periodic.shooting import floquet_scan, mirror_mode
 
-    cons = conservative(model.system())
-    flow = Flow(cons)
     E = np.geomspace(energy_min_J, energy_max_J, n)
     rows = []
-    for mode in (0, 2):
-        guide = nnm_branch(cons, mode, H=1)
-        with single_thread_blas():
-            orbits = shooting_branch(flow, E, [guide])
+    for mode, orbits in floquet_scan(model.system(), (0, 2), E).items():
         for e, o in zip(E, orbits, strict=True):
             if o is None:
                 rows.append({"nnm": mode + 1, "energy_J": float(e), "found": 0, "freq_hz": "", "max_abs_mu": "",
                              "stable": "", "unstable_eigvec": ""})
                 continue
-            lam, vec = np.linalg.eig(o.monodromy)
-            v = vec[:, int(np.argmax(np.abs(lam)))]
-            anti = float(np.linalg.norm(v[[0, 3]] - v[[2, 5]]))
-            sym = float(np.linalg.norm(v[[0, 3]] + v[[2, 5]]) + 2 * np.linalg.norm(v[[1, 4]]))
             unstable = o.max_multiplier > UNSTABLE
             rows.append({"nnm": mode + 1, "energy_J": float(o.energy_J), "found": 1, "freq_hz": float(o.freq_hz),
                          "max_abs_mu": float(o.max_multiplier), "stable": int(not unstable),
-                         "unstable_eigvec": ("antisymmetric" if anti > sym else "symmetric") if unstable else ""})
+                         "unstable_eigvec": mirror_mode(o) if unstable else ""})
     return rows
 
 

@@ -26,8 +26,7 @@ import numpy as np
 from bearingshaft.output import write_rows
 from reduced._blas import single_thread_blas
 from reduced.models.discrete import DiscreteParams
-from reduced.periodic.backbones import nnm_branch
-from reduced.periodic.shooting import conservative, shooting_branch
+from reduced.periodic.shooting import floquet_scan, mirror_mode
 from reduced.transient.exact import integrate_exact
 from reduced.transient.flow import Flow
 
@@ -103,22 +102,12 @@ def main(argv=None) -> int:
     write_rows(out / "symmetry_growth.csv", rows)
 
     # 3. Floquet multipliers of NNM 1 and 3 at energies along the ringdown
-    cons = conservative(system)
-    cflow = Flow(cons)
     frows = []
     energies = np.logspace(1, np.log10(3e4), 25)
-    for mode in (0, 2):
-        guide = nnm_branch(cons, mode, H=1)
-        with single_thread_blas():
-            orbits = shooting_branch(cflow, energies, [guide])
-        for _E, o in zip(energies, orbits, strict=True):
+    for mode, orbits in floquet_scan(system, (0, 2), energies).items():
+        for o in orbits:
             if o is None:
                 continue
-            lam, vec = np.linalg.eig(o.monodromy)
-            k = int(np.argmax(np.abs(lam)))
-            e = vec[:, k]
-            anti = float(np.linalg.norm(e[[0, 3]] - e[[2, 5]]))
-            sym = float(np.linalg.norm(e[[0, 3]] + e[[2, 5]]) + 2 * np.linalg.norm(e[[1, 4]]))
             frows.append(
                 {
                     "nnm": mode + 1,
@@ -127,7 +116,7 @@ def main(argv=None) -> int:
                     "max_abs_mu": o.max_multiplier,
                     "stable": int(o.stable),
                     "growth_1_s": float(np.log(o.max_multiplier) * o.freq_hz),
-                    "eigvec": "antisymmetric" if anti > sym else "symmetric",
+                    "eigvec": mirror_mode(o),
                 }
             )
     write_rows(out / "symmetry_floquet.csv", frows)

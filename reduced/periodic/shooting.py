@@ -198,8 +198,38 @@ def _shoot(flow, x0, v0, period_s, energy_J, *, ref, tol, max_iter, stall=None, 
     )
 
 
+def mirror_mode(orbit: PeriodicOrbit) -> str:
+    """"antisymmetric" or "symmetric": the eigenvector of the largest Floquet multiplier of an orbit of a
+    mirror-symmetric 3-DOF model (state [x1, x2, x3, v1, v2, v3], mirror x1 <-> x3), by which part is
+    larger: |e_x1 - e_x3| + |e_v1 - e_v3| (antisymmetric) or |e_x1 + e_x3| + |e_v1 + e_v3| + 2 |e_x2, e_v2|
+    (symmetric). An orbit unstable with an antisymmetric eigenvector is one a symmetric motion leaves."""
+    lam, vec = np.linalg.eig(orbit.monodromy)
+    e = vec[:, int(np.argmax(np.abs(lam)))]
+    anti = float(np.linalg.norm(e[[0, 3]] - e[[2, 5]]))
+    sym = float(np.linalg.norm(e[[0, 3]] + e[[2, 5]]) + 2 * np.linalg.norm(e[[1, 4]]))
+    return "antisymmetric" if anti > sym else "symmetric"
+
+
+def floquet_scan(system: GapSystem, modes, energies_J: np.ndarray) -> dict[int, list]:
+    """{mode: [PeriodicOrbit or None per energy]}: shooting along NNM ``mode`` (0-based) of the undamped
+    ``system`` at each energy (:func:`shooting_branch` on the exact flow, guided by the HB branch with
+    one harmonic), on one BLAS thread."""
+    from reduced.periodic.backbones import nnm_branch
+
+    cons = conservative(system)
+    flow = Flow(cons)
+    out = {}
+    for mode in modes:
+        guide = nnm_branch(cons, int(mode), H=1)
+        with single_thread_blas():
+            out[int(mode)] = shooting_branch(flow, np.asarray(energies_J, float), [guide])
+    return out
+
+
 __all__ = [
     "drop_trivial_pair",
+    "floquet_scan",
+    "mirror_mode",
     "PeriodicOrbit",
     "ShootingError",
     "shoot",
