@@ -280,13 +280,12 @@ class HarmonicBalance:
 
     def _aft_jacobian(self, w: np.ndarray) -> np.ndarray:
         """dF/dX = sum_r kron(P diag(w_r) E, Q_r) (size, size) from the force weights w (N, r):
-        the Gram matrices of the columns with any weight, contracted with their Q_r at once."""
-        act = np.flatnonzero(np.any(w, axis=0))
-        if act.size == 0:
+        every column's Gram matrix (one FFT each), contracted with the Q_r at once."""
+        if not w.any():
             return np.zeros((self.size, self.size))
-        G = self.weighted_gram(w[:, act])  # (r, h, h')
-        h, n = 2 * self.H + 1, self.n
-        dF = G.reshape(act.size, h * h).T @ self.Qr[act].reshape(act.size, n * n)  # (h h', i j)
+        G = self.weighted_gram(w)  # (r, h, h'), zero for a stop that never closes
+        h, n, r = 2 * self.H + 1, self.n, w.shape[1]
+        dF = G.reshape(r, h * h).T @ self.Qr.reshape(r, n * n)  # (h h', i j)
         return dF.reshape(h, h, n, n).transpose(0, 2, 1, 3).reshape(self.size, self.size)
 
     # -- the linear part and the residual -----------------------------------------------------
@@ -320,11 +319,12 @@ class HarmonicBalance:
         ``potential`` method (:class:`GapForce`, :class:`CubicForce`; zero if it has none).
         """
         x, v = self.time_series(X, omega)
-        kin = 0.5 * np.einsum("ij,jk,ik->i", v, self.M, v)
-        lin = 0.5 * np.einsum("ij,jk,ik->i", x, self.K, x)
+        N = x.shape[0]
+        # sum_i v_i^T M v_i as one dot product of the flattened arrays (a per-sample sum over the
+        # short axis, or a three-operand einsum, costs 3-10x more)
+        quad = (np.vdot(v @ self.M, v) + np.vdot(x @ self.K, x)) / (2 * N)
         potential = potential or getattr(self.force, "potential", None)
-        nl = 0.0 if potential is None else potential(x)
-        return float(np.mean(kin + lin + nl))
+        return float(quad + (0.0 if potential is None else np.mean(potential(x))))
 
     def hill_matrices(self, X: np.ndarray, omega: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(J0, J1, J2) of Hill's quadratic eigenproblem (J2 lam^2 + J1 lam + J0) p = 0.
@@ -464,13 +464,13 @@ class NNMResidual:
         f, _ = hb.force(x)
         N = x.shape[0]
         Kx, Mv = x @ hb.K, v @ hb.M
-        kin2 = np.sum(Mv * v, axis=1)
+        kin2 = np.vdot(Mv, v) / N  # mean of v_i^T M v_i
         potential = getattr(hb.force, "potential", None)
-        E = float(np.mean(0.5 * kin2 + 0.5 * np.sum(Kx * x, axis=1) + (0.0 if potential is None else potential(x))))
+        E = float(0.5 * kin2 + 0.5 * np.vdot(Kx, x) / N + (0.0 if potential is None else np.mean(potential(x))))
         dX = (hb.E.T @ (Kx + f) + omega * (G.T @ Mv)) / N
         g = np.zeros(nX + 3)
         g[:nX] = a * dX.ravel()
-        g[nX] = float(np.mean(kin2)) / omega * self.omega_ref
+        g[nX] = float(kin2) / omega * self.omega_ref
         g[nX + 2] = np.log(10.0) * float(dX.ravel() @ (a * Psi))
         return E, g
 
