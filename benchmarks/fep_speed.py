@@ -93,11 +93,11 @@ def _accuracy(ours: Path, base: Path) -> dict:
     for col in STABLE_COLUMNS:
         diffs, va, vb = [], [], []
         for k in set(a) & set(b):
-            x, y = a[k].get(col, ""), b[k].get(col, "")
-            if x and y:
-                diffs.append(abs(float(x) - float(y)))
-                va.append(float(x))
-                vb.append(float(y))
+            x, y = float(a[k].get(col) or "nan"), float(b[k].get(col) or "nan")
+            if np.isfinite(x) and np.isfinite(y):  # a nan in max() would make the answer depend on set order
+                diffs.append(abs(x - y))
+                va.append(x)
+                vb.append(y)
         out[f"{col}_maxdiff"] = max(diffs, default=np.nan)
         out[f"{col}_ours"] = max(va, default=np.nan)
         out[f"{col}_baseline"] = max(vb, default=np.nan)
