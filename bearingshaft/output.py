@@ -44,6 +44,29 @@ def git_commit() -> str:
         return "unknown"
 
 
+def machine_rows(**extra) -> list[dict]:
+    """The machine a benchmark ran on, as ``key, value`` rows for a CSV: CPU model, cores,
+    Python and library versions, commit, UTC date and 1-minute load, then ``extra``."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        cpu = next(line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
+                   if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    info = {"platform": platform.platform(), "cpu": cpu, "cores": os.cpu_count(),
+            "python": platform.python_version()}
+    for pkg in ("numpy", "scipy", "numba", "scikit-fem"):
+        try:
+            info[pkg] = version(pkg)
+        except PackageNotFoundError:
+            pass
+    info.update(git_commit=git_commit(), date_utc=datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+                load_1min=round(os.getloadavg()[0], 2), **extra)
+    return [{"key": k, "value": v} for k, v in info.items()]
+
+
 def _jsonable(obj):
     if isinstance(obj, dict):
         return {str(k): _jsonable(v) for k, v in obj.items()}

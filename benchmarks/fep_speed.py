@@ -27,7 +27,6 @@ from __future__ import annotations
 import argparse
 import csv
 import os
-import platform
 import re
 import resource
 import shutil
@@ -42,7 +41,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bearingshaft.output import git_commit, write_rows  # noqa: E402
+from bearingshaft.output import machine_rows, write_rows  # noqa: E402
 
 TARGET_S = 30.0
 # error columns of hb_convergence.csv that do not depend on where a continuation crossed a tongue
@@ -166,14 +165,8 @@ def main() -> None:
          "baseline_s": round(b["cpu_s"], 2), "ratio": round(b["cpu_s"] / o["cpu_s"], 2), "error": "", "target": "",
          "met": ""},
     ])
-    write_rows(out_dir / "fep_machine.csv", [
-        {"key": k, "value": v} for k, v in [
-            ("platform", platform.platform()), ("cpu", platform.processor() or platform.machine()),
-            ("cores", os.cpu_count()), ("python", platform.python_version()), ("numpy", np.__version__),
-            ("git_commit", git_commit()), ("baseline_commit", args.baseline_commit),
-            ("load_1min_start", round(load0, 2)), ("load_1min_end", round(os.getloadavg()[0], 2)),
-            ("date_utc", time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())),
-            *[(k, v) for k, v in acc.items()]]])
+    write_rows(out_dir / "fep_machine.csv", machine_rows(
+        baseline_commit=args.baseline_commit, load_1min_start=round(load0, 2), **acc))
     print(f"ours {o['wall_s']:.1f} s, before {b['wall_s']:.1f} s: {b['wall_s'] / o['wall_s']:.2f}x; {err}")
 
 

@@ -67,7 +67,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import sys
 import time
 from dataclasses import replace
@@ -79,7 +78,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from bearingshaft.hammer_report import BAND_HZ, band_limited, full_reference, rms_errors  # noqa: E402
-from bearingshaft.output import git_commit, write_rows  # noqa: E402
+from bearingshaft.output import git_commit, machine_rows, write_rows  # noqa: E402
 from bearingshaft.scenes import load_scene  # noqa: E402
 from bearingshaft.stages.hammer import blow, default_location, run_record  # noqa: E402
 from bearingshaft.stages.study import sig  # noqa: E402
@@ -230,8 +229,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"n = {n}: 2 s record at {IMPACT_N:g} N, median {np.median(walls):.1f} s of "
               f"{', '.join(f'{w:.1f}' for w in walls)}", flush=True)
     machine = {"full_reference_s": round(t_full, 1), "load_1min_before": round(load_before, 2),
-               "load_1min_after": round(os.getloadavg()[0], 2), "cpu": _cpu(), "cores": os.cpu_count(),
-               "python": platform.python_version(), **{p: version(p) for p in ("numpy", "scipy", "numba")},
+               "load_1min_after": round(os.getloadavg()[0], 2),
+               **{r["key"]: r["value"] for r in machine_rows()
+                  if r["key"] in ("cpu", "cores", "python", "numpy", "scipy", "numba")},
                "bearingshaft": version("bearingshaft"), "commit": commit}
     rows.sort(key=lambda r: (r["reference"] != "full-3d", r["level_N"], r["window_s"], list(BANDS).index(r["band"]),
                              r["n_modes"]))
@@ -304,15 +304,6 @@ def figure(path: Path, rows: list[dict], floor: list[dict], counts: list[int], t
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
-
-def _cpu() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 if __name__ == "__main__":

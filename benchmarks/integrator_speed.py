@@ -39,7 +39,6 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import os
-import platform
 import subprocess
 import sys
 import time
@@ -51,7 +50,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bearingshaft.output import git_commit, write_rows  # noqa: E402
+from bearingshaft.output import machine_rows, write_rows  # noqa: E402
 from reduced._blas import single_thread_blas  # noqa: E402
 from reduced.studies import relative_error  # noqa: E402
 from reduced.transient.dop853 import integrate_dop853  # noqa: E402
@@ -97,22 +96,7 @@ def load_baseline(commit: str) -> dict:
 
 
 def machine() -> list[dict]:
-    import numba
-    import scipy
-
-    cpu = "unknown"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    info = {"platform": platform.platform(), "cpu": cpu, "cores": os.cpu_count(),
-            "python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__,
-            "numba": numba.__version__, "git_commit": git_commit(),
-            "load_1min_start": os.getloadavg()[0], "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
-    return [{"key": k, "value": v} for k, v in info.items()]
+    return machine_rows(load_1min_start=os.getloadavg()[0])
 
 
 def timed(fn, repeats: int) -> tuple[object, dict]:

@@ -27,7 +27,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
-import platform
 import statistics
 import sys
 import time
@@ -37,7 +36,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bearingshaft.output import write_rows  # noqa: E402
+from bearingshaft.output import machine_rows, write_rows  # noqa: E402
 from fem.modal import baseline_modal, modal_analysis, residual_test  # noqa: E402
 from fem.model import AssemblyModel, build_system  # noqa: E402
 from geometry.build import build_mesh  # noqa: E402
@@ -132,8 +131,9 @@ def main(argv=None) -> int:
             "met": n_meet == args.n_modes})
         write_rows(out / "modal_residuals.csv", modes_rows, float_format=".6g")
         write_rows(out / "modal_headline.csv", headline, float_format=".4g")
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, python "
-          f"{platform.python_version()}, numpy {np.__version__}")
+    machine = machine_rows()
+    write_rows(out / "modal_machine.csv", machine)
+    print("machine: " + ", ".join(f"{r['key']} {r['value']}" for r in machine))
     return 0
 
 

@@ -30,11 +30,11 @@ from bearingshaft.output import write_rows  # noqa: E402
 SOURCES = (
     ("integrator_headline.csv", "integrator_machine.csv", "ringdown integrators",
      "PYTHONPATH=. python benchmarks/integrator_speed.py --repeats 5", ""),
-    ("modal_headline.csv", None, "FE modal analysis, 112,629 DOFs",
+    ("modal_headline.csv", "modal_machine.csv", "FE modal analysis, 112,629 DOFs",
      "python benchmarks/modal_speed.py --sizes 0.012 --repeats 3",
      "largest relative residual ||K phi - w^2 M phi|| / ||K phi|| over the 16 modes (a soft-spring mode; "
      "per mode with its round-off floor in modal_residuals.csv)"),
-    ("modal_scaling_headline.csv", None, "FE modal analysis, scaling with DOFs",
+    ("modal_scaling_headline.csv", "modal_scaling_machine.csv", "FE modal analysis, scaling with DOFs",
      "python benchmarks/modal_scaling.py", "largest residual over its round-off floor, over all sizes and modes"),
     ("fep_headline.csv", "fep_machine.csv", "frequency-energy study (NNMs by HB and shooting)",
      "python benchmarks/fep_speed.py --repeats 3", ""),
@@ -88,7 +88,8 @@ def _machine(folder: Path, name: str | None) -> str:
     if name is None or not (folder / name).exists():
         return "machine recorded in the benchmark's own CSV"
     kv = {r["key"]: r["value"] for r in _read(folder / name)}
-    keys = ("cpu", "cores", "python", "numpy", "scipy", "numba", "git_commit", "date_utc", "load_1min_start")
+    keys = ("cpu", "cores", "python", "numpy", "scipy", "numba", "scikit-fem", "git_commit", "date_utc",
+            "load_1min_start", "load_1min")
     return ", ".join(f"{k} {kv[k]}" for k in keys if k in kv)
 
 

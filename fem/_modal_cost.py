@@ -17,20 +17,24 @@ from geometry.params import AssemblyGeometry
 
 FLOAT, INDEX = 8, 4  # bytes
 NNZ_PER_ROW = 150  # K (and M, same pattern) entries per row, hex20: measured 146 at 15k and 112k DOFs
-# Cholesky factor of K - sigma M (MKL PARDISO, METIS, VBSR), bytes = FACTOR_COEF * n**FACTOR_EXP,
-# PARDISO's own peak (iparm[15] + iparm[16]). Nested dissection on a 3-D mesh fills like n^(4/3);
-# the coefficient puts the curve through the 112,629-DOF apparatus (791,436 KiB). The 15,087-DOF
-# one measured 71,695 KiB (n^1.2 between the two: the thin tube walls fill less than a cube), so
-# the estimate is an upper bound that grows looser with n; modal_scaling.csv has both columns.
-FACTOR_COEF = 1.6e2
-FACTOR_EXP = 4 / 3
+# Cholesky factor of K - sigma M (MKL PARDISO, METIS, VBSR): PARDISO's own peak (iparm[15] +
+# iparm[16]) measured on the apparatus from 15,087 to 647,781 DOFs (modal_scaling.csv) follows
+# 1.145e-6 GiB * n**1.15 to within -6/+9 %: the thin tube walls fill less than the n^(4/3) of nested
+# dissection on a cube. The estimate is that fit with a 10 % margin up to the largest mesh measured,
+# and beyond it grows as n^(4/3), the 3-D bound, so that an extrapolation never under-estimates.
+FACTOR_COEF = 1.145e-6 * 2**30  # bytes at n = 1
+FACTOR_EXP = 1.15
+FACTOR_MARGIN = 1.1
+FACTOR_MEASURED_DOFS = 647_781  # largest mesh of the fit
+FACTOR_EXP_BEYOND = 4 / 3
 KRYLOV_BLOCKS = 8  # the Krylov basis holds at most 8 blocks of n_modes + 8 columns (fem.modal)
 MAX_COUNTED = 20_000_000  # fine cells counted one by one; beyond, an upper bound (about 3 M DOFs of
 # hex20 is already far past any memory this estimate has to guard)
 MAX_DOFS = 10**30  # counts are capped here, so that any estimate stays a finite float
 BASE = 0.45 * 2**30  # bytes: the interpreter with numpy, scipy, scikit-fem, numba, gmsh and MKL loaded
-# (the 15,087-DOF run peaked at 0.45 GiB for 0.17 GiB of arrays)
-OVERHEAD = 1.25  # Python, numba, scikit-fem DOF tables, mesh arrays, allocator slack
+# (the 15,087-DOF run peaked at 0.45 GiB for 0.17 GiB of arrays). With the matrices and Krylov terms
+# below (8,660 bytes a DOF for 16 modes) this bounds the measured peak less the factor's, 0.30 GiB +
+# 7,700 bytes a DOF (modal_scaling.csv, 15k to 648k DOFs), by 15 to 50 %.
 
 
 def _part_cells(g: AssemblyGeometry, part: str) -> np.ndarray:
@@ -94,15 +98,24 @@ def count_dofs(g: AssemblyGeometry, element: str = "hex20") -> int:
     return min(3 * n, MAX_DOFS)
 
 
+def factor_bytes(n_dofs: float) -> float:
+    """Peak bytes of PARDISO's Cholesky factor of ``n_dofs`` DOFs of the apparatus:
+    m c n^p for n <= n_m (the fit to the measured peaks, m = FACTOR_MARGIN), and that value at
+    n_m times (n / n_m)^(4/3) beyond."""
+    n = float(n_dofs)
+    fit = FACTOR_MARGIN * FACTOR_COEF * min(n, FACTOR_MEASURED_DOFS) ** FACTOR_EXP
+    return fit * max(n / FACTOR_MEASURED_DOFS, 1.0) ** FACTOR_EXP_BEYOND
+
+
 def modal_bytes(n_dofs: int, n_modes: int) -> dict:
     """Peak bytes of mesh, assembly and modal analysis of ``n_dofs`` DOFs, by term."""
     nnz = NNZ_PER_ROW * n_dofs
     terms = {
         # K, M, the upper triangle of K - sigma M handed to PARDISO, and the scatter's adjacency
         "matrices": 2 * nnz * (FLOAT + INDEX) + nnz / 2 * (FLOAT + INDEX) + 60 * n_dofs / 3 * 2 * 8,
-        "factor": FACTOR_COEF * n_dofs**FACTOR_EXP,
+        "factor": factor_bytes(n_dofs),
         # the Krylov basis V and M V, with the Ritz vectors and a block of products beside them
         "krylov": (2 * KRYLOV_BLOCKS + 4) * (n_modes + 8) * n_dofs * FLOAT,
     }
-    terms["total"] = BASE + OVERHEAD * sum(terms.values())
+    terms["total"] = BASE + sum(terms.values())
     return terms
