@@ -19,9 +19,10 @@ FLOAT, INDEX = 8, 4  # bytes
 NNZ_PER_ROW = 150  # K (and M, same pattern) entries per row, hex20: measured 146 at 15k and 112k DOFs
 # Cholesky factor of K - sigma M (MKL PARDISO, METIS, VBSR): PARDISO's own peak (iparm[15] +
 # iparm[16]) measured on the apparatus from 15,087 to 647,781 DOFs (modal_scaling.csv) follows
-# 1.145e-6 GiB * n**1.15 to within -6/+9 %: the thin tube walls fill less than the n^(4/3) of nested
-# dissection on a cube. The estimate is that fit with a 10 % margin up to the largest mesh measured,
-# and beyond it grows as n^(4/3), the 3-D bound, so that an extrapolation never under-estimates.
+# 1.145e-6 GiB * n**1.15 to within -6/+9 % on one thread (two threads add 5-18 % at 15k-112k DOFs,
+# which the other terms' slack covers): the thin tube walls fill less than the n^(4/3) of nested
+# dissection on a cube. The estimate is that fit with a 10 % margin up to the largest mesh
+# measured, and beyond it grows as n^(4/3), the 3-D bound, so that an extrapolation stays above.
 FACTOR_COEF = 1.145e-6 * 2**30  # bytes at n = 1
 FACTOR_EXP = 1.15
 FACTOR_MARGIN = 1.1
