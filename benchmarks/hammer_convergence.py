@@ -305,6 +305,5 @@ def figure(path: Path, rows: list[dict], floor: list[dict], counts: list[int], t
     plt.close(fig)
 
 
-
 if __name__ == "__main__":
     raise SystemExit(main())
