@@ -121,9 +121,24 @@ def _check(args) -> int:
         scene, out = _validated(name, args.out, parent=not single)
         ests = estimates(scene)
         peak = f"peak memory about {human(max(e.bytes for e in ests))}" if ests else "3-D model: memory not estimated"
+        cases = _check_sweep(scene, out / "sweep") if scene.sweep is not None and scene.sweep.vary else None
         print(f"{scene.name}: valid; stages {', '.join(scene.stages) or 'none'}; {peak} "
               f"of {human(available_bytes())} available; results in {out}")
+        if cases:
+            print(cases)
     return 0
+
+
+def _check_sweep(scene: Scene, out: Path) -> str:
+    """Every case of the scene's [sweep] written, parsed and budget-checked as ``bearingshaft sweep``
+    does before it starts a cluster (SweepError, one line, at the first case refused)."""
+    from bearingshaft.sweep import build_plan, check_spec, local_cores
+
+    source = f"{scene.origin or scene.name} [sweep]"
+    plan = build_plan(scene, check_spec(scene.sweep, source), source, out, local_cores())
+    return (f"{scene.name} [sweep]: {len(plan.cases)} cases valid ({scene.sweep.design} over "
+            f"{', '.join(v.key for v in scene.sweep.vary)}), each within the memory of one of "
+            f"{local_cores()} workers; tables in {out}")
 
 
 def main(argv: list[str] | None = None) -> int:

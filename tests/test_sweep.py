@@ -187,6 +187,20 @@ def test_bad_sweep_table_is_refused_by_check(tmp_path, capsys, table, expected):
     assert expected in err and err.count("\n") == 1, err
 
 
+def test_check_validates_every_case_of_a_sweep(tmp_path, capsys):
+    # `bearingshaft check` refuses what `bearingshaft sweep` would refuse, before any case runs
+    scene = tmp_path / "lin.toml"
+    scene.write_text(LINEAR + '[sweep.vary]\n"model.k_s" = [8000.0, -5.0]\n')
+    assert main(["check", "--scene", str(scene), "--out", str(tmp_path / "out")]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.count("\n") == 1, captured
+    assert "case model.k_s = -5.0 [model]: k_s must be > 0, got -5.0" in captured.err
+    scene.write_text(LINEAR + '[sweep.vary]\n"model.k_s" = [8000.0, 16000.0, 30000.0]\n')
+    assert main(["check", "--scene", str(scene), "--out", str(tmp_path / "out")]) == 0
+    assert "[sweep]: 3 cases valid (grid over model.k_s)" in capsys.readouterr().out
+    assert not (tmp_path / "out").exists()
+
+
 def test_builtin_sweeps_validate_every_case():
     gap_kg = load_scene("sweep-gap-kg")
     plan = build_plan(gap_kg, gap_kg.sweep, "sweep-gap-kg [sweep]")
