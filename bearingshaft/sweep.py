@@ -783,12 +783,15 @@ def local_cores() -> int:
 @contextlib.contextmanager
 def dask_client(scheduler: str | None = None, workers: int | None = None):
     """(client, description): a client of the scheduler at ``scheduler``, or of a LocalCluster of
-    ``workers`` single-threaded worker processes (default: one per core), closed on exit."""
+    ``workers`` single-threaded worker processes (default: one per core), closed on exit. The wait
+    for a scheduler is Dask's own ``distributed.comm.timeouts.connect`` (30 s unless set, e.g.
+    ``DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT=2min`` for a scheduler still starting)."""
+    import dask
     from distributed import Client, LocalCluster
 
     if scheduler:
         try:
-            client = Client(scheduler, timeout="20s")
+            client = Client(scheduler, timeout=dask.config.get("distributed.comm.timeouts.connect"))
         except (OSError, TimeoutError) as exc:
             raise SweepError(f"--scheduler {scheduler!r}: cannot connect ({_one_line(exc)})") from None
         try:

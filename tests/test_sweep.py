@@ -201,6 +201,31 @@ def test_check_validates_every_case_of_a_sweep(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
+def test_unreachable_scheduler_is_refused_in_one_line(tmp_path, capsys, monkeypatch):
+    # the wait is Dask's own connect timeout, as configured (here 1 s); then one line naming the
+    # option, exit 2
+    import dask
+    import distributed
+
+    seen = {}
+    real_client = distributed.Client
+
+    def client(*a, **k):
+        seen.update(k)
+        return real_client(*a, **k)
+
+    monkeypatch.setattr(distributed, "Client", client)
+    scene = tmp_path / "lin.toml"
+    scene.write_text(LINEAR)
+    with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
+        assert main(["sweep", "--scene", str(scene), "--out", str(tmp_path / "out"), "--vary",
+                     "model.k_s=8000,16000", "--scheduler", "tcp://127.0.0.1:9"]) == 2
+    assert seen["timeout"] == "1s"
+    err = capsys.readouterr().err
+    assert err.startswith("bearingshaft: error: --scheduler 'tcp://127.0.0.1:9': cannot connect") and \
+        err.count("\n") == 1, err
+
+
 def test_builtin_sweeps_validate_every_case():
     gap_kg = load_scene("sweep-gap-kg")
     plan = build_plan(gap_kg, gap_kg.sweep, "sweep-gap-kg [sweep]")
