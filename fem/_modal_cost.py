@@ -35,7 +35,7 @@ MAX_DOFS = 10**30  # counts are capped here, so that any estimate stays a finite
 BASE = 0.45 * 2**30  # bytes: the interpreter with numpy, scipy, scikit-fem, numba, gmsh and MKL loaded
 # (the 15,087-DOF run peaked at 0.45 GiB for 0.17 GiB of arrays). With the matrices and Krylov terms
 # below (8,660 bytes a DOF for 16 modes) this bounds the measured peak less the factor's, 0.30 GiB +
-# 7,700 bytes a DOF (modal_scaling.csv, 15k to 648k DOFs), by 15 to 50 %.
+# 7,700 bytes a DOF (modal_scaling.csv, 15k to 648k DOFs), by 15 to 55 %.
 
 
 def _part_cells(g: AssemblyGeometry, part: str) -> np.ndarray:
