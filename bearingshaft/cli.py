@@ -130,12 +130,12 @@ def _check(args) -> int:
 
 
 def _check_sweep(scene: Scene, out: Path) -> str:
-    """Every case of the scene's [sweep] written, parsed and budget-checked as ``bearingshaft sweep``
-    does before it starts a cluster (SweepError, one line, at the first case refused)."""
-    from bearingshaft.sweep import build_plan, check_spec, local_cores
+    """Every case of the scene's [sweep] (its table already checked by the scene parser) written,
+    parsed and budget-checked as ``bearingshaft sweep`` does before it starts a cluster
+    (SweepError, one line, at the first case refused)."""
+    from bearingshaft.sweep import build_plan, local_cores, sweep_source
 
-    source = f"{scene.origin or scene.name} [sweep]"
-    plan = build_plan(scene, check_spec(scene.sweep, source), source, out, local_cores())
+    plan = build_plan(scene, scene.sweep, sweep_source(scene), out, local_cores())
     return (f"{scene.name} [sweep]: {len(plan.cases)} cases valid ({scene.sweep.design} over "
             f"{', '.join(v.key for v in scene.sweep.vary)}), each within the memory of one of "
             f"{local_cores()} workers; tables in {out}")

@@ -1020,11 +1020,16 @@ def _positive_int(text: str | None, option: str, allow_zero: bool = False) -> in
     return int(text)
 
 
+def sweep_source(scene: Scene) -> str:
+    """Where a scene's own [sweep] design comes from, as refusals name it."""
+    return f"{scene.origin or scene.name} [sweep]"
+
+
 def spec_from_args(scene: Scene, args) -> tuple[SweepSpec, str]:
     """The sweep's design: the scene's [sweep], with --vary replacing its keys and --design,
     --samples, --seed replacing its options."""
     base = scene.sweep if scene.sweep is not None else SweepSpec()
-    source = f"{scene.origin or scene.name} [sweep]"
+    source = sweep_source(scene)
     vary = base.vary
     if args.vary:
         vary = tuple(parse_vary_option(v) for v in args.vary)

@@ -95,10 +95,6 @@ def load_baseline(commit: str) -> dict:
     return out
 
 
-def machine() -> list[dict]:
-    return machine_rows(load_1min_start=os.getloadavg()[0])
-
-
 def timed(fn, repeats: int) -> tuple[object, dict]:
     """(last result, {median_s, min_s, max_s, cpu_median_s}) of ``repeats`` calls after one warm-up."""
     fn()
@@ -377,7 +373,7 @@ def main(argv=None) -> int:
         redraw(out)
         return 0
     out.mkdir(parents=True, exist_ok=True)
-    info = machine()
+    info = machine_rows()
     base = load_baseline(args.baseline_commit)
     with single_thread_blas():
         heads, details, scans = run_all(base, args)

@@ -6,8 +6,8 @@
 For each element size of the apparatus (hex20, 16 modes), the DOFs and the peak memory are
 estimated from the geometry before anything is meshed (fem._modal_cost, the estimate
 ``bearingshaft check`` uses); a size whose estimate exceeds ``--cap-gib`` or ``--headroom`` (the
-tool's own 80 % by default) of the memory
-available now is refused with its estimate and not meshed. Every other size runs in its own
+tool's own 80 % by default) of the memory available now is refused with its estimate and not
+meshed. Every other size runs in its own
 process (so that its peak RSS is its own): mesh, assembly, factorization, Krylov iteration,
 the largest relative residual and its ratio to the round-off floor, PARDISO's own peak.
 
