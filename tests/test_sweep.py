@@ -308,28 +308,69 @@ def test_a_failing_case_is_a_row_and_the_sweep_goes_on(tmp_path, client):
 def test_worker_killed_mid_sweep_loses_and_doubles_no_case(tmp_path, client):
     """SIGKILL a worker process of the LocalCluster while it runs a case: Dask reruns that task on a
     worker (the nanny restarts the dead one); every case ends in the table once, ok, with one
-    complete folder. (The module's cluster: after the restart it serves any later test as before.)"""
+    complete folder. (The module's cluster: after the restart it serves any later test as before.)
+
+    Deterministic, no race with a polling thread: the first case a worker starts is held inside its
+    stage (a wrapper put on the workers' ``_run_stage`` by ``client.run``, armed by a file only one
+    worker can claim, by an atomic rename) until the test kills that worker; the other worker
+    meanwhile completes at least one case. The held case is then running and not complete, so
+    the kill is mid-sweep and mid-case by construction. The rerun finds the wire disarmed."""
     text = LINEAR.replace("duration_s = 4.0", "duration_s = 0.5")
     plan = plan_of(text, "model.k_s=8000:20000:6")
     out = tmp_path / "sweep"
+    arm, held = tmp_path / "arm", tmp_path / "held"
+    arm.write_text("")
     killed = {}
 
+    def hold_first_stage(arm: str, held: str) -> None:  # runs on each worker (pickled by value)
+        import os
+        import time
+
+        import bearingshaft.sweep as sweep
+
+        original = getattr(sweep._run_stage, "original", sweep._run_stage)
+
+        def held_stage(*args, **kwargs):
+            try:
+                os.rename(arm, arm + ".claimed")  # atomic: one worker claims the wire, once
+            except FileNotFoundError:
+                return original(*args, **kwargs)
+            with open(held + ".tmp", "w") as f:
+                f.write(str(os.getpid()))
+            os.rename(held + ".tmp", held)
+            for _ in range(6000):  # until killed; a guard against a hang, not a time bound of the test
+                time.sleep(0.1)
+            raise RuntimeError("held case was never killed")
+
+        held_stage.original = original
+        sweep._run_stage = held_stage
+
+    def restore() -> None:  # on the workers that still hold the wrapper
+        import bearingshaft.sweep as sweep
+
+        sweep._run_stage = getattr(sweep._run_stage, "original", sweep._run_stage)
+
+    client.run(hold_first_stage, str(arm), str(held))
+
     def kill_one() -> None:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and not killed:
+        for _ in range(6000):  # a hang guard only: both conditions are reached whatever the machine's speed
             done = [c for c in plan.cases if (out / c.case_id / "provenance.json").exists()]
-            busy = {w: keys for w, keys in client.processing().items() if keys}
-            if done and busy:
-                address, keys = next(iter(busy.items()))
-                pid = client.run(os.getpid, workers=[address])[address]
-                killed.update(address=address, keys=list(keys), pid=pid, done=len(done))
+            if held.exists() and done:
+                pid = int(held.read_text())
+                address = next(a for a, p in client.run(os.getpid).items() if p == pid)
+                keys = list(client.processing().get(address, ()))
+                killed.update(address=address, keys=keys, pid=pid, done=len(done))
                 os.kill(pid, signal.SIGKILL)
+                return
             time.sleep(0.05)
 
     thread = threading.Thread(target=kill_one)
     thread.start()
-    res = run_sweep(plan, out, client=client, progress=False)
-    thread.join()
+    try:
+        res = run_sweep(plan, out, client=client, progress=False)
+    finally:
+        thread.join()
+        client.run(restore)
     assert killed and killed["done"] < len(plan.cases), killed  # killed mid-sweep, while running a case
     ids = [r["case_id"] for r in res.rows]
     assert ids == [c.case_id for c in plan.cases]  # each case once, none lost
