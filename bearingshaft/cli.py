@@ -20,9 +20,12 @@ import sys
 from pathlib import Path
 
 from bearingshaft import __version__
-from bearingshaft.budget import available_bytes, check_budget, estimates, human
+from bearingshaft.budget import available_bytes, check_budget, estimates
+from bearingshaft.digits import human
 from bearingshaft.output import check_out_dir
+from bearingshaft.registry import BY_NAME, STAGES, stages_of
 from bearingshaft.scenes import Scene, SceneError, builtin_names, load_scene
+from reduced._checks import one_line
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
@@ -47,28 +50,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    p = sub.add_parser("modal", help="build the mesh and run the modal analysis of a 3-D scene")
-    _add_common(p)
-    p = sub.add_parser("reduce", help="reduce the 3-D model to its tips (Craig-Bampton): rom.npz, cb_check.csv")
-    _add_common(p)
-    p = sub.add_parser("ringdown", help="free response from the scene's initial state")
-    _add_common(p)
-    p.add_argument("--method", choices=("exact", "explicit", "dop853"),
-                   help="integrator (default: the scene's, else exact)")
-    p = sub.add_parser("hammer", help="virtual hammer test of the apparatus, every rig channel (UFF 58 out); "
-                       "--test FILE.uff compares a measured test")
-    _add_common(p)
-    p.add_argument("--test", metavar="FILE.uff", help="a measured test (UFF 58 time histories): the model is run "
-                   "at its sampling, driven by its hammer channel, and compared channel for channel "
-                   "(default results folder: results/<scene>/test-<file name>/)")
-    p = sub.add_parser("nnm", help="frequency-energy relations of the nonlinear normal modes")
-    _add_common(p)
-    p = sub.add_parser("study", help="error against run time, stiff and extreme cases")
-    _add_common(p)
-    p = sub.add_parser("verify", help="verify the reduced model against the discrete model")
-    _add_common(p)
-    p = sub.add_parser("frc", help="forced-response curves by harmonic balance, stepped sine and stability")
-    _add_common(p)
+    for stage in STAGES:  # one subcommand per stage, as the registry declares it
+        p = sub.add_parser(stage.name, help=stage.help, description=stage.description,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+        _add_common(p)
+        for opt in stage.options:
+            p.add_argument(opt.flag, dest=opt.name, metavar=opt.metavar, choices=opt.choices, help=opt.help)
     p = sub.add_parser("run", help="every stage of the named scenes (all built-in scenes if none)")
     p.add_argument("scenes", nargs="*", metavar="SCENE", help="scene names or TOML files")
     p.add_argument("--out", metavar="DIR", help="parent folder of the results (default: results/)")
@@ -122,7 +109,7 @@ def _check(args) -> int:
         ests = estimates(scene)
         peak = f"peak memory about {human(max(e.bytes for e in ests))}" if ests else "3-D model: memory not estimated"
         cases = _check_sweep(scene, out / "sweep") if scene.sweep is not None and scene.sweep.vary else None
-        print(f"{scene.name}: valid; stages {', '.join(scene.stages) or 'none'}; {peak} "
+        print(f"{scene.name}: valid; stages {', '.join(stages_of(scene)) or 'none'}; {peak} "
               f"of {human(available_bytes())} available; results in {out}")
         if cases:
             print(cases)
@@ -156,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "scenes":
             for name in builtin_names():
                 scene = load_scene(name)
-                print(f"{name:28s} {', '.join(scene.stages) or '-':24s} {scene.description}")
+                print(f"{name:28s} {', '.join(stages_of(scene)) or '-':24s} {scene.description}")
             return 0
         if args.command == "check":
             return _check(args)
@@ -171,19 +158,18 @@ def main(argv: list[str] | None = None) -> int:
             for scene, out in runs:
                 pipeline.run_scene(scene, out, progress=progress)
             return 0
-        test = getattr(args, "test", None)
+        test = getattr(args, "test_file", None)
         if test is not None and args.out is None:  # a comparison never mixes with the scene's own files
             args.out = str(Path("results") / load_scene(args.scene).name / f"test-{Path(test).stem}")
         scene, out = _validated(args.scene, args.out, parent=False)
-        options = {"method": getattr(args, "method", None)}
-        if test is not None:
-            if not Path(test).is_file():
-                raise UserError(f"--test: no such file {test!r}")
-            options["test_file"] = test
+        if test is not None and not Path(test).is_file():
+            raise UserError(f"--test: no such file {test!r}")
+        options = {o.name: getattr(args, o.name) for o in BY_NAME[args.command].options
+                   if getattr(args, o.name) is not None}
         pipeline.run_stage(scene, args.command, out, progress=progress, **options)
         return 0
     except (SceneError, UserError, ValueError) as exc:
-        print(f"bearingshaft: error: {_one_line(exc)}", file=sys.stderr)
+        print(f"bearingshaft: error: {one_line(exc, typed=False)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except pipeline.StageUnavailable as exc:
         print(f"bearingshaft: {exc}", file=sys.stderr)
@@ -192,15 +178,13 @@ def main(argv: list[str] | None = None) -> int:
         print("bearingshaft: failed: out of memory (see `bearingshaft check` for the estimates)", file=sys.stderr)
         return EXIT_FAILED
     except (RuntimeError, FloatingPointError, ArithmeticError, OSError) as exc:
-        print(f"bearingshaft: failed: {_one_line(exc)}", file=sys.stderr)
+        print(f"bearingshaft: failed: {one_line(exc, typed=False)}", file=sys.stderr)
         return EXIT_FAILED
     except KeyboardInterrupt:
         print("bearingshaft: interrupted; results folder left as it was", file=sys.stderr)
         return 130
 
 
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 if __name__ == "__main__":

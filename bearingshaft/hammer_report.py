@@ -13,10 +13,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from bearingshaft.digits import sig  # noqa: E402
 from bearingshaft.output import StageWriter, write_rows  # noqa: E402
 from bearingshaft.plots import wrap_title  # noqa: E402
 from bearingshaft.scenes import Scene, SceneError  # noqa: E402
-from bearingshaft.stages.study import sig  # noqa: E402
 from fem.rig import TIP_CELLS  # noqa: E402
 from fem.uff import TimeHistory, write_uff58  # noqa: E402
 from reduced.models.rig import VirtualRig  # noqa: E402

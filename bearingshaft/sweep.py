@@ -54,7 +54,6 @@ import json
 import logging
 import math
 import os
-import re
 import time
 import tomllib
 from dataclasses import dataclass, field
@@ -62,216 +61,32 @@ from pathlib import Path
 
 import numpy as np
 
-from bearingshaft.scenes import SECTIONS, Scene, SceneError, parse_scene, suggest
+from bearingshaft.registry import stages_of
+from bearingshaft.scenes import Scene, parse_scene
+from bearingshaft.scenes.sweep import (  # noqa: F401  (the [sweep] schema, re-exported for the sweep's users)
+    DESIGNS,
+    INT_PATTERN,
+    KEY_PATTERN,
+    MAX_CASES,
+    OVERLAYS,
+    TABLES,
+    SweepError,
+    SweepSpec,
+    Vary,
+    check_key,
+    check_spec,
+    parse_sweep_table,
+    parse_values,
+    parse_vary_option,
+)
+from reduced._checks import one_line
 
-DESIGNS = ("grid", "zip", "random")
-OVERLAYS = ("", "nnm_stability")
-MAX_CASES = 100_000  # cases in one sweep (each is validated before any runs)
 ID_DIGITS = 12  # hex digits of a case id: 48 bits, a collision among 1e5 cases has odds ~1e-5
-TABLES = ("model", "initial", "load", *(s for s in SECTIONS if s != "initial"))
-_KEY = re.compile(r"^(?P<table>[A-Za-z_]\w*)(?:\[(?P<ti>\d+)\])?\.(?P<name>[A-Za-z_]\w*)(?:\[(?P<i>\d+)\])?$")
-_INT = re.compile(r"^[+-]?\d+$")
 # metrics of a ringdown (see case_metrics)
 WINDOW_FRACTION = 1 / 8  # early, middle and late windows of the dominant frequency: each 1/8 of the record
 MAX_WINDOW_SAMPLES = 1 << 18  # and at most this many samples
 PAD = 8  # zero padding of a window's DFT before the peak is refined
 DECAY_FRACTION = 1e-2  # decay time: the energy first falls to 1 % of its peak (20 dB of amplitude)
-
-
-class SweepError(SceneError):
-    """A sweep that cannot run as given; one line, exit code 2."""
-
-
-# -- the design -------------------------------------------------------------------------------
-@dataclass(frozen=True, slots=True)
-class Vary:
-    """One varied key: its values (list or LO:HI:N range), or a range LO:HI for a random design."""
-
-    key: str  # "model.g", "initial.v0_m_s[1]", "load[0].peak_N"
-    values: tuple = ()  # the values of a grid or zip design
-    low: float | None = None  # a random design's range
-    high: float | None = None
-    log: bool = False
-    integer: bool = False  # the range's ends are written as integers: values are rounded
-    text: str = ""  # as written, for messages
-
-    @property
-    def is_range(self) -> bool:
-        return self.low is not None
-
-
-@dataclass(frozen=True, slots=True)
-class SweepSpec:
-    """The ``[sweep]`` table (or ``--vary`` and its options)."""
-
-    vary: tuple[Vary, ...] = ()
-    design: str = "grid"
-    samples: int = 0  # random design: number of cases
-    seed: int = 0  # random design: seed
-    plots: tuple[str, ...] = ()  # metric columns drawn (default: DEFAULT_PLOTS that exist)
-    x: str = ""  # column drawn on the x axis instead of the varied key (one varied key)
-    overlay: str = ""  # "nnm_stability"
-
-
-def _literal(text: str):
-    """A value as written on the command line: integer, number, true/false, else a string."""
-    s = text.strip()
-    if _INT.match(s):
-        return int(s)
-    if s in ("true", "false"):
-        return s == "true"
-    try:
-        return float(s)
-    except ValueError:
-        return s.strip("\"'")
-
-
-def _number(text: str, where: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise SweepError(f"{where}: {text.strip()!r} is not a number") from None
-    if not math.isfinite(v):
-        raise SweepError(f"{where}: {text.strip()!r} must be finite")
-    return v
-
-
-def parse_values(key: str, value, where: str) -> Vary:
-    """A :class:`Vary` from a TOML value or a command-line string (``where`` names it in errors).
-
-    Strings: ``a,b,c`` (a list), ``LO:HI:N`` (N values, linear), ``LO:HI:N:log`` (geometric),
-    ``LO:HI`` or ``LO:HI:log`` (a range for the random design). TOML lists and numbers are
-    values as they are.
-    """
-    check_key(key, where)
-    if isinstance(value, list):
-        if not value:
-            raise SweepError(f"{where}: the list is empty; give at least one value")
-        for v in value:
-            if isinstance(v, (list, dict)):
-                raise SweepError(f"{where}: values must be numbers, strings or booleans, got {v!r}")
-        return Vary(key, tuple(value), text=repr(value))
-    if isinstance(value, (bool, int, float)):
-        return Vary(key, (value,), text=repr(value))
-    if not isinstance(value, str):
-        raise SweepError(f"{where}: expected a list or a string such as '1e-4:1e-3:9:log', got {value!r}")
-    text = value.strip()
-    if not text:
-        raise SweepError(f"{where}: no values given")
-    if ":" not in text:
-        return Vary(key, tuple(_literal(p) for p in text.split(",")), text=text)
-    parts = [p.strip() for p in text.split(":")]
-    scale = "lin"
-    if parts[-1] in ("log", "lin"):
-        scale = parts.pop()
-    if len(parts) not in (2, 3):
-        raise SweepError(f"{where}: {text!r} is not LO:HI:N[:log] (grid, zip) or LO:HI[:log] (random)")
-    lo, hi = _number(parts[0], where), _number(parts[1], where)
-    integer = scale == "lin" and bool(_INT.match(parts[0]) and _INT.match(parts[1]))
-    if scale == "log" and not (lo > 0 and hi > 0):
-        raise SweepError(f"{where}: a log range needs LO > 0 and HI > 0, got {text!r}")
-    if len(parts) == 2:
-        if not hi > lo:
-            raise SweepError(f"{where}: a range needs HI > LO, got {text!r}")
-        return Vary(key, low=lo, high=hi, log=scale == "log", integer=integer, text=text)
-    if not _INT.match(parts[2]) or int(parts[2]) < 1:
-        raise SweepError(f"{where}: the number of values must be an integer >= 1, got {parts[2]!r}")
-    n = int(parts[2])
-    if n > MAX_CASES:
-        raise SweepError(f"{where}: {n} values is too many (at most {MAX_CASES})")
-    if n == 1:
-        vals = np.array([lo])
-    elif scale == "log":
-        vals = np.geomspace(lo, hi, n)
-        vals[0], vals[-1] = lo, hi  # the ends exactly as written
-    else:
-        vals = np.linspace(lo, hi, n)
-    out = tuple(int(round(v)) for v in vals) if integer else tuple(float(v) for v in vals)
-    return Vary(key, out, log=scale == "log", integer=integer, text=text)
-
-
-def parse_vary_option(text: str) -> Vary:
-    """``--vary KEY=VALUES`` as a :class:`Vary`."""
-    key, sep, values = text.partition("=")
-    key = key.strip()
-    if not sep or not key:
-        raise SweepError(f"--vary {text!r}: expected KEY=VALUES, e.g. model.g=1e-4:1e-3:9:log or model.k_g=1e7,1e8")
-    return parse_values(key, values, f"--vary {key}")
-
-
-def check_key(key: str, where: str) -> None:
-    """``key`` is TABLE.KEY, TABLE.KEY[i] or load[i].KEY of a scene table."""
-    m = _KEY.match(key)
-    if m is None:
-        raise SweepError(f"{where}: {key!r} is not a scene key: write TABLE.KEY (e.g. model.g), TABLE.KEY[i] "
-                         "for an element of a list, or load[i].KEY")
-    table = m["table"]
-    if table not in TABLES:
-        raise SweepError(f"{where}: unknown table {table!r}{suggest(table, TABLES)} (known: {', '.join(TABLES)})")
-    if (table == "load") != (m["ti"] is not None):
-        hint = ("[[load]] tables are numbered: load[0].KEY" if table == "load"
-                else f"[{table}] is one table: {table}.KEY")
-        raise SweepError(f"{where}: {key!r}: {hint}")
-
-
-def parse_sweep_table(table, origin: str) -> SweepSpec:
-    """The scene's ``[sweep]`` table, every key checked (the cases themselves: :func:`build_plan`)."""
-    where = f"{origin} [sweep]"
-    if not isinstance(table, dict):
-        raise SweepError(f"{where}: expected a table, got {table!r}"[:200])
-    known = ("vary", "design", "samples", "seed", "plots", "x", "overlay")
-    for key in table:
-        if key not in known:
-            raise SweepError(f"{where}: unknown key {key!r}{suggest(key, known)} (known: {', '.join(known)})")
-    vary = table.get("vary", {})
-    if not isinstance(vary, dict):
-        raise SweepError(f"{where} vary: expected a table of KEY = VALUES ([sweep.vary]), got {vary!r}"[:200])
-    design = table.get("design", "grid")
-    samples = table.get("samples", 0)
-    seed = table.get("seed", 0)
-    for name, v in (("samples", samples), ("seed", seed)):
-        if isinstance(v, bool) or not isinstance(v, int) or v < 0 or v > MAX_CASES * 1000:
-            raise SweepError(f"{where} {name}: expected an integer >= 0, got {v!r}")
-    plots = table.get("plots", [])
-    if not isinstance(plots, list) or not all(isinstance(p, str) for p in plots):
-        raise SweepError(f"{where} plots: expected a list of metric names, got {plots!r}"[:200])
-    for name in ("x", "overlay"):
-        if not isinstance(table.get(name, ""), str):
-            raise SweepError(f"{where} {name}: expected a string, got {table[name]!r}")
-    spec = SweepSpec(tuple(parse_values(k, v, f"{where} vary {k}") for k, v in vary.items()), design, samples,
-                     seed, tuple(plots), table.get("x", ""), table.get("overlay", ""))
-    return check_spec(spec, where)
-
-
-def check_spec(spec: SweepSpec, where: str) -> SweepSpec:
-    """The design's own rules (the values are checked case by case later)."""
-    if not isinstance(spec.design, str) or spec.design not in DESIGNS:
-        raise SweepError(f"{where} design: unknown design {spec.design!r}{suggest(str(spec.design), DESIGNS)} "
-                         f"(known: {', '.join(DESIGNS)})")
-    if spec.overlay not in OVERLAYS:
-        raise SweepError(f"{where} overlay: unknown overlay {spec.overlay!r}{suggest(spec.overlay, OVERLAYS)} "
-                         f"(known: {', '.join(o for o in OVERLAYS if o)})")
-    keys = [v.key for v in spec.vary]
-    for k in keys:
-        if keys.count(k) > 1:
-            raise SweepError(f"{where} vary {k}: the key is varied twice")
-    if spec.design == "random":
-        if spec.vary and spec.samples < 1:
-            raise SweepError(f"{where} samples: the random design needs samples >= 1 (the number of cases)")
-        for v in spec.vary:
-            if not v.is_range:
-                raise SweepError(f"{where} vary {v.key}: the random design samples a range: give LO:HI or "
-                                 f"LO:HI:log, not {v.text!r}")
-    else:
-        for v in spec.vary:
-            if v.is_range:
-                raise SweepError(f"{where} vary {v.key}: the {spec.design} design needs the values: give LO:HI:N "
-                                 f"or LO:HI:N:log or a list, not {v.text!r}")
-        if spec.design == "zip" and len({len(v.values) for v in spec.vary}) > 1:
-            sizes = ", ".join(f"{v.key}: {len(v.values)}" for v in spec.vary)
-            raise SweepError(f"{where} vary: the zip design pairs the i-th values, so every key needs as many "
-                             f"values ({sizes})")
-    return spec
 
 
 def design_points(spec: SweepSpec) -> list[tuple]:
@@ -349,7 +164,7 @@ def apply_values(scene: Scene, data: dict, values, where: str) -> dict:
     """A copy of the scene's TOML data with each (key, value) set."""
     data = json.loads(json.dumps(data))  # a deep copy of plain TOML data
     for key, value in values:
-        m = _KEY.match(key)
+        m = KEY_PATTERN.match(key)
         table, name = m["table"], m["name"]
         ti = int(m["ti"]) if m["ti"] is not None else None
         if table == "load":
@@ -381,7 +196,7 @@ def apply_values(scene: Scene, data: dict, values, where: str) -> dict:
 
 def base_value(scene: Scene, key: str):
     """The value the scene itself gives ``key`` (its TOML, else the default), None if it has none."""
-    m = _KEY.match(key)
+    m = KEY_PATTERN.match(key)
     if m is None:
         return None
     table, name = m["table"], m["name"]
@@ -414,20 +229,21 @@ def _reduction_key(model) -> str:
 
 def case_stages(scene: Scene) -> tuple[str, ...]:
     """The stages a case runs: the scene's, less ``reduce`` (the reduction is built once per sweep)."""
-    return tuple(s for s in scene.stages if s != "reduce")
+    return tuple(s for s in stages_of(scene) if s != "reduce")
 
 
 def build_plan(scene: Scene, spec: SweepSpec, source: str, out: Path | None = None,
                n_workers: int | None = None) -> SweepPlan:
     """Every case's scene written and parsed, memory and disk checked: :class:`SweepError` (one line,
     naming the key and value) at the first case that would be refused, before anything runs."""
-    from bearingshaft.budget import HEADROOM, available_bytes, check_budget, free_disk_bytes, human
+    from bearingshaft.budget import HEADROOM, available_bytes, check_budget, free_disk_bytes
+    from bearingshaft.digits import human
 
     if not spec.vary:
         raise SweepError(f"{source}: nothing is varied; give --vary KEY=VALUES or a [sweep.vary] table")
     if not case_stages(scene):
         raise SweepError(f"{scene.origin or scene.name}: the scene has no stage to run in each case "
-                         f"(its stages: {', '.join(scene.stages) or 'none'})")
+                         f"(its stages: {', '.join(stages_of(scene)) or 'none'})")
     data = tomllib.loads(scene.source)
     data.pop("sweep", None)
     data.pop("name", None)
@@ -478,7 +294,7 @@ def _warm_up() -> None:
     that a case's run time is the case's (the sweep's wall time still counts this, once per worker)."""
     import bearingshaft.pipeline  # noqa: F401
     import bearingshaft.plots  # noqa: F401
-    from bearingshaft.stages.ringdown import model_system  # noqa: F401
+    from bearingshaft.systems import model_system  # noqa: F401
     from reduced.models.discrete import DiscreteParams
     from reduced.transient.integrate import ringdown
 
@@ -568,14 +384,11 @@ def run_case(case: Case, out_root: str, rom=None) -> dict:
         row.update(case_metrics(scene, folder))
         row.update(status="ok", resumed=resumed, message="")
     except Exception as exc:  # a failed case is a row of the table, not the end of the sweep
-        row.update(status="failed", resumed=False, message=_one_line(exc))
+        row.update(status="failed", resumed=False, message=one_line(exc))
     row.update(run_time_s=time.perf_counter() - t0, worker=_worker_name())
     return row
 
 
-def _one_line(exc: BaseException) -> str:
-    text = " ".join(str(exc).split()) or type(exc).__name__
-    return f"{type(exc).__name__}: {text}" if not isinstance(exc, ValueError) else text
 
 
 # -- metrics: the stage's own numbers -------------------------------------------------------
@@ -639,7 +452,8 @@ def ringdown_metrics(scene: Scene, folder: Path, stats: dict) -> dict:
     - with [symmetry]: the stage's seeded break time (median, min, max over its seeds),
       growth rate and runs broken, and ``energy_at_break_J``, the run's energy at that time.
     """
-    from bearingshaft.stages.ringdown import FREQ_MIN_HZ, model_system
+    from bearingshaft.stages.ringdown import FREQ_MIN_HZ
+    from bearingshaft.systems import model_system
     from reduced.transient.compare import stop_closures
     from reduced.transient.store import RingdownFile
 
@@ -793,7 +607,7 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
         try:
             client = Client(scheduler, timeout=dask.config.get("distributed.comm.timeouts.connect"))
         except (OSError, TimeoutError) as exc:
-            raise SweepError(f"--scheduler {scheduler!r}: cannot connect ({_one_line(exc)})") from None
+            raise SweepError(f"--scheduler {scheduler!r}: cannot connect ({one_line(exc)})") from None
         try:
             yield client, scheduler
         finally:
@@ -881,7 +695,7 @@ def run_sweep(plan: SweepPlan, out: str | Path, *, client=None, scheduler: str |
                     row = fut.result()
                 except Exception as exc:  # the worker was lost too often (KilledWorker), or the task cancelled
                     row = {"case_id": case.case_id, **dict(case.values), "status": "failed", "resumed": False,
-                           "message": f"worker lost: {_one_line(exc)}", "run_time_s": math.nan, "worker": ""}
+                           "message": f"worker lost: {one_line(exc)}", "run_time_s": math.nan, "worker": ""}
                 if row.get("resumed") and case.case_id in previous:
                     old = previous[case.case_id]
                     row.update(run_time_s=old.get("run_time_s", math.nan), worker=old.get("worker", ""))
@@ -1015,7 +829,7 @@ def sweep_scene_text(plan: SweepPlan) -> str:
 def _positive_int(text: str | None, option: str, allow_zero: bool = False) -> int | None:
     if text is None:
         return None
-    if not _INT.match(str(text).strip()) or int(text) < (0 if allow_zero else 1):
+    if not INT_PATTERN.match(str(text).strip()) or int(text) < (0 if allow_zero else 1):
         raise SweepError(f"{option}: expected an integer >= {0 if allow_zero else 1}, got {text!r}")
     return int(text)
 

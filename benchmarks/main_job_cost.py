@@ -89,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         for name in names:
             scene = load_scene(name)
-            for stage in scene.stages:
+            for stage in stages_of(scene):
                 log = Path(tmp.name) / f"{name}.{stage}.log"
                 row = {"scene": name, "stage": stage, "load_1min": round(os.getloadavg()[0], 2),
                        "cache_before": cache_files(cache)}

@@ -24,6 +24,22 @@ def show(value) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
+def one_line(exc: BaseException, typed: bool | None = None) -> str:
+    """An exception's message on one line, ``Type: message`` when ``typed`` (by default, for
+    anything but a ValueError, whose message says what is wrong by itself); its type's name
+    when it has no message.
+
+    >>> one_line(ValueError("gap must be\\n >= 0")), one_line(KeyError("x"), typed=True), one_line(OSError())
+    ('gap must be >= 0', "KeyError: 'x'", 'OSError')
+    """
+    text = " ".join(str(exc).split())
+    if not text:
+        return type(exc).__name__
+    if typed is None:
+        typed = not isinstance(exc, ValueError)
+    return f"{type(exc).__name__}: {text}" if typed else text
+
+
 def _is_number(value) -> bool:
     """A real number, NumPy scalars and 0-d arrays included; booleans are not numbers."""
     if isinstance(value, np.ndarray) and value.ndim == 0:

@@ -45,6 +45,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import BinaryIO, TypeVar
 
+from reduced._checks import one_line
+
 try:
     import fcntl
 except ImportError:  # Windows: no flock; concurrent writers of one entry may then leave a mismatch
@@ -64,10 +66,6 @@ def manifest_path(path: str | Path) -> Path:
     return path.with_name(path.name + MANIFEST_SUFFIX)
 
 
-def _one_line(exc: BaseException) -> str:
-    """``Type: message`` of an exception on one line."""
-    text = " ".join(str(exc).split())
-    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
 @contextlib.contextmanager
@@ -158,19 +156,19 @@ def _check(path: Path, inputs_sha256: str, load: Callable[[BinaryIO], T]) -> tup
     except FileNotFoundError:
         return (None, None) if not path.exists() else (None, "no manifest")
     except OSError as exc:
-        return None, f"manifest unreadable: {_one_line(exc)}"
+        return None, f"manifest unreadable: {one_line(exc, typed=True)}"
     try:
         data = path.read_bytes()
     except FileNotFoundError:
         return None, "manifest without its data file"
     except OSError as exc:
-        return None, f"data unreadable: {_one_line(exc)}"
+        return None, f"data unreadable: {one_line(exc, typed=True)}"
     try:
         manifest = json.loads(manifest_bytes)
         fmt, inputs = manifest["format"], manifest["inputs_sha256"]
         digest, size = manifest["sha256"], manifest["size"]
     except Exception as exc:  # bad UTF-8, bad JSON, a list, a missing key: all corrupt
-        return None, f"manifest unreadable: {_one_line(exc)}"
+        return None, f"manifest unreadable: {one_line(exc, typed=True)}"
     if fmt != MANIFEST_FORMAT:
         return None, f"manifest format {fmt!r}, expected {MANIFEST_FORMAT}"
     if inputs != inputs_sha256:
@@ -182,7 +180,7 @@ def _check(path: Path, inputs_sha256: str, load: Callable[[BinaryIO], T]) -> tup
     try:
         return load(io.BytesIO(data)), None
     except Exception as exc:  # whatever the decoder raises on bytes it cannot read
-        return None, f"cannot be read: {_one_line(exc)}"
+        return None, f"cannot be read: {one_line(exc, typed=True)}"
 
 
 def remove_entry(path: str | Path) -> None:
@@ -211,7 +209,7 @@ def load_entry(path: str | Path, inputs_sha256: str, load: Callable[[BinaryIO], 
         try:
             remove_entry(path)
         except OSError as exc:  # a read-only cache: rebuild all the same
-            reason += f"; not removed: {_one_line(exc)}"
+            reason += f"; not removed: {one_line(exc, typed=True)}"
     log.warning("cache entry %s is corrupt (%s); rebuilding", path, reason)
     return None
 
@@ -246,7 +244,7 @@ def call_numba_kernel(kernel, *args):
         if id(kernel) not in cached:
             raise
         log.warning("numba cache of %s in %s is corrupt (%s); recompiling", kernel.py_func.__qualname__,
-                    getattr(kernel._cache, "cache_path", "?"), _one_line(exc))
+                    getattr(kernel._cache, "cache_path", "?"), one_line(exc, typed=True))
         for k in cached.values():
             k._cache.flush()
     return kernel(*args)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy.linalg import eigh
 
+from bearingshaft.registry import stages_of
 from fem.analysis import CENTRE, analyse
 from fem.beam_theory import (
     euler_bernoulli_free_free_hz,
@@ -422,7 +423,7 @@ def test_scene_refuses_modal_on_the_discrete_model():
     with pytest.raises(SceneError, match="takes only a \\[modal\\]"):
         parse_scene('[model]\nkind = "assembly"\n[ringdown]\n', "x", "x.toml")
     scene = parse_scene('[model]\nkind = "assembly"\nlayout = "beam-free"\n[modal]\n', "x", "x.toml")
-    assert scene.stages == ("modal",)
+    assert stages_of(scene) == ("modal",)
 
 
 def test_beam_section_matches_the_mass_and_kappa_of_the_paper():

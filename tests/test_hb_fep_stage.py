@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from bearingshaft.output import StageWriter
+from bearingshaft.registry import stages_of
 from bearingshaft.scenes import parse_scene
 from bearingshaft.stages.fep import fep_stage
 from reduced.models.discrete import DiscreteParams
@@ -30,7 +31,7 @@ n_shooting = 8
 
 def test_fep_stage_writes_its_files(tmp_path):
     scene = parse_scene(SCENE, "fep-small", "test")
-    assert scene.stages == ("nnm",)
+    assert stages_of(scene) == ("nnm",)
     w = StageWriter(tmp_path)
     fep_stage(scene, w, progress=False)
     for name in ("fep.csv", "fep.png", "hb_convergence.csv", "hb_convergence.png", "stability.csv", "tongues.csv"):

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from bearingshaft.output import StageWriter
+from bearingshaft.registry import stages_of
 from bearingshaft.scenes import load_scene, parse_scene
 from bearingshaft.stages.fep import fep_model
 from bearingshaft.stages.nnm import nnm_stage
@@ -132,7 +133,7 @@ n_shooting = 3
 
 def test_nnm_stage_with_fep_on_a_reduced_model(tmp_path):
     scene = parse_scene(SMALL, "rom-fep-small", "test")
-    assert scene.stages == ("reduce", "nnm")
+    assert stages_of(scene) == ("reduce", "nnm")
     writers = []
     for run in ("a", "b"):  # twice: a rerun writes the same science files (tests/test_reproducible.py)
         (tmp_path / run).mkdir()

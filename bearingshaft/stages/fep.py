@@ -45,8 +45,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from tqdm import tqdm
 
+from bearingshaft.digits import dash
 from bearingshaft.output import StageWriter, write_rows
 from bearingshaft.scenes import Scene
+from bearingshaft.systems import model_system
 from reduced._blas import single_thread_blas
 from reduced.models.discrete import DiscreteParams
 from reduced.models.gaps import GapSystem
@@ -105,8 +107,6 @@ class FEPModel:
 def fep_model(scene: Scene, progress: bool = False) -> FEPModel:
     """The :class:`FEPModel` of a scene: the 3-DOF model (with its exact NNM 2 relation when
     m1 == m3) or a reduced model (reference: shooting alone)."""
-    from bearingshaft.stages.ringdown import model_system
-
     model = scene.model
     system, _ = model_system(model, progress)
     system = conservative(system)
@@ -576,10 +576,6 @@ def _plot_cost(path, rows, wall, spec, exact, study) -> None:
 OFF_BACKBONE_TOL = 1e-3  # fep.md: a shooting orbit that no H of the study comes within this of is off the backbone
 
 
-def _g2(x: float) -> str:
-    """A number to 2 significant digits for fep.md ('-' for nan)."""
-    return "-" if not np.isfinite(x) else f"{x:.2g}"
-
 
 @dataclass(frozen=True)
 class FEPSummary:
@@ -656,7 +652,7 @@ def fep_summary(scene: Scene, fm: FEPModel, rows: list, shots: dict, branches: d
           "|--:|--:|" + "--:|" * n + ":--|"]
     for H in Hs:
         errs, ok = max_err[H]
-        cells = [_g2(errs[m]) if m in errs else "not run" for m in range(n)]
+        cells = [dash(errs[m]) if m in errs else "not run" for m in range(n)]
         N = next(b.N for (_, HH, NN), b in branches.items() if HH == H and NN is None)
         L.append(f"| {H} | {N} | " + " | ".join(cells) + f" | {'yes' if ok else 'no'} |")
     L.append("")
@@ -664,7 +660,7 @@ def fep_summary(scene: Scene, fm: FEPModel, rows: list, shots: dict, branches: d
         L.append(f"**No H of the study is converged** by this test (tolerance {CONVERGED_TOL:g}).")
     else:
         L.append(f"**H = {converged} is the converged H**: the smallest H of the study that passes "
-                 f"(max {_g2(max(max_err[converged][0].values()))}). "
+                 f"(max {dash(max(max_err[converged][0].values()))}). "
                  + ("It is the H drawn in fep.png and used for stability (Hill)." if converged == drawn else
                     f"fep.png draws H = {drawn} ([fep] harmonics), not H = {converged}."))
     L += ["", "The error is largest just above grazing, where the contact pulse is short, and where a harmonic "
@@ -675,7 +671,7 @@ def fep_summary(scene: Scene, fm: FEPModel, rows: list, shots: dict, branches: d
     if Ns:
         L += [f"AFT samples at H = {spec.samples_study_harmonics} (NNM {fm.study + 1}, max error against "
               "shooting above the last tongue): "
-              + ", ".join(f"N = {r['samples']}: {_g2(r['max_err_vs_shooting_above_last_tongue'])}" for r in Ns)
+              + ", ".join(f"N = {r['samples']}: {dash(r['max_err_vs_shooting_above_last_tongue'])}" for r in Ns)
               + ".", ""]
     # off-backbone orbits
     L += ["## Shooting orbits off the HB backbone", ""]
@@ -687,7 +683,7 @@ def fep_summary(scene: Scene, fm: FEPModel, rows: list, shots: dict, branches: d
               "| NNM | energy [J] | frequency [Hz] | contact events a period | best HB error |",
               "|--:|--:|--:|--:|--:|"]
         for m, o, b in off:
-            L.append(f"| {m + 1} | {o.energy_J:.3g} | {o.freq_hz:.2f} | {o.n_events} | {_g2(b)} |")
+            L.append(f"| {m + 1} | {o.energy_J:.3g} | {o.freq_hz:.2f} | {o.n_events} | {dash(b)} |")
     else:
         L.append("None: every shooting orbit is reproduced by some H of the study.")
     # shooting failures

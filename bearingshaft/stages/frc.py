@@ -37,14 +37,16 @@ from __future__ import annotations
 import math
 import time
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 from tqdm import tqdm
 
+from bearingshaft.digits import sig
+from bearingshaft.estimates import FLOAT, HILL_COPIES, Estimate, n_dofs
 from bearingshaft.output import StageWriter, write_rows
 from bearingshaft.scenes import Scene
-from bearingshaft.stages.ringdown import model_system
-from bearingshaft.stages.study import sig
+from bearingshaft.systems import model_system
 from reduced._blas import single_thread_blas
 from reduced.models.loads import Harmonic, Loads
 from reduced.models.modes import linear_modes
@@ -659,5 +661,38 @@ def _plot_convergence(path, conv_rows, timing_rows, Pc) -> None:
     fig.savefig(path, dpi=130)
     plt.close(fig)
 
+
+
+# -- the registry's contract (bearingshaft.registry) -------------------------------------------
+DESCRIPTION = """Forced-response curves under P cos(2 pi f t) at one point, by harmonic balance continued
+through folds, with stability (monodromy, Hill, shooting), bifurcations, a stepped sine up and
+down by the exact integrator, the error against H and run time, and the backbone check.
+Writes frc.csv, frc.png, frc_stability.csv, stepped_sine.csv, frc_convergence*.csv,
+frc_backbone.csv and .png, and frc.md."""
+
+
+def estimate(scene: Scene) -> list[Estimate]:
+    """Hill's method: the first-order form of the quadratic eigenproblem at the largest H."""
+    f = scene.frc
+    n = n_dofs(scene)
+    H = max((f.harmonics, *f.convergence_harmonics))
+    size = 2 * (2 * H + 1) * n
+    return [Estimate("frc", HILL_COPIES * size**2 * FLOAT, f"Hill matrices of {size} x {size} (H = {H}, {n} DOFs)",
+                     "[frc] harmonics or convergence_harmonics")]
+
+
+@dataclass(frozen=True, eq=False)
+class _Pending:  # transitional (issue 23): the stage computes while it writes, until split
+    scene: Scene
+    progress: bool
+    options: dict
+
+
+def compute(scene: Scene, progress: bool, workdir) -> _Pending:
+    return _Pending(scene, progress, {})
+
+
+def write(result: _Pending, writer: StageWriter) -> None:
+    frc_stage(result.scene, writer, result.progress, **result.options)
 
 __all__ = ["frc_stage", "orbit_amplitude"]

@@ -34,8 +34,10 @@ from dataclasses import dataclass
 import numpy as np
 from tqdm import tqdm
 
+from bearingshaft.estimates import COPIES, FLOAT, MATPLOTLIB_BYTES, Estimate, n_dofs
 from bearingshaft.output import StageWriter
 from bearingshaft.scenes import HammerSpec, Scene
+from bearingshaft.systems import solver_options
 from fem.rig import TIP_CELLS
 from reduced.models.loads import HalfSine, Tabulated
 from reduced.models.rig import VirtualRig, virtual_rig
@@ -81,7 +83,6 @@ def run_record(rig: VirtualRig, signal, scene: Scene, level_N: float, duration_s
     filter's half length so its last samples are exact too. The hammer channel is the force
     applied, sampled as it is (the model's input: a record drives the model again with the same
     force). The state (x, v) and the energies are the exact ones at the record's samples."""
-    from bearingshaft.stages.ringdown import solver_options
     from reduced.models.daq import Acquisition, oversampling
     from reduced.transient.integrate import ringdown
     from reduced.transient.result import sample_count
@@ -246,5 +247,44 @@ def _hammer_stage(scene: Scene, writer: StageWriter, progress: bool, test_file: 
                          "wall_s": {str(k): r.stats.get("wall_s") for k, r in records.items()}})
     print(report.summary_line(scene, rig, nominal, summary[spec.peak_N], linear), flush=True)
 
+
+
+# -- the registry's contract (bearingshaft.registry) -------------------------------------------
+DESCRIPTION = """Strike the reduced apparatus with the scene's blow at every level and record every rig channel
+as a test's DAQ would (six triaxial beam accelerometers, four triaxial tube sensors, four tip
+load cells, the hammer). Writes hammer.npz, hammer.uff (UFF 58), channels.csv, fig10.png,
+fig11.png, levels.csv, levels.png, hammer.md and, with [hammer] linear_check, linear_check.csv
+and .png. With --test FILE.uff, a measured test drives the model by its hammer channel and every
+channel is compared: test_errors.csv, test_compare.png, test_spectrogram.png, model.uff."""
+
+
+def estimate(scene: Scene) -> list[Estimate]:
+    """Every level's record in memory: state, channels, energies; the exact integrator's table."""
+    from fem.rig import channel_names
+
+    n = n_dofs(scene)
+    r, h = scene.ringdown, scene.hammer
+    samples = r.duration_s * r.sample_rate_hz + 1
+    levels = len({*h.levels_N, h.peak_N}) + int(h.linear_check)
+    per = (2 * n + len(channel_names()) + 4) * FLOAT
+    exact = 3 * 2**4 * (2 * n) ** 2 * 16  # the exact integrator's state table (4 stops)
+    return [Estimate("hammer", int(MATPLOTLIB_BYTES + COPIES * samples * per + levels * samples * per + exact),
+                     f"{levels} records of {samples:.3g} samples x {n} DOFs",
+                     "[ringdown] duration_s or sample_rate_hz, or [hammer] levels_N")]
+
+
+@dataclass(frozen=True, eq=False)
+class _Pending:  # transitional (issue 23): the stage computes while it writes, until split
+    scene: Scene
+    progress: bool
+    options: dict
+
+
+def compute(scene: Scene, progress: bool, workdir, test_file: str | None = None) -> _Pending:
+    return _Pending(scene, progress, {"test_file": test_file})
+
+
+def write(result: _Pending, writer: StageWriter) -> None:
+    hammer_stage(result.scene, writer, result.progress, **result.options)
 
 __all__ = ["hammer_stage", "run_record", "blow", "Record", "pseudo_rigid", "coupled_subsystem", "default_location"]

@@ -25,10 +25,13 @@ from __future__ import annotations
 
 import csv
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from bearingshaft.digits import human
+from bearingshaft.estimates import Estimate
 from bearingshaft.output import StageWriter
 from bearingshaft.scenes import Scene
 
@@ -264,3 +267,48 @@ def _pictures(result, chosen, names, path: Path) -> str:
     shapes = [(f"{name}  {result.modes.freq_hz[i]:.2f} Hz", result.modes.phi[:, i])
               for i, name in zip(chosen, names, strict=True)]
     return render_shapes(result.system, shapes, path)
+
+
+# -- the registry's contract (bearingshaft.registry) -------------------------------------------
+DESCRIPTION = """Build the gmsh model of the scene's parts, assemble 3-D elasticity in scikit-fem and compute
+its lowest modes; label the six pseudo-rigid modes and correlate them with the paper's test.
+Writes frequencies.csv (against Table 2), mac_beam.csv, mac_assembly.csv, mac.png, modes.csv,
+fe_shapes.uff (UFF 55), mode_shapes.png (pyvista, off screen) and modes.vtu (ParaView)."""
+
+
+def estimate(scene: Scene) -> list[Estimate]:
+    """Mesh, K and M, the sparse Cholesky factor and the Krylov basis of the modal analysis."""
+    return [modal_estimate(scene.model, scene.modal.n_modes)]
+
+
+def modal_estimate(model, n_modes: int) -> Estimate:
+    """Peak bytes of meshing, assembling and solving ``model`` (fem.model.AssemblyModel) for
+    ``n_modes`` modes; the DOFs are counted from the block grid, before any gmsh call
+    (:mod:`fem._modal_cost`, whose factor term is checked against measured peaks in
+    ``results/performance/modal_scaling.csv``)."""
+    from fem._modal_cost import count_dofs, modal_bytes
+
+    n = count_dofs(model.geometry(), model.element)
+    b = modal_bytes(n, n_modes)
+    # the key that sizes the largest term: the mesh (factor, matrices) or the modes (Krylov basis)
+    by_modes = b["krylov"] > b["factor"] + b["matrices"]
+    return Estimate("modal", int(b["total"]),
+                    f"{n:,} DOFs ({model.element}): K and M {human(b['matrices'])}, Cholesky factor "
+                    f"{human(b['factor'])}, Krylov basis {human(b['krylov'])} for {n_modes} modes",
+                    "[modal] n_modes" if by_modes else "[model] element_size",
+                    advice="lower n_modes" if by_modes else "raise element_size")
+
+
+@dataclass(frozen=True, eq=False)
+class _Pending:  # transitional (issue 23): the stage computes while it writes, until split
+    scene: Scene
+    progress: bool
+    options: dict
+
+
+def compute(scene: Scene, progress: bool, workdir) -> _Pending:
+    return _Pending(scene, progress, {})
+
+
+def write(result: _Pending, writer: StageWriter) -> None:
+    modal_stage(result.scene, writer, result.progress, **result.options)

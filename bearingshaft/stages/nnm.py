@@ -16,13 +16,17 @@ largest entry positive. The [fep] part: :mod:`bearingshaft.stages.fep`.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from tqdm import tqdm
 
 from bearingshaft import plots
+from bearingshaft.digits import sig, to_resolution
+from bearingshaft.estimates import COPIES, FLOAT, JACOBIAN_COPIES, Estimate, n_dofs
 from bearingshaft.output import StageWriter, write_rows
 from bearingshaft.scenes import Scene
-from bearingshaft.stages.study import sig, to_resolution
+from bearingshaft.systems import model_system
 from reduced._blas import single_thread_blas
 from reduced.models.discrete import DiscreteParams
 from reduced.models.modes import linear_modes
@@ -59,8 +63,6 @@ def nnm_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
 
 
 def _nnm_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
-    from bearingshaft.stages.ringdown import model_system
-
     p = scene.model
     system, _ = model_system(p, progress)  # the 3-DOF model, or a reduced model from rom.npz / the cache
     modes = {s: linear_modes(system, s) for s in ("open", "closed")}
@@ -117,3 +119,41 @@ def _nnm2_exact(scene: Scene, writer: StageWriter, progress: bool, modes: dict) 
         writer.stats["nnm2_max_rel_err_paper_eq13"] = max(abs(c["rel_err_paper"]) for c in checks)
     plots.nnm2_figure(E, f_exact, f_paper, checks, modes["open"].freq_hz, modes["closed"].freq_hz,
                       writer.path("nnm2.png"))
+
+
+# -- the registry's contract (bearingshaft.registry) -------------------------------------------
+DESCRIPTION = """Linear modes of the open and closed gaps, the exact NNM 2 relation of the symmetric 3-DOF
+model checked against integrated periods, and with [fep] the frequency-energy plots of the
+NNMs by harmonic balance and shooting with their stability. Writes linear_modes.csv,
+nnm2_exact.csv, nnm2_check.csv, nnm2.png and, with [fep], fep.csv, fep.png, stability.csv,
+tongues.csv, hb_convergence*.csv and fep.md."""
+
+
+def estimate(scene: Scene) -> list[Estimate]:
+    """HB Jacobians of the [fep] study and the [nnm] energy grid."""
+    n = n_dofs(scene)
+    out = []
+    if scene.fep is not None:
+        H = max(scene.fep.harmonics + scene.fep.convergence_harmonics + (scene.fep.samples_study_harmonics,))
+        size = (2 * H + 1) * n
+        out.append(Estimate("nnm", JACOBIAN_COPIES * size**2 * FLOAT,
+                            f"HB Jacobians of {size} x {size} (H = {H})", "[fep] harmonics"))
+    if scene.nnm is not None:
+        out.append(Estimate("nnm", COPIES * scene.nnm.n_energy * 64 * FLOAT,
+                            f"{scene.nnm.n_energy} energies", "[nnm] n_energy"))
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class _Pending:  # transitional (issue 23): the stage computes while it writes, until split
+    scene: Scene
+    progress: bool
+    options: dict
+
+
+def compute(scene: Scene, progress: bool, workdir) -> _Pending:
+    return _Pending(scene, progress, {})
+
+
+def write(result: _Pending, writer: StageWriter) -> None:
+    nnm_stage(result.scene, writer, result.progress, **result.options)

@@ -26,6 +26,7 @@ from datetime import UTC, datetime
 import numpy as np
 
 from bearingshaft import __version__
+from bearingshaft.estimates import Estimate
 from bearingshaft.output import StageWriter, git_commit, write_rows
 from bearingshaft.scenes import Scene
 from reduced.models.modes import LinearModes, linear_modes
@@ -232,3 +233,31 @@ def reduce_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
                          "left_out": [r for c in comps.values() for r in c.left_out],
                          "reduced_modes_unpaired": {s: (c.unpaired + 1).tolist() for s, c in comps.items()}})
     print(_summary(scene, rom, comps, failed, writer), flush=True)
+
+
+# -- the registry's contract (bearingshaft.registry) -------------------------------------------
+DESCRIPTION = """Reduce the scene's 3-D model onto the tips by Craig-Bampton: the two gap coordinates as
+boundary and the fixed-interface modes the scene keeps. Writes rom.npz (matrices, DOF map,
+modes, checks; also stored in the reduced-model cache), cb_check.csv (pyyeti-style checks),
+gap_modes.csv (full and reduced modes, open and tied tips, paired by MAC), gap_modes.png and
+gap_modes.vtu."""
+
+
+def estimate(scene: Scene) -> list[Estimate]:
+    """Nothing beyond the 3-D model's own build, which the reduced-model cache bounds (no estimate)."""
+    return []
+
+
+@dataclass(frozen=True, eq=False)
+class _Pending:  # transitional (issue 23): the stage computes while it writes, until split
+    scene: Scene
+    progress: bool
+    options: dict
+
+
+def compute(scene: Scene, progress: bool, workdir) -> _Pending:
+    return _Pending(scene, progress, {})
+
+
+def write(result: _Pending, writer: StageWriter) -> None:
+    reduce_stage(result.scene, writer, result.progress, **result.options)

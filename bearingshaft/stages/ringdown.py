@@ -13,18 +13,21 @@ from __future__ import annotations
 
 import math
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from bearingshaft import plots
+from bearingshaft.digits import text
+from bearingshaft.estimates import MATPLOTLIB_BYTES, Estimate, n_dofs
 from bearingshaft.output import StageWriter, write_rows
+from bearingshaft.progress import ProgressBar
 from bearingshaft.scenes import Scene
+from bearingshaft.systems import model_system, ringdown_options, scene_initial_state, scene_loads
 from reduced.models.discrete import DiscreteParams
 from reduced.models.gaps import GapSystem
-from reduced.models.initial import initial_state
-from reduced.models.loads import Loads, point_loads
+from reduced.models.loads import Loads
 from reduced.models.modes import gap_moving_modes, linear_modes
 from reduced.transient.compare import (
     MAX_WINDOWS,
@@ -58,72 +61,16 @@ GROWTH_BAND = 1e-2  # growth rates are fitted where BREAK_THRESHOLD_M x GROWTH_B
 TITLE_NOTE = "break time from round-off alone is not reproducible across machines"
 
 
-class _Bar:
-    """A progress callback (fraction done) drawing a tqdm bar."""
-
-    def __init__(self, desc: str, enabled: bool) -> None:
-        self.bar = tqdm(total=1000, desc=desc, disable=not enabled, leave=False,
-                        bar_format="{l_bar}{bar}| {elapsed}<{remaining}")
-        self.done = 0
-
-    def __call__(self, fraction: float) -> None:
-        new = int(round(1000 * min(max(fraction, 0.0), 1.0)))
-        if new > self.done:
-            self.bar.update(new - self.done)
-            self.done = new
-
-    def close(self) -> None:
-        self.bar.close()
-
-
-def model_system(model, progress: bool = False) -> tuple[GapSystem, np.ndarray]:
-    """(system, P): a scene model's gap system and its points x1, x2, x3 as rows P of its DOFs."""
-    if hasattr(model, "reduced"):  # a reduced 3-D model: from rom.npz or the cache
-        rom = model.reduced(progress)
-        return rom.system(), rom.point_rows
-    return model.system(), model.point_rows
-
-
-def scene_initial_state(scene: Scene, system: GapSystem, P: np.ndarray, dx_points=None, dv_points=None
-                        ) -> tuple[np.ndarray, np.ndarray]:
-    """(x0, v0) on the system's DOFs from the scene's point values (:mod:`reduced.models.initial`),
-    plus the point perturbations ``dx_points``, ``dv_points`` if given."""
-    init = scene.initial
-    x_pts, v_pts = np.array(init.x0_m, float), np.array(init.v0_m_s, float)
-    if dx_points is not None:
-        x_pts, v_pts = x_pts + dx_points, v_pts + dv_points
-    return initial_state(system.M, system.K, P, x_pts, v_pts)
-
-
-def scene_loads(scene: Scene, P: np.ndarray) -> Loads | None:
-    """The scene's [[load]] tables as loads on the system's DOFs (b_l = the row of P of the load's
-    point), or None for a free ringdown."""
-    if not scene.loads:
-        return None
-    return point_loads(scene.load_signals, [spec.point for spec in scene.loads], P, scene.model.point_names)
-
-
-def solver_options(spec) -> dict:
-    """The integrator options of a [ringdown] table (each method checks the others' too)."""
-    return {"dt": spec.dt_s, "omega_dt": spec.omega_dt, "step_basis": spec.step_basis, "rtol": spec.rtol,
-            "atol": spec.atol}
-
-
-def _options(scene: Scene, P: np.ndarray) -> dict:
-    loads = scene_loads(scene, P)
-    return {**solver_options(scene.ringdown), **({"loads": loads} if loads is not None else {})}
-
-
 def run_ringdown(scene: Scene, system: GapSystem, P: np.ndarray, method: str, progress: bool,
                  out: str | Path | None = None) -> RingdownResult | RingdownFile:
     """The scene's ringdown of ``system`` (points P) from its initial state, by ``method``, with a
     progress bar: in memory, or streamed into the file ``out`` (returned as a RingdownFile)."""
     spec = scene.ringdown
     x0, v0 = scene_initial_state(scene, system, P)
-    bar = _Bar(f"{scene.name}: {method}", progress)
+    bar = ProgressBar(f"{scene.name}: {method}", progress)
     try:
         return ringdown(system, x0, v0, spec.duration_s, spec.sample_rate_hz, method, progress=bar, out=out,
-                        **_options(scene, P))
+                        **ringdown_options(scene, P))
     finally:
         bar.close()
 
@@ -133,10 +80,7 @@ def stream_ringdown(scene: Scene, system: GapSystem, P: np.ndarray, method: str,
     """The scene's ringdown (with its loads) from (x0, v0) by ``method``, as a stream of chunks."""
     spec = scene.ringdown
     return ringdown_stream(system, x0, v0, spec.duration_s, spec.sample_rate_hz, method, progress=progress,
-                           **_options(scene, P))
-
-
-MATPLOTLIB_BYTES = 64 * 2**20  # figures being drawn, fonts, the HB backbones: measured 10-30 MB
+                           **ringdown_options(scene, P))
 
 
 def stage_estimate(scene: Scene, n_dofs: int, n_stops: int = 4, method: str | None = None) -> dict[str, int]:
@@ -194,15 +138,6 @@ def backbone_curves(model, system: GapSystem | None = None, n_modes: int = 3
     return curves
 
 
-def _g(value, digits: int = 4):
-    """A number to ``digits`` significant digits for a science file ('' for None or NaN)."""
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return ""
-    if isinstance(value, float) and math.isinf(value):
-        return "inf" if value > 0 else "-inf"
-    return format(float(value), f".{digits}g") if isinstance(value, float) else value
-
-
 # -- reference check: the run against the exact integrator -------------------------------------
 def _spread(values: list[float]) -> tuple[float, float, float]:
     v = [x for x in values if x is not None and not math.isnan(x)]
@@ -254,7 +189,7 @@ def reference_check(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndar
     freq_point = names.index(scene.spectrogram.dof) if scene.spectrogram is not None else 0
     window = scene.spectrogram.window_s if scene.spectrogram is not None else REFERENCE_WINDOW_S
     overlap = scene.spectrogram.overlap if scene.spectrogram is not None else 0.9
-    bar = _Bar(f"{scene.name}: exact reference", progress)
+    bar = ProgressBar(f"{scene.name}: exact reference", progress)
     ref = stream_ringdown(scene, system, P, "exact", x0, v0, progress=bar)
     seeds = [stream_ringdown(scene, system, P, "exact", *_displaced(scene, system, P, x0, v0, k))
              for k in range(REFERENCE_SEEDS)]
@@ -286,8 +221,8 @@ def reference_check(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndar
 
     def row(quantity, unit, run_value, seed_values, meaning):
         lo, mid, hi = _spread(seed_values)
-        return {"quantity": quantity, "unit": unit, "run_vs_exact": _g(run_value),
-                "exact_pairs_min": _g(lo), "exact_pairs_median": _g(mid), "exact_pairs_max": _g(hi),
+        return {"quantity": quantity, "unit": unit, "run_vs_exact": text(run_value),
+                "exact_pairs_min": text(lo), "exact_pairs_median": text(mid), "exact_pairs_max": text(hi),
                 "meaning": meaning}
 
     pts = "max |p - p_exact| / max |p_exact| at the points " + ", ".join(names)
@@ -321,10 +256,10 @@ def reference_check(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndar
     ]
     write_rows(writer.path("reference.csv"), rows)
     write_rows(writer.path("lyapunov.csv"), [
-        {"seed": k, "delta": _g(e.delta), "saturation": _g(e.saturation), "window_s": _g(e.window_s),
-         "exponent_per_s": _g(e.exponent_per_s), "lyapunov_time_s": _g(e.lyapunov_time_s),
-         "onset_s": _g(e.onset_s), "saturation_s": _g(e.saturation_s), "fit_start_s": _g(e.fit_start_s),
-         "fit_end_s": _g(e.fit_end_s), "ln_growth_fitted": _g(e.ln_growth), "residual": _g(e.residual, 2),
+        {"seed": k, "delta": text(e.delta), "saturation": text(e.saturation), "window_s": text(e.window_s),
+         "exponent_per_s": text(e.exponent_per_s), "lyapunov_time_s": text(e.lyapunov_time_s),
+         "onset_s": text(e.onset_s), "saturation_s": text(e.saturation_s), "fit_start_s": text(e.fit_start_s),
+         "fit_end_s": text(e.fit_end_s), "ln_growth_fitted": text(e.ln_growth), "residual": text(e.residual, 2),
          "chaotic": e.chaotic} for k, e in enumerate(est)])
     summary = {"run_vs_exact": {r["quantity"]: r["run_vs_exact"] for r in rows},
                "closures_run": run_r.closures_run, "closures_exact": run_r.closures_ref,
@@ -532,7 +467,7 @@ def symmetry_stage(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndarr
         for other in scene.symmetry.methods:
             if other in runs:
                 continue
-            bar = _Bar(f"{scene.name}: {other}", progress)
+            bar = ProgressBar(f"{scene.name}: {other}", progress)
             stream = stream_ringdown(scene, system, P, other, x0, v0, progress=bar)
             try:
                 a, files[other] = follow(other, stream)
@@ -565,10 +500,10 @@ def symmetry_stage(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndarr
     for k in range(SYMMETRY_SEEDS):
         a = seeded_run(k)
         seeded.append(a)
-        seed_rows.append({"seed": k, "perturbation_m": _g(SYMMETRY_PERTURBATION_M),
-                          "theta_rad": _g(float(np.random.default_rng(k).uniform(0.0, 2.0 * np.pi))),
-                          "break_threshold_m": _g(BREAK_THRESHOLD_M), "t_break_s": _g(a.t_break, 6),
-                          "growth_rate_per_s": _g(a.growth_rate, 3)})
+        seed_rows.append({"seed": k, "perturbation_m": text(SYMMETRY_PERTURBATION_M),
+                          "theta_rad": text(float(np.random.default_rng(k).uniform(0.0, 2.0 * np.pi))),
+                          "break_threshold_m": text(BREAK_THRESHOLD_M), "t_break_s": text(a.t_break, 6),
+                          "growth_rate_per_s": text(a.growth_rate, 3)})
     write_rows(writer.path("symmetry_seeds.csv"), seed_rows)
     # seed 0 again with the closed form restarted on another grid: another round-off history (as on
     # another machine); the same break time shows that the seed, not round-off, sets it
@@ -577,21 +512,21 @@ def symmetry_stage(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndarr
     rates = _spread([a.growth_rate for a in seeded])
     breaks = _spread([a.t_break if a.t_break is not None else math.nan for a in seeded])
     n_broken = sum(a.t_break is not None for a in seeded)
-    rows = [{"case": "seeded", "method": "exact", "perturbation_m": _g(SYMMETRY_PERTURBATION_M),
-             "runs": SYMMETRY_SEEDS, "growth_rate_per_s": _g(rates[1], 3), "growth_rate_min_per_s": _g(rates[0], 3),
-             "growth_rate_max_per_s": _g(rates[2], 3), "break_threshold_m": _g(BREAK_THRESHOLD_M),
-             "runs_broken": n_broken, "t_break_s": _g(breaks[1], 6), "t_break_min_s": _g(breaks[0], 6),
-             "t_break_max_s": _g(breaks[2], 6), "growth_fit_band_m": f"{band[0]:g} to {band[1]:g}",
-             "t_break_seed0_other_roundoff_s": _g(restarted, 6), "tolerance_m": "", "t_exceeds_tolerance_s": "",
+    rows = [{"case": "seeded", "method": "exact", "perturbation_m": text(SYMMETRY_PERTURBATION_M),
+             "runs": SYMMETRY_SEEDS, "growth_rate_per_s": text(rates[1], 3), "growth_rate_min_per_s": text(rates[0], 3),
+             "growth_rate_max_per_s": text(rates[2], 3), "break_threshold_m": text(BREAK_THRESHOLD_M),
+             "runs_broken": n_broken, "t_break_s": text(breaks[1], 6), "t_break_min_s": text(breaks[0], 6),
+             "t_break_max_s": text(breaks[2], 6), "growth_fit_band_m": f"{band[0]:g} to {band[1]:g}",
+             "t_break_seed0_other_roundoff_s": text(restarted, 6), "tolerance_m": "", "t_exceeds_tolerance_s": "",
              "reproducible_across_machines": "yes (the spread over seeds is the uncertainty)"}]
     for method, (a, tol) in runs.items():
         rows.append({"case": "round-off", "method": method, "perturbation_m": 0, "runs": 1,
-                     "growth_rate_per_s": _g(a.growth_rate, 3), "growth_rate_min_per_s": "",
-                     "growth_rate_max_per_s": "", "break_threshold_m": _g(BREAK_THRESHOLD_M),
-                     "runs_broken": int(a.t_break is not None), "t_break_s": _g(a.t_break, 6), "t_break_min_s": "",
+                     "growth_rate_per_s": text(a.growth_rate, 3), "growth_rate_min_per_s": "",
+                     "growth_rate_max_per_s": "", "break_threshold_m": text(BREAK_THRESHOLD_M),
+                     "runs_broken": int(a.t_break is not None), "t_break_s": text(a.t_break, 6), "t_break_min_s": "",
                      "t_break_max_s": "", "growth_fit_band_m": f"{band[0]:g} to {band[1]:g}",
-                     "t_break_seed0_other_roundoff_s": "", "tolerance_m": _g(tol, 2),
-                     "t_exceeds_tolerance_s": _g(t_tol[method], 6),
+                     "t_break_seed0_other_roundoff_s": "", "tolerance_m": text(tol, 2),
+                     "t_exceeds_tolerance_s": text(t_tol[method], 6),
                      "reproducible_across_machines":
                          "no: round-off sets the break time and so the phase where the rate is fitted"})
     write_rows(writer.path("symmetry.csv"), rows)
@@ -605,6 +540,38 @@ def symmetry_stage(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndarr
         f"{scene.name}: symmetry breaking of {pair[0]} and {pair[1]}; {seeds_text}; the {TITLE_NOTE}",
     )
     writer.stats["symmetry"] = {"seeded": rows[0], "round_off": rows[1:], "seeds": seed_rows}
-    roundoff = ", ".join(f"{m} {_g(a.t_break, 4) or 'none'} s" for m, (a, _) in runs.items())
-    print(f"[{scene.name}] symmetry: {seeds_text}; seed 0 with another round-off: {_g(restarted, 4)} s; "
+    roundoff = ", ".join(f"{m} {text(a.t_break, 4) or 'none'} s" for m, (a, _) in runs.items())
+    print(f"[{scene.name}] symmetry: {seeds_text}; seed 0 with another round-off: {text(restarted, 4)} s; "
           f"from round-off alone (not reproducible across machines): {roundoff}", flush=True)
+
+
+# -- the registry's contract (bearingshaft.registry) -------------------------------------------
+DESCRIPTION = """Integrate the scene's model from its initial state (with its [[load]] forces, if any) by the
+exact, explicit or DOP853 integrator, streamed to disk. Writes ringdown.npz (time, states,
+energies), ringdown.png, with [spectrogram] spectrogram.png and spectrogram.npz (NNM backbones
+overlaid), with [symmetry] symmetry.png and symmetry.csv, a comparison with the exact
+integrator (reference_check.csv) and ringdown.csv of its statistics."""
+
+
+def estimate(scene: Scene) -> list[Estimate]:
+    """The streamed run's chunks, the spectrogram's frames and the figures; disk: ringdown.npz."""
+    r = scene.ringdown
+    est = stage_estimate(scene, n_dofs(scene))
+    samples = r.duration_s * r.sample_rate_hz + 1
+    return [Estimate("ringdown", est["memory"], f"{samples:.3g} samples streamed to disk in chunks",
+                     "[ringdown] duration_s or sample_rate_hz", disk=est["disk"])]
+
+
+@dataclass(frozen=True, eq=False)
+class _Pending:  # transitional (issue 23): the stage computes while it writes, until split
+    scene: Scene
+    progress: bool
+    options: dict
+
+
+def compute(scene: Scene, progress: bool, workdir, method: str | None = None) -> _Pending:
+    return _Pending(scene, progress, {"method": method})
+
+
+def write(result: _Pending, writer: StageWriter) -> None:
+    ringdown_stage(result.scene, writer, result.progress, **result.options)

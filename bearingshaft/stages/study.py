@@ -31,13 +31,16 @@ impacting runs are sensitive by nature (the motion is chaotic): study.md says so
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from bearingshaft import plots
+from bearingshaft.digits import ROUNDOFF_FLOOR, roundoff_bound, short, sig
+from bearingshaft.estimates import Estimate, history_bytes, n_dofs
 from bearingshaft.output import StageWriter, write_rows
+from bearingshaft.progress import CaseBar, ProgressBar
 from bearingshaft.scenes import Scene
-from bearingshaft.stages.ringdown import _Bar
 from reduced._blas import single_thread_blas
 from reduced.studies import STIFF_FIELDS, rom_case, rom_convergence, stiff_cases, work_precision
 
@@ -52,50 +55,11 @@ SENSITIVE_DIGITS = 2  # DOP853's error without events, penetrations of chaotic r
 VALUE_DIGITS = 12  # energies, steps, frequencies: exact up to round-off (~1e-15 relative)
 PENETRATION_DIGITS = 4  # largest penetration: the same to 1e-15 except in chaotic runs (2e-5 seen)
 TIMING_DIGITS = 4  # run times: machine load changes them by tens of percent anyway
-ROUNDOFF_FLOOR = 1e-10  # the exact integrator's energy balance and its distance to DOP853 with events:
-# round-off, whose size moved by up to 6x (across a decade) on another CPU; written as max(decade, floor)
 
 WP_FIELDS = ["method", "setting", "error", "n_steps", "dt_s"]
 TIMING_KEYS = {"work_precision": ["method", "setting"],
                "stiff": ["k_g", "gap", "speed", "c", "method", "duration_s"],
                "rom_convergence": ["n_modes"]}
-
-
-# -- digits: what survives a rerun on another machine ------------------------------------------
-def sig(value, digits: int):
-    """``value`` rounded to ``digits`` significant digits (non-numbers and non-finite values kept)."""
-    if not isinstance(value, (int, float, np.floating)) or isinstance(value, bool) or not math.isfinite(value):
-        return value
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    return float(f"{float(value):.{digits}g}")
-
-
-def decade_bound(value):
-    """The smallest power of ten >= |value| (0 stays 0): a round-off-level quantity has no
-    reproducible digit, only its order of magnitude (non-numbers kept)."""
-    if not isinstance(value, (int, float, np.floating)) or isinstance(value, bool) or not math.isfinite(value):
-        return value
-    v = abs(float(value))
-    return 0.0 if v == 0 else float(f"1e{math.ceil(math.log10(v) - 1e-12)}")
-
-
-def roundoff_bound(value):
-    """A round-off-level quantity as written: its :func:`decade_bound`, at least :data:`ROUNDOFF_FLOOR`."""
-    bound = decade_bound(value)
-    return max(bound, ROUNDOFF_FLOOR) if isinstance(bound, float) else bound
-
-
-def to_resolution(value, resolution: float, digits: int):
-    """``value`` rounded to a multiple of ``resolution`` when smaller than it in magnitude (0),
-    else to ``digits`` significant digits: an error below what the reference resolves is 0."""
-    if not isinstance(value, (int, float, np.floating)) or isinstance(value, bool) or not math.isfinite(value):
-        return value
-    return 0.0 if abs(value) < resolution else sig(value, digits)
-
-
-def _fmt(v, spec: str = ".3g") -> str:
-    return format(v, spec) if isinstance(v, (int, float)) and not isinstance(v, bool) else str(v)
 
 
 def _timing_rows(rows: list[dict], keys: list[str], columns: list[str]) -> list[dict]:
@@ -149,7 +113,7 @@ def _wp_error(row: dict):
 
 def _work_precision(scene: Scene, writer: StageWriter, progress: bool) -> tuple[list[str], list[str]]:
     wp = scene.work_precision
-    bar = _Bar(f"{scene.name}: work-precision", progress)
+    bar = ProgressBar(f"{scene.name}: work-precision", progress)
     rows, order = work_precision(
         scene.model.system(), np.array(scene.initial.x0_m), np.array(scene.initial.v0_m_s), wp.window_s,
         wp.sample_rate_hz, wp.explicit_omega_dt, wp.dop853_rtol, wp.repeats, progress=bar,
@@ -173,7 +137,7 @@ def _work_precision(scene: Scene, writer: StageWriter, progress: bool) -> tuple[
         "",
         f"Window 0-{wp.window_s:g} s, error = max over samples ({wp.sample_rate_hz:g} Hz) and DOFs of "
         "|x - x_ref| / max |x_ref|, reference = the exact integrator. Its own error, measured against DOP853 "
-        f"with every stop crossing located as an event (rtol 1e-13), is below {_fmt(roundoff_bound(exact['error']))} "
+        f"with every stop crossing located as an event (rtol 1e-13), is below {short(roundoff_bound(exact['error']))} "
         f"(round-off of the comparison; written as the power of ten that bounds it, at least {ROUNDOFF_FLOOR:g}). "
         "Steps: events of the exact "
         "integrator, steps of the explicit one, right-hand-side evaluations of DOP853.",
@@ -188,7 +152,7 @@ def _work_precision(scene: Scene, writer: StageWriter, progress: bool) -> tuple[
         "",
         "| method | setting | error | steps |",
         "|---|---|---|---|",
-        *[f"| {r['method']} | {r['setting']} | {_fmt(r['error'], '.4g')} | {r['n_steps']} |" for r in written],
+        *[f"| {r['method']} | {r['setting']} | {short(r['error'], '.4g')} | {r['n_steps']} |" for r in written],
         "",
     ]
     timed = [
@@ -199,7 +163,7 @@ def _work_precision(scene: Scene, writer: StageWriter, progress: bool) -> tuple[
         "",
         "| method | setting | run time [s] | error |",
         "|---|---|---|---|",
-        *[f"| {r['method']} | {r['setting']} | {r['runtime_s']:.3g} | {_fmt(w['error'], '.4g')} |"
+        *[f"| {r['method']} | {r['setting']} | {r['runtime_s']:.3g} | {short(w['error'], '.4g')} |"
           for r, w in zip(rows, written, strict=True)],
         "",
     ]
@@ -207,17 +171,6 @@ def _work_precision(scene: Scene, writer: StageWriter, progress: bool) -> tuple[
 
 
 # -- stiff and extreme cases -----------------------------------------------------------------
-class _CaseBar(_Bar):
-    """The stiff-case bar, naming the case being run (long cases otherwise look like a stall)."""
-
-    def __init__(self, desc: str, enabled: bool) -> None:
-        super().__init__(desc, enabled)
-        self.bar.bar_format = "{l_bar}{bar}| {elapsed}<{remaining}{postfix}"
-
-    def describe(self, text: str) -> None:
-        self.bar.set_postfix_str(text, refresh=False)
-
-
 def _stiff_written(row: dict) -> dict:
     out = dict(row)
     out["energy_J"] = sig(row["energy_J"], VALUE_DIGITS)
@@ -230,7 +183,7 @@ def _stiff_written(row: dict) -> dict:
 def _stiff_cases(scene: Scene, writer: StageWriter, progress: bool) -> tuple[list[str], list[str]]:
     sc = scene.stiff_cases
     rom = scene.model_kind == "rom"
-    bar = _CaseBar(f"{scene.name}: stiff cases", progress)
+    bar = CaseBar(f"{scene.name}: stiff cases", progress)
     if rom:
         spec = scene.model
         base = rom_case(spec.reduced(progress), spec)
@@ -287,21 +240,22 @@ def _stiff_cases(scene: Scene, writer: StageWriter, progress: bool) -> tuple[lis
             continue
         err = _stiff_written(w)["energy_balance_error"]
         if m == "exact":  # round-off: which run is worst is itself round-off, so no case is named
-            science.append(f"| {m} | < {_fmt(err)} | (every run) | |")
+            science.append(f"| {m} | < {short(err)} | (every run) | |")
         else:
-            science.append(f"| {m} | {_fmt(err)} | ({w['k_g']:.3g}, {w['gap']:.3g}, {w['speed']:.3g}, "
+            science.append(f"| {m} | {short(err)} | ({w['k_g']:.3g}, {w['gap']:.3g}, {w['speed']:.3g}, "
                            f"{w['c']:.3g}) | {w['n_steps']} |")
     if long_rows:
         science += ["", f"Long runs ({sc.long_duration_s:g} s, nominal case):", "",
                     "| method | c [N s/m] | status | energy-balance error | steps | events |",
                     "|---|---|---|---|---|---|"]
-        science += [f"| {r['method']} | {_fmt(r['c'])} | {r['status']} | {'< ' if r['method'] == 'exact' else ''}"
-                    f"{_fmt(_stiff_written(r)['energy_balance_error'])} | {r['n_steps']} | {r['n_events']} |"
+        science += [f"| {r['method']} | {short(r['c'])} | {r['status']} | {'< ' if r['method'] == 'exact' else ''}"
+                    f"{short(_stiff_written(r)['energy_balance_error'])} | {r['n_steps']} | {r['n_events']} |"
                     for r in long_rows]
     if refused:
         science += ["", "Refused:", ""]
-        science += [f"- {r['method']} at (k_g, g, v, c) = ({_fmt(r['k_g'])}, {_fmt(r['gap'])}, "
-                    f"{_fmt(r['speed'])}, {_fmt(r['c'])}), {_fmt(r['duration_s'])} s: {r['reason']}" for r in refused]
+        science += [f"- {r['method']} at (k_g, g, v, c) = ({short(r['k_g'])}, {short(r['gap'])}, "
+                    f"{short(r['speed'])}, {short(r['c'])}), {short(r['duration_s'])} s: {r['reason']}"
+                    for r in refused]
     science.append("")
     total = sum(r["runtime_s"] for r in ok)
     timed = ["## Stiff and extreme cases" + (" (reduced model)" if rom else ""), "",
@@ -312,7 +266,7 @@ def _stiff_cases(scene: Scene, writer: StageWriter, progress: bool) -> tuple[lis
                      f"{slowest['runtime_s']:.3g} s for {slowest['n_steps']} steps.")
     if long_rows:
         timed += ["", "| method | c [N s/m] | run time [s] | steps |", "|---|---|---|---|"]
-        timed += [f"| {r['method']} | {_fmt(r['c'])} | {_fmt(r['runtime_s'])} | {r['n_steps']} |"
+        timed += [f"| {r['method']} | {short(r['c'])} | {short(r['runtime_s'])} | {r['n_steps']} |"
                   for r in long_rows]
     timed.append("")
     return science, timed
@@ -343,7 +297,7 @@ def _rom_convergence(scene: Scene, writer: StageWriter, progress: bool) -> tuple
     fe = build_system(spec.fe_model())
     full = full_gap_modes(fe, spec)
     full_hz = {s: g.freq_hz[g.coupled] for s, g in full.items()}
-    bar = _Bar(f"{scene.name}: reduced model vs modes", progress)
+    bar = ProgressBar(f"{scene.name}: reduced model vs modes", progress)
     roms = {}
     for i, n in enumerate(sorted(set(rc.modes))):
         roms[n] = build_rom(replace(spec, n_modes=n), fe=fe)[0]
@@ -412,3 +366,50 @@ def _rom_convergence(scene: Scene, writer: StageWriter, progress: bool) -> tuple
         "",
     ]
     return science, timed
+
+
+# -- the registry's contract (bearingshaft.registry) -------------------------------------------
+DESCRIPTION = """The integrators' error against run time ([work_precision]), stiff and extreme parameters
+([stiff_cases]) and, for a reduced model, its convergence with the number of modes
+([rom_convergence]). Writes work_precision.csv and .png, stiff_cases.csv, rom_convergence.csv
+and .png, study.md (every number reproduced by a rerun), study_timing.md and *_timing.csv."""
+
+
+def estimate(scene: Scene) -> list[Estimate]:
+    """The sampled histories each study holds at once."""
+    n = n_dofs(scene)
+    out = []
+    if scene.work_precision is not None:
+        w = scene.work_precision
+        runs = len(w.explicit_omega_dt) + len(w.dop853_rtol) + 1
+        samples = w.window_s * w.sample_rate_hz + 1
+        out.append(Estimate("study", history_bytes(samples, n, runs),
+                            f"{runs} runs of {samples:.3g} samples", "[work_precision] window_s or sample_rate_hz"))
+    if scene.stiff_cases is not None:
+        s = scene.stiff_cases
+        samples = max(s.duration_s, s.long_duration_s) * s.sample_rate_hz + 1
+        out.append(Estimate("study", history_bytes(samples, n, len(s.methods)),
+                            f"{len(s.methods)} runs of {samples:.3g} samples",
+                            "[stiff_cases] duration_s, long_duration_s or sample_rate_hz"))
+    if scene.rom_convergence is not None:
+        c = scene.rom_convergence
+        samples = c.window_s * c.sample_rate_hz + 1
+        out.append(Estimate("study", history_bytes(samples, max(c.modes) + 2, len(c.modes)),
+                            f"{len(c.modes)} models of up to {max(c.modes) + 2} DOFs, {samples:.3g} samples",
+                            "[rom_convergence] window_s or sample_rate_hz"))
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class _Pending:  # transitional (issue 23): the stage computes while it writes, until split
+    scene: Scene
+    progress: bool
+    options: dict
+
+
+def compute(scene: Scene, progress: bool, workdir) -> _Pending:
+    return _Pending(scene, progress, {})
+
+
+def write(result: _Pending, writer: StageWriter) -> None:
+    study_stage(result.scene, writer, result.progress, **result.options)

@@ -21,14 +21,17 @@ The ringdowns start from the paper's three initial conditions, read from the bui
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
+from bearingshaft.digits import cells
+from bearingshaft.estimates import Estimate, history_bytes, n_dofs
 from bearingshaft.output import StageWriter, write_rows
 from bearingshaft.plots import plt
+from bearingshaft.progress import ProgressBar
 from bearingshaft.scenes import Scene, VerifySpec, load_scene
 from bearingshaft.stages.reduce import GapModeComparison, compare_all, full_gap_modes, left_out_summary
-from bearingshaft.stages.ringdown import _Bar
 from reduced.models.discrete import DiscreteParams
 from reduced.models.gaps import GapSystem
 from reduced.models.identify import RESIDUAL_MEANING, identify_discrete
@@ -72,16 +75,11 @@ def _frequency_rows(comps: dict[str, GapModeComparison], systems: dict[str, GapS
     return rows
 
 
-def _digits(rows: list[dict], formats: dict[str, str], default: str = ".6g") -> list[dict]:
-    """Rows with floats as text to their converged digits: ``formats[key]`` or ``default``."""
-    return [{k: format(v, formats.get(k, default)) if isinstance(v, float) else v for k, v in r.items()}
-            for r in rows]
-
 
 def _backbones(systems: dict[str, GapSystem], energy_max_J: float, progress: bool) -> dict:
     """{model: {nnm: (energy_J, freq_hz)}}, HB with one harmonic, sorted by energy."""
     out: dict = {}
-    bar = _Bar("NNM backbones", progress)
+    bar = ProgressBar("NNM backbones", progress)
     try:
         for i, (name, system) in enumerate(systems.items()):
             curves = hb_backbones(system, 1, energy_max_J, modes=range(N_COMPARE))
@@ -95,7 +93,7 @@ def _backbones(systems: dict[str, GapSystem], energy_max_J: float, progress: boo
 def _ringdowns(systems: dict, vs: VerifySpec, progress: bool) -> dict:
     """{(start, model): RingdownResult} from the paper's three initial conditions."""
     out = {}
-    bar = _Bar("ringdowns", progress)
+    bar = ProgressBar("ringdowns", progress)
     jobs = [(start, scene, name) for start, scene in STARTS for name in MODELS]
     try:
         for j, (start, scene_name, name) in enumerate(jobs):
@@ -360,15 +358,15 @@ def verify_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
     table1 = DiscreteParams()
     id_rows = [{"parameter": k, "unit": UNITS[k], "table1": getattr(table1, k), "identified": getattr(ident, k),
                 "relative_difference": _rel(getattr(ident, k), getattr(table1, k))} for k in UNITS]
-    write_rows(writer.path("identified.csv"), _digits(id_rows, {"relative_difference": ".4g"}))
-    write_rows(writer.path("residuals.csv"), _digits([{"residual": k, "value": v, "meaning": RESIDUAL_MEANING[k]}
+    write_rows(writer.path("identified.csv"), cells(id_rows, {"relative_difference": ".4g"}))
+    write_rows(writer.path("residuals.csv"), cells([{"residual": k, "value": v, "meaning": RESIDUAL_MEANING[k]}
                                                       for k, v in residuals.items()], {}, ".4g"))
 
     models = {"reduced": (rom.system(), rom.P), "identified": (ident.system(), np.eye(3)),
               "table1": (table1.system(), np.eye(3))}
     systems = {k: s for k, (s, _) in models.items()}
     freq_rows = _frequency_rows(comps, systems)
-    write_rows(writer.path("verify.csv"), _digits(freq_rows, {"reduced_mac": ".6f", **{f"{k}_rel": ".4g"
+    write_rows(writer.path("verify.csv"), cells(freq_rows, {"reduced_mac": ".6f", **{f"{k}_rel": ".4g"
                                                                                      for k in MODELS}}))
 
     backbones = _backbones(systems, vs.energy_max_J, progress)
@@ -429,3 +427,33 @@ def verify_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
           f"{n_left['closed']} closed gap (verify.md says which and why)\n"
           "  files: " + ", ".join(sorted(p.name for p in writer.scratch.iterdir())), flush=True)
 
+
+
+# -- the registry's contract (bearingshaft.registry) -------------------------------------------
+DESCRIPTION = """Read the reduced 3-D beam as the paper's 3-DOF model: identify its parameters against Table 1,
+compare the coupled frequencies of the full, reduced and identified models, their NNM
+backbones and ringdowns from the paper's three initial conditions. Writes identified.csv,
+frequencies.csv, ringdowns.csv, sensitivity.csv, verify.png and verify.md."""
+
+
+def estimate(scene: Scene) -> list[Estimate]:
+    """Three models x three ringdowns held at once."""
+    v = scene.verify
+    samples = v.duration_s * v.sample_rate_hz + 1
+    return [Estimate("verify", history_bytes(samples, n_dofs(scene), 3 * 3),
+                     f"3 models x 3 ringdowns of {samples:.3g} samples", "[verify] duration_s or sample_rate_hz")]
+
+
+@dataclass(frozen=True, eq=False)
+class _Pending:  # transitional (issue 23): the stage computes while it writes, until split
+    scene: Scene
+    progress: bool
+    options: dict
+
+
+def compute(scene: Scene, progress: bool, workdir) -> _Pending:
+    return _Pending(scene, progress, {})
+
+
+def write(result: _Pending, writer: StageWriter) -> None:
+    verify_stage(result.scene, writer, result.progress, **result.options)

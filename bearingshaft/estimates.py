@@ -1,0 +1,46 @@
+"""What a stage will hold at its peak, counted from the scene alone (no model is built).
+
+Each stage declares its estimate in the registry (:mod:`bearingshaft.registry`); the budget
+(:mod:`bearingshaft.budget`) checks them against the memory and disk available. The
+estimates are upper bounds within a small factor (``COPIES``), not a profile: their job is
+to stop a 149 GiB request before numpy makes it. Sizes: samples x channels x 8 bytes for
+time histories held in memory, ((2H + 1) n)^2 x 8 bytes for harmonic-balance Jacobians.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from bearingshaft.scenes import Scene
+
+COPIES = 3  # a stage holds its result, a derived series (energy, points) and a plotting copy
+JACOBIAN_COPIES = 4  # HB: Jacobian, its LU factors, the AFT blocks and a continuation copy
+HILL_COPIES = 6  # FRC Hill: the real matrix, its Hessenberg/Schur work copies, complex eigenvalue output
+FLOAT = 8  # bytes
+MATPLOTLIB_BYTES = 64 * 2**20  # figures being drawn, fonts, the HB backbones: measured 10-30 MB
+
+
+@dataclass(frozen=True, slots=True)
+class Estimate:
+    """Peak bytes one stage will hold, what they are, and the scene key that sizes them."""
+
+    stage: str
+    bytes: float
+    what: str
+    key: str  # "[table] key"
+    disk: float = 0.0  # bytes written to the results folder
+    advice: str = ""  # what to do when it does not fit (default: "lower <key>")
+
+
+def n_dofs(scene: Scene) -> int:
+    """DOFs of the scene's gap system, known before it is built (3-D models: 0)."""
+    if scene.model_kind == "discrete":
+        return 3
+    if scene.model_kind == "rom":
+        return scene.model.n_modes + 2
+    return 0
+
+
+def history_bytes(samples: float, n: int, runs: int = 1) -> float:
+    """Bytes of ``runs`` sampled histories: t, x (n), v (n), dissipated, energy per sample."""
+    return runs * COPIES * samples * (2 * n + 3) * FLOAT

@@ -1,0 +1,101 @@
+"""The stage registry: every stage of the pipeline, declared once.
+
+A stage is what one subcommand runs on a scene: its entry says which tables ask for it, how to
+compute it, how to write what it computed, what it will hold in memory (checked before any
+work) and how the command line offers it. The pipeline (:mod:`bearingshaft.pipeline`),
+``bearingshaft check``, the budget (:mod:`bearingshaft.budget`) and the command line
+(:mod:`bearingshaft.cli`) read this table and nothing else.
+
+The contract of a stage module (``bearingshaft/stages/<name>.py``)::
+
+    compute(scene, progress, workdir, **options) -> result   # a frozen dataclass: arrays, numbers,
+                                                             # solver statistics; no file is written
+                                                             # but arrays streamed into ``workdir``
+    write(result, writer)                                    # CSV/NPZ/UFF/Markdown and figures from
+                                                             # the result; runs no solver
+    estimate(scene) -> list[Estimate]                        # peak memory and disk, from the scene
+
+To add a stage: write that module, add one :class:`Stage` below in pipeline order; its
+subcommand, its budget check and its place in ``bearingshaft run`` follow from the entry.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from bearingshaft.scenes import Scene
+from bearingshaft.stages import frc, hammer, modal, nnm, reduce, ringdown, study, verify
+
+
+@dataclass(frozen=True, slots=True)
+class Option:
+    """A command-line option of a stage's subcommand, passed to its compute as ``name=value``."""
+
+    flag: str  # "--method"
+    name: str  # keyword of compute
+    help: str
+    metavar: str | None = None
+    choices: tuple[str, ...] | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Stage:
+    """One stage: the tables that ask for it, its compute, its writer, its estimate, its subcommand."""
+
+    name: str
+    asked_by: str  # the tables (or keys) that ask for it, as a refusal names them
+    wanted: Callable[[Scene], bool]  # does the scene ask for it?
+    compute: Callable  # compute(scene, progress, workdir, **options) -> result
+    write: Callable  # write(result, writer)
+    estimate: Callable  # estimate(scene) -> list[Estimate]
+    help: str  # one line in `bearingshaft --help`
+    description: str  # what the subcommand does and writes (`bearingshaft NAME --help`)
+    options: tuple[Option, ...] = field(default=())
+
+
+STAGES: tuple[Stage, ...] = (
+    Stage("modal", "[modal]", lambda s: s.modal is not None, modal.compute, modal.write, modal.estimate,
+          help="build the mesh and run the modal analysis of a 3-D scene",
+          description=modal.DESCRIPTION),
+    Stage("reduce", '[model] kind = "rom"', lambda s: s.model_kind == "rom", reduce.compute, reduce.write,
+          reduce.estimate, help="reduce the 3-D model to its tips (Craig-Bampton): rom.npz, cb_check.csv",
+          description=reduce.DESCRIPTION),
+    Stage("ringdown", "[ringdown]", lambda s: s.ringdown is not None and s.hammer is None,  # [hammer] records its own
+          ringdown.compute, ringdown.write, ringdown.estimate,
+          help="free (or forced) response from the scene's initial state",
+          description=ringdown.DESCRIPTION,
+          options=(Option("--method", "method", "integrator (default: the scene's, else exact)",
+                          choices=("exact", "explicit", "dop853")),)),
+    Stage("hammer", "[hammer]", lambda s: s.hammer is not None, hammer.compute, hammer.write, hammer.estimate,
+          help="virtual hammer test of the apparatus, every rig channel (UFF 58 out); --test FILE.uff compares a "
+               "measured test",
+          description=hammer.DESCRIPTION,
+          options=(Option("--test", "test_file", "a measured test (UFF 58 time histories): the model is run at its "
+                          "sampling, driven by its hammer channel, and compared channel for channel (default results "
+                          "folder: results/<scene>/test-<file name>/)", metavar="FILE.uff"),)),
+    Stage("nnm", "[nnm]", lambda s: s.nnm is not None or s.fep is not None, nnm.compute, nnm.write,
+          nnm.estimate, help="frequency-energy relations of the nonlinear normal modes",
+          description=nnm.DESCRIPTION),
+    Stage("study", "[work_precision], [stiff_cases] or [rom_convergence]",
+          lambda s: s.work_precision is not None or s.stiff_cases is not None or s.rom_convergence is not None,
+          study.compute, study.write, study.estimate, help="error against run time, stiff and extreme cases",
+          description=study.DESCRIPTION),
+    Stage("verify", "[verify]", lambda s: s.verify is not None, verify.compute, verify.write, verify.estimate,
+          help="verify the reduced model against the discrete model", description=verify.DESCRIPTION),
+    Stage("frc", "[frc]", lambda s: s.frc is not None, frc.compute, frc.write, frc.estimate,
+          help="forced-response curves by harmonic balance, stepped sine and stability",
+          description=frc.DESCRIPTION),
+)
+
+BY_NAME: dict[str, Stage] = {s.name: s for s in STAGES}
+
+
+def stages_of(scene: Scene) -> tuple[str, ...]:
+    """The stages ``scene`` asks for, in pipeline order."""
+    return tuple(s.name for s in STAGES if s.wanted(scene))
+
+
+def stage(name: str) -> Stage:
+    """The registry entry of stage ``name`` (KeyError if there is none)."""
+    return BY_NAME[name]

@@ -1,0 +1,71 @@
+"""TOML values to dataclass fields: types checked (a number given as a string or a boolean is
+refused, not coerced), NaN, infinities and absurd magnitudes refused, unknown keys named."""
+
+from __future__ import annotations
+
+import math
+import types
+import typing
+from dataclasses import fields
+
+from bearingshaft.scenes.errors import SceneError, show, suggest
+
+MAX_COUNT = 100_000  # largest count (energies, orbits, repeats, modes) a scene may ask for
+MAX_MAGNITUDE = 1e100  # no SI quantity here comes near; squares of larger values (energies) overflow
+
+
+# -- conversion --------------------------------------------------------------------------
+def _coerce(value, typ, where: str):
+    origin = typing.get_origin(typ)
+    if origin in (types.UnionType, typing.Union):
+        args = [a for a in typing.get_args(typ) if a is not type(None)]
+        return _coerce(value, args[0], where)
+    if origin is tuple:
+        (inner, _) = typing.get_args(typ)
+        if not isinstance(value, list):
+            raise SceneError(f"{where}: expected a list, got {show(value)}")
+        if not value:
+            raise SceneError(f"{where}: the list is empty; give at least one value")
+        if len(value) > MAX_COUNT:
+            raise SceneError(f"{where}: {len(value)} values is too many (at most {MAX_COUNT})")
+        return tuple(_coerce(v, inner, f"{where}[{i}]") for i, v in enumerate(value))
+    if typ is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise SceneError(f"{where}: expected a number, got {show(value)}")
+        if isinstance(value, float) and not math.isfinite(value):
+            raise SceneError(f"{where}: must be finite, got {show(value)}")
+        if abs(value) > MAX_MAGNITUDE:
+            raise SceneError(f"{where}: {value!r} is out of range (|value| <= {MAX_MAGNITUDE:g})")
+        return float(value)
+    if typ is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise SceneError(f"{where}: expected an integer, got {show(value)}")
+        if abs(value) > MAX_COUNT:
+            raise SceneError(f"{where}: {value} is too large (at most {MAX_COUNT})")
+        return value
+    if typ is str:
+        if not isinstance(value, str):
+            raise SceneError(f"{where}: expected a string, got {show(value)}")
+        return value
+    if typ is bool:
+        if not isinstance(value, bool):
+            raise SceneError(f"{where}: expected true or false, got {show(value)}")
+        return value
+    raise TypeError(f"unsupported field type {typ!r} at {where}")  # a bug, not bad input
+
+
+def from_table(cls: type, table: dict, where: str):
+    """Build dataclass ``cls`` from a TOML table, naming ``where`` in every error."""
+    if not isinstance(table, dict):
+        raise SceneError(f"{where}: expected a table, got {show(table)}")
+    hints = typing.get_type_hints(cls)
+    known = [f.name for f in fields(cls)]
+    for key in table:
+        if key not in known:
+            raise SceneError(f"{where}: unknown key {key!r}{suggest(key, known)} (known: {', '.join(known)})")
+    kwargs = {k: _coerce(v, hints[k], f"{where} {k}") for k, v in table.items()}
+    try:
+        return cls(**kwargs)
+    except (ValueError, TypeError) as exc:
+        raise SceneError(f"{where}: {exc}") from None
+

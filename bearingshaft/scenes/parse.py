@@ -1,0 +1,181 @@
+"""A scene from TOML text or a file: every table read into its dataclass, then the rules that tie
+tables together (a [hammer] needs the reduced apparatus, [fep] needs [nnm], ...), each refusal one
+line naming the file, table and key. Built-in scenes are the ``*.toml`` files of this package."""
+
+from __future__ import annotations
+
+import tomllib
+from importlib import resources
+from pathlib import Path
+
+from bearingshaft.scenes.convert import from_table
+from bearingshaft.scenes.errors import SceneError, show, suggest
+from bearingshaft.scenes.loads import parse_loads
+from bearingshaft.scenes.models import MODEL_KINDS, model_class
+from bearingshaft.scenes.scene import Scene
+from bearingshaft.scenes.sweep import parse_sweep_table
+from bearingshaft.scenes.tables import SECTIONS, InitialSpec
+
+
+def parse_scene(text: str, default_name: str, origin: str) -> Scene:
+    """A :class:`Scene` from TOML text; ``origin`` names the file in error messages."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{origin}: invalid TOML: {exc}") from None
+    top = {"name", "description", "model", "load", "sweep", *SECTIONS}
+    for key in data:
+        if key not in top:
+            raise SceneError(f"{origin}: unknown key {key!r}{suggest(key, top)} (known: {', '.join(sorted(top))})")
+    name = data.get("name", default_name)
+    description = data.get("description", "")
+    if not isinstance(name, str) or not name or "/" in name or name.startswith(".") or len(name) > 200:
+        raise SceneError(f"{origin}: name must be a non-empty string without '/' or a leading '.', "
+                         f"got {show(name)}")
+    if not isinstance(description, str):
+        raise SceneError(f"{origin}: description must be a string, got {show(description)}")
+    model_table = data.get("model", {})
+    if not isinstance(model_table, dict):
+        raise SceneError(f"{origin} [model]: expected a table, got {show(model_table)}")
+    model_table = dict(model_table)
+    kind = model_table.pop("kind", "discrete")
+    if not isinstance(kind, str):
+        raise SceneError(f"{origin} [model] kind: expected a string (one of {', '.join(MODEL_KINDS)}), "
+                         f"got {show(kind)}")
+    if kind not in MODEL_KINDS:
+        raise SceneError(f"{origin} [model] kind: unknown model {show(kind)}{suggest(kind, MODEL_KINDS)} "
+                         f"(known: {', '.join(MODEL_KINDS)})")
+    try:
+        model = from_table(model_class(kind), model_table, f"{origin} [model]")
+    except SceneError as exc:
+        if "kind" in data.get("model", {}):
+            raise
+        raise SceneError(f"{exc}; [model] kind is not given, so {kind!r} is assumed") from None
+    sections = {
+        key: from_table(cls, data[key], f"{origin} [{key}]") for key, cls in SECTIONS.items() if key in data
+    }
+    if "sweep" in data:  # the table only: its cases are built and checked by bearingshaft.sweep.plan
+        sections["sweep"] = parse_sweep_table(data["sweep"], origin)
+    if not hasattr(model, "system"):  # a 3-D model: only [modal] applies
+        other = [k for k in sections if k not in ("modal", "sweep")] + (["[load]"] if "load" in data else [])
+        if other:
+            raise SceneError(f"{origin}: model kind {kind!r} takes only a [modal] table, got [{other[0]}]")
+        return Scene(name=name, description=description, model_kind=kind, model=model, source=text, origin=origin,
+                     **sections)
+    if "modal" in sections:
+        raise SceneError(f"{origin}: [modal] needs a 3-D model (kind = \"assembly\"), not {kind!r}")
+    if kind == "rom":
+        for key in ("work_precision",):  # [nnm] and [fep] run on a reduced model too (stages/fep.py)
+            if key in sections:
+                raise SceneError(f"{origin}: [{key}] is for the discrete model; a reduced model has "
+                                 "[ringdown], [nnm], [fep], [stiff_cases], [rom_convergence] and [verify]")
+    else:
+        for key in ("rom_convergence", "verify"):
+            if key in sections:
+                raise SceneError(f"{origin}: [{key}] needs a reduced model (kind = \"rom\"), not {kind!r}")
+    dof_names = model.point_names  # what [initial], [spectrogram] and [symmetry] refer to
+    n = len(dof_names)
+    init = sections.get("initial", InitialSpec())
+    for key in ("x0_m", "v0_m_s"):
+        if len(getattr(init, key)) != n:
+            raise SceneError(f"{origin} [initial] {key}: needs {n} values ({', '.join(dof_names)}), "
+                             f"got {len(getattr(init, key))}")
+    hammer = sections.get("hammer")
+    if hammer is not None:
+        _check_hammer(sections, kind, model, origin, "load" in data)
+        from fem.rig import channel_names
+
+        dof_names = channel_names()  # [spectrogram] dof names a channel of the rig
+    spec = sections.get("spectrogram")
+    if spec is not None and spec.dof not in dof_names:
+        raise SceneError(f"{origin} [spectrogram] dof: unknown DOF {spec.dof!r} (known: {', '.join(dof_names)})")
+    sym = sections.get("symmetry")
+    if sym is not None and any(d not in dof_names for d in sym.dofs):
+        raise SceneError(f"{origin} [symmetry] dofs: unknown DOF in {sym.dofs!r}")
+    if spec is not None and "ringdown" in sections and spec.window_s > sections["ringdown"].duration_s:
+        raise SceneError(f"{origin} [spectrogram] window_s: {spec.window_s!r} s is longer than the run "
+                         f"([ringdown] duration_s = {sections['ringdown'].duration_s!r} s)")
+    loads, signals = (), ()
+    if "load" in data:
+        loads, signals = parse_loads(data["load"], origin, dof_names)
+        if "ringdown" not in sections:
+            raise SceneError(f"{origin} [[load]]: loads drive the ringdown stage; add a [ringdown] table")
+        for key in ("work_precision", "stiff_cases", "rom_convergence", "verify"):
+            if key in sections:
+                raise SceneError(f"{origin} [[load]]: [{key}] runs free ringdowns; put the loads in a scene "
+                                 "without it")
+        duration = sections["ringdown"].duration_s
+        for i, sig in enumerate(signals):
+            if sig.start_s >= duration:
+                raise SceneError(f"{origin} [[load]] {i + 1} start_s: the load starts at {sig.start_s!r} s, "
+                                 f"at or after the end of the run ([ringdown] duration_s = {duration!r} s)")
+    if "fep" in sections and "nnm" not in sections:
+        raise SceneError(f"{origin}: [fep] needs an [nnm] table (its energy range and grid)")
+    frc = sections.get("frc")
+    if frc is not None:
+        if frc.point not in dof_names:
+            raise SceneError(f"{origin} [frc] point: unknown point {frc.point!r}{suggest(frc.point, dof_names)} "
+                             f"(known: {', '.join(dof_names)})")
+        damping = (model.c,) if kind == "discrete" else (model.c_points, model.alpha)
+        if not any(d > 0 for d in damping):
+            raise SceneError(f"{origin} [frc]: the model has no damping ([model] "
+                             f"{'c' if kind == 'discrete' else 'c_points or alpha'} = 0), so no forced response "
+                             "settles and the curves have no peak; give the model damping")
+    if ("spectrogram" in sections or "symmetry" in sections) and "ringdown" not in sections:
+        raise SceneError(f"{origin}: [spectrogram] and [symmetry] need a [ringdown] table")
+    return Scene(name=name, description=description, model_kind=kind, model=model, source=text, origin=origin,
+                 loads=loads, load_signals=signals, **sections)
+
+
+def _check_hammer(sections: dict, kind: str, model, origin: str, has_loads: bool) -> None:
+    """[hammer] needs a reduced model of the whole assembly, a [ringdown] and no other load or stage."""
+    if kind != "rom" or model.layout != "assembly":
+        raise SceneError(f"{origin} [hammer]: the virtual test needs the reduced apparatus ([model] kind = \"rom\", "
+                         "layout = \"assembly\")")
+    if "ringdown" not in sections:
+        raise SceneError(f"{origin} [hammer]: add a [ringdown] table (the record's duration_s, sample_rate_hz, "
+                         "method)")
+    if has_loads:
+        raise SceneError(f"{origin} [[load]]: [hammer] is the load of a virtual test; drop [[load]] or [hammer]")
+    for key in ("symmetry", "work_precision", "stiff_cases", "rom_convergence", "verify", "frc"):
+        if key in sections:
+            raise SceneError(f"{origin}: [{key}] does not go with [hammer]; put it in another scene")
+    h, rd = sections["hammer"], sections["ringdown"]
+    if h.start_s + h.duration_s > rd.duration_s:
+        raise SceneError(f"{origin} [hammer] start_s: the blow ends at {h.start_s + h.duration_s!r} s, after the "
+                         f"record ([ringdown] duration_s = {rd.duration_s!r} s)")
+    from fem.rig import channel_names
+
+    names = channel_names()
+    for c in h.compare:
+        if c not in names:
+            raise SceneError(f"{origin} [hammer] compare: unknown channel {c!r}{suggest(c, names)}")
+
+
+# -- built-in scenes ---------------------------------------------------------------------
+def builtin_names() -> list[str]:
+    """Names of the scenes shipped with the package, sorted."""
+    folder = resources.files("bearingshaft") / "scenes"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def load_scene(name_or_path: str) -> Scene:
+    """A built-in scene by name, or a scene from a TOML file path."""
+    path = Path(name_or_path)
+    if path.suffix == ".toml" or path.exists():
+        try:
+            text = path.read_text(encoding="utf-8")
+        except OSError as exc:
+            raise SceneError(f"{name_or_path}: cannot read scene file ({exc.strerror})") from None
+        except UnicodeDecodeError:
+            raise SceneError(f"{name_or_path}: not a text file (a scene is TOML in UTF-8)") from None
+        return parse_scene(text, path.stem, str(path))
+    if name_or_path not in builtin_names():
+        hint = suggest(name_or_path, builtin_names())
+        raise SceneError(
+            f"unknown scene {name_or_path!r}{hint}: not a file, and no built-in scene has that name"
+            + ("" if hint else f" (built-in: {', '.join(builtin_names())})")
+        )
+    text = (resources.files("bearingshaft") / "scenes" / f"{name_or_path}.toml").read_text(encoding="utf-8")
+    return parse_scene(text, name_or_path, f"scene {name_or_path}")
+

@@ -1,0 +1,52 @@
+"""A scene: one case, a model and the tables that say which stages run on it
+(:func:`bearingshaft.registry.stages_of`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from bearingshaft.scenes.sweep import SweepSpec
+from bearingshaft.scenes.tables import (
+    FEPSpec,
+    FRCSpec,
+    HammerSpec,
+    InitialSpec,
+    ModalSpec,
+    NNMSpec,
+    RingdownSpec,
+    RomConvergenceSpec,
+    SpectrogramSpec,
+    StiffCasesSpec,
+    SymmetrySpec,
+    VerifySpec,
+    WorkPrecisionSpec,
+)
+
+
+@dataclass(frozen=True, slots=True)
+class Scene:
+    """One case: a model and the stages to run on it."""
+
+    name: str
+    description: str
+    model_kind: str
+    model: object  # DiscreteParams | RomSpec | fem.model.AssemblyModel
+    source: str = field(repr=False)  # the TOML text as read, kept with every result
+    origin: str = field(default="", repr=False)  # where it was read from, for messages
+    initial: InitialSpec = InitialSpec()
+    loads: tuple = ()  # [[load]] specs (HalfSineLoadSpec | HarmonicLoadSpec | TabulatedLoadSpec)
+    load_signals: tuple = field(default=(), repr=False)  # their time functions (reduced.models.loads)
+    modal: ModalSpec | None = None
+    ringdown: RingdownSpec | None = None
+    spectrogram: SpectrogramSpec | None = None
+    symmetry: SymmetrySpec | None = None
+    nnm: NNMSpec | None = None
+    fep: FEPSpec | None = None
+    work_precision: WorkPrecisionSpec | None = None
+    stiff_cases: StiffCasesSpec | None = None
+    rom_convergence: RomConvergenceSpec | None = None
+    verify: VerifySpec | None = None
+    frc: FRCSpec | None = None
+    hammer: HammerSpec | None = None
+    sweep: SweepSpec | None = None  # [sweep]: run by `bearingshaft sweep`
+

@@ -1,0 +1,315 @@
+"""The tables of a scene other than [model], [[load]] and [sweep]: one frozen dataclass each,
+with the unit first in every field's comment and the allowed values checked on construction.
+``SECTIONS`` maps each table name to its class."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from bearingshaft.scenes.checks import check, each, positive, tolerance
+from reduced.transient.integrate import METHODS
+
+MAX_HARMONICS = 1000  # HB orders beyond this resolve nothing a 20 kHz ringdown shows
+EXPLICIT_OMEGA_DT_MAX = 1.6  # rad: 0.8 x the central-difference limit omega dt = 2 (reduced.transient.explicit)
+
+
+@dataclass(frozen=True, slots=True)
+class InitialSpec:
+    """Initial state of the ringdown at the points x1, x2, x3 (see :mod:`reduced.models.initial`).
+
+    For the discrete model the points are its DOFs. A reduced model takes the point values
+    in its lowest three open-gap modes (heave, pitch, first bending), as the discrete model.
+    """
+
+    x0_m: tuple[float, ...] = (0.0, 0.0, 0.0)  # m, displacement of each point
+    v0_m_s: tuple[float, ...] = (0.0, 0.0, 0.0)  # m/s, velocity of each point
+
+
+
+@dataclass(frozen=True, slots=True)
+class RingdownSpec:
+    """Free response from the initial state."""
+
+    method: str = "exact"  # exact | explicit | dop853
+    duration_s: float = 2.0  # s
+    sample_rate_hz: float = 20000.0  # Hz, output sampling
+    dt_s: float | None = None  # s, explicit step (default: omega_dt / omega_max)
+    omega_dt: float = 0.05  # rad, explicit step: omega_ref dt
+    step_basis: str = "top"  # omega_ref: "top" closed-gap frequency, or "contact" (the three lowest
+    # modes that move the gaps, as the discrete model has; top mode capped at omega_max dt = 1)
+    rtol: float = 1e-10  # dop853 relative tolerance
+    atol: float | None = None  # m, dop853 absolute tolerance (default rtol x gap)
+
+    def __post_init__(self) -> None:
+        check(self.method in METHODS, f"method must be one of {', '.join(METHODS)}, got {self.method!r}")
+        positive(self, "duration_s", "sample_rate_hz", "omega_dt", "rtol")
+        tolerance(self, "rtol")
+        check(self.omega_dt <= EXPLICIT_OMEGA_DT_MAX, f"omega_dt must be <= {EXPLICIT_OMEGA_DT_MAX} "
+               f"(central difference is unstable past omega dt = 2), got {self.omega_dt!r}")
+        check(self.step_basis in ("top", "contact"), f"step_basis must be top or contact, got {self.step_basis!r}")
+        if self.dt_s is not None:
+            positive(self, "dt_s")
+        if self.atol is not None:
+            positive(self, "atol")
+
+
+@dataclass(frozen=True, slots=True)
+class SpectrogramSpec:
+    """Short-time Fourier transform (Hann window) of one DOF."""
+
+    dof: str = "x1"  # which DOF to transform
+    window_s: float = 0.05  # s, Hann window length
+    overlap: float = 0.9  # fraction of the window shared by neighbouring frames
+    fmax_hz: float = 1500.0  # Hz, top of the plot
+    db_range: float = 120.0  # dB shown below the peak
+
+    def __post_init__(self) -> None:
+        positive(self, "window_s", "fmax_hz", "db_range")
+        check(0.0 <= self.overlap < 1.0, f"overlap must be in [0, 1), got {self.overlap!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class SymmetrySpec:
+    """Symmetry-breaking plot: |x_a - x_b| against time (Fig. 4)."""
+
+    dofs: tuple[str, ...] = ("x1", "x3")  # the pair that a symmetric motion keeps equal
+    methods: tuple[str, ...] = ("exact", "explicit", "dop853")  # integrators compared
+
+    def __post_init__(self) -> None:
+        check(len(self.dofs) == 2, f"dofs must name two DOFs, got {self.dofs!r}")
+        check(self.dofs[0] != self.dofs[1], f"dofs must name two different DOFs, got {self.dofs!r}")
+        each(self, "methods", lambda m: m in METHODS, f"one of {', '.join(METHODS)}")
+
+
+@dataclass(frozen=True, slots=True)
+class NNMSpec:
+    """Frequency-energy relations of the nonlinear normal modes."""
+
+    n_energy: int = 400  # number of energies, log-spaced
+    energy_min_J: float = 1e-4  # J
+    energy_max_J: float = 1e5  # J
+
+    def __post_init__(self) -> None:
+        check(self.n_energy >= 2, f"n_energy must be >= 2, got {self.n_energy!r}")
+        positive(self, "energy_min_J", "energy_max_J")
+        check(self.energy_max_J > self.energy_min_J, "energy_max_J must exceed energy_min_J")
+
+
+@dataclass(frozen=True, slots=True)
+class FEPSpec:
+    """Frequency-energy plots by HB, shooting and their stability (issue 3) -> stage nnm."""
+
+    harmonics: tuple[int, ...] = (1, 15)  # HB orders drawn in fep.png (1: the paper's Fig. 2)
+    convergence_harmonics: tuple[int, ...] = (1, 3, 5, 9, 15, 25, 50)  # hb_convergence study
+    samples_study_harmonics: int = 15  # H at which the AFT sample count N is varied
+    samples: tuple[int, ...] = (32, 64, 128, 256, 512, 1024, 2048)  # N values of that study
+    energy_max_J: float = 1e5  # J, every branch runs at least this far
+    n_shooting: int = 60  # shooting orbits per NNM (log-spaced in energy)
+
+    def __post_init__(self) -> None:
+        each(self, "harmonics", lambda h: 1 <= h <= MAX_HARMONICS, f"in [1, {MAX_HARMONICS}]")
+        each(self, "convergence_harmonics", lambda h: 1 <= h <= MAX_HARMONICS, f"in [1, {MAX_HARMONICS}]")
+        check(1 <= self.samples_study_harmonics <= MAX_HARMONICS,
+               f"samples_study_harmonics must be in [1, {MAX_HARMONICS}], got {self.samples_study_harmonics!r}")
+        each(self, "samples", lambda n: n > 2 * self.samples_study_harmonics,
+              f"> 2 x samples_study_harmonics = {2 * self.samples_study_harmonics} (AFT sampling theorem)")
+        positive(self, "energy_max_J")
+        check(self.n_shooting >= 2, f"n_shooting must be >= 2, got {self.n_shooting!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class WorkPrecisionSpec:
+    """Error against run time of the three integrators over a short window."""
+
+    window_s: float = 0.05  # s, before chaotic divergence dominates
+    sample_rate_hz: float = 20000.0  # Hz, grid on which errors are measured
+    explicit_omega_dt: tuple[float, ...] = (0.8, 0.4, 0.2, 0.1, 0.05, 0.025, 0.0125, 0.00625, 0.003125)
+    dop853_rtol: tuple[float, ...] = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12, 1e-13)
+    repeats: int = 3  # best-of timing
+
+    def __post_init__(self) -> None:
+        positive(self, "window_s", "sample_rate_hz")
+        check(len(self.explicit_omega_dt) >= 3, "explicit_omega_dt needs >= 3 values to fit an order")
+        each(self, "explicit_omega_dt", lambda v: 0 < v <= EXPLICIT_OMEGA_DT_MAX,
+              f"in (0, {EXPLICIT_OMEGA_DT_MAX}] (central difference is unstable past omega dt = 2)")
+        each(self, "dop853_rtol", lambda v: 0 < v < 1, "in (0, 1)")
+        check(self.repeats >= 1, f"repeats must be >= 1, got {self.repeats!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class StiffCasesSpec:
+    """Sweep over stiff and extreme parameters (every combination is run)."""
+
+    k_g: tuple[float, ...] = (3.502e7, 1e9, 1e11)  # N/m
+    gap: tuple[float, ...] = (0.0, 2.54e-4, 1e-2)  # m
+    speed: tuple[float, ...] = (0.01, 200.0, 2000.0)  # m/s, initial velocity of mass 3
+    c: tuple[float, ...] = (0.0, 4.0, 400.0)  # N s/m
+    duration_s: float = 0.2  # s
+    sample_rate_hz: float = 5000.0  # Hz
+    methods: tuple[str, ...] = ("exact", "explicit")
+    long_duration_s: float = 0.0  # s, also run the nominal case (first k_g, Table-1 gap, 200 m/s) this long
+    # for every c (0: no long runs)
+
+    def __post_init__(self) -> None:
+        positive(self, "duration_s", "sample_rate_hz")
+        each(self, "k_g", lambda v: v > 0, "> 0 N/m")
+        each(self, "gap", lambda v: v >= 0, ">= 0 m")
+        each(self, "c", lambda v: v >= 0, ">= 0 N s/m")
+        each(self, "speed", lambda v: v != 0, "nonzero m/s (a run from rest has nothing to show)")
+        check(self.long_duration_s >= 0, f"long_duration_s must be >= 0, got {self.long_duration_s!r}")
+        each(self, "methods", lambda m: m in METHODS, f"one of {', '.join(METHODS)}")
+
+
+@dataclass(frozen=True, slots=True)
+class ModalSpec:
+    """Modal analysis of a 3-D model (kind = "assembly"): correlation, MAC, pictures."""
+
+    n_modes: int = 20  # modes computed, rigid-body ones included
+    shift_hz: float = 1.0  # Hz, the shift is sigma = -(2 pi shift_hz)^2 (K - sigma M > 0)
+    solver: str = "pardiso"  # pardiso | superlu (falls back to superlu without pypardiso)
+    test_shapes: str = ""  # UFF (dataset 55) or CSV file of test mode shapes; "" -> FE auto-MAC
+    pictures: bool = True  # mode-shape pictures rendered with pyvista off screen
+    vtu: bool = True  # modes.vtu of the labelled modes for ParaView
+
+    def __post_init__(self) -> None:
+        check(self.n_modes >= 12, f"n_modes must be >= 12 (6 rigid + 6 pseudo-rigid), got {self.n_modes!r}")
+        positive(self, "shift_hz")
+        check(self.solver in ("pardiso", "superlu"), f"solver must be pardiso or superlu, got {self.solver!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class RomConvergenceSpec:
+    """Reduced model against its number of fixed-interface modes (kind = "rom")."""
+
+    modes: tuple[int, ...] = (1, 2, 5, 10, 20, 50)  # fixed-interface modes; the largest is the reference
+    window_s: float = 0.05  # s, ringdown window over which the error is measured
+    sample_rate_hz: float = 20000.0  # Hz, grid on which errors are measured
+    n_compare: int = 4  # contact-coupled frequencies compared (open and closed gap)
+    repeats: int = 3  # best-of timing
+
+    def __post_init__(self) -> None:
+        check(len(self.modes) >= 2, f"modes needs >= 2 counts, got {self.modes!r}")
+        each(self, "modes", lambda m: m >= 0, ">= 0")
+        positive(self, "window_s", "sample_rate_hz")
+        check(self.n_compare >= 1, f"n_compare must be >= 1, got {self.n_compare!r}")
+        check(self.repeats >= 1, f"repeats must be >= 1, got {self.repeats!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class VerifySpec:
+    """Reduction against the discrete model: identified parameters, frequencies, NNMs, ringdowns."""
+
+    duration_s: float = 2.0  # s, ringdown of each of the paper's three initial conditions
+    sample_rate_hz: float = 20000.0  # Hz
+    method: str = "exact"  # ringdown integrator
+    energy_max_J: float = 1e5  # J, NNM backbones (HB, H = 1) up to this energy
+    window_s: float = 0.05  # s, spectrogram window
+    fmax_hz: float = 1500.0  # Hz, top of the spectrograms
+
+    def __post_init__(self) -> None:
+        check(self.method in METHODS, f"method must be one of {', '.join(METHODS)}, got {self.method!r}")
+        positive(self, "duration_s", "sample_rate_hz", "energy_max_J", "window_s", "fmax_hz")
+
+
+@dataclass(frozen=True, slots=True)
+class FRCSpec:
+    """Forced-response curves by HB under a harmonic load at one point, verified by a stepped
+    sine of the exact integrator (issue 11) -> stage frc (reduced.periodic.frc)."""
+
+    point: str = "x2"  # where the load P cos(2 pi f t) acts (a point name)
+    levels_N: tuple[float, ...] = (0.1, 1.0, 10.0)  # N, load amplitudes P: one curve each
+    freq_min_hz: float = 10.0  # Hz, each curve starts here (from rest at the lowest level)
+    freq_max_hz: float = 900.0  # Hz, and ends where it leaves the band
+    harmonics: int = 15  # H of the curves in frc.csv and frc.png
+    odd_harmonics: bool = True  # odd harmonics only (a half-wave symmetric response; stability sees all)
+    convergence_harmonics: tuple[int, ...] = (1, 3, 5, 9, 15, 21, 25, 31)  # H of the error-against-H study
+    convergence_level_N: float = 1.0  # N, the level of that study
+    max_steps: int = 3000  # continuation steps per curve at most
+    hill_points: int = 40  # Hill's method on at most this many points per curve (0: none)
+    shooting_points: int = 12  # Floquet multipliers by shooting on the exact flow, points per curve (0: none)
+    shooting_segments: int = 8  # segments of the multiple shooting
+    stepped_sine_points: int = 24  # frequencies per level, each swept up and down (0: no stepped sine)
+    stepped_sine_tol: float = 1e-6  # settled when the predicted distance to the periodic orbit is below this
+    stepped_sine_max_s: float = 10.0  # s, simulated time per frequency at most before "not settled"
+    backbone_scales: tuple[float, ...] = (1.0, 0.1, 0.01)  # damping and load scaled together (backbone check)
+
+    def __post_init__(self) -> None:
+        each(self, "levels_N", lambda v: v > 0, "> 0 N")
+        positive(self, "freq_min_hz", "freq_max_hz", "convergence_level_N", "stepped_sine_max_s")
+        check(self.freq_max_hz > self.freq_min_hz,
+               f"freq_max_hz must exceed freq_min_hz = {self.freq_min_hz!r} Hz, got {self.freq_max_hz!r}")
+        check(1 <= self.harmonics <= MAX_HARMONICS,
+               f"harmonics must be in [1, {MAX_HARMONICS}], got {self.harmonics!r}")
+        each(self, "convergence_harmonics", lambda h: 1 <= h <= MAX_HARMONICS, f"in [1, {MAX_HARMONICS}]")
+        if self.odd_harmonics:
+            check(self.harmonics % 2 == 1, f"harmonics must be odd with odd_harmonics = true, got {self.harmonics!r}")
+            each(self, "convergence_harmonics", lambda h: h % 2 == 1, "odd with odd_harmonics = true")
+        check(self.max_steps >= 1, f"max_steps must be >= 1, got {self.max_steps!r}")
+        check(self.hill_points >= 0, f"hill_points must be >= 0, got {self.hill_points!r}")
+        check(self.shooting_points >= 0, f"shooting_points must be >= 0, got {self.shooting_points!r}")
+        check(self.shooting_segments >= 1, f"shooting_segments must be >= 1, got {self.shooting_segments!r}")
+        check(self.stepped_sine_points >= 0, f"stepped_sine_points must be >= 0, got {self.stepped_sine_points!r}")
+        tolerance(self, "stepped_sine_tol")
+        each(self, "backbone_scales", lambda v: 0 < v <= 1, "in (0, 1] (damping and load scaled down together)")
+
+
+@dataclass(frozen=True, slots=True)
+class HammerSpec:
+    """A hammer blow on the beam of the reduced apparatus, recorded on every rig channel
+    (issue 12) -> stage hammer (reduced.models.rig). The record's length, sampling and
+    integrator are [ringdown]'s."""
+
+    location_m: tuple[float, ...] = ()  # m, point struck (default: the beam's top face at mid-span,
+    # under the tube's hole)
+    direction: tuple[float, ...] = (0.0, 0.0, -1.0)  # the blow's direction (default: straight down)
+    peak_N: float = 500.0  # N, the nominal blow: hammer.npz, hammer.uff, fig10.png, fig11.png
+    duration_s: float = 1e-3  # s, length of the half-sine
+    start_s: float = 0.01  # s, pre-trigger: the blow starts here
+    levels_N: tuple[float, ...] = (20.0, 100.0, 200.0, 500.0, 1000.0, 2000.0)  # N, the level sweep
+    force_file: str = ""  # a measured force history (CSV t_s,force_N or UFF 58) instead of the half-sine
+    seismic_mass_kg: float = 0.04  # kg, tip assembly above each load cell's gauge (fem.rig)
+    load_cell: str = "tip_left_top"  # the load cell of fig10.png
+    compare: tuple[str, ...] = ()  # channels compared with a measured test (default: all but the hammer)
+    compare_window_s: tuple[float, ...] = ()  # s, (start, end) of the error measures (default: the record)
+    linear_check: bool = False  # the open-gap response against the full 3-D model's modal superposition
+    linear_check_max_hz: float = 20000.0  # Hz, full-model modes up to this in that reference
+    backbone_modes: int = 3  # NNM backbones overlaid on fig11.png (0: none)
+
+    def __post_init__(self) -> None:
+        from fem.rig import TIP_CELLS
+
+        if self.location_m:
+            check(len(self.location_m) == 3, f"location_m must be 3 numbers (x, y, z), got {self.location_m!r}")
+        check(len(self.direction) == 3, f"direction must be 3 numbers, got {self.direction!r}")
+        check(any(d != 0 for d in self.direction), "direction must not be the zero vector")
+        positive(self, "peak_N", "duration_s", "linear_check_max_hz")
+        check(self.start_s >= 0, f"start_s must be >= 0, got {self.start_s!r}")
+        each(self, "levels_N", lambda v: v > 0, "> 0 N")
+        check(self.seismic_mass_kg >= 0, f"seismic_mass_kg must be >= 0, got {self.seismic_mass_kg!r}")
+        check(self.load_cell in TIP_CELLS, f"load_cell must be one of {', '.join(TIP_CELLS)}, got {self.load_cell!r}")
+        if self.force_file:
+            check(Path(self.force_file).is_file(), f"force_file: no such file {self.force_file!r}")
+        if self.compare_window_s:
+            w = self.compare_window_s
+            check(len(w) == 2 and 0 <= w[0] < w[1], f"compare_window_s must be (start, end), 0 <= start < end, "
+                   f"got {w!r}")
+        check(self.backbone_modes >= 0, f"backbone_modes must be >= 0, got {self.backbone_modes!r}")
+
+
+
+SECTIONS: dict[str, type] = {
+    "modal": ModalSpec,
+    "initial": InitialSpec,
+    "ringdown": RingdownSpec,
+    "spectrogram": SpectrogramSpec,
+    "symmetry": SymmetrySpec,
+    "nnm": NNMSpec,
+    "fep": FEPSpec,
+    "work_precision": WorkPrecisionSpec,
+    "stiff_cases": StiffCasesSpec,
+    "rom_convergence": RomConvergenceSpec,
+    "verify": VerifySpec,
+    "frc": FRCSpec,
+    "hammer": HammerSpec,
+}
