@@ -18,7 +18,56 @@ from bearingshaft.scenes.tables import SECTIONS, InitialSpec
 
 
 def parse_scene(text: str, default_name: str, origin: str) -> Scene:
-    """A :class:`Scene` from TOML text; ``origin`` names the file in error messages."""
+    """A :class:`Scene` from TOML text.
+
+    Parameters
+    ----------
+    text : str
+        The scene's TOML.
+    default_name : str
+        Its name when the text gives none (the file's stem).
+    origin : str
+        Where the text comes from, named at the start of every error message.
+
+    Returns
+    -------
+    Scene
+        Every table read into its dataclass and checked against the others.
+
+    Raises
+    ------
+    SceneError
+        One line naming the file, table and key, at the first thing wrong.
+    """
+    data = _read_toml(text, origin)
+    name, description = _name_and_description(data, default_name, origin)
+    kind, model = _read_model(data, origin)
+    sections = {
+        key: from_table(cls, data[key], f"{origin} [{key}]") for key, cls in SECTIONS.items() if key in data
+    }
+    if "sweep" in data:  # the table only: its cases are built and checked by bearingshaft.sweep
+        sections["sweep"] = parse_sweep_table(data["sweep"], origin)
+    if not hasattr(model, "system"):  # a 3-D model: only [modal] applies
+        other = [k for k in sections if k not in ("modal", "sweep")] + (["[load]"] if "load" in data else [])
+        if other:
+            raise SceneError(f"{origin}: model kind {kind!r} takes only a [modal] table, got [{other[0]}]")
+        return Scene(name=name, description=description, model_kind=kind, model=model, source=text, origin=origin,
+                     **sections)
+    _check_tables_of_kind(sections, kind, origin)
+    dof_names = _check_points(sections, kind, model, origin, "load" in data)
+    loads, signals = _read_loads(data, sections, dof_names, origin)
+    if "fep" in sections and "nnm" not in sections:
+        raise SceneError(f"{origin}: [fep] needs an [nnm] table (its energy range and grid)")
+    if "frc" in sections:
+        _check_frc(sections["frc"], kind, model, dof_names, origin)
+    if ("spectrogram" in sections or "symmetry" in sections) and "ringdown" not in sections:
+        raise SceneError(f"{origin}: [spectrogram] and [symmetry] need a [ringdown] table")
+    return Scene(name=name, description=description, model_kind=kind, model=model, source=text, origin=origin,
+                 loads=loads, load_signals=signals, **sections)
+
+
+def _read_toml(text: str, origin: str) -> dict:
+    """The TOML data, its top-level keys known."""
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -27,6 +76,10 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
     for key in data:
         if key not in top:
             raise SceneError(f"{origin}: unknown key {key!r}{suggest(key, top)} (known: {', '.join(sorted(top))})")
+    return data
+
+
+def _name_and_description(data: dict, default_name: str, origin: str) -> tuple[str, str]:
     name = data.get("name", default_name)
     description = data.get("description", "")
     if not isinstance(name, str) or not name or "/" in name or name.startswith(".") or len(name) > 200:
@@ -34,6 +87,11 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
                          f"got {show(name)}")
     if not isinstance(description, str):
         raise SceneError(f"{origin}: description must be a string, got {show(description)}")
+    return name, description
+
+
+def _read_model(data: dict, origin: str) -> tuple[str, object]:
+    """(kind, model) of the [model] table (kind "discrete" when not given, and the message says so)."""
     model_table = data.get("model", {})
     if not isinstance(model_table, dict):
         raise SceneError(f"{origin} [model]: expected a table, got {show(model_table)}")
@@ -46,26 +104,19 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
         raise SceneError(f"{origin} [model] kind: unknown model {show(kind)}{suggest(kind, MODEL_KINDS)} "
                          f"(known: {', '.join(MODEL_KINDS)})")
     try:
-        model = from_table(model_class(kind), model_table, f"{origin} [model]")
+        return kind, from_table(model_class(kind), model_table, f"{origin} [model]")
     except SceneError as exc:
         if "kind" in data.get("model", {}):
             raise
         raise SceneError(f"{exc}; [model] kind is not given, so {kind!r} is assumed") from None
-    sections = {
-        key: from_table(cls, data[key], f"{origin} [{key}]") for key, cls in SECTIONS.items() if key in data
-    }
-    if "sweep" in data:  # the table only: its cases are built and checked by bearingshaft.sweep.plan
-        sections["sweep"] = parse_sweep_table(data["sweep"], origin)
-    if not hasattr(model, "system"):  # a 3-D model: only [modal] applies
-        other = [k for k in sections if k not in ("modal", "sweep")] + (["[load]"] if "load" in data else [])
-        if other:
-            raise SceneError(f"{origin}: model kind {kind!r} takes only a [modal] table, got [{other[0]}]")
-        return Scene(name=name, description=description, model_kind=kind, model=model, source=text, origin=origin,
-                     **sections)
+
+
+def _check_tables_of_kind(sections: dict, kind: str, origin: str) -> None:
+    """Tables that need a 3-D, a discrete or a reduced model are refused on the others."""
     if "modal" in sections:
         raise SceneError(f"{origin}: [modal] needs a 3-D model (kind = \"assembly\"), not {kind!r}")
     if kind == "rom":
-        for key in ("work_precision",):  # [nnm] and [fep] run on a reduced model too (stages/fep.py)
+        for key in ("work_precision",):  # [nnm] and [fep] run on a reduced model too (stages/nnm_fep.py)
             if key in sections:
                 raise SceneError(f"{origin}: [{key}] is for the discrete model; a reduced model has "
                                  "[ringdown], [nnm], [fep], [stiff_cases], [rom_convergence] and [verify]")
@@ -73,16 +124,20 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
         for key in ("rom_convergence", "verify"):
             if key in sections:
                 raise SceneError(f"{origin}: [{key}] needs a reduced model (kind = \"rom\"), not {kind!r}")
-    dof_names = model.point_names  # what [initial], [spectrogram] and [symmetry] refer to
+
+
+def _check_points(sections: dict, kind: str, model, origin: str, has_loads: bool) -> tuple[str, ...]:
+    """The names [initial], [spectrogram] and [symmetry] refer to, checked: the model's points, or with
+    [hammer] the rig's channels."""
+    dof_names = model.point_names
     n = len(dof_names)
     init = sections.get("initial", InitialSpec())
     for key in ("x0_m", "v0_m_s"):
         if len(getattr(init, key)) != n:
             raise SceneError(f"{origin} [initial] {key}: needs {n} values ({', '.join(dof_names)}), "
                              f"got {len(getattr(init, key))}")
-    hammer = sections.get("hammer")
-    if hammer is not None:
-        _check_hammer(sections, kind, model, origin, "load" in data)
+    if sections.get("hammer") is not None:
+        _check_hammer(sections, kind, model, origin, has_loads)
         from fem.rig import channel_names
 
         dof_names = channel_names()  # [spectrogram] dof names a channel of the rig
@@ -95,36 +150,38 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
     if spec is not None and "ringdown" in sections and spec.window_s > sections["ringdown"].duration_s:
         raise SceneError(f"{origin} [spectrogram] window_s: {spec.window_s!r} s is longer than the run "
                          f"([ringdown] duration_s = {sections['ringdown'].duration_s!r} s)")
-    loads, signals = (), ()
-    if "load" in data:
-        loads, signals = parse_loads(data["load"], origin, dof_names)
-        if "ringdown" not in sections:
-            raise SceneError(f"{origin} [[load]]: loads drive the ringdown stage; add a [ringdown] table")
-        for key in ("work_precision", "stiff_cases", "rom_convergence", "verify"):
-            if key in sections:
-                raise SceneError(f"{origin} [[load]]: [{key}] runs free ringdowns; put the loads in a scene "
-                                 "without it")
-        duration = sections["ringdown"].duration_s
-        for i, sig in enumerate(signals):
-            if sig.start_s >= duration:
-                raise SceneError(f"{origin} [[load]] {i + 1} start_s: the load starts at {sig.start_s!r} s, "
-                                 f"at or after the end of the run ([ringdown] duration_s = {duration!r} s)")
-    if "fep" in sections and "nnm" not in sections:
-        raise SceneError(f"{origin}: [fep] needs an [nnm] table (its energy range and grid)")
-    frc = sections.get("frc")
-    if frc is not None:
-        if frc.point not in dof_names:
-            raise SceneError(f"{origin} [frc] point: unknown point {frc.point!r}{suggest(frc.point, dof_names)} "
-                             f"(known: {', '.join(dof_names)})")
-        damping = (model.c,) if kind == "discrete" else (model.c_points, model.alpha)
-        if not any(d > 0 for d in damping):
-            raise SceneError(f"{origin} [frc]: the model has no damping ([model] "
-                             f"{'c' if kind == 'discrete' else 'c_points or alpha'} = 0), so no forced response "
-                             "settles and the curves have no peak; give the model damping")
-    if ("spectrogram" in sections or "symmetry" in sections) and "ringdown" not in sections:
-        raise SceneError(f"{origin}: [spectrogram] and [symmetry] need a [ringdown] table")
-    return Scene(name=name, description=description, model_kind=kind, model=model, source=text, origin=origin,
-                 loads=loads, load_signals=signals, **sections)
+    return dof_names
+
+
+def _read_loads(data: dict, sections: dict, dof_names, origin: str) -> tuple[tuple, tuple]:
+    """([[load]] specs, their signals): loads drive a [ringdown] within its duration, and no free study."""
+    if "load" not in data:
+        return (), ()
+    loads, signals = parse_loads(data["load"], origin, dof_names)
+    if "ringdown" not in sections:
+        raise SceneError(f"{origin} [[load]]: loads drive the ringdown stage; add a [ringdown] table")
+    for key in ("work_precision", "stiff_cases", "rom_convergence", "verify"):
+        if key in sections:
+            raise SceneError(f"{origin} [[load]]: [{key}] runs free ringdowns; put the loads in a scene "
+                             "without it")
+    duration = sections["ringdown"].duration_s
+    for i, sig in enumerate(signals):
+        if sig.start_s >= duration:
+            raise SceneError(f"{origin} [[load]] {i + 1} start_s: the load starts at {sig.start_s!r} s, "
+                             f"at or after the end of the run ([ringdown] duration_s = {duration!r} s)")
+    return loads, signals
+
+
+def _check_frc(frc, kind: str, model, dof_names, origin: str) -> None:
+    """[frc] loads a point of the model, which needs damping for a forced response to settle."""
+    if frc.point not in dof_names:
+        raise SceneError(f"{origin} [frc] point: unknown point {frc.point!r}{suggest(frc.point, dof_names)} "
+                         f"(known: {', '.join(dof_names)})")
+    damping = (model.c,) if kind == "discrete" else (model.c_points, model.alpha)
+    if not any(d > 0 for d in damping):
+        raise SceneError(f"{origin} [frc]: the model has no damping ([model] "
+                         f"{'c' if kind == 'discrete' else 'c_points or alpha'} = 0), so no forced response "
+                         "settles and the curves have no peak; give the model damping")
 
 
 def _check_hammer(sections: dict, kind: str, model, origin: str, has_loads: bool) -> None:
