@@ -130,131 +130,166 @@ def _divisions(length: float, g: AssemblyGeometry, along_x: bool) -> int:
 
 
 def build_mesh(g: AssemblyGeometry, verbose: bool = False, msh_path: str | Path | None = None) -> MeshData:
-    """Build, name and mesh the parts in ``g.parts``; return the hexahedral :class:`MeshData`."""
+    """Build, name and mesh the parts in ``g.parts``; return the hexahedral :class:`MeshData`.
+
+    Parameters
+    ----------
+    g : AssemblyGeometry
+        The parts, their dimensions and the element size.
+    verbose : bool
+        Let gmsh print.
+    msh_path : str or Path, optional
+        Also write the gmsh mesh (``.msh``) here.
+
+    Returns
+    -------
+    MeshData
+        Nodes, 8-node hexahedra with their part, and the named node sets (seats, contact
+        patches, sensors, bungee points); nodes of no hexahedron are dropped.
+    """
     import time
 
     t0 = time.perf_counter()
     with gmsh_session("assembly", verbose) as model:
-        occ = model.occ
-        boxes: dict[str, list[int]] = {p: [] for p in g.parts}
-        if "beam" in g.parts:
-            xs, ys, zs = beam_grid(g)
-            for i in range(len(xs) - 1):
-                for j in range(len(ys) - 1):
-                    for k in range(len(zs) - 1):
-                        boxes["beam"].append(occ.addBox(xs[i], ys[j], zs[k], xs[i + 1] - xs[i],
-                                                        ys[j + 1] - ys[j], zs[k + 1] - zs[k]))
-        if "tube" in g.parts:
-            xs, ys, zs = tube_grid(g)
-            w, h = g.tube_inner_width / 2, g.tube_inner_height / 2
-            for i in range(len(xs) - 1):
-                for j in range(len(ys) - 1):
-                    for k in range(len(zs) - 1):
-                        yc, zc = (ys[j] + ys[j + 1]) / 2, (zs[k] + zs[k + 1]) / 2
-                        if abs(yc) < w and abs(zc) < h:
-                            continue  # inside the tube
-                        boxes["tube"].append(occ.addBox(xs[i], ys[j], zs[k], xs[i + 1] - xs[i],
-                                                        ys[j + 1] - ys[j], zs[k + 1] - zs[k]))
-        all_boxes = [(3, t) for p in boxes.values() for t in p]
-        occ.fragment(all_boxes, [])
-        occ.synchronize()
-
-        def inside(box, dim):
-            lo, hi = box
-            return [t for (_, t) in model.getEntitiesInBoundingBox(
-                lo[0] - BBOX_TOL, lo[1] - BBOX_TOL, lo[2] - BBOX_TOL,
-                hi[0] + BBOX_TOL, hi[1] + BBOX_TOL, hi[2] + BBOX_TOL, dim)]
-
-        vols: dict[str, list[int]] = {}
-        if "beam" in g.parts:
-            b2, h2, l2 = g.beam_width / 2, g.beam_height / 2, g.beam_length / 2
-            vols["beam"] = inside(((-l2, -b2, -h2), (l2, b2, h2)), 3)
-        if "tube" in g.parts:
-            every = [t for (_, t) in model.getEntities(3)]
-            vols["tube"] = [t for t in every if t not in vols["beam"]]
-        for name, tags in vols.items():
-            if not tags:
-                raise RuntimeError(f"gmsh selected no volume for part {name!r}")
-            model.addPhysicalGroup(3, tags, name=name)
-
-        # transfinite hexahedral meshing: divisions from each curve's length and direction
-        for _, c in model.getEntities(1):
-            x0, y0, z0, x1, y1, z1 = model.getBoundingBox(1, c)
-            ext = np.array([x1 - x0, y1 - y0, z1 - z0])
-            d = int(np.argmax(ext))
-            n = _divisions(float(ext[d]) - 2e-7, g, along_x=(d == 0))
-            model.mesh.setTransfiniteCurve(c, n + 1)
-        for _, s in model.getEntities(2):
-            model.mesh.setTransfiniteSurface(s)
-            model.mesh.setRecombine(2, s)
-        for _, v in model.getEntities(3):
-            model.mesh.setTransfiniteVolume(v)
-
-        named_faces: dict[str, list[int]] = {}
-        named_points: dict[str, tuple[float, float, float]] = {}
-        s = g.seat_diameter / 2
-        for part in g.parts:
-            for key, (x, y, z) in g.seat_centres(part).items():
-                tags = inside(((x - s, y - s, z), (x + s, y + s, z)), 2)
-                named_faces[f"{part}_seat_{key}"] = tags
-                if part == "beam":
-                    named_faces[f"beam_contact_{key}"] = tags
-        if "beam" in g.parts:
-            named_points.update(g.beam_sensors())
-        if "tube" in g.parts:
-            named_points.update(g.tube_sensors())
-            lt, W, H = g.tube_length / 2, g.tube_outer_width / 2, g.tube_outer_height / 2
-            for i, (x, y) in enumerate(((-lt, W), (-lt, -W), (lt, W), (lt, -W))):
-                named_points[f"bungee_{i + 1}"] = (x, y, H)
-        for name, tags in named_faces.items():
-            if not tags:
-                raise RuntimeError(f"gmsh selected no face for {name!r}")
-            model.addPhysicalGroup(2, tags, name=name)
-        point_tags = {}
-        for name, (x, y, z) in named_points.items():
-            tags = inside(((x, y, z), (x, y, z)), 0)
-            if len(tags) != 1:
-                raise RuntimeError(f"expected one vertex for {name!r} at {(x, y, z)}, found {len(tags)}")
-            point_tags[name] = tags
-            model.addPhysicalGroup(0, tags, name=name)
-
+        _add_part_boxes(model.occ, g)
+        model.occ.synchronize()
+        vols = _name_volumes(model, g)
+        _set_transfinite(model, g)
+        named_faces, point_tags = _name_regions(model, g)
         model.mesh.generate(3)
         if msh_path is not None:
             import gmsh
 
             gmsh.write(str(msh_path))
-
-        node_tags, coords, _ = model.mesh.getNodes()
-        order = np.argsort(node_tags)
-        node_tags = node_tags[order]
-        points = coords.reshape(-1, 3)[order]
-
-        def index(tags):
-            return np.searchsorted(node_tags, np.asarray(tags, dtype=node_tags.dtype))
-
-        hexes, cell_part = [], []
-        names = tuple(vols)
-        for pi, name in enumerate(names):
-            for v in vols[name]:
-                types, _, conn = model.mesh.getElements(3, v)
-                for et, cn in zip(types, conn, strict=True):
-                    if et != GMSH_HEX8:
-                        raise RuntimeError(f"gmsh produced element type {et} in {name!r}: hexahedra only")
-                    h8 = index(cn).reshape(-1, 8)
-                    hexes.append(h8)
-                    cell_part.append(np.full(len(h8), pi))
-        node_sets = {}
-        for name, tags in named_faces.items():
-            nt = np.concatenate([model.mesh.getNodes(2, t, includeBoundary=True)[0] for t in tags])
-            node_sets[name] = np.unique(index(nt))
-        for name, tags in point_tags.items():
-            node_sets[name] = index(model.mesh.getNodes(0, tags[0])[0])
-    hexes = np.concatenate(hexes)
+        points, hexes, cell_part, node_sets = _read_mesh(model, vols, named_faces, point_tags)
     used = np.unique(hexes)
     if len(used) != len(points):  # drop nodes that belong to no hexahedron
         remap = -np.ones(len(points), dtype=np.int64)
         remap[used] = np.arange(len(used))
         points, hexes = points[used], remap[hexes]
         node_sets = {k: remap[v] for k, v in node_sets.items()}
-    return MeshData(points=points, hexes=hexes, cell_part=np.concatenate(cell_part), part_names=names,
+    return MeshData(points=points, hexes=hexes, cell_part=cell_part, part_names=tuple(vols),
                     node_sets=node_sets, wall_time_s=time.perf_counter() - t0)
+
+
+def _grid_boxes(occ, xs, ys, zs, skip=None) -> list[int]:
+    """OCC boxes of the cells of a block grid (``skip(yc, zc)``: leave that cell out)."""
+    tags = []
+    for i in range(len(xs) - 1):
+        for j in range(len(ys) - 1):
+            for k in range(len(zs) - 1):
+                if skip is not None and skip((ys[j] + ys[j + 1]) / 2, (zs[k] + zs[k + 1]) / 2):
+                    continue
+                tags.append(occ.addBox(xs[i], ys[j], zs[k], xs[i + 1] - xs[i], ys[j + 1] - ys[j], zs[k + 1] - zs[k]))
+    return tags
+
+
+def _add_part_boxes(occ, g: AssemblyGeometry) -> None:
+    """The parts as block grids of boxes, fragmented so that touching blocks share their faces."""
+    boxes: dict[str, list[int]] = {p: [] for p in g.parts}
+    if "beam" in g.parts:
+        boxes["beam"] = _grid_boxes(occ, *beam_grid(g))
+    if "tube" in g.parts:
+        w, h = g.tube_inner_width / 2, g.tube_inner_height / 2
+        boxes["tube"] = _grid_boxes(occ, *tube_grid(g), skip=lambda yc, zc: abs(yc) < w and abs(zc) < h)  # inside
+    occ.fragment([(3, t) for p in boxes.values() for t in p], [])
+
+
+def _inside(model, box, dim: int) -> list[int]:
+    """Tags of the entities of dimension ``dim`` in the box ((lo), (hi)), padded by BBOX_TOL."""
+    lo, hi = box
+    return [t for (_, t) in model.getEntitiesInBoundingBox(
+        lo[0] - BBOX_TOL, lo[1] - BBOX_TOL, lo[2] - BBOX_TOL,
+        hi[0] + BBOX_TOL, hi[1] + BBOX_TOL, hi[2] + BBOX_TOL, dim)]
+
+
+def _name_volumes(model, g: AssemblyGeometry) -> dict[str, list[int]]:
+    """{part: volume tags}, each a physical group: the beam by its box, the tube everything else."""
+    vols: dict[str, list[int]] = {}
+    if "beam" in g.parts:
+        b2, h2, l2 = g.beam_width / 2, g.beam_height / 2, g.beam_length / 2
+        vols["beam"] = _inside(model, ((-l2, -b2, -h2), (l2, b2, h2)), 3)
+    if "tube" in g.parts:
+        every = [t for (_, t) in model.getEntities(3)]
+        vols["tube"] = [t for t in every if t not in vols["beam"]]
+    for name, tags in vols.items():
+        if not tags:
+            raise RuntimeError(f"gmsh selected no volume for part {name!r}")
+        model.addPhysicalGroup(3, tags, name=name)
+    return vols
+
+
+def _set_transfinite(model, g: AssemblyGeometry) -> None:
+    """Transfinite hexahedral meshing: divisions from each curve's length and direction."""
+    for _, c in model.getEntities(1):
+        x0, y0, z0, x1, y1, z1 = model.getBoundingBox(1, c)
+        ext = np.array([x1 - x0, y1 - y0, z1 - z0])
+        d = int(np.argmax(ext))
+        n = _divisions(float(ext[d]) - 2e-7, g, along_x=(d == 0))
+        model.mesh.setTransfiniteCurve(c, n + 1)
+    for _, s in model.getEntities(2):
+        model.mesh.setTransfiniteSurface(s)
+        model.mesh.setRecombine(2, s)
+    for _, v in model.getEntities(3):
+        model.mesh.setTransfiniteVolume(v)
+
+
+def _name_regions(model, g: AssemblyGeometry) -> tuple[dict[str, list[int]], dict[str, list[int]]]:
+    """Physical groups of the seats and contact patches (faces) and of the sensor and bungee points."""
+    named_faces: dict[str, list[int]] = {}
+    named_points: dict[str, tuple[float, float, float]] = {}
+    s = g.seat_diameter / 2
+    for part in g.parts:
+        for key, (x, y, z) in g.seat_centres(part).items():
+            tags = _inside(model, ((x - s, y - s, z), (x + s, y + s, z)), 2)
+            named_faces[f"{part}_seat_{key}"] = tags
+            if part == "beam":
+                named_faces[f"beam_contact_{key}"] = tags
+    if "beam" in g.parts:
+        named_points.update(g.beam_sensors())
+    if "tube" in g.parts:
+        named_points.update(g.tube_sensors())
+        lt, W, H = g.tube_length / 2, g.tube_outer_width / 2, g.tube_outer_height / 2
+        for i, (x, y) in enumerate(((-lt, W), (-lt, -W), (lt, W), (lt, -W))):
+            named_points[f"bungee_{i + 1}"] = (x, y, H)
+    for name, tags in named_faces.items():
+        if not tags:
+            raise RuntimeError(f"gmsh selected no face for {name!r}")
+        model.addPhysicalGroup(2, tags, name=name)
+    point_tags = {}
+    for name, (x, y, z) in named_points.items():
+        tags = _inside(model, ((x, y, z), (x, y, z)), 0)
+        if len(tags) != 1:
+            raise RuntimeError(f"expected one vertex for {name!r} at {(x, y, z)}, found {len(tags)}")
+        point_tags[name] = tags
+        model.addPhysicalGroup(0, tags, name=name)
+    return named_faces, point_tags
+
+
+def _read_mesh(model, vols: dict, named_faces: dict, point_tags: dict):
+    """(points, hexes, cell_part, node_sets) of the generated mesh, nodes in gmsh tag order."""
+    node_tags, coords, _ = model.mesh.getNodes()
+    order = np.argsort(node_tags)
+    node_tags = node_tags[order]
+    points = coords.reshape(-1, 3)[order]
+
+    def index(tags):
+        return np.searchsorted(node_tags, np.asarray(tags, dtype=node_tags.dtype))
+
+    hexes, cell_part = [], []
+    for pi, name in enumerate(vols):
+        for v in vols[name]:
+            types, _, conn = model.mesh.getElements(3, v)
+            for et, cn in zip(types, conn, strict=True):
+                if et != GMSH_HEX8:
+                    raise RuntimeError(f"gmsh produced element type {et} in {name!r}: hexahedra only")
+                h8 = index(cn).reshape(-1, 8)
+                hexes.append(h8)
+                cell_part.append(np.full(len(h8), pi))
+    node_sets = {}
+    for name, tags in named_faces.items():
+        nt = np.concatenate([model.mesh.getNodes(2, t, includeBoundary=True)[0] for t in tags])
+        node_sets[name] = np.unique(index(nt))
+    for name, tags in point_tags.items():
+        node_sets[name] = index(model.mesh.getNodes(0, tags[0])[0])
+    return points, np.concatenate(hexes), np.concatenate(cell_part), node_sets
