@@ -38,18 +38,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
+from bearingshaft.digits import sig  # noqa: E402
 from bearingshaft.output import staged_output, write_rows  # noqa: E402
 from bearingshaft.scenes import load_scene  # noqa: E402
 from bearingshaft.stages.frc import _in_contact, shooting_error  # noqa: E402
-from bearingshaft.stages.ringdown import model_system  # noqa: E402
-from bearingshaft.stages.study import sig  # noqa: E402
+from bearingshaft.systems import model_system  # noqa: E402
 from reduced._blas import single_thread_blas  # noqa: E402
 from reduced.models.loads import Harmonic, Loads  # noqa: E402
-from reduced.periodic.frc import (  # noqa: E402
-    frc,
-    solution_at_frequency,
-    stepped_sine,
-)
+from reduced.periodic.frc import frc, solution_at_frequency  # noqa: E402
+from reduced.periodic.stepped_sine import stepped_sine  # noqa: E402
 
 TOLERANCES = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-8)  # stepped-sine settle tolerances of the work study
 HARMONICS = (1, 3, 5, 9, 15, 21, 25, 31)  # HB orders of the work study

@@ -18,18 +18,11 @@ from reduced.models.gaps import GapSystem, two_sided_stops
 from reduced.models.loads import Harmonic, Loads
 from reduced.periodic.backbones import nnm_branch
 from reduced.periodic.exact_hb import ExactGapBalance, contact_intervals
-from reduced.periodic.frc import (
-    ForcedBalance,
-    bifurcations,
-    floquet_by_shooting,
-    frc,
-    hb_states,
-    linear_frf,
-    max_abs_over_period,
-    solution_at_frequency,
-    stepped_sine,
-)
+from reduced.periodic.forced_balance import ForcedBalance
+from reduced.periodic.forced_stability import bifurcations, floquet_by_shooting, hb_states
+from reduced.periodic.frc import frc, linear_frf, max_abs_over_period, solution_at_frequency
 from reduced.periodic.hb import HarmonicBalance, _derivative_matrix
+from reduced.periodic.stepped_sine import stepped_sine
 from reduced.transient.flow import Flow
 
 P = DiscreteParams()

@@ -10,7 +10,7 @@ import pytest
 from bearingshaft.output import StageWriter
 from bearingshaft.registry import stages_of
 from bearingshaft.scenes import parse_scene
-from bearingshaft.stages.fep import fep_stage
+from bearingshaft.stages.nnm_fep import fep_stage
 from reduced.models.discrete import DiscreteParams
 from reduced.periodic import nnm2
 from reduced.periodic.backbones import hb_point_at_energy, nnm_branch

@@ -15,8 +15,8 @@ import pytest
 from bearingshaft.output import StageWriter
 from bearingshaft.registry import stages_of
 from bearingshaft.scenes import load_scene, parse_scene
-from bearingshaft.stages.fep import fep_model
 from bearingshaft.stages.nnm import nnm_stage
+from bearingshaft.stages.nnm_fep import fep_model
 from reduced.models.discrete import DiscreteParams
 from reduced.models.modes import gap_moving_modes, linear_modes
 from reduced.periodic import nnm2

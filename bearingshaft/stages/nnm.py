@@ -2,30 +2,23 @@
 
 Runs on the 3-DOF model and on a reduced 3-D model (``[model] kind = "rom"``: its linear
 modes over the coordinates x1, x3, eta_i); only the symmetric 3-DOF model has the exact
-NNM 2 relation, so a reduced model writes linear_modes.csv and the [fep] files.
-
-Numbers go to the digits that a rerun on another machine reproduces (its CPU picks other
-SIMD kernels in NumPy and OpenBLAS, which moves the last bits; measured by rerunning with
-OpenBLAS's Sandy Bridge kernels and NumPy's AVX2/FMA paths disabled): closed-form and
-eigenvalue frequencies and energies to :data:`VALUE_DIGITS` significant digits, frequencies
-integrated by DOP853 (rtol 1e-13, moved by 1e-13) to :data:`INTEGRATED_DIGITS`, relative
-errors to 3 digits and 0 below :data:`CHECK_RESOLUTION` (what the integrated reference
-resolves), mode shapes to :data:`SHAPE_DECIMALS` decimals with the sign of their first
-largest entry positive. The [fep] part: :mod:`bearingshaft.stages.fep`.
+NNM 2 relation, so a reduced model writes linear_modes.csv and the [fep] files. The [fep]
+part: :mod:`bearingshaft.stages.nnm_fep`. :func:`compute` runs everything into an
+:class:`~bearingshaft.stages.nnm_files.NNMResult`; :func:`write`
+(:mod:`bearingshaft.stages.nnm_files`, which also says to how many digits each number is
+written) writes the files listed in :data:`DESCRIPTION`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from tqdm import tqdm
 
-from bearingshaft import plots
-from bearingshaft.digits import sig, to_resolution
 from bearingshaft.estimates import COPIES, FLOAT, JACOBIAN_COPIES, Estimate, n_dofs
-from bearingshaft.output import StageWriter, write_rows
+from bearingshaft.output import StageWriter
 from bearingshaft.scenes import Scene
+from bearingshaft.stages.nnm_fep import compute_fep
+from bearingshaft.stages.nnm_files import NNM2Exact, NNMResult, write
 from bearingshaft.systems import model_system
 from reduced._blas import single_thread_blas
 from reduced.models.discrete import DiscreteParams
@@ -33,71 +26,46 @@ from reduced.models.modes import linear_modes
 from reduced.periodic import nnm2
 
 CHECK_CHI = (1.000001, 1.0001, 1.01, 1.1, 2.0, 10.0, 100.0, 1000.0)  # x0 / g checked by integration
-VALUE_DIGITS = 12  # closed forms and 3 x 3 eigenvalues: exact to ~1e-15, moved by 1e-16 on another CPU
-INTEGRATED_DIGITS = 11  # DOP853 periods at rtol 1e-13: moved by up to 1e-13 on another CPU
-CHECK_RESOLUTION = 1e-12  # relative errors against the integrated periods: below this, 0 (seen <= 2e-13)
-SHAPE_DECIMALS = 10  # mode shapes scaled to a largest entry of 1: round-off zeros (~1e-13) written 0
-TIE = 1e-8  # entries within this of the largest are equal (x1 = -x3 in antisymmetric modes)
 
 
-def unit_shape(phi: np.ndarray) -> np.ndarray:
-    """``phi`` scaled so that its first largest entry (by magnitude, ties within :data:`TIE`) is 1.
+def compute(scene: Scene, progress: bool, workdir=None) -> NNMResult:
+    """The linear modes, the exact NNM 2 relation with its check, and the [fep] study.
 
-    ``argmax |phi|`` alone picks between x1 and -x3 of an antisymmetric mode by round-off, which
-    flips the sign of the written shape from one machine to another.
+    Parameters
+    ----------
+    scene : a scene with an [nnm] or [fep] table
+    progress : draw progress bars
+    workdir : unused (nothing is streamed to disk)
+
+    Returns
+    -------
+    NNMResult
+        Dense linear algebra on one BLAS thread: the same sums whatever the machine's core count.
     """
-    mag = np.abs(phi)
-    k = int(np.flatnonzero(mag >= (1.0 - TIE) * mag.max())[0])
-    return phi / phi[k]
-
-
-def _shape_value(v: float) -> float:
-    return round(float(v), SHAPE_DECIMALS) + 0.0  # + 0.0: no "-0.0"
-
-
-def nnm_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
-    """linear_modes.csv, nnm2_exact.csv, nnm2_check.csv, nnm2.png (and the [fep] files). Dense linear
-    algebra on one BLAS thread: the same sums whatever the machine's core count."""
     with single_thread_blas():
-        _nnm_stage(scene, writer, progress)
+        p = scene.model
+        system, _ = model_system(p, progress)  # the 3-DOF model, or a reduced model from rom.npz / the cache
+        modes = {s: linear_modes(system, s) for s in ("open", "closed")}
+        exact, skipped = None, ""
+        if not isinstance(p, DiscreteParams):
+            skipped = ("skipped: the exact NNM 2 relation is the symmetric 3-DOF model's; a reduced model has no "
+                       "closed form (the [fep] study's reference is shooting)")
+        elif p.m1 != p.m3:
+            skipped = "skipped: the exact NNM 2 relation needs m1 == m3"
+        else:
+            exact = _nnm2_exact(scene, progress)
+        fep = compute_fep(scene, progress) if scene.fep is not None else None
+    return NNMResult(scene.name, tuple(system.dof_names), modes, exact, skipped, fep)
 
 
-def _nnm_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
-    p = scene.model
-    system, _ = model_system(p, progress)  # the 3-DOF model, or a reduced model from rom.npz / the cache
-    modes = {s: linear_modes(system, s) for s in ("open", "closed")}
-    rows = []
-    for state, lm in modes.items():
-        for r in range(system.n):
-            shape = unit_shape(lm.phi[:, r])
-            rows.append({"state": state, "mode": r + 1, "freq_hz": sig(lm.freq_hz[r], VALUE_DIGITS),
-                         **{f"phi_{d}": _shape_value(shape[i]) for i, d in enumerate(system.dof_names)}})
-    write_rows(writer.path("linear_modes.csv"), rows)
-    writer.stats["open_hz"] = modes["open"].freq_hz.tolist()
-    writer.stats["closed_hz"] = modes["closed"].freq_hz.tolist()
-
-    if not isinstance(p, DiscreteParams):
-        writer.stats["nnm2_exact"] = ("skipped: the exact NNM 2 relation is the symmetric 3-DOF model's; a reduced "
-                                      "model has no closed form (the [fep] study's reference is shooting)")
-    elif p.m1 != p.m3:
-        writer.stats["nnm2_exact"] = "skipped: the exact NNM 2 relation needs m1 == m3"
-    else:
-        _nnm2_exact(scene, writer, progress, modes)
-    if scene.fep is not None:
-        from bearingshaft.stages.fep import fep_stage
-
-        fep_stage(scene, writer, progress)
-
-
-def _nnm2_exact(scene: Scene, writer: StageWriter, progress: bool, modes: dict) -> None:
-    """nnm2_exact.csv, the check against integrated periods (nnm2_check.csv) and nnm2.png."""
+def _nnm2_exact(scene: Scene, progress: bool) -> NNM2Exact:
+    """The exact relation on the [nnm] energy grid, the paper's, and both against periods
+    integrated by DOP853 at the amplitudes :data:`CHECK_CHI` x the gap."""
     p = scene.model
     spec = scene.nnm
     E = np.logspace(np.log10(spec.energy_min_J), np.log10(spec.energy_max_J), spec.n_energy)
     f_exact = nnm2.frequency_from_energy(p, E)
     f_paper = nnm2.frequency_from_energy(p, E, paper=True)
-    np.savetxt(writer.path("nnm2_exact.csv"), np.column_stack([E, f_exact]), delimiter=",",
-               header="energy_J,freq_hz", comments="", fmt=f"%.{VALUE_DIGITS}g")
     checks = []
     if p.g > 0:
         for chi in tqdm(CHECK_CHI, desc=f"{scene.name}: NNM 2 periods by DOP853", disable=not progress,
@@ -110,23 +78,21 @@ def _nnm2_exact(scene: Scene, writer: StageWriter, progress: bool, modes: dict) 
             checks.append({"x0_over_g": chi, "energy_J": float(nnm2.energy_from_amplitude(p, x0)),
                            "freq_integrated_hz": f_int, "freq_exact_hz": f_ex, "freq_paper_eq13_hz": f_pa,
                            "rel_err_exact": (f_ex - f_int) / f_int, "rel_err_paper": (f_pa - f_int) / f_int})
-        digits = {"energy_J": VALUE_DIGITS, "freq_integrated_hz": INTEGRATED_DIGITS, "freq_exact_hz": VALUE_DIGITS,
-                  "freq_paper_eq13_hz": VALUE_DIGITS}
-        write_rows(writer.path("nnm2_check.csv"),
-                   [{k: (to_resolution(v, CHECK_RESOLUTION, 3) if k.startswith("rel_err") else
-                         sig(v, digits[k]) if k in digits else v) for k, v in c.items()} for c in checks])
-        writer.stats["nnm2_max_rel_err_exact"] = max(abs(c["rel_err_exact"]) for c in checks)
-        writer.stats["nnm2_max_rel_err_paper_eq13"] = max(abs(c["rel_err_paper"]) for c in checks)
-    plots.nnm2_figure(E, f_exact, f_paper, checks, modes["open"].freq_hz, modes["closed"].freq_hz,
-                      writer.path("nnm2.png"))
+    return NNM2Exact(E, f_exact, f_paper, checks, p.g > 0)
+
+
+def nnm_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
+    """Compute and write the stage in one call (the pipeline calls :func:`compute` and :func:`write`)."""
+    write(compute(scene, progress, writer.scratch), writer)
 
 
 # -- the registry's contract (bearingshaft.registry) -------------------------------------------
 DESCRIPTION = """Linear modes of the open and closed gaps, the exact NNM 2 relation of the symmetric 3-DOF
 model checked against integrated periods, and with [fep] the frequency-energy plots of the
 NNMs by harmonic balance and shooting with their stability. Writes linear_modes.csv,
-nnm2_exact.csv, nnm2_check.csv, nnm2.png and, with [fep], fep.csv, fep.png, stability.csv,
-tongues.csv, hb_convergence*.csv and fep.md."""
+nnm2_exact.csv, nnm2_check.csv and nnm2.png (the symmetric 3-DOF model) and, with [fep],
+fep.csv, fep.png, stability.csv, tongues.csv, hb_convergence.csv and .png,
+hb_convergence_timing.csv and .png, and fep.md (a reduced model)."""
 
 
 def estimate(scene: Scene) -> list[Estimate]:
@@ -144,16 +110,4 @@ def estimate(scene: Scene) -> list[Estimate]:
     return out
 
 
-@dataclass(frozen=True, eq=False)
-class _Pending:  # transitional (issue 23): the stage computes while it writes, until split
-    scene: Scene
-    progress: bool
-    options: dict
-
-
-def compute(scene: Scene, progress: bool, workdir) -> _Pending:
-    return _Pending(scene, progress, {})
-
-
-def write(result: _Pending, writer: StageWriter) -> None:
-    nnm_stage(result.scene, writer, result.progress, **result.options)
+__all__ = ["CHECK_CHI", "DESCRIPTION", "compute", "estimate", "nnm_stage", "write"]

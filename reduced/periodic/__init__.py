@@ -7,7 +7,15 @@
 - :mod:`~reduced.periodic.stability`: Hill's method and its comparison with Floquet;
 - :mod:`~reduced.periodic.nnm2`: the exact NNM 2 relation of the three-mass model (Eq. 12-14, corrected);
 - :mod:`~reduced.periodic.exact_hb`: HB with the stop forces projected exactly over their contact intervals;
-- :mod:`~reduced.periodic.frc`: forced-response curves under a harmonic load (HB condensed onto the
-  contact coordinates, continued through folds), their stability and bifurcations, and the
-  stepped-sine reference by the exact flow.
+- :mod:`~reduced.periodic.forced_balance`: HB under a harmonic load, condensed onto the contact
+  coordinates (the residual of the forced-response curves);
+- :mod:`~reduced.periodic.frc`: forced-response curves, continued through folds, with amplitudes;
+- :mod:`~reduced.periodic.forced_stability`: their stability (monodromy, Hill, shooting on the
+  forced exact flow) and bifurcations;
+- :mod:`~reduced.periodic.stepped_sine`: the reference of the forced-response curves, a stepped
+  sine by the exact flow.
+
+Every continued curve takes one set of step options,
+:class:`~reduced.periodic.continuation.ContinuationOptions`; every shooting failure is one
+:class:`~reduced.periodic.shooting.ShootingError`.
 """

@@ -17,10 +17,11 @@ from reduced import _checks as _check
 from reduced._blas import single_thread_blas
 from reduced.models.gaps import GapSystem
 from reduced.models.modes import linear_modes
-from reduced.periodic.continuation import continue_branch
+from reduced.periodic.continuation import STEP_FIELDS, ContinuationOptions, continue_branch
 from reduced.periodic.hb import HarmonicBalance, NewtonError, NNMResidual, default_samples, newton
 
 START_FRACTION = 0.3  # start amplitude as a fraction of the grazing amplitude (open gap)
+NNM_STEPS = ContinuationOptions(ds=0.05, ds_max=0.3, max_steps=3000)  # in log10 of the modal amplitude
 
 
 def grazing_amplitude(system: GapSystem, phi: np.ndarray) -> float:
@@ -322,10 +323,7 @@ def _nnm_branch(
     N: int | None = None,
     energy_max_J: float = 1e5,
     energy_start_J: float | None = None,
-    ds: float = 0.05,
-    ds_max: float = 0.3,
-    max_steps: int = 3000,
-    max_angle_deg: float = 15.0,
+    continuation: ContinuationOptions = NNM_STEPS,
     tongue_ratio: float = TONGUE_RATIO,
     max_tongues: int = 60,
     follow_steps: int = 100,
@@ -336,7 +334,8 @@ def _nnm_branch(
 
     The branch starts at START_FRACTION of the amplitude at which the linear mode first
     touches a stop (or lower, at ``energy_start_J``), continued in log10 of the modal
-    amplitude (:class:`reduced.periodic.hb.NNMResidual`).
+    amplitude (:class:`reduced.periodic.hb.NNMResidual`) with the step control ``continuation``
+    (its ``max_steps`` bounds the points of all pieces together).
 
     Internal resonances (tongues, H > 1): when a harmonic k >= 2 outgrows the fundamental
     (``tongue_ratio``), or the frequency falls while the energy rises and does not come back
@@ -373,12 +372,11 @@ def _nnm_branch(
     watch = _TongueWatch(res, energy_max_J, tongue_ratio, follow_steps, tongue_measure == "velocity")
     backbone1 = None
     pieces = []  # (Branch, indices of its points kept)
-    steps_left = max_steps
+    steps_left = continuation.max_steps
     for _ in range(max_tongues + 1):
         watch.reset()
-        br = continue_branch(res, ystart, param=i_a, direction=1.0, ds=ds, ds_max=ds_max, max_steps=steps_left,
-                             max_angle_deg=max_angle_deg, stop=watch, monitor=(i_w,), callback=res.energy,
-                             progress=progress)
+        br = continue_branch(res, ystart, param=i_a, direction=1.0, options=continuation, max_steps=steps_left,
+                             stop=watch, monitor=(i_w,), callback=res.energy, progress=progress)
         steps_left -= len(br.y)
         if not watch.in_tongue:
             pieces.append((br, np.arange(len(br.y))))
@@ -433,10 +431,23 @@ def _assemble_branch(res: NNMResidual, mode: int, pieces: list, energy_max_J: fl
 def nnm_branch(system: GapSystem, mode: int, **options) -> NNMBranch:
     """Continue NNM ``mode`` (0-based) by HB; see :func:`_nnm_branch` for the options.
 
+    Parameters
+    ----------
+    system : the gap system (undamped for an NNM)
+    mode : 0-based open-gap linear mode the branch starts from
+    **options : those of :func:`_nnm_branch`; the step control is ``continuation``
+        (a :class:`reduced.periodic.continuation.ContinuationOptions`, default
+        :data:`NNM_STEPS`), whose fields may also be given one by one (``ds=0.01``)
+
+    Returns
+    -------
+    NNMBranch
+        The backbone's points with their continuation data and the tongues met.
+
     Runs with single-threaded BLAS (:mod:`reduced._blas`): the matrices are small. The
     arguments are checked before any work (one-line ValueError naming the argument).
     """
-    _check_branch_options(system, mode, options)
+    options = _check_branch_options(system, mode, options)
     with single_thread_blas():
         return _nnm_branch(system, mode, **options)
 
@@ -444,32 +455,38 @@ def nnm_branch(system: GapSystem, mode: int, **options) -> NNMBranch:
 MAX_HARMONICS = 1000  # the scene parser's limit too (bearingshaft.scenes)
 
 
-def _check_branch_options(system: GapSystem, mode: int, options: dict) -> None:
-    """Refuse, in one line, the arguments of :func:`nnm_branch` that cannot be used."""
+def _check_branch_options(system: GapSystem, mode: int, options: dict) -> dict:
+    """Refuse, in one line, the arguments of :func:`nnm_branch` that cannot be used; the options
+    of :func:`_nnm_branch`, the step fields given one by one folded into ``continuation``."""
     _check.gap_system(system)
     _check.integer("mode", mode, lo=0, hi=system.n - 1)
-    known = ("H", "N", "energy_max_J", "energy_start_J", "ds", "ds_max", "max_steps", "max_angle_deg",
-             "tongue_ratio", "max_tongues", "follow_steps", "tongue_measure", "progress")
+    known = ("H", "N", "energy_max_J", "energy_start_J", "continuation", "tongue_ratio", "max_tongues",
+             "follow_steps", "tongue_measure", "progress", *STEP_FIELDS)
     for key in options:
         if key not in known:
             raise _check.InvalidArgument(f"unknown option {key!r} (known: {', '.join(known)})")
     H = _check.integer("H", options.get("H", 1), lo=1, hi=MAX_HARMONICS)
     if options.get("N") is not None:
         _check.integer("N", options["N"], lo=2 * H + 1)
-    for key in ("energy_max_J", "ds", "ds_max", "max_angle_deg", "tongue_ratio"):
+    for key in ("energy_max_J", "tongue_ratio"):
         if key in options:
             _check.positive(key, options[key])
+    base = options.get("continuation", NNM_STEPS)
+    if not isinstance(base, ContinuationOptions):
+        raise _check.InvalidArgument(f"continuation must be a ContinuationOptions, got {_check.show(base)}")
+    out = {k: v for k, v in options.items() if k not in STEP_FIELDS}
+    out["continuation"] = base.replace(**{k: v for k, v in options.items() if k in STEP_FIELDS})
     if options.get("energy_start_J") is not None:
         _check.positive("energy_start_J", options["energy_start_J"], "J")
-    for key in ("max_steps", "follow_steps"):
-        if key in options:
-            _check.integer(key, options[key])
+    if "follow_steps" in options:
+        _check.integer("follow_steps", options["follow_steps"])
     if "max_tongues" in options:
         _check.integer("max_tongues", options["max_tongues"], lo=0)
     if options.get("tongue_measure", "displacement") not in TONGUE_MEASURES:
         raise _check.InvalidArgument(f"tongue_measure must be one of {', '.join(TONGUE_MEASURES)}, "
                                      f"got {options['tongue_measure']!r}")
     _check.callback("progress", options.get("progress"))
+    return out
 
 
 def hb_backbones(
@@ -493,6 +510,7 @@ def hb_backbones(
 
 
 __all__ = [
+    "NNM_STEPS",
     "NNMBranch",
     "nnm_branch",
     "hb_backbones",

@@ -29,12 +29,14 @@ bound), after ``max_steps`` points, or when the step falls below ``ds_min``
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from reduced import _checks as _check
 from reduced.periodic.hb import NewtonError, newton
 
 
@@ -78,27 +80,64 @@ def tangent(J: np.ndarray, t_prev: np.ndarray | None = None) -> np.ndarray:
     return t
 
 
+@dataclass(frozen=True, slots=True)
+class ContinuationOptions:
+    """Step control of a pseudo-arclength continuation (module docstring), in the scaled unknowns.
+
+    The one set of continuation options: :func:`continue_branch` takes it, and so do the curves
+    continued on top of it (:func:`reduced.periodic.backbones.nnm_branch`,
+    :func:`reduced.periodic.frc.frc`), each with its own defaults as an instance varied by
+    :meth:`replace`. Checked on construction (one-line
+    :class:`reduced._checks.InvalidArgument` naming the field).
+
+    Examples
+    --------
+    >>> ContinuationOptions(ds=0.02).replace(max_steps=10).max_steps
+    10
+    >>> ContinuationOptions(ds=0.0)
+    Traceback (most recent call last):
+    ...
+    reduced._checks.InvalidArgument: ds must be a finite number > 0, got 0.0
+    """
+
+    ds: float = 0.05  # first step
+    ds_min: float = 1e-6  # a step halved below this tries a corner step, then the run ends ("min_step")
+    ds_max: float = 0.5  # largest step
+    max_steps: int = 2000  # points at most
+    max_iter: int = 8  # Newton iterations of a corrector; a step needing more is halved
+    good_iter: int = 3  # a corrector converged in at most this many iterations grows the step
+    growth: float = 1.5  # by this factor, up to ds_max
+    max_angle_deg: float = 15.0  # deg, largest turn of the tangent over one step (above corner_ds)
+    corner_ds: float = 1e-3  # at or below this step a larger turn is a corner of the branch: accepted
+    tol: float = 1e-10  # Newton tolerance of the start point and the correctors
+
+    def __post_init__(self) -> None:
+        for key in ("ds", "ds_min", "ds_max", "growth", "max_angle_deg", "corner_ds", "tol"):
+            _check.positive(key, getattr(self, key))
+        for key in ("max_steps", "max_iter", "good_iter"):
+            _check.integer(key, getattr(self, key))
+
+    def replace(self, **changes) -> ContinuationOptions:
+        """These options with the fields ``changes`` replaced (checked again); ``self`` if none."""
+        return dataclasses.replace(self, **changes) if changes else self
+
+
+STEP_FIELDS = tuple(f.name for f in dataclasses.fields(ContinuationOptions))  # the keywords that vary them
+
+
 def continue_branch(
     fun,
     y0: np.ndarray,
     *,
     param: int,
     direction: float = 1.0,
-    ds: float = 0.05,
-    ds_min: float = 1e-6,
-    ds_max: float = 0.5,
-    max_steps: int = 2000,
-    max_iter: int = 8,
-    good_iter: int = 3,
-    growth: float = 1.5,
-    max_angle_deg: float = 15.0,
-    corner_ds: float = 1e-3,
-    tol: float = 1e-10,
+    options: ContinuationOptions | None = None,
     stop=None,
     monitor: tuple[int, ...] = (),
     callback=None,
     reject=None,
     progress=None,
+    **steps,
 ) -> Branch:
     """Continue the solution curve of ``fun`` from ``y0`` (see the module docstring).
 
@@ -108,79 +147,46 @@ def continue_branch(
     y0 : initial guess; corrected with coordinate ``param`` held fixed
     param : the coordinate that starts the branch (its tangent component has the sign
         of ``direction`` at the start) and whose folds are always reported
+    options : the step control (default :class:`ContinuationOptions`)
     stop : y -> bool, ends the run after the first point where it is true
     monitor : further coordinates whose folds are reported
     callback : y -> object stored in ``Branch.data`` for each point
     reject : (y_old, y_new) -> bool; a true answer rejects the step (halved), e.g. a
         jump in a physical quantity that the tangent angle does not see
     progress : callable(y) after every accepted point
+    **steps : fields of :class:`ContinuationOptions` replacing those of ``options``
+        (``ds=0.1, max_steps=200``)
+
+    Returns
+    -------
+    Branch
+        The points reached, their tangents and steps, the folds of the watched coordinates,
+        and why the run ended (``status``). Raises :class:`ContinuationError` if the start
+        point is not found.
     """
+    opt = (options or ContinuationOptions()).replace(**steps)
     t_wall = time.perf_counter()
-    p1 = y0.size
-
-    def max_jump(h):
-        # past a square-root corner the branch lies ~sqrt(h) from the predictor
-        return 4.0 * max(h, math.sqrt(h * corner_ds))
-
-    def fixed(y):
-        R, J = fun(y)
-        e = np.zeros(p1)
-        e[param] = 1.0
-        return np.concatenate([R, [y[param] - y0[param]]]), np.vstack([J, e])
-
-    try:
-        start = newton(fixed, y0, tol=tol, max_iter=30)
-    except NewtonError as exc:
-        raise ContinuationError(f"start point not found: {exc}") from None
-    y = start.y
-    J = start.jacobian[:-1]  # dR/dy at y (the fixed row dropped)
-    t = tangent(J)
-    if t[param] * direction < 0.0:
-        t = -t
-    ys, ts, dss, its = [y], [t], [0.0], [start.n_iter]
+    y, t, n_iter = _start_point(fun, y0, param, direction, opt.tol)
+    ys, ts, dss, its = [y], [t], [0.0], [n_iter]
     data = [callback(y)] if callback else []
     folds: list = []
     corners: list = []
     watch = tuple(dict.fromkeys((param, *monitor)))
     n_rej = 0
     status = "max_steps"
-    cos_max = math.cos(math.radians(max_angle_deg))
+    max_steps = opt.max_steps
     if stop is not None and stop(y):
         status = "stop"
         max_steps = 0
+    ds = opt.ds
     for _ in range(max_steps):
-        while True:
-            yp = y + ds * t
-
-            def corrector(z, yp=yp, t=t):
-                R, Jz = fun(z)
-                return np.concatenate([R, [t @ (z - yp)]]), np.vstack([Jz, t])
-
-            ok = False
-            try:
-                res = newton(corrector, yp, tol=tol, max_iter=max_iter, max_step=max_jump(ds))
-                tn = tangent(res.jacobian[:-1], t)  # newton's Jacobian is at res.y: the arclength row dropped
-                # a corner (the square-root onset of contact at grazing) turns the tangent by
-                # up to 90 degrees however short the step: accept it once the step is short
-                turn_ok = tn @ t >= cos_max or (ds <= corner_ds and tn @ t > 0.0)
-                ok = turn_ok and (reject is None or not reject(y, res.y))
-            except NewtonError:
-                pass
-            if ok:
-                break
-            n_rej += 1
-            ds *= 0.5
-            if ds < ds_min:
-                corner = _corner_step(fun, y, t, watch, param, corner_ds, tol, max_iter, reject)
-                if corner is None:
-                    status = "min_step"
-                else:
-                    res, tn = corner
-                    corners.append(len(ys))
-                    ds = corner_ds
-                break
-        if status == "min_step":
+        res, tn, ds, rejected, corner = _advance(fun, y, t, ds, opt, reject, watch, param)
+        n_rej += rejected
+        if res is None:
+            status = "min_step"
             break
+        if corner:
+            corners.append(len(ys))
         for c in watch:
             if t[c] * tn[c] < 0.0:
                 folds.append((len(ys), c))
@@ -196,20 +202,74 @@ def continue_branch(
         if stop is not None and stop(y):
             status = "stop"
             break
-        if res.n_iter <= good_iter:
-            ds = min(ds * growth, ds_max)
-    return Branch(
-        np.array(ys),
-        np.array(ts),
-        np.array(dss),
-        np.array(its),
-        folds,
-        status,
-        n_rej,
-        time.perf_counter() - t_wall,
-        data,
-        corners,
-    )
+        if res.n_iter <= opt.good_iter:
+            ds = min(ds * opt.growth, opt.ds_max)
+    return Branch(np.array(ys), np.array(ts), np.array(dss), np.array(its), folds, status, n_rej,
+                  time.perf_counter() - t_wall, data, corners)
+
+
+def _start_point(fun, y0: np.ndarray, param: int, direction: float, tol: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """(y, unit tangent, Newton iterations) of the first point: ``y0`` corrected with coordinate
+    ``param`` held fixed, the tangent oriented so that its ``param`` component has the sign of
+    ``direction``."""
+    p1 = y0.size
+
+    def fixed(y):
+        R, J = fun(y)
+        e = np.zeros(p1)
+        e[param] = 1.0
+        return np.concatenate([R, [y[param] - y0[param]]]), np.vstack([J, e])
+
+    try:
+        start = newton(fixed, y0, tol=tol, max_iter=30)
+    except NewtonError as exc:
+        raise ContinuationError(f"start point not found: {exc}") from None
+    t = tangent(start.jacobian[:-1])  # dR/dy at the start (the fixed row dropped)
+    if t[param] * direction < 0.0:
+        t = -t
+    return start.y, t, start.n_iter
+
+
+def _max_jump(h: float, corner_ds: float) -> float:
+    """Largest Newton step of a corrector after a step h: past a square-root corner the branch
+    lies ~sqrt(h corner_ds) from the predictor."""
+    return 4.0 * max(h, math.sqrt(h * corner_ds))
+
+
+def _advance(fun, y: np.ndarray, t: np.ndarray, ds: float, opt: ContinuationOptions, reject, watch: tuple,
+             param: int):
+    """One accepted step from the point y with tangent t, trying ``ds`` first and halving it.
+
+    Returns (NewtonResult, new tangent, the step that reached it, steps rejected, whether a
+    corner step reached it); the result and tangent are None when the step fell below
+    ``ds_min`` and no corner step was found.
+    """
+    cos_max = math.cos(math.radians(opt.max_angle_deg))
+    n_rej = 0
+    while True:
+        yp = y + ds * t
+
+        def corrector(z, yp=yp, t=t):
+            R, Jz = fun(z)
+            return np.concatenate([R, [t @ (z - yp)]]), np.vstack([Jz, t])
+
+        try:
+            res = newton(corrector, yp, tol=opt.tol, max_iter=opt.max_iter, max_step=_max_jump(ds, opt.corner_ds))
+            tn = tangent(res.jacobian[:-1], t)  # newton's Jacobian is at res.y: the arclength row dropped
+            # a corner (the square-root onset of contact at grazing) turns the tangent by
+            # up to 90 degrees however short the step: accept it once the step is short
+            turn_ok = tn @ t >= cos_max or (ds <= opt.corner_ds and tn @ t > 0.0)
+            if turn_ok and (reject is None or not reject(y, res.y)):
+                return res, tn, ds, n_rej, False
+        except NewtonError:
+            pass
+        n_rej += 1
+        ds *= 0.5
+        if ds < opt.ds_min:
+            corner = _corner_step(fun, y, t, watch, param, opt.corner_ds, opt.tol, opt.max_iter, reject)
+            if corner is None:
+                return None, None, ds, n_rej, False
+            return corner[0], corner[1], opt.corner_ds, n_rej, True
 
 
 def _corner_step(fun, y, t, coords, param, h, tol, max_iter, reject):
@@ -256,4 +316,4 @@ def _corner_step(fun, y, t, coords, param, h, tol, max_iter, reject):
     return None
 
 
-__all__ = ["Branch", "ContinuationError", "continue_branch", "tangent"]
+__all__ = ["Branch", "ContinuationError", "ContinuationOptions", "STEP_FIELDS", "continue_branch", "tangent"]

@@ -28,7 +28,7 @@ E = 2 k_s x0^2 + k_g (x0 - g)^2 for x0 > g, and the frequency is
 omega = 2 pi / (T_g + T_s) above the grazing energy 2 k_s g^2, omega_0 below it.
 
 Only the symmetric 3-DOF model has this relation. A reduced 3-D model has none: its NNM
-study (scene rom-fep, :mod:`bearingshaft.stages.fep`) takes shooting on the exact flow as
+study (scene rom-fep, :mod:`bearingshaft.stages.nnm_fep`) takes shooting on the exact flow as
 the reference.
 """
 

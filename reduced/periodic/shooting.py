@@ -45,7 +45,9 @@ MULTIPLE_MAC = 0.9999  # shape test for orbits found by the fallback
 
 
 class ShootingError(RuntimeError):
-    """Gauss-Newton on the shooting equations did not converge."""
+    """Shooting found no periodic orbit: (Gauss-)Newton on the periodicity equations of the exact
+    flow did not converge (the free orbits of :func:`shoot` and :func:`shoot_multiple`, the forced
+    ones of :func:`reduced.periodic.forced_stability.floquet_by_shooting`)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -370,7 +372,7 @@ def shooting_branch(
     max_events: int | None = None,
     pick: str = "first",
     guide_at_energy: bool = False,
-):
+) -> list[PeriodicOrbit | None]:
     """Orbits at increasing energies along an NNM: natural-parameter continuation in energy.
 
     ``guides`` are HB branches (:class:`reduced.periodic.backbones.NNMBranch`, best first) of the
@@ -396,103 +398,150 @@ def shooting_branch(
     (:func:`reduced.periodic.backbones.hb_point_at_energy`), not the point itself: on a
     sparse branch (a few tens of points over nine decades) the nearest point can lie a
     factor 2 away in energy; the first guide's frequency there is then the reference of
-    the frequency test and of ``pick``. Returns a list with a :class:`PeriodicOrbit` or None per energy.
+    the frequency test and of ``pick``.
+
+    Parameters
+    ----------
+    flow : the exact flow of the undamped system (:func:`conservative`)
+    energies_J : J, increasing
+    guides : HB branches of the NNM, best first
+    max_rel_jump, min_mac, pick : the acceptance of an orbit (above)
+    max_iter, stall, max_events : passed to :func:`shoot`
+    max_substeps, use_multiple, guide_at_energy : the fallbacks and guesses (above)
+
+    Returns
+    -------
+    list
+        A :class:`PeriodicOrbit` or None per energy.
     """
     g0 = guides[0]
     order = np.argsort(g0.energy_J)
-    lgE, fg = np.log(g0.energy_J[order]), g0.freq_hz[order]
-
-    def f_guide(E):
-        return float(np.interp(np.log(E), lgE, fg))
-
-    def attempt(E, prev, prev2=None):
-        guesses = []
-        if (
-            prev is not None
-            and prev2 is not None
-            and E / prev.energy_J < 3.0
-            and prev.energy_J > prev2.energy_J
-        ):
-            # secant predictor in log energy from the last two orbits
-            s_ = np.log(E / prev.energy_J) / np.log(prev.energy_J / prev2.energy_J)
-            guesses.append(
-                (
-                    prev.x0 + s_ * (prev.x0 - prev2.x0),
-                    prev.v0 + s_ * (prev.v0 - prev2.v0),
-                    prev.period_s + s_ * (prev.period_s - prev2.period_s),
-                )
-            )
-        if prev is not None and E / prev.energy_J < 3.0:
-            sc = np.sqrt(E / prev.energy_J)
-            ratio = f_guide(prev.energy_J) / f_guide(E)
-            guesses.append((prev.x0 * sc, prev.v0 * sc, prev.period_s * ratio))
-            guesses.append((prev.x0 * sc, prev.v0 * sc, prev.period_s))
-        f_ref = f_guide(E)
-        for k, g in enumerate(guides):
-            X, omega = _guide_point(g, E, guide_at_energy)
-            x, v = g.residual.hb.time_series(X, omega)
-            guesses.append((x[0], v[0], 2 * np.pi / omega))
-            if k == 0 and guide_at_energy:
-                f_ref = omega / (2 * np.pi)  # the first guide at exactly E, not interpolated
-        if prev is not None and E / prev.energy_J < 3.0:
-            shape_ref = prev.x0  # the last exact orbit of this branch is the better shape
-        else:
-            i0 = int(np.argmin(np.abs(np.log(g0.energy_J / E))))
-            shape_ref = g0.residual.hb.time_series(g0.X[i0])[0]
-        found = []
-        for x0, v0, T in guesses:
-            if not T > 0.0:
-                continue
-            try:
-                o = shoot(flow, x0, v0, T, E, max_iter=max_iter, stall=stall, max_events=max_events)
-            except (ShootingError, RuntimeError):
-                continue
-            # the same NNM: near the guide's frequency and the same shape (mass-weighted
-            # MAC of the turning-point displacement; NNM 2 and NNM 3 are orthogonal)
-            if abs(o.freq_hz / f_ref - 1.0) < max_rel_jump and _mac(flow.system.M, o.x0, shape_ref) > min_mac:
-                if pick == "first":
-                    return o
-                found.append(o)
-        if found:
-            return min(found, key=lambda o: abs(o.freq_hz / f_ref - 1.0))
-        # opt-in: multiple shooting from the guides' orbits (near grazing single shooting's
-        # basin is too small). Off by default: in the discrete-fep run it also converged to
-        # a neighbouring family 4.5 % off NNM 2 that passed even the strict shape test, and
-        # the branch then followed it
-        for g in guides if use_multiple else ():
-            i = int(np.argmin(np.abs(np.log(g.energy_J / E))))
-            x, v = g.residual.hb.time_series(g.X[i], g.omega[i], N=MULTIPLE_SEGMENTS)
-            try:
-                o = shoot_multiple(flow, np.hstack([x, v]), 2 * np.pi / g.omega[i], E)
-            except (ShootingError, RuntimeError):
-                continue
-            # a wider basin also reaches neighbouring orbit families (seen: an asymmetric
-            # orbit 6 % below NNM 2 at MAC 0.998), hence a stricter shape test here
-            if abs(o.freq_hz / f_ref - 1.0) < max_rel_jump and _mac(flow.system.M, o.x0, shape_ref) > MULTIPLE_MAC:
-                return o
-        return None
-
+    march = _March(flow, guides, np.log(g0.energy_J[order]), g0.freq_hz[order], max_rel_jump, min_mac, max_iter,
+                   stall, max_events, pick, guide_at_energy, use_multiple)
     out = []
     prev = prev2 = None
     for E in np.asarray(energies_J, float):
-        orbit = attempt(E, prev, prev2)
+        orbit = _attempt(march, E, prev, prev2)
         if orbit is None and prev is not None and E > prev.energy_J:
-            # substeps: march from the previous orbit in smaller energy steps
-            for depth in range(1, max_substeps + 1):
-                cur, cur2 = prev, prev2
-                for Es in np.geomspace(prev.energy_J, E, 2**depth + 1)[1:]:
-                    nxt = attempt(Es, cur, cur2)
-                    if nxt is None:
-                        break
-                    cur, cur2 = nxt, cur
-                else:
-                    orbit = cur
-                if orbit is not None:
-                    prev2 = cur2
-                    break
+            orbit, prev2 = _substeps(march, E, prev, prev2, max_substeps)
         elif orbit is not None:
             prev2 = prev
         out.append(orbit)
         if orbit is not None:
             prev = orbit
     return out
+
+
+@dataclass(frozen=True, eq=False)
+class _March:
+    """What :func:`shooting_branch` tries at each energy: its flow, its guides (the first one's
+    frequency against log energy, ``lgE`` and ``fg``) and its acceptance options."""
+
+    flow: Flow
+    guides: list
+    lgE: np.ndarray  # ln J, the first guide's energies, sorted
+    fg: np.ndarray  # Hz, its frequencies there
+    max_rel_jump: float
+    min_mac: float
+    max_iter: int
+    stall: int | None
+    max_events: int | None
+    pick: str
+    guide_at_energy: bool
+    use_multiple: bool
+
+    def f_guide(self, E: float) -> float:
+        """Hz, the first guide's frequency at energy E (interpolated in log energy)."""
+        return float(np.interp(np.log(E), self.lgE, self.fg))
+
+
+def _substeps(march: _March, E: float, prev: PeriodicOrbit, prev2, max_substeps: int):
+    """(orbit at E, the orbit before it) marched from ``prev`` in 2, 4, ... log-spaced energy steps
+    (up to 2^max_substeps), or (None, prev2) when no march reaches E."""
+    for depth in range(1, max_substeps + 1):
+        cur, cur2 = prev, prev2
+        for Es in np.geomspace(prev.energy_J, E, 2**depth + 1)[1:]:
+            nxt = _attempt(march, Es, cur, cur2)
+            if nxt is None:
+                break
+            cur, cur2 = nxt, cur
+        else:
+            return cur, cur2
+    return None, prev2
+
+
+def _guesses(march: _March, E: float, prev, prev2) -> tuple[list, float, np.ndarray]:
+    """(guesses (x0, v0, T) in the order tried, the reference frequency [Hz], the reference shape)
+    at energy E (:func:`shooting_branch`)."""
+    guesses = []
+    if prev is not None and prev2 is not None and E / prev.energy_J < 3.0 and prev.energy_J > prev2.energy_J:
+        # secant predictor in log energy from the last two orbits
+        s_ = np.log(E / prev.energy_J) / np.log(prev.energy_J / prev2.energy_J)
+        guesses.append((prev.x0 + s_ * (prev.x0 - prev2.x0), prev.v0 + s_ * (prev.v0 - prev2.v0),
+                        prev.period_s + s_ * (prev.period_s - prev2.period_s)))
+    if prev is not None and E / prev.energy_J < 3.0:
+        sc = np.sqrt(E / prev.energy_J)
+        ratio = march.f_guide(prev.energy_J) / march.f_guide(E)
+        guesses.append((prev.x0 * sc, prev.v0 * sc, prev.period_s * ratio))
+        guesses.append((prev.x0 * sc, prev.v0 * sc, prev.period_s))
+    f_ref = march.f_guide(E)
+    for k, g in enumerate(march.guides):
+        X, omega = _guide_point(g, E, march.guide_at_energy)
+        x, v = g.residual.hb.time_series(X, omega)
+        guesses.append((x[0], v[0], 2 * np.pi / omega))
+        if k == 0 and march.guide_at_energy:
+            f_ref = omega / (2 * np.pi)  # the first guide at exactly E, not interpolated
+    if prev is not None and E / prev.energy_J < 3.0:
+        shape_ref = prev.x0  # the last exact orbit of this branch is the better shape
+    else:
+        g0 = march.guides[0]
+        i0 = int(np.argmin(np.abs(np.log(g0.energy_J / E))))
+        shape_ref = g0.residual.hb.time_series(g0.X[i0])[0]
+    return guesses, f_ref, shape_ref
+
+
+def _attempt(march: _March, E: float, prev, prev2) -> PeriodicOrbit | None:
+    """The orbit at energy E from the guesses (:func:`_guesses`) that passes the frequency and shape
+    tests, then (opt-in) by multiple shooting from the guides; None if none does."""
+    guesses, f_ref, shape_ref = _guesses(march, E, prev, prev2)
+    M = march.flow.system.M
+    found = []
+    for x0, v0, T in guesses:
+        if not T > 0.0:
+            continue
+        try:
+            o = shoot(march.flow, x0, v0, T, E, max_iter=march.max_iter, stall=march.stall,
+                      max_events=march.max_events)
+        except (ShootingError, RuntimeError):
+            continue
+        # the same NNM: near the guide's frequency and the same shape (mass-weighted
+        # MAC of the turning-point displacement; NNM 2 and NNM 3 are orthogonal)
+        if abs(o.freq_hz / f_ref - 1.0) < march.max_rel_jump and _mac(M, o.x0, shape_ref) > march.min_mac:
+            if march.pick == "first":
+                return o
+            found.append(o)
+    if found:
+        return min(found, key=lambda o: abs(o.freq_hz / f_ref - 1.0))
+    return _attempt_multiple(march, E, f_ref, shape_ref) if march.use_multiple else None
+
+
+def _attempt_multiple(march: _March, E: float, f_ref: float, shape_ref: np.ndarray) -> PeriodicOrbit | None:
+    """Multiple shooting from each guide's orbit nearest E, under a stricter shape test; or None.
+
+    Opt-in (near grazing single shooting's basin is too small). Off by default: in the
+    discrete-fep run it also converged to a neighbouring family 4.5 % off NNM 2 that passed even
+    the strict shape test, and the branch then followed it.
+    """
+    for g in march.guides:
+        i = int(np.argmin(np.abs(np.log(g.energy_J / E))))
+        x, v = g.residual.hb.time_series(g.X[i], g.omega[i], N=MULTIPLE_SEGMENTS)
+        try:
+            o = shoot_multiple(march.flow, np.hstack([x, v]), 2 * np.pi / g.omega[i], E)
+        except (ShootingError, RuntimeError):
+            continue
+        # a wider basin also reaches neighbouring orbit families (seen: an asymmetric
+        # orbit 6 % below NNM 2 at MAC 0.998), hence a stricter shape test here
+        M = march.flow.system.M
+        if abs(o.freq_hz / f_ref - 1.0) < march.max_rel_jump and _mac(M, o.x0, shape_ref) > MULTIPLE_MAC:
+            return o
+    return None

@@ -1,0 +1,454 @@
+"""The ``frc`` stage's files, from what :func:`bearingshaft.stages.frc.compute` found.
+
+``frc.csv`` (level, method, harmonics, freq_hz, point, amplitude_m, stable, bifurcation,
+response: one row per curve point or stepped-sine frequency and per output point),
+``frc.png``, ``frc_harmonics.csv`` (amplitude per harmonic along each curve),
+``frc_bifurcations.csv``, ``frc_stability.csv`` (monodromy, Hill and shooting side by side),
+``stepped_sine.csv`` (each sweep point: how it settled, its amplitude against HB),
+``frc_convergence.csv`` and ``frc_convergence_timing.csv`` / ``.png`` (run times: the
+project's ``_timing`` convention, tests/test_reproducible.py), ``frc_backbone.csv`` and
+``frc_backbone.png``. Amplitudes are written to :data:`DIGITS` significant digits; no solver
+runs here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from bearingshaft.digits import sig
+from bearingshaft.output import StageWriter, write_rows
+
+DIGITS = 10  # significant digits of frequencies and amplitudes (a rerun on this machine: identical)
+ERR_DIGITS = 3  # relative errors
+CONVERGENCE_FIELDS = ["level", "harmonics", "status", "n_points", "f_reached_hz", "n_folds", "highest_fold_hz",
+                      "lowest_fold_hz", "n_vs_stepped_sine", "max_rel_err_vs_stepped_sine", "n_vs_shooting",
+                      "n_shooting_failed", "max_rel_err_vs_shooting", "median_rel_err_vs_shooting"]
+BIFURCATION_FIELDS = ["level", "harmonics", "kind", "index", "freq_hz", "amplitude_m", "max_abs_mu_before",
+                      "max_abs_mu_after"]
+BACKBONE_FIELDS = ["level", "scale", "load_N", "nnm", "peak_freq_hz", "peak_amplitude_m", "log_distance", "note"]
+
+
+# -- what the stage computed ---------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class PointCheck:
+    """Hill's method and shooting at one point of a curve, beside its monodromy verdict."""
+
+    index: int  # the point on the curve
+    contact: bool  # a stop closes somewhere along its orbit
+    shot: bool  # shooting was tried here
+    freq_hz: float
+    mono: float  # max |mu| of the orbit monodromy
+    mono_stable: bool
+    hill: float  # max |mu| by Hill's method (nan where not run)
+    hill_stable: bool | None  # None where not run
+    shoot: float  # max |mu| of the exact orbit (nan where not found)
+    shoot_stable: bool | None  # None where not found
+    shoot_amp: np.ndarray | None  # (p,) m, the exact orbit's amplitude at each point
+    shoot_note: str  # why shooting failed ("" otherwise)
+
+
+@dataclass(frozen=True, eq=False)
+class ConvergenceRun:
+    """One H of the convergence study at ``[frc] convergence_level_N``."""
+
+    H: int
+    curve: object  # FRCBranch, or the ContinuationError of a curve that could not start (no stability)
+    err_stepped_sine: list  # max relative amplitude error at each periodic stepped-sine point
+    err_shooting: list  # max relative amplitude error at each exact orbit found
+    shooting_failed: int  # contact shooting points where no HB solution or no exact orbit was found
+    wall_s: float
+
+
+@dataclass(frozen=True, eq=False)
+class FRCResult:
+    """Everything the frc stage computed (:func:`bearingshaft.stages.frc.compute`).
+
+    Curves are :class:`reduced.periodic.frc.FRCBranch` objects; one that could not start is
+    kept as its :class:`reduced.periodic.continuation.ContinuationError` (reported, not raised).
+    Keys: P the load level [N], ``direction`` "up" or "down", ``scale`` a factor of
+    ``[frc] backbone_scales``.
+    """
+
+    scene_name: str
+    spec: object  # the [frc] table
+    names: tuple[str, ...]  # output points
+    load_col: int  # the point the load acts at
+    curves: dict  # P -> FRCBranch | ContinuationError, H = [frc] harmonics
+    events: dict  # P -> (k,) Hz where the sweeps must jump (folds, ends of stable pieces)
+    checks: dict  # P -> list[PointCheck]
+    sweeps: dict  # P -> {direction: SteppedSine} (empty without a stepped sine)
+    sweep_hb: dict  # (P, direction) -> per sweep frequency the HB amplitudes (p,) there, or None
+    convergence: list  # ConvergenceRun per H of [frc] convergence_harmonics
+    backbone_curves: dict  # (P, scale) -> FRCBranch (H = 1, damping and load scaled)
+    backbones: dict  # linear mode -> (freq_hz (k,), amplitudes (k, p)) of its NNM backbone
+    peaks: dict  # (P, scale) -> (Hz, m) the peak of the backbone curve at the load point
+    nearest: dict  # (P, scale) -> (mode, log distance) of the nearest backbone to that peak
+
+
+# -- the files ---------------------------------------------------------------------------------------
+def write(result: FRCResult, writer: StageWriter) -> None:
+    """Write the frc stage's files (module docstring) and put its statistics in ``writer.stats``.
+
+    Parameters
+    ----------
+    result : FRCResult
+        What :func:`bearingshaft.stages.frc.compute` returned.
+    writer : StageWriter
+        Where the files go.
+    """
+    spec, names = result.spec, result.names
+    stats = {"curves": _curve_stats(result), "stepped_sine": {}, "stability": {}}
+    write_rows(writer.path("stepped_sine.csv"), _stepped_sine_rows(result, stats))
+    _curve_files(result, writer, stats)
+    conv_rows = [_convergence_row(spec.convergence_level_N, run) for run in result.convergence]
+    timing_rows = _timing_rows(result)
+    write_rows(writer.path("frc_convergence.csv"), conv_rows, fields=CONVERGENCE_FIELDS)
+    write_rows(writer.path("frc_convergence_timing.csv"), timing_rows)
+    Pc = spec.convergence_level_N
+    sweeps = result.sweeps
+    if Pc in sweeps and sweeps[Pc]:
+        t_ss = sum(float(np.sum(s.wall_s)) for s in sweeps[Pc].values())
+        t_hb = {r["harmonics"]: r["wall_s"] for r in timing_rows if r["what"].startswith("hb curve H=")
+                and r["level"] == Pc and "monodromy" not in r["what"]}
+        stats["speed_ratio_stepped_sine_over_hb"] = {f"H={h}": round(t_ss / t, 2) for h, t in t_hb.items() if t > 0}
+    write_rows(writer.path("frc_backbone.csv"), _backbone_rows(result), fields=BACKBONE_FIELDS)
+    writer.stats["frc"] = stats
+    _plot_frc(writer.path("frc.png"), result.curves, sweeps, result.backbones, names, spec, result.scene_name,
+              result.events)
+    _plot_backbone(writer.path("frc_backbone.png"), result.backbone_curves, result.backbones, names, result.load_col,
+                   spec, result.peaks)
+    _plot_convergence(writer.path("frc_convergence_timing.png"), conv_rows, timing_rows, Pc)
+
+
+def _bool(v) -> str:
+    """A verdict as frc.csv writes it.
+
+    >>> _bool(True), _bool(np.False_)
+    ('true', 'false')
+    """
+    return "true" if v else "false"
+
+
+def _curve_stats(result: FRCResult) -> dict:
+    """Per level: the curve's size, status, notes, folds, unstable points and run times, or why it failed."""
+    out = {}
+    for P, br in result.curves.items():
+        if isinstance(br, Exception):
+            out[f"{P:g} N"] = f"failed: {br}"
+        else:
+            out[f"{P:g} N"] = {
+                "points": len(br.freq_hz), "status": br.status, "notes": br.notes,
+                "folds_hz": [sig(f, 6) for f in br.freq_hz[br.folds]],
+                "unstable_points": int(np.sum(~br.stable)), "wall_s": round(br.wall_s, 3),
+                "stability_wall_s": round(br.stability_wall_s, 3)}
+    return out
+
+
+def _stepped_sine_rows(result: FRCResult, stats: dict) -> list[dict]:
+    """stepped_sine.csv: every sweep point, how it settled, its amplitudes and HB's there; the
+    counts per level into ``stats["stepped_sine"]``."""
+    ss_rows = []
+    names, load_col = result.names, result.load_col
+    for P in result.spec.levels_N:
+        for direction, ss in result.sweeps[P].items():
+            hb = result.sweep_hb[(P, direction)]
+            for j, f in enumerate(ss.freq_hz):
+                amp_ss = ss.amplitude_m[j]
+                row = {"level": P, "direction": direction, "freq_hz": sig(f, DIGITS), "response": ss.response[j],
+                       "settle_error": sig(float(ss.settle_error[j]), 3), "settle_s": sig(float(ss.settle_s[j]), 6),
+                       "asymmetry": sig(float(ss.asymmetry[j]), 3)}
+                for c, nm in enumerate(names):
+                    row[f"amplitude_{nm}_m"] = sig(float(amp_ss[c]), DIGITS)
+                err, hb_amp = "", ""
+                a = hb[j]
+                if a is not None:
+                    hb_amp = sig(float(a[load_col]), DIGITS)
+                    err = sig(float(np.max(np.abs(a / amp_ss - 1.0))), ERR_DIGITS)
+                row["hb_amplitude_m"] = hb_amp  # at the load point, on the stable branch it landed on
+                row["rel_err_hb"] = err  # max over the points of |A_hb / A_stepped - 1|
+                ss_rows.append(row)
+        if result.sweeps[P]:
+            lv = [r for r in ss_rows if r["level"] == P]
+            errs = [r["rel_err_hb"] for r in lv if r["rel_err_hb"] != ""]
+            stats["stepped_sine"][f"{P:g} N"] = {
+                "periodic": sum(r["response"] == "periodic" for r in lv),
+                "settling": sum(r["response"] == "settling" for r in lv),
+                "not_settled": sum(r["response"] == "not_settled" for r in lv),
+                "compared_with_hb": len(errs), "max_rel_err_hb": max(errs) if errs else None,
+                "wall_s": {d: round(float(np.sum(s.wall_s)), 3) for d, s in result.sweeps[P].items()}}
+    return ss_rows
+
+
+def _curve_files(result: FRCResult, writer: StageWriter, stats: dict) -> None:
+    """frc.csv, frc_harmonics.csv, frc_bifurcations.csv, frc_stability.csv; the stability counts
+    per level into ``stats["stability"]``."""
+    rows_csv, harm_rows, bif_rows, stab_rows = [], [], [], []
+    for P in result.spec.levels_N:
+        br = result.curves[P]
+        if not isinstance(br, Exception):
+            rows_csv += _curve_rows(result, P, br)
+            harm_rows += _harmonic_rows(result, P, br)
+            bif_rows += _bifurcation_rows(result, P, br)
+            st = [_stability_row(result, P, br, r) for r in result.checks[P]]
+            stab_rows += st
+            stats["stability"][f"{P:g} N"] = {
+                "hill_points": sum(r["hill_stable"] != "" for r in st),
+                "hill_disagree": sum(r["hill_stable"] not in ("", r["monodromy_stable"]) for r in st),
+                "shooting_points": sum(r["shooting_stable"] != "" for r in st),
+                "shooting_disagree": sum(r["shooting_stable"] not in ("", r["monodromy_stable"]) for r in st),
+                "shooting_failed": sum(r["note"] != "" for r in st)}
+        for direction, ss in result.sweeps[P].items():
+            for j, f in enumerate(ss.freq_hz):
+                for c, nm in enumerate(result.names):
+                    rows_csv.append({"level": P, "method": f"stepped_sine_{direction}", "harmonics": "",
+                                     "freq_hz": sig(float(f), DIGITS), "point": nm,
+                                     "amplitude_m": sig(float(ss.amplitude_m[j, c]), DIGITS),
+                                     "stable": _bool(ss.response[j] != "not_settled"), "bifurcation": "",
+                                     "response": ss.response[j], "segment": ""})
+    write_rows(writer.path("frc.csv"), rows_csv)
+    write_rows(writer.path("frc_harmonics.csv"), harm_rows)
+    write_rows(writer.path("frc_bifurcations.csv"), bif_rows, fields=BIFURCATION_FIELDS)
+    write_rows(writer.path("frc_stability.csv"), stab_rows)
+
+
+def _curve_rows(result: FRCResult, P: float, br) -> list[dict]:
+    """frc.csv rows of one HB curve: each point at each output point."""
+    H = result.spec.harmonics
+    labels = br.bifurcation_labels()
+    return [{"level": P, "method": "hb", "harmonics": H, "freq_hz": sig(br.freq_hz[i], DIGITS), "point": nm,
+             "amplitude_m": sig(float(br.amplitude_m[i, c]), DIGITS), "stable": _bool(br.stable[i]),
+             "bifurcation": labels[i], "response": "", "segment": int(br.segment[i])}
+            for i in range(len(br.freq_hz)) for c, nm in enumerate(result.names)]
+
+
+def _harmonic_rows(result: FRCResult, P: float, br) -> list[dict]:
+    """frc_harmonics.csv rows of one curve: harmonics 0..min(H, 9) (the odd ones with odd_harmonics)."""
+    spec, H = result.spec, result.spec.harmonics
+    return [{"level": P, "harmonics": H, "index": i, "freq_hz": sig(br.freq_hz[i], DIGITS), "point": nm,
+             "harmonic": kk, "amplitude_m": sig(float(br.harmonic_amplitude_m[i, c, kk]), DIGITS)}
+            for i in range(len(br.freq_hz)) for c, nm in enumerate(result.names)
+            for kk in range(min(br.H, 9) + 1) if not (spec.odd_harmonics and kk % 2 == 0)]
+
+
+def _bifurcation_rows(result: FRCResult, P: float, br) -> list[dict]:
+    """frc_bifurcations.csv rows of one curve."""
+    H, col = result.spec.harmonics, result.load_col
+    return [{"level": P, "harmonics": H, "kind": kind, "index": int(i), "freq_hz": sig(br.freq_hz[i], DIGITS),
+             "amplitude_m": sig(float(br.amplitude_m[i, col]), DIGITS),
+             "max_abs_mu_before": sig(float(np.abs(br.multipliers[i - 1, 0])), 6),
+             "max_abs_mu_after": sig(float(np.abs(br.multipliers[i, 0])), 6)} for i, kind in br.bifurcations]
+
+
+def _stability_row(result: FRCResult, P: float, br, r: PointCheck) -> dict:
+    """frc_stability.csv row of one checked point: monodromy, Hill and shooting side by side."""
+    col = result.load_col
+    amp_hb = br.amplitude_m[r.index]
+    shot = r.shoot_amp is not None
+    return {
+        "level": P, "harmonics": result.spec.harmonics, "index": r.index, "freq_hz": sig(r.freq_hz, DIGITS),
+        "amplitude_m": sig(float(amp_hb[col]), DIGITS),
+        "monodromy_max_abs_mu": sig(r.mono, 6), "monodromy_stable": _bool(r.mono_stable),
+        "hill_max_abs_mu": sig(r.hill, 6) if r.hill_stable is not None else "",
+        "hill_stable": _bool(r.hill_stable) if r.hill_stable is not None else "",
+        "shooting_max_abs_mu": sig(r.shoot, 6) if r.shoot_stable is not None else "",
+        "shooting_stable": _bool(r.shoot_stable) if r.shoot_stable is not None else "",
+        "shooting_amplitude_m": sig(float(r.shoot_amp[col]), DIGITS) if shot else "",
+        "hb_rel_err_vs_shooting": sig(float(np.max(np.abs(amp_hb / r.shoot_amp - 1.0))), ERR_DIGITS) if shot else "",
+        "note": r.shoot_note}
+
+
+def _convergence_row(Pc: float, run: ConvergenceRun) -> dict:
+    """frc_convergence.csv row of one H: its curve, its errors against the stepped sine and shooting."""
+    row = {"level": Pc, "harmonics": run.H}
+    bc = run.curve
+    if isinstance(bc, Exception):
+        row.update({"status": "failed", "n_points": 0})
+        return row
+    e_ss, e_sh = run.err_stepped_sine, run.err_shooting
+    fo = bc.freq_hz[bc.folds] if bc.folds else np.zeros(0)
+    row.update({
+        "status": bc.status, "n_points": len(bc.freq_hz),
+        "f_reached_hz": sig(float(bc.freq_hz[bc.segment == 0][-1]), DIGITS),
+        "n_folds": len(bc.folds),
+        "highest_fold_hz": sig(float(fo.max()), DIGITS) if fo.size else "",
+        "lowest_fold_hz": sig(float(fo.min()), DIGITS) if fo.size else "",
+        "n_vs_stepped_sine": len(e_ss),
+        "max_rel_err_vs_stepped_sine": sig(float(max(e_ss)), ERR_DIGITS) if e_ss else "",
+        "n_vs_shooting": len(e_sh), "n_shooting_failed": run.shooting_failed,
+        "max_rel_err_vs_shooting": sig(float(max(e_sh)), ERR_DIGITS) if e_sh else "",
+        "median_rel_err_vs_shooting": sig(float(np.median(e_sh)), ERR_DIGITS) if e_sh else ""})
+    return row
+
+
+def _timing_rows(result: FRCResult) -> list[dict]:
+    """frc_convergence_timing.csv: the run time of each H's curve, each sweep and each drawn curve."""
+    Pc, H = result.spec.convergence_level_N, result.spec.harmonics
+    rows = [{"level": Pc, "what": f"hb curve H={run.H}", "harmonics": run.H,
+             "points": 0 if isinstance(run.curve, Exception) else len(run.curve.freq_hz),
+             "wall_s": round(run.wall_s, 4)} for run in result.convergence]
+    for P in result.spec.levels_N:
+        for d, ss in result.sweeps.get(P, {}).items():
+            rows.append({"level": P, "what": f"stepped sine {d}", "harmonics": "", "points": len(ss.freq_hz),
+                         "wall_s": round(float(np.sum(ss.wall_s)), 4)})
+        br = result.curves[P]
+        if not isinstance(br, Exception):
+            rows.append({"level": P, "what": f"hb curve H={H} with monodromy stability", "harmonics": H,
+                         "points": len(br.freq_hz), "wall_s": round(br.wall_s, 4)})
+    return rows
+
+
+def _backbone_rows(result: FRCResult) -> list[dict]:
+    """frc_backbone.csv: each scaled curve's peak and the backbone nearest it (log distance)."""
+    rows = []
+    for P in result.spec.levels_N:
+        for eps in result.spec.backbone_scales:
+            row = {"level": P, "scale": eps, "load_N": sig(P * eps, DIGITS)}
+            if (P, eps) not in result.backbone_curves or not result.backbones:
+                row["note"] = "no curve" if (P, eps) not in result.backbone_curves else "no backbone"
+                rows.append(row)
+                continue
+            fp, A = result.peaks[(P, eps)]
+            mode, dist = result.nearest[(P, eps)]
+            row.update({"nnm": mode + 1, "peak_freq_hz": sig(fp, DIGITS), "peak_amplitude_m": sig(A, DIGITS),
+                        "log_distance": sig(dist, ERR_DIGITS), "note": ""})
+            rows.append(row)
+    return rows
+
+
+# -- the figures -------------------------------------------------------------------------------------
+def _plot_frc(path, curves, sweeps, bb, names, spec, title, events) -> None:
+    """frc.png: top row, every output point over the band (log-log); bottom row, the jump region
+    (linear axes): curves per level, stable solid, unstable dashed, stepped sine, backbones dotted."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    p = len(names)
+    fig, axs = plt.subplots(2, p, figsize=(5.2 * p, 8.6), squeeze=False)
+    colors = {P: f"C{i}" for i, P in enumerate(curves)}
+    ev = np.concatenate([events[P] for P in curves] + [np.zeros(0)])
+    zoom = (max(ev.min() / 1.15, spec.freq_min_hz), min(ev.max() * 1.15, spec.freq_max_hz)) if ev.size else None
+    for row in range(2):
+        for c in range(p):
+            ax = axs[row][c]
+            for P, br in curves.items():
+                col = colors[P]
+                if isinstance(br, Exception):
+                    continue
+                for idx in br.pieces():
+                    a, fr, stb = br.amplitude_m[idx, c], br.freq_hz[idx], br.stable[idx]
+                    ax.plot(fr, np.where(stb, a, np.nan), "-", color=col, lw=1.1, label=f"{P:g} N, HB H={br.H}")
+                    uns = ~stb
+                    edge = uns | np.roll(uns, 1) | np.roll(uns, -1)  # join the dashed pieces to the solid ones
+                    ax.plot(fr, np.where(edge, a, np.nan), "--", color=col, lw=0.7)
+                for d, mk in (("up", "^"), ("down", "v")):
+                    ss = sweeps.get(P, {}).get(d)
+                    if ss is None:
+                        continue
+                    per = np.array([r in ("periodic", "settling") for r in ss.response])
+                    ax.plot(ss.freq_hz[per], ss.amplitude_m[per, c], mk, mfc="none", mec=col, ms=6, mew=0.9,
+                            label=f"{P:g} N, stepped sine {d}")
+                    ax.plot(ss.freq_hz[~per], ss.amplitude_m[~per, c], mk, mfc="k", mec=col, ms=4, mew=0.6)
+            for r, (f, amps) in bb.items():
+                ax.plot(f, amps[:, c], ":", color="k", lw=1.2, label=f"NNM {r + 1} backbone (H=1)")
+            if row == 0:
+                ax.set_xscale("log")
+                ax.set_yscale("log")
+                ax.set_xlim(spec.freq_min_hz, spec.freq_max_hz)
+                good = [br.amplitude_m[:, c] for br in curves.values() if not isinstance(br, Exception)]
+                if good:
+                    ax.set_ylim(min(np.min(g) for g in good) / 2, max(np.max(g) for g in good) * 3)
+            elif zoom is not None:
+                ax.set_xlim(*zoom)
+                top = max((np.max(br.amplitude_m[(br.freq_hz >= zoom[0]) & (br.freq_hz <= zoom[1]), c], initial=0.0)
+                           for br in curves.values() if not isinstance(br, Exception)), default=1e-3)
+                ax.set_ylim(0.0, 1.15 * top)
+            ax.set_xlabel("excitation frequency [Hz]")
+            ax.set_ylabel(f"max |{names[c]}| over a period [m]")
+            ax.grid(True, which="both", alpha=0.2)
+    handles, labels = axs[0][0].get_legend_handles_labels()
+    uniq = dict(zip(labels, handles, strict=True))
+    axs[0][0].legend(uniq.values(), uniq.keys(), fontsize=6, loc="lower left")
+    fig.suptitle(f"{title}: forced response to a load at {spec.point} (solid: stable, dashed: unstable; open "
+                 "markers: stepped sine settled, filled: not settled; dotted: backbone); bottom: the jump region",
+                 fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _plot_backbone(path, bb_curves, bb, names, load_col, spec, peaks) -> None:
+    """frc_backbone.png: the curves with damping and load scaled down, their peaks and the backbones."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 5))
+    styles = {eps: (w, a) for eps, w, a in zip(sorted(spec.backbone_scales, reverse=True), (1.4, 1.0, 0.7, 0.5),
+                                               (1.0, 0.8, 0.6, 0.5), strict=False)}
+    levels = sorted({P for P, _ in bb_curves})
+    for i, P in enumerate(levels):
+        for eps in spec.backbone_scales:
+            bc = bb_curves.get((P, eps))
+            if bc is None:
+                continue
+            lw, al = styles.get(eps, (0.5, 0.5))
+            ax.plot(bc.freq_hz, bc.amplitude_m[:, load_col], "-", color=f"C{i}", lw=lw, alpha=al,
+                    label=f"{P:g} N, damping and load x {eps:g}")
+            k = int(np.argmax(bc.amplitude_m[:, load_col]))
+            ax.plot(bc.freq_hz[k], bc.amplitude_m[k, load_col], "o", color=f"C{i}", ms=4)
+    for r, (f, amps) in bb.items():
+        ax.plot(f, amps[:, load_col], ":", color="k", lw=1.5, label=f"NNM {r + 1} backbone (nnm stage, H=1)")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    peaks = [peaks[key] for key in bb_curves]
+    if peaks:  # around the peaks: off resonance the scaled load only shifts each curve down
+        ax.set_xlim(spec.freq_min_hz, min(1.5 * max(f for f, _ in peaks), spec.freq_max_hz))
+        ax.set_ylim(0.3 * min(a for _, a in peaks), 3.0 * max(a for _, a in peaks))
+    ax.set_xlabel("excitation frequency [Hz]")
+    ax.set_ylabel(f"max |{names[load_col]}| [m]")
+    ax.set_title("FRC peaks (dots) approach the backbones as damping and load go to zero together (HB H=1)",
+                 fontsize=8)
+    ax.grid(True, which="both", alpha=0.2)
+    ax.legend(fontsize=6)
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def _plot_convergence(path, conv_rows, timing_rows, Pc) -> None:
+    """frc_convergence_timing.png: the error of each H against its curve's run time."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    wall = {r["harmonics"]: r["wall_s"] for r in timing_rows if r["what"].startswith("hb curve H=")
+            and "monodromy" not in r["what"]}
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    for key, mk, label in (("max_rel_err_vs_shooting", "o-", "max error vs exact orbits (shooting)"),
+                           ("median_rel_err_vs_shooting", "s--", "median error vs exact orbits"),
+                           ("max_rel_err_vs_stepped_sine", "^:", "max error vs stepped sine (settled points)")):
+        pts = [(wall[r["harmonics"]], r[key], r["harmonics"]) for r in conv_rows
+               if r.get(key) not in (None, "") and r["harmonics"] in wall]
+        if not pts:
+            continue
+        t, e, h = zip(*pts, strict=True)
+        ax.loglog(t, np.maximum(np.array(e, float), 1e-16), mk, label=label)
+        for ti, ei, hi in pts:
+            ax.annotate(f"H={hi}", (ti, max(float(ei), 1e-16)), fontsize=6)
+    ax.set_xlabel("HB curve run time [s] (this run; varies with machine load)")
+    ax.set_ylabel("relative amplitude error")
+    ax.set_title(f"HB forced response at {Pc:g} N: error against run time", fontsize=9)
+    ax.legend(fontsize=7)
+    ax.grid(True, which="both", alpha=0.2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+__all__ = ["ConvergenceRun", "FRCResult", "PointCheck", "write"]
