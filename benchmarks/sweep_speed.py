@@ -50,13 +50,13 @@ from bearingshaft.output import write_rows  # noqa: E402
 from bearingshaft.scenes import parse_scene  # noqa: E402
 from bearingshaft.sweep import (  # noqa: E402
     SweepSpec,
-    _warm_up,
     build_plan,
     dask_client,
     parse_vary_option,
     run_case,
     run_sweep,
 )
+from bearingshaft.sweep.run import _warm_up  # noqa: E402
 
 CASE_SCENE = """
 description = "sweep_speed: the impulse ringdown of discrete-impulse, 0.5 s"

@@ -157,7 +157,7 @@ def test_any_vary_text_parses_or_is_refused_in_one_line(text):
     ([], "the scene has no [sweep] table; give --vary"),
 ])
 def test_bad_sweep_is_one_line_exit_2_before_anything_runs(tmp_path, capsys, monkeypatch, argv, expected):
-    import bearingshaft.sweep as sweep
+    import bearingshaft.sweep.run as sweep
 
     def no_cluster(*a, **k):
         raise AssertionError("a cluster was started for a sweep that must be refused")
@@ -327,7 +327,7 @@ def test_worker_killed_mid_sweep_loses_and_doubles_no_case(tmp_path, client):
         import os
         import time
 
-        import bearingshaft.sweep as sweep
+        import bearingshaft.sweep.run as sweep
 
         original = getattr(sweep._run_stage, "original", sweep._run_stage)
 
@@ -347,7 +347,7 @@ def test_worker_killed_mid_sweep_loses_and_doubles_no_case(tmp_path, client):
         sweep._run_stage = held_stage
 
     def restore() -> None:  # on the workers that still hold the wrapper
-        import bearingshaft.sweep as sweep
+        import bearingshaft.sweep.run as sweep
 
         sweep._run_stage = getattr(sweep._run_stage, "original", sweep._run_stage)
 
@@ -391,7 +391,7 @@ def test_a_stage_that_needs_the_main_thread_runs_in_a_child_process(tmp_path, mo
     """gmsh (the modal, reduce and verify stages) cannot start in a Dask worker's task thread; such a
     stage runs as ``python -m bearingshaft.cli STAGE`` in a child process. Exercised here on a cheap
     stage declared as meshing: the folder it leaves is the single run's, for the case's scene."""
-    import bearingshaft.sweep as sweep
+    import bearingshaft.sweep.run as sweep
 
     monkeypatch.setattr(sweep, "MESH_STAGES", ("ringdown",))
     plan = plan_of(LINEAR.replace("duration_s = 4.0", "duration_s = 0.1"), "model.k_s=9000")

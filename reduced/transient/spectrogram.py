@@ -29,6 +29,7 @@ from scipy.signal import ShortTimeFFT
 from scipy.signal.windows import hann
 
 from reduced import _checks as _check
+from reduced.transient.spectral import dominant_freq_hz
 
 MAX_FRAMES = 4000  # frames of a long record's spectrogram (the hop grows to keep to this)
 BATCH_FLOATS = 1 << 18  # samples transformed at once (frames x n_win): 2 MB a copy
@@ -46,11 +47,10 @@ class Spectrogram:
     n_win: int = 0  # samples in a window
 
     def dominant_freq_hz(self, fmin_hz: float = 0.0) -> np.ndarray:
-        """Hz, the frequency of the largest power in each frame, above ``fmin_hz``."""
-        keep = self.freq_hz > fmin_hz
-        if not np.any(keep) or self.power.shape[1] == 0:
-            return np.full(self.power.shape[1], np.nan)
-        return self.freq_hz[keep][np.argmax(self.power[keep], axis=0)]
+        """Hz, the frequency of the largest power in each frame, at or above ``fmin_hz`` and above 0
+        (:func:`reduced.transient.spectral.dominant_freq_hz` of the frames' power; NaN for a frame
+        without power there)."""
+        return dominant_freq_hz(self.power, None, fmin_hz, freq_hz=self.freq_hz)
 
 
 def frame_grid(n_samples: int, sample_rate_hz: float, window_s: float, overlap: float,

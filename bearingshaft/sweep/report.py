@@ -1,15 +1,15 @@
 """Figures of a sweep (issue 13): a metric against one varied key, maps over two, and the
-symmetry-break time against energy beside the NNM stability ranges.
+symmetry-break time against energy beside the NNM stability ranges. Draws only: every number
+comes in the rows and the overlay (:mod:`bearingshaft.sweep.metrics`); no solver runs here.
 
 ``sweep.png``: one panel per plotted metric (``[sweep] plots``, default the DEFAULT_PLOTS a
 stage wrote). With one varied key (or ``[sweep] x``, a metric column such as
 ``energy_J_initial``) each panel is the metric against it; with two keys of a grid design
 each panel is a map over the grid (grey: no value, e.g. a decay not reached in the run);
 with two keys of a zip or random design, the cases as coloured points. With
-``overlay = "nnm_stability"`` the Floquet multipliers of NNM 1 and NNM 3 (the symmetric
-NNMs of the 3-DOF model, by shooting on the exact flow of its undamped system,
-:func:`nnm_stability`) are computed over the swept energies, written to
-``nnm_stability.csv`` and drawn in ``symmetry_break.png`` beside the break times.
+``overlay = "nnm_stability"`` the Floquet multipliers of NNM 1 and NNM 3 over the swept
+energies (:func:`bearingshaft.sweep.metrics.nnm_stability`) are drawn in
+``symmetry_break.png`` beside the break times.
 """
 
 from __future__ import annotations
@@ -23,14 +23,16 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from bearingshaft.output import write_rows  # noqa: E402
+from bearingshaft.plots import wrap_title  # noqa: E402
+from bearingshaft.sweep.plan import base_value  # noqa: E402
 
 DEFAULT_PLOTS = ("freq_early_hz", "freq_middle_hz", "freq_late_hz", "decay_time_s", "gaps_open_after_s", "impacts",
                  "peak_tip_force_N", "t_break_s", "energy_at_break_J")
 MAX_PANELS = 9
 LOG_SPAN = 100.0  # an axis is drawn on a log scale when its positive values span more than this factor
-STABILITY_ENERGIES = 40  # energies of the NNM stability overlay (log-spaced over the sweep's range)
-UNSTABLE = 1.0 + 1e-6  # |mu|max above this: unstable (shooting's multipliers are good to ~1e-12 here)
+# the NNM instability ranges: (NNM, eigenvector of the largest multiplier) -> colour
+COLOURS = {(1, "antisymmetric"): "tab:red", (1, "symmetric"): "tab:orange",
+           (3, "antisymmetric"): "tab:purple", (3, "symmetric"): "tab:pink"}
 
 
 def _finite(values) -> np.ndarray:
@@ -39,12 +41,28 @@ def _finite(values) -> np.ndarray:
 
 
 def _is_log(values, hint: bool = False) -> bool:
+    """Whether an axis of these values is drawn on a log scale.
+
+    >>> _is_log([1.0, 1e3]), _is_log([1.0, 10.0]), _is_log([1.0, 10.0], hint=True), _is_log([-1.0, 1e3])
+    (True, False, True, False)
+    """
     a = _finite(values)
     return bool(a.size and np.all(a > 0) and (hint or a.max() / a.min() > LOG_SPAN))
 
 
 def plotted_metrics(spec, rows: list[dict]) -> list[str]:
-    """The metric columns to draw: ``[sweep] plots`` if given, else the DEFAULT_PLOTS that hold a number."""
+    """The metric columns to draw.
+
+    Parameters
+    ----------
+    spec : the sweep's design (its ``plots`` and varied keys)
+    rows : the ok cases' rows
+
+    Returns
+    -------
+    ``[sweep] plots`` if given, else the DEFAULT_PLOTS that hold a number (else a stage's first
+    numbers), at most MAX_PANELS.
+    """
     names = list(spec.plots) or [m for m in DEFAULT_PLOTS if any(
         isinstance(r.get(m), (int, float)) and math.isfinite(r[m]) for r in rows)]
     if not names:  # stages without a default: their first numbers
@@ -60,7 +78,18 @@ def _label(name: str) -> str:
 
 
 def write_plots(plan, result) -> list[str]:
-    """The sweep's figures in ``result.out``; the names written."""
+    """The sweep's figures in ``result.out``.
+
+    Parameters
+    ----------
+    plan : the :class:`~bearingshaft.sweep.plan.SweepPlan`
+    result : the :class:`~bearingshaft.sweep.tables.SweepResult` (rows and overlay)
+
+    Returns
+    -------
+    The names written: ``sweep.png`` (when a metric can be drawn against one key or over two),
+    ``symmetry_break.png`` (with the NNM stability overlay).
+    """
     rows = [r for r in result.rows if r.get("status") == "ok"]
     spec = plan.spec
     if not rows:
@@ -69,8 +98,6 @@ def write_plots(plan, result) -> list[str]:
     metrics = plotted_metrics(spec, rows)
     keys = [v.key for v in spec.vary]
     title = f"{plan.scene.name}: {len(rows)} cases ({spec.design} over {', '.join(keys)})"
-    from bearingshaft.sweep import base_value
-
     base = [base_value(plan.scene, k) for k in keys]  # the scene's own values: marked on the plots
     base = [b if isinstance(b, (int, float)) and not isinstance(b, bool) else None for b in base]
     if metrics and (len(keys) == 1 or spec.x):
@@ -82,12 +109,18 @@ def write_plots(plan, result) -> list[str]:
     elif metrics and len(keys) == 2:
         _maps(rows, spec, metrics, result.out / "sweep.png", title, base)
         files.append("sweep.png")
-    if spec.overlay == "nnm_stability" and plan.scene.model_kind == "discrete":
-        files += symmetry_break_figure(plan, rows, result.out)
+    if result.stability is not None:
+        symmetry_break_figure(plan, rows, result.stability, result.out)
+        files.append("symmetry_break.png")
     return files
 
 
 def _grid(n: int) -> tuple[int, int]:
+    """(rows, columns) of a figure of n panels, at most 3 columns.
+
+    >>> _grid(1), _grid(4), _grid(9)
+    ((1, 1), (2, 3), (3, 3))
+    """
     cols = min(3, n)
     return -(-n // cols), cols
 
@@ -122,7 +155,11 @@ def _lines(rows, xkey, metrics, path: Path, title: str, logx: bool, base=None) -
 
 
 def _edges(v: np.ndarray, log: bool) -> np.ndarray:
-    """Cell edges around sorted centres v (geometric midpoints on a log axis)."""
+    """Cell edges around sorted centres v (geometric midpoints on a log axis).
+
+    >>> _edges(np.array([1.0, 2.0, 4.0]), False).tolist(), _edges(np.array([1.0, 100.0]), True).round(9).tolist()
+    ([0.5, 1.5, 3.0, 5.0], [0.1, 10.0, 1000.0])
+    """
     if v.size == 1:
         return np.array([v[0] * 0.9, v[0] * 1.1]) if log else np.array([v[0] - 0.5, v[0] + 0.5])
     u = np.log(v) if log else v
@@ -174,34 +211,16 @@ def _maps(rows, spec, metrics, path: Path, title: str, base=(None, None)) -> Non
 
 
 # -- symmetry break against energy, beside the NNM stability ranges ----------------------------
-def nnm_stability(model, energy_min_J: float, energy_max_J: float, n: int = STABILITY_ENERGIES) -> list[dict]:
-    """Floquet stability of NNM 1 and NNM 3 (the 3-DOF model's symmetric NNMs) at ``n`` log-spaced
-    energies: the largest multiplier of each orbit found by shooting on the exact flow of the
-    undamped model (reduced.periodic.shooting.shooting_branch, guided by the HB H = 1 branch) and
-    whether its eigenvector is symmetric (x1 = x3) or antisymmetric (x1 = -x3): an
-    antisymmetrically unstable orbit is one the symmetric motion leaves. Energies where shooting
-    finds no orbit are rows with ``found`` = 0."""
-    from reduced.periodic.shooting import floquet_scan, mirror_mode
-
-    E = np.geomspace(energy_min_J, energy_max_J, n)
-    rows = []
-    for mode, orbits in floquet_scan(model.system(), (0, 2), E).items():
-        for e, o in zip(E, orbits, strict=True):
-            if o is None:
-                rows.append({"nnm": mode + 1, "energy_J": float(e), "found": 0, "freq_hz": "", "max_abs_mu": "",
-                             "stable": "", "unstable_eigvec": ""})
-                continue
-            unstable = o.max_multiplier > UNSTABLE
-            rows.append({"nnm": mode + 1, "energy_J": float(o.energy_J), "found": 1, "freq_hz": float(o.freq_hz),
-                         "max_abs_mu": float(o.max_multiplier), "stable": int(not unstable),
-                         "unstable_eigvec": mirror_mode(o) if unstable else ""})
-    return rows
-
-
 def _ranges(rows: list[dict], nnm: int, eigvec: str) -> list[tuple[float, float]]:
     """Energy intervals over which NNM ``nnm`` is unstable with an ``eigvec`` eigenvector: each such
     orbit stands for the energies up to the geometric midpoints with its neighbours on the grid
-    (an energy where shooting found no orbit is not shaded)."""
+    (an energy where shooting found no orbit is not shaded).
+
+    >>> rows = [{"nnm": 1, "energy_J": e, "found": 1, "unstable_eigvec": k}
+    ...         for e, k in ((1.0, ""), (4.0, "antisymmetric"), (16.0, "antisymmetric"))]
+    >>> [(float(a), float(b)) for a, b in _ranges(rows, 1, "antisymmetric")]
+    [(2.0, 16.0)]
+    """
     pts = [r for r in rows if r["nnm"] == nnm]
     E = np.array([r["energy_J"] for r in pts])
     flag = np.array([bool(r["found"]) and r["unstable_eigvec"] == eigvec for r in pts])
@@ -217,33 +236,9 @@ def _ranges(rows: list[dict], nnm: int, eigvec: str) -> list[tuple[float, float]
     return out
 
 
-def symmetry_break_figure(plan, rows: list[dict], out: Path) -> list[str]:
-    """``symmetry_break.png`` and ``nnm_stability.csv``: the seeded break time against the initial
-    energy, the energy at the break, and the energies where NNM 1 and NNM 3 are unstable."""
-    E0 = np.array([r.get("energy_J_initial", np.nan) for r in rows], float)
-    tb = np.array([r.get("t_break_s", np.nan) for r in rows], float)
-    lo = np.array([r.get("t_break_min_s", np.nan) for r in rows], float)
-    hi = np.array([r.get("t_break_max_s", np.nan) for r in rows], float)
-    Eb = np.array([r.get("energy_at_break_J", np.nan) for r in rows], float)
-    ok = np.isfinite(E0) & (E0 > 0)
-    if not np.any(ok):
-        return []
-    stab = nnm_stability(plan.scene.model, float(np.min(E0[ok])), float(np.max(E0[ok])))
-    write_rows(out / "nnm_stability.csv", stab,
-               fields=["nnm", "energy_J", "found", "freq_hz", "max_abs_mu", "stable", "unstable_eigvec"])
-    order = np.argsort(E0)
-    E0, tb, lo, hi, Eb = E0[order], tb[order], lo[order], hi[order], Eb[order]
-    duration = plan.scene.ringdown.duration_s
-    perturbation = next((r.get("symmetry_perturbation_m") for r in rows if r.get("symmetry_perturbation_m")), None)
-    fig, axes = plt.subplots(3, 1, figsize=(9, 9.5), sharex=True, gridspec_kw={"height_ratios": [3, 3, 2]})
-    colours = {(1, "antisymmetric"): "tab:red", (1, "symmetric"): "tab:orange",
-               (3, "antisymmetric"): "tab:purple", (3, "symmetric"): "tab:pink"}
-    for ax in axes[:2]:
-        for (nnm, kind), c in colours.items():
-            for a, b in _ranges(stab, nnm, kind):
-                ax.axvspan(a, b, color=c, alpha=0.12 if nnm == 1 else 0.08, lw=0)
+def _break_time_panel(ax, E0, tb, lo, hi, duration: float) -> None:
+    """The seeded break time against the initial energy, the NNM instability ranges shaded."""
     broke = np.isfinite(tb)
-    ax = axes[0]
     ax.errorbar(E0[broke], tb[broke], yerr=[tb[broke] - lo[broke], hi[broke] - tb[broke]], fmt=".", ms=3, lw=0.6,
                 color="k", label="seeded break time (median, min-max over the seeds)")
     ax.plot(E0[~broke], np.full(np.sum(~broke), duration), "v", color="0.5", ms=3,
@@ -251,16 +246,23 @@ def symmetry_break_figure(plan, rows: list[dict], out: Path) -> list[str]:
     ax.set_ylabel("break time [s]")
     ax.legend(fontsize=8, loc="upper right")
     ax.grid(True, alpha=0.3)
-    ax = axes[1]
+
+
+def _break_energy_panel(ax, stab, E0, tb, Eb) -> None:
+    """The energy at the break against the initial energy, the instability ranges on both axes."""
+    broke = np.isfinite(tb)
     ax.loglog(E0[broke], Eb[broke], ".", ms=3, color="k", label="energy when the symmetry breaks")
     ax.loglog(E0, E0, ":", color="0.5", lw=0.8, label="initial energy")
-    for (nnm, kind), c in colours.items():
+    for (nnm, kind), c in COLOURS.items():
         for a, b in _ranges(stab, nnm, kind):
             ax.axhspan(a, b, color=c, alpha=0.12, lw=0)
     ax.set_ylabel("energy at the break [J]")
     ax.legend(fontsize=8, loc="upper left")
     ax.grid(True, alpha=0.3, which="both")
-    ax = axes[2]
+
+
+def _multiplier_panel(ax, stab) -> None:
+    """|mu|max of NNM 1 and NNM 3 against energy, coloured by the eigenvector of the unstable ones."""
     for nnm, marker in ((1, "o"), (3, "s")):
         pts = [r for r in stab if r["nnm"] == nnm and r["found"]]
         e = np.array([r["energy_J"] for r in pts])
@@ -276,17 +278,39 @@ def symmetry_break_figure(plan, rows: list[dict], out: Path) -> list[str]:
     ax.set_xlabel("initial energy [J] (shaded above: the energies where NNM 1 / NNM 3 are unstable)")
     ax.legend(fontsize=7, ncol=2, loc="upper left")
     ax.grid(True, alpha=0.3, which="both")
+
+
+def symmetry_break_figure(plan, rows: list[dict], stability, out: Path) -> None:
+    """``symmetry_break.png``: the seeded break time against the initial energy, the energy at the
+    break, and the energies where NNM 1 and NNM 3 are unstable.
+
+    Parameters
+    ----------
+    plan : the :class:`~bearingshaft.sweep.plan.SweepPlan` (its scene's name and run length)
+    rows : the ok cases' rows
+    stability : the :class:`~bearingshaft.sweep.metrics.NnmStability` overlay
+    out : the sweep's folder
+    """
+    stab = stability.rows
+    cols = [np.array([r.get(k, np.nan) for r in rows], float)
+            for k in ("energy_J_initial", "t_break_s", "t_break_min_s", "t_break_max_s", "energy_at_break_J")]
+    order = np.argsort(cols[0])
+    E0, tb, lo, hi, Eb = (c[order] for c in cols)
+    perturbation = next((r.get("symmetry_perturbation_m") for r in rows if r.get("symmetry_perturbation_m")), None)
+    fig, axes = plt.subplots(3, 1, figsize=(9, 9.5), sharex=True, gridspec_kw={"height_ratios": [3, 3, 2]})
+    for ax in axes[:2]:
+        for (nnm, kind), c in COLOURS.items():
+            for a, b in _ranges(stab, nnm, kind):
+                ax.axvspan(a, b, color=c, alpha=0.12 if nnm == 1 else 0.08, lw=0)
+    _break_time_panel(axes[0], E0, tb, lo, hi, plan.scene.ringdown.duration_s)
+    _break_energy_panel(axes[1], stab, E0, tb, Eb)
+    _multiplier_panel(axes[2], stab)
     axes[0].set_xscale("log")
-    from bearingshaft.stages.ringdown import SYMMETRY_SEEDS
-
-    seed = (f"seeded with a {perturbation:g} m antisymmetric perturbation at x1, x3 ({SYMMETRY_SEEDS} seeds)"
-            if perturbation else "")
-    from bearingshaft.plots import wrap_title
-
+    seed = (f"seeded with a {perturbation:g} m antisymmetric perturbation at x1, x3 ({stability.symmetry_seeds} "
+            "seeds)" if perturbation else "")
     fig.suptitle(wrap_title(f"{plan.scene.name}: symmetry-break time against energy; {seed}; shaded red/purple: "
                             "NNM 1/3 unstable with an antisymmetric eigenvector, orange: NNM 1 with a symmetric one",
                             110), fontsize=9)
     fig.tight_layout()
     fig.savefig(out / "symmetry_break.png", dpi=110)
     plt.close(fig)
-    return ["symmetry_break.png", "nnm_stability.csv"]
