@@ -25,6 +25,7 @@ from reduced.models.discrete import DiscreteParams
 from reduced.models.gaps import GapSystem, two_sided_stops
 from reduced.models.loads import HalfSine, Loads
 from reduced.studies import relative_error
+from reduced.transient import _exact_kernels as exk
 from reduced.transient import _modal
 from reduced.transient import exact as ex
 from reduced.transient.dop853 import integrate_dop853
@@ -74,16 +75,16 @@ def first_crossing_both_ways(system: GapSystem, y: np.ndarray, active: np.ndarra
                                       tau_limit, hmin, np.empty(Kmax, complex), np.empty(Kmax), hprev, hnext,
                                       np.empty((m, 11)))
     X, werr2 = np.empty((N, N), complex), np.empty(N)
-    ex._modal_start(table.V[s], table.Vinv[s], y, table.yp[s], X, werr2)
+    exk._modal_start(table.V[s], table.Vinv[s], y, table.yp[s], X, werr2)
     tau_old, j_old = tau_limit, -1
     cf = np.empty(N, complex)
     for j in range(m):
         sgn = -system.side[j] if active[j] else system.side[j]
-        const_j = ex._stop_series(system.B, j, sgn, system.offset[j], table.yp[s], X, cf)
+        const_j = exk._stop_series(system.B, j, sgn, system.offset[j], table.yp[s], X, cf)
         pv = system.B[j] @ table.V[s, :n]
         qn = float(np.sum(np.abs(pv) * werr2))
         dn = float(np.sum(np.abs(pv) * np.abs(table.lam[s]) * werr2))
-        tj, _ = ex._first_root(const_j, cf, table.lam[s], tau_old, hmin, qn, dn, floor)
+        tj, _ = exk._first_root(const_j, cf, table.lam[s], tau_old, hmin, qn, dn, floor)
         if tj < tau_old:
             tau_old, j_old = tj, j
     return (tau_new, j_new), (tau_old, j_old)

@@ -25,7 +25,11 @@ def _cd_small(AT, dtGKT, dtGBT, L, B, offset, side, k, x, vh, dt, n_steps, every
     """:func:`reduced.transient.explicit._cd_kernel` for n <= 4: AT, dtGKT (4, 4), dtGBT (m, 4), L (4, r),
     B (m, 4), dtGbT and b (L, 4) and x, vh (4,) zero-padded beyond the model's n = out_x.shape[1]
     DOFs. Row i of v_{n+3/2} is 0 + sum_c (A_ic v_c - (dt G K)_ic x_c) - sum_j (dt G B^T)_ij f_j
-    + sum_q (dt G b^T)_iq p_q, c = 0 .. 3 in order (the padded c add exact zeros)."""
+    + sum_q (dt G b^T)_iq p_q, c = 0 .. 3 in order (the padded c add exact zeros).
+
+    Long because the state and the two 4 x 4 matrices live in scalar variables, in registers, for the
+    whole step loop, written out term by term: a helper would pass them through memory, which is
+    what costs the generic kernel a load and a store per term (module docstring)."""
     n = out_x.shape[1]
     m = B.shape[0]
     r = L.shape[1]

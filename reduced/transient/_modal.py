@@ -43,16 +43,18 @@ import math
 import numba as nb
 import numpy as np
 
+# The constants below are the exact integrator's, free and forced segments alike
+# (reduced.transient._exact_kernels takes them from here).
 EPS = np.finfo(float).eps
-QTOL_REL = 64.0 * EPS  # as reduced.transient.exact: round-off of q, relative to the size of its terms
-NOISE_FACTOR = 4.0  # as reduced.transient.exact: margin on the propagated round-off of q and q'
-MAX_MARCH_ITER = 10_000_000  # per segment: a hang guard, never reached in practice
+QTOL_REL = 64.0 * EPS  # q is a sum of ~2n terms: round-off of its evaluation, relative to the size of its terms
+NOISE_FACTOR = 4.0  # margin on the propagated round-off of q and q'
+MAX_MARCH_ITER = 10_000_000  # per segment (per stop and segment in the forced march): a hang guard, never reached
 FAST_LT = 2.0  # |lam| h beyond which a term's amplitude bounds it better than its Taylor bound
 CUBIC_REACH = 4.0  # the cubic bound is tried first on [0, CUBIC_REACH x the quadratic bound's step] ...
 CUBIC_ITER = 3  # ... and on intervals moved this many times toward its step
-TAYLOR_ZT = 0.5  # |z tau| below which I(z) = int_0^tau e^{z t} dt is summed as a series ...
+TAYLOR_ZT = 0.5  # |z tau| below which int_0^tau t^r e^{z t} dt is summed as a series ...
 TAYLOR_TERMS = 17  # ... of this many terms (0.5^18 / 18! ~ 6e-22: exact to round-off)
-BUFFER_FULL = 1  # kernel status: the sample buffer is full inside the present segment
+BUFFER_FULL = 1  # kernel status (free and forced): the sample buffer is full inside the present segment
 
 
 @nb.njit(cache=True, inline="always")
@@ -70,7 +72,7 @@ def switch_stop(active, tip, j_ev):
 
 @nb.njit(cache=True)
 def _state_of(active):
-    """Index of a contact state: sum_j active_j 2^j."""
+    """Index of a contact state in the tables: sum_j active_j 2^j (free and forced kernels, the flow)."""
     s = 0
     for j in range(active.shape[0]):
         if active[j]:
@@ -272,6 +274,11 @@ def _march(s, K, lam, alam, const, coef, lc, l2c, a0, qtol, dnoise, live, n_live
     again with the fast terms bounded by their amplitude. The cubic bounds are worked out only for
     the stop whose step is the smallest (the others' quadratic steps are already longer), until
     that stop's step is the smallest of the refined ones. P[j] keeps each stop's sums for that.
+
+    Long because it is the integrator's inner loop (every march iteration of every free segment):
+    one pass over the terms gives each stop's q, q', q'' and the bounds of both partitions, a dozen
+    accumulators that stay in registers in one loop body; split into functions they would be
+    returned as tuples and stored into P on every iteration.
     """
     m = const.shape[0]
     best = tau_limit
@@ -406,6 +413,23 @@ def _march(s, K, lam, alam, const, coef, lc, l2c, a0, qtol, dnoise, live, n_live
 
 
 @nb.njit(cache=True)
+def _term_scratch(K):
+    """Per-term scratch of a free segment (K terms): w (complex), werr, e (complex), ea, em (complex), am1,
+    gr, gi."""
+    return (np.empty(K, np.complex128), np.empty(K), np.empty(K, np.complex128), np.empty(K),
+            np.empty(K, np.complex128), np.empty(K), np.empty(K), np.empty(K))
+
+
+@nb.njit(cache=True)
+def _stop_scratch(m, K):
+    """Per-stop scratch of the march (m stops, K terms): coef, lc, l2c (m, K) complex, a0 (m, K), const,
+    qtol, dnoise (m,), live (m,) bool, hprev, hnext (m,), P (m, 11) (:func:`_march`)."""
+    return (np.empty((m, K), np.complex128), np.empty((m, K), np.complex128), np.empty((m, K), np.complex128),
+            np.empty((m, K)), np.empty(m), np.empty(m), np.empty(m), np.empty(m, np.bool_), np.empty(m),
+            np.empty(m), np.empty((m, 11)))
+
+
+@nb.njit(cache=True)
 def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_samples, i_samp, t_after, out_y, out_W,
                  W, hmin, floor, max_events, n_stuck, out_E, E, seg_s, seg_tau):
     """March events from t through the pieces ending at bounds[c], bounds[c + 1], ... (no loads), filling
@@ -428,28 +452,11 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
     Kmax = lam.shape[1]
     ns = t_samples.shape[0]
     has_E = out_E.shape[0] > 0
-    w = np.empty(Kmax, np.complex128)
-    werr = np.empty(Kmax)
-    e = np.empty(Kmax, np.complex128)
-    ea = np.empty(Kmax)
-    em = np.empty(Kmax, np.complex128)
-    am1 = np.empty(Kmax)
-    coef = np.empty((m, Kmax), np.complex128)
-    lc = np.empty((m, Kmax), np.complex128)
-    l2c = np.empty((m, Kmax), np.complex128)
-    a0 = np.empty((m, Kmax))
-    const = np.empty(m)
-    qtol = np.empty(m)
-    dnoise = np.empty(m)
-    live = np.empty(m, np.bool_)
-    hprev = np.empty(m)
-    hnext = np.empty(m)
-    P = np.empty((m, 11))
+    w, werr, e, ea, em, am1, gr, gi = _term_scratch(Kmax)
+    coef, lc, l2c, a0, const, qtol, dnoise, live, hprev, hnext, P = _stop_scratch(m, Kmax)
     ytmp = np.empty(N)
     dy = np.empty(N)
     ay = np.empty(N)
-    gr = np.empty(Kmax)
-    gi = np.empty(Kmax)
     n_events = 0
     n_iter = 0
     status = 0

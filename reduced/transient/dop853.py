@@ -19,6 +19,7 @@ leg integrates a smooth vector field.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.integrate import DOP853
@@ -26,7 +27,8 @@ from scipy.optimize import brentq
 
 from reduced import _checks as _check
 from reduced.models.gaps import GapSystem
-from reduced.transient.result import RingdownResult, RingdownStream, sample_count
+from reduced.transient import stepper as _stepper
+from reduced.transient.result import RingdownResult, RingdownStream
 
 EPS = np.finfo(float).eps
 
@@ -162,6 +164,194 @@ def _first_event(sol, t_old: float, t: float, act: np.ndarray, funcs: list, syst
     return -1, t
 
 
+def _x_scale(system: GapSystem) -> float:
+    """m, the displacement scale of the default atol and of the state switch: the largest stop offset or 1 mm."""
+    return max(float(np.max(np.abs(system.offset), initial=0.0)), 1e-3)
+
+
+@dataclass(frozen=True, slots=True)
+class Dop853Options:
+    """Options of the DOP853 integrator (see :func:`integrate_dop853`).
+
+    Parameters
+    ----------
+    rtol : relative tolerance, in (0, 1)
+    atol : m, absolute tolerance (> 0); None: rtol x (largest stop offset or 1e-3 m)
+    events : restart at every stop crossing (the reference mode, see the module docstring)
+    """
+
+    rtol: float = 1e-10
+    atol: float | None = None
+    events: bool = False
+
+    def checked(self, system: GapSystem) -> Dop853Options:
+        """These options validated (ValueError naming the first bad one), atol resolved."""
+        rtol = _check.number("rtol", self.rtol, lo=0.0, hi=1.0)
+        atol = rtol * _x_scale(system) if self.atol is None else _check.positive("atol", self.atol, "m")
+        return Dop853Options(rtol, atol, _check.flag("events", self.events))
+
+
+class Dop853Stepper(_stepper.Stepper):
+    """DOP853's step (:mod:`reduced.transient.stepper`): one step of SciPy's ``DOP853`` stepper.
+
+    The stepper is driven exactly as ``solve_ivp`` drives it (the same steps, dense output at the
+    samples, events located by ``brentq`` on the dense output to 4 eps), but it lives across
+    buffers, so the samples do not depend on them. A run is a sequence of legs, each a smooth
+    vector field: a leg ends at a stop crossing (``events``) or a load breakpoint, and the next
+    starts from the state there. A step whose samples overflow the buffer finishes them in the
+    next call, before the stepper moves on.
+    """
+
+    method = "dop853"
+
+    def __init__(self, system: GapSystem, x0: np.ndarray, v0: np.ndarray, duration_s: float, n_samples: int,
+                 sample_rate_hz: float, options: Dop853Options, loads, report: bool) -> None:
+        super().__init__(system, n_samples, sample_rate_hz, loads, report)
+        self.options = options
+        self.x_scale = _x_scale(system)
+        self.T = (n_samples - 1) / sample_rate_hz
+        self.z0 = np.concatenate([x0, v0, [0.0, 0.0] if self.forced else [0.0]])
+        self.stats.update({"nfev": 0, "n_events": 0, "rtol": options.rtol, "atol": options.atol, "n_steps": 0,
+                           "n_legs": 1})
+        self.Minv = np.linalg.inv(system.M)
+        self.breakpoints = loads.breakpoints(self.T) if self.forced else np.zeros(0)
+        if self.forced:
+            self.stats["n_loads"] = loads.n_loads
+        self.active = system.penetration(x0) > 0.0 if options.events else None
+        self.t0, self.z = 0.0, self.z0
+        self.shown = 0  # progress reported, in 1/1000 of the run
+        self.solver = None  # the leg under way
+        self.pending = None  # [dense output or None, last sample, t, event stop, finished] of a step
+
+    def arrays(self, k: int) -> tuple[np.ndarray, ...]:
+        return (np.empty((k, self.z0.size)),)
+
+    def block(self, buf: _stepper.Buffer) -> tuple[np.ndarray, ...]:
+        """(start, x, v, W[, W_ext]) views of the buffer's columns."""
+        b, n = buf.arrays[0], self.n
+        if self.forced:
+            return b[:, :n], b[:, n : 2 * n], b[:, 2 * n], b[:, 2 * n + 1]
+        return b[:, :n], b[:, n : 2 * n], b[:, 2 * n]
+
+    def step(self, buf: _stepper.Buffer) -> float | None:
+        """One DOP853 step (a new leg first, if one ended), its samples put into ``buf``."""
+        if self.n_samples == 1:
+            buf.arrays[0][0] = self.z0
+            buf.filled = 1
+            self.finished = True
+            return None
+        if self.pending is None:
+            if self.solver is None:
+                self.solver = self._leg()
+            self._take_step()
+        if not self._put(buf):
+            return None  # the buffer is full: the step's other samples go into the next
+        return self._end_step()
+
+    def _leg(self) -> DOP853:
+        """The solver of the leg from (t0, z): to the next load breakpoint (its loads: the piece in force
+        at t0), in the contact state with its crossings as events (``events``)."""
+        system, n, Minv, forced = self.system, self.n, self.Minv, self.forced
+        t_bound = self.T
+        if forced:
+            kb = int(np.searchsorted(self.breakpoints, self.t0, side="right"))
+            t_bound = float(self.breakpoints[kb]) if kb < self.breakpoints.size else self.T
+            force = _load_piece(self.loads, float(self.breakpoints[kb - 1]) if kb > 0 else 0.0)
+        if self.options.events:
+            Ks, Fs = system.state_matrices(self.active)
+            if forced:
+                def fun(t, zz, Ks=Ks, Fs=Fs, force=force):
+                    x, v = zz[:n], zz[n : 2 * n]
+                    f = force(t)
+                    a = Minv @ (Fs - Ks @ x - system.C @ v + f)
+                    return np.concatenate([v, a, [v @ system.C @ v, v @ f]])
+            else:
+                def fun(t, zz, Ks=Ks, Fs=Fs):
+                    x, v = zz[:n], zz[n : 2 * n]
+                    a = Minv @ (Fs - Ks @ x - system.C @ v)
+                    return np.concatenate([v, a, [v @ system.C @ v]])
+
+            self.funcs = system.crossing_events(self.active)
+            self.direction = np.array([f.direction for f in self.funcs])
+            self.g = [f(self.t0, self.z) for f in self.funcs]
+        elif forced:
+            def fun(t, zz, force=force):
+                x, v = zz[:n], zz[n : 2 * n]
+                f = force(t)
+                a = Minv @ (f - system.K @ x - system.C @ v - system.contact_force(x))
+                return np.concatenate([v, a, [v @ system.C @ v, v @ f]])
+        else:
+            fun = _rhs_factory(system)
+        self.t_bound = t_bound
+        return DOP853(fun, self.t0, self.z, t_bound, rtol=self.options.rtol, atol=self.options.atol,
+                      vectorized=False)
+
+    def _take_step(self) -> None:
+        """solver.step(); with ``events`` the first crossing in it; the last sample it reaches."""
+        solver = self.solver
+        solver.step()
+        if solver.status == "failed":
+            raise RuntimeError(f"DOP853 failed at t = {solver.t:.6g} s: step size too small")
+        finished = solver.status == "finished"
+        self.stats["n_steps"] += 1
+        t, sol = solver.t, None
+        je = -1
+        if self.options.events:
+            g_new = [f(t, solver.y) for f in self.funcs]
+            act = _find_active_events(self.g, g_new, self.direction)
+            sol = solver.dense_output()
+            je, t = _first_event(sol, solver.t_old, t, act, self.funcs, self.system, self.direction)
+            self.g = g_new
+        self.pending = [sol, _last_sample_at_or_before(t, self.sample_rate_hz, self.n_samples), t, je, finished]
+
+    def _put(self, buf: _stepper.Buffer) -> bool:
+        """The pending step's samples from the dense output into ``buf``; False if it filled first."""
+        p = self.pending
+        upto = p[1]
+        b = buf.arrays[0]
+        while buf.j0 + buf.filled <= upto:
+            if buf.full:
+                return False
+            if p[0] is None:
+                p[0] = self.solver.dense_output()
+            k = min(buf.k - buf.filled, upto + 1 - buf.j0 - buf.filled)
+            tt = np.arange(buf.j0 + buf.filled, buf.j0 + buf.filled + k) / self.sample_rate_hz
+            b[buf.filled : buf.filled + k] = p[0](tt).T
+            buf.filled += k
+        return True
+
+    def _end_step(self) -> float | None:
+        """After a step's samples: the progress mark, and a new leg at a crossing or a load breakpoint."""
+        sol, _, t, je, finished = self.pending
+        self.pending = None
+        solver, stats = self.solver, self.stats
+        fraction = None
+        if int(1000 * t / self.T) > self.shown:
+            self.shown = int(1000 * t / self.T)
+            fraction = t / self.T
+        if je >= 0:
+            z = sol(t)
+            self.z, self.t0 = z, t
+            self.active = self.system.state_after_crossing(self.active, je, z[:self.n], z[self.n : 2 * self.n],
+                                                           1e-9 * self.x_scale)
+            stats["n_events"] += 1
+            stats["n_legs"] += 1
+            stats["nfev"] += solver.nfev
+            self.solver = None
+        elif finished and self.t_bound < self.T:  # a load breakpoint: a new leg in the same contact state
+            self.z, self.t0 = solver.y.copy(), self.t_bound
+            stats["n_legs"] += 1
+            stats["nfev"] += solver.nfev
+            self.solver = None
+        elif finished:
+            stats["nfev"] += solver.nfev
+            self.finished = True
+        return fraction
+
+    def tolerance(self, amp: float) -> float:
+        return float(self.options.atol + self.options.rtol * amp)
+
+
 def stream_dop853(
     system: GapSystem,
     x0: np.ndarray,
@@ -176,142 +366,18 @@ def stream_dop853(
     chunk_samples: int | None = None,
     progress=None,
 ) -> RingdownStream:
-    """DOP853 response, free or forced, chunk by chunk (see :func:`integrate_dop853`).
+    """DOP853 response, free or forced, chunk by chunk.
 
-    SciPy's ``DOP853`` stepper is driven here exactly as ``solve_ivp`` drives it (the same
-    steps, dense output at the samples, events located by ``brentq`` on the dense output
-    to 4 eps), but it lives across chunks, so the samples do not depend on the chunking.
+    See :func:`integrate_dop853` for the arguments; the samples come in chunks of at most
+    ``chunk_samples`` (default: the whole run in one), the same bits whatever it is
+    (:class:`Dop853Stepper`).
+
+    Returns
+    -------
+    RingdownStream : the run, computed as it is read
     """
-    n, x0, v0, duration_s, sample_rate_hz = _check.run_args(system, x0, v0, duration_s, sample_rate_hz)
-    loads = _check.loads(loads, n)
-    forced = loads is not None
-    rtol = _check.number("rtol", rtol, lo=0.0, hi=1.0)
-    x_scale = max(float(np.max(np.abs(system.offset), initial=0.0)), 1e-3)
-    atol = rtol * x_scale if atol is None else _check.positive("atol", atol, "m")
-    events = _check.flag("events", events)
-    _check.callback("progress", progress)
-    N = sample_count(duration_s, sample_rate_hz)
-    chunk_samples = N if chunk_samples is None else _check.integer("chunk_samples", chunk_samples)
-    fs = sample_rate_hz
-    T = (N - 1) / fs
-    z0 = np.concatenate([x0, v0, [0.0, 0.0] if forced else [0.0]])
-    nz = z0.size
-    stats = {"nfev": 0, "n_events": 0, "rtol": rtol, "atol": atol, "n_steps": 0, "n_legs": 1}
-    Minv = np.linalg.inv(system.M)
-    breakpoints = loads.breakpoints(T) if forced else np.zeros(0)
-    if forced:
-        stats["n_loads"] = loads.n_loads
-
-    def out(j, b):
-        """A full or final buffer as a block: (start, x, v, W[, W_ext])."""
-        return (j, b[:, :n], b[:, n : 2 * n], b[:, 2 * n], b[:, 2 * n + 1]) if forced else \
-            (j, b[:, :n], b[:, n : 2 * n], b[:, 2 * n])
-
-    def blocks():
-        buf = np.empty((min(chunk_samples, N), nz))
-        j0, filled = 0, 0  # the buffer holds samples j0 .. j0 + filled - 1
-
-        def put(sol, upto: int):
-            """Samples j0 + filled .. upto from the dense output ``sol``; yields full buffers."""
-            nonlocal buf, j0, filled
-            while j0 + filled <= upto:
-                k = min(buf.shape[0] - filled, upto + 1 - j0 - filled)
-                tt = np.arange(j0 + filled, j0 + filled + k) / fs
-                buf[filled : filled + k] = sol(tt).T if sol is not None else z0
-                filled += k
-                if filled == buf.shape[0]:
-                    yield out(j0, buf)
-                    j0 += filled
-                    filled = 0
-                    buf = np.empty((min(chunk_samples, N - j0), nz))
-
-        if N == 1:
-            yield from put(None, 0)
-            return
-        active = system.penetration(x0) > 0.0 if events else None
-        t0, z = 0.0, z0
-        shown = 0
-        while True:
-            t_bound = T
-            if forced:  # the leg ends at the next load breakpoint; its loads are the piece in force at t0
-                kb = int(np.searchsorted(breakpoints, t0, side="right"))
-                t_bound = float(breakpoints[kb]) if kb < breakpoints.size else T
-                force = _load_piece(loads, float(breakpoints[kb - 1]) if kb > 0 else 0.0)
-            if events:
-                Ks, Fs = system.state_matrices(active)
-                if forced:
-                    def leg(t, zz, Ks=Ks, Fs=Fs, force=force):
-                        x, v = zz[:n], zz[n : 2 * n]
-                        f = force(t)
-                        a = Minv @ (Fs - Ks @ x - system.C @ v + f)
-                        return np.concatenate([v, a, [v @ system.C @ v, v @ f]])
-                else:
-                    def leg(t, zz, Ks=Ks, Fs=Fs):
-                        x, v = zz[:n], zz[n : 2 * n]
-                        a = Minv @ (Fs - Ks @ x - system.C @ v)
-                        return np.concatenate([v, a, [v @ system.C @ v]])
-
-                funcs = system.crossing_events(active)
-                direction = np.array([f.direction for f in funcs])
-                g = [f(t0, z) for f in funcs]
-                fun = leg
-            elif forced:
-                def fun(t, zz, force=force):
-                    x, v = zz[:n], zz[n : 2 * n]
-                    f = force(t)
-                    a = Minv @ (f - system.K @ x - system.C @ v - system.contact_force(x))
-                    return np.concatenate([v, a, [v @ system.C @ v, v @ f]])
-            else:
-                fun = _rhs_factory(system)
-            solver = DOP853(fun, t0, z, t_bound, rtol=rtol, atol=atol, vectorized=False)
-            while True:
-                solver.step()
-                if solver.status == "failed":
-                    raise RuntimeError(f"DOP853 failed at t = {solver.t:.6g} s: step size too small")
-                finished = solver.status == "finished"
-                stats["n_steps"] += 1
-                t, sol = solver.t, None
-                je = -1
-                if events:
-                    g_new = [f(t, solver.y) for f in funcs]
-                    act = _find_active_events(g, g_new, direction)
-                    sol = solver.dense_output()
-                    je, t = _first_event(sol, solver.t_old, t, act, funcs, system, direction)
-                    g = g_new
-                upto = _last_sample_at_or_before(t, fs, N)
-                if upto >= j0 + filled:
-                    if sol is None:
-                        sol = solver.dense_output()
-                    yield from put(sol, upto)
-                if progress is not None and int(1000 * t / T) > shown:
-                    shown = int(1000 * t / T)
-                    progress(t / T)
-                if je >= 0:
-                    z = sol(t)
-                    t0 = t
-                    active = system.state_after_crossing(active, je, z[:n], z[n : 2 * n], 1e-9 * x_scale)
-                    stats["n_events"] += 1
-                    stats["n_legs"] += 1
-                    stats["nfev"] += solver.nfev
-                    break
-                if finished and t_bound < T:  # a load breakpoint: a new leg in the same contact state
-                    z, t0 = solver.y.copy(), t_bound
-                    stats["n_legs"] += 1
-                    stats["nfev"] += solver.nfev
-                    break
-                if finished:
-                    stats["nfev"] += solver.nfev
-                    if j0 + filled != N:
-                        raise RuntimeError(f"internal: {N - j0 - filled} DOP853 samples not filled")
-                    if filled:
-                        yield out(j0, buf[:filled])
-                    return
-
-    def tolerance(amp: float) -> float:
-        return float(atol + rtol * amp)
-
-    return RingdownStream(system, "dop853", N, sample_rate_hz, chunk_samples, blocks(), tolerance, stats,
-                          loads=loads)
+    return _stepper.run(Dop853Stepper, system, x0, v0, duration_s, sample_rate_hz, Dop853Options(rtol, atol, events),
+                        loads, progress, chunk_samples)
 
 
 def integrate_dop853(

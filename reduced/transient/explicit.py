@@ -26,6 +26,7 @@ stability: omega_max dt = ``DEFAULT_OMEGA_DT``.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
@@ -35,7 +36,8 @@ from reduced import _checks as _check
 from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
 from reduced.transient import _cd
-from reduced.transient.result import RingdownResult, RingdownStream, sample_count
+from reduced.transient import stepper as _stepper
+from reduced.transient.result import RingdownResult, RingdownStream
 
 SWITCHING_SAFETY = 0.8  # of the textbook limit: CD with switching contact fails near 1.6
 DEFAULT_OMEGA_DT = 0.05  # rad: 2.6e-2 relative error over the 0.05 s work-precision window
@@ -44,6 +46,7 @@ TOP_CAP = 1.0  # rad, omega_max dt with step_basis "contact": the top mode still
 STEP_BASES = ("top", "contact")
 MAX_STEPS = 2_000_000_000  # refuse runs that would take more steps than this
 LOAD_BLOCK_STEPS = 1 << 16  # steps per kernel call of a forced run: the loads' values are tabulated per call
+PIECES = 50  # progress is reported this many times a run
 
 
 class StepTooLargeError(ValueError):
@@ -67,9 +70,7 @@ def default_step(system: GapSystem, omega_dt: float = DEFAULT_OMEGA_DT, step_bas
     before it is rounded to the output interval (see its docstring for ``step_basis``)."""
     _check.gap_system(system)
     step_basis = _check.choice("step_basis", step_basis, STEP_BASES)
-    if not (_check._is_number(omega_dt) and 0.0 < omega_dt <= SWITCHING_SAFETY * 2.0):
-        raise StepTooLargeError(f"omega_dt must be a finite number in (0, {2 * SWITCHING_SAFETY:g}] rad "
-                                f"(central difference is unstable past omega dt = 2), got {_check.show(omega_dt)}")
+    omega_dt = _checked_omega_dt(omega_dt)
     omega, dt_crit = stability_limit(system)
     limit = SWITCHING_SAFETY * dt_crit
     if omega <= 0:
@@ -78,6 +79,14 @@ def default_step(system: GapSystem, omega_dt: float = DEFAULT_OMEGA_DT, step_bas
         return min(omega_dt / omega, limit), omega, omega, limit
     omega_ref = contact_omega(system)
     return min(omega_dt / omega_ref, TOP_CAP / omega, limit), omega, omega_ref, limit
+
+
+def _checked_omega_dt(omega_dt):
+    """``omega_dt`` as given, or StepTooLargeError unless it is a finite number in (0, 2 SWITCHING_SAFETY] rad."""
+    if not (_check._is_number(omega_dt) and 0.0 < omega_dt <= SWITCHING_SAFETY * 2.0):
+        raise StepTooLargeError(f"omega_dt must be a finite number in (0, {2 * SWITCHING_SAFETY:g}] rad "
+                                f"(central difference is unstable past omega dt = 2), got {_check.show(omega_dt)}")
+    return omega_dt
 
 
 def contact_omega(system: GapSystem, n: int = 3) -> float:
@@ -198,6 +207,181 @@ def _damping_factor(C: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(U[:, keep] * np.sqrt(lam[keep]))
 
 
+@dataclass(frozen=True, slots=True)
+class ExplicitOptions:
+    """Options of the central-difference integrator (see :func:`integrate_explicit`).
+
+    Parameters
+    ----------
+    dt : s, the step (refused beyond ``SWITCHING_SAFETY`` x the stability limit), or None
+    omega_dt : rad, the step as omega_ref dt when ``dt`` is None, in (0, 2 SWITCHING_SAFETY]
+    step_basis : omega_ref, "top" (omega_max) or "contact" (:func:`contact_omega`)
+    chunks : progress is reported this many times a run
+    """
+
+    dt: float | None = None
+    omega_dt: float = DEFAULT_OMEGA_DT
+    step_basis: str = "top"
+    chunks: int = PIECES
+
+    def checked(self, system: GapSystem) -> ExplicitOptions:
+        """These options validated (ValueError naming the first bad one)."""
+        step_basis = _check.choice("step_basis", self.step_basis, STEP_BASES)
+        omega_dt = _checked_omega_dt(self.omega_dt)
+        chunks = _check.integer("chunks", self.chunks)
+        dt = None if self.dt is None else _check.positive("dt", self.dt, "s")
+        return ExplicitOptions(dt, omega_dt, step_basis, chunks)
+
+
+class ExplicitStepper(_stepper.Stepper):
+    """The central-difference step: one kernel call of whole output intervals (:mod:`reduced.transient.stepper`).
+
+    The scheme's whole state is carried from call to call: x_n, the half-step velocity
+    v_{n+1/2}, the dissipated work W and the dissipation rate p_n of its trapezoidal rule (and
+    the loads' work and power), so the samples are the same bits however the calls are cut. A
+    call stops at the buffer's end, at the next progress mark (when progress is reported) and,
+    under loads, after ``LOAD_BLOCK_STEPS`` steps (the loads at each step are tabulated a call).
+    Models of at most ``_cd.SMALL_N`` DOFs run the register kernel :func:`reduced.transient._cd._cd_small`.
+    """
+
+    method = "explicit"
+
+    def __init__(self, system: GapSystem, x0: np.ndarray, v0: np.ndarray, duration_s: float, n_samples: int,
+                 sample_rate_hz: float, options: ExplicitOptions, loads, report: bool) -> None:
+        super().__init__(system, n_samples, sample_rate_hz, loads, report)
+        N = n_samples
+        self.dt, self.every, omega, omega_ref, limit = self._step_size(options)
+        n_steps = (N - 1) * self.every
+        if n_steps > MAX_STEPS:
+            raise StepTooLargeError(
+                f"{n_steps:.3g} steps needed (dt = {self.dt:.3g} s): more than {MAX_STEPS:.0e}; "
+                "shorten the run (duration_s) or soften the contact"
+            )
+        dt = self.dt
+        self.stats.update({"n_steps": n_steps, "dt": dt, "omega_max": omega, "omega_dt": omega * dt,
+                           "step_basis": options.step_basis, "omega_ref": omega_ref, "omega_ref_dt": omega_ref * dt,
+                           "dt_stable": limit})
+        if self.forced:
+            self.stats["n_loads"] = loads.n_loads
+        self._matrices()
+        self._first_state(x0, v0)
+        # samples between progress reports (without them a buffer is filled in one kernel call)
+        self.per_piece = max(1, (N - 1) // options.chunks) if report else max(1, N - 1)
+        self.done = 0  # samples filled after the first
+
+    def _step_size(self, options: ExplicitOptions) -> tuple[float, int, float, float, float]:
+        """(dt, every, omega_max, omega_ref, dt_stable): the step, shortened so that the output
+        interval is ``every`` steps."""
+        system = self.system
+        if options.dt is not None:
+            omega, dt_crit = stability_limit(system)
+            omega_ref, limit = omega, SWITCHING_SAFETY * dt_crit
+            if options.dt > limit:
+                raise StepTooLargeError(
+                    f"dt = {options.dt:.3g} s exceeds the stable step {limit:.3g} s "
+                    f"({SWITCHING_SAFETY} x 2/omega_max with damping; omega_max = {omega:.4g} rad/s "
+                    "in the closed-gap state)"
+                )
+            dt_target = options.dt
+        else:
+            dt_target, omega, omega_ref, limit = default_step(system, options.omega_dt, options.step_basis)
+            if omega <= 0:
+                dt_target = 1.0 / self.sample_rate_hz
+        h_out = 1.0 / self.sample_rate_hz
+        every = max(1, math.ceil(h_out / dt_target * (1.0 - 1e-12)))
+        return h_out / every, every, omega, omega_ref, limit
+
+    def _matrices(self) -> None:
+        """The kernel and its matrices, formed once: A^T, (dt G K)^T, (dt G B^T)^T, the damping factor,
+        the stops' rows (and dt G b^T, b of the loads), G = (M + dt/2 C)^-1, A = G (M - dt/2 C)."""
+        system, n, dt = self.system, self.n, self.dt
+        M, C, K = system.M, system.C, system.K
+        G = np.linalg.inv(M + 0.5 * dt * C)
+        A = G @ (M - 0.5 * dt * C)
+        dtGK = dt * (G @ K)
+        AT, dtGKT = np.ascontiguousarray(A.T), np.ascontiguousarray(dtGK.T)
+        dtGBT = np.ascontiguousarray((dt * (G @ system.B.T)).T)
+        self.L = L = _damping_factor(C)
+        b = np.ascontiguousarray(self.loads.b) if self.forced else np.zeros((0, n))
+        dtGbT = np.ascontiguousarray((dt * (G @ b.T)).T)
+        self.small = n <= _cd.SMALL_N  # state in registers (reduced.transient._cd), zero-padded to SMALL_N DOFs
+        if self.small:
+            S = _cd.SMALL_N
+            self.kernel = _cd._cd_small
+            self.mats = (_cd.pad(AT, S, S), _cd.pad(dtGKT, S, S), _cd.pad(dtGBT, None, S), _cd.pad(L, S, None),
+                         _cd.pad(system.B, None, S))
+            self.dtGbT, self.b = _cd.pad(dtGbT, None, S), _cd.pad(b, None, S)
+        else:
+            self.kernel = _cd_kernel
+            self.mats = (AT, dtGKT, dtGBT, np.ascontiguousarray(L.T), *_sparse_rows(system.B))
+            self.dtGbT, self.b = dtGbT, b
+
+    def _first_state(self, x0: np.ndarray, v0: np.ndarray) -> None:
+        """x_0, v_{1/2} = v_0 + dt/2 a_0, and the work sums' first terms (p_0 = v_0^T C v_0, v_0^T f_ext(0))."""
+        system, dt = self.system, self.dt
+        x, v = x0.copy(), v0.copy()
+        self.x0, self.v0 = x0.copy(), v0.copy()
+        rhs0 = -(system.K @ x) - system.contact_force(x) - system.C @ v
+        if self.forced:
+            f0 = self.loads.force(0.0)
+            rhs0 = rhs0 + f0
+        a0 = np.linalg.solve(system.M, rhs0)
+        vh = v + 0.5 * dt * a0
+        S = _cd.SMALL_N
+        self.x, self.vh = (_cd.pad(x, S, None), _cd.pad(vh, S, None)) if self.small else (x, vh)
+        self.W, self.pw = 0.0, float(np.sum((v @ self.L) ** 2))
+        self.E, self.pe = 0.0, (float(v @ f0) if self.forced else 0.0)
+
+    def arrays(self, k: int) -> tuple[np.ndarray, ...]:
+        return np.empty((k, self.n)), np.empty((k, self.n)), np.empty(k), np.empty(k if self.forced else 0)
+
+    def block(self, buf: _stepper.Buffer) -> tuple[np.ndarray, ...]:
+        return buf.arrays if self.forced else buf.arrays[:3]
+
+    def step(self, buf: _stepper.Buffer) -> float | None:
+        """Sample 0 (the initial state) or one kernel call of whole output intervals."""
+        out_x, out_v, out_W, out_E = buf.arrays
+        N = self.n_samples
+        if buf.j0 == 0 and buf.filled == 0:
+            out_x[0], out_v[0], out_W[0] = self.x0, self.v0, 0.0
+            if self.forced:
+                out_E[0] = 0.0
+            buf.filled = 1
+            if N == 1:
+                self.finished = True
+                return 1.0
+            if buf.full:
+                return None
+        # stop at the buffer's end and at the next progress mark, whichever comes first
+        nout = min(buf.k - buf.filled, self.per_piece - self.done % self.per_piece)
+        P = _NO_LOADS
+        if self.forced:  # and after LOAD_BLOCK_STEPS steps: the loads at each step are tabulated
+            nout = min(nout, max(1, LOAD_BLOCK_STEPS // self.every))
+            steps = self.done * self.every + np.arange(1, nout * self.every + 1)  # global step numbers
+            P = np.ascontiguousarray(self.loads.values(steps * self.dt))
+        sy = self.system
+        self.W, self.pw, buf.filled, self.E, self.pe = call_numba_kernel(
+            self.kernel, *self.mats, sy.offset, sy.side, sy.k, self.x, self.vh, self.dt, nout * self.every,
+            self.every, out_x, out_v, out_W, self.W, self.pw, buf.filled, self.dtGbT, self.b, P, out_E, self.E,
+            self.pe)
+        self.done += nout
+        if not np.all(np.isfinite(self.x)):
+            raise FloatingPointError(
+                f"central difference diverged before t = {self.done * (1.0 / self.sample_rate_hz):.4g} s "
+                f"(dt = {self.dt:.3g} s)"
+            )
+        self.finished = self.done == N - 1
+        if self.done % self.per_piece == 0 or self.finished:
+            return self.done / (N - 1)
+        return None
+
+    def tolerance(self, amp: float) -> float:
+        return float(np.finfo(float).eps * amp)
+
+
+_NO_LOADS = np.zeros((0, 0))
+
+
 def stream_explicit(
     system: GapSystem,
     x0: np.ndarray,
@@ -209,133 +393,22 @@ def stream_explicit(
     omega_dt: float = DEFAULT_OMEGA_DT,
     step_basis: str = "top",
     loads=None,
-    chunks: int = 50,
+    chunks: int = PIECES,
     chunk_samples: int | None = None,
     progress=None,
 ) -> RingdownStream:
-    """Central-difference response, free or forced, chunk by chunk (see :func:`integrate_explicit`).
+    """Central-difference response, free or forced, chunk by chunk.
 
-    Between chunks the scheme's whole state is carried: x_n, the half-step velocity
-    v_{n+1/2}, the dissipated work W and the dissipation rate p_n of its trapezoidal rule
-    (and the loads' work and power), so the samples are the same bits as those of an
-    unchunked run.
+    See :func:`integrate_explicit` for the arguments; the samples come in chunks of at most
+    ``chunk_samples`` (default: the whole run in one), the same bits as those of an unchunked
+    run (:class:`ExplicitStepper`).
+
+    Returns
+    -------
+    RingdownStream : the run, computed as it is read
     """
-    n, x0, v0, duration_s, sample_rate_hz = _check.run_args(system, x0, v0, duration_s, sample_rate_hz)
-    loads = _check.loads(loads, n)
-    forced = loads is not None
-    step_basis = _check.choice("step_basis", step_basis, STEP_BASES)
-    if not (_check._is_number(omega_dt) and 0.0 < omega_dt <= SWITCHING_SAFETY * 2.0):
-        raise StepTooLargeError(f"omega_dt must be a finite number in (0, {2 * SWITCHING_SAFETY:g}] rad "
-                                f"(central difference is unstable past omega dt = 2), got {_check.show(omega_dt)}")
-    chunks = _check.integer("chunks", chunks)
-    _check.callback("progress", progress)
-    N = sample_count(duration_s, sample_rate_hz)
-    chunk_samples = N if chunk_samples is None else _check.integer("chunk_samples", chunk_samples)
-    if dt is not None:
-        dt = _check.positive("dt", dt, "s")
-        omega, dt_crit = stability_limit(system)
-        omega_ref, limit = omega, SWITCHING_SAFETY * dt_crit
-        if dt > limit:
-            raise StepTooLargeError(
-                f"dt = {dt:.3g} s exceeds the stable step {limit:.3g} s "
-                f"({SWITCHING_SAFETY} x 2/omega_max with damping; omega_max = {omega:.4g} rad/s "
-                "in the closed-gap state)"
-            )
-        dt_target = dt
-    else:
-        dt_target, omega, omega_ref, limit = default_step(system, omega_dt, step_basis)
-        if omega <= 0:
-            dt_target = 1.0 / sample_rate_hz
-    h_out = 1.0 / sample_rate_hz
-    every = max(1, math.ceil(h_out / dt_target * (1.0 - 1e-12)))
-    dt_run = h_out / every
-    n_steps = (N - 1) * every
-    if n_steps > MAX_STEPS:
-        raise StepTooLargeError(
-            f"{n_steps:.3g} steps needed (dt = {dt_run:.3g} s): more than {MAX_STEPS:.0e}; "
-            "shorten the run (duration_s) or soften the contact"
-        )
-    M, C, K = system.M, system.C, system.K
-    G = np.linalg.inv(M + 0.5 * dt_run * C)
-    A = G @ (M - 0.5 * dt_run * C)
-    dtGK = dt_run * (G @ K)
-    AT, dtGKT = np.ascontiguousarray(A.T), np.ascontiguousarray(dtGK.T)
-    dtGBT = np.ascontiguousarray((dt_run * (G @ system.B.T)).T)
-    L = _damping_factor(C)
-    b = np.ascontiguousarray(loads.b) if forced else np.zeros((0, n))
-    dtGbT = np.ascontiguousarray((dt_run * (G @ b.T)).T)
-    stats = {"n_steps": n_steps, "dt": dt_run, "omega_max": omega, "omega_dt": omega * dt_run,
-             "step_basis": step_basis, "omega_ref": omega_ref, "omega_ref_dt": omega_ref * dt_run, "dt_stable": limit}
-
-    if forced:
-        stats["n_loads"] = loads.n_loads
-    no_loads = np.zeros((0, 0))
-    small = n <= _cd.SMALL_N  # state in registers (reduced.transient._cd), zero-padded to SMALL_N DOFs
-    if small:
-        S = _cd.SMALL_N
-        kernel = _cd._cd_small
-        mats = (_cd.pad(AT, S, S), _cd.pad(dtGKT, S, S), _cd.pad(dtGBT, None, S), _cd.pad(L, S, None),
-                _cd.pad(system.B, None, S))
-        dtGbT_k, b_k = _cd.pad(dtGbT, None, S), _cd.pad(b, None, S)
-    else:
-        kernel = _cd_kernel
-        mats = (AT, dtGKT, dtGBT, np.ascontiguousarray(L.T), *_sparse_rows(system.B))
-        dtGbT_k, b_k = dtGbT, b
-
-    def blocks():
-        x, v = x0.copy(), v0.copy()
-        rhs0 = -(K @ x) - system.contact_force(x) - C @ v
-        if forced:
-            f0 = loads.force(0.0)
-            rhs0 = rhs0 + f0
-        a0 = np.linalg.solve(M, rhs0)
-        vh = v + 0.5 * dt_run * a0
-        xk, vk = (_cd.pad(x, _cd.SMALL_N, None), _cd.pad(vh, _cd.SMALL_N, None)) if small else (x, vh)
-        W, pw = 0.0, float(np.sum((v @ L) ** 2))
-        E, pe = 0.0, (float(v @ f0) if forced else 0.0)
-        # samples between progress calls (without a progress bar a buffer is filled in one kernel call)
-        per_piece = max(1, (N - 1) // chunks) if progress is not None else max(1, N - 1)
-        done = 0  # samples filled after the first
-        j0 = 0
-        while j0 < N:
-            k = min(chunk_samples, N - j0)
-            out_x, out_v, out_W = np.empty((k, n)), np.empty((k, n)), np.empty(k)
-            out_E = np.empty(k if forced else 0)
-            io = 0
-            if j0 == 0:
-                out_x[0], out_v[0], out_W[0] = x, v, 0.0
-                if forced:
-                    out_E[0] = 0.0
-                io = 1
-            while io < k:
-                # stop at the buffer's end and at the next progress mark, whichever comes first
-                nout = min(k - io, per_piece - done % per_piece)
-                if forced:  # and after LOAD_BLOCK_STEPS steps: the loads at each step are tabulated
-                    nout = min(nout, max(1, LOAD_BLOCK_STEPS // every))
-                    steps = done * every + np.arange(1, nout * every + 1)  # global step numbers
-                    P = np.ascontiguousarray(loads.values(steps * dt_run))
-                else:
-                    P = no_loads
-                W, pw, io, E, pe = call_numba_kernel(kernel, *mats, system.offset, system.side, system.k, xk, vk,
-                                                     dt_run, nout * every, every, out_x, out_v, out_W, W, pw, io,
-                                                     dtGbT_k, b_k, P, out_E, E, pe)
-                done += nout
-                if not np.all(np.isfinite(xk)):
-                    raise FloatingPointError(
-                        f"central difference diverged before t = {done * h_out:.4g} s (dt = {dt_run:.3g} s)"
-                    )
-                if progress is not None and (done % per_piece == 0 or done == N - 1):
-                    progress(done / (N - 1))
-            yield (j0, out_x, out_v, out_W, out_E) if forced else (j0, out_x, out_v, out_W)
-            j0 += k
-        if progress is not None and N == 1:
-            progress(1.0)
-
-    def tolerance(amp: float) -> float:
-        return float(np.finfo(float).eps * amp)
-
-    return RingdownStream(system, "explicit", N, sample_rate_hz, chunk_samples, blocks(), tolerance, stats,
-                          loads=loads)
+    return _stepper.run(ExplicitStepper, system, x0, v0, duration_s, sample_rate_hz,
+                        ExplicitOptions(dt, omega_dt, step_basis, chunks), loads, progress, chunk_samples)
 
 
 def integrate_explicit(
@@ -349,7 +422,7 @@ def integrate_explicit(
     omega_dt: float = DEFAULT_OMEGA_DT,
     step_basis: str = "top",
     loads=None,
-    chunks: int = 50,
+    chunks: int = PIECES,
     progress=None,
 ) -> RingdownResult:
     """Central-difference response of ``system`` from (x0, v0), free or under ``loads``.

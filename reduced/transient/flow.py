@@ -34,7 +34,8 @@ with the closed-form particular solution y_part of the loads' piece (the module 
 exp(A_s tau), and the vector field is still continuous at a crossing (the loads do not depend
 on the contact state), so the saltation matrix is still I: the Jacobian is the same product of
 segment exponentials. The forced flow still marches each stop on its own (:func:`_flow_kernel`,
-the forced kernel's root search of :mod:`reduced.transient.exact`) and multiplies in Python.
+the forced kernel's segment set-up and root search, :mod:`reduced.transient._exact_kernels`) and
+multiplies in Python.
 """
 
 from __future__ import annotations
@@ -48,22 +49,12 @@ from reduced import _checks as _check
 from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
 from reduced.transient import _modal
-from reduced.transient.exact import (
-    NO_TAU,
-    POLY_DEG,
-    QTOL_REL,
+from reduced.transient._exact_kernels import _add_poly, _eval_state, _next_crossing, _segment_arrays, _start_segment
+from reduced.transient._modal import QTOL_REL, _state_of
+from reduced.transient.exact import HMIN_PERIODS, NO_TAU
+from reduced.transient.exact_tables import (
     ExactIntegratorError,
     StateTable,
-    _add_poly,
-    _eval_state,
-    _first_root,
-    _first_root_forced,
-    _forced_segment,
-    _modal_start,
-    _piece_at,
-    _state_index,
-    _stop_poly,
-    _stop_series,
     forced_arrays,
     forced_table,
     modal_table,
@@ -71,92 +62,50 @@ from reduced.transient.exact import (
 )
 
 # The event march (a step that provably skips no root of q, Newton-like near one) and the
-# closed-form evaluation are reduced.transient.exact's own kernels; the flow passes no round-off
-# noise bound (qnoise = dnoise = 0) and no rest floor.
-HMIN_PERIODS = 1e-9  # as in reduced.transient.exact: smallest march step, in units of 1/omega_max
+# closed-form evaluation are the exact integrator's own kernels (reduced.transient._exact_kernels);
+# the flow passes no round-off noise bound (qnoise = dnoise = 0) and no rest floor.
 MAX_SEGMENTS = 100_000  # per call: a hang guard (a period has tens of events)
 
 
 @nb.njit(cache=True)
-def _flow_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, seg_state, seg_tau,
-                 forced, fz, fY, fU, fb, pstarts, pF, pp0, pp1):
-    """March from 0 to T; y and active are updated in place. Returns (n_seg, status).
+def _flow_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, seg_state, seg_tau, fz, fY, fU, fb,
+                 pstarts, pF, pp0, pp1):
+    """March the forced flow from 0 to T; y and active are updated in place. Returns (n_seg, status).
 
-    With ``forced``, the loads' pieces start at ``pstarts`` (times from the start of the flow, the
-    first 0) and every piece boundary ends a segment
-    (:func:`reduced.transient.exact._forced_segment`).
+    The loads' pieces start at ``pstarts`` (times from the start of the flow, the first 0) and every
+    piece boundary ends a segment; each segment is set up and its first crossing found by the
+    exact integrator's kernels (:func:`reduced.transient._exact_kernels._start_segment`,
+    :func:`~reduced.transient._exact_kernels._next_crossing`, without round-off noise or rest floor).
     """
     n = B.shape[1]
-    m = B.shape[0]
     N = 2 * n
-    L = fb.shape[0] if forced else 0
-    Kt = N + 2 * L
-    M1 = POLY_DEG + 1 if forced else 1
-    X = np.empty((N, Kt), np.complex128)
-    coef = np.empty(Kt, np.complex128)
-    z = np.zeros(Kt, np.complex128)
-    ytmp = np.empty(N)
-    werr = np.empty(N)
-    ypart = np.zeros(N)
-    P = np.zeros((M1, N))
-    Qp = np.zeros(M1)
-    Fs = np.zeros(L, np.complex128)
-    phi = np.zeros((L, M1))
-    gam = np.zeros(M1, np.complex128)
+    X, z, coef, werr, ytmp, ypart, P, Qp, Fs, phi, gam = _segment_arrays(n, fb.shape[0])
     ip = 0
-    poly = False
     t = 0.0
     n_seg = 0
     n_zero = 0
-    status = 0
     max_seg = seg_state.shape[0]
     while True:
-        s = _state_index(active)
+        s = _state_of(active)
         if not valid[s]:
             return n_seg, -2
-        lam_s = lam[s]
-        zs = lam_s
-        t_lim = T
-        if forced:
-            ip, t_lim = _piece_at(pstarts, ip, t, T)
-            poly = _forced_segment(s, t - pstarts[ip], ip, t_lim - t, y, yp[s], lam_s, V[s], Vinv[s], fz, fY, fU,
-                                   pF, pp0, pp1, n, X, z, P, Fs, phi, gam, werr, ypart)
-            zs = z
-        else:
-            _modal_start(V[s], Vinv[s], y, yp[s], X, werr)
-        tau_ev = t_lim - t
-        j_ev = -1
-        for j in range(m):
-            sgn = -side[j] if active[j] else side[j]
-            const = _stop_series(B, j, sgn, offset[j], yp[s], X, coef)
-            if forced:
-                if poly:
-                    _stop_poly(B, j, sgn, P, Qp)
-                tj, it = _first_root_forced(const, coef, zs, Qp, poly, tau_ev, hmin, 0.0, 0.0, 0.0)
-            else:
-                tj, it = _first_root(const, coef, lam_s, tau_ev, hmin, 0.0, 0.0, 0.0)
-            if tj < 0.0:
-                return n_seg, -3
-            if tj < tau_ev:
-                tau_ev = tj
-                j_ev = j
-        _eval_state(yp[s], X, zs, tau_ev, ytmp)
+        ip, t_lim, poly = _start_segment(s, t, T, ip, pstarts, y, yp[s], lam[s], V[s], Vinv[s], fz, fY, fU, pF, pp0,
+                                         pp1, n, X, z, P, Fs, phi, gam, werr, ypart)
+        tau_ev, j_ev, _, status = _next_crossing(B, offset, side, active, yp[s], V[s], X, z, werr, poly, P, Qp, coef,
+                                                 t_lim - t, hmin, 0.0, False)
+        if status != 0:
+            return n_seg, -3
+        _eval_state(yp[s], X, z, tau_ev, ytmp)
         if poly:
             _add_poly(P, tau_ev, N, ytmp)
-        if j_ev >= 0:
-            # a crossing against the stop's own rate (closing while separating, or the
-            # reverse) is a round-off root next to a crossing just made: not an event;
-            # march hmin further in the present state instead
-            rate = 0.0
-            for r in range(n):
-                rate += B[j_ev, r] * ytmp[n + r]
-            rate = side[j_ev] * rate
-            if (rate > 0.0) == active[j_ev] and rate != 0.0:
-                tau_ev = min(tau_ev + hmin, t_lim - t)
-                _eval_state(yp[s], X, zs, tau_ev, ytmp)
-                if poly:
-                    _add_poly(P, tau_ev, N, ytmp)
-                j_ev = -2
+        if j_ev >= 0 and _against_its_rate(B, side, active, j_ev, ytmp):
+            # a round-off root next to a crossing just made: not an event; march hmin further
+            # in the present state instead
+            tau_ev = min(tau_ev + hmin, t_lim - t)
+            _eval_state(yp[s], X, z, tau_ev, ytmp)
+            if poly:
+                _add_poly(P, tau_ev, N, ytmp)
+            j_ev = -2
         for r in range(N):
             y[r] = ytmp[r]
         if n_seg >= max_seg:
@@ -174,34 +123,49 @@ def _flow_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, s
                 continue  # a load breakpoint: the same contact state, a new piece
             break
         active[j_ev] = not active[j_ev]
-        if tau_ev == 0.0:
-            n_zero += 1
-        else:
-            n_zero = 0
-        # switch stops that cross at the same instant (symmetric motions) together; after
-        # repeated zero-length segments (a stop flipping on round-off at a crossing) set
-        # every stop from the sign of its penetration, ties by the sign of its rate
-        settle_all = n_zero > 4
+        n_zero = n_zero + 1 if tau_ev == 0.0 else 0
         if n_zero > 64:
             return n_seg, -1
-        scale = 0.0
+        _settle(B, offset, side, active, y, j_ev, n_zero > 4)
+    return n_seg, 0
+
+
+@nb.njit(cache=True)
+def _against_its_rate(B, side, active, j, y):
+    """Does stop j cross against its own rate at y (closing while separating, or the reverse)?"""
+    n = B.shape[1]
+    rate = 0.0
+    for r in range(n):
+        rate += B[j, r] * y[n + r]
+    rate = side[j] * rate
+    return (rate > 0.0) == active[j] and rate != 0.0
+
+
+@nb.njit(cache=True)
+def _settle(B, offset, side, active, y, j_ev, settle_all):
+    """After stop j_ev switched: switch the stops that cross at the same instant (symmetric motions)
+    together, each at its threshold (within QTOL_REL) by the sign of its rate; with ``settle_all``
+    (after repeated zero-length segments: a stop flipping on round-off at a crossing) set every stop
+    from the sign of its penetration, ties by the sign of its rate."""
+    n = B.shape[1]
+    m = B.shape[0]
+    scale = 0.0
+    for r in range(n):
+        scale += abs(y[r])
+    for j in range(m):
+        if j == j_ev and not settle_all:
+            continue
+        pen = 0.0
+        rate = 0.0
         for r in range(n):
-            scale += abs(y[r])
-        for j in range(m):
-            if j == j_ev and not settle_all:
-                continue
-            pen = 0.0
-            rate = 0.0
-            for r in range(n):
-                pen += B[j, r] * y[r]
-                rate += B[j, r] * y[n + r]
-            pen = side[j] * (pen - offset[j])
-            rate = side[j] * rate
-            if abs(pen) <= QTOL_REL * (scale + abs(offset[j])):
-                active[j] = rate > 0.0
-            elif settle_all:
-                active[j] = pen > 0.0
-    return n_seg, status
+            pen += B[j, r] * y[r]
+            rate += B[j, r] * y[n + r]
+        pen = side[j] * (pen - offset[j])
+        rate = side[j] * rate
+        if abs(pen) <= QTOL_REL * (scale + abs(offset[j])):
+            active[j] = rate > 0.0
+        elif settle_all:
+            active[j] = pen > 0.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -293,7 +257,6 @@ class Flow:
             self.hmin,
             self._seg_state,
             self._seg_tau,
-            True,
             *fargs,
         )
         _check_status(status, MAX_SEGMENTS, T)

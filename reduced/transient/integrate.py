@@ -8,6 +8,10 @@
   analyses that need no file (two runs compared sample by sample);
 - :func:`ringdown_peak_bytes` and :func:`ringdown_disk_bytes` say beforehand what a run
   will allocate and write, so a caller can refuse it before any work.
+
+Each method is a :class:`~reduced.transient.stepper.Stepper` (``STEPPERS``) with a frozen options
+dataclass (:func:`method_options` builds it from the keywords of :func:`ringdown`), run by the one
+driver :func:`reduced.transient.stepper.run`.
 """
 
 from __future__ import annotations
@@ -16,13 +20,15 @@ from pathlib import Path
 
 from reduced import _checks as _check
 from reduced.models.gaps import GapSystem
-from reduced.transient.dop853 import stream_dop853
-from reduced.transient.exact import stream_exact
-from reduced.transient.explicit import DEFAULT_OMEGA_DT, stream_explicit
+from reduced.transient import stepper as _stepper
+from reduced.transient.dop853 import Dop853Options, Dop853Stepper
+from reduced.transient.exact import ExactOptions, ExactStepper
+from reduced.transient.explicit import DEFAULT_OMEGA_DT, ExplicitOptions, ExplicitStepper
 from reduced.transient.result import RingdownResult, RingdownStream, sample_count
 from reduced.transient.store import RingdownFile, npz_disk_bytes
 
 METHODS = ("exact", "explicit", "dop853")
+STEPPERS = {"exact": ExactStepper, "explicit": ExplicitStepper, "dop853": Dop853Stepper}
 FLOAT = 8  # bytes
 CHUNK_BYTES = 8 * 2**20  # bytes of samples (t, x, v, W) in one chunk of a streamed run
 MIN_CHUNK_SAMPLES = 1024
@@ -86,6 +92,39 @@ def ringdown_disk_bytes(n_dofs: int, duration_s: float, sample_rate_hz: float, *
     return npz_disk_bytes(shapes)
 
 
+def method_options(method: str, *, dt: float | None = None, omega_dt: float | None = None, step_basis: str = "top",
+                   rtol: float = 1e-10, atol: float | None = None) -> ExactOptions | ExplicitOptions | Dop853Options:
+    """The options dataclass of ``method`` from the keywords of :func:`ringdown`.
+
+    Parameters
+    ----------
+    method : "exact", "explicit" or "dop853" (checked by the caller)
+    dt, omega_dt, step_basis : the explicit method's step (omega_dt None: ``DEFAULT_OMEGA_DT``)
+    rtol, atol : DOP853's tolerances
+
+    Returns
+    -------
+    ExactOptions, ExplicitOptions or Dop853Options : validated when the run starts
+        (:func:`reduced.transient.stepper.run`); the options of the other methods are checked here,
+        so a typo is not ignored.
+    """
+    if method != "explicit":
+        if dt is not None:
+            _check.positive("dt", dt, "s")
+        if omega_dt is not None:
+            _check.positive("omega_dt", omega_dt, "rad")
+        _check.choice("step_basis", step_basis, ("top", "contact"))
+    if method != "dop853":
+        _check.number("rtol", rtol, lo=0.0, hi=1.0)
+        if atol is not None:
+            _check.positive("atol", atol, "m")
+    if method == "explicit":
+        return ExplicitOptions(dt, DEFAULT_OMEGA_DT if omega_dt is None else omega_dt, step_basis)
+    if method == "dop853":
+        return Dop853Options(rtol, atol)
+    return ExactOptions()
+
+
 def ringdown_stream(
     system: GapSystem,
     x0,
@@ -103,32 +142,26 @@ def ringdown_stream(
     progress=None,
     chunk_samples: int | None = None,
 ) -> RingdownStream:
-    """The response of ``system`` from (x0, v0) by ``method``, as chunks (see :func:`ringdown`)."""
+    """The response of ``system`` from (x0, v0) by ``method``, as chunks.
+
+    Parameters
+    ----------
+    The arguments of :func:`ringdown` but ``out`` and ``max_memory_bytes``; ``chunk_samples``
+    defaults to :func:`default_chunk_samples`.
+
+    Returns
+    -------
+    RingdownStream : the run, computed as it is read (iterate it once)
+    """
     method = _check.choice("method", method, METHODS)
     _check.gap_system(system)
     loads = _check.loads(loads, system.n)
     if chunk_samples is None:
         chunk_samples = default_chunk_samples(system.n)
     chunk_samples = _check.integer("chunk_samples", chunk_samples)
-    if method != "explicit":  # options of another method are still checked: a typo is not ignored
-        if dt is not None:
-            _check.positive("dt", dt, "s")
-        if omega_dt is not None:
-            _check.positive("omega_dt", omega_dt, "rad")
-        _check.choice("step_basis", step_basis, ("top", "contact"))
-    if method != "dop853":
-        _check.number("rtol", rtol, lo=0.0, hi=1.0)
-        if atol is not None:
-            _check.positive("atol", atol, "m")
-    if method == "exact":
-        return stream_exact(system, x0, v0, duration_s, sample_rate_hz, loads=loads, chunk_samples=chunk_samples,
-                            progress=progress)
-    if method == "explicit":
-        return stream_explicit(system, x0, v0, duration_s, sample_rate_hz, dt=dt,
-                               omega_dt=DEFAULT_OMEGA_DT if omega_dt is None else omega_dt,
-                               step_basis=step_basis, loads=loads, chunk_samples=chunk_samples, progress=progress)
-    return stream_dop853(system, x0, v0, duration_s, sample_rate_hz, rtol=rtol, atol=atol, loads=loads,
-                         chunk_samples=chunk_samples, progress=progress)
+    options = method_options(method, dt=dt, omega_dt=omega_dt, step_basis=step_basis, rtol=rtol, atol=atol)
+    return _stepper.run(STEPPERS[method], system, x0, v0, duration_s, sample_rate_hz, options, loads, progress,
+                        chunk_samples)
 
 
 def ringdown(
