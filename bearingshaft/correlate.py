@@ -1,4 +1,4 @@
-"""Test-model correlation of a hammer test: channels matched, errors measured, figures drawn.
+"""Test-model correlation of a hammer test: channels matched, errors measured, the errors CSV.
 
 The model's channels (:class:`fem.uff.TimeHistory`, e.g. ``beam_s3:z``, ``tip_left_top``,
 ``hammer``) are paired with a test file's channels by node and axis (:func:`match_channels`);
@@ -13,18 +13,19 @@ and x_k the test's samples in the window (raw signals, no mean removed)::
     rms_model = sqrt(mean(m_k^2)),   rms_test = sqrt(mean(x_k^2))
     rms_rel_error = sqrt(mean((m_k - x_k)^2)) / rms_test          (>= 0)
     peak_abs_model = max |m_k|,      peak_abs_test = max |x_k|
-    f_dominant_*_hz = the peak of the Welch-averaged spectrum over fmin_hz <= f <= fmax_hz (below)
+    f_dominant_*_hz = argmax of the Welch PSD over fmin_hz <= f <= fmax_hz (below)
     f_rel_error = (f_dominant_model_hz - f_dominant_test_hz) / f_dominant_test_hz   (signed)
 
-The dominant frequency is :func:`reduced.transient.spectral.dominant_freq_hz` (the estimator
-of the sweep's metrics and the spectrograms too) over Hann segments of n_seg = min(N, round(fs /
-resolution_hz)) samples (bins ``resolution_hz`` apart, 2 Hz by default, ``f_resolution_hz``;
-the whole window as one segment when it is shorter), half overlapping, each segment's mean
-removed: the peak of their averaged, zero-padded spectrum refined on the averaged continuous
-spectrum, which places a single tone to a small fraction of a bin. A rms_test of 0 gives
-rms_rel_error = inf (0 when the model is exactly 0 as well); a band without power gives NaN frequencies.
+The Welch PSD (``scipy.signal.welch``) uses Hann segments of n_seg = min(N, round(fs /
+resolution_hz)) samples (bins ``resolution_hz`` apart, 2 Hz by default; the whole window as one
+segment when it is shorter), half overlapping, each segment's mean removed. The dominant
+frequency is the vertex of the parabola through the log PSD at the largest bin in the band and
+its two neighbours (when that bin is a local maximum; the bin's own frequency otherwise), which
+places a single tone to a small fraction of a bin. A rms_test of 0 gives rms_rel_error = inf
+(0 when the model is exactly 0 as well); a band without power gives NaN frequencies.
 
-All refusals are :class:`ChannelError` with a one-line message.
+All refusals are :class:`ChannelError` with a one-line message. Nothing here draws: the
+comparison figures are the hammer stage's (:mod:`bearingshaft.stages.hammer_files`).
 """
 
 from __future__ import annotations
@@ -34,18 +35,12 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+from scipy.signal import welch
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from bearingshaft.output import write_rows  # noqa: E402
-from bearingshaft.plots import Envelope, wrap_title  # noqa: E402
-from fem.uff import TimeHistory  # noqa: E402
-from reduced import _checks  # noqa: E402
-from reduced.transient.spectral import dominant_freq_hz, segment_length  # noqa: E402
-from reduced.transient.spectrogram import MAX_FRAMES, spectrogram  # noqa: E402
+from bearingshaft.output import write_rows
+from fem.uff import TimeHistory
+from reduced import _checks
 
 DT_RTOL = 1e-9  # relative difference of two time steps still taken as the same sampling
 # fraction of a sample by which the two grids may be offset and still be read as one: a shift of
@@ -70,12 +65,17 @@ class ChannelError(ValueError):
     """Model and test channels that cannot be compared; the message is one line."""
 
 
-def _direction_label(d: int) -> str:
+def direction_label(d: int) -> str:
+    """A UFF direction code as the messages and figures say it.
+
+    >>> direction_label(3), direction_label(-1), direction_label(0)
+    ('+3 (+Z)', '-1 (-X)', '0 (scalar)')
+    """
     return "0 (scalar)" if d == 0 else f"{d:+d} ({'+-'[d < 0]}{'XYZ'[abs(d) - 1]})"
 
 
 def _describe(ch: TimeHistory) -> str:
-    return f"{ch.name!r} (node {ch.node}, direction {_direction_label(ch.direction)}, {ch.quantity} [{ch.unit}])"
+    return f"{ch.name!r} (node {ch.node}, direction {direction_label(ch.direction)}, {ch.quantity} [{ch.unit}])"
 
 
 def _axis(ch: TimeHistory) -> tuple[int, int]:
@@ -230,7 +230,7 @@ def match_channels(model: list[TimeHistory], test: list[TimeHistory], wanted: li
         if not same:
             c = candidates[0]
             raise ChannelError(f"model channel {m.name!r} (node {m.node}, direction "
-                               f"{_direction_label(m.direction)}) predicts {m.quantity} [{m.unit}] but test channel "
+                               f"{direction_label(m.direction)}) predicts {m.quantity} [{m.unit}] but test channel "
                                f"{c.name!r} at its node and axis in {source} is {c.quantity} [{c.unit}]; give the "
                                f"test as {m.quantity} or leave the channel out of {COMPARE_KEY}")
         if len(same) > 1:
@@ -263,8 +263,45 @@ def match_channels(model: list[TimeHistory], test: list[TimeHistory], wanted: li
     return pairs
 
 
-def _rms(y: np.ndarray) -> float:
+def rms(y: np.ndarray) -> float:
+    """The root mean square of ``y`` (no mean removed).
+
+    >>> rms(np.array([3.0, -3.0, 3.0, -3.0]))
+    3.0
+    """
     return float(np.sqrt(np.mean(np.square(y))))
+
+
+def dominant_freq_hz(y: np.ndarray, sample_rate_hz: float, fmin_hz: float = FMIN_HZ, fmax_hz: float | None = None,
+                     resolution_hz: float = WELCH_RESOLUTION_HZ) -> tuple[float, float]:
+    """(Hz, Hz): the dominant frequency of ``y`` in [fmin_hz, fmax_hz] and the Welch bin spacing.
+
+    Welch PSD, Hann segments of n_seg = min(N, round(fs / resolution_hz)) samples, half
+    overlapping, each segment's mean removed; the largest bin k in the band is refined by the
+    vertex of the parabola through ln P at k - 1, k, k + 1 (when k is a local maximum):
+    f = f_k + df (ln P_{k-1} - ln P_{k+1}) / (2 (ln P_{k-1} - 2 ln P_k + ln P_{k+1})).
+    NaN when the band holds no bin or no power.
+    """
+    y = np.asarray(y, dtype=float)
+    fs = float(sample_rate_hz)
+    if y.size < 2:
+        return math.nan, math.nan
+    n_seg = int(min(y.size, max(8, round(fs / resolution_hz))))
+    freq, P = welch(y, fs=fs, window="hann", nperseg=n_seg, noverlap=n_seg // 2, detrend="constant",
+                    scaling="density")
+    df = float(freq[1] - freq[0]) if freq.size > 1 else math.nan
+    hi = fs / 2.0 if fmax_hz is None else fmax_hz
+    band = np.flatnonzero((freq >= fmin_hz) & (freq <= hi))
+    if band.size == 0 or not np.max(P[band]) > 0.0:
+        return math.nan, df
+    k = int(band[np.argmax(P[band])])
+    f = float(freq[k])
+    if 0 < k < P.size - 1 and P[k - 1] > 0.0 and P[k + 1] > 0.0 and P[k] >= max(P[k - 1], P[k + 1]):
+        a, b, c = np.log(P[k - 1]), np.log(P[k]), np.log(P[k + 1])
+        curv = a - 2.0 * b + c
+        if curv < 0.0:
+            f += df * 0.5 * (a - c) / curv
+    return float(f), df
 
 
 def channel_errors(pairs: list[ChannelPair], window_s: tuple[float, float] | None = None,
@@ -289,18 +326,16 @@ def channel_errors(pairs: list[ChannelPair], window_s: tuple[float, float] | Non
     for p in pairs:
         a = p.aligned(window_s)
         fs = a.sample_rate_hz
-        rms_m, rms_x = _rms(a.model), _rms(a.test)
-        rms_d = _rms(a.model - a.test)
+        rms_m, rms_x = rms(a.model), rms(a.test)
+        rms_d = rms(a.model - a.test)
         if rms_d == 0.0:
             rel = 0.0
         elif rms_x == 0.0:
             rel = math.inf
         else:
             rel = rms_d / rms_x
-        n_seg = segment_length(a.t.size, fs, resolution_hz)
-        df = fs / n_seg  # Hz, the segments' bin spacing
-        f_m = dominant_freq_hz(a.model, fs, fmin_hz, fmax_hz, segment=n_seg)
-        f_x = dominant_freq_hz(a.test, fs, fmin_hz, fmax_hz, segment=n_seg)
+        f_m, df = dominant_freq_hz(a.model, fs, fmin_hz, fmax_hz, resolution_hz)
+        f_x, _ = dominant_freq_hz(a.test, fs, fmin_hz, fmax_hz, resolution_hz)
         f_rel = (f_m - f_x) / f_x if f_x > 0.0 else math.nan  # NaN propagates from either
         rows.append({
             "name": p.name, "test_name": p.test.name, "node": p.node, "direction": p.direction,
@@ -323,24 +358,34 @@ def default_channels(pairs: list[ChannelPair], n: int = MAX_PANELS) -> list[str]
     """Names of up to ``n`` pairs to draw: the hammer (an excitation force) if compared, the tip
     load cell of largest test rms, then the beam accelerometers (``beam_*``) of largest test rms,
     then any other channel by test rms."""
-    def rms(p: ChannelPair) -> float:
-        a = p.aligned()
-        return _rms(a.test)
+    def test_rms(p: ChannelPair) -> float:
+        return rms(p.aligned().test)
 
     chosen: list[str] = []
     force = [p for p in pairs if p.quantity == EXCITATION]
     if force:
         chosen.append(force[0].name)
-    cells = sorted((p for p in pairs if p.quantity == "reaction_force"), key=rms, reverse=True)
+    cells = sorted((p for p in pairs if p.quantity == "reaction_force"), key=test_rms, reverse=True)
     if cells:
         chosen.append(cells[0].name)
     rest = [p for p in pairs if p.name not in chosen]
-    rest.sort(key=lambda p: (not p.name.startswith("beam_"), -rms(p)))  # stable: ties keep their order
+    rest.sort(key=lambda p: (not p.name.startswith("beam_"), -test_rms(p)))  # stable: ties keep their order
     chosen += [p.name for p in rest]
     return chosen[:n]
 
 
-def _select(pairs: list[ChannelPair], channels: list[str] | None) -> list[ChannelPair]:
+def select_pairs(pairs: list[ChannelPair], channels: list[str] | None) -> list[ChannelPair]:
+    """The pairs named ``channels``, once each in that order (default: :func:`default_channels`).
+
+    Parameters
+    ----------
+    pairs : from :func:`match_channels`
+    channels : names of compared channels, or None
+
+    Returns
+    -------
+    list of ChannelPair (ChannelError, one line, for a name not among the pairs)
+    """
     by_name = {p.name: p for p in pairs}
     if channels is None:
         return [by_name[n] for n in default_channels(pairs)]
@@ -350,74 +395,7 @@ def _select(pairs: list[ChannelPair], channels: list[str] | None) -> list[Channe
     return [by_name[n] for n in dict.fromkeys(channels)]
 
 
-def comparison_figure(pairs: list[ChannelPair], path: str | Path, title: str, channels: list[str] | None = None,
-                      window_s: tuple[float, float] | None = None) -> None:
-    """Model and test time histories overlaid, one panel per channel (default:
-    :func:`default_channels`), each titled with its rms_rel_error over the window. A long record
-    is drawn as its min/max per pixel column (:class:`bearingshaft.plots.Envelope`)."""
-    chosen = _select(pairs, channels)
-    if not chosen:
-        raise ChannelError("no channel to draw")
-    fig, axes = plt.subplots(len(chosen), 1, figsize=(9, 1.9 * len(chosen) + 1.0), sharex=True,
-                             constrained_layout=True, squeeze=False)
-    for ax, p in zip(axes[:, 0], chosen, strict=True):
-        a = p.aligned(window_s)
-        env = Envelope(a.t.size, a.sample_rate_hz, 2)
-        env.add(0, np.column_stack([a.model, a.test]))
-        t, y = env.lines()
-        t = t + a.t[0]
-        ax.plot(t, y[:, 1], color="k", lw=0.8, label="test" + (" (sign flipped)" if p.flipped else ""))
-        ax.plot(t, y[:, 0], color="C3", lw=0.8, alpha=0.85, label="model")
-        rms_x = _rms(a.test)
-        err = _rms(a.model - a.test) / rms_x if rms_x > 0 else math.inf
-        ax.set_title(f"{p.name} (node {p.node}, direction {_direction_label(p.direction)}): "
-                     f"rms error {100 * err:.3g} %", fontsize=9, loc="left")
-        ax.set_ylabel(f"{p.quantity.replace('_', ' ')}\n[{p.unit}]", fontsize=9)
-        ax.legend(loc="upper right", fontsize=7)
-        ax.set_xlim(a.t[0], a.t[-1])
-    axes[-1, 0].set_xlabel("time [s]")
-    fig.suptitle(wrap_title(title), fontsize=10)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-
-
-def spectrogram_pair_figure(pair: ChannelPair, path: str | Path, window_s: float, overlap: float, fmax_hz: float,
-                            db_range: float = 60.0, title: str | None = None,
-                            span_s: tuple[float, float] | None = None) -> None:
-    """Spectrograms of the model (left) and the test (right) of one channel on one colour scale.
-
-    ``window_s`` (s) and ``overlap`` are the STFT's (:func:`reduced.transient.spectrogram.spectrogram`:
-    Hann window, PSD scaling, mean removed); the colour scale spans ``db_range`` dB below the
-    larger of the two maxima. ``span_s`` (s, absolute times) limits the record drawn (default:
-    the common samples).
-    """
-    a = pair.aligned(span_s)
-    specs = []
-    for label, y in (("model", a.model), ("test", a.test)):
-        try:
-            specs.append(spectrogram(a.t, y, window_s, overlap, fmax_hz=fmax_hz, max_frames=MAX_FRAMES))
-        except _checks.InvalidArgument as exc:
-            raise ChannelError(f"channel {pair.name!r} ({label}): {exc}") from None
-    dbs = [10.0 * np.log10(np.maximum(s.power, 1e-300)) for s in specs]
-    top = max(float(np.max(d)) for d in dbs)
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.8), sharey=True, constrained_layout=True)
-    for ax, s, db, label in zip(axes, specs, dbs, ("model", "test" + (" (sign flipped)" if pair.flipped else "")),
-                                strict=True):
-        mesh = ax.pcolormesh(s.t, s.freq_hz, db, shading="nearest", cmap="viridis", vmin=top - db_range, vmax=top,
-                             rasterized=True)
-        ax.set_title(label, fontsize=10)
-        ax.set_xlabel("time [s]")
-        ax.set_ylim(0, fmax_hz)
-    axes[0].set_ylabel("frequency [Hz]")
-    fig.colorbar(mesh, ax=axes, label=f"PSD [dB re 1 ({pair.unit})^2/Hz]")
-    head = title or f"{pair.name}: model and test spectrograms"
-    fig.suptitle(wrap_title(f"{head} (node {pair.node}, direction {_direction_label(pair.direction)}; "
-                            f"Hann {window_s:g} s, overlap {overlap:g})"), fontsize=10)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-
-
 __all__ = [
     "ChannelError", "ChannelPair", "AlignedPair", "match_channels", "channel_errors", "dominant_freq_hz",
-    "write_errors_csv", "default_channels", "comparison_figure", "spectrogram_pair_figure", "ERROR_FIELDS",
+    "write_errors_csv", "default_channels", "select_pairs", "rms", "direction_label", "ERROR_FIELDS",
 ]

@@ -16,13 +16,13 @@ axes, 4 tip load cells), each by
     e_c = rms(a_c - ref_c) / rms(ref_c)   over t0 <= t < t0 + window,
 
 an axis near zero by symmetry (below 1 % of its sensor's largest) judged against that
-largest axis (:func:`bearingshaft.hammer_report.rms_errors`), both signals low-passed alike
+largest axis (:func:`bearingshaft.stages.hammer_linear.rms_errors`), both signals low-passed alike
 at the stage's 2 kHz (``band_limited``: 8th-order Butterworth, zero phase, over the whole
 record) and raw (to 10 kHz, the anti-alias filter's edge). Three comparisons:
 
 1. 20 N, gaps opened (``replace(rom, gap=1.0)``, as the stage's linear check), 50 ms, against
    the full 3-D model's modal superposition with the same damping, acquired the same way
-   (:func:`bearingshaft.hammer_report.full_reference`: modes up to the scene's
+   (:func:`bearingshaft.stages.hammer_linear.full_reference`: modes up to the scene's
    ``linear_check_max_hz``, computed once). This is the measure that chooses n;
 2. the same records against the largest n's: how far the reduction itself has converged;
 3. 500 N with the real gap (the tips hit), against the largest n over the first 20 ms (and,
@@ -77,11 +77,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from bearingshaft.hammer_report import BAND_HZ, band_limited, full_reference, rms_errors  # noqa: E402
+from bearingshaft.digits import sig  # noqa: E402
 from bearingshaft.output import git_commit, machine_rows, write_rows  # noqa: E402
 from bearingshaft.scenes import load_scene  # noqa: E402
 from bearingshaft.stages.hammer import blow, default_location, run_record  # noqa: E402
-from bearingshaft.stages.study import sig  # noqa: E402
+from bearingshaft.stages.hammer_linear import BAND_HZ, band_limited, full_reference, rms_errors  # noqa: E402
 from reduced._blas import single_thread_blas  # noqa: E402
 from reduced.models.rig import virtual_rig  # noqa: E402
 from reduced.models.rom import _cache_path  # noqa: E402

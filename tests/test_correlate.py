@@ -8,15 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from bearingshaft.correlate import (
-    ChannelError,
-    channel_errors,
-    comparison_figure,
-    default_channels,
-    match_channels,
-    spectrogram_pair_figure,
-    write_errors_csv,
-)
+from bearingshaft.correlate import ChannelError, channel_errors, default_channels, match_channels, write_errors_csv
+from bearingshaft.stages.hammer_files import comparison_figure, spectrogram_pair_figure
 from fem.uff import QUANTITIES, TimeHistory, UffError, read_uff58, write_uff58
 
 FS = 2000.0  # Hz: 2 Hz Welch bins are 1000-sample segments, two of them in a 1 s record

@@ -380,7 +380,7 @@ def test_a_measured_force_history_drives_the_blow(built, tmp_path):
 
 def test_rms_errors_judge_a_symmetry_zero_axis_against_its_sensor():
     """rms(a - ref) / rms(ref) per channel; an axis below 1 % of its sensor's largest is scaled by that."""
-    from bearingshaft.hammer_report import rms_errors
+    from bearingshaft.stages.hammer_linear import rms_errors
 
     t = np.linspace(0.0, 1.0, 1001)
     ref = np.vstack([np.sin(20 * t), 1e-4 * np.sin(20 * t), np.cos(3 * t), 2.0 * np.ones_like(t)])
@@ -398,9 +398,9 @@ def test_full_reference_agrees_with_the_reduced_apparatus_at_low_frequency(stage
     20-mode reduced apparatus (fixed-interface modes to 1.9 kHz), open gaps, 20 N, both in a
     100 Hz band: each misses modes above its cut-off whose share of a 100 Hz acceleration is
     ~(f / f_c)^2 = (0.1 / 1.9)^2 ~ 3e-3 of their participation; measured 1.1e-3 (80 s)."""
-    from bearingshaft.hammer_report import band_limited, full_reference, rms_errors
     from bearingshaft.scenes import parse_scene
     from bearingshaft.stages.hammer import run_record
+    from bearingshaft.stages.hammer_linear import band_limited, full_reference, rms_errors
 
     rom, _ = built
     scene = parse_scene(SCENE.format(n_modes=N_MODES, gap=1.0).replace(

@@ -5,7 +5,10 @@ the whole assembly, every fixed-interface mode up to its count, planar or not) i
 the scene's blow and recorded on every rig channel (:mod:`fem.rig`): six triaxial beam
 accelerometers, four triaxial tube sensors, four tip load cells and the hammer. The record
 is [ringdown]'s (duration, sampling, integrator: ``exact`` by default, whose crossings are
-found with a guarantee, :mod:`reduced.transient.exact`). Files:
+found with a guarantee, :mod:`reduced.transient.exact`).
+
+:func:`compute` runs it and returns what it found (:mod:`bearingshaft.stages.hammer_results`);
+:func:`write` hands that to :mod:`bearingshaft.stages.hammer_files`, which writes (:data:`DESCRIPTION`):
 
 - ``hammer.npz``: ``t`` and ``data`` (channels x samples) of the nominal blow, with the
   channels' ``names``, ``nodes``, ``directions``, ``units``; ``channels.csv`` says which is which;
@@ -17,54 +20,55 @@ found with a guarantee, :mod:`reduced.transient.exact`). Files:
 - ``hammer.md``: what happens, in numbers (peak tip forces, impacts, when the gaps stay
   open, which modes carry the energy at the end, energy balance);
 - with ``[hammer] linear_check``: ``linear_check.csv`` and ``linear_check.png``, the
-  open-gap response against the full 3-D model's modal superposition (:func:`linear_check`);
-- with a measured test (``bearingshaft hammer --test FILE.uff``): the model driven by the
-  measured hammer force at the test's sampling, ``test_errors.csv``, ``test_compare.png``
-  and ``test_spectrogram.png`` (:mod:`bearingshaft.correlate`).
+  open-gap response against the full 3-D model's modal superposition
+  (:mod:`bearingshaft.stages.hammer_linear`);
+- with a measured test (``bearingshaft hammer --test FILE.uff``) instead of all the above: the
+  model driven by the measured hammer force at the test's sampling (:mod:`bearingshaft.stages.hammer_compare`,
+  :mod:`bearingshaft.correlate`), ``test_errors.csv``, ``test_compare.png``, ``test_spectrogram.png``
+  and ``model.uff``.
 
 Numbers in the science files are written to 6 significant digits (to 4 for the quantities
-that depend on where the exact integrator lands a crossing), :mod:`bearingshaft.hammer_report`.
+that depend on where the exact integrator lands a crossing), :mod:`bearingshaft.stages.hammer_files`.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
 from bearingshaft.estimates import COPIES, FLOAT, MATPLOTLIB_BYTES, Estimate, n_dofs
 from bearingshaft.output import StageWriter
-from bearingshaft.scenes import HammerSpec, Scene
+from bearingshaft.scenes import HammerSpec, Scene, SceneError
+from bearingshaft.stages import hammer_compare, hammer_linear
+from bearingshaft.stages.hammer_results import Comparison, LinearCheck, Record, VirtualTest
 from bearingshaft.systems import solver_options
 from fem.rig import TIP_CELLS
 from reduced.models.loads import HalfSine, Tabulated
 from reduced.models.rig import VirtualRig, virtual_rig
 
 LABEL_MAX_HZ = 100.0  # Hz, the pseudo-rigid modes are searched below this (Table 2: 10.9 to 33.7 Hz)
+END_SHARE_S = 0.1  # s, the energy "at the end" is the mean over the record's last 0.1 s
+OPEN_GAP_M = 1.0  # m, the linear check's gap: too large to close
 
 
 # -- the run ------------------------------------------------------------------------------
-@dataclass(frozen=True, eq=False)
-class Record:
-    """One virtual test: every channel at the sample times, and what the integrator reported."""
-
-    level_N: float  # N, the blow's peak
-    t: np.ndarray  # (N,) s
-    data: np.ndarray  # (n_channels, N)
-    x: np.ndarray  # (N, n) reduced state (for the modal energy at the end)
-    v: np.ndarray
-    energy: np.ndarray  # (N,) J
-    dissipated: np.ndarray  # (N,) J
-    external: np.ndarray  # (N,) J, work of the hammer
-    stats: dict
-    balance_error: float
-
-
 def blow(spec: HammerSpec, level_N: float):
     """The hammer's force history at peak ``level_N``: the half-sine, or the measured history of
-    ``force_file`` scaled to that peak."""
+    ``force_file`` scaled to that peak.
+
+    Parameters
+    ----------
+    spec : the scene's [hammer] (half-sine duration and start, or ``force_file``)
+    level_N : N, the blow's peak
+
+    Returns
+    -------
+    HalfSine or Tabulated, a force signal p(t) in N
+    """
     if spec.force_file:
         tab = Tabulated.from_file(spec.force_file)
         peak = float(np.max(np.abs(tab.force_N)))
@@ -82,7 +86,20 @@ def run_record(rig: VirtualRig, signal, scene: Scene, level_N: float, duration_s
     -100 dB from fs/2) and decimated; the integration runs on past the record by the
     filter's half length so its last samples are exact too. The hammer channel is the force
     applied, sampled as it is (the model's input: a record drives the model again with the same
-    force). The state (x, v) and the energies are the exact ones at the record's samples."""
+    force). The state (x, v) and the energies are the exact ones at the record's samples.
+
+    Parameters
+    ----------
+    rig : the virtual rig, from rest
+    signal : the hammer's force p(t), N (:func:`blow`, or a measured history)
+    scene : the scene ([ringdown]: duration, sampling, integrator and its options)
+    level_N : N, the blow's peak, as the record is labelled
+    duration_s, sample_rate_hz : s, Hz, the record (default: [ringdown]'s)
+
+    Returns
+    -------
+    Record
+    """
     from reduced.models.daq import Acquisition, oversampling
     from reduced.transient.integrate import ringdown
     from reduced.transient.result import sample_count
@@ -105,7 +122,16 @@ def run_record(rig: VirtualRig, signal, scene: Scene, level_N: float, duration_s
 
 
 def default_location(rom) -> tuple[float, float, float]:
-    """m, the beam's top face at mid-span (x = 0, y = 0): where the tube's hole lets the hammer in."""
+    """m, the beam's top face at mid-span (x = 0, y = 0): where the tube's hole lets the hammer in.
+
+    Parameters
+    ----------
+    rom : a reduced assembly model built with its mesh
+
+    Returns
+    -------
+    (x, y, z), m
+    """
     pts, part = rom.mesh["points"], rom.mesh["cell_part"]
     beam_nodes = np.unique(rom.mesh["hexes"][part == int(rom.mesh["beam_part"])])
     return 0.0, 0.0, float(pts[beam_nodes, 2].max())
@@ -114,7 +140,17 @@ def default_location(rom) -> tuple[float, float, float]:
 # -- what happens: impacts, peak forces, energy by mode --------------------------------------
 def impacts(rig: VirtualRig, rec: Record) -> dict:
     """Per stop (tip load cell): number of impacts (closures seen in the samples), peak contact
-    force, time the last contact ends; and the exact integrator's crossing count."""
+    force, time the last contact ends.
+
+    Parameters
+    ----------
+    rig : the virtual rig
+    rec : a record of it (its states ``x`` at the times ``t``)
+
+    Returns
+    -------
+    dict {tip load cell: {"impacts": int, "peak_contact_N": N, "last_contact_s": s (NaN: never closed)}}
+    """
     pen = rig.system.penetration(rec.x)  # (N, 4) > 0 closed
     closed = pen > 0
     out = {}
@@ -137,6 +173,16 @@ def pseudo_rigid(rig: VirtualRig, geometry, lm) -> dict[str, tuple[int, float, f
     the beam's rigid kinetic energy (diag of its rigid mass: m, m, m, I_x, I_y, I_z of the bar);
     a linear assignment gives each label one mode below LABEL_MAX_HZ (the sensor version of
     :mod:`fem.labels`, on the 10 measured points as the paper's beam MAC).
+
+    Parameters
+    ----------
+    rig : the virtual rig
+    geometry : the apparatus's geometry (sensor positions, beam dimensions)
+    lm : the rig's open-gap linear modes (:func:`reduced.models.modes.linear_modes`)
+
+    Returns
+    -------
+    dict {label: (mode index, freq_hz, score)}; empty when fewer than six modes lie below LABEL_MAX_HZ
     """
     from scipy.optimize import linear_sum_assignment
 
@@ -172,7 +218,19 @@ def pseudo_rigid(rig: VirtualRig, geometry, lm) -> dict[str, tuple[int, float, f
 
 def modal_energy_end(rig: VirtualRig, rec: Record, lm, last_s: float = 0.1) -> np.ndarray:
     """J, mean energy of each open-gap linear mode over the last ``last_s`` of the record:
-    E_k = (p_k'^2 + omega_k^2 p_k^2) / 2 with p = Phi^T M q (modes mass-normalised)."""
+    E_k = (p_k'^2 + omega_k^2 p_k^2) / 2 with p = Phi^T M q (modes mass-normalised).
+
+    Parameters
+    ----------
+    rig : the virtual rig
+    rec : a record of it
+    lm : the rig's open-gap linear modes
+    last_s : s, the end of the record averaged over
+
+    Returns
+    -------
+    (n_modes,) ndarray, J
+    """
     k = max(1, int(round(last_s / (rec.t[1] - rec.t[0]))))
     M = rig.system.M
     p = rec.x[-k:] @ M @ lm.phi
@@ -185,7 +243,17 @@ def coupled_subsystem(system, tol: float = 1e-6):
     """The rig restricted to x1, x3 and the fixed-interface modes that couple to them (|M_bq| >
     tol sqrt(max M_bb)): the others have no mass or stiffness coupling to anything (K_bq = 0,
     M_qq = I, K_qq diagonal) and no damping coupling (dashpots on the symmetric points), so the
-    free motion of the gaps, hence every NNM that moves them, lives in this subsystem exactly."""
+    free motion of the gaps, hence every NNM that moves them, lives in this subsystem exactly.
+
+    Parameters
+    ----------
+    system : the rig's GapSystem
+    tol : coupling below which a mode is left out, relative to sqrt(max M_bb)
+
+    Returns
+    -------
+    GapSystem on x1, x3 and the coupled modes
+    """
     from reduced.models.gaps import GapSystem
 
     Mbq = system.M[:2, 2:]
@@ -197,56 +265,204 @@ def coupled_subsystem(system, tol: float = 1e-6):
                      dof_names=tuple(system.dof_names[i] for i in keep), stop_names=system.stop_names)
 
 
+def backbones(rig: VirtualRig, n_modes: int, energy_max_J: float) -> dict:
+    """HB (H = 1) backbones of the lowest ``n_modes`` NNMs that move the gaps, on the rig's coupled
+    subsystem (exact for them: :func:`coupled_subsystem`).
+
+    Parameters
+    ----------
+    rig : the virtual rig
+    n_modes : how many backbones (0: none)
+    energy_max_J : J, the record's largest energy: the backbones reach ten times it (at least 1 mJ)
+
+    Returns
+    -------
+    dict {label: (energy_J, freq_hz)}, label ``"NNM at f Hz (HB, H=1)"``
+    """
+    if n_modes == 0:
+        return {}
+    from reduced.models.modes import gap_moving_modes
+    from reduced.periodic.backbones import hb_backbones
+
+    sub = coupled_subsystem(rig.system)
+    curves = hb_backbones(sub, 1, energy_max_J=max(10.0 * energy_max_J, 1e-3),
+                          modes=gap_moving_modes(sub, "open", n_modes))
+    return {f"NNM at {f[0]:.1f} Hz (HB, H=1)": (E, f) for E, f in curves.values()}
+
+
+def mode_classes(freq_hz, labels: dict) -> list[str]:
+    """A name for every open-gap mode: its pseudo-rigid label, "bungee" for the whole assembly
+    swinging on its bungees (below half the lowest pseudo-rigid frequency), else "elastic".
+
+    Parameters
+    ----------
+    freq_hz : Hz, the open-gap modes' frequencies
+    labels : {label: (mode index, freq_hz, score)} from :func:`pseudo_rigid`
+
+    Returns
+    -------
+    list of str, one per mode
+
+    >>> mode_classes([0.4, 11.0, 20.0, 900.0], {"bounce": (2, 20.0, 0.9), "roll": (1, 11.0, 0.8)})
+    ['bungee', 'roll', 'bounce', 'elastic']
+    """
+    name_of = {v[0]: k for k, v in labels.items()}
+    f_low = 0.5 * min((v[1] for v in labels.values()), default=0.0)
+    return [name_of.get(k, "bungee" if f < f_low else "elastic") for k, f in enumerate(freq_hz)]
+
+
+def level_summary(rig: VirtualRig, rec: Record, lm, labels: dict) -> dict:
+    """Peak tip forces, impacts, when the gaps stay open, energy shares at the end, energy balance.
+
+    Parameters
+    ----------
+    rig : the virtual rig
+    rec : one level's record
+    lm : the rig's open-gap linear modes (:func:`reduced.models.modes.linear_modes`)
+    labels : the pseudo-rigid modes, from :func:`pseudo_rigid`
+
+    Returns
+    -------
+    dict: ``level_N``, ``impacts`` (per tip load cell), ``impacts_total``, ``crossings_found``,
+    ``peak_contact_N`` and ``peak_load_cell_N`` (per cell), ``gaps_open_after_s``,
+    ``end_energy_J``, ``end_bungee_share``, ``end_modes`` (the three beam modes carrying most of
+    the energy at the end), ``hammer_work_J`` (the integrator's), ``hammer_work_trapezoid_J``
+    (from the hammer channel), ``energy_balance_error``, ``wall_s``
+    """
+    imp = impacts(rig, rec)
+    E_end = modal_energy_end(rig, rec, lm, END_SHARE_S)
+    total = float(E_end.sum())
+    kinds = mode_classes(lm.freq_hz, labels)
+    bungee = float(sum(E for E, k in zip(E_end, kinds, strict=True) if k == "bungee"))
+    beam = [k for k in np.argsort(E_end)[::-1] if kinds[k] != "bungee"][:3]
+    rest = total - bungee
+    names = list(rig.names)
+    hammer = rec.data[names.index("hammer")]
+    # the hammer's work from its own channel: int p d.u'(X) dt, with d.u'(X) = b^T q' (trapezoid)
+    work = float(np.trapezoid(hammer * (rec.v @ rig.b), rec.t))
+    last = [v["last_contact_s"] for v in imp.values() if not math.isnan(v["last_contact_s"])]
+    return {
+        "level_N": rec.level_N,
+        "impacts": {k: v["impacts"] for k, v in imp.items()},
+        "impacts_total": int(sum(v["impacts"] for v in imp.values())),
+        "crossings_found": int(rec.stats.get("n_events", -1)),
+        "peak_contact_N": {k: v["peak_contact_N"] for k, v in imp.items()},
+        "peak_load_cell_N": {c: float(np.max(np.abs(rec.data[names.index(c)]))) for c in TIP_CELLS},
+        "gaps_open_after_s": max(last) if last else 0.0,
+        "end_energy_J": total,
+        "end_bungee_share": bungee / total if total > 0 else 0.0,
+        "end_modes": [{"mode": int(k + 1), "freq_hz": float(lm.freq_hz[k]), "label": kinds[k],
+                       "share": float(E_end[k] / rest) if rest > 0 else 0.0} for k in beam],
+        "hammer_work_J": float(rec.external[-1]),
+        "hammer_work_trapezoid_J": work,
+        "energy_balance_error": rec.balance_error,
+        "wall_s": rec.stats.get("wall_s"),
+    }
+
+
 # -- the stage ------------------------------------------------------------------------------
-def hammer_stage(scene: Scene, writer: StageWriter, progress: bool, test_file: str | None = None) -> None:
-    """Run the virtual test (and the level sweep, the linear check, a test comparison), write its files."""
+def compute(scene: Scene, progress: bool, workdir: Path | None = None,
+            test_file: str | None = None) -> VirtualTest | Comparison:
+    """Run the virtual test: every level, the backbones, the linear check; or compare a measured test.
+
+    Parameters
+    ----------
+    scene : a scene with [hammer], [ringdown] and a reduced assembly model
+    progress : show progress bars and what is being built
+    workdir : the stage's scratch folder (unused: nothing is streamed to disk)
+    test_file : a measured test (UFF 58): the model is run at its sampling, driven by its hammer
+        channel, and compared with it instead of the virtual test
+
+    Returns
+    -------
+    VirtualTest, or Comparison with ``test_file``
+    """
     from reduced._blas import single_thread_blas
-
-    with single_thread_blas():
-        _hammer_stage(scene, writer, progress, test_file)
-
-
-def _hammer_stage(scene: Scene, writer: StageWriter, progress: bool, test_file: str | None) -> None:
-    from bearingshaft import hammer_report as report
     from reduced.models.modes import linear_modes
 
+    with single_thread_blas():
+        rom = scene.model.reduced(progress)
+        rig = _rig(scene, rom)
+        lm = linear_modes(rig.system, "open")
+        labels = pseudo_rigid(rig, scene.model.fe_model().geometry(), lm)
+        stats = {"n_dofs": rig.system.n, "location_m": list(rig.location), "direction": list(rig.direction),
+                 "pseudo_rigid_hz": {k: v[1] for k, v in labels.items()}}
+        if test_file is not None:
+            return _compare(scene, rig, test_file, stats)
+        return _virtual_test(scene, rom, rig, lm, labels, stats, progress)
+
+
+def _rig(scene: Scene, rom) -> VirtualRig:
+    """The rig of ``rom`` struck at the scene's point (SceneError, one line, if it cannot be)."""
     spec = scene.hammer
-    rom = scene.model.reduced(progress)
     location = tuple(spec.location_m) if spec.location_m else default_location(rom)
     try:
-        rig = virtual_rig(rom, location, spec.direction, spec.seismic_mass_kg)
+        return virtual_rig(rom, location, spec.direction, spec.seismic_mass_kg)
     except ValueError as exc:
-        from bearingshaft.scenes import SceneError
-
         raise SceneError(f"{scene.origin} [hammer]: {exc}") from None
-    geometry = scene.model.fe_model().geometry()
-    lm = linear_modes(rig.system, "open")
-    labels = pseudo_rigid(rig, geometry, lm)
-    writer.stats.update({"n_dofs": rig.system.n, "location_m": list(location), "direction": list(rig.direction),
-                         "pseudo_rigid_hz": {k: v[1] for k, v in labels.items()}})
 
-    if test_file is not None:
-        report.compare_test(scene, rig, writer, test_file, progress)
-        return
 
+def _virtual_test(scene: Scene, rom, rig: VirtualRig, lm, labels: dict, stats: dict, progress: bool) -> VirtualTest:
+    """Every level's record, their summaries, the backbones and (if asked) the linear check."""
+    spec = scene.hammer
     levels = sorted({*spec.levels_N, spec.peak_N})
     records = {}
     bar = tqdm(levels, desc=f"{scene.name}: virtual tests", unit="level", disable=not progress, leave=False)
     for level in bar:
         records[level] = run_record(rig, blow(spec, level), scene, level)
     nominal = records[spec.peak_N]
-    report.write_record(writer, rig, nominal, scene)
-    backbones = report.backbones(rig, spec.backbone_modes, float(np.max(nominal.energy)))
-    report.fig10(writer.path("fig10.png"), rig, nominal, spec)
-    report.fig11(writer.path("fig11.png"), rig, nominal, scene, labels, backbones)
-    summary = {level: report.level_summary(rig, rec, lm, labels) for level, rec in records.items()}
-    report.levels_files(writer, rig, records, summary, scene)
-    linear = report.linear_check(scene, rom, rig, writer, progress) if spec.linear_check else None
-    report.write_markdown(writer.path("hammer.md"), scene, rig, nominal, summary, labels, linear, backbones)
-    writer.stats.update({"levels": {str(k): v for k, v in summary.items()},
-                         "wall_s": {str(k): r.stats.get("wall_s") for k, r in records.items()}})
-    print(report.summary_line(scene, rig, nominal, summary[spec.peak_N], linear), flush=True)
+    curves = backbones(rig, spec.backbone_modes, float(np.max(nominal.energy)))
+    summary = {level: level_summary(rig, rec, lm, labels) for level, rec in records.items()}
+    linear = _linear_check(scene, rom, rig, progress) if spec.linear_check else None
+    if linear is not None:
+        stats["linear_check"] = {"worst": linear.worst, "worst_channel": linear.worst_channel,
+                                 "worst_raw": linear.worst_raw, "n_full_modes": linear.n_full_modes,
+                                 "cond_V": linear.cond_V}
+    stats.update({"levels": {str(k): v for k, v in summary.items()},
+                  "wall_s": {str(k): r.stats.get("wall_s") for k, r in records.items()}})
+    line = _summary_line(scene, rig, nominal, summary[spec.peak_N], linear)
+    return VirtualTest(scene=scene, rig=rig, labels=labels, records=records, summary=summary, backbones=curves,
+                       linear=linear, end_share_s=END_SHARE_S, stats=stats, lines=(line,))
 
+
+def _linear_check(scene: Scene, rom, rig: VirtualRig, progress: bool) -> LinearCheck:
+    """The nominal half-sine on the rig with gaps too large to close, against the full 3-D model."""
+    spec = scene.hammer
+    level = spec.peak_N
+    open_rig = virtual_rig(replace(rom, gap=OPEN_GAP_M), rig.location, rig.direction, rig.seismic_mass_kg)
+    rec = run_record(open_rig, HalfSine(level, spec.duration_s, spec.start_s), scene, level)
+    return hammer_linear.linear_check(scene, rig, rec, progress)
+
+
+def _compare(scene: Scene, rig: VirtualRig, test_file: str, stats: dict) -> Comparison:
+    """The model at a measured test's sampling, driven by its hammer channel if it has one, compared."""
+    spec = scene.hammer
+    test = hammer_compare.read_test(scene, test_file)
+    signal, level = (test.signal, test.level_N) if test.signal is not None else (blow(spec, spec.peak_N), spec.peak_N)
+    rec = run_record(rig, signal, scene, level, duration_s=test.duration_s, sample_rate_hz=test.sample_rate_hz)
+    return hammer_compare.compare(scene, rig, rec, test, test_file, stats)
+
+
+def _summary_line(scene: Scene, rig: VirtualRig, rec: Record, s: dict, linear: LinearCheck | None) -> str:
+    text = (f"[{scene.name}] virtual hammer test: {len(rig.channels)} channels, {rec.level_N:g} N blow: "
+            f"{s['impacts_total']} impacts, peak tip force {max(s['peak_contact_N'].values()):.4g} N, gaps open after "
+            f"{s['gaps_open_after_s']:.4g} s; balance {s['energy_balance_error']:.1e}")
+    if linear is not None:
+        text += f"; linear check worst {100 * linear.worst:.3g} % RMS ({linear.worst_channel})"
+    return text
+
+
+def write(result: VirtualTest | Comparison, writer: StageWriter) -> None:
+    """Write the files of ``result`` (:func:`bearingshaft.stages.hammer_files.write`); runs no solver.
+
+    Parameters
+    ----------
+    result : from :func:`compute`
+    writer : the stage's writer (its folder and statistics)
+    """
+    from bearingshaft.stages import hammer_files  # matplotlib: loaded only when files are written
+
+    hammer_files.write(result, writer)
 
 
 # -- the registry's contract (bearingshaft.registry) -------------------------------------------
@@ -254,12 +470,22 @@ DESCRIPTION = """Strike the reduced apparatus with the scene's blow at every lev
 as a test's DAQ would (six triaxial beam accelerometers, four triaxial tube sensors, four tip
 load cells, the hammer). Writes hammer.npz, hammer.uff (UFF 58), channels.csv, fig10.png,
 fig11.png, levels.csv, levels.png, hammer.md and, with [hammer] linear_check, linear_check.csv
-and .png. With --test FILE.uff, a measured test drives the model by its hammer channel and every
-channel is compared: test_errors.csv, test_compare.png, test_spectrogram.png, model.uff."""
+and linear_check.png. With --test FILE.uff, instead, a measured test drives the model by its
+hammer channel at the test's sampling and every channel is compared: writes test_errors.csv,
+test_compare.png, test_spectrogram.png and model.uff (the model's channels, UFF 58)."""
 
 
 def estimate(scene: Scene) -> list[Estimate]:
-    """Every level's record in memory: state, channels, energies; the exact integrator's table."""
+    """Every level's record in memory: state, channels, energies; the exact integrator's table.
+
+    Parameters
+    ----------
+    scene : a scene with [hammer] and [ringdown]
+
+    Returns
+    -------
+    list of one Estimate, the stage's peak memory
+    """
     from fem.rig import channel_names
 
     n = n_dofs(scene)
@@ -273,18 +499,5 @@ def estimate(scene: Scene) -> list[Estimate]:
                      "[ringdown] duration_s or sample_rate_hz, or [hammer] levels_N")]
 
 
-@dataclass(frozen=True, eq=False)
-class _Pending:  # transitional (issue 23): the stage computes while it writes, until split
-    scene: Scene
-    progress: bool
-    options: dict
-
-
-def compute(scene: Scene, progress: bool, workdir, test_file: str | None = None) -> _Pending:
-    return _Pending(scene, progress, {"test_file": test_file})
-
-
-def write(result: _Pending, writer: StageWriter) -> None:
-    hammer_stage(result.scene, writer, result.progress, **result.options)
-
-__all__ = ["hammer_stage", "run_record", "blow", "Record", "pseudo_rigid", "coupled_subsystem", "default_location"]
+__all__ = ["compute", "write", "estimate", "DESCRIPTION", "run_record", "blow", "Record", "pseudo_rigid",
+           "coupled_subsystem", "default_location", "impacts", "modal_energy_end", "backbones", "level_summary"]

@@ -1,0 +1,114 @@
+"""What the hammer stage computes (:mod:`bearingshaft.stages.hammer`), as the writers read it
+(:mod:`bearingshaft.stages.hammer_files`): one record, the virtual test with its level sweep and
+linear check, the comparison with a measured test.
+
+Data only: nothing here integrates, draws or writes, so the computing modules and the writers
+both import it (neither imports the other's module).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from bearingshaft.correlate import ChannelPair
+from bearingshaft.scenes import Scene
+from fem.uff import TimeHistory
+from reduced.models.rig import VirtualRig
+
+
+@dataclass(frozen=True, eq=False)
+class Record:
+    """One virtual test: every channel at the sample times, and what the integrator reported."""
+
+    level_N: float  # N, the blow's peak
+    t: np.ndarray  # (N,) s
+    data: np.ndarray  # (n_channels, N)
+    x: np.ndarray  # (N, n) reduced state (for the modal energy at the end)
+    v: np.ndarray
+    energy: np.ndarray  # (N,) J
+    dissipated: np.ndarray  # (N,) J
+    external: np.ndarray  # (N,) J, work of the hammer
+    stats: dict
+    balance_error: float
+
+
+@dataclass(frozen=True, eq=False)
+class LinearCheck:
+    """The open-gap response of the reduced rig against the full 3-D model's (:mod:`.hammer_linear`).
+
+    ``errors`` maps (band, window) to rms(a_rom - a_full) / rms(a_full) per channel, band
+    ``"band"`` (both low-passed at ``band_hz``) or ``"raw"``, window ``"50ms"`` (the first
+    ``window_s`` after the blow) or ``"record"`` (from the blow to the end).
+    """
+
+    names: list[str]  # the compared channels: accelerometer axes, then the tip load cells
+    errors: dict  # {(band, window): (len(names),) relative RMS error}
+    near_zero: np.ndarray  # (len(names),) bool, an axis judged against its sensor's largest
+    worst: float  # the worst band-limited error over the window
+    worst_channel: str
+    worst_raw: float
+    n_full_modes: int
+    cond_V: float  # condition number of the full model's damped modal basis
+    t: np.ndarray  # (k,) s, the figure's window: start_s <= t <= start_s + window_s
+    rom_band: np.ndarray  # (k,) the worst channel of the reduced model, low-passed at band_hz, in that window
+    full_band: np.ndarray  # (k,) the same of the full model
+    band_hz: float  # Hz, the band of the comparisons
+    window_s: float  # s, the window after the blow
+    bound: float  # the issue's bound on the band-limited error (1 %)
+    text: str  # the paragraph of hammer.md
+
+
+@dataclass(frozen=True, eq=False)
+class VirtualTest:
+    """The virtual hammer test: the nominal record, the level sweep, backbones and the linear check."""
+
+    scene: Scene
+    rig: VirtualRig
+    labels: dict  # {label: (mode index, freq_hz, score)} of the six pseudo-rigid open-gap modes
+    records: dict  # {level_N: Record}, in increasing level
+    summary: dict  # {level_N: dict of level_summary}, the same levels
+    backbones: dict  # {label: (energy_J, freq_hz)} NNM backbones (HB, H = 1)
+    linear: LinearCheck | None
+    end_share_s: float  # s, the energy "at the end" is the mean over the record's last end_share_s
+    stats: dict  # for provenance.json
+    lines: tuple[str, ...]  # the stage's summary lines
+
+    @property
+    def nominal(self) -> Record:
+        """The record of the nominal blow, ``[hammer] peak_N``."""
+        return self.records[self.scene.hammer.peak_N]
+
+
+@dataclass(frozen=True, eq=False)
+class Comparison:
+    """The model run at a measured test's sampling, driven by its hammer, compared channel for channel."""
+
+    scene: Scene
+    test_file: str
+    driven: str  # what drove the model (the test's hammer channel, or the scene's blow)
+    model: list[TimeHistory]  # every channel of the model run
+    pairs: list[ChannelPair]  # model and test channels matched (bearingshaft.correlate.match_channels)
+    rows: list[dict]  # error measures, one per pair (bearingshaft.correlate.channel_errors)
+    window_s: tuple[float, float] | None  # s, the compared window ([hammer] compare_window_s)
+    stats: dict  # for provenance.json
+    lines: tuple[str, ...]  # the stage's summary lines
+
+
+def histories(rig: VirtualRig, t: np.ndarray, data: np.ndarray) -> list[TimeHistory]:
+    """The channels of one record as :class:`fem.uff.TimeHistory` (uniform t).
+
+    Parameters
+    ----------
+    rig : the rig whose channels ``data`` holds, in its channel order
+    t : (N,) s, uniform sample times
+    data : (n_channels, N) the channels' samples
+
+    Returns
+    -------
+    list of TimeHistory, one per channel, named, placed and oriented as the rig's channels
+    """
+    dt = float(t[1] - t[0])
+    return [TimeHistory(c.name, c.node, c.direction, c.quantity, data[i], dt, float(t[0]))
+            for i, c in enumerate(rig.channels)]
