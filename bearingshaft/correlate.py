@@ -13,16 +13,16 @@ and x_k the test's samples in the window (raw signals, no mean removed)::
     rms_model = sqrt(mean(m_k^2)),   rms_test = sqrt(mean(x_k^2))
     rms_rel_error = sqrt(mean((m_k - x_k)^2)) / rms_test          (>= 0)
     peak_abs_model = max |m_k|,      peak_abs_test = max |x_k|
-    f_dominant_*_hz = argmax of the Welch PSD over fmin_hz <= f <= fmax_hz (below)
+    f_dominant_*_hz = the peak of the Welch-averaged spectrum over fmin_hz <= f <= fmax_hz (below)
     f_rel_error = (f_dominant_model_hz - f_dominant_test_hz) / f_dominant_test_hz   (signed)
 
-The Welch PSD (``scipy.signal.welch``) uses Hann segments of n_seg = min(N, round(fs /
-resolution_hz)) samples (bins ``resolution_hz`` apart, 2 Hz by default; the whole window as one
-segment when it is shorter), half overlapping, each segment's mean removed. The dominant
-frequency is the vertex of the parabola through the log PSD at the largest bin in the band and
-its two neighbours (when that bin is a local maximum; the bin's own frequency otherwise), which
-places a single tone to a small fraction of a bin. A rms_test of 0 gives rms_rel_error = inf
-(0 when the model is exactly 0 as well); a band without power gives NaN frequencies.
+The dominant frequency is :func:`reduced.transient.spectral.dominant_freq_hz` (the estimator
+of the sweep's metrics and the spectrograms too) over Hann segments of n_seg = min(N, round(fs /
+resolution_hz)) samples (bins ``resolution_hz`` apart, 2 Hz by default, ``f_resolution_hz``;
+the whole window as one segment when it is shorter), half overlapping, each segment's mean
+removed: the peak of their averaged, zero-padded spectrum refined on the averaged continuous
+spectrum, which places a single tone to a small fraction of a bin. A rms_test of 0 gives
+rms_rel_error = inf (0 when the model is exactly 0 as well); a band without power gives NaN frequencies.
 
 All refusals are :class:`ChannelError` with a one-line message. Nothing here draws: the
 comparison figures are the hammer stage's (:mod:`bearingshaft.stages.hammer_files`).
@@ -36,11 +36,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.signal import welch
 
 from bearingshaft.output import write_rows
 from fem.uff import TimeHistory
 from reduced import _checks
+from reduced.transient.spectral import dominant_freq_hz, segment_length
 
 DT_RTOL = 1e-9  # relative difference of two time steps still taken as the same sampling
 # fraction of a sample by which the two grids may be offset and still be read as one: a shift of
@@ -272,38 +272,6 @@ def rms(y: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(y))))
 
 
-def dominant_freq_hz(y: np.ndarray, sample_rate_hz: float, fmin_hz: float = FMIN_HZ, fmax_hz: float | None = None,
-                     resolution_hz: float = WELCH_RESOLUTION_HZ) -> tuple[float, float]:
-    """(Hz, Hz): the dominant frequency of ``y`` in [fmin_hz, fmax_hz] and the Welch bin spacing.
-
-    Welch PSD, Hann segments of n_seg = min(N, round(fs / resolution_hz)) samples, half
-    overlapping, each segment's mean removed; the largest bin k in the band is refined by the
-    vertex of the parabola through ln P at k - 1, k, k + 1 (when k is a local maximum):
-    f = f_k + df (ln P_{k-1} - ln P_{k+1}) / (2 (ln P_{k-1} - 2 ln P_k + ln P_{k+1})).
-    NaN when the band holds no bin or no power.
-    """
-    y = np.asarray(y, dtype=float)
-    fs = float(sample_rate_hz)
-    if y.size < 2:
-        return math.nan, math.nan
-    n_seg = int(min(y.size, max(8, round(fs / resolution_hz))))
-    freq, P = welch(y, fs=fs, window="hann", nperseg=n_seg, noverlap=n_seg // 2, detrend="constant",
-                    scaling="density")
-    df = float(freq[1] - freq[0]) if freq.size > 1 else math.nan
-    hi = fs / 2.0 if fmax_hz is None else fmax_hz
-    band = np.flatnonzero((freq >= fmin_hz) & (freq <= hi))
-    if band.size == 0 or not np.max(P[band]) > 0.0:
-        return math.nan, df
-    k = int(band[np.argmax(P[band])])
-    f = float(freq[k])
-    if 0 < k < P.size - 1 and P[k - 1] > 0.0 and P[k + 1] > 0.0 and P[k] >= max(P[k - 1], P[k + 1]):
-        a, b, c = np.log(P[k - 1]), np.log(P[k]), np.log(P[k + 1])
-        curv = a - 2.0 * b + c
-        if curv < 0.0:
-            f += df * 0.5 * (a - c) / curv
-    return float(f), df
-
-
 def channel_errors(pairs: list[ChannelPair], window_s: tuple[float, float] | None = None,
                    fmin_hz: float = FMIN_HZ, fmax_hz: float | None = None,
                    resolution_hz: float = WELCH_RESOLUTION_HZ) -> list[dict]:
@@ -334,8 +302,10 @@ def channel_errors(pairs: list[ChannelPair], window_s: tuple[float, float] | Non
             rel = math.inf
         else:
             rel = rms_d / rms_x
-        f_m, df = dominant_freq_hz(a.model, fs, fmin_hz, fmax_hz, resolution_hz)
-        f_x, _ = dominant_freq_hz(a.test, fs, fmin_hz, fmax_hz, resolution_hz)
+        n_seg = segment_length(a.t.size, fs, resolution_hz)
+        df = fs / n_seg  # Hz, the segments' bin spacing
+        f_m = dominant_freq_hz(a.model, fs, fmin_hz, fmax_hz, segment=n_seg)
+        f_x = dominant_freq_hz(a.test, fs, fmin_hz, fmax_hz, segment=n_seg)
         f_rel = (f_m - f_x) / f_x if f_x > 0.0 else math.nan  # NaN propagates from either
         rows.append({
             "name": p.name, "test_name": p.test.name, "node": p.node, "direction": p.direction,
