@@ -180,7 +180,21 @@ def _in_contact(system, br) -> np.ndarray:
 
 
 def orbit_amplitude(system, loads, orbit, rows) -> np.ndarray:
-    """(p,) m, max |r . x| over one period of an exact periodic orbit (sampled, ORBIT_SAMPLES)."""
+    """(p,) m, max |r . x| over one period of an exact periodic orbit (sampled, ORBIT_SAMPLES).
+
+    Parameters
+    ----------
+    system : the gap system
+    loads : the load the orbit is driven by
+    orbit : a periodic orbit (x0, v0, period_s), e.g. a
+        :class:`reduced.periodic.forced_stability.ForcedOrbit`
+    rows : (p, n) the output points as rows of the DOFs
+
+    Returns
+    -------
+    ndarray
+        (p,) m.
+    """
     r = ringdown(system, orbit.x0, orbit.v0, orbit.period_s, ORBIT_SAMPLES / orbit.period_s, method="exact",
                  loads=loads)
     return np.max(np.abs(r.x @ rows.T), axis=0)
@@ -189,7 +203,22 @@ def orbit_amplitude(system, loads, orbit, rows) -> np.ndarray:
 def shooting_error(system, loads, X: np.ndarray, amplitude: np.ndarray, freq_hz: float, rows: np.ndarray,
                    segments: int) -> float | None:
     """max |a_HB / a_exact - 1| over the points ``rows``: the exact forced orbit is found by multiple
-    shooting (``segments`` segments) from the HB orbit X at ``freq_hz``; None if shooting fails."""
+    shooting (``segments`` segments) from the HB orbit X at ``freq_hz``; None if shooting fails.
+
+    Parameters
+    ----------
+    system, loads : the gap system and its harmonic load at ``freq_hz``
+    X : (2H+1, n) m, the HB orbit
+    amplitude : (p,) m, its amplitude at the points
+    freq_hz : Hz
+    rows : (p, n) the output points
+    segments : segments of the multiple shooting
+
+    Returns
+    -------
+    float or None
+        The largest relative amplitude error over the points.
+    """
     try:
         orb = floquet_by_shooting(Flow(system, loads=loads), hb_states(X, 2 * np.pi * freq_hz, segments),
                                   1.0 / freq_hz, tol=1e-10)

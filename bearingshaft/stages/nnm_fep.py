@@ -109,7 +109,18 @@ class FEPModel:
 
 def fep_model(scene: Scene, progress: bool = False) -> FEPModel:
     """The :class:`FEPModel` of a scene: the 3-DOF model (with its exact NNM 2 relation when
-    m1 == m3) or a reduced model (reference: shooting alone)."""
+    m1 == m3) or a reduced model (reference: shooting alone).
+
+    Parameters
+    ----------
+    scene : a scene whose model is the 3-DOF model or a reduced model
+    progress : draw a progress bar if the reduced model must be built
+
+    Returns
+    -------
+    FEPModel
+        The conservative system, the NNMs followed and the options of each method for it.
+    """
     model = scene.model
     system, _ = model_system(model, progress)
     system = conservative(system)
@@ -376,6 +387,19 @@ def fep_summary(scene: Scene, fm: FEPModel, shots: dict, branches: dict, errors:
     the study comes within :data:`OFF_BACKBONE_TOL` of it; the others (multi-impact orbits
     near grazing, orbits shifted by a resonance of higher order than any H of the study)
     are listed, not compared.
+
+    Parameters
+    ----------
+    scene : the scene (its [fep] table)
+    fm : its model
+    shots : {nnm: (energies, orbits, wall_s)}
+    branches : {(nnm, H, N): NNMBranch}
+    errors : {(nnm, H, N): (shooting energies, |f_HB / f_shooting - 1| there)}
+
+    Returns
+    -------
+    FEPSummary
+        The converged H (or None), the errors per H and NNM, the orbits off the backbone.
     """
     spec = scene.fep
     n = len(fm.modes)

@@ -61,7 +61,19 @@ class Branch:
 
 
 def tangent(J: np.ndarray, t_prev: np.ndarray | None = None) -> np.ndarray:
-    """Unit null vector of J (p, p+1), oriented along t_prev."""
+    """Unit null vector of J (p, p+1), oriented along t_prev.
+
+    Parameters
+    ----------
+    J : (p, p+1) the Jacobian dR/dy at a point
+    t_prev : (p+1,) the previous tangent (None: the right singular vector of the smallest
+        singular value, its sign as the SVD gives it)
+
+    Returns
+    -------
+    ndarray
+        (p+1,) unit vector t with J t = 0 and t . t_prev >= 0.
+    """
     p1 = J.shape[1]
     if t_prev is None:
         # the right singular vector of the smallest singular value

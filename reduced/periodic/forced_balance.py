@@ -59,6 +59,17 @@ class ForcedBalance:
 
     The unknowns are the coefficients q (2H+1, u) of the u contact coordinates U x, of which
     only the rows ``keep`` (all, or the odd harmonics) are free; the others are zero.
+
+    Parameters
+    ----------
+    system : the gap system (its damping C is used)
+    b : (n,) force direction
+    amplitude_N : N, P
+    phase_deg : deg, phi
+    H : harmonics
+    N : phases bracketing the extrema of each contact coordinate
+        (:func:`reduced.periodic.exact_hb.default_root_samples`)
+    odd : keep only the odd harmonics (half-wave symmetric response)
     """
 
     system: GapSystem
@@ -258,7 +269,14 @@ class ForcedBalance:
 @dataclass(frozen=True, eq=False)
 class ForcedResidual:
     """R(y) / x_ref for continuation in y = [z / x_ref, ln(Omega / omega_ref)]:
-    ``__call__(y) -> (R (size,), dR/dy (size, size + 1))``."""
+    ``__call__(y) -> (R (size,), dR/dy (size, size + 1))``.
+
+    Parameters
+    ----------
+    fb : the condensed balance
+    x_ref : m, scale of the contact coordinates
+    omega_ref : rad/s, reference of the frequency coordinate
+    """
 
     fb: ForcedBalance
     x_ref: float  # m

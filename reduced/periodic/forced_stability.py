@@ -46,7 +46,18 @@ BIFURCATIONS = ("fold", "branch_point", "period_doubling", "neimark_sacker")
 
 # -- stability ----------------------------------------------------------------------------------
 def state_matrix(system: GapSystem, active: np.ndarray) -> np.ndarray:
-    """A_s (2n, 2n) of y = [x; v] with the stops in ``active`` closed: y' = A_s y + const."""
+    """A_s (2n, 2n) of y = [x; v] with the stops in ``active`` closed: y' = A_s y + const.
+
+    Parameters
+    ----------
+    system : the gap system
+    active : (m,) bool, the closed stops
+
+    Returns
+    -------
+    ndarray
+        [[0, I], [-M^-1 K_s, -M^-1 C]] with K_s the stiffness of that contact state.
+    """
     Ks, _ = system.state_matrices(active)
     n = system.n
     Minv = np.linalg.inv(system.M)
@@ -60,6 +71,18 @@ def orbit_monodromy(system: GapSystem, intervals: list, omega: float) -> np.ndar
     Between events the variational equation is y' = A_s y with the contact state s constant,
     and the saltation matrices of penalty stops are identities (the force is continuous
     through a crossing), so Phi = exp(A_{s_K} tau_K / Omega) ... exp(A_{s_1} tau_1 / Omega).
+
+    Parameters
+    ----------
+    system : the gap system
+    intervals : per stop, (alpha, beta) arrays of the starts and ends of its closed intervals
+        (:meth:`reduced.periodic.forced_balance.ForcedBalance.contact`)
+    omega : rad/s, the orbit's angular frequency (period 2 pi / omega)
+
+    Returns
+    -------
+    ndarray
+        Phi (2n, 2n), the monodromy from tau = 0 over one period.
     """
     two_pi = 2.0 * math.pi
     ev = [0.0, two_pi]
@@ -89,7 +112,17 @@ def orbit_monodromy(system: GapSystem, intervals: list, omega: float) -> np.ndar
 
 
 def multipliers_of(Phi: np.ndarray) -> np.ndarray:
-    """Eigenvalues of Phi sorted by decreasing modulus."""
+    """Eigenvalues of Phi sorted by decreasing modulus.
+
+    Parameters
+    ----------
+    Phi : (2n, 2n) a monodromy matrix
+
+    Returns
+    -------
+    ndarray
+        (2n,) complex Floquet multipliers, largest |mu| first (ties kept in eigvals' order).
+    """
     mu = np.linalg.eigvals(Phi)
     return mu[np.argsort(-np.abs(mu), kind="stable")]
 
@@ -104,6 +137,17 @@ def forced_hill(fb: ForcedBalance, z: np.ndarray, omega: float) -> np.ndarray:
     the first zone |Im lam| <= Omega / 2 are kept, mu = exp(2 pi lam / Omega). A real negative
     multiplier has its exponent on the zone's edge with both copies in it: of eigenvalues on
     the edge (within 1e-6 Omega) those with Im lam < 0 are ranked last so each counts once.
+
+    Parameters
+    ----------
+    fb : the condensed balance the orbit solves
+    z : (fb.size,) m, the orbit's free unknowns
+    omega : rad/s, the excitation frequency
+
+    Returns
+    -------
+    ndarray
+        (2n,) complex multipliers by decreasing modulus.
     """
     s = fb.system
     h, n = 2 * fb.H + 1, fb.n
@@ -127,7 +171,24 @@ def forced_hill(fb: ForcedBalance, z: np.ndarray, omega: float) -> np.ndarray:
 
 def classify_crossing(mu: np.ndarray, tol: float) -> str:
     """How the multiplier nearest the unit circle among those outside it left: ``fold`` (real
-    > 0), ``period_doubling`` (real < 0) or ``neimark_sacker`` (complex)."""
+    > 0), ``period_doubling`` (real < 0) or ``neimark_sacker`` (complex).
+
+    Parameters
+    ----------
+    mu : the multipliers at a point past the crossing
+    tol : |mu| - 1 above this is outside the unit circle
+
+    Returns
+    -------
+    str
+        One of ``fold``, ``period_doubling``, ``neimark_sacker`` (within :data:`REAL_TOL` rad of
+        the real axis a multiplier is real).
+
+    Examples
+    --------
+    >>> classify_crossing([1.2, 0.5], 1e-6), classify_crossing([-1.1, 0.5], 1e-6), classify_crossing([1.1j], 1e-6)
+    ('fold', 'period_doubling', 'neimark_sacker')
+    """
     mu = np.asarray(mu)
     out = mu[np.abs(mu) > 1.0 + tol]
     if out.size == 0:
@@ -148,6 +209,17 @@ def bifurcations(multipliers: np.ndarray, tol: float, folds=()) -> list[tuple[in
     that has the crossing multiplier outside. A real crossing through +1 is a ``fold`` if the
     curve turns in frequency within one point of it (``folds``: indices of the turning points,
     continuation's own detection), else a ``branch_point``.
+
+    Parameters
+    ----------
+    multipliers : (k, 2n) the multipliers of consecutive points
+    tol : |mu| - 1 above this is outside the unit circle
+    folds : indices of the points where the curve turns in frequency
+
+    Returns
+    -------
+    list
+        (index of the first point past the crossing, kind), kind in :data:`BIFURCATIONS`.
     """
     mu = np.asarray(multipliers)
     n_out = np.sum(np.abs(mu) > 1.0 + tol, axis=1)
@@ -244,7 +316,6 @@ class ForcedOrbit:
         return self.max_multiplier <= 1.0 + STABILITY_TOL
 
 
-
 def floquet_by_shooting(flow, Y: np.ndarray, period_s: float, *, tol: float = 1e-11, max_iter: int = 30
                         ) -> ForcedOrbit:
     """The periodic orbit of the forced exact flow ``flow`` (``Flow(system, loads=...)``, load
@@ -255,7 +326,21 @@ def floquet_by_shooting(flow, Y: np.ndarray, period_s: float, *, tol: float = 1e
     with the exact segment Jacobians. Each segment sees only the S-th root of the monodromy's
     growth, so orbits with multipliers of 1e3 (the contact plateau of the three-mass model) are
     found where single shooting's Newton diverges. The monodromy is the product of the segment
-    Jacobians. Raises :class:`ShootingError` if the closure stays above ``tol`` (relative).
+    Jacobians.
+
+    Parameters
+    ----------
+    flow : the forced exact flow, :class:`reduced.transient.flow.Flow` with the load
+    Y : (S, 2n) guessed states [x; v] at the S phases (e.g. :func:`hb_states`)
+    period_s : s, the load's period
+    tol : closure to reach, relative (displacements and velocities scaled apart)
+    max_iter : Newton iterations at most
+
+    Returns
+    -------
+    ForcedOrbit
+        The orbit from t = 0, its monodromy and multipliers. Raises :class:`ShootingError` if
+        the closure stays above ``tol``.
     """
     n = flow.system.n
     Y = np.atleast_2d(np.array(Y, float))
@@ -309,7 +394,19 @@ def floquet_by_shooting(flow, Y: np.ndarray, period_s: float, *, tol: float = 1e
 
 
 def hb_states(X: np.ndarray, omega: float, S: int) -> np.ndarray:
-    """(S, 2n) states [x; v] of the HB orbit X (2H+1, n) at the phases 2 pi k / S."""
+    """(S, 2n) states [x; v] of the HB orbit X (2H+1, n) at the phases 2 pi k / S.
+
+    Parameters
+    ----------
+    X : (2H+1, n) m, HB coefficients (rows c_0, c_1, s_1, ...)
+    omega : rad/s
+    S : number of phases
+
+    Returns
+    -------
+    ndarray
+        (S, 2n): x and v = omega dx/dtau at tau = 2 pi k / S, k = 0..S-1.
+    """
     H = (X.shape[0] - 1) // 2
     E = _synthesis_matrix(H, _phases(S))
     return np.hstack([E @ X, omega * (E @ (_derivative_matrix(H) @ X))])

@@ -67,7 +67,19 @@ def _synthesis(H: int, N: int) -> np.ndarray:
 
 def max_abs_over_period(X: np.ndarray, rows: np.ndarray, samples: int | None = None) -> np.ndarray:
     """(p,) m, max over tau of |rows[j] . x(tau)| for X (2H+1, n): the largest of ``samples`` phases,
-    refined by Newton on the derivative of the Fourier series."""
+    refined by Newton on the derivative of the Fourier series.
+
+    Parameters
+    ----------
+    X : (2H+1, n) m, HB coefficients
+    rows : (p, n) the output points as rows of the DOFs
+    samples : phases sampled first (default max(64, 8 (2H+1)))
+
+    Returns
+    -------
+    ndarray
+        (p,) m, never below the largest sample.
+    """
     H = (X.shape[0] - 1) // 2
     C = np.asarray(rows, float) @ X.T  # (p, 2H+1): each point's own series
     N = samples or max(64, 8 * (2 * H + 1))
@@ -89,7 +101,18 @@ def max_abs_over_period(X: np.ndarray, rows: np.ndarray, samples: int | None = N
 
 
 def harmonic_amplitudes(X: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """(p, H + 1) m: |c_0| and sqrt(c_k^2 + s_k^2), k = 1..H, of each point ``rows[j] . x`` for X (2H+1, n)."""
+    """(p, H + 1) m: |c_0| and sqrt(c_k^2 + s_k^2), k = 1..H, of each point ``rows[j] . x`` for X (2H+1, n).
+
+    Parameters
+    ----------
+    X : (2H+1, n) m, HB coefficients
+    rows : (p, n) the output points as rows of the DOFs
+
+    Returns
+    -------
+    ndarray
+        (p, H + 1) m, the amplitude of each harmonic at each point.
+    """
     C = np.asarray(rows, float) @ X.T
     return np.column_stack([np.abs(C[:, 0]), np.hypot(C[:, 1::2], C[:, 2::2])])
 
@@ -99,10 +122,11 @@ def harmonic_amplitudes(X: np.ndarray, rows: np.ndarray) -> np.ndarray:
 class FRCBranch:
     """One forced-response curve: points in continuation order, with stability and bifurcations.
 
-    ``multipliers`` are those of :func:`orbit_monodromy` (every point); ``hill`` holds Hill's
-    multipliers at the points ``hill_index`` (all, or a subset where Hill's matrix is large).
-    ``bifurcations`` lists (point index, kind), kind in :data:`BIFURCATIONS`, the index being
-    the first point past the crossing; ``folds`` the indices where the curve turned in frequency.
+    ``multipliers`` are those of :func:`reduced.periodic.forced_stability.orbit_monodromy`
+    (every point); ``hill`` holds Hill's multipliers at the points ``hill_index`` (all, or a
+    subset where Hill's matrix is large). ``bifurcations`` lists (point index, kind), kind in
+    :data:`reduced.periodic.forced_stability.BIFURCATIONS`, the index being the first point past
+    the crossing; ``folds`` the indices where the curve turned in frequency.
     """
 
     amplitude_N: float
@@ -252,7 +276,21 @@ def frc(
 
 def linear_frf(system: GapSystem, load: np.ndarray, amplitude_N: float, freq_hz: np.ndarray,
                rows: np.ndarray | None = None) -> np.ndarray:
-    """(k, p) m: |rows (K - Omega^2 M + i Omega C)^-1 b P| with every stop open (the FRF of the linear part)."""
+    """(k, p) m: |rows (K - Omega^2 M + i Omega C)^-1 b P| with every stop open (the FRF of the linear part).
+
+    Parameters
+    ----------
+    system : the gap system (its stops are ignored)
+    load : (n,) force direction b
+    amplitude_N : N, P
+    freq_hz : (k,) Hz
+    rows : (p, n) output points (default: the DOFs)
+
+    Returns
+    -------
+    ndarray
+        (k, p) m, the amplitude at each frequency and point.
+    """
     rows = np.eye(system.n) if rows is None else np.atleast_2d(rows)
     out = []
     for f in np.atleast_1d(freq_hz):
@@ -264,7 +302,18 @@ def linear_frf(system: GapSystem, load: np.ndarray, amplitude_N: float, freq_hz:
 
 def default_x_ref(fb: ForcedBalance, f_min_hz: float, f_max_hz: float) -> float:
     """m, scale of the contact coordinates: their largest linear open-stop response over the band,
-    but no more than the stops let through (largest stop offset + the closed-state response)."""
+    but no more than the stops let through (largest stop offset + the closed-state response).
+
+    Parameters
+    ----------
+    fb : the condensed balance
+    f_min_hz, f_max_hz : Hz, the band (400 log-spaced frequencies are tried)
+
+    Returns
+    -------
+    float
+        m, at least 1e-300.
+    """
     s = fb.system
     f = np.geomspace(f_min_hz, f_max_hz, 400)
     peak = {}
@@ -444,7 +493,23 @@ def solution_at_frequency(br: FRCBranch, freq_hz: float, amplitude_ref: float | 
     """(amplitudes (p,), index of the piece, X (2H+1, n)) of the HB solution exactly at ``freq_hz`` on
     the piece of the curve bracketing it (stable at both ends if ``stable_only``) whose amplitude
     at point ``col`` is nearest ``amplitude_ref``: Newton at fixed frequency from the
-    interpolated point. (None, -1, None) where no such piece brackets the frequency."""
+    interpolated point.
+
+    Parameters
+    ----------
+    br : the curve
+    freq_hz : Hz
+    amplitude_ref : m, the amplitude at point ``col`` the solution should be nearest (None: the
+        first piece found)
+    col : the output point compared
+    stable_only : only pieces stable at both ends
+
+    Returns
+    -------
+    tuple
+        (amplitudes (p,) m, i of the bracketing points i and i + 1, X (2H+1, n)), or (None, -1, None)
+        where no such piece brackets the frequency.
+    """
     res = ForcedResidual(br.balance, br.x_ref, 2 * np.pi * br.freq_hz.max())
     nz = res.size
     lw = math.log(2 * np.pi * freq_hz / res.omega_ref)

@@ -61,7 +61,18 @@ def slowest_decay_rate(system: GapSystem, load: np.ndarray | None = None) -> flo
     the load moves, modal force above 1e-9 of the largest, if ``load`` is given): the slowest
     linear transient a sweep starts decays like exp(-rate t). (A mode the load leaves
     at rest, such as a reduced beam's antisymmetric bending with a node at every dashpot,
-    would otherwise set hours of settling.)"""
+    would otherwise set hours of settling.)
+
+    Parameters
+    ----------
+    system : the gap system
+    load : (n,) force direction b, or None for every mode
+
+    Returns
+    -------
+    float
+        1/s, > 0; an undamped mode is refused (:class:`reduced._checks.InvalidArgument`).
+    """
     rates = []
     n = system.n
     Minv = np.linalg.inv(system.M)
