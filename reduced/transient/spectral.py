@@ -109,10 +109,11 @@ def dominant_freq_hz(y: np.ndarray, sample_rate_hz: float | None, fmin_hz: float
     w = np.hanning(n_seg)
     yws = [s * w for s in segs]
     nfft = PAD * (1 << int(np.ceil(np.log2(n_seg))))
-    if len(yws) == 1:
+    Yw = np.array(yws) if len(yws) > 1 else None
+    if Yw is None:
         spec = np.abs(np.fft.rfft(yws[0], nfft))
     else:
-        spec = np.sqrt(np.mean([np.abs(np.fft.rfft(s, nfft)) ** 2 for s in yws], axis=0))
+        spec = np.sqrt(np.mean(np.abs(np.fft.rfft(Yw, nfft, axis=1)) ** 2, axis=0))
     f = np.fft.rfftfreq(nfft, 1.0 / fs)
     band = _band(f, fmin_hz, fmax_hz)
     if not np.any(band) or not np.any(spec[band]):
@@ -120,13 +121,13 @@ def dominant_freq_hz(y: np.ndarray, sample_rate_hz: float | None, fmin_hz: float
     k = int(np.flatnonzero(band)[np.argmax(spec[band])])
     df = fs / nfft
     t = np.arange(n_seg) / fs
-    Yw = np.array(yws) if len(yws) > 1 else None
 
     def neg(fq: float) -> float:  # -A(fq)
-        e = np.exp(-2j * np.pi * fq * t)
-        if len(yws) == 1:
-            return -abs(np.dot(yws[0], e))
-        return -math.sqrt(float(np.mean(np.abs(Yw @ e) ** 2)))
+        if Yw is None:
+            return -abs(np.dot(yws[0], np.exp(-2j * np.pi * fq * t)))
+        phase = 2.0 * np.pi * fq * t  # real products: a complex one would cast every segment each call
+        re, im = Yw @ np.cos(phase), Yw @ np.sin(phase)
+        return -math.sqrt(float(np.mean(re * re + im * im)))
 
     lo, hi = max(f[k] - df, fmin_hz), min(f[k] + df, fs / 2)
     if fmax_hz is not None:
