@@ -41,6 +41,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bearingshaft.registry import stages_of  # noqa: E402
 from bearingshaft.scenes import builtin_names, load_scene  # noqa: E402
 
 FIELDS = ["scene", "stage", "wall_s", "peak_mb", "cpu_s", "cache_before", "cache_after", "load_1min", "exit_code"]
