@@ -11,11 +11,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from reduced.transient.compare import binned  # noqa: E402
+from bearingshaft.envelopes import N_COLUMNS, Envelope  # noqa: E402, F401 (Envelope: figures draw it)
 from reduced.transient.spectrogram import Spectrogram, curve_in_time  # noqa: E402
 
 CURVE_STYLES = ("-", "--", "-.", ":")
-N_COLUMNS = 2000  # envelope bins of a time plot: finer than the ~1000 pixel columns of a 9 in, 120 dpi axis
 TITLE_CHARS = 95  # a title line of a 9 in wide figure at 10 pt
 ENERGY_FLOOR = 1e-6  # the energy panel shows down to this fraction of the initial energy
 
@@ -23,45 +22,6 @@ ENERGY_FLOOR = 1e-6  # the energy panel shows down to this fraction of the initi
 def wrap_title(title: str, width: int = TITLE_CHARS) -> str:
     """The title broken into lines that fit the figure's width."""
     return "\n".join(textwrap.wrap(title, width=width, break_long_words=False, break_on_hyphens=False)) or title
-
-
-class Envelope:
-    """Min and max of ``n_series`` time series in each of ``n_bins`` equal bins of samples, accumulated
-    chunk by chunk: what a dense line plot draws in each pixel column, in memory independent of
-    the record's length. A record of at most 2 n_bins samples is kept whole."""
-
-    def __init__(self, n_samples: int, sample_rate_hz: float, n_series: int, n_bins: int = N_COLUMNS) -> None:
-        self.n_samples = n_samples
-        self.fs = sample_rate_hz
-        self.per = 1 if n_samples <= 2 * n_bins else -(-n_samples // n_bins)
-        nb = -(-n_samples // self.per)
-        self.lo = np.full((nb, n_series), np.inf)
-        self.hi = np.full((nb, n_series), -np.inf)
-
-    def add(self, start: int, values: np.ndarray) -> None:
-        """Samples start .. start + len(values) - 1, shape (k, n_series) or (k,)."""
-        v = np.asarray(values, dtype=float).reshape(len(values), -1)
-        if v.shape[0] == 0:
-            return
-        b, lo = binned(np.minimum, v, start, self.per)
-        hi = binned(np.maximum, v, start, self.per)[1]
-        sl = slice(b, b + lo.shape[0])
-        self.lo[sl] = np.minimum(self.lo[sl], lo)
-        self.hi[sl] = np.maximum(self.hi[sl], hi)
-
-    def lines(self) -> tuple[np.ndarray, np.ndarray]:
-        """(t, y): a line through each bin's min then max (the whole record when kept whole)."""
-        t0 = np.arange(self.lo.shape[0]) * self.per / self.fs
-        if self.per == 1:
-            return t0, self.lo
-        t = np.repeat(t0 + 0.5 * self.per / self.fs, 2)
-        y = np.empty((2 * self.lo.shape[0], self.lo.shape[1]))
-        y[0::2], y[1::2] = self.lo, self.hi
-        return t, y
-
-    def upper(self) -> tuple[np.ndarray, np.ndarray]:
-        """(t, y): each bin's max at its centre."""
-        return (np.arange(self.hi.shape[0]) + 0.5 * (self.per > 1)) * self.per / self.fs, self.hi
 
 
 def ringdown_envelopes(res, chunk_samples: int | None = None, also=None, loads=None) -> dict[str, Envelope]:

@@ -115,7 +115,7 @@ def _matvecs(A: np.ndarray, u: np.ndarray, k: int) -> None:
 
 def scene_model(name: str):
     from bearingshaft.scenes import load_scene
-    from bearingshaft.stages.ringdown import model_system, scene_initial_state
+    from bearingshaft.systems import model_system, scene_initial_state
 
     sc = load_scene(name)
     system, P = model_system(sc.model)

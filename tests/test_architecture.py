@@ -25,7 +25,7 @@ APP_FLOORS = (
     ("bearingshaft", "bearingshaft.scenes"),
     ("bearingshaft.digits", "bearingshaft.progress", "bearingshaft.output", "bearingshaft.estimates",
      "bearingshaft.systems", "bearingshaft.plots", "bearingshaft.render", "bearingshaft.correlate",
-     "bearingshaft.gap_modes", "bearingshaft.signals"),
+     "bearingshaft.gap_modes", "bearingshaft.signals", "bearingshaft.envelopes"),
     ("bearingshaft.stages",),
     ("bearingshaft.registry",),
     ("bearingshaft.budget", "bearingshaft.pipeline"),

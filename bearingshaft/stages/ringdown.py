@@ -1,9 +1,12 @@
-"""Stage ``ringdown``: free response, its spectrogram with NNM overlays, symmetry breaking.
+"""Stage ``ringdown``: free (or forced) response, its spectrogram with NNM overlays, symmetry breaking.
 
-The run is streamed into ``ringdown.npz`` as it is computed and every later step (figures,
-spectrogram, comparison with the exact integrator, symmetry) reads it, and any other run,
-chunk by chunk: the stage's memory does not grow with the duration of the run (a ringdown
-of 1e4 s works; its disk use is :func:`reduced.transient.integrate.ringdown_disk_bytes`).
+:func:`compute` streams the run into ``ringdown.npz`` in the stage's scratch folder as it is
+computed, and every later step (the comparison with the exact integrator, the spectrogram, the
+symmetry study) reads it, and any other run, chunk by chunk: the stage's memory does not grow
+with the duration of the run (a ringdown of 1e4 s works; its disk use is
+:func:`reduced.transient.integrate.ringdown_disk_bytes`). Its result
+(:class:`~bearingshaft.stages.ringdown_results.RingdownOutcome`) holds the file and the analyses;
+:func:`write` (:mod:`bearingshaft.stages.ringdown_files`) draws and writes from it and runs no solver.
 
 Science files (CSV, npz) hold no wall-clock time: timings go to ``provenance.json``
 (``writer.stats``), so a rerun of the same scene with the same code writes the same bytes.
@@ -11,31 +14,38 @@ Science files (CSV, npz) hold no wall-clock time: timings go to ``provenance.jso
 
 from __future__ import annotations
 
-import math
 import tempfile
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from bearingshaft import plots
-from bearingshaft.digits import text
+from bearingshaft.envelopes import Envelope
 from bearingshaft.estimates import MATPLOTLIB_BYTES, Estimate, n_dofs
-from bearingshaft.output import StageWriter, write_rows
+from bearingshaft.output import StageWriter
 from bearingshaft.progress import ProgressBar
 from bearingshaft.scenes import Scene
+from bearingshaft.stages.ringdown_results import (  # noqa: F401 (the study's constants, re-exported)
+    BREAK_THRESHOLD_M,
+    COMPARE_WINDOW_S,
+    GROWTH_BAND,
+    LYAPUNOV_DELTA,
+    REFERENCE_WINDOW_S,
+    SYMMETRY_PERTURBATION_M,
+    SYMMETRY_SEEDS,
+    Asymmetry,
+    ReferenceComparison,
+    RingdownOutcome,
+    SpectrogramData,
+    SymmetryData,
+)
 from bearingshaft.systems import model_system, ringdown_options, scene_initial_state, scene_loads
 from reduced.models.discrete import DiscreteParams
 from reduced.models.gaps import GapSystem
-from reduced.models.loads import Loads
 from reduced.models.modes import gap_moving_modes, linear_modes
 from reduced.transient.compare import (
-    MAX_WINDOWS,
     ComparisonAccumulator,
-    LineFit,
     LyapunovAccumulator,
     aligned,
-    binned,
     displaced_state,
 )
 from reduced.transient.exact import PIECES, stream_exact
@@ -44,21 +54,10 @@ from reduced.transient.result import RingdownResult, RingdownStream
 from reduced.transient.spectrogram import BATCH_FLOATS, MAX_FRAMES, StftAccumulator
 from reduced.transient.store import RingdownFile
 
-REFERENCE_WINDOW_S = 0.05  # s, pointwise comparison window at the start of the run
-COMPARE_WINDOW_S = 0.01  # s, windows of the separation, pointwise maxima and energy means
 REFERENCE_SEEDS = 3  # exact runs displaced by LYAPUNOV_DELTA: the Lyapunov exponent and the chaotic spread
-LYAPUNOV_DELTA = 1e-9  # relative size of their displacement (energy norm)
 LYAPUNOV_SATURATION = 1e-3  # the separation has saturated at this fraction of the state's norm
 FREQ_MIN_HZ = 5.0  # dominant frequencies are searched above this (the DC bin of a drifting record)
-SYMMETRY_SEEDS = 5  # seeded runs of the symmetry study
-# m, size of their antisymmetric perturbation. Measured on discrete-symmetric: seeds of 1e-12 and
-# 1e-10 m still moved the break by up to 0.48 and 0.07 s when only the exact integrator's restart
-# grid changed (the round-off it injects at ~1e4 contact events competes with them); from 1e-8 m
-# the break time did not move (and rom-symmetric's from 1e-9 m).
-SYMMETRY_PERTURBATION_M = 1e-8
-BREAK_THRESHOLD_M = 1e-6  # m, the symmetry is broken once |x_a - x_b| exceeds this ("visibly")
-GROWTH_BAND = 1e-2  # growth rates are fitted where BREAK_THRESHOLD_M x GROWTH_BAND < |x_a - x_b| < threshold
-TITLE_NOTE = "break time from round-off alone is not reproducible across machines"
+RESTART_OFFSET = 7  # seed 0 is repeated with PIECES + this many restart pieces: another round-off history
 
 
 def run_ringdown(scene: Scene, system: GapSystem, P: np.ndarray, method: str, progress: bool,
@@ -138,14 +137,96 @@ def backbone_curves(model, system: GapSystem | None = None, n_modes: int = 3
     return curves
 
 
+# -- the stage ---------------------------------------------------------------------------------
+def compute(scene: Scene, progress: bool, workdir, method: str | None = None) -> RingdownOutcome:
+    """The scene's ringdown streamed into ``workdir/ringdown.npz``, and its analyses.
+
+    Parameters
+    ----------
+    scene : a scene with a [ringdown] table
+    progress : show progress bars
+    workdir : the stage's scratch folder (the results folder once the stage has written)
+    method : the integrator, "exact", "explicit" or "dop853" (default: the scene's)
+
+    Returns
+    -------
+    RingdownOutcome : the run (a RingdownFile read lazily), the comparison with the exact
+        integrator (a reduced model run by another method), the spectrogram ([spectrogram]) and
+        the symmetry study ([symmetry])
+    """
+    method = method or scene.ringdown.method
+    system, P = model_system(scene.model, progress)
+    res = run_ringdown(scene, system, P, method, progress, out=Path(workdir) / "ringdown.npz")
+    reference = None
+    if scene.model_kind == "rom" and method != "exact":
+        reference = compare_with_exact(scene, res, P, progress)
+    spectrogram = spectrogram_of(scene, res, P, system) if scene.spectrogram is not None else None
+    symmetry = symmetry_runs(scene, res, P, workdir, progress) if scene.symmetry is not None else None
+    return RingdownOutcome(scene, method, system, P, res, scene_loads(scene, P), reference, spectrogram, symmetry)
+
+
+def write(result: RingdownOutcome, writer: StageWriter) -> None:
+    """ringdown.png, the stage's statistics and summary lines, and the files of the analyses.
+
+    Parameters
+    ----------
+    result : what :func:`compute` returned
+    writer : the stage's results folder
+
+    The writing is :func:`bearingshaft.stages.ringdown_files.write` (imported here when called, so
+    that computing imports no figure code).
+    """
+    from bearingshaft.stages import ringdown_files
+
+    ringdown_files.write(result, writer)
+
+
+def ringdown_stage(scene: Scene, writer: StageWriter, progress: bool, method: str | None = None) -> None:
+    """The whole stage into ``writer``: :func:`compute` in its folder, then :func:`write`.
+
+    Parameters
+    ----------
+    scene : a scene with a [ringdown] table
+    writer : the results folder (its ``scratch`` is the stage's work folder)
+    progress : show progress bars
+    method : the integrator (default: the scene's)
+    """
+    write(compute(scene, progress, writer.scratch, method), writer)
+
+
+def _point_mean(res, P: np.ndarray, point: int) -> float:
+    """The mean of one point's series over the run (the spectrogram removes it), read chunk by chunk."""
+    total = 0.0
+    for c in res.chunks(**({"fields": ("x",)} if isinstance(res, RingdownFile) else {})):
+        total += float(np.sum(c.x @ P[point]))
+    return total / max(res.n_samples, 1)
+
+
+def spectrogram_of(scene: Scene, res, P: np.ndarray, system: GapSystem) -> SpectrogramData:
+    """The spectrogram of the [spectrogram] point over the run (at most MAX_FRAMES frames), the open-gap
+    frequencies of the three lowest modes that move the gaps and the NNM curves to overlay.
+
+    Parameters
+    ----------
+    scene : a scene with a [spectrogram] table
+    res : the run (a RingdownFile or RingdownResult), read chunk by chunk
+    P : (points, n) the points' displacements from the DOFs; system : the run's gap system
+
+    Returns
+    -------
+    SpectrogramData
+    """
+    sp = scene.spectrogram
+    point = scene.model.point_names.index(sp.dof)
+    acc = StftAccumulator(res.n_samples, res.sample_rate_hz, sp.window_s, sp.overlap, mean=_point_mean(res, P, point),
+                          fmax_hz=sp.fmax_hz, max_frames=MAX_FRAMES)
+    for c in res.chunks(**({"fields": ("x",)} if isinstance(res, RingdownFile) else {})):
+        acc.feed(c.start, c.x @ P[point])
+    f_open = linear_modes(system, "open").freq_hz[gap_moving_modes(system, "open", 3)]
+    return SpectrogramData(point, acc.result(), f_open, backbone_curves(scene.model, system))
+
+
 # -- reference check: the run against the exact integrator -------------------------------------
-def _spread(values: list[float]) -> tuple[float, float, float]:
-    v = [x for x in values if x is not None and not math.isnan(x)]
-    if not v:
-        return math.nan, math.nan, math.nan
-    return float(np.min(v)), float(np.median(v)), float(np.max(v))
-
-
 def _displaced(scene: Scene, system: GapSystem, P: np.ndarray, x0: np.ndarray, v0: np.ndarray, k: int
                ) -> tuple[np.ndarray, np.ndarray]:
     """Seed k's start, LYAPUNOV_DELTA from (x0, v0) relative to its energy norm; a forced run from
@@ -158,29 +239,29 @@ def _displaced(scene: Scene, system: GapSystem, P: np.ndarray, x0: np.ndarray, v
     return x0 + (x - x_ref), v0 + v
 
 
-def reference_check(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndarray, writer: StageWriter,
-                    progress: bool) -> dict:
-    """The run against the exact integrator on the same model: ``reference.csv``, ``lyapunov.csv``.
+def compare_with_exact(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndarray, progress: bool
+                       ) -> ReferenceComparison:
+    """The run against the exact integrator on the same model, in one pass over the run.
 
     An impacting ringdown can be chaotic, and then a pointwise difference between two runs
     grows like exp(lambda t) whatever its origin, so it says nothing about the integrator
-    beyond a few Lyapunov times. In one pass over the run, the exact run and
+    beyond a few Lyapunov times. The pass reads the run, the exact run and
     ``REFERENCE_SEEDS`` exact runs displaced by ``LYAPUNOV_DELTA`` (relative, energy norm;
-    :mod:`reduced.transient.compare`), this finds
+    :mod:`reduced.transient.compare`) together and compares the run with the exact one, and
+    each displaced exact run with the exact one (the spread a chaotic motion has by itself):
+    the pointwise error at the points, the energy envelope, the spectrogram frames' dominant
+    frequency, the stop closures; and finds the largest Lyapunov exponent of the motion from
+    each displaced pair (:func:`bearingshaft.stages.ringdown_files.write_reference` writes
+    ``reference.csv`` and ``lyapunov.csv`` from it).
 
-    - the largest Lyapunov exponent lambda of the motion from each displaced pair (the slope
-      of the log separation over its growth phase), the onset of that growth and its
-      saturation: ``lyapunov.csv``;
-    - for the run against the exact one *and* for each displaced exact run against the exact
-      one (the spread a chaotic motion has by itself): the pointwise error at the points
-      x1, x2, x3 (max |p - p_exact| / max |p_exact|) over the first REFERENCE_WINDOW_S, up to
-      the onset and over the run; the energy envelope error (max over COMPARE_WINDOW_S windows
-      of |mean E - mean E_exact| / mean E_exact); the fraction of spectrogram frames whose
-      dominant frequency agrees within one bin; the stop closures (impacts) counted from the
-      samples: ``reference.csv``, one row per quantity.
+    Parameters
+    ----------
+    scene : the scene; res : its run (read chunk by chunk); P : (points, n) the points' displacements
+    progress : show a progress bar
 
-    The run is judged by whether its differences from the exact run are within the spread of
-    the exact runs among themselves, not by a pointwise number over the whole run.
+    Returns
+    -------
+    ReferenceComparison
     """
     spec = scene.ringdown
     system, N, fs = res.system, res.n_samples, res.sample_rate_hz
@@ -211,184 +292,29 @@ def reference_check(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndar
         bar.close()
         for s in (ref, *seeds):
             s.close()
-    run_r = run_cmp.result()
-    seed_r = [c.result() for c in seed_cmp]
-    est = [acc.result() for acc in lyap]
-    onsets = [e.onset_s for e in est]
-    onset = float(np.min(onsets))  # the earliest: before it no displaced pair has separated
-    lam = _spread([e.exponent_per_s for e in est if e.chaotic])
-    chaotic = any(e.chaotic for e in est)
-
-    def row(quantity, unit, run_value, seed_values, meaning):
-        lo, mid, hi = _spread(seed_values)
-        return {"quantity": quantity, "unit": unit, "run_vs_exact": text(run_value),
-                "exact_pairs_min": text(lo), "exact_pairs_median": text(mid), "exact_pairs_max": text(hi),
-                "meaning": meaning}
-
-    pts = "max |p - p_exact| / max |p_exact| at the points " + ", ".join(names)
-    rows = [
-        row("pointwise_error_first_window", "relative", run_r.pointwise_error[0],
-            [r.pointwise_error[0] for r in seed_r], f"{pts} over the first {REFERENCE_WINDOW_S:g} s"),
-    ]
-    if math.isfinite(onset):
-        rows.append(row("pointwise_error_to_onset", "relative", run_r.pointwise_error_until(onset),
-                        [r.pointwise_error_until(onset) for r in seed_r],
-                        f"{pts} up to {onset:g} s, when exact runs {LYAPUNOV_DELTA:g} apart start to separate"))
-    rows += [
-        row("pointwise_error_whole_run", "relative", run_r.pointwise_error[1], [r.pointwise_error[1] for r in seed_r],
-            f"{pts} over the whole {spec.duration_s:g} s run"
-            + ("; after the onset it measures the chaos of the motion, not the integrator" if chaotic else "")),
-        row("energy_envelope_error", "relative", run_r.energy_envelope_error,
-            [r.energy_envelope_error for r in seed_r],
-            f"max over {run_r.energy_window_s:g} s windows of |mean E - mean E_exact| / mean E_exact"),
-        row("dominant_frequency_agreement", "fraction of frames", run_r.freq_agreement,
-            [r.freq_agreement for r in seed_r],
-            f"spectrogram frames of {names[freq_point]} whose peak frequencies agree within one bin "
-            f"({run_r.freq_resolution_hz:g} Hz)"),
-        row("dominant_frequency_median_difference", "Hz", run_r.freq_median_diff_hz,
-            [r.freq_median_diff_hz for r in seed_r], "median over frames of |f_peak - f_peak,exact|"),
-        row("stop_closures_difference", "relative", run_r.closures_diff, [r.closures_diff for r in seed_r],
-            f"(closures - closures_exact) / closures_exact, counted from the samples; exact: {run_r.closures_ref}"),
-        row("lyapunov_exponent", "1/s", None, [e.exponent_per_s for e in est],
-            f"slope of ln |y_b - y_a| over its growth phase, exact runs {LYAPUNOV_DELTA:g} apart (lyapunov.csv)"),
-        row("separation_onset", "s", None, onsets,
-            "when the separation of the displaced exact runs has grown 100-fold (inf: never)"),
-    ]
-    write_rows(writer.path("reference.csv"), rows)
-    write_rows(writer.path("lyapunov.csv"), [
-        {"seed": k, "delta": text(e.delta), "saturation": text(e.saturation), "window_s": text(e.window_s),
-         "exponent_per_s": text(e.exponent_per_s), "lyapunov_time_s": text(e.lyapunov_time_s),
-         "onset_s": text(e.onset_s), "saturation_s": text(e.saturation_s), "fit_start_s": text(e.fit_start_s),
-         "fit_end_s": text(e.fit_end_s), "ln_growth_fitted": text(e.ln_growth), "residual": text(e.residual, 2),
-         "chaotic": e.chaotic} for k, e in enumerate(est)])
-    summary = {"run_vs_exact": {r["quantity"]: r["run_vs_exact"] for r in rows},
-               "closures_run": run_r.closures_run, "closures_exact": run_r.closures_ref,
-               "lyapunov_exponent_per_s": lam, "onset_s": onset, "chaotic": chaotic,
-               "exact_wall_s": ref.stats.get("wall_s"), "exact_n_events": ref.stats.get("n_events"),
-               "exact_tolerance_m": ref.tolerance}
-    writer.stats["reference"] = summary
-    sp_e = _spread([r.energy_envelope_error for r in seed_r])
-    sp_f = _spread([r.freq_agreement for r in seed_r])
-    sp_c = _spread([r.closures_diff for r in seed_r])
-    head = (f"[{scene.name}] {res.method} against exact: pointwise error {run_r.pointwise_error[0]:.2g} over the "
-            f"first {REFERENCE_WINDOW_S:g} s")
-    if chaotic:
-        text = (f"{head}, {run_r.pointwise_error_until(onset):.2g} up to {onset:.3g} s, when exact runs "
-                f"{LYAPUNOV_DELTA:g} apart start to separate at lambda = {lam[1]:.3g} /s (Lyapunov time "
-                f"{1e3 / lam[1]:.3g} ms): the motion is chaotic, so the {run_r.pointwise_error[1]:.2g} over the "
-                f"{spec.duration_s:g} s run is no integrator error. Over the run (run vs exact; exact pairs): energy "
-                f"envelope {run_r.energy_envelope_error:.2%} ({sp_e[0]:.2%} to {sp_e[2]:.2%}), dominant frequency "
-                f"agrees in {run_r.freq_agreement:.0%} of frames ({sp_f[0]:.0%} to {sp_f[2]:.0%}), stop closures "
-                f"{run_r.closures_run} vs {run_r.closures_ref} ({run_r.closures_diff:+.1%}; "
-                f"{sp_c[0]:+.1%} to {sp_c[2]:+.1%})")
-    else:
-        text = (f"{head}, {run_r.pointwise_error[1]:.2g} over the {spec.duration_s:g} s run; exact runs "
-                f"{LYAPUNOV_DELTA:g} apart do not separate (lambda = {lam[1]:.3g} /s), so the whole-run error is the "
-                f"integrator's: energy envelope {run_r.energy_envelope_error:.2%}, stop closures "
-                f"{run_r.closures_run} vs {run_r.closures_ref}")
-    print(text, flush=True)
-    return summary
+    return ReferenceComparison(run_cmp.result(), [c.result() for c in seed_cmp], [acc.result() for acc in lyap],
+                               ref.stats, ref.tolerance)
 
 
-# -- the stage -----------------------------------------------------------------------------
-def _first_pass(res, P: np.ndarray, point: int | None, loads: Loads | None = None) -> tuple[dict, float]:
-    """Envelopes of the ringdown figure and the mean of one point's series, from one pass."""
-    total = [0.0]
+def reference_check(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndarray, writer: StageWriter,
+                    progress: bool) -> dict:
+    """The run against the exact integrator (:func:`compare_with_exact`), written.
 
-    def add(c) -> None:
-        if point is not None:
-            total[0] += float(np.sum(c.x @ P[point]))
+    Parameters
+    ----------
+    scene, res, P, progress : as :func:`compare_with_exact`
+    writer : where ``reference.csv`` and ``lyapunov.csv`` go
 
-    env = plots.ringdown_envelopes(res, also=add, loads=loads)
-    return env, total[0] / max(res.n_samples, 1)
+    Returns
+    -------
+    dict : the summary (also ``writer.stats["reference"]``)
+    """
+    from bearingshaft.stages import ringdown_files
 
-
-def ringdown_stage(scene: Scene, writer: StageWriter, progress: bool, method: str | None = None) -> None:
-    spec = scene.ringdown
-    method = method or spec.method
-    system, P = model_system(scene.model, progress)
-    res = run_ringdown(scene, system, P, method, progress, out=writer.path("ringdown.npz"))
-    names = scene.model.point_names
-    sp = scene.spectrogram
-    point = names.index(sp.dof) if sp is not None else None
-    loads = scene_loads(scene, P)
-    env, mean = _first_pass(res, P, point, loads)
-    plots.ringdown_figure(res, writer.path("ringdown.png"), f"{scene.name}: {scene.description}", env, loads)
-    forced = {}
-    if loads is not None:
-        t_W, W_ext = env["Wext"].upper()
-        forced = {"loads": [f"{spec_l.kind} at {spec_l.point}" for spec_l in scene.loads],
-                  "work_of_loads_J_max": float(np.max(W_ext)), "energy_J_max": env["scale"]}
-    writer.stats.update(
-        {"method": method, "duration_s": spec.duration_s, "energy_J_initial": env["E0"], **forced,
-         "energy_balance_error": res.energy_balance_error, "n_samples": res.n_samples,
-         "ringdown_npz_bytes": writer.path("ringdown.npz").stat().st_size, **res.stats}
-    )
-    count = res.stats.get("n_steps", res.stats.get("n_events"))
-    print(f"[{scene.name}] {method}: {count} {'steps' if 'n_steps' in res.stats else 'events'}, "
-          f"{res.n_samples} samples of {spec.duration_s:g} s, energy-balance error {res.energy_balance_error:.2g}"
-          + (f" (with the work of the loads, {forced['work_of_loads_J_max']:.4g} J)" if forced else ""), flush=True)
-    if scene.model_kind == "rom" and method != "exact":
-        reference_check(scene, res, P, writer, progress)
-    if sp is not None:
-        acc = StftAccumulator(res.n_samples, res.sample_rate_hz, sp.window_s, sp.overlap, mean=mean,
-                              fmax_hz=sp.fmax_hz, max_frames=MAX_FRAMES)
-        for c in res.chunks(**({"fields": ("x",)} if isinstance(res, RingdownFile) else {})):
-            acc.feed(c.start, c.x @ P[point])
-        S = acc.result()
-        f_open = linear_modes(system, "open").freq_hz[gap_moving_modes(system, "open", 3)]
-        t_E, E = env["E"].upper()
-        thinned = f", hop {S.hop / res.sample_rate_hz:.3g} s" if S.hop > round(sp.window_s * res.sample_rate_hz
-                                                                                * (1 - sp.overlap)) + 1 else ""
-        plots.spectrogram_figure(
-            S, (t_E, E[:, 0]), backbone_curves(scene.model, system), writer.path("spectrogram.png"),
-            f"{scene.name}: spectrogram of {sp.dof} ({method}{thinned}); open-gap "
-            f"{', '.join(f'{f:.1f}' for f in f_open)} Hz",
-            sp.fmax_hz, sp.db_range,
-        )
-    if scene.symmetry is not None:
-        symmetry_stage(scene, res, P, writer, progress)
+    return ringdown_files.write_reference(scene, res, compare_with_exact(scene, res, P, progress), writer)
 
 
 # -- symmetry breaking -----------------------------------------------------------------------
-class _Asymmetry:
-    """|x_a - x_b| of one run, chunk by chunk: envelope, first exceedances, growth fit in a band."""
-
-    def __init__(self, n_samples: int, fs: float, threshold: float, band: tuple[float, float]) -> None:
-        self.env = plots.Envelope(n_samples, fs, 1)
-        self.threshold = threshold
-        self.band = band
-        self.t_break = None
-        self.k_break = n_samples  # samples before the break
-        duration = (n_samples - 1) / fs
-        self.per = max(1, int(round(max(COMPARE_WINDOW_S, duration / MAX_WINDOWS) * fs)))  # growth-fit windows
-        self.fs = fs
-        self.wmax = np.zeros(-(-n_samples // self.per))  # max d in each window, up to the break
-
-    def feed(self, start: int, t: np.ndarray, d: np.ndarray) -> bool:
-        """Returns True once the threshold has been crossed."""
-        self.env.add(start, d)
-        if self.t_break is None:
-            over = np.flatnonzero(d > self.threshold)
-            k = int(over[0]) if over.size else d.size
-            if k:
-                b, m = binned(np.maximum, d[:k], start, self.per)
-                self.wmax[b : b + m.size] = np.maximum(self.wmax[b : b + m.size], m)
-            if over.size:
-                self.t_break = float(t[k])
-                self.k_break = start + k
-        return self.t_break is not None
-
-    @property
-    def growth_rate(self) -> float:
-        """1/s, slope of ln (window max of d) over the whole windows inside the band before the break."""
-        m = self.wmax[: self.k_break // self.per]
-        w = np.flatnonzero((m > self.band[0]) & (m < self.band[1]))
-        fit = LineFit()
-        fit.add((w + 0.5) * self.per / self.fs, np.log(m[w]))
-        return fit.slope if fit.n >= 3 else math.nan
-
-
 def _first_exceedance(d_file: Path, fs: float, threshold: float, chunk: int) -> float | None:
     """s, first sample of the float64 file ``d_file`` above threshold (None if none)."""
     with open(d_file, "rb") as fh:
@@ -415,8 +341,8 @@ def _seed_perturbation(k: int, names: tuple[str, ...], pair: tuple[str, str], si
     return dx, dv
 
 
-def symmetry_stage(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndarray, writer: StageWriter,
-                   progress: bool) -> None:
+def symmetry_runs(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndarray, workdir, progress: bool
+                  ) -> SymmetryData:
     """Fig. 4: the symmetric motion's loss of symmetry, led by what is reproducible.
 
     The symmetric motion is transversally unstable (results/discrete-fep/symmetry.md): any
@@ -428,28 +354,53 @@ def symmetry_stage(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndarr
     ``SYMMETRY_PERTURBATION_M`` at the pair's points (+-, random phase between displacement
     and velocity), large enough that round-off does not move the break (checked in every
     run: seed 0 is repeated with the closed form restarted on another grid, i.e. another
-    round-off history, column ``t_break_seed0_other_roundoff_s``). A run has broken when
-    |x_a - x_b| exceeds ``BREAK_THRESHOLD_M``; growth rates are the least-squares slope of
-    ln |x_a - x_b| (maxima over COMPARE_WINDOW_S windows) between GROWTH_BAND x that threshold
-    and the threshold, i.e. over the last decades before the break (the transverse exponent
-    changes with the energy, so a round-off run, which gets there later, shows a different
-    rate). The round-off runs of each method follow, with the old criterion (|x_a - x_b| above
-    the method's own tolerance), marked not reproducible. Files: ``symmetry.csv`` (one row per
-    case), ``symmetry_seeds.csv`` (one row per seed).
+    round-off history). A run has broken when |x_a - x_b| exceeds ``BREAK_THRESHOLD_M``;
+    growth rates are the least-squares slope of ln |x_a - x_b| (maxima over COMPARE_WINDOW_S
+    windows) between GROWTH_BAND x that threshold and the threshold, i.e. over the last decades
+    before the break (the transverse exponent changes with the energy, so a round-off run, which
+    gets there later, shows a different rate). The round-off runs of each method follow, with the
+    old criterion (|x_a - x_b| above the method's own tolerance), marked not reproducible
+    (:func:`bearingshaft.stages.ringdown_files.write_symmetry`: ``symmetry.csv``,
+    ``symmetry_seeds.csv``, ``symmetry.png``). |x_a - x_b| of the round-off runs is kept in
+    temporary files in ``workdir`` until their tolerance crossings are found.
+
+    Parameters
+    ----------
+    scene : a scene with a [symmetry] table; res : its run (read chunk by chunk)
+    P : (points, n) the points' displacements; workdir : the stage's scratch folder
+    progress : show progress bars
+
+    Returns
+    -------
+    SymmetryData
     """
+    points, runs, t_tol, wall = _round_off_runs(scene, res, P, workdir, progress)
+    omega = float(linear_modes(res.system, "open").omega[gap_moving_modes(res.system, "open", 1)[0]])
+    seeded = [_seeded_run(scene, res, P, omega, k) for k in range(SYMMETRY_SEEDS)]
+    thetas = [float(np.random.default_rng(k).uniform(0.0, 2.0 * np.pi)) for k in range(SYMMETRY_SEEDS)]
+    # seed 0 again with the closed form restarted on another grid: another round-off history (as on
+    # another machine); the same break time shows that the seed, not round-off, sets it
+    restarted = _seeded_run(scene, res, P, omega, 0, PIECES + RESTART_OFFSET).t_break
+    return SymmetryData(scene.symmetry.dofs, res.method, points, runs, t_tol, wall, seeded, thetas, restarted)
+
+
+def _round_off_runs(scene: Scene, res, P: np.ndarray, workdir, progress: bool) -> tuple:
+    """(points, runs, t_tol, wall_s) of the runs seeded by round-off alone: the stage's run (read back)
+    and a run of each other method of [symmetry], |x_a - x_b| followed chunk by chunk (and kept in
+    temporary files for the first crossing of each method's own tolerance)."""
     names = scene.model.point_names
-    pair = scene.symmetry.dofs
-    pa, pb = (P[names.index(n)] for n in pair)
+    pa, pb = (P[names.index(n)] for n in scene.symmetry.dofs)
     system, N, fs = res.system, res.n_samples, res.sample_rate_hz
     band = (BREAK_THRESHOLD_M * GROWTH_BAND, BREAK_THRESHOLD_M)
     chunk = default_chunk_samples(system.n)
-    points = plots.Envelope(N, fs, 2)
-    runs: dict[str, tuple[_Asymmetry, float]] = {}
-    with tempfile.TemporaryDirectory(dir=writer.scratch, prefix=".asym-") as tmp:
+    points = Envelope(N, fs, 2)
+    runs: dict[str, tuple[Asymmetry, float]] = {}
+    wall: dict[str, float] = {}
+    with tempfile.TemporaryDirectory(dir=workdir, prefix=".asym-") as tmp:
         files = {}
 
-        def follow(method: str, chunks) -> tuple[_Asymmetry, Path]:
-            a = _Asymmetry(N, fs, BREAK_THRESHOLD_M, band)
+        def follow(method: str, chunks) -> tuple[Asymmetry, Path]:
+            a = Asymmetry(N, fs, BREAK_THRESHOLD_M, band)
             path = Path(tmp) / f"{method}.f8"
             with open(path, "wb") as fh:
                 for c in chunks:
@@ -474,83 +425,41 @@ def symmetry_stage(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndarr
             finally:
                 bar.close()
             runs[other] = (a, stream.tolerance)
-            writer.stats.setdefault("symmetry_wall_s", {})[other] = stream.stats.get("wall_s")
+            wall[other] = stream.stats.get("wall_s")
         t_tol = {m: _first_exceedance(files[m], fs, tol, chunk) for m, (_, tol) in runs.items()}
+    return points, runs, t_tol, wall
 
-    # seeded exact runs, each followed until it breaks
-    omega = float(linear_modes(system, "open").omega[gap_moving_modes(system, "open", 1)[0]])
+
+def _seeded_run(scene: Scene, res, P: np.ndarray, omega: float, k: int, pieces: int = PIECES) -> Asymmetry:
+    """The exact run from the scene's state perturbed by seed k (:func:`_seed_perturbation`), with the
+    closed form restarted on ``pieces`` pieces, followed until it breaks."""
+    names = scene.model.point_names
+    pair = scene.symmetry.dofs
+    pa, pb = (P[names.index(n)] for n in pair)
+    system, N, fs = res.system, res.n_samples, res.sample_rate_hz
     spec = scene.ringdown
     loads = scene_loads(scene, P)
-
-    def seeded_run(k: int, pieces: int = PIECES) -> _Asymmetry:
-        dx, dv = _seed_perturbation(k, names, pair, SYMMETRY_PERTURBATION_M, omega)
-        x0, v0 = scene_initial_state(scene, system, P, dx, dv)
-        stream = stream_exact(system, x0, v0, spec.duration_s, spec.sample_rate_hz, chunks=pieces,
-                              chunk_samples=chunk, **({"loads": loads} if loads is not None else {}))
-        a = _Asymmetry(N, fs, BREAK_THRESHOLD_M, band)
-        try:
-            for c in stream:
-                if a.feed(c.start, c.t, np.abs(c.x @ (pa - pb))):
-                    break
-        finally:
-            stream.close()
-        return a
-
-    seeded, seed_rows = [], []
-    for k in range(SYMMETRY_SEEDS):
-        a = seeded_run(k)
-        seeded.append(a)
-        seed_rows.append({"seed": k, "perturbation_m": text(SYMMETRY_PERTURBATION_M),
-                          "theta_rad": text(float(np.random.default_rng(k).uniform(0.0, 2.0 * np.pi))),
-                          "break_threshold_m": text(BREAK_THRESHOLD_M), "t_break_s": text(a.t_break, 6),
-                          "growth_rate_per_s": text(a.growth_rate, 3)})
-    write_rows(writer.path("symmetry_seeds.csv"), seed_rows)
-    # seed 0 again with the closed form restarted on another grid: another round-off history (as on
-    # another machine); the same break time shows that the seed, not round-off, sets it
-    restarted = seeded_run(0, PIECES + 7).t_break
-
-    rates = _spread([a.growth_rate for a in seeded])
-    breaks = _spread([a.t_break if a.t_break is not None else math.nan for a in seeded])
-    n_broken = sum(a.t_break is not None for a in seeded)
-    rows = [{"case": "seeded", "method": "exact", "perturbation_m": text(SYMMETRY_PERTURBATION_M),
-             "runs": SYMMETRY_SEEDS, "growth_rate_per_s": text(rates[1], 3), "growth_rate_min_per_s": text(rates[0], 3),
-             "growth_rate_max_per_s": text(rates[2], 3), "break_threshold_m": text(BREAK_THRESHOLD_M),
-             "runs_broken": n_broken, "t_break_s": text(breaks[1], 6), "t_break_min_s": text(breaks[0], 6),
-             "t_break_max_s": text(breaks[2], 6), "growth_fit_band_m": f"{band[0]:g} to {band[1]:g}",
-             "t_break_seed0_other_roundoff_s": text(restarted, 6), "tolerance_m": "", "t_exceeds_tolerance_s": "",
-             "reproducible_across_machines": "yes (the spread over seeds is the uncertainty)"}]
-    for method, (a, tol) in runs.items():
-        rows.append({"case": "round-off", "method": method, "perturbation_m": 0, "runs": 1,
-                     "growth_rate_per_s": text(a.growth_rate, 3), "growth_rate_min_per_s": "",
-                     "growth_rate_max_per_s": "", "break_threshold_m": text(BREAK_THRESHOLD_M),
-                     "runs_broken": int(a.t_break is not None), "t_break_s": text(a.t_break, 6), "t_break_min_s": "",
-                     "t_break_max_s": "", "growth_fit_band_m": f"{band[0]:g} to {band[1]:g}",
-                     "t_break_seed0_other_roundoff_s": "", "tolerance_m": text(tol, 2),
-                     "t_exceeds_tolerance_s": text(t_tol[method], 6),
-                     "reproducible_across_machines":
-                         "no: round-off sets the break time and so the phase where the rate is fitted"})
-    write_rows(writer.path("symmetry.csv"), rows)
-    seeds_text = (f"seeded ({SYMMETRY_SEEDS} x {SYMMETRY_PERTURBATION_M:g} m, antisymmetric): growth "
-                  f"{rates[1]:.3g}/s [{rates[0]:.3g}, {rates[2]:.3g}], break at {BREAK_THRESHOLD_M:g} m: "
-                  f"{breaks[1]:.3g} s [{breaks[0]:.3g}, {breaks[2]:.3g}] ({n_broken} of {SYMMETRY_SEEDS} broke)")
-    plots.symmetry_figure(
-        points, pair, res.method,
-        {m: (a.env, tol, a.t_break) for m, (a, tol) in runs.items()}, [a.env for a in seeded], BREAK_THRESHOLD_M,
-        writer.path("symmetry.png"),
-        f"{scene.name}: symmetry breaking of {pair[0]} and {pair[1]}; {seeds_text}; the {TITLE_NOTE}",
-    )
-    writer.stats["symmetry"] = {"seeded": rows[0], "round_off": rows[1:], "seeds": seed_rows}
-    roundoff = ", ".join(f"{m} {text(a.t_break, 4) or 'none'} s" for m, (a, _) in runs.items())
-    print(f"[{scene.name}] symmetry: {seeds_text}; seed 0 with another round-off: {text(restarted, 4)} s; "
-          f"from round-off alone (not reproducible across machines): {roundoff}", flush=True)
+    dx, dv = _seed_perturbation(k, names, pair, SYMMETRY_PERTURBATION_M, omega)
+    x0, v0 = scene_initial_state(scene, system, P, dx, dv)
+    stream = stream_exact(system, x0, v0, spec.duration_s, spec.sample_rate_hz, chunks=pieces,
+                          chunk_samples=default_chunk_samples(system.n),
+                          **({"loads": loads} if loads is not None else {}))
+    a = Asymmetry(N, fs, BREAK_THRESHOLD_M, (BREAK_THRESHOLD_M * GROWTH_BAND, BREAK_THRESHOLD_M))
+    try:
+        for c in stream:
+            if a.feed(c.start, c.t, np.abs(c.x @ (pa - pb))):
+                break
+    finally:
+        stream.close()
+    return a
 
 
 # -- the registry's contract (bearingshaft.registry) -------------------------------------------
 DESCRIPTION = """Integrate the scene's model from its initial state (with its [[load]] forces, if any) by the
 exact, explicit or DOP853 integrator, streamed to disk. Writes ringdown.npz (time, states,
-energies), ringdown.png, with [spectrogram] spectrogram.png and spectrogram.npz (NNM backbones
-overlaid), with [symmetry] symmetry.png and symmetry.csv, a comparison with the exact
-integrator (reference_check.csv) and ringdown.csv of its statistics."""
+energies) and ringdown.png; with [spectrogram] spectrogram.png (NNM backbones overlaid); with
+[symmetry] symmetry.csv, symmetry_seeds.csv and symmetry.png; for a reduced model run by a method
+other than exact, its comparison with the exact integrator: reference.csv and lyapunov.csv."""
 
 
 def estimate(scene: Scene) -> list[Estimate]:
@@ -560,18 +469,3 @@ def estimate(scene: Scene) -> list[Estimate]:
     samples = r.duration_s * r.sample_rate_hz + 1
     return [Estimate("ringdown", est["memory"], f"{samples:.3g} samples streamed to disk in chunks",
                      "[ringdown] duration_s or sample_rate_hz", disk=est["disk"])]
-
-
-@dataclass(frozen=True, eq=False)
-class _Pending:  # transitional (issue 23): the stage computes while it writes, until split
-    scene: Scene
-    progress: bool
-    options: dict
-
-
-def compute(scene: Scene, progress: bool, workdir, method: str | None = None) -> _Pending:
-    return _Pending(scene, progress, {"method": method})
-
-
-def write(result: _Pending, writer: StageWriter) -> None:
-    ringdown_stage(result.scene, writer, result.progress, **result.options)

@@ -7,7 +7,10 @@ report the loads' work int v^T f_ext dt (``external``) beside the dissipated wor
 - :mod:`~reduced.transient.integrate`: :func:`ringdown`, one entry point for the three methods, in
   memory or streamed to disk (``out=``), :func:`ringdown_stream`, and the estimates
   :func:`ringdown_peak_bytes` and :func:`ringdown_disk_bytes`;
-- :mod:`~reduced.transient.exact`: event-driven closed form in each contact state;
+- :mod:`~reduced.transient.stepper`: the one driver of the three methods (each a
+  :class:`~reduced.transient.stepper.Stepper` that supplies its step, with a frozen options dataclass);
+- :mod:`~reduced.transient.exact`: event-driven closed form in each contact state (its tables in
+  :mod:`~reduced.transient.exact_tables`, its numba kernels in ``_modal`` and ``_exact_kernels``);
 - :mod:`~reduced.transient.explicit`: central difference in a numba kernel;
 - :mod:`~reduced.transient.dop853`: SciPy's DOP853, the independent reference;
 - :mod:`~reduced.transient.flow`: the exact flow map and its Jacobian (for shooting);

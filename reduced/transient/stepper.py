@@ -131,7 +131,18 @@ def run(stepper_class: type[Stepper], system: GapSystem, x0, v0, duration_s: flo
 
 
 def stream(stepper: Stepper, chunk_samples: int, progress: Callable[[float], None] | None = None) -> RingdownStream:
-    """The run of ``stepper`` as a :class:`RingdownStream` of blocks of ``chunk_samples`` samples."""
+    """The run of ``stepper`` as a stream of blocks.
+
+    Parameters
+    ----------
+    stepper : a method set up for the run (:class:`Stepper`)
+    chunk_samples : samples a block (the last may be shorter)
+    progress : None or a callable taking the fraction done, called when the stepper reports one
+
+    Returns
+    -------
+    RingdownStream : the samples, computed as the stream is read (once)
+    """
     return RingdownStream(stepper.system, stepper.method, stepper.n_samples, stepper.sample_rate_hz, chunk_samples,
                           _blocks(stepper, chunk_samples, progress), stepper.tolerance, stepper.stats,
                           loads=stepper.loads)

@@ -1,0 +1,131 @@
+"""What the ringdown stage computes (:mod:`bearingshaft.stages.ringdown`) and writes
+(:mod:`bearingshaft.stages.ringdown_files`): its result objects, and the accumulator of a
+symmetric pair's asymmetry that the symmetry study fills while runs stream by."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from bearingshaft.envelopes import Envelope
+from bearingshaft.scenes import Scene
+from reduced.models.gaps import GapSystem
+from reduced.models.loads import Loads
+from reduced.transient.compare import MAX_WINDOWS, LineFit, binned
+from reduced.transient.spectrogram import Spectrogram
+from reduced.transient.store import RingdownFile
+
+COMPARE_WINDOW_S = 0.01  # s, windows of the separation, pointwise maxima and energy means
+REFERENCE_WINDOW_S = 0.05  # s, pointwise comparison window at the start of the run
+LYAPUNOV_DELTA = 1e-9  # relative size of the displacement of the exact runs compared with the exact one (energy norm)
+SYMMETRY_SEEDS = 5  # seeded runs of the symmetry study
+# m, size of their antisymmetric perturbation. Measured on discrete-symmetric: seeds of 1e-12 and
+# 1e-10 m still moved the break by up to 0.48 and 0.07 s when only the exact integrator's restart
+# grid changed (the round-off it injects at ~1e4 contact events competes with them); from 1e-8 m
+# the break time did not move (and rom-symmetric's from 1e-9 m).
+SYMMETRY_PERTURBATION_M = 1e-8
+BREAK_THRESHOLD_M = 1e-6  # m, the symmetry is broken once |x_a - x_b| exceeds this ("visibly")
+GROWTH_BAND = 1e-2  # growth rates are fitted where BREAK_THRESHOLD_M x GROWTH_BAND < |x_a - x_b| < threshold
+
+
+class Asymmetry:
+    """|x_a - x_b| of one run, chunk by chunk: envelope, first exceedances, growth fit in a band.
+
+    Parameters
+    ----------
+    n_samples, fs : the run's samples and their rate [Hz]
+    threshold : m, the run has broken once |x_a - x_b| exceeds it (``t_break``, s)
+    band : m, (low, high): the growth rate is fitted where the windows' maxima lie inside it
+    """
+
+    def __init__(self, n_samples: int, fs: float, threshold: float, band: tuple[float, float]) -> None:
+        self.env = Envelope(n_samples, fs, 1)
+        self.threshold = threshold
+        self.band = band
+        self.t_break = None
+        self.k_break = n_samples  # samples before the break
+        duration = (n_samples - 1) / fs
+        self.per = max(1, int(round(max(COMPARE_WINDOW_S, duration / MAX_WINDOWS) * fs)))  # growth-fit windows
+        self.fs = fs
+        self.wmax = np.zeros(-(-n_samples // self.per))  # max d in each window, up to the break
+
+    def feed(self, start: int, t: np.ndarray, d: np.ndarray) -> bool:
+        """Returns True once the threshold has been crossed."""
+        self.env.add(start, d)
+        if self.t_break is None:
+            over = np.flatnonzero(d > self.threshold)
+            k = int(over[0]) if over.size else d.size
+            if k:
+                b, m = binned(np.maximum, d[:k], start, self.per)
+                self.wmax[b : b + m.size] = np.maximum(self.wmax[b : b + m.size], m)
+            if over.size:
+                self.t_break = float(t[k])
+                self.k_break = start + k
+        return self.t_break is not None
+
+    @property
+    def growth_rate(self) -> float:
+        """1/s, slope of ln (window max of d) over the whole windows inside the band before the break."""
+        m = self.wmax[: self.k_break // self.per]
+        w = np.flatnonzero((m > self.band[0]) & (m < self.band[1]))
+        fit = LineFit()
+        fit.add((w + 0.5) * self.per / self.fs, np.log(m[w]))
+        return fit.slope if fit.n >= 3 else math.nan
+
+
+@dataclass(frozen=True, eq=False)
+class ReferenceComparison:
+    """The run against the exact integrator (:func:`bearingshaft.stages.ringdown.compare_with_exact`).
+
+    ``run`` and each of ``seeds`` are :class:`reduced.transient.compare.Comparison` results (the run,
+    and each displaced exact run, against the exact run); ``lyapunov`` the
+    :class:`reduced.transient.compare.LyapunovEstimate` of each displaced pair; the exact run's
+    statistics and tolerance."""
+
+    run: object
+    seeds: list
+    lyapunov: list
+    exact_stats: dict
+    exact_tolerance: float
+
+
+@dataclass(frozen=True, eq=False)
+class SpectrogramData:
+    """The spectrogram of one point's displacement, with what is drawn over it."""
+
+    point: int  # index of the point (scene.model.point_names)
+    spectrogram: Spectrogram
+    f_open_hz: np.ndarray  # Hz, the open-gap frequencies of the lowest modes that move the gaps
+    curves: dict  # label -> (E [J], f [Hz]): the NNM frequency-energy curves overlaid
+
+
+@dataclass(frozen=True, eq=False)
+class SymmetryData:
+    """The symmetry study (:func:`bearingshaft.stages.ringdown.symmetry_runs`)."""
+
+    pair: tuple[str, str]
+    primary: str  # the stage's method: its run is the one drawn
+    points: Envelope  # the pair's two points over the primary run
+    runs: dict  # method -> (Asymmetry, tolerance [m]) of the round-off runs
+    t_tol: dict  # method -> s, when |x_a - x_b| first exceeds the method's tolerance (None: never)
+    wall_s: dict  # method -> s, wall time of the runs of the other methods
+    seeded: list  # Asymmetry of each seeded exact run
+    thetas: list  # rad, the phase of each seed's perturbation
+    restarted_t_break: float | None  # s, seed 0 again on another restart grid
+
+
+@dataclass(frozen=True, eq=False)
+class RingdownOutcome:
+    """What the ringdown stage computed: the run streamed into ``ringdown.npz`` and its analyses."""
+
+    scene: Scene
+    method: str
+    system: GapSystem
+    P: np.ndarray  # (points, n): the points' displacements from the DOFs
+    run: RingdownFile
+    loads: Loads | None
+    reference: ReferenceComparison | None  # a reduced model not run by the exact method
+    spectrogram: SpectrogramData | None  # [spectrogram]
+    symmetry: SymmetryData | None  # [symmetry]
