@@ -434,6 +434,29 @@ def rom_convergence(
     x0_points and v0_points, not all zero; window_s, sample_rate_hz > 0 with 1 to
     ``MAX_SAMPLES`` samples; n_compare, repeats >= 1; budget_s > 0 (inf allowed).
     """
+    x0_points, v0_points, window_s, sample_rate_hz, n_compare, repeats, budget_s, step_basis = (
+        _rom_convergence_args(roms, full_freq_hz, x0_points, v0_points, window_s, sample_rate_hz, n_compare,
+                              repeats, budget_s, progress, step_basis))
+    counts = sorted(roms)
+    runs, rows = {}, []
+    for i, n in enumerate(counts):
+        rom = roms[n]
+        row, runs[n] = _rom_convergence_row(n, rom, full_freq_hz, x0_points, v0_points, window_s, sample_rate_hz,
+                                            n_compare, repeats, budget_s, step_basis, compile_first=i == 0)
+        rows.append(row)
+        if progress:
+            progress((i + 1) / len(counts))
+    top = runs[counts[-1]][0]
+    for row in rows:
+        row["ringdown_error"] = relative_error(runs[row["n_modes"]][0], top)
+        row["explicit_ringdown_error"] = relative_error(runs[row["n_modes"]][1], top)
+    return rows
+
+
+def _rom_convergence_args(roms, full_freq_hz, x0_points, v0_points, window_s, sample_rate_hz, n_compare, repeats,
+                          budget_s, progress, step_basis) -> tuple:
+    """The arguments of :func:`rom_convergence`, checked (one-line ValueError) and converted:
+    (x0_points, v0_points, window_s, sample_rate_hz, n_compare, repeats, budget_s, step_basis)."""
     func = "rom_convergence"
     if not isinstance(roms, dict) or len(roms) < 2:
         raise _refuse(func, "roms", roms, "must be a dict {n_modes: ReducedModel} with at least two mode counts "
@@ -461,43 +484,40 @@ def rom_convergence(
                        finite=False)
     step_basis = _choice(func, "step_basis", step_basis, STEP_BASES)
     _callable_or_none(func, "progress", progress)
-    counts = sorted(roms)
-    runs, rows = {}, []
-    for i, n in enumerate(counts):
-        rom = roms[n]
-        system = rom.system()
-        x0, v0 = initial_state(rom.M, rom.K, rom.P, x0_points, v0_points)
-        run = lambda method, s=system, x0=x0, v0=v0: ringdown(  # noqa: E731
-            s, x0, v0, window_s, sample_rate_hz, method, step_basis=step_basis)
-        if i == 0:
-            run("exact"), run("explicit")  # compile the kernels before timing
-        t_exact, ref = _best_of(repeats, lambda run=run: run("exact"), budget_s)
-        t_expl, exp = _best_of(repeats, lambda run=run: run("explicit"), budget_s)
-        row = {"n_modes": n, "n_dofs": rom.n}
-        for state in ("open", "closed"):
-            f_r = linear_modes(system, state).freq_hz
-            f = np.asarray(full_freq_hz[state])
-            k = min(n_compare, f_r.size, f.size)
-            err = np.abs(f_r[:k] - f[:k]) / f[:k]
-            row[f"{state}_freq_error"] = float(np.max(err))
-            row[f"{state}_freq_errors"] = " ".join(f"{e:.3g}" for e in err)
-        row.update({
-            "n_freq_compared": k,
-            "build_s": float(rom.info.get("timing_s", {}).get("craig_bampton", float("nan"))),
-            "exact_s": t_exact,
-            "exact_events": ref.stats.get("n_events"),
-            "explicit_s": t_expl,
-            "explicit_steps": exp.stats["n_steps"],
-            "omega_max": exp.stats["omega_max"],
-            "explicit_error": relative_error(exp.x @ rom.P.T, ref.x @ rom.P.T),
-            "energy_J": float(ref.energy[0]),
-        })
-        runs[n] = (ref.x @ rom.P.T, exp.x @ rom.P.T)
-        rows.append(row)
-        if progress:
-            progress((i + 1) / len(counts))
-    top = runs[counts[-1]][0]
-    for row in rows:
-        row["ringdown_error"] = relative_error(runs[row["n_modes"]][0], top)
-        row["explicit_ringdown_error"] = relative_error(runs[row["n_modes"]][1], top)
-    return rows
+    return x0_points, v0_points, window_s, sample_rate_hz, n_compare, repeats, budget_s, step_basis
+
+
+def _rom_convergence_row(n: int, rom: ReducedModel, full_freq_hz: dict, x0_points: np.ndarray,
+                         v0_points: np.ndarray, window_s: float, sample_rate_hz: float, n_compare: int,
+                         repeats: int, budget_s: float, step_basis: str, compile_first: bool
+                         ) -> tuple[dict, tuple[np.ndarray, np.ndarray]]:
+    """One mode count of :func:`rom_convergence`: its row (without the ringdown errors, which need the
+    reference) and the point motion x P^T of its exact and explicit runs."""
+    system = rom.system()
+    x0, v0 = initial_state(rom.M, rom.K, rom.P, x0_points, v0_points)
+    run = lambda method, s=system, x0=x0, v0=v0: ringdown(  # noqa: E731
+        s, x0, v0, window_s, sample_rate_hz, method, step_basis=step_basis)
+    if compile_first:
+        run("exact"), run("explicit")  # compile the kernels before timing
+    t_exact, ref = _best_of(repeats, lambda run=run: run("exact"), budget_s)
+    t_expl, exp = _best_of(repeats, lambda run=run: run("explicit"), budget_s)
+    row = {"n_modes": n, "n_dofs": rom.n}
+    for state in ("open", "closed"):
+        f_r = linear_modes(system, state).freq_hz
+        f = np.asarray(full_freq_hz[state])
+        k = min(n_compare, f_r.size, f.size)
+        err = np.abs(f_r[:k] - f[:k]) / f[:k]
+        row[f"{state}_freq_error"] = float(np.max(err))
+        row[f"{state}_freq_errors"] = " ".join(f"{e:.3g}" for e in err)
+    row.update({
+        "n_freq_compared": k,
+        "build_s": float(rom.info.get("timing_s", {}).get("craig_bampton", float("nan"))),
+        "exact_s": t_exact,
+        "exact_events": ref.stats.get("n_events"),
+        "explicit_s": t_expl,
+        "explicit_steps": exp.stats["n_steps"],
+        "omega_max": exp.stats["omega_max"],
+        "explicit_error": relative_error(exp.x @ rom.P.T, ref.x @ rom.P.T),
+        "energy_J": float(ref.energy[0]),
+    })
+    return row, (ref.x @ rom.P.T, exp.x @ rom.P.T)

@@ -121,7 +121,7 @@ def test_gap_modes_pair_by_mac_and_list_only_what_the_basis_holds(fe):
     # the verify-reduction model (x1, x3 + the first bending mode) has three modes; the full
     # model's higher coupled modes (2029 Hz, ...) must not be paired with its top one (they were,
     # by index, with "errors" of -64 to -95 %)
-    from bearingshaft.stages.reduce import MAC_PAIR, compare_all
+    from bearingshaft.gap_modes import MAC_PAIR, compare_all
 
     spec = RomSpec(n_modes=1)
     rom = build_rom(spec, fe=fe)[0]

@@ -21,7 +21,7 @@ MODES = (1, 2, 5, 10)
 @pytest.fixture(scope="module")
 def reduced_family():
     """({n: ReducedModel} on one mesh, full model's coupled frequencies {state: Hz})."""
-    from bearingshaft.stages.reduce import full_gap_modes
+    from bearingshaft.gap_modes import full_gap_modes
     from fem.model import build_system
 
     fe = build_system(SPEC.fe_model())
