@@ -258,27 +258,128 @@ def _cubic_step(q, d, Q2, d2, Q3):
     return h
 
 
+@nb.njit(cache=True, inline="always")
+def _stop_sums(s, j, K, i0, alam, const, coef, lc, l2c, a0, e, ea):
+    """Stop j at the march's tau (e = e^{lam tau}, ea = |e|): q, the amplitude sum amp, the scale ds of q',
+    and q', q'' (exact), Q2, Q3 (the bounds of the second and third derivatives) over the slow terms
+    (i < i0) and over the fast ones, with the fast terms' slack sum (|c e| - Re(c e)):
+    (q, amp, ds, d_s, d2_s, q2_s, q3_s, slack, d_f, d2_f, q2_f, q3_f)."""
+    q = const[j]
+    ds = 0.0
+    amp = 0.0
+    d_s = 0.0  # slow terms: q', q'' (exact), Q2, Q3
+    d2_s = 0.0
+    q2_s = 0.0
+    q3_s = 0.0
+    slack = 0.0  # fast terms: sum (|c e| - Re(c e)), q', q'', Q2, Q3
+    d_f = 0.0
+    d2_f = 0.0
+    q2_f = 0.0
+    q3_f = 0.0
+    for i in range(K):
+        r = (coef[j, i] * e[i]).real
+        dr = (lc[j, i] * e[i]).real
+        d2r = (l2c[j, i] * e[i]).real
+        a = a0[j, i] * ea[i]
+        al = alam[s, i]
+        a1 = al * a
+        a2 = al * a1
+        q += r
+        ds += a1
+        amp += a
+        if i < i0:
+            d_s += dr
+            d2_s += d2r
+            q2_s += a2
+            q3_s += al * a2
+        else:
+            slack += a - r
+            d_f += dr
+            d2_f += d2r
+            q2_f += a2
+            q3_f += al * a2
+    return q, amp, ds, d_s, d2_s, q2_s, q3_s, slack, d_f, d2_f, q2_f, q3_f
+
+
+@nb.njit(cache=True, inline="always")
+def _root_at(tau, q, d, d2, Q3, qt, dt):
+    """Where the stop crosses, seen from tau (q, q' = d, q'' = d2 and Q3, a bound of the third derivative,
+    q and q' known to qt and dt): tau itself, tau - q / q' or tau + x, x the root of the Taylor quadratic
+    (:func:`_march`); -1 if not decided here."""
+    if q > -qt:
+        # at the threshold a crossing needs q' > 0 beyond its round-off; otherwise it is a
+        # graze, or the round-off of re-expanding the state right after a switch
+        if q > qt and d >= -dt:
+            return tau
+        if d > dt:
+            return tau + max(-q, 0.0) / d
+    elif d > dt:
+        disc = d * d - 2.0 * d2 * q
+        if disc >= 0.0:
+            x = -2.0 * q / (d + math.sqrt(disc))  # q + q' x + q'' x^2 / 2 = 0
+            if Q3 * x * x * x <= qt:  # the cubic remainder is within the round-off band
+                return tau + x
+    return -1.0
+
+
+@nb.njit(cache=True, inline="always")
+def _quadratic_step(j, q, d, d2, Q2, Q3, split, slack, d_s, d2_s, q2_s, q3_s, P):
+    """Stop j's safe step from its quadratic bounds (with the fast terms by their amplitude when
+    ``split``), its sums kept in P[j] for the cubic bounds (:func:`_refine_smallest`)."""
+    h = _step(q, d, Q2)
+    if split and q + slack < 0.0:
+        h = max(h, _step(q + slack, d_s, q2_s))
+    P[j, 0] = q
+    P[j, 1] = d
+    P[j, 2] = d2
+    P[j, 3] = Q2
+    P[j, 4] = Q3
+    P[j, 5] = q + slack if split else 1.0  # > 0: no partition
+    P[j, 6] = d_s
+    P[j, 7] = d2_s
+    P[j, 8] = q2_s
+    P[j, 9] = q3_s
+    P[j, 10] = 0.0  # not refined yet
+    return h
+
+
+@nb.njit(cache=True, inline="always")
+def _refine_smallest(m, live, hnext, P, tau, best, hmin):
+    """Refine the smallest step by the cubic bounds until it is a refined one (or cannot matter)."""
+    while True:
+        jm = -1
+        hm = np.inf
+        for j in range(m):
+            if live[j] and hnext[j] < hm:
+                hm = hnext[j]
+                jm = j
+        if jm < 0 or P[jm, 10] != 0.0 or tau + max(hm, hmin) >= best:
+            return
+        h = max(hm, _cubic_step(P[jm, 0], P[jm, 1], P[jm, 3], P[jm, 2], P[jm, 4]))
+        if P[jm, 5] < 0.0:
+            h = max(h, _cubic_step(P[jm, 5], P[jm, 6], P[jm, 8], P[jm, 7], P[jm, 9]))
+        hnext[jm] = h
+        P[jm, 10] = 1.0
+
+
 @nb.njit(cache=True)
 def _march(s, K, lam, alam, const, coef, lc, l2c, a0, qtol, dnoise, live, n_live, tau_limit, hmin, e, ea, hprev,
            hnext, P):
     """First crossing of any live stop in [0, tau_limit): (tau, j, n_iter), j = -1 if none, j = -2 if the
     march did not end (module docstring).
 
-    At tau, per live stop: the crossing is at tau when q > qtol and q' >= -dtol, at tau - q / q' when
-    |q| <= qtol and q' > dtol (the decisions of :func:`reduced.transient.exact._march_step`), or, when
-    q' > dtol, at tau + x with x the root of q + q' x + q'' x^2 / 2 if Q3 x^3 <= qtol
-    (Q3 = sum |lam|^3 |c e| bounds |q'''|): the Taylor remainder is then within the round-off band, so
-    the root is located as well as by stepping onto it. Otherwise the safe step is the largest of four
-    bounds, each valid for every h in its range: the quadratic one (Q2), the cubic one
-    q + q' h + q2 h^2 / 2 + Q3 h^3 / 6 (q2 = Re sum lam^2 c e exact; :func:`_cubic_step`), and both
-    again with the fast terms bounded by their amplitude. The cubic bounds are worked out only for
-    the stop whose step is the smallest (the others' quadratic steps are already longer), until
-    that stop's step is the smallest of the refined ones. P[j] keeps each stop's sums for that.
-
-    Long because it is the integrator's inner loop (every march iteration of every free segment):
-    one pass over the terms gives each stop's q, q', q'' and the bounds of both partitions, a dozen
-    accumulators that stay in registers in one loop body; split into functions they would be
-    returned as tuples and stored into P on every iteration.
+    At tau, per live stop (:func:`_stop_sums`): the crossing is at tau when q > qtol and q' >= -dtol, at
+    tau - q / q' when |q| <= qtol and q' > dtol (the decisions of
+    :func:`reduced.transient._exact_kernels._march_step`), or, when q' > dtol, at tau + x with x the root
+    of q + q' x + q'' x^2 / 2 if Q3 x^3 <= qtol (Q3 = sum |lam|^3 |c e| bounds the third derivative): the
+    Taylor remainder is then within the round-off band, so the root is located as well as by stepping
+    onto it (:func:`_root_at`). Otherwise the safe step is the largest of four bounds, each valid for
+    every h in its range: the quadratic one (Q2), the cubic one q + q' h + q2 h^2 / 2 + Q3 h^3 / 6
+    (q2 = Re sum lam^2 c e exact; :func:`_cubic_step`), and both again with the fast terms bounded by
+    their amplitude. The cubic bounds are worked out only for the stop whose step is the smallest (the
+    others' quadratic steps are already longer), until that stop's step is the smallest of the refined
+    ones (:func:`_refine_smallest`). P[j] keeps each stop's sums for that. The helpers are inlined
+    (numba ``inline="always"``): the march is still one loop body.
     """
     m = const.shape[0]
     best = tau_limit
@@ -302,60 +403,13 @@ def _march(s, K, lam, alam, const, coef, lc, l2c, a0, qtol, dnoise, live, n_live
             hp = hprev[j]
             while i0 > 0 and alam[s, i0 - 1] * hp > FAST_LT:
                 i0 -= 1
-            q = const[j]
-            ds = 0.0
-            amp = 0.0
-            d_s = 0.0  # slow terms: q', q'' (exact), Q2, Q3
-            d2_s = 0.0
-            q2_s = 0.0
-            q3_s = 0.0
-            slack = 0.0  # fast terms: sum (|c e| - Re(c e)), q', q'', Q2, Q3
-            d_f = 0.0
-            d2_f = 0.0
-            q2_f = 0.0
-            q3_f = 0.0
-            for i in range(K):
-                r = (coef[j, i] * e[i]).real
-                dr = (lc[j, i] * e[i]).real
-                d2r = (l2c[j, i] * e[i]).real
-                a = a0[j, i] * ea[i]
-                al = alam[s, i]
-                a1 = al * a
-                a2 = al * a1
-                q += r
-                ds += a1
-                amp += a
-                if i < i0:
-                    d_s += dr
-                    d2_s += d2r
-                    q2_s += a2
-                    q3_s += al * a2
-                else:
-                    slack += a - r
-                    d_f += dr
-                    d2_f += d2r
-                    q2_f += a2
-                    q3_f += al * a2
+            q, amp, ds, d_s, d2_s, q2_s, q3_s, slack, d_f, d2_f, q2_f, q3_f = _stop_sums(
+                s, j, K, i0, alam, const, coef, lc, l2c, a0, e, ea)
             d = d_s + d_f
             d2 = d2_s + d2_f
-            Q2 = q2_s + q2_f
             Q3 = q3_s + q3_f
             qt = qtol[j]
-            dt = QTOL_REL * ds + dnoise[j]
-            root = -1.0
-            if q > -qt:
-                # at the threshold a crossing needs q' > 0 beyond its round-off; otherwise it is a
-                # graze, or the round-off of re-expanding the state right after a switch
-                if q > qt and d >= -dt:
-                    root = tau
-                elif d > dt:
-                    root = tau + max(-q, 0.0) / d
-            elif d > dt:
-                disc = d * d - 2.0 * d2 * q
-                if disc >= 0.0:
-                    x = -2.0 * q / (d + math.sqrt(disc))  # q + q' x + q'' x^2 / 2 = 0
-                    if Q3 * x * x * x <= qt:  # the cubic remainder is within the round-off band
-                        root = tau + x
+            root = _root_at(tau, q, d, d2, Q3, qt, QTOL_REL * ds + dnoise[j])
             if root >= 0.0:
                 live[j] = False
                 n_live -= 1
@@ -364,38 +418,11 @@ def _march(s, K, lam, alam, const, coef, lc, l2c, a0, qtol, dnoise, live, n_live
                     j_best = j
                 continue
             if const[j] + amp < -qt:
-                h = np.inf  # its amplitude can never bring it to the threshold
+                hnext[j] = np.inf  # its amplitude can never bring it to the threshold
                 P[j, 10] = 1.0
             else:
-                h = _step(q, d, Q2)
-                if i0 < K and q + slack < 0.0:
-                    h = max(h, _step(q + slack, d_s, q2_s))
-                P[j, 0] = q
-                P[j, 1] = d
-                P[j, 2] = d2
-                P[j, 3] = Q2
-                P[j, 4] = Q3
-                P[j, 5] = q + slack if i0 < K else 1.0  # > 0: no partition
-                P[j, 6] = d_s
-                P[j, 7] = d2_s
-                P[j, 8] = q2_s
-                P[j, 9] = q3_s
-                P[j, 10] = 0.0  # not refined yet
-            hnext[j] = h
-        while True:  # refine the smallest step until it is a refined one
-            jm = -1
-            hm = np.inf
-            for j in range(m):
-                if live[j] and hnext[j] < hm:
-                    hm = hnext[j]
-                    jm = j
-            if jm < 0 or P[jm, 10] != 0.0 or tau + max(hm, hmin) >= best:
-                break
-            h = max(hm, _cubic_step(P[jm, 0], P[jm, 1], P[jm, 3], P[jm, 2], P[jm, 4]))
-            if P[jm, 5] < 0.0:
-                h = max(h, _cubic_step(P[jm, 5], P[jm, 6], P[jm, 8], P[jm, 7], P[jm, 9]))
-            hnext[jm] = h
-            P[jm, 10] = 1.0
+                hnext[j] = _quadratic_step(j, q, d, d2, q2_s + q2_f, Q3, i0 < K, slack, d_s, d2_s, q2_s, q3_s, P)
+        _refine_smallest(m, live, hnext, P, tau, best, hmin)
         h_all = np.inf
         for j in range(m):
             if live[j]:
