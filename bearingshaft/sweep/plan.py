@@ -174,7 +174,17 @@ def apply_values(scene: Scene, data: dict, values, where: str) -> dict:
 
 
 def base_value(scene: Scene, key: str):
-    """The value the scene itself gives ``key`` (its TOML, else the default), None if it has none."""
+    """The value the scene itself gives a key (the sweep's figures mark it).
+
+    Parameters
+    ----------
+    scene : the base scene
+    key : TABLE.KEY, TABLE.KEY[i] or load[i].KEY
+
+    Returns
+    -------
+    Its value in the scene's TOML, else the default; None if the scene has none.
+    """
     m = KEY_PATTERN.match(key)
     if m is None:
         return None
@@ -203,7 +213,16 @@ def _reduction_key(model) -> str:
 
 
 def case_stages(scene: Scene) -> tuple[str, ...]:
-    """The stages a case runs: the scene's, less ``reduce`` (the reduction is built once per sweep)."""
+    """The stages a case runs.
+
+    Parameters
+    ----------
+    scene : the case's (or the base) scene
+
+    Returns
+    -------
+    The scene's stages in pipeline order, less ``reduce`` (the reduction is built once per sweep).
+    """
     return tuple(s for s in stages_of(scene) if s != "reduce")
 
 

@@ -152,7 +152,12 @@ def run_case(case: Case, out_root: str, rom=None) -> dict:
 
 # -- the cluster -------------------------------------------------------------------------------
 def local_cores() -> int:
-    """The cores this process may run on (its affinity), else the machine's."""
+    """The cores this process may run on.
+
+    Returns
+    -------
+    The size of its CPU affinity set, else the machine's core count (the default number of workers).
+    """
     try:
         return len(os.sched_getaffinity(0))
     except AttributeError:
