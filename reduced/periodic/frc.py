@@ -244,16 +244,7 @@ def frc(
     if N is not None:
         N = _check.integer("N", N, lo=2 * H + 1)
     phase_deg = _check.number("phase_deg", phase_deg)
-    if point_rows is None:
-        rows = np.eye(system.n)
-        names = tuple(point_names or system.dof_names)
-    else:
-        rows = np.atleast_2d(_check.series("point_rows", point_rows, ndim=2))
-        if rows.shape[1] != system.n:
-            raise _check.InvalidArgument(f"point_rows must have {system.n} columns, got shape {rows.shape}")
-        names = tuple(point_names) if point_names is not None else tuple(f"p{j + 1}" for j in range(rows.shape[0]))
-    if len(names) != rows.shape[0]:
-        raise _check.InvalidArgument(f"point_names must name {rows.shape[0]} points, got {len(names)}")
+    rows, names = _output_points(system, point_rows, point_names)
     if x_ref is not None:
         x_ref = _check.positive("x_ref", x_ref, "m")
     if continuation is not None and not isinstance(continuation, ContinuationOptions):
@@ -272,6 +263,22 @@ def frc(
     with single_thread_blas(), warnings.catch_warnings():
         warnings.simplefilter("ignore")  # LinAlgWarning from LU on rejected steps
         return _frc(fb, f0, f1, rows, names, x_ref, step_control, stability, hill_points, progress)
+
+
+def _output_points(system: GapSystem, point_rows, point_names) -> tuple[np.ndarray, tuple[str, ...]]:
+    """(rows (p, n), names) of the output points: the DOFs by default; refused in one line if they
+    do not fit the system."""
+    if point_rows is None:
+        rows = np.eye(system.n)
+        names = tuple(point_names or system.dof_names)
+    else:
+        rows = np.atleast_2d(_check.series("point_rows", point_rows, ndim=2))
+        if rows.shape[1] != system.n:
+            raise _check.InvalidArgument(f"point_rows must have {system.n} columns, got shape {rows.shape}")
+        names = tuple(point_names) if point_names is not None else tuple(f"p{j + 1}" for j in range(rows.shape[0]))
+    if len(names) != rows.shape[0]:
+        raise _check.InvalidArgument(f"point_names must name {rows.shape[0]} points, got {len(names)}")
+    return rows, names
 
 
 def linear_frf(system: GapSystem, load: np.ndarray, amplitude_N: float, freq_hz: np.ndarray,
