@@ -7,7 +7,7 @@
   model's parameters: no mesh, no seats, no RBE3 patches.
 - :func:`rigid_body_hz`: the six pseudo-rigid modes of a 3-D system as the 6x6 Rayleigh-Ritz
   problem (Phi_rb^T K Phi_rb) q = omega^2 (Phi_rb^T M Phi_rb) q on its rigid-body modes about
-  the centre (REFERENCES.md, "Rigid body on springs"), each labelled by its dominant rigid motion.
+  the centre (Rayleigh-Ritz on the rigid-body modes), each labelled by its dominant rigid motion.
 """
 
 from __future__ import annotations

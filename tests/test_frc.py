@@ -266,7 +266,8 @@ def test_stepped_sine_of_a_linear_system_is_the_frf():
 
 
 def test_stepped_sine_reports_the_unsettled_symmetric_contact():
-    # REFERENCES: at 1 N near 17-20 Hz the symmetric orbit is unstable once the tips touch
+    # at 1 N near 17-20 Hz the symmetric orbit is unstable once the tips touch (shown by shooting in
+    # tests/test_frc_contact.py: |mu| = 720 at 17 Hz)
     ss = stepped_sine(P.system(), B2, 1.0, [14.0, 16.0, 17.5, 19.0], settle_tol=1e-6, max_settle_s=10.0)
     assert ss.response[:2] == ["periodic", "periodic"]
     assert ss.response[3] == "not_settled" and ss.asymmetry[3] > 0.05
@@ -355,8 +356,8 @@ def test_frc_stage_writes_its_files_and_reruns_byte_for_byte(tmp_path, monkeypat
     ss = [r for r in sweep if r["rel_err_hb"] and r["response"] == "periodic"]
     assert ss and max(float(r["rel_err_hb"]) for r in ss) < 1e-5
     # Contact. At 1 N the tips close from 16.9 Hz up, and there the curve's orbit (symmetric, x1 = x3)
-    # is unstable at every frequency sampled (shooting, 17-47 Hz: |mu| from 1.6 to 1.2e3; REFERENCES.md,
-    # "Forced 3-DOF model: what is known to be hard"), so a sweep cannot settle on it and no stepped-sine
+    # is unstable at every frequency sampled (shooting, 17-47 Hz: |mu| from 1.6 to 1.2e3;
+    # tests/test_frc_contact.py shoots it at 17 and 21 Hz), so a sweep cannot settle on it and no stepped-sine
     # point in contact can be compared with this curve: every compared point is below the gap. What the
     # stage can show in contact it must show: the sweeps reach contact (17.1 and 20 Hz here), report
     # there a response that left the symmetric orbit (not settled, x1 != x3), and the stage's own

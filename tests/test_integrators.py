@@ -58,7 +58,7 @@ def test_exact_sdnd101_closed_form():
     force = sys.stop_force(res.x)[:, 0]
     first = res.t < 0.05
     i_peak = np.argmax(force * first)
-    assert force[i_peak] == pytest.approx(9950.37, abs=0.01)  # REFERENCES: 9950.37 N at 0.015630 s
+    assert force[i_peak] == pytest.approx(9950.37, abs=0.01)  # code_aster SDND101: 9950.37 N at 0.015630 s
     assert res.t[i_peak] == pytest.approx(0.015630, abs=1e-5)
     impulse = np.trapezoid(force[first], res.t[first])
     assert impulse == pytest.approx(198.02, abs=0.01)  # N s
@@ -206,7 +206,8 @@ def test_central_difference_diverges_just_above_2_over_omega_max_with_the_gaps_c
 
 
 def test_central_difference_damped_limit_is_2_over_omega_for_this_scheme(monkeypatch):
-    # A 1-DOF oscillator with xi = 0.3. REFERENCES.md gives dt <= (2/omega)(sqrt(1 + xi^2) - xi) = 1.488/omega
+    # A 1-DOF oscillator with xi = 0.3. Belytschko, Liu & Moran (Nonlinear Finite Elements for Continua and
+    # Structures, 2000, Sec. 6.2) give dt <= (2/omega)(sqrt(1 + xi^2) - xi) = 1.488/omega
     # for central difference with damping; that bound belongs to the variant with the damping force at the
     # lagged velocity v_{n-1/2}. The kernel here takes it at (v_{n-1/2} + v_{n+1/2}) / 2 (G = (M + dt/2 C)^-1,
     # Newmark gamma = 1/2, beta = 0), whose recurrence (1 + xi W) z^2 - (2 - W^2) z + (1 - xi W) = 0 is stable
@@ -219,7 +220,7 @@ def test_central_difference_damped_limit_is_2_over_omega_for_this_scheme(monkeyp
                     k=np.zeros(1), offset=np.ones(1), side=np.ones(1), tip=np.zeros(1, int), dof_names=("x",),
                     stop_names=("never",))  # no contact: a linear oscillator
     _, dt_crit = stability_limit(sys)
-    assert omega * dt_crit == pytest.approx(2 * (math.sqrt(1 + xi**2) - xi), rel=1e-12)  # REFERENCES' formula
+    assert omega * dt_crit == pytest.approx(2 * (math.sqrt(1 + xi**2) - xi), rel=1e-12)  # the damped textbook bound
     for W in (1.9, 1.99, 2.02):
         x = _cd_unchecked(monkeypatch, sys, np.array([1e-3]), W / omega, 400)[:, 0]
         ref = _cd_closed_form(W, xi, 1e-3, 400)
