@@ -134,8 +134,10 @@ def timoshenko_free_free_hz(E: float, nu: float, rho: float, length: float, A: f
     (:func:`timoshenko_frequency_function`, even and odd modes) are bracketed on a log-spaced scan
     starting at a twentieth of the first Euler-Bernoulli frequency (shear and rotary inertia only
     lower the frequencies) and refined by Brent's method. ``k_shear`` defaults to Cowper's
-    coefficient of a rectangle. For the bar of REFERENCES.md (0.2 m, 20 x 20 mm, E = 210 GPa,
-    nu = 0.3) this gives 2568.1 Hz against Euler-Bernoulli's 2658.3 Hz.
+    coefficient of a rectangle (Cowper 1966). For a free-free steel bar 0.2 m long, 20 x 20 mm,
+    E = 210 GPa, nu = 0.3, rho = 7850 kg/m^3 this gives 2568.1 Hz against Euler-Bernoulli's
+    2658.3 Hz (beta_1 l = 4.730041: R. D. Blevins, *Formulas for Natural Frequency and Mode
+    Shape* (1979), free-free beam).
     """
     k = cowper_shear_coefficient(nu) if k_shear is None else k_shear
     G = E / (2 * (1 + nu))

@@ -73,10 +73,15 @@ def calibrate(model: AssemblyModel, evaluate: Callable[[AssemblyModel], np.ndarr
     lo = np.log([parameters[n][0] for n in names])
     hi = np.log([parameters[n][1] for n in names])
     x0 = np.clip(np.log(p0), lo + 1e-9, hi - 1e-9)
+    # unknowns y = ln(p / p0): SciPy's finite-difference step is diff_step max(1, |y|), so about
+    # diff_step relative in every parameter near the start (on ln p itself it grew with |ln p|:
+    # 28 % for a stiffness of 1e6)
+    x_ref = x0.copy()
     history: list = []
     cache: dict = {}
 
-    def freq(x):
+    def freq(y):
+        x = x_ref + y
         key = tuple(np.round(x, 12))
         if key not in cache:
             m = dataclasses.replace(model, **{n: float(v) for n, v in zip(names, np.exp(x), strict=True)})
@@ -93,11 +98,11 @@ def calibrate(model: AssemblyModel, evaluate: Callable[[AssemblyModel], np.ndarr
         return cache[key]
 
     t0 = time.perf_counter()
-    sol = least_squares(lambda x: freq(x) / test - 1.0, x0, bounds=(lo, hi), method="trf",
-                        jac="2-point", diff_step=diff_step, max_nfev=max_nfev, x_scale=1.0)
+    sol = least_squares(lambda y: freq(y) / test - 1.0, np.zeros_like(x0), bounds=(lo - x_ref, hi - x_ref),
+                        method="trf", jac="2-point", diff_step=diff_step, max_nfev=max_nfev, x_scale=1.0)
     f = freq(sol.x)
-    S = sol.jac * (test / f)[:, None]  # d ln f / d ln p from d r / d ln p
-    fitted = np.exp(sol.x)
+    S = sol.jac * (test / f)[:, None]  # d ln f / d ln p from d r / d ln p (= d r / d y)
+    fitted = np.exp(x_ref + sol.x)
     best = dataclasses.replace(model, **{n: float(v) for n, v in zip(names, fitted, strict=True)})
     return CalibrationResult(model=best, names=names, initial=p0, fitted=fitted, freq_hz=f, test_hz=test,
                              sensitivity=S, n_evaluations=len(history), status=sol.status,

@@ -12,6 +12,13 @@ that is not the SI unit of its quantity (an acceleration in g, a force in kN).
 
 Direction codes are UFF's: 1, 2, 3 for +X, +Y, +Z, negative for the opposite sense, 0 for
 a scalar.
+
+The layout is SDRC's Universal Dataset Number 58, "Function at Nodal DOF" (I-DEAS "Universal
+File Datasets Summary"; text at UC-SDRL, https://www.ceas3.uc.edu/sdrluff/files/58.asc) and
+UC-SDRL's binary 58b; ``tests/test_uff_spec.py`` compares the writer's records field by field
+with one written by hand from it. Record 7 keeps the abscissa minimum and increment as E13.5,
+6 significant digits (exact for 20 kHz, dt = 5e-5 s; 51.2 kHz's 1.953125e-5 s is written
+1.95313e-05, 2.6e-6 long).
 """
 
 from __future__ import annotations
@@ -77,6 +84,13 @@ class TimeHistory:
         return self.t0_s + np.arange(self.data.size) * self.dt_s
 
 
+def _name10(name: str) -> str:
+    """Record 6's entity name, Format 10A1: the first 10 characters from column 1, blank-padded
+    (as Fortran stores a CHARACTER*10; pyuff's %10s would right-justify a shorter one), "NONE"
+    if unused."""
+    return (name[:10] or "NONE").ljust(10)
+
+
 def write_uff58(path: str | Path, channels, *, binary: bool = True, model: str = "bearingshaft") -> None:
     """Write ``channels`` (TimeHistory) to ``path`` as dataset 58 records (replacing the file)."""
     import pyuff
@@ -89,8 +103,8 @@ def write_uff58(path: str | Path, channels, *, binary: bool = True, model: str =
         code, unit, len_exp, force_exp = QUANTITIES[ch.quantity]
         sets.append(pyuff.prepare_58(
             binary=1 if binary else 0, id1=ch.name, id2=model, id3="NONE", id4="NONE", id5="NONE",
-            func_type=TIME_RESPONSE, ver_num=0, load_case_id=0, rsp_ent_name=ch.name[:10] or "NONE",
-            rsp_node=int(ch.node), rsp_dir=int(ch.direction), ref_ent_name="NONE", ref_node=0, ref_dir=0,
+            func_type=TIME_RESPONSE, ver_num=0, load_case_id=0, rsp_ent_name=_name10(ch.name),
+            rsp_node=int(ch.node), rsp_dir=int(ch.direction), ref_ent_name=_name10(""), ref_node=0, ref_dir=0,
             ord_data_type=4, num_pts=int(ch.data.size), abscissa_spacing=1, abscissa_min=float(ch.t0_s),
             abscissa_inc=float(ch.dt_s), z_axis_value=0.0, abscissa_spec_data_type=TIME_DATA_TYPE,
             abscissa_len_unit_exp=0, abscissa_force_unit_exp=0, abscissa_temp_unit_exp=0,

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from reduced.models.discrete import DiscreteParams
+from reduced.models.modes import linear_modes
 from reduced.periodic.backbones import nnm_branch
 from reduced.periodic.continuation import continue_branch
 
@@ -84,12 +85,43 @@ def test_nnm1_tongues_are_reported_not_jumped():
         assert np.all(np.abs(np.diff(np.log(f))) < 0.3)
 
 
+def _crosses_its_tongues(H: int) -> None:
+    """Every NNM continued with H harmonics to >= 1e5 J; NNM 1 crosses each k:1 tongue on the way
+    by stepping over it (or following it round), none stopped.
+
+    Independent reference for where the tongues are: a k:1 internal resonance of NNM 1 with
+    NNM 3 needs k f_1 = f_3, and the frequency of a motion in NNM 3 lies between its open- and
+    closed-gap linear frequencies (699.9 and 1302.7 Hz: the piecewise-linear stiffness is
+    bounded by the two states'), so each tongue's k f_1 must fall in that range. NNM 1's orbit
+    is symmetric (half a period later it is mirrored: x(t + T/2) = -x(t)), so only odd harmonics
+    are excited: the tongues are at odd k from 3 to H, met in falling k as the energy rises (k f_1
+    = f_3 at a higher f_1 for a smaller k); f_1 rises from 18.0 to 451.1 Hz (open and closed),
+    so 3 f_1 and 5 f_1 certainly sweep past 700 Hz. High-k tongues are narrow and may never raise
+    a harmonic above the fundamental (H = 15 reports none at 13 and 15). Measured, H = 15:
+    k f_1 = 743, 756, 763, 804, 894 Hz for k = 11, 9, 7, 5, 3.
+    """
+    f_open, f_closed = linear_modes(SYS, "open").freq_hz, linear_modes(SYS, "closed").freq_hz
+    for mode in range(3):
+        b = nnm_branch(SYS, mode, H=H, energy_max_J=1e5)
+        assert b.status == "stop" and b.energy_J[-1] >= 1e5, (mode, b.status, b.energy_J[-1])
+        assert all(t["action"] in ("stepped over", "followed") for t in b.tongues), (mode, b.tongues)
+        if mode != 0:
+            continue
+        ks = [t["harmonic"] for t in b.tongues]
+        assert ks == sorted(ks, reverse=True) and all(k % 2 == 1 for k in ks), ks
+        assert {3, 5} <= set(ks) <= set(range(3, H + 1, 2)), ks
+        for t in b.tongues:
+            assert f_open[2] < t["harmonic"] * t["freq_hz"] < f_closed[2], t
+        assert np.all(np.diff([t["energy_J"] for t in b.tongues]) > 0)
+
+
+def test_branches_cross_the_tongues_to_1e5_joules_with_7_harmonics():
+    """Fast variant of the H = 15 study below: with H = 7 NNM 1 meets its 7:1, 5:1 and 3:1
+    tongues (measured k f_1 = 757, 815, 898 Hz) and crosses every one (3 s)."""
+    _crosses_its_tongues(7)
+
+
 @pytest.mark.slow
 def test_converged_branches_reach_1e5_joules():
     # H = 15: every NNM to >= 1e5 J; NNM 1 crosses its 11:1 ... 3:1 tongues by stepping over
-    for mode in range(3):
-        b = nnm_branch(SYS, mode, H=15, energy_max_J=1e5)
-        assert b.status == "stop" and b.energy_J[-1] >= 1e5
-        assert all(t["action"] in ("stepped over", "followed") for t in b.tongues)
-        if mode == 0:
-            assert {t["harmonic"] for t in b.tongues} >= {3, 5}
+    _crosses_its_tongues(15)

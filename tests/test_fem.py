@@ -47,7 +47,8 @@ def bar_hex20():
 
 
 def test_free_free_bar_first_bending_matches_timoshenko(bar_hex20):
-    # REFERENCES.md: Timoshenko (Cowper shear factor) 2568.1 Hz, Euler-Bernoulli 2658.3 Hz.
+    # Timoshenko beam theory with Cowper's shear coefficient 10(1+nu)/(12+11 nu) (Cowper 1966, J. Appl.
+    # Mech. 33:335): 2568.1 Hz; Euler-Bernoulli 2658.3 Hz (both from fem.beam_theory, tested below).
     # The 3-D solid differs from Timoshenko beam theory by its cross-section warping and
     # Poisson coupling, a few tenths of a percent at l/h = 10; the mesh (20 x 4 x 2
     # serendipity hexahedra) adds < 0.1 %. 0.5 % separates this cleanly from Euler-Bernoulli (+3.5 %).
@@ -70,7 +71,8 @@ def test_linear_hexahedra_lock_in_bending(bar_hex20):
 
 # -- the impact beam, free-free, against beam theory (fem.beam_theory) ----------------------
 def test_euler_bernoulli_roots_are_the_tabulated_ones():
-    # REFERENCES.md: free-free beta_n L = 4.730041, 7.853205, 10.995608, 14.137165 (6 decimals)
+    # Blevins, Formulas for Natural Frequency and Mode Shape (1979), Table 8-1: free-free beta_n L =
+    # 4.730041, 7.853205, 10.995608, 14.137165 (6 decimals)
     np.testing.assert_allclose(euler_bernoulli_roots(4), [4.730041, 7.853205, 10.995608, 14.137165], atol=1e-6)
     x = euler_bernoulli_roots(8)
     assert np.all(np.abs(np.cos(x) - 1.0 / np.cosh(x)) < 1e-14)  # the equation as solved (cos cosh ~ 1e11)
@@ -79,7 +81,7 @@ def test_euler_bernoulli_roots_are_the_tabulated_ones():
 
 
 def test_timoshenko_frequency_equation_gives_the_reference_bar():
-    # REFERENCES.md: free-free steel bar 0.2 m, 20 x 20 mm, E = 210 GPa, nu = 0.3, Cowper's
+    # Free-free steel bar 0.2 m, 20 x 20 mm, E = 210 GPa, nu = 0.3, Cowper's (1966)
     # coefficient: Timoshenko 2568.1 Hz, Euler-Bernoulli 2658.3 Hz (quoted to 0.05 Hz)
     A, I = 0.02 * 0.02, 0.02**4 / 12
     f_t = timoshenko_free_free_hz(210e9, 0.3, 7850.0, 0.2, A, I, n_modes=4)
@@ -276,7 +278,7 @@ def test_rigid_mass_properties_of_the_beam(free_beam):
 
 def test_rigid_body_on_springs_matches_the_6x6_problem():
     # the beam on its grounded springs: the six lowest modes against the 6x6 problem
-    # (Phi^T K Phi) q = omega^2 (Phi^T M Phi) q of its rigid-body modes (REFERENCES.md).
+    # (Phi^T K Phi) q = omega^2 (Phi^T M Phi) q of its rigid-body modes (Rayleigh-Ritz on the six rigid-body modes).
     # Rayleigh-Ritz makes the 6x6 values upper bounds; the beam's own flexibility lowers
     # the FE values by ~(f / f_elastic)^2 x coupling, measured 1.6e-4 at most here (a beam
     # made 100 times stiffer agrees to the 1e-5 noise of the solves, condition ~1e12)

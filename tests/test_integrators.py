@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.linalg import eigh as scipy_eigh
 
 from reduced.models.discrete import DiscreteParams
 from reduced.models.gaps import GapSystem
@@ -57,7 +58,7 @@ def test_exact_sdnd101_closed_form():
     force = sys.stop_force(res.x)[:, 0]
     first = res.t < 0.05
     i_peak = np.argmax(force * first)
-    assert force[i_peak] == pytest.approx(9950.37, abs=0.01)  # REFERENCES: 9950.37 N at 0.015630 s
+    assert force[i_peak] == pytest.approx(9950.37, abs=0.01)  # code_aster SDND101: 9950.37 N at 0.015630 s
     assert res.t[i_peak] == pytest.approx(0.015630, abs=1e-5)
     impulse = np.trapezoid(force[first], res.t[first])
     assert impulse == pytest.approx(198.02, abs=0.01)  # N s
@@ -128,6 +129,104 @@ def test_explicit_refuses_unstable_step():
     with pytest.raises(StepTooLargeError, match="exceeds the stable step"):
         ringdown(sys, *IMPULSE, 0.01, 20000.0, "explicit", dt=0.9 * dt_crit)
     ringdown(sys, *IMPULSE, 0.01, 20000.0, "explicit", dt=0.5 * dt_crit)  # accepted
+
+
+def _cd_unchecked(monkeypatch, system: GapSystem, x0: np.ndarray, dt: float, n_steps: int) -> np.ndarray:
+    """x at every step of the explicit integrator's central difference with step dt, its stability
+    refusal bypassed (stability_limit patched to allow any step); the production kernel runs as is."""
+    import reduced.transient.explicit as explicit
+
+    monkeypatch.setattr(explicit, "stability_limit", lambda s: (1.0, math.inf))
+    # one sample a step: sample_rate_hz = 1/dt makes the run take exactly dt
+    res = ringdown(system, x0, np.zeros(system.n), n_steps * dt, 1.0 / dt, "explicit", dt=dt)
+    assert res.stats["dt"] == pytest.approx(dt, rel=1e-12) and res.stats["n_steps"] == n_steps
+    return res.x
+
+
+def _cd_growth_per_step(omega_dt: float, xi: float = 0.0) -> float:
+    """ln |z|max of central difference on one mode: (1 + xi W) z^2 - (2 - W^2) z + (1 - xi W) = 0, W = omega dt
+    (M (x+ - 2x + x-)/dt^2 + C (x+ - x-)/(2 dt) + K x = 0, the scheme of explicit._cd_kernel)."""
+    W = omega_dt
+    return float(np.log(np.abs(np.roots([1 + xi * W, -(2 - W * W), 1 - xi * W])).max()))
+
+
+def _cd_closed_form(omega_dt: float, xi: float, x0: float, n_steps: int) -> np.ndarray:
+    """x_0 .. x_n of central difference on one mode from rest, in closed form: x_n = c1 z1^n + c2 z2^n with
+    z the roots of (1 + xi W) z^2 - (2 - W^2) z + (1 - xi W) = 0, W = omega dt (the recurrence
+    M (x+ - 2x + x-)/dt^2 + C (x+ - x-)/(2 dt) + K x = 0 of explicit._cd_kernel) and x_1 = x0 (1 - W^2/2)
+    (its start: v_{1/2} = v0 + dt/2 a0)."""
+    W = omega_dt
+    z = np.roots([1 + xi * W, -(2 - W * W), 1 - xi * W]).astype(complex)
+    c = np.linalg.solve(np.array([[1.0, 1.0], z]), np.array([x0, x0 * (1 - W * W / 2)]))
+    n = np.arange(n_steps + 1)
+    return (c[0] * z[0] ** n + c[1] * z[1] ** n).real
+
+
+@pytest.mark.parametrize("c", [0.0, 4.0])
+def test_central_difference_diverges_just_above_2_over_omega_max_with_the_gaps_closed(monkeypatch, c):
+    # The 3-DOF model with the stops of x1 and x3 held closed (offset -1 mm: a preload keeps each in
+    # contact, penetration 4.6e-7 m at equilibrium), so the system is linear in its stiffest state,
+    # omega_max = 8184.87 rad/s, and the kernel runs its contact terms. From the equilibrium plus some of
+    # the top closed-gap mode (every stop checked closed at every step):
+    # - dt = 1.01 x 2/omega_max, from 1e-12 m: |x - x_eq| grows each step by the closed-form root of the CD recurrence,
+    #   ln|z| = 0.2826 (undamped; 0.2818 with c = 4, top-mode xi = 3.8e-4), 1e-12 to 4e-8 m in 40 steps.
+    #   Measured over steps 20-40 (the other root, |z2/z1|^20 ~ 1e-5, nearly gone): 2.2e-6 from the closed
+    #   form; 1e-4 allowed (c = 4 couples the modes slightly: C is not proportional to M);
+    # - dt = 0.99 x 2/omega_max, from 1e-9 m of the top mode: bounded over 20,000 steps. Undamped, CD's
+    #   discrete solution of one mode from rest is x0 cos(n theta), cos theta = 1 - (omega dt)^2 / 2, so
+    #   |x - x_eq| never exceeds its start but by round-off (x_eq is solved to ~1e-15 m, cond(K) ~ 5e3:
+    #   measured 1 + 1.3e-8 of the start); with c = 4 it decays. 1e-6 allowed.
+    s = DiscreteParams(c=c).system()
+    held = s.side > 0
+    sys = GapSystem(M=s.M, C=s.C, K=s.K, B=s.B[held], k=s.k[held], offset=np.full(held.sum(), -1e-3),
+                    side=s.side[held], tip=s.tip[held], dof_names=s.dof_names,
+                    stop_names=tuple(np.array(s.stop_names)[held]))
+    Kc = sys.closed_stiffness()
+    assert np.allclose(Kc, s.closed_stiffness(), rtol=1e-15)  # the discrete model's stiffest state
+    lam, phi = scipy_eigh(Kc, sys.M)
+    omega = math.sqrt(lam[-1])
+    assert omega == pytest.approx(8184.87, rel=1e-5)
+    xi = float(phi[:, -1] @ sys.C @ phi[:, -1]) / (2 * omega)
+    x_eq = np.linalg.solve(Kc, sys.B.T @ (sys.k * sys.offset))  # K x + B^T k (B x - offset) = 0
+    top = phi[:, -1] / np.abs(phi[:, -1]).max()
+
+    def run(dt, n_steps, size):
+        x = _cd_unchecked(monkeypatch, sys, x_eq + size * top, dt, n_steps)
+        assert np.all(sys.side * (x @ sys.B.T - sys.offset) > 0), "a stop opened: no longer linear"
+        return np.abs(x - x_eq).max(axis=1)
+
+    dt = 1.01 * 2.0 / omega
+    d = run(dt, 40, 1e-12)
+    rate = np.log(d[40] / d[20]) / 20
+    assert rate == pytest.approx(_cd_growth_per_step(omega * dt, xi), rel=1e-4)
+    assert d[-1] > 1e4 * d[0]
+
+    d = run(0.99 * 2.0 / omega, 20_000, 1e-9)
+    assert d.max() <= (1 + 1e-6) * d[0], d.max() / d[0]
+
+
+def test_central_difference_damped_limit_is_2_over_omega_for_this_scheme(monkeypatch):
+    # A 1-DOF oscillator with xi = 0.3. Belytschko, Liu & Moran (Nonlinear Finite Elements for Continua and
+    # Structures, 2000, Sec. 6.2) give dt <= (2/omega)(sqrt(1 + xi^2) - xi) = 1.488/omega
+    # for central difference with damping; that bound belongs to the variant with the damping force at the
+    # lagged velocity v_{n-1/2}. The kernel here takes it at (v_{n-1/2} + v_{n+1/2}) / 2 (G = (M + dt/2 C)^-1,
+    # Newmark gamma = 1/2, beta = 0), whose recurrence (1 + xi W) z^2 - (2 - W^2) z + (1 - xi W) = 0 is stable
+    # for W = omega dt < 2 whatever xi (Schur-Cohn: |2 - W^2| < 2). So stability_limit's damped dt_crit is
+    # conservative for this kernel (the refusal errs on the safe side), and the limit is 2/omega: at
+    # W = 1.9 and 1.99 (above 1.488) the response decays, at W = 2.02 it grows, as the closed form
+    # x_n = c1 z1^n + c2 z2^n says, sample by sample (measured: 2.8e-12 of the envelope r^n |x0| at most; 1e-9 allowed).
+    omega, xi = 1e3, 0.3
+    sys = GapSystem(M=np.eye(1), C=np.array([[2 * xi * omega]]), K=np.array([[omega**2]]), B=np.eye(1),
+                    k=np.zeros(1), offset=np.ones(1), side=np.ones(1), tip=np.zeros(1, int), dof_names=("x",),
+                    stop_names=("never",))  # no contact: a linear oscillator
+    _, dt_crit = stability_limit(sys)
+    assert omega * dt_crit == pytest.approx(2 * (math.sqrt(1 + xi**2) - xi), rel=1e-12)  # the damped textbook bound
+    for W in (1.9, 1.99, 2.02):
+        x = _cd_unchecked(monkeypatch, sys, np.array([1e-3]), W / omega, 400)[:, 0]
+        ref = _cd_closed_form(W, xi, 1e-3, 400)
+        envelope = 1e-3 * np.exp(_cd_growth_per_step(W, xi) * np.arange(401))
+        assert np.max(np.abs(x - ref) / envelope) < 1e-9, (W, np.max(np.abs(x - ref) / envelope))
+        assert (envelope[-1] > 1e3 * envelope[0]) == (W > 2.0), W  # grows only past 2/omega
 
 
 @pytest.mark.parametrize("method", ["exact", "explicit", "dop853"])
@@ -287,7 +386,8 @@ def test_lyapunov_exponent_of_a_linear_system_is_its_decay_rate(c, method):
 def test_lyapunov_exponent_on_an_unstable_periodic_orbit_is_its_floquet_exponent():
     # NNM 2 of the undamped model at 2.6 J: the antisymmetric orbit x(0) = [a, 0, -a] is periodic
     # (its period in closed form, reduced.periodic.nnm2) and unstable; the monodromy matrix of
-    # the exact flow gives its largest multiplier, ln|mu| / T = 400 /s, independently of two runs
+    # the exact flow gives its largest multiplier, ln|mu| / T = 400 /s, checked against finite
+    # differences of DOP853 and against the divergence of two nearby runs
     from scipy.optimize import brentq
 
     from reduced.periodic import nnm2
@@ -302,7 +402,23 @@ def test_lyapunov_exponent_on_an_unstable_periodic_orbit_is_its_floquet_exponent
     flow = Flow(sys)(x0, np.zeros(3), T, jacobian=True)
     assert np.max(np.abs(flow.y[:3] - x0)) < 1e-12 * a  # periodic
     floquet = np.log(np.max(np.abs(np.linalg.eigvals(flow.jacobian)))) / T
-    assert floquet == pytest.approx(400.0, rel=0.01)
+    assert floquet == pytest.approx(400.0, rel=0.01)  # regression guard only (the value when written: 399.97)
+    # independent of the closed-form segments: the monodromy by central differences of SciPy's DOP853
+    # (rtol 1e-12, crossings located) over one period, steps of 1e-5 of a and of a omega. Measured: the
+    # matrices agree to 2.8e-8 of the largest entry (truncation h^2 and DOP853's 1e-12 / h noise), the
+    # exponents to 6e-10; 1e-6 and 1e-7 allowed.
+    y0, step = np.concatenate([x0, np.zeros(3)]), np.r_[np.full(3, 1e-5 * a), np.full(3, 1e-5 * a * 2 * np.pi / T)]
+    J = np.empty((6, 6))
+    for j in range(6):
+        ends = []
+        for sign in (1.0, -1.0):
+            y = y0.copy()
+            y[j] += sign * step[j]
+            r = integrate_dop853(sys, y[:3], y[3:], T, 1.0 / T, rtol=1e-12, events=True)  # samples at 0 and T
+            ends.append(np.r_[r.x[-1], r.v[-1]])
+        J[:, j] = (ends[0] - ends[1]) / (2 * step[j])
+    assert np.abs(J - flow.jacobian).max() < 1e-6 * np.abs(flow.jacobian).max()
+    assert np.log(np.max(np.abs(np.linalg.eigvals(J)))) / T == pytest.approx(floquet, rel=1e-7)
     for seed in (0, 1):
         est = largest_lyapunov(sys, x0, np.zeros(3), 200 * T, 100 / T, window_s=T, seed=seed)
         assert est.chaotic and est.saturation_s < 30 * T

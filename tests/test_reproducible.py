@@ -23,7 +23,8 @@ This file runs cheap stages twice in-process, each on a trimmed copy of a built-
 (``bearingshaft.scenes.parse_scene``), into two folders, and compares every science file.
 It also checks that science CSVs carry no run-time column and that the timing files are
 where the convention says. The reduced-model study needs the 3-D model: its version of the
-test is marked ``slow``.
+test is marked ``slow``, and a fast variant runs the same stage on a smaller model (the hex8
+mesh, 5 modes, one stiff case, 5 ms windows).
 """
 
 from __future__ import annotations
@@ -145,3 +146,27 @@ def test_rom_impulse_study_is_reproduced(tmp_path):
     a, b = run_twice(tmp_path, text, "rom-trimmed", ("study",))
     science = assert_same_science(a, b)
     assert {"rom_convergence.csv", "rom_stiff_cases.csv", "study.md"} <= set(science)
+
+
+def test_rom_impulse_study_on_a_small_model_is_reproduced(tmp_path, monkeypatch):
+    """Fast variant of the slow test above: the same stage and files from a smaller model (hex8
+    mesh: 4,185 full DOFs against 15,087; 5 fixed-interface modes, convergence over 1 and 2
+    modes, one stiff case, 5 and 10 ms runs). Each run has its own empty reduced-model cache,
+    so both build their models (a cached model would hide a build that is not reproducible)."""
+    text = trimmed("rom-impulse", {
+        "ringdown": None, "spectrogram": None,
+        "model": {"element": "hex8", "n_modes": 5},
+        "rom_convergence": {"modes": [1, 2], "window_s": 0.005, "repeats": 1},
+        "stiff_cases": {"k_g": [3.502e7], "gap": [2.54e-4], "speed": [200.0], "c": [4.0],
+                        "duration_s": 0.005, "long_duration_s": 0.01},
+    })
+    scene = parse_scene(text, "rom-small", "trimmed rom-impulse")
+    a, b = tmp_path / "a", tmp_path / "b"
+    for out in (a, b):
+        monkeypatch.setenv("BEARINGSHAFT_CACHE", str(tmp_path / f"cache-{out.name}"))
+        run_stage(scene, "study", out, progress=False)
+        assert list((tmp_path / f"cache-{out.name}").glob("rom-*.npz")), "the run built and stored its model"
+    science = assert_same_science(a, b)
+    assert {"rom_convergence.csv", "rom_stiff_cases.csv", "study.md"} <= set(science)
+    timing = {p.name for p in a.iterdir() if is_timing(p)}
+    assert {"rom_convergence_timing.csv", "rom_stiff_cases_timing.csv", "study_timing.md"} <= timing

@@ -95,6 +95,20 @@ def test_convergence_rows_improve_with_the_mode_count(reduced_family):
         # non-increasing up to eigensolver round-off (a mode the tips cannot excite changes nothing: 1 -> 2)
         assert np.all(np.diff(e) <= 1e-9 * e[:-1]), f"{key} not decreasing: {e}"
         assert e[-1] < 1e-2 * e[0], f"{key}: {e}"
-    assert rows[-1]["closed_freq_error"] < 1e-4 and rows[-1]["ringdown_error"] == 0.0
+    assert rows[-1]["closed_freq_error"] < 1e-4
     ring = [r["ringdown_error"] for r in rows]
     assert ring[2] < 0.1 * ring[0], ring
+    # The ringdown errors are against the largest mode count's exact run (its own row is 0 by
+    # definition, so asserting it checks nothing). Check that reference itself by an independent
+    # integrator: SciPy's DOP853 with event location on the same 10-mode model over the same window
+    # (measured 2.0e-9 at rtol = 1e-8, i.e. DOP853's own error; the exact run is exact to round-off),
+    # and that every other row's error is resolved far above it (measured 0.46, 0.46, 7.5e-3 for 1, 2,
+    # 5 modes), so the column measures truncation of the modes, not integration error.
+    rom = roms[max(MODES)]
+    x0, v0 = initial_state(rom.M, rom.K, rom.P, np.zeros(3), (0.0, 0.0, 200.0))
+    exact = ringdown(rom.system(), x0, v0, 0.005, 20000.0, "exact")
+    dop = ringdown(rom.system(), x0, v0, 0.005, 20000.0, "dop853", rtol=1e-8)
+    ref_err = relative_error(dop.x @ rom.P.T, exact.x @ rom.P.T)
+    assert ref_err < 1e-7, f"10-mode exact reference against DOP853: {ref_err:.3g}"  # 50 x the measured 2e-9
+    assert exact.stats["n_events"] > 20  # the window has impacts: the reference crosses the gaps
+    assert all(e > 100 * ref_err for e in ring[:-1]), (ring, ref_err)

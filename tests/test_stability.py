@@ -33,8 +33,9 @@ def test_hill_and_floquet_agree_on_an_unstable_orbit(nnm2_h15):
     h, orb = _at(nnm2_h15, 2.6)
     assert not orb.stable and not h.stable
     assert 1.3 < orb.max_multiplier < 2.5
-    # Hill on 15 harmonics of a kinked force: exponents within a few percent
-    assert h.max_multiplier == pytest.approx(orb.max_multiplier, rel=0.05)
+    # Hill on 15 harmonics of a kinked force against the exact orbit: the difference is HB's truncation
+    # (measured on this orbit: 3.1e-3 at H = 15, 1.4e-3 at H = 25, 1.3e-4 at H = 35), so twice the H = 15 value
+    assert h.max_multiplier == pytest.approx(orb.max_multiplier, rel=6e-3)
 
 
 def test_hill_and_floquet_agree_on_a_stable_orbit(nnm2_h15):
@@ -44,8 +45,11 @@ def test_hill_and_floquet_agree_on_a_stable_orbit(nnm2_h15):
     assert np.allclose(np.abs(orb.multipliers), 1.0, atol=1e-4)  # trivial pair splits ~sqrt(eps |Phi|)
     assert np.allclose(np.abs(orb.nontrivial), 1.0, atol=1e-9)
     # Hill: the nontrivial multipliers on the unit circle (the trivial pair, split by the
-    # AFT Jacobian's error, is dropped)
-    assert h.max_multiplier == pytest.approx(1.0, abs=1e-3)
+    # AFT Jacobian's error, is dropped). Hill's problem of a conservative orbit is Hamiltonian (J0
+    # symmetric, J1 skew in the weighted Fourier basis), so a simple exponent on the imaginary axis stays
+    # there under truncation (it can leave only through a collision): |mu| = 1 to round-off, not to HB's
+    # accuracy (measured 1 + 3e-14 at H = 15, 1 + 2e-12 at H = 25)
+    assert h.max_multiplier == pytest.approx(1.0, abs=1e-9)
 
 
 def test_compare_flags_disagreements():

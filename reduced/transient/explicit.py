@@ -16,8 +16,12 @@ f_n -> f_n - f_ext(t_n) with f_ext(t) = sum_l b_l p_l(t) evaluated by the signal
 W_ext = int v^T f_ext dt is integrated by the trapezoidal rule on v_n^T f_ext(t_n), like the
 dissipated work. The stability rule is that of the free system (the loads do not depend on x).
 
-Stability: for the stiffest (closed) state with damping ratio xi in its top mode,
-dt < (2 / omega_max) (sqrt(1 + xi^2) - xi). Switching penalty contact has been seen to go
+Stability: this scheme (damping at the mean of the two half-step velocities, Newmark gamma =
+1/2, beta = 0) is stable for omega_max dt < 2 whatever the damping (its recurrence
+(1 + xi W) z^2 - (2 - W^2) z + (1 - xi W) = 0 has |z| < 1 for W < 2: tests/test_integrators.py).
+The refusal uses the smaller bound dt < (2 / omega_max) (sqrt(1 + xi^2) - xi) of the variant with
+the damping at the lagged velocity (Belytschko, Liu & Moran 2000, Sec. 6.2), xi the damping ratio
+of the stiffest (closed) state's top mode: conservative here. Switching penalty contact has been seen to go
 unstable near omega_max dt = 1.6 - 1.8, so a user step is refused beyond
 ``SWITCHING_SAFETY`` times that limit. The default step is chosen for accuracy, not
 stability: omega_max dt = ``DEFAULT_OMEGA_DT``.
@@ -54,7 +58,8 @@ class StepTooLargeError(ValueError):
 
 
 def stability_limit(system: GapSystem) -> tuple[float, float]:
-    """(omega_max [rad/s], dt_crit [s]) of the closed state, with damping in the top mode."""
+    """(omega_max [rad/s], dt_crit [s]) of the closed state, with damping in the top mode: the damped
+    bound of the lagged-velocity variant, conservative for this scheme (module docstring)."""
     _check.gap_system(system)
     lam, phi = eigh(system.closed_stiffness(), system.M)
     omega = math.sqrt(max(lam[-1], 0.0))
