@@ -65,7 +65,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scene", dest="scene_opt", metavar="NAME_OR_TOML", help="one scene (as for the stages)")
     p.add_argument("--out", metavar="DIR", help="results folder to check (default: results/<scene>/)")
     sub.add_parser("scenes", help="list the built-in scenes")
-    # -- issue 13: parameter sweeps on Dask (bearingshaft/sweep.py) --
+    # -- parameter sweeps on Dask (bearingshaft/sweep/) --
     p = sub.add_parser("sweep", help="run a scene over a design of parameter values on Dask (a local cluster, "
                        "or --scheduler ADDRESS); sweep.parquet, sweep.csv, sweep.png")
     p.add_argument("--scene", required=True, metavar="NAME_OR_TOML", help="built-in scene name or scene TOML file")

@@ -14,9 +14,16 @@ The contract of a stage module (``bearingshaft/stages/<name>.py``)::
     write(result, writer)                                    # CSV/NPZ/UFF/Markdown and figures from
                                                              # the result; runs no solver
     estimate(scene) -> list[Estimate]                        # peak memory and disk, from the scene
+    DESCRIPTION                                              # what the subcommand does and writes
 
-To add a stage: write that module, add one :class:`Stage` below in pipeline order; its
-subcommand, its budget check and its place in ``bearingshaft run`` follow from the entry.
+with the result dataclasses in ``<name>_results.py`` and the writers and figures in
+``<name>_files.py`` (the only part that loads matplotlib; ``write`` imports it when called).
+Bigger stages have more parts (``hammer_linear.py``, ``nnm_fep.py``); a stage imports no other
+stage's parts: what two stages share goes in a helper module named for it.
+
+To add a stage: write those modules, add one :class:`Stage` below in pipeline order; its
+subcommand, its budget check and its place in ``bearingshaft run`` follow from the entry
+(tests/test_architecture.py checks the imports).
 """
 
 from __future__ import annotations

@@ -13,6 +13,8 @@ solver. Long functions say why in their docstring.
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -25,7 +27,7 @@ APP_FLOORS = (
     ("bearingshaft", "bearingshaft.scenes"),
     ("bearingshaft.digits", "bearingshaft.progress", "bearingshaft.output", "bearingshaft.estimates",
      "bearingshaft.systems", "bearingshaft.plots", "bearingshaft.render", "bearingshaft.correlate",
-     "bearingshaft.gap_modes", "bearingshaft.signals", "bearingshaft.envelopes"),
+     "bearingshaft.gap_modes", "bearingshaft.envelopes"),
     ("bearingshaft.stages",),
     ("bearingshaft.registry",),
     ("bearingshaft.budget", "bearingshaft.pipeline"),
@@ -226,3 +228,15 @@ def test_the_schema_and_the_registry_do_not_import_dask(mod):
     for t in seen | {mod}:
         text = MODULES[t].read_text(encoding="utf-8")
         assert "import dask" not in text and "from dask" not in text and "from distributed" not in text, t
+
+
+def test_computing_never_loads_matplotlib():
+    # a stage's compute (bearingshaft/stages/<name>.py and its parts but <name>_files.py) and the
+    # registry, pipeline and budget run without drawing: matplotlib is loaded only by the writers
+    compute = sorted(m for m in MODULES if m.startswith("bearingshaft.stages.") and not m.endswith("_files"))
+    assert len(compute) >= 8
+    code = ("import sys\n" + "".join(f"import {m}\n" for m in [*compute, "bearingshaft.registry",
+                                                                     "bearingshaft.pipeline", "bearingshaft.budget"])
+            + "print('matplotlib' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
+    assert out.stdout.strip() == "False", "a computing module imports matplotlib (directly or through a writer)"

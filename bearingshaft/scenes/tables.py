@@ -8,9 +8,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from bearingshaft.scenes.checks import check, each, positive, tolerance
-from reduced.transient.integrate import METHODS
+from reduced.periodic import MAX_HARMONICS
+from reduced.transient.methods import METHODS
 
-MAX_HARMONICS = 1000  # HB orders beyond this resolve nothing a 20 kHz ringdown shows
 EXPLICIT_OMEGA_DT_MAX = 1.6  # rad: 0.8 x the central-difference limit omega dt = 2 (reduced.transient.explicit)
 
 

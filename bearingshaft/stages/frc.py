@@ -39,7 +39,7 @@ from tqdm import tqdm
 from bearingshaft.estimates import FLOAT, HILL_COPIES, Estimate, n_dofs
 from bearingshaft.output import StageWriter
 from bearingshaft.scenes import Scene
-from bearingshaft.stages.frc_files import ConvergenceRun, FRCResult, PointCheck, write
+from bearingshaft.stages.frc_results import ConvergenceRun, FRCResult, PointCheck
 from bearingshaft.systems import model_system
 from reduced._blas import single_thread_blas
 from reduced.models.gaps import GapSystem
@@ -450,3 +450,11 @@ def estimate(scene: Scene) -> list[Estimate]:
 
 __all__ = ["DESCRIPTION", "FRCResult", "compute", "estimate", "frc_stage", "orbit_amplitude", "shooting_error",
            "write"]
+
+
+def write(result, writer) -> None:
+    """The stage's files and figures from ``result`` (:mod:`bearingshaft.stages.frc_files`; matplotlib
+    is loaded only here, so computing never loads it)."""
+    from bearingshaft.stages import frc_files
+
+    frc_files.write(result, writer)

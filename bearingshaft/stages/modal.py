@@ -35,7 +35,7 @@ import numpy as np
 from bearingshaft.digits import human
 from bearingshaft.estimates import Estimate
 from bearingshaft.scenes import Scene
-from bearingshaft.stages.modal_files import Correlation, ModalStageResult, write
+from bearingshaft.stages.modal_results import Correlation, ModalStageResult
 
 __all__ = ["DESCRIPTION", "ModalStageResult", "compute", "estimate", "modal_estimate", "write"]
 
@@ -204,3 +204,11 @@ def modal_estimate(model, n_modes: int) -> Estimate:
                     f"{human(b['factor'])}, Krylov basis {human(b['krylov'])} for {n_modes} modes",
                     "[modal] n_modes" if by_modes else "[model] element_size",
                     advice="lower n_modes" if by_modes else "raise element_size")
+
+
+def write(result, writer) -> None:
+    """The stage's files and figures from ``result`` (:mod:`bearingshaft.stages.modal_files`; matplotlib
+    is loaded only here, so computing never loads it)."""
+    from bearingshaft.stages import modal_files
+
+    modal_files.write(result, writer)

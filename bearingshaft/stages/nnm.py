@@ -18,7 +18,7 @@ from bearingshaft.estimates import COPIES, FLOAT, JACOBIAN_COPIES, Estimate, n_d
 from bearingshaft.output import StageWriter
 from bearingshaft.scenes import Scene
 from bearingshaft.stages.nnm_fep import compute_fep
-from bearingshaft.stages.nnm_files import NNM2Exact, NNMResult, write
+from bearingshaft.stages.nnm_results import NNM2Exact, NNMResult
 from bearingshaft.systems import model_system
 from reduced._blas import single_thread_blas
 from reduced.models.discrete import DiscreteParams
@@ -111,3 +111,11 @@ def estimate(scene: Scene) -> list[Estimate]:
 
 
 __all__ = ["CHECK_CHI", "DESCRIPTION", "compute", "estimate", "nnm_stage", "write"]
+
+
+def write(result, writer) -> None:
+    """The stage's files and figures from ``result`` (:mod:`bearingshaft.stages.nnm_files`; matplotlib
+    is loaded only here, so computing never loads it)."""
+    from bearingshaft.stages import nnm_files
+
+    nnm_files.write(result, writer)

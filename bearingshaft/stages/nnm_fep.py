@@ -49,7 +49,7 @@ from tqdm import tqdm
 
 from bearingshaft.output import StageWriter
 from bearingshaft.scenes import Scene
-from bearingshaft.stages.nnm_files import FEPResult, FEPSummary, write_fep
+from bearingshaft.stages.nnm_results import FEPResult, FEPSummary
 from bearingshaft.systems import model_system
 from reduced._blas import single_thread_blas
 from reduced.models.discrete import DiscreteParams
@@ -170,6 +170,8 @@ def _hb_at(b, E_q):
 def fep_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
     """Compute and write the [fep] files alone (module docstring; the nnm stage does both with the
     rest of its files)."""
+    from bearingshaft.stages.nnm_files import write_fep  # matplotlib: loaded only when files are written
+
     write_fep(compute_fep(scene, progress), writer)
 
 

@@ -18,94 +18,18 @@ largest entry positive. The [fep] files are written as computed (see
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from bearingshaft import plots
 from bearingshaft.digits import dash, sig, to_resolution
 from bearingshaft.output import StageWriter, write_rows
+from bearingshaft.stages.nnm_results import FEPResult, FEPSummary, NNM2Exact, NNMResult  # noqa: F401  (re-exported)
 
 VALUE_DIGITS = 12  # closed forms and 3 x 3 eigenvalues: exact to ~1e-15, moved by 1e-16 on another CPU
 INTEGRATED_DIGITS = 11  # DOP853 periods at rtol 1e-13: moved by up to 1e-13 on another CPU
 CHECK_RESOLUTION = 1e-12  # relative errors against the integrated periods: below this, 0 (seen <= 2e-13)
 SHAPE_DECIMALS = 10  # mode shapes scaled to a largest entry of 1: round-off zeros (~1e-13) written 0
 TIE = 1e-8  # entries within this of the largest are equal (x1 = -x3 in antisymmetric modes)
-
-
-# -- what the stage computed ---------------------------------------------------------------------------
-@dataclass(frozen=True, eq=False)
-class NNM2Exact:
-    """The exact NNM 2 relation of the symmetric 3-DOF model on an energy grid, and its check
-    against periods integrated by DOP853 (``checks``: one dict per amplitude x0 / g, raw numbers;
-    ``checked`` False for a model without a gap, which has nothing to check)."""
-
-    energy_J: np.ndarray  # (k,)
-    freq_hz: np.ndarray  # (k,) exact
-    freq_paper_hz: np.ndarray  # (k,) the paper's Eq. 12-14 as printed
-    checks: list
-    checked: bool
-
-
-@dataclass(frozen=True, eq=False)
-class FEPSummary:
-    """The numbers of fep.md (a model without a closed form): the converged H and why.
-
-    ``max_err``: H -> ({nnm: max error against the shooting orbits on the backbone}, whether
-    every branch of that H reached ``[fep] energy_max_J``); ``off``: (nnm, orbit, best HB error)
-    of the shooting orbits off the HB backbone.
-    """
-
-    converged_H: int | None  # smallest H of the study within converged_tol of shooting, or None
-    max_err: dict
-    off: list
-    open_hz: np.ndarray  # every open-gap linear frequency
-    closed_hz: np.ndarray  # every closed-gap linear frequency
-    closed_idx: list  # the closed-gap modes that move the gaps, one per NNM followed
-    converged_tol: float  # relative frequency error of a converged H
-    off_backbone_tol: float  # an orbit no H of the study comes within this of is off the backbone
-
-    @property
-    def n_off(self) -> int:
-        """Shooting orbits off the HB backbone."""
-        return len(self.off)
-
-
-@dataclass(frozen=True, eq=False)
-class FEPResult:
-    """What the [fep] part of the nnm stage computed (:func:`bearingshaft.stages.nnm_fep.compute_fep`).
-
-    Keys: ``nnm`` the 0-based position of a followed NNM, ``H`` the harmonics, ``N`` the AFT
-    samples of the N study (None: the default of that H).
-    """
-
-    scene_name: str
-    spec: object  # the [fep] table
-    model: object  # the FEPModel: system, modes followed, kind, exact reference, study NNM
-    open_hz: np.ndarray  # the followed NNMs' open-gap linear frequencies
-    closed_hz: np.ndarray  # the gap-moving closed-gap linear frequencies
-    branches: dict  # (nnm, H, N) -> NNMBranch
-    shots: dict  # nnm -> (energies (k,), PeriodicOrbit or None per energy, wall_s)
-    hill_stable: dict  # (nnm, H) -> per HB point of the drawn branch, stable by Hill's method
-    stability: list  # stability.csv rows: Hill against Floquet at the shooting energies
-    disagreements: dict  # "NNM k H=h" -> points where Hill and Floquet disagree
-    errors: dict  # (nnm, H, N) -> (shooting energies, |f_HB / f_shooting - 1| there)
-    exact_err: dict  # (nnm, H, N) -> |f_HB / f_exact - 1| at each point (NNMs with a closed form)
-    convergence: list  # hb_convergence.csv rows
-    shooting_vs_exact: float | None  # max |f / f_exact - 1| of the shooting orbits (with a closed form)
-    summary: FEPSummary | None  # fep.md's numbers (a reduced model)
-
-
-@dataclass(frozen=True, eq=False)
-class NNMResult:
-    """What the nnm stage computed (:func:`bearingshaft.stages.nnm.compute`)."""
-
-    scene_name: str
-    dof_names: tuple[str, ...]
-    linear: dict  # "open", "closed" -> LinearModes
-    nnm2: NNM2Exact | None
-    nnm2_skipped: str  # why the exact NNM 2 relation was not computed ("" if it was)
-    fep: FEPResult | None
 
 
 # -- linear modes and the exact NNM 2 relation ---------------------------------------------------------
@@ -269,7 +193,7 @@ def _md_model(fep: FEPResult) -> list[str]:
     """The title, where the file comes from, the model and its NNMs, the reference."""
     fm, s = fep.model, fep.summary
     L = [f"# NNMs of the reduced model by HB and shooting (scene {fep.scene_name})", "",
-         f"Written by `bearingshaft nnm --scene {fep.scene_name}` (bearingshaft/stages/fep.py) with fep.csv, "
+         f"Written by `bearingshaft nnm --scene {fep.scene_name}` (bearingshaft/stages/nnm_fep.py) with fep.csv, "
          "fep.png, stability.csv, tongues.csv, hb_convergence.csv and .png; run times are in "
          "hb_convergence_timing.csv. Numbers to 2 digits.", "",
          f"Model: the reduced 3-D model, {fm.system.n} coordinates ({', '.join(fm.system.dof_names)}), "

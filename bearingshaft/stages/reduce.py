@@ -30,7 +30,7 @@ import numpy as np
 from bearingshaft.estimates import Estimate
 from bearingshaft.gap_modes import STATES, GapModeComparison, compare_all, expand
 from bearingshaft.scenes import Scene
-from bearingshaft.stages.reduce_files import ReduceResult, write
+from bearingshaft.stages.reduce_results import ReduceResult
 from reduced.models.modes import gap_moving_modes, linear_modes
 from reduced.models.rom import ReducedModel, build_rom
 
@@ -110,3 +110,11 @@ gap_modes.vtu."""
 def estimate(scene: Scene) -> list[Estimate]:
     """Nothing beyond the 3-D model's own build, which the reduced-model cache bounds (no estimate)."""
     return []
+
+
+def write(result, writer) -> None:
+    """The stage's files and figures from ``result`` (:mod:`bearingshaft.stages.reduce_files`; matplotlib
+    is loaded only here, so computing never loads it)."""
+    from bearingshaft.stages import reduce_files
+
+    reduce_files.write(result, writer)

@@ -42,7 +42,7 @@ from bearingshaft.estimates import Estimate, history_bytes, n_dofs
 from bearingshaft.gap_modes import full_gap_modes
 from bearingshaft.progress import CaseBar, ProgressBar
 from bearingshaft.scenes import Scene
-from bearingshaft.stages.study_files import CONVERGENCE_BUDGET_S, StudyResult, step_basis, write
+from bearingshaft.stages.study_results import CONVERGENCE_BUDGET_S, StudyResult, step_basis
 from reduced._blas import single_thread_blas
 from reduced.studies import STIFF_FIELDS, rom_case, rom_convergence, stiff_cases, work_precision
 
@@ -167,3 +167,11 @@ def estimate(scene: Scene) -> list[Estimate]:
                             f"{len(c.modes)} models of up to {max(c.modes) + 2} DOFs, {samples:.3g} samples",
                             "[rom_convergence] window_s or sample_rate_hz"))
     return out
+
+
+def write(result, writer) -> None:
+    """The stage's files and figures from ``result`` (:mod:`bearingshaft.stages.study_files`; matplotlib
+    is loaded only here, so computing never loads it)."""
+    from bearingshaft.stages import study_files
+
+    study_files.write(result, writer)

@@ -10,14 +10,13 @@ says how they were measured). No solver runs here.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 from bearingshaft import plots
 from bearingshaft.digits import ROUNDOFF_FLOOR, roundoff_bound, short, sig
 from bearingshaft.output import StageWriter, write_rows
 from bearingshaft.scenes import Scene
+from bearingshaft.stages.study_results import CONVERGENCE_BUDGET_S, StudyResult, step_basis  # noqa: F401  (re-exported)
 
-CONVERGENCE_BUDGET_S = 2.0  # s, stop repeating a timed run once this is spent on it
 RECOMMEND_FREQ_TOL = 1e-3  # relative error of the compared coupled frequencies (open and closed)
 RECOMMEND_RINGDOWN_TOL = 1e-2  # relative max-norm error of the point motion against the reference
 
@@ -31,47 +30,6 @@ WP_FIELDS = ["method", "setting", "error", "n_steps", "dt_s"]
 TIMING_KEYS = {"work_precision": ["method", "setting"],
                "stiff": ["k_g", "gap", "speed", "c", "method", "duration_s"],
                "rom_convergence": ["n_modes"]}
-
-
-@dataclass(frozen=True, eq=False)
-class StudyResult:
-    """What the ``study`` stage computed; a study the scene does not ask for is None.
-
-    Parameters
-    ----------
-    scene : Scene
-        The scene studied.
-    work_precision : list of dict or None
-        ``[work_precision]``: one row per run (:func:`reduced.studies.work_precision`).
-    explicit_order : float
-        The explicit integrator's observed order of accuracy (nan if not fitted).
-    rom_convergence : list of dict or None
-        ``[rom_convergence]``: one row per mode count (:func:`reduced.studies.rom_convergence`).
-    n_full_dofs : int
-        DOFs of the 3-D model reduced in ``rom_convergence`` (0 without it).
-    stiff_cases : list of dict or None
-        ``[stiff_cases]``: one row per run (:func:`reduced.studies.stiff_cases`).
-    stiff_fields : tuple of str
-        The columns of a stiff-case row (``reduced.studies.STIFF_FIELDS``).
-    """
-
-    scene: Scene
-    work_precision: list[dict] | None = None
-    explicit_order: float = math.nan
-    rom_convergence: list[dict] | None = None
-    n_full_dofs: int = 0
-    stiff_cases: list[dict] | None = None
-    stiff_fields: tuple[str, ...] = ()
-
-
-def step_basis(scene: Scene) -> str:
-    """The explicit step basis of the scene's ringdown (reduced.transient.explicit), "top" without one.
-
-    >>> from bearingshaft.scenes import load_scene
-    >>> step_basis(load_scene("rom-impulse")), step_basis(load_scene("verify-reduction"))
-    ('contact', 'top')
-    """
-    return scene.ringdown.step_basis if scene.ringdown is not None else "top"
 
 
 def _timing_rows(rows: list[dict], keys: list[str], columns: list[str]) -> list[dict]:

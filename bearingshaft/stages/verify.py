@@ -29,7 +29,7 @@ from bearingshaft.estimates import Estimate, history_bytes, n_dofs
 from bearingshaft.gap_modes import GapModeComparison, compare_all, full_gap_modes
 from bearingshaft.progress import ProgressBar
 from bearingshaft.scenes import Scene, VerifySpec, load_scene
-from bearingshaft.stages.verify_files import MODELS, STARTS, VerifyResult, write
+from bearingshaft.stages.verify_results import MODELS, STARTS, VerifyResult
 from reduced.models.discrete import DiscreteParams
 from reduced.models.gaps import GapSystem
 from reduced.models.identify import identify_discrete
@@ -219,3 +219,11 @@ def estimate(scene: Scene) -> list[Estimate]:
     samples = v.duration_s * v.sample_rate_hz + 1
     return [Estimate("verify", history_bytes(samples, n_dofs(scene), 3 * 3),
                      f"3 models x 3 ringdowns of {samples:.3g} samples", "[verify] duration_s or sample_rate_hz")]
+
+
+def write(result, writer) -> None:
+    """The stage's files and figures from ``result`` (:mod:`bearingshaft.stages.verify_files`; matplotlib
+    is loaded only here, so computing never loads it)."""
+    from bearingshaft.stages import verify_files
+
+    verify_files.write(result, writer)

@@ -9,8 +9,6 @@ Numbers go to their converged digits; no solver runs here.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from bearingshaft.digits import cells
@@ -18,71 +16,13 @@ from bearingshaft.gap_modes import GapModeComparison, left_out_summary
 from bearingshaft.output import StageWriter, write_rows
 from bearingshaft.plots import plt
 from bearingshaft.scenes import Scene, VerifySpec
-from reduced.models.discrete import DiscreteParams
+from bearingshaft.stages.verify_results import MODELS, STARTS, VerifyResult  # noqa: F401  (re-exported)
 from reduced.models.identify import RESIDUAL_MEANING
 from reduced.transient.spectrogram import curve_in_time
 
-STARTS = (("antisymmetric", "discrete-antisymmetric"), ("impulse", "discrete-impulse"),
-          ("symmetric", "discrete-symmetric"))  # the paper's Section 3.2 initial conditions
-MODELS = ("reduced", "identified", "table1")
 LABELS = {"full": "full 3-D", "reduced": "reduced (CB)", "identified": "identified 3-mass", "table1": "Table 1"}
 COLORS = {"full": "k", "reduced": "C0", "identified": "C2", "table1": "C3"}
 DB_RANGE = 80.0  # dB shown below each spectrogram's peak
-
-
-@dataclass(frozen=True, eq=False)
-class VerifyResult:
-    """What the ``verify`` stage computed: the reduced 3-D model read as a three-mass model.
-
-    Parameters
-    ----------
-    scene : Scene
-        The scene verified.
-    identified : DiscreteParams
-        The three-mass model read from the reduced matrices.
-    id_rows : list of dict
-        Per parameter: ``parameter``, ``unit``, ``table1``, ``identified``, ``relative_difference``.
-    residuals : dict
-        ``{name: value}``: what the three-mass form cannot carry (:data:`RESIDUAL_MEANING`).
-    freq_rows : list of dict
-        The lowest coupled modes, open and closed gap: full, reduced (MAC partner), identified and
-        Table 1 frequencies [Hz] and their relative differences against the full model.
-    backbones : dict
-        ``{model: {nnm: (energy_J, freq_hz)}}`` for the models of :data:`MODELS` (HB, H = 1).
-    runs : dict
-        ``{(start, model): RingdownResult}`` from the starts of :data:`STARTS`.
-    spectra : dict
-        ``{(start, model): Spectrogram}`` of x1 of each run.
-    ring_rows : list of dict
-        Per run: initial and final energy, x1's peak frequency in the first and last window,
-        contact events, energy balance error, wall time.
-    sensitivity : list of dict
-        The reduced model's runs again from a perturbed start: final energy and events beside the
-        unperturbed ones.
-    perturbation : float
-        The relative change of the initial state in ``sensitivity``.
-    comparisons : dict
-        ``{state: GapModeComparison}`` of the reduced model against the full one.
-    facts : dict
-        The numbers ``verify.md`` explains the differences with (masses, stiffnesses, sizes).
-    wall_s : float
-        s, the stage's compute time (provenance only).
-    """
-
-    scene: Scene
-    identified: DiscreteParams
-    id_rows: list[dict]
-    residuals: dict
-    freq_rows: list[dict]
-    backbones: dict
-    runs: dict
-    spectra: dict
-    ring_rows: list[dict]
-    sensitivity: list[dict]
-    perturbation: float
-    comparisons: dict[str, GapModeComparison]
-    facts: dict
-    wall_s: float
 
 
 def _figure(path, title: str, freq_rows: list[dict], backbones: dict, runs: dict, spectra: dict,
@@ -245,7 +185,7 @@ def _frequencies(f: dict, freq_rows: list[dict]) -> str:
 Open gap: tips free; closed gap: both tips tied to the ground by k_g (the HB backbones' limits).
 Relative differences against the full 3-D model. Each full mode ("full 3-D mode": its number among the
 full model's modes) is one the reduction basis [Psi, Phi] holds (at least 90 % of it in the mass norm) and
-is paired with the reduced mode of largest mass-weighted MAC (`bearingshaft/stages/reduce.py`,
+is paired with the reduced mode of largest mass-weighted MAC (`bearingshaft/gap_modes.py`,
 `gap_modes.csv`); the three-mass models, which have no 3-D shape, are taken rank for rank.
 
 {freq}

@@ -19,3 +19,6 @@ Every continued curve takes one set of step options,
 :class:`~reduced.periodic.continuation.ContinuationOptions`; every shooting failure is one
 :class:`~reduced.periodic.shooting.ShootingError`.
 """
+
+MAX_HARMONICS = 1000  # HB orders beyond this resolve nothing a 20 kHz ringdown shows (every solver here and
+# the scene schema refuse more)

@@ -17,6 +17,7 @@ from reduced import _checks as _check
 from reduced._blas import single_thread_blas
 from reduced.models.gaps import GapSystem
 from reduced.models.modes import linear_modes
+from reduced.periodic import MAX_HARMONICS
 from reduced.periodic.continuation import STEP_FIELDS, ContinuationOptions, continue_branch
 from reduced.periodic.hb import HarmonicBalance, NewtonError, NNMResidual, default_samples, newton
 
@@ -452,7 +453,6 @@ def nnm_branch(system: GapSystem, mode: int, **options) -> NNMBranch:
         return _nnm_branch(system, mode, **options)
 
 
-MAX_HARMONICS = 1000  # the scene parser's limit too (bearingshaft.scenes)
 
 
 def _check_branch_options(system: GapSystem, mode: int, options: dict) -> dict:

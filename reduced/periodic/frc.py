@@ -37,6 +37,7 @@ import numpy as np
 from reduced import _checks as _check
 from reduced._blas import single_thread_blas
 from reduced.models.gaps import GapSystem
+from reduced.periodic import MAX_HARMONICS
 from reduced.periodic.continuation import (
     STEP_FIELDS,
     Branch,
@@ -50,7 +51,6 @@ from reduced.periodic.forced_balance import ForcedBalance, ForcedResidual
 from reduced.periodic.forced_stability import HILL_TOL, BranchStability, branch_stability
 from reduced.periodic.hb import NewtonError, _phases, _synthesis_matrix, newton
 
-MAX_HARMONICS = 1000  # as reduced.periodic.backbones and the scene parser
 AMPLITUDE_NEWTON_STEPS = 6  # Newton steps refining the phase of max |x| (quadratic: 2-3 suffice)
 HARMONIC_SETS = ("all", "odd")
 FRC_STEPS = ContinuationOptions(ds=0.02, ds_max=0.05, max_steps=5000)  # in the scaled unknowns y

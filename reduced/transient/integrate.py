@@ -24,10 +24,10 @@ from reduced.transient import stepper as _stepper
 from reduced.transient.dop853 import Dop853Options, Dop853Stepper
 from reduced.transient.exact import ExactOptions, ExactStepper
 from reduced.transient.explicit import DEFAULT_OMEGA_DT, ExplicitOptions, ExplicitStepper
+from reduced.transient.methods import METHODS
 from reduced.transient.result import RingdownResult, RingdownStream, sample_count
 from reduced.transient.store import RingdownFile, npz_disk_bytes
 
-METHODS = ("exact", "explicit", "dop853")
 STEPPERS = {"exact": ExactStepper, "explicit": ExplicitStepper, "dop853": Dop853Stepper}
 FLOAT = 8  # bytes
 CHUNK_BYTES = 8 * 2**20  # bytes of samples (t, x, v, W) in one chunk of a streamed run

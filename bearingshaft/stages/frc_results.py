@@ -1,0 +1,64 @@
+"""The results of the frc stage: what its compute returns and its writers read (no drawing here)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+# -- what the stage computed ---------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class PointCheck:
+    """Hill's method and shooting at one point of a curve, beside its monodromy verdict."""
+
+    index: int  # the point on the curve
+    contact: bool  # a stop closes somewhere along its orbit
+    shot: bool  # shooting was tried here
+    freq_hz: float
+    mono: float  # max |mu| of the orbit monodromy
+    mono_stable: bool
+    hill: float  # max |mu| by Hill's method (nan where not run)
+    hill_stable: bool | None  # None where not run
+    shoot: float  # max |mu| of the exact orbit (nan where not found)
+    shoot_stable: bool | None  # None where not found
+    shoot_amp: np.ndarray | None  # (p,) m, the exact orbit's amplitude at each point
+    shoot_note: str  # why shooting failed ("" otherwise)
+
+
+@dataclass(frozen=True, eq=False)
+class ConvergenceRun:
+    """One H of the convergence study at ``[frc] convergence_level_N``."""
+
+    H: int
+    curve: object  # FRCBranch, or the ContinuationError of a curve that could not start (no stability)
+    err_stepped_sine: list  # max relative amplitude error at each periodic stepped-sine point
+    err_shooting: list  # max relative amplitude error at each exact orbit found
+    shooting_failed: int  # contact shooting points where no HB solution or no exact orbit was found
+    wall_s: float
+
+
+@dataclass(frozen=True, eq=False)
+class FRCResult:
+    """Everything the frc stage computed (:func:`bearingshaft.stages.frc.compute`).
+
+    Curves are :class:`reduced.periodic.frc.FRCBranch` objects; one that could not start is
+    kept as its :class:`reduced.periodic.continuation.ContinuationError` (reported, not raised).
+    Keys: P the load level [N], ``direction`` "up" or "down", ``scale`` a factor of
+    ``[frc] backbone_scales``.
+    """
+
+    scene_name: str
+    spec: object  # the [frc] table
+    names: tuple[str, ...]  # output points
+    load_col: int  # the point the load acts at
+    curves: dict  # P -> FRCBranch | ContinuationError, H = [frc] harmonics
+    events: dict  # P -> (k,) Hz where the sweeps must jump (folds, ends of stable pieces)
+    checks: dict  # P -> list[PointCheck]
+    sweeps: dict  # P -> {direction: SteppedSine} (empty without a stepped sine)
+    sweep_hb: dict  # (P, direction) -> per sweep frequency the HB amplitudes (p,) there, or None
+    convergence: list  # ConvergenceRun per H of [frc] convergence_harmonics
+    backbone_curves: dict  # (P, scale) -> FRCBranch (H = 1, damping and load scaled)
+    backbones: dict  # linear mode -> (freq_hz (k,), amplitudes (k, p)) of its NNM backbone
+    peaks: dict  # (P, scale) -> (Hz, m) the peak of the backbone curve at the load point
+    nearest: dict  # (P, scale) -> (mode, log distance) of the nearest backbone to that peak
