@@ -7,7 +7,9 @@ job before and after into two folders, then
 
 Every file under either tree is compared by content. Files that hold run times or the run's
 own provenance (``provenance.json``, ``*timing*``) are reported but not judged: they change with
-machine load on every run. Exit status 1 if a science file differs, is missing on one side or
+machine load on every run. An ``.npz`` archive is compared array by array, and the JSON it
+carries (``rom.npz``'s ``info_json``) without its run records (times, dates, commit, source
+hash). Exit status 1 if a science file differs, is missing on one side or
 is extra on the other; 0 otherwise.
 """
 
@@ -21,6 +23,41 @@ from pathlib import Path
 
 NOT_JUDGED = ("provenance.json",)  # the run's commit, date and wall times
 NOT_JUDGED_PARTS = ("timing",)  # study_timing.md, *_timing.csv: wall-clock times
+RUN_RECORD_KEYS = ("time", "timing", "wall", "utc", "commit", "hash", "created")  # in a JSON key: a record of the run
+# (and keys ending in _s: durations in seconds)
+
+
+def _without_run_records(obj):
+    """A JSON value with the keys that record the run (times, dates, commit, source hash) dropped.
+
+    >>> _without_run_records({"n": 10, "static_s": 1.2, "provenance": {"git_commit": "abc"}, "k": [{"timing": 3}]})
+    {'n': 10, 'provenance': {}, 'k': [{}]}
+    """
+    if isinstance(obj, dict):
+        return {k: _without_run_records(v) for k, v in obj.items()
+                if not (k.lower().endswith("_s") or any(r in k.lower() for r in RUN_RECORD_KEYS))}
+    if isinstance(obj, list):
+        return [_without_run_records(v) for v in obj]
+    return obj
+
+
+def _same_npz(a: Path, b: Path) -> bool:
+    """Same arrays (bit for bit, NaN equal to NaN) and the same JSON less its run records."""
+    import json
+
+    import numpy as np
+
+    with np.load(a, allow_pickle=False) as x, np.load(b, allow_pickle=False) as y:
+        if sorted(x.files) != sorted(y.files):
+            return False
+        for k in x.files:
+            u, v = x[k], y[k]
+            if k.endswith("_json"):
+                if _without_run_records(json.loads(str(u))) != _without_run_records(json.loads(str(v))):
+                    return False
+            elif u.dtype != v.dtype or u.shape != v.shape or u.tobytes() != v.tobytes():
+                return False
+    return True
 
 
 def _digest(path: Path) -> str:
@@ -53,7 +90,10 @@ def compare(before: Path, after: Path) -> list[dict]:
         elif not a.exists():
             status = "extra"
         else:
-            status = "same" if a.stat().st_size == b.stat().st_size and _digest(a) == _digest(b) else "differs"
+            same = a.stat().st_size == b.stat().st_size and _digest(a) == _digest(b)
+            if not same and a.suffix == ".npz":
+                same = _same_npz(a, b)
+            status = "same" if same else "differs"
         rows.append({"file": rel, "status": status, "judged": judged(rel)})
     return rows
 
