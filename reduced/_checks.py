@@ -52,6 +52,8 @@ def one_line(exc: BaseException, typed: bool | None = None) -> str:
     str
         The message with its whitespace runs collapsed to single spaces.
 
+    Examples
+    --------
     >>> one_line(ValueError("gap must be\\n >= 0")), one_line(KeyError("x"), typed=True), one_line(OSError())
     ('gap must be >= 0', "KeyError: 'x'", 'OSError')
     """

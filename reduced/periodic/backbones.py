@@ -616,7 +616,7 @@ def hb_point_at_energy(
     ----------
     res : NNMResidual
         The NNM residual.
-    y_guess : (size + 3,) ndarray of float
+    y_guess : (res.size,) ndarray of float
         A nearby point of the branch, in the unknowns of ``res``.
     energy_J : float
         J, E*, the energy wanted (> 0).
@@ -625,7 +625,7 @@ def hb_point_at_energy(
 
     Returns
     -------
-    (size + 3,) ndarray of float
+    (res.size,) ndarray of float
         The point y at energy E*.
 
     Raises

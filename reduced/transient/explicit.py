@@ -104,7 +104,8 @@ def default_step(system: GapSystem, omega_dt: float = DEFAULT_OMEGA_DT, step_bas
     Returns
     -------
     dt : float
-        s, min(omega_dt / omega_ref, the cap, dt_limit) (inf if omega_max is 0).
+        s, min(omega_dt / omega_ref, dt_limit), and at most TOP_CAP / omega_max for 'contact'
+        (inf if omega_max is 0).
     omega_max, omega_ref : float
         rad/s.
     dt_limit : float

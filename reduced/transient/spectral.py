@@ -46,6 +46,8 @@ def segment_length(n_samples: int, sample_rate_hz: float, resolution_hz: float) 
     int
         min(n_samples, max(MIN_SAMPLES, round(sample_rate_hz / resolution_hz))).
 
+    Examples
+    --------
     >>> segment_length(10_000, 1000.0, 2.0), segment_length(300, 1000.0, 2.0), segment_length(100, 1000.0, 500.0)
     (500, 300, 8)
     """
