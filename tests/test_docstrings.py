@@ -11,12 +11,14 @@ modules such as ``fem/_pardiso.py`` included: their public names are used across
 
 Exempt:
 
-- private names (a leading underscore), which covers the numba kernels (``_exact_kernel`` ...)
-  and methods (only module-level definitions are read);
+- private names (a leading underscore), the numba kernels among them (``_exact_kernel`` ...);
+  methods are not read (module-level definitions only);
 - functions without arguments (nothing to describe; their first line says what they return);
 - exception classes (a base named ``...Error`` or ``...Exception``) whose body is their docstring
   alone: they take one message, which their docstring describes;
-- ``__init__.py`` files, which only re-export names defined and checked in their modules;
+- the re-exports of the ``__init__.py`` files: they are imports, not definitions, so the reader
+  does not see them (each name is checked in the module that defines it; a function or class
+  defined in an ``__init__.py`` is checked like any other);
 - the command-line entry points ``main(argv)``, whose arguments are described by ``--help``.
 """
 
@@ -36,8 +38,6 @@ def _definitions():
     """(label, node) of every checked public module-level function and class."""
     for pkg in PACKAGES:
         for path in sorted((ROOT / pkg).rglob("*.py")):
-            if path.name == "__init__.py":
-                continue
             for node in ast.parse(path.read_text(encoding="utf-8")).body:
                 if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)) \
                         and not node.name.startswith("_"):
@@ -75,9 +75,29 @@ def _documented_names(doc: str) -> set[str]:
     return names
 
 
-def _functions():
-    return [(label, node) for label, node in DEFINITIONS if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+def _functions(definitions):
+    return [(label, node) for label, node in definitions if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
             and _arguments(node) and node.name not in EXEMPT_FUNCTIONS]
+
+
+def _violations(definitions) -> dict[str, list[str]]:
+    """The definitions that break each rule (module docstring), by rule."""
+    out: dict[str, list[str]] = {"no_parameters": [], "undescribed": [], "class": []}
+    for label, node in _functions(definitions):
+        doc = ast.get_docstring(node) or ""
+        if not _has_section(doc, "Parameters"):
+            out["no_parameters"].append(label)
+            continue
+        missing = [a for a in _arguments(node) if a not in _documented_names(doc)]
+        if missing:
+            out["undescribed"].append(f"{label}: {', '.join(missing)}")
+    out["class"] = [label for label, node in definitions
+                    if isinstance(node, ast.ClassDef) and not _plain_exception(node)
+                    and not any(_has_section(ast.get_docstring(node) or "", s) for s in ("Parameters", "Attributes"))]
+    return out
+
+
+VIOLATIONS = _violations(DEFINITIONS)
 
 
 def test_the_definitions_are_found():
@@ -88,34 +108,89 @@ def test_the_definitions_are_found():
 
 
 def test_functions_have_a_parameters_section():
-    bad = [label for label, node in _functions() if not _has_section(ast.get_docstring(node) or "", "Parameters")]
+    bad = VIOLATIONS["no_parameters"]
     assert not bad, f"{len(bad)} public functions without a numpydoc Parameters section:\n" + "\n".join(bad)
 
 
 def test_every_argument_is_described():
-    bad = []
-    for label, node in _functions():
-        doc = ast.get_docstring(node) or ""
-        if _has_section(doc, "Parameters"):
-            missing = [a for a in _arguments(node) if a not in _documented_names(doc)]
-            if missing:
-                bad.append(f"{label}: {', '.join(missing)}")
+    bad = VIOLATIONS["undescribed"]
     assert not bad, "arguments missing from the Parameters section:\n" + "\n".join(bad)
 
 
 def test_classes_have_a_parameters_or_attributes_section():
-    bad = [label for label, node in DEFINITIONS if isinstance(node, ast.ClassDef) and not _plain_exception(node)
-           and not any(_has_section(ast.get_docstring(node) or "", s) for s in ("Parameters", "Attributes"))]
+    bad = VIOLATIONS["class"]
     assert not bad, f"{len(bad)} public classes without a Parameters or Attributes section:\n" + "\n".join(bad)
 
 
+PLANTED = '''
+def bare(x):
+    """One line only."""
+
+
+def partial(K, M, *extra, tol=1e-9, **options):
+    """Parameters: K and M (a heading without dashes is not a section).
+
+    Parameters
+    ----------
+    K, M : (n, n) ndarray
+        N/m and kg.
+    **options
+        Passed on.
+    """
+
+
+def described(K, M, tol=0.0):
+    """Solve (``tol`` is named under Returns only).
+
+    Parameters
+    ----------
+    K, M : (n, n) ndarray
+        N/m and kg.
+
+    Returns
+    -------
+    tol : float
+    """
+
+
+def main(argv=None):
+    """Command line."""
+
+
+def _kernel(x):
+    pass
+
+
+class Plain:
+    """No section."""
+
+
+class Fine:
+    """Has one.
+
+    Attributes
+    ----------
+    x : float
+    """
+
+
+class Refused(ValueError):
+    """A message alone."""
+'''
+
+
 def test_the_checks_can_fail():
-    # the section and name readers on planted docstrings: a heading without dashes is not a section
+    # the rules on a planted module: each kind of violation is found, and only those
+    defs = [(node.name, node) for node in ast.parse(PLANTED).body if not node.name.startswith("_")]
+    v = _violations(defs)
+    assert v["no_parameters"] == ["bare"]
+    # a name under another section does not count as described
+    assert v["undescribed"] == ["partial: tol, extra", "described: tol"]
+    assert v["class"] == ["Plain"]
+    # the readers themselves: a heading without dashes is not a section
     doc = "Sum.\n\nParameters\n----------\na, b : float\n    m.\n*args : tuple\n\nReturns\n-------\nfloat\n"
     assert _has_section(doc, "Parameters") and _has_section(doc, "Returns")
     assert _documented_names(doc) == {"a", "b", "args"}
     assert not _has_section("Sum.\n\nParameters: a and b.\n", "Parameters")
     assert _documented_names("Sum.\n\nReturns\n-------\nfloat\n") == set()
-    assert _plain_exception(ast.parse('class E(ValueError):\n    """Bad."""\n').body[0])
     assert not _plain_exception(ast.parse('class E(ValueError):\n    """Bad."""\n    code: int\n').body[0])
-    assert not _plain_exception(ast.parse('class R:\n    """Result."""\n').body[0])
