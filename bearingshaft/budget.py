@@ -35,12 +35,33 @@ def available_bytes() -> int:
 
 
 def estimates(scene: Scene) -> list[Estimate]:
-    """What each stage of ``scene`` will hold at its peak, in pipeline order (the registry's estimates)."""
+    """What each stage of ``scene`` will hold at its peak, in pipeline order (the registry's estimates).
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+
+    Returns
+    -------
+    list of Estimate
+    """
     return [e for name in stages_of(scene) for e in BY_NAME[name].estimate(scene)]
 
 
 def free_disk_bytes(out_dir: str | Path) -> int:
-    """Bytes free on the file system that holds (or will hold) ``out_dir``."""
+    """Bytes free on the file system that holds (or will hold) ``out_dir``.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        A folder, existing or not (its nearest existing parent is measured).
+
+    Returns
+    -------
+    int
+        bytes.
+    """
     probe = Path(out_dir).absolute()
     while not probe.exists():
         probe = probe.parent
@@ -49,7 +70,26 @@ def free_disk_bytes(out_dir: str | Path) -> int:
 
 def check_budget(scene: Scene, out_dir: str | Path | None = None, available: int | None = None) -> list[Estimate]:
     """The scene's estimates, or :class:`SceneError` naming the key if one does not fit in
-    memory (or, given ``out_dir``, on its disk)."""
+    memory (or, given ``out_dir``, on its disk).
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+    out_dir : str or Path, optional
+        The results folder, for the disk check.
+    available : int, optional
+        bytes of memory available (default: :func:`available_bytes`).
+
+    Returns
+    -------
+    list of Estimate
+
+    Raises
+    ------
+    SceneError
+        An estimate above ``HEADROOM`` of the memory available or of the free disk.
+    """
     avail = available_bytes() if available is None else available
     ests = estimates(scene)
     if out_dir is not None:

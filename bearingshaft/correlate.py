@@ -68,6 +68,17 @@ class ChannelError(ValueError):
 def direction_label(d: int) -> str:
     """A UFF direction code as the messages and figures say it.
 
+    Parameters
+    ----------
+    d : int
+        UFF direction code, -3 .. 3.
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
     >>> direction_label(3), direction_label(-1), direction_label(0)
     ('+3 (+Z)', '-1 (-X)', '0 (scalar)')
     """
@@ -95,7 +106,17 @@ def _unknown(kind: str, name: str, known: list[str]) -> ChannelError:
 
 @dataclass(frozen=True, eq=False)
 class AlignedPair:
-    """Model and test samples at the same times ``t`` (s); ``test`` in the model's sense."""
+    """Model and test samples at the same times ``t`` (s); ``test`` in the model's sense.
+
+    Attributes
+    ----------
+    t : (n,) ndarray of float
+        s, the common sample times (n >= 2).
+    model : (n,) ndarray of float
+        The model channel, in its unit.
+    test : (n,) ndarray of float
+        The test channel, same unit and sign convention.
+    """
 
     t: np.ndarray  # s, (n,)
     model: np.ndarray  # (n,), the model channel's unit
@@ -112,6 +133,17 @@ class ChannelPair:
 
     ``test`` is the test channel with its data negated (and its direction set to the model's)
     when it was measured along the opposite sense; ``flipped`` records that it was.
+
+    Attributes
+    ----------
+    name : str
+        The model channel's name.
+    model : TimeHistory
+        The model channel.
+    test : TimeHistory
+        The test channel at the same node and axis, sign-aligned with the model.
+    flipped : bool
+        The test channel was measured along the opposite sense (its data negated here).
     """
 
     name: str  # the model channel's name
@@ -266,6 +298,18 @@ def match_channels(model: list[TimeHistory], test: list[TimeHistory], wanted: li
 def rms(y: np.ndarray) -> float:
     """The root mean square of ``y`` (no mean removed).
 
+    Parameters
+    ----------
+    y : array_like of float
+        The samples.
+
+    Returns
+    -------
+    float
+        sqrt(mean(y^2)), in the unit of y.
+
+    Examples
+    --------
     >>> rms(np.array([3.0, -3.0, 3.0, -3.0]))
     3.0
     """
@@ -320,14 +364,41 @@ def channel_errors(pairs: list[ChannelPair], window_s: tuple[float, float] | Non
 
 def write_errors_csv(rows: list[dict], path: str | Path, digits: int = CSV_DIGITS) -> None:
     """The rows of :func:`channel_errors` as CSV (columns ERROR_FIELDS), floats to ``digits``
-    significant digits so that a rerun writes the same bytes."""
+    significant digits so that a rerun writes the same bytes.
+
+    Parameters
+    ----------
+    rows : list of dict
+        :func:`channel_errors` rows.
+    path : str or Path
+        The CSV file, replaced.
+    digits : int
+        Significant digits of the floats.
+
+    Returns
+    -------
+    None
+    """
     write_rows(path, rows, ERROR_FIELDS, float_format=f".{int(digits)}g")
 
 
 def default_channels(pairs: list[ChannelPair], n: int = MAX_PANELS) -> list[str]:
     """Names of up to ``n`` pairs to draw: the hammer (an excitation force) if compared, the tip
     load cell of largest test rms, then the beam accelerometers (``beam_*``) of largest test rms,
-    then any other channel by test rms."""
+    then any other channel by test rms.
+
+    Parameters
+    ----------
+    pairs : list of ChannelPair
+        The compared channels.
+    n : int
+        Most names returned.
+
+    Returns
+    -------
+    list of str
+        Channel names, in drawing order.
+    """
     def test_rms(p: ChannelPair) -> float:
         return rms(p.aligned().test)
 

@@ -25,6 +25,20 @@ def _is_number(value) -> bool:
 def sig(value, digits: int):
     """``value`` rounded to ``digits`` significant digits (non-numbers and non-finite values kept).
 
+    Parameters
+    ----------
+    value : object
+        A number, or anything else (kept).
+    digits : int
+        Significant digits.
+
+    Returns
+    -------
+    float, int or object
+        A float rounded (through its decimal text), an int unchanged, anything else as given.
+
+    Examples
+    --------
     >>> sig(3.14159, 3), sig(12345, 2), sig("x", 3), sig(float("nan"), 3)
     (3.14, 12345, 'x', nan)
     """
@@ -39,6 +53,18 @@ def decade_bound(value):
     """The smallest power of ten >= |value| (0 stays 0): a round-off-level quantity has no
     reproducible digit, only its order of magnitude (non-numbers kept).
 
+    Parameters
+    ----------
+    value : object
+        A number, or anything else (kept).
+
+    Returns
+    -------
+    float or object
+        10^ceil(log10 |value|), 0.0 for zero; non-finite values and non-numbers as given.
+
+    Examples
+    --------
     >>> decade_bound(3.2e-13), decade_bound(-1e-9), decade_bound(0.0)
     (1e-12, 1e-09, 0.0)
     """
@@ -51,6 +77,18 @@ def decade_bound(value):
 def roundoff_bound(value):
     """A round-off-level quantity as written: its :func:`decade_bound`, at least :data:`ROUNDOFF_FLOOR`.
 
+    Parameters
+    ----------
+    value : object
+        A number, or anything else (kept).
+
+    Returns
+    -------
+    float or object
+        max(:func:`decade_bound`, ``ROUNDOFF_FLOOR``) (0 becomes ``ROUNDOFF_FLOOR``).
+
+    Examples
+    --------
     >>> roundoff_bound(3.2e-13), roundoff_bound(4e-8)
     (1e-10, 1e-07)
     """
@@ -62,6 +100,21 @@ def to_resolution(value, resolution: float, digits: int):
     """``value`` rounded to a multiple of ``resolution`` when smaller than it in magnitude (0),
     else to ``digits`` significant digits: an error below what the reference resolves is 0.
 
+    Parameters
+    ----------
+    value : object
+        A number, or anything else (kept).
+    resolution : float
+        The smallest magnitude the reference resolves.
+    digits : int
+        Significant digits above it.
+
+    Returns
+    -------
+    float or object
+
+    Examples
+    --------
     >>> to_resolution(3e-12, 1e-10, 3), to_resolution(1.23456e-6, 1e-10, 3)
     (0.0, 1.23e-06)
     """
@@ -73,6 +126,19 @@ def to_resolution(value, resolution: float, digits: int):
 def short(value, spec: str = ".3g") -> str:
     """A number formatted by ``spec`` for Markdown text; anything else as ``str``.
 
+    Parameters
+    ----------
+    value : object
+        An int or float (not a bool) is formatted; anything else goes through ``str``.
+    spec : str
+        A format specification.
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
     >>> short(0.000123456), short(2, ".2f"), short("n/a"), short(True)
     ('0.000123', '2.00', 'n/a', 'True')
     """
@@ -83,6 +149,19 @@ def text(value, digits: int = 4):
     """A number to ``digits`` significant digits for a science file ('' for None or NaN, 'inf' and
     '-inf' for infinities); integers and non-numbers kept.
 
+    Parameters
+    ----------
+    value : object
+        A float (formatted), None, or anything else (kept, ints included).
+    digits : int
+        Significant digits.
+
+    Returns
+    -------
+    str or object
+
+    Examples
+    --------
     >>> text(1 / 3), text(float("nan")), text(float("-inf")), text(None), text(7)
     ('0.3333', '', '-inf', '', 7)
     """
@@ -96,6 +175,19 @@ def text(value, digits: int = 4):
 def dash(value: float, digits: int = 2) -> str:
     """A number to ``digits`` significant digits for a Markdown table, '-' where it is not finite.
 
+    Parameters
+    ----------
+    value : float
+        The number.
+    digits : int
+        Significant digits.
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
     >>> dash(0.012345), dash(float("nan"))
     ('0.012', '-')
     """
@@ -105,6 +197,22 @@ def dash(value: float, digits: int = 2) -> str:
 def cells(rows: list[dict], formats: dict[str, str], default: str = ".6g") -> list[dict]:
     """Rows with floats as text to their converged digits: ``formats[key]`` or ``default``.
 
+    Parameters
+    ----------
+    rows : list of dict
+        Rows of a table.
+    formats : dict of str to str
+        Format specification per key.
+    default : str
+        Format specification of the other float cells.
+
+    Returns
+    -------
+    list of dict
+        New rows: float cells as text, the others as given.
+
+    Examples
+    --------
     >>> cells([{"f": 1.23456789, "e": 1.5e-9, "n": 3}], {"e": ".1e"})
     [{'f': '1.23457', 'e': '1.5e-09', 'n': 3}]
     """
@@ -115,6 +223,18 @@ def cells(rows: list[dict], formats: dict[str, str], default: str = ".6g") -> li
 def human(n: float) -> str:
     """Bytes in B, KiB, MiB, GiB or TiB.
 
+    Parameters
+    ----------
+    n : float
+        bytes.
+
+    Returns
+    -------
+    str
+        Three significant digits and a binary unit, from B to PiB.
+
+    Examples
+    --------
     >>> human(512), human(3 * 2**20), human(1.5 * 2**40)
     ('512 B', '3 MiB', '1.5 TiB')
     """

@@ -17,7 +17,26 @@ N_COLUMNS = 2000  # envelope bins of a time plot: finer than the ~1000 pixel col
 class Envelope:
     """Min and max of ``n_series`` time series in each of ``n_bins`` equal bins of samples, accumulated
     chunk by chunk: what a dense line plot draws in each pixel column, in memory independent of
-    the record's length. A record of at most 2 n_bins samples is kept whole."""
+    the record's length. A record of at most 2 n_bins samples is kept whole.
+
+    Parameters
+    ----------
+    n_samples : int
+        Samples of the record.
+    sample_rate_hz : float
+        Hz.
+    n_series : int
+        Series accumulated side by side.
+    n_bins : int
+        Bins (pixel columns) wanted.
+
+    Attributes
+    ----------
+    per : int
+        Samples a bin (1: the record is kept whole).
+    lo, hi : (n_bins, n_series) ndarray of float
+        Min and max of each bin so far (+inf and -inf before any sample).
+    """
 
     def __init__(self, n_samples: int, sample_rate_hz: float, n_series: int, n_bins: int = N_COLUMNS) -> None:
         self.n_samples = n_samples

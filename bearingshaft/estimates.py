@@ -22,7 +22,23 @@ MATPLOTLIB_BYTES = 64 * 2**20  # figures being drawn, fonts, the HB backbones: m
 
 @dataclass(frozen=True, slots=True)
 class Estimate:
-    """Peak bytes one stage will hold, what they are, and the scene key that sizes them."""
+    """Peak bytes one stage will hold, what they are, and the scene key that sizes them.
+
+    Parameters
+    ----------
+    stage : str
+        The stage's name.
+    bytes : float
+        Peak bytes held in memory.
+    what : str
+        What they are, for the refusal message.
+    key : str
+        ``"[table] key"``: the scene key that sizes them.
+    disk : float
+        bytes written to the results folder.
+    advice : str
+        What to do when it does not fit (default: "lower <key>").
+    """
 
     stage: str
     bytes: float
@@ -33,7 +49,18 @@ class Estimate:
 
 
 def n_dofs(scene: Scene) -> int:
-    """DOFs of the scene's gap system, known before it is built (3-D models: 0)."""
+    """DOFs of the scene's gap system, known before it is built (3-D models: 0).
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+
+    Returns
+    -------
+    int
+        3 for the discrete model, n_modes + 2 for a reduced one, 0 for a 3-D model.
+    """
     if scene.model_kind == "discrete":
         return 3
     if scene.model_kind == "rom":
@@ -42,5 +69,20 @@ def n_dofs(scene: Scene) -> int:
 
 
 def history_bytes(samples: float, n: int, runs: int = 1) -> float:
-    """Bytes of ``runs`` sampled histories: t, x (n), v (n), dissipated, energy per sample."""
+    """Bytes of ``runs`` sampled histories: t, x (n), v (n), dissipated, energy per sample.
+
+    Parameters
+    ----------
+    samples : float
+        Samples of one history.
+    n : int
+        DOFs.
+    runs : int
+        Histories held.
+
+    Returns
+    -------
+    float
+        bytes, runs x ``COPIES`` x samples x (2 n + 3) x 8.
+    """
     return runs * COPIES * samples * (2 * n + 3) * FLOAT

@@ -66,7 +66,27 @@ def expand(rom: ReducedModel, q: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class GapModeComparison:
-    """The full model's modes of one contact state against the reduced model's, by mass-weighted MAC."""
+    """The full model's modes of one contact state against the reduced model's, by mass-weighted MAC.
+
+    Attributes
+    ----------
+    state : {'open', 'closed'}
+        The contact state.
+    full_hz : (m,) ndarray of float
+        Hz, the full model's lowest modes.
+    reduced : LinearModes
+        The reduced model's modes (n of them).
+    mac : (m, n) ndarray of float
+        MAC_ij = (v_i^T M u_j)^2 / ((v_i^T M v_i)(u_j^T M u_j)), mass-weighted.
+    basis_fraction : (m,) ndarray of float
+        Share of full mode i in span[Psi, Phi] (M-norm); = sum_j MAC_ij.
+    rows : list of dict
+        One per full mode in the basis: its reduced partner, error, MAC.
+    left_out : list of dict
+        One per full mode not in the basis: why.
+    unpaired : (k,) ndarray of int
+        Reduced modes that are no full mode's partner (indices into ``reduced``).
+    """
 
     state: str
     full_hz: np.ndarray  # (m,) Hz, the full model's lowest modes

@@ -46,7 +46,18 @@ def git_commit() -> str:
 
 def machine_rows(**extra) -> list[dict]:
     """The machine a benchmark ran on, as ``key, value`` rows for a CSV: CPU model, cores,
-    Python and library versions, commit, UTC date and 1-minute load, then ``extra``."""
+    Python and library versions, commit, UTC date and 1-minute load, then ``extra``.
+
+    Parameters
+    ----------
+    **extra
+        Further ``key=value`` rows, appended in order (a key already present is replaced in place).
+
+    Returns
+    -------
+    list of dict
+        ``{"key": ..., "value": ...}`` per item.
+    """
     from importlib.metadata import PackageNotFoundError, version
 
     cpu = platform.processor() or platform.machine()
@@ -82,7 +93,24 @@ def _jsonable(obj):
 def write_rows(path: str | Path, rows: list[dict], fields: list[str] | None = None,
                float_format: str | None = None) -> None:
     """CSV of dict rows; columns ``fields`` (default: the first row's keys; others dropped);
-    floats written with ``float_format`` (e.g. ".4g") if given, else in full."""
+    floats written with ``float_format`` (e.g. ".4g") if given, else in full.
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file, replaced.
+    rows : list of dict
+        The rows.
+    fields : list of str, optional
+        The columns, in order.
+    float_format : str, optional
+        Format specification of the float cells.
+
+    Returns
+    -------
+    None
+        With neither rows nor ``fields`` the file is left empty (no header).
+    """
     with open(path, "w", newline="") as fh:
         if not rows and fields is None:
             return
@@ -96,7 +124,20 @@ def write_rows(path: str | Path, rows: list[dict], fields: list[str] | None = No
 
 
 class StageWriter:
-    """Where a stage puts its files (``path(name)``) and its solver statistics (``stats``)."""
+    """Where a stage puts its files (``path(name)``) and its solver statistics (``stats``).
+
+    Parameters
+    ----------
+    scratch : Path
+        The scratch folder the stage writes into.
+
+    Attributes
+    ----------
+    scratch : Path
+        As given.
+    stats : dict
+        Solver statistics, written to ``provenance.json`` under the stage.
+    """
 
     def __init__(self, scratch: Path) -> None:
         self.scratch = scratch
@@ -112,6 +153,21 @@ def check_out_dir(out_dir: str | Path) -> Path:
     It must not be a file (nor /dev/null), nor lie under a file, and the nearest folder that
     exists on its path must be writable (the results folder and its scratch siblings are
     created there). Checked before any work starts.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        The results folder asked for (it need not exist).
+
+    Returns
+    -------
+    Path
+        ``Path(out_dir)``.
+
+    Raises
+    ------
+    ValueError
+        A file, a path under a file, or a folder that cannot be written.
     """
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
@@ -176,6 +232,15 @@ def folder_lock(out: Path):
 
     Writers of one folder take turns only while they merge their files in; the work itself
     runs in parallel. A lock dies with its process, so a killed run never blocks the next.
+
+    Parameters
+    ----------
+    out : Path
+        The results folder.
+
+    Yields
+    ------
+    None
     """
     lock_path = out.with_name(f".{out.name}.lock")
     with open(lock_path, "a+b") as fh:
@@ -239,6 +304,26 @@ def staged_output(out_dir: str | Path, scene_name: str, scene_source: str, stage
     is swapped in for ``out_dir`` atomically. A failure, an interrupt or a SIGKILL at any
     moment leaves ``out_dir`` as it was (or absent, if it did not exist): never a mix of old
     and new files under a provenance that looks complete.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        The results folder (checked by :func:`check_out_dir`).
+    scene_name : str
+        Recorded in ``provenance.json``.
+    scene_source : str
+        The case as read, written to ``scene.toml``.
+    stage : str
+        The stage's name: its entry in ``provenance.json`` and its scratch folder's name.
+
+    Yields
+    ------
+    StageWriter
+
+    Raises
+    ------
+    ValueError
+        As :func:`check_out_dir`.
     """
     out = check_out_dir(out_dir).absolute()
     out.parent.mkdir(parents=True, exist_ok=True)

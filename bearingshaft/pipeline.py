@@ -18,7 +18,32 @@ class StageUnavailable(Exception):
 
 def run_stage(scene: Scene, stage: str, out_dir: str | Path, progress: bool = True, **options) -> None:
     """Run one stage of ``scene`` into ``out_dir`` (refused if the scene lacks its table, or if
-    ``out_dir`` cannot be a results folder, before any work); print one summary line."""
+    ``out_dir`` cannot be a results folder, before any work); print one summary line.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+    stage : str
+        A stage's name (:data:`bearingshaft.registry.STAGES`).
+    out_dir : str or Path
+        The results folder.
+    progress : bool
+        Draw progress bars.
+    **options
+        The stage's command-line options, passed to its compute.
+
+    Returns
+    -------
+    None
+
+    Raises
+    ------
+    StageUnavailable
+        The scene has no table for the stage.
+    ValueError
+        ``out_dir`` cannot be a results folder; a stage's own errors propagate.
+    """
     wanted = stages_of(scene)
     if stage not in wanted:
         entry = BY_NAME.get(stage)
@@ -37,6 +62,20 @@ def run_stage(scene: Scene, stage: str, out_dir: str | Path, progress: bool = Tr
 
 
 def run_scene(scene: Scene, out_dir: str | Path, progress: bool = True) -> None:
-    """Every stage the scene asks for, in pipeline order."""
+    """Every stage the scene asks for, in pipeline order.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+    out_dir : str or Path
+        The results folder.
+    progress : bool
+        Draw progress bars.
+
+    Returns
+    -------
+    None
+    """
     for stage in stages_of(scene):
         run_stage(scene, stage, out_dir, progress=progress)

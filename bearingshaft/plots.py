@@ -20,7 +20,20 @@ ENERGY_FLOOR = 1e-6  # the energy panel shows down to this fraction of the initi
 
 
 def wrap_title(title: str, width: int = TITLE_CHARS) -> str:
-    """The title broken into lines that fit the figure's width."""
+    """The title broken into lines that fit the figure's width.
+
+    Parameters
+    ----------
+    title : str
+        The title.
+    width : int
+        Characters a line.
+
+    Returns
+    -------
+    str
+        Lines joined by newlines (words are not broken).
+    """
     return "\n".join(textwrap.wrap(title, width=width, break_long_words=False, break_on_hyphens=False)) or title
 
 
@@ -30,7 +43,26 @@ def ringdown_envelopes(res, chunk_samples: int | None = None, also=None, loads=N
     anything with ``chunks``, ``n_samples``, ``sample_rate_hz``); with ``loads``
     (:class:`reduced.models.loads.Loads`) also each load's force p_l(t). ``also(chunk)`` is
     called on every chunk of that pass. ``env["scale"]`` is what the defect is divided by:
-    max(E0, max E, max |W_ext|), so a run from rest has a relative balance too."""
+    max(E0, max E, max |W_ext|), so a run from rest has a relative balance too.
+
+    Parameters
+    ----------
+    res : RingdownResult or RingdownFile
+        The run (``system``, ``n_samples``, ``sample_rate_hz`` and ``chunks(chunk_samples)``).
+    chunk_samples : int, optional
+        Samples a chunk read.
+    also : callable, optional
+        ``also(chunk)`` called on every chunk.
+    loads : Loads, optional
+        The run's loads.
+
+    Returns
+    -------
+    dict
+        :class:`Envelope` per key: ``x`` (m, every DOF), ``E``, ``W``, ``balance`` (J) and, with
+        loads, ``Wext`` (J) and ``p`` (N, each load); plus ``E0`` (J, the first energy) and
+        ``scale`` (J).
+    """
     n, N, fs = res.system.n, res.n_samples, res.sample_rate_hz
     env = {"x": Envelope(N, fs, n), "E": Envelope(N, fs, 1), "W": Envelope(N, fs, 1), "balance": Envelope(N, fs, 1)}
     if loads is not None:
@@ -62,7 +94,25 @@ def ringdown_envelopes(res, chunk_samples: int | None = None, also=None, loads=N
 def ringdown_figure(res, path: Path, title: str, envelopes: dict | None = None, loads=None) -> None:
     """Displacements, energy and energy-balance error against time (min/max envelopes per pixel
     column, so a run of any length is drawn in bounded memory); with ``loads`` (a forced run) a
-    first panel of the load forces and the work of the loads in the energy panel."""
+    first panel of the load forces and the work of the loads in the energy panel.
+
+    Parameters
+    ----------
+    res : RingdownResult or RingdownFile
+        The run (its system's DOF names label the lines).
+    path : Path
+        The image file.
+    title : str
+        The figure's title.
+    envelopes : dict, optional
+        :func:`ringdown_envelopes` of the run, if already made.
+    loads : Loads, optional
+        The run's loads (labels of the load panel).
+
+    Returns
+    -------
+    None
+    """
     env = envelopes or ringdown_envelopes(res, loads=loads)
     forced = "p" in env
     fig, axes = plt.subplots(3 + forced, 1, figsize=(9, 8 + 2 * forced), sharex=True, constrained_layout=True)
@@ -109,7 +159,29 @@ def spectrogram_figure(
     fmax_hz: float,
     db_range: float,
 ) -> None:
-    """Spectrogram in dB with the NNM frequency-energy curves mapped onto time, f(E(t))."""
+    """Spectrogram in dB with the NNM frequency-energy curves mapped onto time, f(E(t)).
+
+    Parameters
+    ----------
+    spec : Spectrogram
+        The spectrogram (power in m^2/Hz).
+    energy_t : (ndarray, ndarray)
+        s and J, the ringdown's energy against time.
+    curves : dict of str to (ndarray, ndarray)
+        Label -> (J, Hz), a frequency-energy curve.
+    path : Path
+        The image file.
+    title : str
+        The figure's title.
+    fmax_hz : float
+        Hz, top of the frequency axis.
+    db_range : float
+        dB drawn below the largest power.
+
+    Returns
+    -------
+    None
+    """
     fig, ax = plt.subplots(figsize=(9, 5.5), constrained_layout=True)
     keep = spec.freq_hz <= fmax_hz
     db = 10.0 * np.log10(np.maximum(spec.power[keep], 1e-300))
@@ -140,7 +212,31 @@ def symmetry_figure(points: Envelope, names: tuple[str, str], primary: str,
                     threshold_m: float, path: Path, title: str) -> None:
     """Top: the two points (envelopes) of the ``primary`` run. Bottom: |x_a - x_b| of each run
     (upper envelope), its solver tolerance (dotted) and break time (dashed), the seeded runs
-    (grey) and the break threshold (black)."""
+    (grey) and the break threshold (black).
+
+    Parameters
+    ----------
+    points : Envelope
+        The two points of the ``primary`` run, m.
+    names : (str, str)
+        Names of the two points.
+    primary : str
+        The method of the run drawn on top.
+    runs : dict of str to (Envelope, float, float or None)
+        Method -> (|x_a - x_b| envelope in m, solver tolerance in m, break time in s or None).
+    seeded : list of Envelope
+        |x_a - x_b| of the seeded runs, m.
+    threshold_m : float
+        m, the break threshold.
+    path : Path
+        The image file.
+    title : str
+        The figure's title.
+
+    Returns
+    -------
+    None
+    """
     fig, ax = plt.subplots(2, 1, figsize=(9, 7), sharex=True, constrained_layout=True)
     t, y = points.lines()
     ax[0].plot(t, y[:, 0] * 1e3, lw=0.6, label=names[0])
@@ -171,7 +267,25 @@ def symmetry_figure(points: Envelope, names: tuple[str, str], primary: str,
 
 def nnm2_figure(E: np.ndarray, f_exact: np.ndarray, f_paper: np.ndarray, checks: list[dict],
                 f_open: np.ndarray, f_closed: np.ndarray, path: Path) -> None:
-    """Frequency-energy curve of NNM 2: exact, the paper's Eq. 13, integrated periods."""
+    """Frequency-energy curve of NNM 2: exact, the paper's Eq. 13, integrated periods.
+
+    Parameters
+    ----------
+    E : (k,) ndarray of float
+        J, the energies of the curves.
+    f_exact, f_paper : (k,) ndarray of float
+        Hz, the exact relation and the paper's printed one at E.
+    checks : list of dict
+        ``energy_J`` and ``freq_integrated_hz`` of each integrated period.
+    f_open, f_closed : ndarray of float
+        Hz, the linear open- and closed-gap frequencies (dotted lines).
+    path : Path
+        The image file.
+
+    Returns
+    -------
+    None
+    """
     fig, ax = plt.subplots(figsize=(8, 5), constrained_layout=True)
     ax.semilogx(E, f_exact, "k-", label="exact (this work)")
     ax.semilogx(E, f_paper, "r--", label="paper's Eq. 12-14 as printed")
@@ -192,7 +306,23 @@ def nnm2_figure(E: np.ndarray, f_exact: np.ndarray, f_paper: np.ndarray, checks:
 
 
 def work_precision_figure(rows: list[dict], order: float, path: Path, window_s: float) -> None:
-    """Error against run time for each method."""
+    """Error against run time for each method.
+
+    Parameters
+    ----------
+    rows : list of dict
+        :func:`reduced.studies.work_precision` rows.
+    order : float
+        The explicit method's fitted order.
+    path : Path
+        The image file.
+    window_s : float
+        s, the run's window (in the title).
+
+    Returns
+    -------
+    None
+    """
     fig, ax = plt.subplots(figsize=(8, 5.5), constrained_layout=True)
     markers = {"exact": "*", "explicit": "o", "dop853": "s"}
     for i, method in enumerate(("exact", "explicit", "dop853")):
@@ -215,7 +345,21 @@ def work_precision_figure(rows: list[dict], order: float, path: Path, window_s: 
 
 
 def rom_convergence_figure(rows: list[dict], path: Path, window_s: float) -> None:
-    """Reduced model against its mode count: errors vs modes, and ringdown error vs run time."""
+    """Reduced model against its mode count: errors vs modes, and ringdown error vs run time.
+
+    Parameters
+    ----------
+    rows : list of dict
+        :func:`reduced.studies.rom_convergence` rows, mode counts ascending (the last the reference).
+    path : Path
+        The image file.
+    window_s : float
+        s, the ringdown's window (in a label).
+
+    Returns
+    -------
+    None
+    """
     fig, (a, b) = plt.subplots(1, 2, figsize=(12, 5), constrained_layout=True)
     n = [r["n_modes"] for r in rows]
     floor = 1e-17  # the reference's own ringdown error is zero: draw it at the floor

@@ -6,7 +6,22 @@ from tqdm import tqdm
 
 
 class ProgressBar:
-    """A progress callback (fraction done, 0 to 1) drawing a tqdm bar of 1000 steps."""
+    """A progress callback (fraction done, 0 to 1) drawing a tqdm bar of 1000 steps.
+
+    Parameters
+    ----------
+    desc : str
+        Label drawn before the bar.
+    enabled : bool
+        Draw it (False: a silent callback).
+
+    Attributes
+    ----------
+    bar : tqdm.tqdm
+        The bar, 1000 steps.
+    done : int
+        Steps drawn so far (a fraction that goes back is ignored).
+    """
 
     def __init__(self, desc: str, enabled: bool) -> None:
         self.bar = tqdm(total=1000, desc=desc, disable=not enabled, leave=False,
@@ -24,7 +39,13 @@ class ProgressBar:
 
 
 class CaseBar(ProgressBar):
-    """A bar that names the case being run (long cases otherwise look like a stall)."""
+    """A bar that names the case being run (long cases otherwise look like a stall).
+
+    Parameters
+    ----------
+    desc, enabled
+        As :class:`ProgressBar`.
+    """
 
     def __init__(self, desc: str, enabled: bool) -> None:
         super().__init__(desc, enabled)

@@ -37,7 +37,21 @@ from bearingshaft.stages import frc, hammer, modal, nnm, reduce, ringdown, study
 
 @dataclass(frozen=True, slots=True)
 class Option:
-    """A command-line option of a stage's subcommand, passed to its compute as ``name=value``."""
+    """A command-line option of a stage's subcommand, passed to its compute as ``name=value``.
+
+    Parameters
+    ----------
+    flag : str
+        The option on the command line (``"--method"``).
+    name : str
+        Keyword of the stage's compute.
+    help : str
+        One line for ``--help``.
+    metavar : str, optional
+        Placeholder of its value in ``--help``.
+    choices : tuple of str, optional
+        The values allowed.
+    """
 
     flag: str  # "--method"
     name: str  # keyword of compute
@@ -48,7 +62,29 @@ class Option:
 
 @dataclass(frozen=True, slots=True)
 class Stage:
-    """One stage: the tables that ask for it, its compute, its writer, its estimate, its subcommand."""
+    """One stage: the tables that ask for it, its compute, its writer, its estimate, its subcommand.
+
+    Parameters
+    ----------
+    name : str
+        The stage's name and subcommand.
+    asked_by : str
+        The tables (or keys) that ask for it, as a refusal names them.
+    wanted : callable
+        ``wanted(scene) -> bool``: does the scene ask for it?
+    compute : callable
+        ``compute(scene, progress, workdir, **options) -> result``.
+    write : callable
+        ``write(result, writer)``: the files, into a :class:`bearingshaft.output.StageWriter`.
+    estimate : callable
+        ``estimate(scene) -> list[Estimate]``.
+    help : str
+        One line in ``bearingshaft --help``.
+    description : str
+        What the subcommand does and writes (``bearingshaft NAME --help``).
+    options : tuple of Option
+        Its command-line options.
+    """
 
     name: str
     asked_by: str  # the tables (or keys) that ask for it, as a refusal names them
@@ -99,10 +135,35 @@ BY_NAME: dict[str, Stage] = {s.name: s for s in STAGES}
 
 
 def stages_of(scene: Scene) -> tuple[str, ...]:
-    """The stages ``scene`` asks for, in pipeline order."""
+    """The stages ``scene`` asks for, in pipeline order.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+
+    Returns
+    -------
+    tuple of str
+    """
     return tuple(s.name for s in STAGES if s.wanted(scene))
 
 
 def stage(name: str) -> Stage:
-    """The registry entry of stage ``name`` (KeyError if there is none)."""
+    """The registry entry of stage ``name`` (KeyError if there is none).
+
+    Parameters
+    ----------
+    name : str
+        The stage's name.
+
+    Returns
+    -------
+    Stage
+
+    Raises
+    ------
+    KeyError
+        An unknown stage.
+    """
     return BY_NAME[name]

@@ -12,6 +12,23 @@ def render_shapes(fe, shapes: list[tuple[str, np.ndarray]], path: str | Path, co
 
     The largest beam displacement of each shape is drawn as 40 % of the beam's smaller side:
     translations show without turning a roll into radians. The tube is drawn see-through.
+
+    Parameters
+    ----------
+    fe : FESystem
+        The assembled model (mesh, nodal DOF map, beam section).
+    shapes : list of (str, ndarray)
+        (title, (n_dofs,) displacement vector) per panel.
+    path : str or Path
+        The image file.
+    columns : int
+        Panels a row.
+
+    Returns
+    -------
+    str
+        'pyvista', or 'matplotlib (pyvista failed: <why>)' when the fallback drew a point cloud
+        (each shape then scaled to 8 % of the mesh's extent).
     """
     mesh = fe.mesh
     dofs = fe.solid.nodal_dofs  # (3, n_nodes)

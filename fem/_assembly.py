@@ -85,7 +85,28 @@ def _fill(ed, shape, Ke, Me, ptr, elem, loc, indptr, indices):
 
 def scatter_pair(ed: np.ndarray, shape: np.ndarray, Ke: np.ndarray, Me: np.ndarray, n: int):
     """(indptr, indices, K data, M data) of sum_e Ke[shape[e]] and sum_e Me[shape[e]] over the
-    elements, whose global DOFs are ``ed[:, e]`` (n_local, n_elements); CSR, sorted columns."""
+    elements, whose global DOFs are ``ed[:, e]`` (n_local, n_elements); CSR, sorted columns.
+
+    Parameters
+    ----------
+    ed : (n_local, n_elements) ndarray of int
+        Global DOF of each local DOF of each element (e.g. 60 x n_elements for hex20).
+    shape : (n_elements,) ndarray of int
+        Index of each element's matrices in ``Ke`` and ``Me`` (elements of one shape share them).
+    Ke, Me : (n_shapes, n_local, n_local) ndarray of float
+        Element stiffness (N/m) and mass (kg) matrices, one per distinct shape.
+    n : int
+        Number of global DOFs (rows and columns).
+
+    Returns
+    -------
+    indptr : (n + 1,) ndarray of int64
+        CSR row pointers, shared by K and M (one pattern).
+    indices : (nnz,) ndarray of int32
+        Column of each entry, sorted within each row.
+    kdata, mdata : (nnz,) ndarray of float
+        Values of K and M; each entry is summed in element order (the same bits on any thread count).
+    """
     ed = np.ascontiguousarray(ed, dtype=np.int64)
     shape = np.ascontiguousarray(shape, dtype=np.int64)
     ptr, elem, loc = _dof_elements(ed, n)

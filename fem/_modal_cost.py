@@ -79,7 +79,21 @@ def _divs(g: AssemblyGeometry, part: str) -> list[list[int]]:
 def count_dofs(g: AssemblyGeometry, element: str = "hex20") -> int:
     """DOFs of the mesh :func:`geometry.build.build_mesh` would make of ``g`` (parts do not touch):
     exact, or, past MAX_COUNTED cells, the DOFs of the full block grid (an upper bound, counted
-    without building the grid)."""
+    without building the grid).
+
+    Parameters
+    ----------
+    g : AssemblyGeometry
+        The geometry and mesh controls :func:`geometry.build.build_mesh` would mesh.
+    element : {'hex8', 'hex20', 'hex27'}
+        Element type: DOFs on the vertices, plus the edge mid-nodes (hex20), plus the face and
+        cell centres (hex27).
+
+    Returns
+    -------
+    int
+        Number of DOFs, 3 per node, capped at ``MAX_DOFS``.
+    """
     n = 0
     for part in g.parts:
         Nx, Ny, Nz = (sum(d) for d in _divs(g, part))
@@ -102,14 +116,41 @@ def count_dofs(g: AssemblyGeometry, element: str = "hex20") -> int:
 def factor_bytes(n_dofs: float) -> float:
     """Peak bytes of PARDISO's Cholesky factor of ``n_dofs`` DOFs of the apparatus:
     m c n^p for n <= n_m (the fit to the measured peaks, m = FACTOR_MARGIN), and that value at
-    n_m times (n / n_m)^(4/3) beyond."""
+    n_m times (n / n_m)^(4/3) beyond.
+
+    Parameters
+    ----------
+    n_dofs : float
+        Size of the matrix K - sigma M.
+
+    Returns
+    -------
+    float
+        bytes, the estimated peak of the factorization (``FACTOR_COEF``, ``FACTOR_EXP``,
+        ``FACTOR_MARGIN`` and ``FACTOR_MEASURED_DOFS`` are c, p, m and n_m).
+    """
     n = float(n_dofs)
     fit = FACTOR_MARGIN * FACTOR_COEF * min(n, FACTOR_MEASURED_DOFS) ** FACTOR_EXP
     return fit * max(n / FACTOR_MEASURED_DOFS, 1.0) ** FACTOR_EXP_BEYOND
 
 
 def modal_bytes(n_dofs: int, n_modes: int) -> dict:
-    """Peak bytes of mesh, assembly and modal analysis of ``n_dofs`` DOFs, by term."""
+    """Peak bytes of mesh, assembly and modal analysis of ``n_dofs`` DOFs, by term.
+
+    Parameters
+    ----------
+    n_dofs : int
+        DOFs of the mesh (:func:`count_dofs`).
+    n_modes : int
+        Modes asked of the eigensolver.
+
+    Returns
+    -------
+    dict of str to float
+        bytes, by term: ``matrices`` (K, M, the triangle handed to PARDISO and the scatter's
+        adjacency), ``factor`` (:func:`factor_bytes`), ``krylov`` (the Krylov basis and its
+        products) and ``total`` (their sum plus the interpreter's ``BASE``).
+    """
     nnz = NNZ_PER_ROW * n_dofs
     terms = {
         # K, M, the upper triangle of K - sigma M handed to PARDISO, and the scatter's adjacency

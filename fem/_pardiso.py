@@ -111,7 +111,19 @@ def _openblas_calls(lib: ctypes.CDLL):
 
 @contextlib.contextmanager
 def blas_threads(n: int):
-    """OpenBLAS (numpy's and scipy's) limited to ``n`` threads inside the block."""
+    """OpenBLAS (numpy's and scipy's) limited to ``n`` threads inside the block.
+
+    Parameters
+    ----------
+    n : int
+        Threads allowed to every OpenBLAS library loaded in the process (numpy's and scipy's); the
+        previous counts come back on leaving the block. Libraries without the thread calls are left
+        alone.
+
+    Yields
+    ------
+    None
+    """
     import scipy.linalg  # noqa: F401  (loads scipy's OpenBLAS so that it is found)
 
     saved = []
@@ -134,6 +146,31 @@ class PardisoCholesky:
 
     The upper triangle in zero-based CSR is handed over once; blocks of right-hand sides are
     solved together (column-major, BLAS-3). ``stats``: factor non-zeros, MFLOP, phase times.
+
+    Parameters
+    ----------
+    A : (n, n) sparse matrix
+        Symmetric positive definite; only its upper triangle is read (duplicates summed).
+    n_threads : int, optional
+        MKL threads (default: :func:`free_cores`).
+    iparm : dict of int to int, optional
+        PARDISO control entries (zero-based index: value) that override ``IPARM``.
+
+    Attributes
+    ----------
+    n : int
+        Order of A.
+    n_threads : int
+        MKL threads used.
+    stats : dict
+        ``factor_nnz`` (non-zeros of L), ``factor_mflop``, ``analyse_s`` and ``factor_s`` (s, the
+        reordering and the numerical factorization), ``n_threads``, ``peak_analysis_kib`` and
+        ``peak_factor_kib`` (KiB, PARDISO's own memory peaks).
+
+    Raises
+    ------
+    RuntimeError
+        PARDISO reports an error (A not positive definite: error -4; out of memory: -2 or -9).
     """
 
     def __init__(self, A: sp.spmatrix, n_threads: int | None = None, iparm: dict | None = None) -> None:

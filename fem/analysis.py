@@ -21,7 +21,20 @@ CENTRE = np.zeros(3)  # m, the beam's centre of mass: the model is symmetric abo
 
 @dataclass(frozen=True, eq=False)
 class ModalAnalysis:
-    """A solved model with its pseudo-rigid mode labels (none for the free beam)."""
+    """A solved model with its pseudo-rigid mode labels (none for the free beam).
+
+    Attributes
+    ----------
+    system : FESystem
+        The assembled model: mesh, K, M and the DOF map.
+    modes : ModalResult
+        Its lowest modes.
+    labels : ModeLabels or None
+        Which mode is which pseudo-rigid mode of Table 2; None for the free beam.
+    timing : dict of str to float
+        s, wall times of the steps: ``mesh_s``, ``assembly_s``, ``factorize_s``, ``iterate_s``,
+        ``eigensolution_s``, ``labels_s``.
+    """
 
     system: FESystem
     modes: ModalResult
@@ -53,7 +66,29 @@ class ModalAnalysis:
 
 def analyse(model: AssemblyModel, n_modes: int = 20, shift_hz: float = 1.0, solver: str = "pardiso",
             method: str = "cached", step: Callable[[str], None] | None = None) -> ModalAnalysis:
-    """Mesh, assemble, solve and label ``model``; ``step(name)`` is called as each step starts."""
+    """Mesh, assemble, solve and label ``model``; ``step(name)`` is called as each step starts.
+
+    Parameters
+    ----------
+    model : AssemblyModel
+        The apparatus (or the beam alone) to analyse; its ``layout`` decides the labels.
+    n_modes : int
+        Modes computed, rigid-body ones included.
+    shift_hz : float
+        Hz, magnitude of the negative shift of :func:`fem.modal.modal_analysis`.
+    solver : {'pardiso', 'superlu'}
+        Sparse factorization (PARDISO falls back to SuperLU when it is not installed).
+    method : str
+        Assembly method passed to :func:`fem.model.build_system` ('cached' by default).
+    step : callable, optional
+        ``step(name)`` called as each step starts ('mesh and assemble', 'eigensolution', 'labels').
+
+    Returns
+    -------
+    ModalAnalysis
+        System, modes, labels (the beam's pseudo-rigid modes, and the tube's for the assembly;
+        None for 'beam-free') and the time of each step.
+    """
     step = step or (lambda name: None)
     t0 = time.perf_counter()
     step("mesh and assemble")

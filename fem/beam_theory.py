@@ -35,7 +35,18 @@ SCAN_POINTS_PER_ROOT = 400  # log-spaced samples of the Timoshenko frequency equ
 
 
 def cowper_shear_coefficient(nu: float) -> float:
-    """Cowper's shear coefficient of a rectangular section, k = 10 (1 + nu) / (12 + 11 nu)."""
+    """Cowper's shear coefficient of a rectangular section, k = 10 (1 + nu) / (12 + 11 nu).
+
+    Parameters
+    ----------
+    nu : float
+        Poisson's ratio.
+
+    Returns
+    -------
+    float
+        The shear coefficient k (dimensionless, 0.85 at nu = 0.3).
+    """
     return 10.0 * (1.0 + nu) / (12.0 + 11.0 * nu)
 
 
@@ -48,6 +59,18 @@ def rectangle_torsion_constant(b: float, h: float, n_terms: int = N_TORSION_TERM
 
     the series solution of Prandtl's stress function, -lap(phi) = 2 on the section, phi = 0 on
     its edge, J = 2 int phi dA. A square gives J = 0.1406 a^4, a 2:1 rectangle 0.2287 a c^3.
+
+    Parameters
+    ----------
+    b, h : float
+        m, sides of the rectangle (either order).
+    n_terms : int
+        Odd terms n = 1, 3, .., 2 n_terms - 1 kept of the series.
+
+    Returns
+    -------
+    float
+        m^4, J.
     """
     a, c = max(b, h), min(b, h)
     n = np.arange(1, 2 * n_terms, 2, dtype=float)
@@ -61,6 +84,16 @@ def euler_bernoulli_roots(n_modes: int) -> np.ndarray:
     Written cos(x) = 1 / cosh(x), the n-th root lies within pi/4 of (2 n + 1) pi / 2, where
     cos(x) takes opposite signs (+-0.707) at the two ends and 1 / cosh(x) < 0.02; Brent's method
     refines it to round-off (4.730041, 7.853205, 10.995608, 14.137165, ...).
+
+    Parameters
+    ----------
+    n_modes : int
+        Number of elastic roots.
+
+    Returns
+    -------
+    (n_modes,) ndarray of float
+        beta_n l, increasing (dimensionless).
     """
     out = []
     for n in range(1, n_modes + 1):
@@ -72,7 +105,28 @@ def euler_bernoulli_roots(n_modes: int) -> np.ndarray:
 
 def euler_bernoulli_free_free_hz(E: float, rho: float, length: float, A: float, I: float,
                                  n_modes: int = 4) -> np.ndarray:
-    """Hz, f_n = (beta_n l)^2 / (2 pi l^2) sqrt(E I / (rho A)), n = 1 .. n_modes (elastic modes only)."""
+    """Hz, f_n = (beta_n l)^2 / (2 pi l^2) sqrt(E I / (rho A)), n = 1 .. n_modes (elastic modes only).
+
+    Parameters
+    ----------
+    E : float
+        Pa, Young's modulus.
+    rho : float
+        kg/m^3, density.
+    length : float
+        m, l.
+    A : float
+        m^2, cross-section area.
+    I : float
+        m^4, second moment of area about the bending axis.
+    n_modes : int
+        Number of elastic modes.
+
+    Returns
+    -------
+    (n_modes,) ndarray of float
+        Hz, f_1 .. f_n.
+    """
     bl = euler_bernoulli_roots(n_modes)
     return bl**2 / (2 * np.pi * length**2) * math.sqrt(E * I / (rho * A))
 
@@ -111,6 +165,28 @@ def timoshenko_frequency_function(omega: float, length: float, EI: float, kGA: f
     Without shear and rotary inertia (P = alpha, Q = -beta, alpha = beta) these become
     Euler-Bernoulli's tan(beta l/2) = -tanh(beta l/2) and tan(beta l/2) = tanh(beta l/2), the two
     halves of cos(beta l) cosh(beta l) = 1.
+
+    Parameters
+    ----------
+    omega : float
+        rad/s, below the cut-off sqrt(kGA / rhoI).
+    length : float
+        m, l.
+    EI : float
+        N m^2, bending stiffness.
+    kGA : float
+        N, shear stiffness (shear coefficient times G A).
+    rhoA : float
+        kg/m, mass per length.
+    rhoI : float
+        kg m, rotary inertia per length.
+    symmetric : bool
+        True for the modes even in w, False for the odd ones.
+
+    Returns
+    -------
+    float
+        D(omega) (dimensionless scale); it changes sign at each natural frequency of the family.
     """
     al, be = _timoshenko_wavenumbers(omega, EI, kGA, rhoA, rhoI)
     r = rhoA * omega**2 / kGA
@@ -138,6 +214,36 @@ def timoshenko_free_free_hz(E: float, nu: float, rho: float, length: float, A: f
     E = 210 GPa, nu = 0.3, rho = 7850 kg/m^3 this gives 2568.1 Hz against Euler-Bernoulli's
     2658.3 Hz (beta_1 l = 4.730041: R. D. Blevins, *Formulas for Natural Frequency and Mode
     Shape* (1979), free-free beam).
+
+    Parameters
+    ----------
+    E : float
+        Pa, Young's modulus.
+    nu : float
+        Poisson's ratio (for G and Cowper's k).
+    rho : float
+        kg/m^3, density.
+    length : float
+        m, l.
+    A : float
+        m^2, cross-section area.
+    I : float
+        m^4, second moment of area about the bending axis.
+    k_shear : float, optional
+        Shear coefficient (default :func:`cowper_shear_coefficient` of ``nu``).
+    n_modes : int
+        Number of elastic modes, even and odd together.
+
+    Returns
+    -------
+    (n_modes,) ndarray of float
+        Hz, increasing.
+
+    Raises
+    ------
+    ValueError
+        Fewer than ``n_modes`` roots below the top of the scan (the Euler-Bernoulli frequency of
+        mode n_modes + 1, or the cut-off sqrt(kGA / rhoI) if lower).
     """
     k = cowper_shear_coefficient(nu) if k_shear is None else k_shear
     G = E / (2 * (1 + nu))
@@ -168,6 +274,24 @@ def torsion_free_free_hz(G: float, rho: float, length: float, b: float, h: float
     (:func:`rectangle_torsion_constant`). Warping is free at the ends; its stiffness and inertia
     are left out: the 3-D impact beam converges to this (+2e-5 with 8 elements across each section
     block, tests/test_fem.py).
+
+    Parameters
+    ----------
+    G : float
+        Pa, shear modulus.
+    rho : float
+        kg/m^3, density.
+    length : float
+        m, l.
+    b, h : float
+        m, sides of the rectangular section.
+    n_modes : int
+        Number of torsion modes.
+
+    Returns
+    -------
+    (n_modes,) ndarray of float
+        Hz, f_1 .. f_n.
     """
     J = rectangle_torsion_constant(b, h)
     Ip = (b * h**3 + h * b**3) / 12.0
@@ -178,13 +302,47 @@ def torsion_free_free_hz(G: float, rho: float, length: float, b: float, h: float
 def axial_free_free_hz(E: float, rho: float, length: float, n_modes: int = 1) -> np.ndarray:
     """Hz, longitudinal modes of a free-free rod: f_n = n / (2 l) sqrt(E / rho) (rho u_tt = E u_xx, u_x = 0
     at the ends). A 3-D bar sits lower by Love's lateral inertia, -nu^2 (n pi r_p / l)^2 / 2 relative with
-    r_p^2 = I_p / A (-2.8e-4 for the first mode of the impact beam)."""
+    r_p^2 = I_p / A (-2.8e-4 for the first mode of the impact beam).
+
+    Parameters
+    ----------
+    E : float
+        Pa, Young's modulus.
+    rho : float
+        kg/m^3, density.
+    length : float
+        m, l.
+    n_modes : int
+        Number of axial modes.
+
+    Returns
+    -------
+    (n_modes,) ndarray of float
+        Hz, f_1 .. f_n (without Love's correction, :func:`love_axial_correction`).
+    """
     return np.arange(1, n_modes + 1) / (2 * length) * math.sqrt(E / rho)
 
 
 def love_axial_correction(nu: float, length: float, b: float, h: float, n: int = 1) -> float:
     """Relative shift of the n-th axial frequency by lateral inertia (Love's rod theory, first order):
-    -nu^2 (n pi r_p / l)^2 / 2, r_p^2 = (b^2 + h^2) / 12."""
+    -nu^2 (n pi r_p / l)^2 / 2, r_p^2 = (b^2 + h^2) / 12.
+
+    Parameters
+    ----------
+    nu : float
+        Poisson's ratio.
+    length : float
+        m, l.
+    b, h : float
+        m, sides of the rectangular section.
+    n : int
+        Axial mode number.
+
+    Returns
+    -------
+    float
+        Relative shift (f_Love - f_rod) / f_rod, negative.
+    """
     rp2 = (b * b + h * h) / 12.0
     return -0.5 * nu**2 * (n * np.pi / length) ** 2 * rp2
 
@@ -198,6 +356,33 @@ def free_beam_references(E: float, nu: float, rho: float, length: float, b: floa
 
     Bending against Timoshenko (Euler-Bernoulli beside it), torsion against St-Venant, axial
     against the rod; ``counts`` says how many modes of each family (see :data:`FAMILIES`).
+
+    Parameters
+    ----------
+    E : float
+        Pa, Young's modulus.
+    nu : float
+        Poisson's ratio.
+    rho : float
+        kg/m^3, density.
+    length : float
+        m, l.
+    b, h : float
+        m, section sides along y and z.
+    counts : dict of str to int
+        Family (a member of ``FAMILIES``: 'bending z', 'bending y', 'torsion', 'axial') -> number of
+        modes wanted (0 or less: none).
+
+    Returns
+    -------
+    dict of str to list of (str, float, float)
+        Per family of ``counts``: (theory name, Hz of that theory, Hz of Euler-Bernoulli for the
+        bending families, else nan), mode 1 first.
+
+    Raises
+    ------
+    ValueError
+        A family not in ``FAMILIES``.
     """
     A, G = b * h, E / (2 * (1 + nu))
     out: dict[str, list[tuple[str, float, float]]] = {}

@@ -38,7 +38,32 @@ DEFAULT_PARAMETERS = {  # name: (lower, upper) bounds
 
 @dataclass(frozen=True, eq=False)
 class CalibrationResult:
-    """Fitted model, its frequencies and the sensitivities at the optimum."""
+    """Fitted model, its frequencies and the sensitivities at the optimum.
+
+    Attributes
+    ----------
+    model : AssemblyModel
+        ``model`` with the fitted values put in.
+    names : tuple of str
+        The fitted parameters, in the order of ``initial`` and ``fitted``.
+    initial, fitted : (n_params,) ndarray of float
+        The parameters' values at the start and at the optimum (their own units, see
+        ``DEFAULT_PARAMETERS``).
+    freq_hz : (6,) ndarray of float
+        Hz, the model's pseudo-rigid frequencies at the fitted values, Table 2 order.
+    test_hz : (6,) ndarray of float
+        Hz, the measured frequencies fitted to.
+    sensitivity : (6, n_params) ndarray of float
+        S_ij = d ln f_i / d ln p_j at the optimum (from the last finite-difference Jacobian).
+    n_evaluations : int
+        Distinct models evaluated.
+    status, message
+        ``scipy.optimize.least_squares``'s status and message.
+    wall_time_s : float
+        s, time of the fit.
+    history : list of tuple
+        (parameter values, frequencies in Hz) of every evaluation, in order.
+    """
 
     model: AssemblyModel
     names: tuple[str, ...]
@@ -62,7 +87,37 @@ def calibrate(model: AssemblyModel, evaluate: Callable[[AssemblyModel], np.ndarr
               parameters: dict[str, tuple[float, float]] | None = None,
               test_hz=TABLE2_TEST_HZ, max_nfev: int = 60, diff_step: float = 0.02,
               log: Callable[[str], None] | None = None) -> CalibrationResult:
-    """Fit ``parameters`` of ``model`` so that ``evaluate(model)`` (Hz, Table 2 order) matches ``test_hz``."""
+    """Fit ``parameters`` of ``model`` so that ``evaluate(model)`` (Hz, Table 2 order) matches ``test_hz``.
+
+    Parameters
+    ----------
+    model : AssemblyModel
+        The starting model; its values of the fitted parameters are the starting point (clipped
+        into the bounds).
+    evaluate : callable
+        ``evaluate(model) -> (6,) ndarray``, Hz, the model's frequencies in Table 2 order. A
+        ValueError (infeasible geometry inside the bounds) counts as frequencies ten times the test.
+    parameters : dict of str to (float, float), optional
+        Field of AssemblyModel -> (lower, upper) bound, in the field's units (default
+        ``DEFAULT_PARAMETERS``).
+    test_hz : (6,) array_like of float
+        Hz, the measured frequencies (Table 2).
+    max_nfev : int
+        Most residual evaluations of the least-squares solver.
+    diff_step : float
+        Relative step of the forward differences in ln p.
+    log : callable, optional
+        ``log(line)`` called after each new evaluation.
+
+    Returns
+    -------
+    CalibrationResult
+
+    Raises
+    ------
+    ValueError
+        A parameter the paper fixes (``FIXED_BY_PAPER``) is asked to be fitted.
+    """
     parameters = parameters or DEFAULT_PARAMETERS
     bad = [p for p in parameters if p in FIXED_BY_PAPER]
     if bad:

@@ -33,7 +33,29 @@ TIPS = (("x1", "left"), ("x3", "right"))  # gap coordinate name, beam end
 
 @dataclass(frozen=True, eq=False)
 class ContactPair:
-    """One impact-tip clearance: gap coordinate s = row . u, two-sided stop |s| <= gap."""
+    """One impact-tip clearance: gap coordinate s = row . u, two-sided stop |s| <= gap.
+
+    Parameters
+    ----------
+    name : str
+        "x1" (left tip, x = -L) or "x3" (right tip, x = +L).
+    row : (n_dofs,) ndarray of float
+        Distributing row of the gap coordinate, s = row @ u (m): the mean uz of the beam's two
+        contact patches, less that of the tube seats in the 'assembly' layout.
+    normal : tuple of 3 float
+        Unit normal of the upper tip; the lower tip's is its opposite.
+    gap : float
+        m, clearance g on either side, >= 0.
+    k_g : float
+        N/m, penalty stiffness of a closed tip, > 0.
+    centre : tuple of 3 float
+        m, centroid of the beam-side patches.
+
+    Raises
+    ------
+    ValueError
+        ``gap`` negative or not finite, ``k_g`` not finite and > 0.
+    """
 
     name: str  # "x1" (left tip, x = -L) or "x3" (right tip, x = +L)
     row: np.ndarray  # (n_dofs,) distributing row: s = row @ u [m]
@@ -63,7 +85,27 @@ def _mean_uz_row(fe, names: list[str]) -> np.ndarray:
 
 
 def contact_pairs(fe, gap: float | None = None, k_g: float | None = None) -> list[ContactPair]:
-    """The two tip clearances of an assembled model (gap and k_g default to the model's)."""
+    """The two tip clearances of an assembled model (gap and k_g default to the model's).
+
+    Parameters
+    ----------
+    fe : FESystem
+        An assembled model of layout 'beam-grounded' or 'assembly'.
+    gap : float, optional
+        m, clearance (default ``fe.model.gap``).
+    k_g : float, optional
+        N/m, contact stiffness (default ``fe.model.k_g``).
+
+    Returns
+    -------
+    list of ContactPair
+        x1 (left) and x3 (right), each with normal +z.
+
+    Raises
+    ------
+    ValueError
+        Layout 'beam-free', which has no tips.
+    """
     layout = fe.model.layout
     if layout == "beam-free":
         raise ValueError("layout 'beam-free' has no impact tips (use 'beam-grounded' or 'assembly')")
@@ -82,12 +124,36 @@ def contact_pairs(fe, gap: float | None = None, k_g: float | None = None) -> lis
 
 
 def contact_rows(pairs: list[ContactPair]) -> np.ndarray:
-    """(n_tips, n_dofs) the gap coordinates' rows, s = R u."""
+    """(n_tips, n_dofs) the gap coordinates' rows, s = R u.
+
+    Parameters
+    ----------
+    pairs : list of ContactPair
+        The tips, in the order of the rows.
+
+    Returns
+    -------
+    (n_tips, n_dofs) ndarray of float
+        R, one gap-coordinate row per tip (m per m of displacement).
+    """
     return np.vstack([p.row for p in pairs])
 
 
 def tied_stiffness(K: sp.spmatrix, pairs: list[ContactPair]) -> sp.csr_matrix:
-    """N/m, closed-gap linearization K + sum_i k_g r_i r_i^T (sparse: rows touch patch DOFs only)."""
+    """N/m, closed-gap linearization K + sum_i k_g r_i r_i^T (sparse: rows touch patch DOFs only).
+
+    Parameters
+    ----------
+    K : (n_dofs, n_dofs) sparse matrix
+        N/m, the open-gap stiffness.
+    pairs : list of ContactPair
+        The tips tied, each with its own k_g and row r_i.
+
+    Returns
+    -------
+    (n_dofs, n_dofs) scipy.sparse.csr_matrix
+        N/m, K + sum_i k_g,i r_i r_i^T (a copy: K is not changed).
+    """
     out = sp.csr_matrix(K, copy=True)
     for p in pairs:
         r = sp.csr_matrix(p.row)
@@ -97,7 +163,23 @@ def tied_stiffness(K: sp.spmatrix, pairs: list[ContactPair]) -> sp.csr_matrix:
 
 @dataclass(frozen=True, eq=False)
 class GapModes:
-    """Open- or closed-gap modes of the 3-D model, flagged by whether the tips can excite them."""
+    """Open- or closed-gap modes of the 3-D model, flagged by whether the tips can excite them.
+
+    Attributes
+    ----------
+    state : {'open', 'closed'}
+        The tips open (K) or tied (:func:`tied_stiffness`).
+    freq_hz : (n,) ndarray of float
+        Hz, ascending.
+    phi : (n_dofs, n) ndarray of float
+        Mode shapes, mass-normalised (phi^T M phi = I).
+    tip_motion : (2, n) ndarray of float
+        R phi, the gap coordinates of each mode, m / sqrt(kg).
+    symmetric : (n,) ndarray of float
+        phi^T M (mirror phi) about y = 0: +1 symmetric (in-plane), -1 antisymmetric.
+    coupled : (n,) ndarray of bool
+        A symmetric mode the tips can excite (see :func:`gap_modes`).
+    """
 
     state: str  # "open" or "closed"
     freq_hz: np.ndarray  # (n,) Hz
@@ -123,6 +205,33 @@ def gap_modes(fe, pairs: list[ContactPair], state: str, n_modes: int = 20, Psi: 
     coupling |Psi^T M phi| > ``mass_tol`` sqrt(max diag Psi^T M Psi) (the reduced model's own
     criterion: it catches rigid-like modes whose relative tip motion is small). Symmetric
     modes that are neither (surge, z-antisymmetric tube modes) sit at 1e-9 of these scales.
+
+    Parameters
+    ----------
+    fe : FESystem
+        The assembled model ('beam-grounded' or 'assembly' layout, mirror-symmetric about y = 0).
+    pairs : list of ContactPair
+        The tips (:func:`contact_pairs`): their rows, and their k_g for the closed state.
+    state : {'open', 'closed'}
+        Tips open or tied.
+    n_modes : int
+        Modes computed (shift 0.1 Hz, rigid-body modes counted).
+    Psi : (n_dofs, n_c) ndarray of float, optional
+        Constraint modes of a reduced model, for the mass-coupling test.
+    tip_tol : float
+        Relative tip-motion threshold of a coupled mode, against the largest |R phi| of the set.
+    mass_tol : float
+        Relative mass-coupling threshold, against sqrt(max diag Psi^T M Psi).
+
+    Returns
+    -------
+    GapModes
+
+    Raises
+    ------
+    ValueError
+        ``state`` neither 'open' nor 'closed', or a mesh not symmetric about y = 0
+        (:func:`mirror_map`).
     """
     from fem.modal import modal_analysis
 
@@ -149,6 +258,17 @@ def point_rows(fe) -> dict[str, np.ndarray]:
     In the ``assembly`` layout the points are taken relative to the tube, as the gaps are: x1,
     x3 minus the tips' seats, x2 minus the mean of the tube sensors tube_s1..4 (their centroid is
     the tube's centre). Whole-assembly motion on the bungees then leaves the points at rest.
+
+    Parameters
+    ----------
+    fe : FESystem
+        An assembled model with the beam's contact patches and sensors beam_s3, beam_s4 (and, in
+        the 'assembly' layout, the tube seats and sensors tube_s1..4).
+
+    Returns
+    -------
+    dict of str to (n_dofs,) ndarray of float
+        ``x1``, ``x2``, ``x3``: rows r with x = r @ u in m.
     """
     rows = {name: _mean_uz_row(fe, [f"beam_contact_{end}_top", f"beam_contact_{end}_bottom"])
             for name, end in TIPS}
@@ -166,6 +286,27 @@ def mirror_map(fe, tol: float = 1e-8, axis: int = 1) -> tuple[np.ndarray, np.nda
 
     A mode is symmetric when phi^T M (sign * phi[perm]) = +1 and antisymmetric when it is -1.
     Raises ValueError if the mesh is not symmetric about that plane.
+
+    Parameters
+    ----------
+    fe : FESystem
+        The assembled model (its DOF locations and components are read).
+    tol : float
+        Largest mismatch of a mirrored DOF's location, relative to the model's largest extent.
+    axis : {0, 1, 2}
+        Normal of the mirror plane through the origin.
+
+    Returns
+    -------
+    perm : (n_dofs,) ndarray of int
+        Index of the mirror image of each DOF.
+    sign : (n_dofs,) ndarray of float
+        -1 for the DOFs along ``axis``, +1 for the others.
+
+    Raises
+    ------
+    ValueError
+        ``axis`` not 0, 1 or 2, or the mesh not symmetric about the plane.
     """
     from scipy.spatial import cKDTree
 

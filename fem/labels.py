@@ -29,7 +29,21 @@ TABLE2_PAPER_FE_HZ = (10.68, 11.24, 13.73, 18.50, 22.65, 34.72)  # Hz, paper Tab
 
 @dataclass(frozen=True, eq=False)
 class ModeLabels:
-    """Which computed mode is which pseudo-rigid mode, and how clearly."""
+    """Which computed mode is which pseudo-rigid mode, and how clearly.
+
+    Attributes
+    ----------
+    mode_index : dict of str to int
+        Label (``COMPONENT_LABELS``: longitudinal, lateral, bounce, roll, pitch, yaw) -> index of its
+        mode in the modal result.
+    score : (n_modes, 6) ndarray of float
+        Score of each mode against each component, in ``COMPONENT_LABELS`` order, in [0, 1].
+    rigid_fraction : (n_modes,) ndarray of float
+        Share of the beam's kinetic energy that is rigid motion, in [0, 1].
+    relative_q : (n_modes, 6) ndarray of float
+        Relative rigid motion q_b - q_t (q_b alone without a tube): translations x, y, z, then
+        rotations about x, y, z, on the scale of ``phi``.
+    """
 
     mode_index: dict[str, int]  # label -> index into the modal result
     score: np.ndarray  # (n_modes, 6) score of each mode against each component
@@ -42,7 +56,24 @@ class ModeLabels:
 
 
 def rigid_projection(phi: np.ndarray, M: sp.spmatrix, Phi_rb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """q = (Phi_rb^T M Phi_rb)^-1 Phi_rb^T M phi for every column of phi; returns (q (6, m), Mrb)."""
+    """q = (Phi_rb^T M Phi_rb)^-1 Phi_rb^T M phi for every column of phi; returns (q (6, m), Mrb).
+
+    Parameters
+    ----------
+    phi : (n, m) ndarray of float
+        Displacement fields (e.g. mode shapes restricted to a part's DOFs).
+    M : (n, n) sparse matrix
+        kg, the mass matrix on the same DOFs.
+    Phi_rb : (n, 6) ndarray of float
+        Rigid-body modes (translations x, y, z, then rotations about x, y, z).
+
+    Returns
+    -------
+    q : (6, m) ndarray of float
+        Mass-weighted least-squares rigid motion of each column.
+    Mrb : (6, 6) ndarray of float
+        Phi_rb^T M Phi_rb, the rigid-body mass matrix.
+    """
     MP = M @ Phi_rb
     Mrb = Phi_rb.T @ MP
     q = np.linalg.solve(Mrb, MP.T @ phi)
@@ -56,6 +87,33 @@ def label_modes(phi: np.ndarray, M: sp.spmatrix, beam_dofs: np.ndarray, Phi_beam
 
     ``Phi_beam`` (and ``Phi_tube``) are the rigid-body modes of the beam (tube) DOFs about
     the beam's centre of mass; ``candidates`` restricts the modes considered.
+
+    Parameters
+    ----------
+    phi : (n_dofs, n_modes) ndarray of float
+        Mode shapes.
+    M : (n_dofs, n_dofs) sparse matrix
+        kg, mass matrix.
+    beam_dofs : (n_b,) ndarray of int
+        The beam's DOFs.
+    Phi_beam : (n_b, 6) ndarray of float
+        Rigid-body modes on ``beam_dofs``.
+    tube_dofs : (n_t,) ndarray of int, optional
+        The tube's DOFs: with ``Phi_tube``, the motion is scored relative to the tube.
+    Phi_tube : (n_t, 6) ndarray of float, optional
+        Rigid-body modes on ``tube_dofs`` about the same point.
+    candidates : ndarray of int, optional
+        Indices of the modes that may be labelled (default: all).
+
+    Returns
+    -------
+    ModeLabels
+        One mode per label, chosen by a linear assignment maximising the total score.
+
+    Raises
+    ------
+    ValueError
+        Fewer than six candidate modes.
     """
     Mb = M[beam_dofs][:, beam_dofs]
     ub = phi[beam_dofs]
@@ -90,7 +148,17 @@ SYMMETRY_TOL = 1e-3  # a mode of a mirror-symmetric mesh has phi^T M (mirror phi
 
 @dataclass(frozen=True, eq=False)
 class FreeBeamMode:
-    """One elastic mode of the free beam: which family it belongs to and its order in that family."""
+    """One elastic mode of the free beam: which family it belongs to and its order in that family.
+
+    Attributes
+    ----------
+    index : int
+        Index of the mode in the modal result.
+    family : {'bending z', 'bending y', 'torsion', 'axial', 'other'}
+        Its family by mirror symmetry about y = 0 and z = 0.
+    order : int
+        n = 1, 2, ... within its family by frequency; 0 for 'other'.
+    """
 
     index: int  # into the modal result
     family: str  # bending z | bending y | torsion | axial | other
@@ -107,6 +175,22 @@ def free_beam_families(fe, phi: np.ndarray, elastic: np.ndarray) -> list[FreeBea
     exact; the direction holding most of the kinetic energy (> 1/2) confirms it, so that a
     higher-order section mode of the same class (far above the modes computed here) reads
     "other". Orders count the modes of one family by ascending frequency.
+
+    Parameters
+    ----------
+    fe : FESystem
+        The free beam's assembled model (mirror-symmetric about y = 0 and z = 0).
+    phi : (n_dofs, n_modes) ndarray of float
+        Mass-normalised mode shapes.
+    elastic : (n_modes,) ndarray of bool
+        Which modes to sort (the rigid-body ones are left out).
+
+    Returns
+    -------
+    list of FreeBeamMode
+        One per elastic mode, in mode order; 'other' for a mode whose symmetry is not +-1 to
+        ``SYMMETRY_TOL`` (a degenerate pair mixed by the solver) or whose energy is not mostly
+        in its family's direction.
     """
     from fem.contact import mirror_map
 

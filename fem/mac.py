@@ -12,7 +12,25 @@ import numpy as np
 
 
 def mac(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """(m, n) MAC between the columns of A (p, m) and B (p, n)."""
+    """(m, n) MAC between the columns of A (p, m) and B (p, n).
+
+    Parameters
+    ----------
+    A : (p, m) array_like of float
+        Mode shapes at p DOFs.
+    B : (p, n) array_like of float
+        Mode shapes at the same p DOFs.
+
+    Returns
+    -------
+    (m, n) ndarray of float
+        MAC_ij of column i of A with column j of B, in [0, 1].
+
+    Raises
+    ------
+    ValueError
+        A and B with different numbers of rows.
+    """
     A = np.asarray(A, float)
     B = np.asarray(B, float)
     if A.shape[0] != B.shape[0]:
@@ -27,6 +45,23 @@ def write_uff55(path: str | Path, node_ids: np.ndarray, freq_hz: np.ndarray, sha
     """Write real normal modes as UFF dataset 55 (three DOFs per node).
 
     ``shapes`` is (3 n_nodes, n_modes) with x, y, z per node in ``node_ids`` order.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file, replaced if it exists.
+    node_ids : (n_nodes,) array_like of int
+        UFF node numbers.
+    freq_hz : (n_modes,) array_like of float
+        Hz, one per mode.
+    shapes : (3 n_nodes, n_modes) ndarray of float
+        Mode shapes, x, y, z per node (written with modal mass 1).
+    name : str
+        The records' first ID line.
+
+    Returns
+    -------
+    None
     """
     import pyuff
 
@@ -49,7 +84,27 @@ def write_uff55(path: str | Path, node_ids: np.ndarray, freq_hz: np.ndarray, sha
 
 
 def read_uff55(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Read real modes from UFF dataset 55: (node_ids, freq_hz (m,), shapes (3 n, m))."""
+    """Read real modes from UFF dataset 55: (node_ids, freq_hz (m,), shapes (3 n, m)).
+
+    Parameters
+    ----------
+    path : str or Path
+        A universal file holding dataset 55 records (other datasets are skipped).
+
+    Returns
+    -------
+    node_ids : (n,) ndarray of int
+        Node numbers of the first record.
+    freq_hz : (m,) ndarray of float
+        Hz, one per record.
+    shapes : (3 n, m) ndarray of float
+        Real parts of the shapes, x, y, z per node.
+
+    Raises
+    ------
+    ValueError
+        No dataset 55 in the file.
+    """
     import pyuff
 
     uff = pyuff.UFF(str(path))
@@ -67,7 +122,20 @@ def read_uff55(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def read_shapes_csv(path: str | Path) -> tuple[list[str], np.ndarray]:
-    """Test shapes from CSV: header ``dof,mode1,...``, one row per sensor DOF (e.g. beam_s1:x)."""
+    """Test shapes from CSV: header ``dof,mode1,...``, one row per sensor DOF (e.g. beam_s1:x).
+
+    Parameters
+    ----------
+    path : str or Path
+        CSV file; the header line is skipped.
+
+    Returns
+    -------
+    dofs : list of str
+        The first column (sensor DOF names).
+    shapes : (n_dofs, n_modes) ndarray of float
+        The other columns.
+    """
     rows = Path(path).read_text().strip().splitlines()
     dofs, vals = [], []
     for line in rows[1:]:

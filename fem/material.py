@@ -11,7 +11,22 @@ from skfem.helpers import ddot, dot, sym_grad, trace
 
 @dataclass(frozen=True, slots=True)
 class Material:
-    """Isotropic linear elastic material."""
+    """Isotropic linear elastic material.
+
+    Parameters
+    ----------
+    E : float
+        Pa, Young's modulus, > 0.
+    nu : float
+        Poisson's ratio, in (-1, 0.5).
+    rho : float
+        kg/m^3, density, > 0.
+
+    Raises
+    ------
+    ValueError
+        A value outside those ranges.
+    """
 
     E: float = 200e9  # Pa, Young's modulus (steel)
     nu: float = 0.3  # Poisson's ratio
@@ -32,12 +47,36 @@ class Material:
 
 
 def lame_parameters(E: float, nu: float) -> tuple[float, float]:
-    """(lambda, mu) = (E nu / ((1 + nu)(1 - 2 nu)), E / (2 (1 + nu)))."""
+    """(lambda, mu) = (E nu / ((1 + nu)(1 - 2 nu)), E / (2 (1 + nu))).
+
+    Parameters
+    ----------
+    E : float
+        Pa, Young's modulus.
+    nu : float
+        Poisson's ratio, in (-1, 0.5).
+
+    Returns
+    -------
+    lam, mu : float
+        Pa, the Lame parameters (mu = G).
+    """
     return E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
 
 
 def stiffness_form(material: Material) -> BilinearForm:
-    """a(u, v) = int 2 mu eps(u):eps(v) + lambda div u div v dx."""
+    """a(u, v) = int 2 mu eps(u):eps(v) + lambda div u div v dx.
+
+    Parameters
+    ----------
+    material : Material
+        E and nu give lambda and mu.
+
+    Returns
+    -------
+    skfem.BilinearForm
+        The form (N/m once assembled with lengths in m).
+    """
     lam, mu = lame_parameters(material.E, material.nu)
 
     @BilinearForm
@@ -49,7 +88,18 @@ def stiffness_form(material: Material) -> BilinearForm:
 
 
 def mass_form(material: Material) -> BilinearForm:
-    """m(u, v) = int rho u . v dx (consistent mass)."""
+    """m(u, v) = int rho u . v dx (consistent mass).
+
+    Parameters
+    ----------
+    material : Material
+        rho is used.
+
+    Returns
+    -------
+    skfem.BilinearForm
+        The form (kg once assembled).
+    """
     rho = material.rho
 
     @BilinearForm

@@ -50,7 +50,35 @@ MAX_STEPS = 60  # Krylov: block solves before giving up (a mode left unconverged
 @dataclass(frozen=True, eq=False)
 class ModalResult:
     """Natural frequencies and mass-normalised mode shapes (phi^T M phi = I), signs fixed by
-    :func:`_fix_signs`."""
+    :func:`_fix_signs`.
+
+    Attributes
+    ----------
+    freq_hz : (n_modes,) ndarray of float
+        Hz, ascending (negative eigenvalues give 0).
+    phi : (n_dofs, n_modes) ndarray of float
+        Mode shapes, phi^T M phi = I.
+    omega2 : (n_modes,) ndarray of float
+        rad^2/s^2, the eigenvalues.
+    solver : str
+        '<factorization>/<method>', e.g. 'pardiso/krylov'.
+    shift_hz : float
+        Hz, magnitude of the negative shift.
+    n_op : int
+        Applications of (K - sigma M)^-1 to a vector (-1 when unknown).
+    n_iter : int
+        Subspace iterations or block Krylov steps (0 for ARPACK).
+    timing : dict of str to float
+        s, ``factorize_s``, ``iterate_s`` (and ``check_s`` or ``total_s``).
+    residual : float
+        max_i ||K phi_i - omega_i^2 M phi_i|| / ||K phi_i|| over the elastic modes.
+    residuals, floors : (n_modes,) ndarray of float or None
+        Each mode's relative residual and its round-off floor (:func:`residual_test`).
+    converged : (n_modes,) ndarray of bool or None
+        The Krylov residual test passed (Krylov method only).
+    stats : dict
+        Factorization statistics (factor non-zeros, MFLOP, threads).
+    """
 
     freq_hz: np.ndarray  # Hz, (n_modes,) ascending
     phi: np.ndarray  # (n_dofs, n_modes)
@@ -72,7 +100,13 @@ def has_pardiso() -> bool:
 
 
 class PardisoFactor(PardisoCholesky):
-    """Cholesky factor of a symmetric positive definite matrix by MKL PARDISO (mtype 2)."""
+    """Cholesky factor of a symmetric positive definite matrix by MKL PARDISO (mtype 2).
+
+    Parameters
+    ----------
+    A, n_threads, iparm
+        As :class:`fem._pardiso.PardisoCholesky`.
+    """
 
 
 def _fix_signs(phi: np.ndarray) -> np.ndarray:
@@ -103,7 +137,26 @@ def _abs(K: sp.spmatrix) -> sp.csr_matrix:
 
 def residual_test(K, M, lam: np.ndarray, X: np.ndarray, absK=None, MX=None):
     """Per column: relative residual ||K x - lam M x|| / ||K x|| and its round-off floor
-    eps || |K| |x| || / ||K x|| (the error of evaluating K x itself in double precision)."""
+    eps || |K| |x| || / ||K x|| (the error of evaluating K x itself in double precision).
+
+    Parameters
+    ----------
+    K, M : (n, n) sparse matrix
+        N/m and kg.
+    lam : (m,) ndarray of float
+        rad^2/s^2, eigenvalue estimates.
+    X : (n, m) ndarray of float
+        Eigenvector estimates.
+    absK : (n, n) sparse matrix, optional
+        |K| entrywise (computed when not given).
+    MX : (n, m) ndarray of float, optional
+        M X, if already known.
+
+    Returns
+    -------
+    residual, floor : (m,) ndarray of float
+        ||K x - lam M x|| / ||K x|| and eps || |K| |x| || / ||K x|| of each column.
+    """
     KX = K @ X
     MX = M @ X if MX is None else MX
     absK = _abs(K) if absK is None else absK
@@ -253,7 +306,19 @@ def modal_analysis(K: sp.spmatrix, M: sp.spmatrix, n_modes: int = 20, shift_hz: 
         the solves of K - sigma M, condition ~1e10, are accurate to about 1e-6, so the Ritz
         values of the near-zero modes wander by ~1e-5 of |sigma|; at least three iterations
         are always made). lanczos: not used (ARPACK to machine precision).
+    max_iter : most subspace iterations (method 'subspace' only).
+    seed : seed of the random start block (krylov, subspace) or start vector (lanczos).
     n_threads : PARDISO threads (default: the cores free now, :func:`fem._pardiso.free_cores`).
+
+    Returns
+    -------
+    ModalResult
+        Ascending, mass-normalised, signs fixed, with each mode's residual and round-off floor.
+
+    Raises
+    ------
+    ValueError
+        An unknown ``method``.
     """
     if solver == "pardiso" and not has_pardiso():
         solver = "superlu"
@@ -306,7 +371,24 @@ def modal_analysis(K: sp.spmatrix, M: sp.spmatrix, n_modes: int = 20, shift_hz: 
 
 def baseline_modal(K: sp.spmatrix, M: sp.spmatrix, n_modes: int = 20, shift_hz: float = 1.0,
                    seed: int = 0) -> ModalResult:
-    """The plain SciPy baseline: eigsh(K, M=M, sigma=sigma) factorizing with SuperLU itself."""
+    """The plain SciPy baseline: eigsh(K, M=M, sigma=sigma) factorizing with SuperLU itself.
+
+    Parameters
+    ----------
+    K, M : (n, n) sparse matrix
+        N/m and kg.
+    n_modes : int
+        Number of modes, rigid-body ones included.
+    shift_hz : float
+        Hz, sigma = -(2 pi shift_hz)^2.
+    seed : int
+        Seed of ARPACK's random start vector.
+
+    Returns
+    -------
+    ModalResult
+        Mass-normalised, signs fixed; no residuals, ``n_op`` = -1, only ``total_s`` timed.
+    """
     n = K.shape[0]
     sigma = -(2 * np.pi * shift_hz) ** 2
     v0 = np.random.default_rng(seed).standard_normal(n)

@@ -68,6 +68,22 @@ def half_sine_laplace(s, peak: float, duration: float, start: float = 0.0) -> np
     of s^2 + a^2 (e^{-mu d} = -1 gives 1 + e^{-s d} = -expm1(-(s - mu) d)), so there is no 0/0
     at s = +-i a, where F = -+i P d e^{-+i a t0} / 2. With s = i 2 pi f it is the Fourier transform
     of the pulse (N s).
+
+    Parameters
+    ----------
+    s : complex or array_like of complex
+        rad/s, Laplace variable(s).
+    peak : float
+        N, P.
+    duration : float
+        s, d > 0.
+    start : float
+        s, t0.
+
+    Returns
+    -------
+    ndarray of complex
+        N s, F(s), the shape of ``s``.
     """
     s = np.asarray(s, dtype=complex)
     a = np.pi / duration
@@ -114,6 +130,20 @@ class ModalPoles:
     (diagonal), is written z = [q_e; q_e'], z' = A z + [0; E^T b] f,
     A = [[0, I], [-K_e, -C_e]] = V diag(lam) V^-1. Without free rigid directions E = I and A
     is the full [[0, I], [-Omega^2, -Cm]].
+
+    Attributes
+    ----------
+    lam : (2 m_e,) ndarray of complex
+        rad/s, the poles, Re <= 0 (conjugate pairs or real).
+    V, V_inv : (2 m_e, 2 m_e) ndarray of complex
+        Eigenvectors of A (A V = V diag(lam)), [q_e; q_e'] rows, and their inverse.
+    cond_V : float
+        2-norm condition number of the eigenbasis of the balanced form (see
+        :meth:`ModalModel.poles`).
+    elastic_basis : (m, m_e) ndarray of float
+        E, orthonormal columns: the coordinates of A.
+    rigid_basis : (m, n_r) ndarray of float
+        G, orthonormal columns: the free rigid directions.
     """
 
     lam: np.ndarray  # rad/s, (2 m_e,) complex poles, Re <= 0 (conjugate pairs or real)
@@ -134,6 +164,23 @@ class HalfSineResponse:
 
     Units: with mass-normalised modes (q in sqrt(kg) m) and R rows of the mode shapes
     (1/sqrt(kg)), displacement is in m, velocity m/s, acceleration m/s^2.
+
+    Attributes
+    ----------
+    t : (nt,) ndarray of float
+        s, the times asked for.
+    displacement, velocity, acceleration : (r, nt) ndarray of float
+        R q, R q', R q'' (the last with the feedthrough R b f).
+    force : (nt,) ndarray of float
+        N, f(t).
+    peak_N, duration_s, start_s : float
+        The pulse: P (N), d (s), t0 (s).
+    imag_rel : float
+        max |Im| / max |Re| of the complex sums before their real parts are taken (round-off).
+    cond_V : float
+        Condition number of the eigenbasis (:class:`ModalPoles`).
+    n_poles, n_rigid : int
+        Poles of the first-order form and free rigid directions.
     """
 
     t: np.ndarray  # s, (nt,)
@@ -161,6 +208,19 @@ class ModalModel:
     (the partial fractions 1 / (s (s + c)) = (1/s - 1/(s + c)) / c cancel); give exactly zero
     damping coupling for a free mode. Exactly defective pole pairs (critical damping) are
     refused by :meth:`poles`.
+
+    Parameters
+    ----------
+    omega : (m,) array_like of float
+        rad/s, natural frequencies, >= 0 (0 exactly for a rigid mode).
+    Cm : (m, m) array_like of float
+        1/s, modal damping matrix, symmetric positive semi-definite (kept as (Cm + Cm^T) / 2).
+
+    Raises
+    ------
+    ValueError
+        Non-finite or empty ``omega``, a negative frequency, ``Cm`` of the wrong shape, not
+        symmetric to ``SYM_RTOL`` or with an eigenvalue below -``PSD_RTOL`` max|Cm|.
     """
 
     omega: np.ndarray  # rad/s, (m,) >= 0, natural frequencies

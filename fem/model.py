@@ -42,7 +42,56 @@ SEATS = ("left_top", "left_bottom", "right_top", "right_bottom")
 
 @dataclass(frozen=True, slots=True)
 class AssemblyModel:
-    """The apparatus of Section 4 (SI units); the calibrated values are the defaults."""
+    """The apparatus of Section 4 (SI units); the calibrated values are the defaults.
+
+    Parameters
+    ----------
+    layout : {'assembly', 'beam-grounded', 'beam-free'}
+        Beam in its tube on bungees; beam on springs grounded at the tube's seats (no tube); or
+        the free beam alone.
+    k_s : float
+        N/m, axial stiffness of one suspension spring (Table 1).
+    L : float
+        m, spring and tip axes at x = +-L.
+    gap : float
+        m, tip clearance (open in the linear model).
+    k_g : float
+        N/m, tip contact stiffness (used by the nonlinear stages).
+    beam_mass : float
+        kg, m1 + m2 + m3; with ``rho`` and ``beam_length`` it sets the beam's section area.
+    kappa : float
+        N m/rad, sets the beam's bending stiffness, EI = 2 kappa L / 3.
+    E, nu, rho : float
+        Pa, -, kg/m^3: the steel of beam and tube.
+    beam_length : float
+        m, overall length of the impact beam.
+    coil_diameter : float
+        m, mean coil diameter (lateral, bending and torsion stiffness of a spring; seat size).
+    spring_length : float
+        m, installed spring length (sets the tube's inner height).
+    seat_k_rx, seat_k_ry, seat_k_rz : float
+        N m/rad, rotational stiffness of a tube seat about x, y, z.
+    tube_mass : float
+        kg, box tube with its sensors and fixtures, smeared over its volume.
+    tip_mass : float
+        kg, one impact tip with bolt and load cell, lumped on its tube seat.
+    tube_wall, tube_clearance_y, tube_overhang : float
+        m, wall thickness, lateral gap from beam side to tube wall, tube beyond each beam end.
+    bungee_kz, bungee_kxy : float
+        N/m, vertical and horizontal stiffness of each of the 4 bungee attachments.
+    element : {'hex8', 'hex20', 'hex27'}
+        Solid element.
+    element_size : float
+        m, target element edge.
+    wall_layers : int
+        Elements through the tube wall.
+
+    Raises
+    ------
+    ValueError
+        An unknown layout, a number that is not finite (or not > 0, ``nu`` aside), an invalid
+        material, or a geometry :class:`geometry.params.AssemblyGeometry` refuses.
+    """
 
     layout: str = "assembly"  # assembly | beam-grounded (no tube, springs grounded) | beam-free
     # -- fixed by the paper (Table 1, Section 4) -------------------------------------------
@@ -120,7 +169,23 @@ class AssemblyModel:
 
 @dataclass(frozen=True, eq=False)
 class FESystem:
-    """Assembled model: K, M and the maps from names to DOFs."""
+    """Assembled model: K, M and the maps from names to DOFs.
+
+    Attributes
+    ----------
+    model : AssemblyModel
+        The model assembled.
+    mesh : MeshData
+        Its hexahedral mesh with the named node sets.
+    solid : SolidMatrices
+        The solids' matrices and DOF map (components, locations, nodal DOFs).
+    K : (n_dofs, n_dofs) scipy.sparse.csr_matrix
+        N/m, solids plus springs, seats and bungees.
+    M : (n_dofs, n_dofs) scipy.sparse.csr_matrix
+        kg, solids plus the lumped tip masses.
+    timing : dict of str to float
+        s, ``mesh_s``, ``assembly_s``, ``springs_s``.
+    """
 
     model: AssemblyModel
     mesh: MeshData
@@ -187,6 +252,20 @@ def spring_with_seat(spring: CoilSpring, a: np.ndarray, b: np.ndarray, k_seat: n
 
     The spring's b-end rotation r is a separate DOF tied to the tube master's rotation by
     diag(k_seat); r carries no mass and is condensed out: K = K_mm - K_mr K_rr^-1 K_rm.
+
+    Parameters
+    ----------
+    spring : CoilSpring
+        The spring's equivalent-column rigidities.
+    a, b : (3,) ndarray of float
+        m, the spring's ends: the beam seat's centre and the tube seat's centre.
+    k_seat : (3,) ndarray of float
+        N m/rad, the tube seat's rotational stiffness about x, y, z.
+
+    Returns
+    -------
+    (12, 12) ndarray of float
+        Stiffness on (u, theta at a; u, theta of the tube master at b), N/m, N/rad, N m/rad.
     """
     Ke = spring_element(spring, a, b)  # DOFs: a(6), b_u(3), r(3)
     K15 = np.zeros((15, 15))  # a(6), tube master u(3), th(3), r(3)
@@ -202,7 +281,21 @@ def spring_with_seat(spring: CoilSpring, a: np.ndarray, b: np.ndarray, k_seat: n
 
 
 def build_system(model: AssemblyModel, method: str = "cached", mesh: MeshData | None = None) -> FESystem:
-    """Mesh (unless given), assemble the solids, add springs, seats, bungees and lumped masses."""
+    """Mesh (unless given), assemble the solids, add springs, seats, bungees and lumped masses.
+
+    Parameters
+    ----------
+    model : AssemblyModel
+        The apparatus (its layout decides which springs, seats and bungees are added).
+    method : {'cached', 'skfem'}
+        Solid assembly (:func:`fem.solid.assemble_solid`).
+    mesh : MeshData, optional
+        A mesh of ``model.geometry()`` already built (default: built here with gmsh).
+
+    Returns
+    -------
+    FESystem
+    """
     t0 = time.perf_counter()
     g = model.geometry()
     if mesh is None:

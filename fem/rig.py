@@ -46,13 +46,40 @@ NUDGE = 1e-7  # m, a location on the surface is moved this far along the blow to
 
 
 def sensor_node(name: str) -> int:
-    """UFF node number of a sensor (beam_s<i>: i, tube_s<i>: 100 + i)."""
+    """UFF node number of a sensor (beam_s<i>: i, tube_s<i>: 100 + i).
+
+    Parameters
+    ----------
+    name : str
+        ``beam_s<i>`` or ``tube_s<i>``.
+
+    Returns
+    -------
+    int
+        The UFF node number.
+    """
     part, i = name.split("_s")
     return int(i) + (TUBE_NODE0 if part == "tube" else 0)
 
 
 def tip_node(cell: str) -> tuple[int, int]:
-    """(UFF node, direction code) of a tip load cell: 201..204, +3 for a top tip and -3 for a bottom one."""
+    """(UFF node, direction code) of a tip load cell: 201..204, +3 for a top tip and -3 for a bottom one.
+
+    Parameters
+    ----------
+    cell : str
+        A member of ``TIP_CELLS``.
+
+    Returns
+    -------
+    node, direction : int
+        The UFF node number and direction code.
+
+    Raises
+    ------
+    ValueError
+        ``cell`` not a tip load cell.
+    """
     return TIP_NODE0 + 1 + TIP_CELLS.index(cell), (3 if cell.endswith("top") else -3)
 
 
@@ -64,7 +91,21 @@ def channel_names() -> tuple[str, ...]:
 
 
 def sensor_rows(fe, parts: tuple[str, ...] = ("beam", "tube")) -> dict[str, np.ndarray]:
-    """{``<sensor>:<axis>``: DOF index} of every accelerometer axis of the parts present in the mesh."""
+    """{``<sensor>:<axis>``: DOF index} of every accelerometer axis of the parts present in the mesh.
+
+    Parameters
+    ----------
+    fe : FESystem
+        The assembled model.
+    parts : tuple of str
+        Parts whose sensors (``<part>_s<i>`` node sets) are wanted; a part absent from the mesh
+        gives none.
+
+    Returns
+    -------
+    dict of str to int
+        ``<sensor>:<axis>`` (axis x, y, z) -> the DOF index of that displacement.
+    """
     out = {}
     for part in parts:
         for name in fe.sensor_names(part):
@@ -75,7 +116,18 @@ def sensor_rows(fe, parts: tuple[str, ...] = ("beam", "tube")) -> dict[str, np.n
 
 
 def seat_rows(fe) -> dict[str, np.ndarray]:
-    """{tip load cell: (n_dofs,) row of its tube seat's mean vertical displacement} (assembly layout)."""
+    """{tip load cell: (n_dofs,) row of its tube seat's mean vertical displacement} (assembly layout).
+
+    Parameters
+    ----------
+    fe : FESystem
+        An assembled model with the tube seats (layout 'assembly').
+
+    Returns
+    -------
+    dict of str to (n_dofs,) ndarray of float
+        Tip load cell -> row r, r @ u = the seat's mean uz in m (r @ a for its acceleration).
+    """
     rows = {}
     for cell in TIP_CELLS:
         nodes = fe.mesh.node_sets[f"tube_seat_{cell[4:]}"]
@@ -86,7 +138,23 @@ def seat_rows(fe) -> dict[str, np.ndarray]:
 
 
 def unit_direction(direction) -> np.ndarray:
-    """The blow's unit vector; ValueError (one line) for a zero or non-finite vector."""
+    """The blow's unit vector; ValueError (one line) for a zero or non-finite vector.
+
+    Parameters
+    ----------
+    direction : array_like of 3 float
+        Any non-zero vector.
+
+    Returns
+    -------
+    (3,) ndarray of float
+        direction / |direction|.
+
+    Raises
+    ------
+    ValueError
+        Not three finite numbers, or the zero vector.
+    """
     d = np.asarray(direction, dtype=float).reshape(-1)
     if d.shape != (3,) or not np.all(np.isfinite(d)):
         raise ValueError(f"direction must be 3 finite numbers, got {direction!r}")
@@ -97,7 +165,23 @@ def unit_direction(direction) -> np.ndarray:
 
 
 def dominant_axis(direction) -> int:
-    """UFF direction code (+-1, +-2, +-3) of the axis nearest a blow's direction."""
+    """UFF direction code (+-1, +-2, +-3) of the axis nearest a blow's direction.
+
+    Parameters
+    ----------
+    direction : array_like of 3 float
+        Any non-zero vector.
+
+    Returns
+    -------
+    int
+        +-1, +-2, +-3 for +-X, +-Y, +-Z (the first of equal components wins).
+
+    Raises
+    ------
+    ValueError
+        As :func:`unit_direction`.
+    """
     d = unit_direction(direction)
     k = int(np.argmax(np.abs(d)))
     return int(np.sign(d[k])) * (k + 1)
@@ -110,6 +194,36 @@ def point_load_vector(points: np.ndarray, hexes: np.ndarray, element: str, cell_
     The location must lie in or on a cell of part index ``part`` (the beam); a point on the
     surface is moved ``NUDGE`` along the blow, into the solid it strikes. Raises ValueError
     (one line) when no cell of that part holds it.
+
+    Parameters
+    ----------
+    points : (n_nodes, 3) ndarray of float
+        m, the mesh's nodes.
+    hexes : (n_cells, 8) ndarray of int
+        gmsh-ordered hexahedra.
+    element : {'hex8', 'hex20', 'hex27'}
+        The model's element.
+    cell_part : (n_cells,) ndarray of int
+        Part index of each cell.
+    part : int
+        Index of the part that may be struck.
+    location : array_like of 3 float
+        m, the point struck.
+    direction : array_like of 3 float
+        The blow's direction (normalised here).
+    n_dofs : int
+        The model's DOFs; the mesh must give as many.
+
+    Returns
+    -------
+    (1, n_dofs) scipy.sparse.csr_matrix
+        b, with b @ u = d . u(X) (m per m) and b^T P the nodal forces of a force P (N).
+
+    Raises
+    ------
+    ValueError
+        ``location`` not three finite numbers, a zero direction, a mesh that is not the model's
+        (DOF count differs), or no cell of ``part`` holding the location.
     """
     from skfem import Basis, ElementVector
 

@@ -35,7 +35,27 @@ KEY_DECIMALS = 10  # m, element shapes equal to 1e-10 m share their matrices
 
 @dataclass(frozen=True, eq=False)
 class SolidMatrices:
-    """Assembled stiffness and mass of the solids with their DOF map."""
+    """Assembled stiffness and mass of the solids with their DOF map.
+
+    Attributes
+    ----------
+    K : (n_dofs, n_dofs) scipy.sparse.csr_matrix
+        N/m, stiffness of the solids.
+    M : (n_dofs, n_dofs) scipy.sparse.csr_matrix
+        kg, consistent mass of the solids.
+    nodal_dofs : (3, n_nodes) ndarray of int
+        DOF index of each node's x, y, z displacement.
+    dof_component : (n_dofs,) ndarray of int
+        0, 1, 2 for x, y, z.
+    dof_location : (n_dofs, 3) ndarray of float
+        m, the node, edge midpoint, face or cell centre each DOF sits at.
+    element : str
+        'hex8', 'hex20' or 'hex27'.
+    n_unique_shapes : int
+        Distinct element shapes whose matrices were computed (0 for the 'skfem' method).
+    timing : dict of str to float
+        s, per assembly step.
+    """
 
     K: sp.csr_matrix  # N/m, (n_dofs, n_dofs)
     M: sp.csr_matrix  # kg, (n_dofs, n_dofs)
@@ -52,7 +72,20 @@ class SolidMatrices:
 
 
 def skfem_mesh(points: np.ndarray, hexes: np.ndarray) -> MeshHex1:
-    """scikit-fem mesh from gmsh/meshio-ordered hexahedra."""
+    """scikit-fem mesh from gmsh/meshio-ordered hexahedra.
+
+    Parameters
+    ----------
+    points : (n_nodes, 3) ndarray of float
+        m, node coordinates.
+    hexes : (n_cells, 8) ndarray of int
+        Hexahedra in gmsh/meshio node order.
+
+    Returns
+    -------
+    skfem.MeshHex1
+        The same mesh in scikit-fem's node order.
+    """
     return MeshHex1(np.ascontiguousarray(points.T), np.ascontiguousarray(hexes[:, INV_HEX_MAPPING[:8]].T))
 
 
@@ -61,6 +94,25 @@ def dof_table(mesh: MeshHex1, dof: Dofs) -> tuple[np.ndarray, np.ndarray]:
 
     Each DOF is a displacement component at a node, an edge midpoint, a face centre or the
     cell centre, so a rigid motion u = a + theta x X is interpolated exactly by its values there.
+
+    Parameters
+    ----------
+    mesh : skfem.MeshHex1
+        The mesh.
+    dof : skfem.Dofs
+        DOFs of a vector element on it (3 components per place).
+
+    Returns
+    -------
+    component : (n_dofs,) ndarray of int8
+        0, 1, 2 for x, y, z.
+    location : (n_dofs, 3) ndarray of float
+        m, where each DOF sits.
+
+    Raises
+    ------
+    RuntimeError
+        A DOF layout without three components per place.
     """
     comp = np.empty(dof.N, dtype=np.int8)
     loc = np.empty((dof.N, 3))

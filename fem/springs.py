@@ -19,7 +19,19 @@ import numpy as np
 
 @dataclass(frozen=True, slots=True)
 class CoilSpring:
-    """Equivalent-column rigidities of a helical compression spring."""
+    """Equivalent-column rigidities of a helical compression spring.
+
+    Parameters
+    ----------
+    k_axial : float
+        N/m, axial stiffness k_s.
+    coil_diameter : float
+        m, mean coil diameter D.
+    length : float
+        m, installed length l.
+    nu_wire : float
+        Poisson's ratio of the wire.
+    """
 
     k_axial: float  # N/m, axial stiffness k_s
     coil_diameter: float  # m, mean coil diameter D
@@ -59,6 +71,24 @@ def timoshenko_beam_stiffness(EA: float, GA: float, EI: float, GJ: float, length
 
     DOF order per node: u_x, u_y, u_z, theta_x, theta_y, theta_z. Bending in both planes
     uses Phi = 12 EI / (GA l^2) (Przemieniecki, *Theory of Matrix Structural Analysis*).
+
+    Parameters
+    ----------
+    EA : float
+        N, axial rigidity.
+    GA : float
+        N, shear rigidity (shear coefficient included).
+    EI : float
+        N m^2, bending rigidity, the same in both planes.
+    GJ : float
+        N m^2, torsional rigidity.
+    length : float
+        m, l.
+
+    Returns
+    -------
+    (12, 12) ndarray of float
+        Local stiffness on (u, theta at node 1; u, theta at node 2): N/m, N/rad, N m/rad.
     """
     l = length
     K = np.zeros((12, 12))
@@ -79,7 +109,19 @@ def timoshenko_beam_stiffness(EA: float, GA: float, EI: float, GJ: float, length
 
 
 def rotate_to(axis: np.ndarray) -> np.ndarray:
-    """3x3 matrix R with rows the local axes (local x along ``axis``): u_local = R u_global."""
+    """3x3 matrix R with rows the local axes (local x along ``axis``): u_local = R u_global.
+
+    Parameters
+    ----------
+    axis : (3,) array_like of float
+        Local x direction (any length but zero).
+
+    Returns
+    -------
+    (3, 3) ndarray of float
+        R, orthonormal rows ex, ey, ez (ey normal to ex and global z, or global x when ex is
+        within 26 degrees of z).
+    """
     ex = np.asarray(axis, float) / np.linalg.norm(axis)
     ref = np.array([0.0, 0.0, 1.0]) if abs(ex[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
     ey = np.cross(ref, ex)
@@ -89,7 +131,20 @@ def rotate_to(axis: np.ndarray) -> np.ndarray:
 
 
 def spring_element(spring: CoilSpring, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """12x12 global stiffness of ``spring`` from point a to point b (u_a, th_a, u_b, th_b)."""
+    """12x12 global stiffness of ``spring`` from point a to point b (u_a, th_a, u_b, th_b).
+
+    Parameters
+    ----------
+    spring : CoilSpring
+        The spring's rigidities.
+    a, b : (3,) ndarray of float
+        m, its ends.
+
+    Returns
+    -------
+    (12, 12) ndarray of float
+        Global stiffness on (u_a, th_a, u_b, th_b): N/m, N/rad, N m/rad.
+    """
     R = rotate_to(np.asarray(b, float) - np.asarray(a, float))
     T = np.kron(np.eye(4), R)
     Kl = timoshenko_beam_stiffness(spring.EA, spring.GA, spring.EI, spring.GJ, float(np.linalg.norm(b - a)))
@@ -97,13 +152,37 @@ def spring_element(spring: CoilSpring, a: np.ndarray, b: np.ndarray) -> np.ndarr
 
 
 def rigid_map(r: np.ndarray) -> np.ndarray:
-    """(3, 6) map from rigid motion (u, theta) about the origin to the displacement at r: u + theta x r."""
+    """(3, 6) map from rigid motion (u, theta) about the origin to the displacement at r: u + theta x r.
+
+    Parameters
+    ----------
+    r : (3,) array_like of float
+        m, the point relative to the origin of the rigid motion.
+
+    Returns
+    -------
+    (3, 6) ndarray of float
+        The map (u, theta) -> u + theta x r.
+    """
     x, y, z = r
     return np.array([[1, 0, 0, 0, z, -y], [0, 1, 0, -z, 0, x], [0, 0, 1, y, -x, 0]], float)
 
 
 def rigid_modes(X: np.ndarray, centre: np.ndarray) -> np.ndarray:
-    """(3n, 6) rigid-body modes of points X (n, 3) about ``centre``, DOFs interleaved xyz per point."""
+    """(3n, 6) rigid-body modes of points X (n, 3) about ``centre``, DOFs interleaved xyz per point.
+
+    Parameters
+    ----------
+    X : (n, 3) array_like of float
+        m, the points.
+    centre : (3,) ndarray of float
+        m, the origin of the rotations.
+
+    Returns
+    -------
+    (3 n, 6) ndarray of float
+        Columns: unit translations x, y, z, then unit rotations about x, y, z.
+    """
     return np.vstack([rigid_map(r) for r in np.asarray(X) - centre])
 
 
@@ -113,6 +192,18 @@ def rbe3_map(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     u_m = mean(u_i),  theta_m = S^-1 sum_i r_i x u_i,  S = sum_i (|r_i|^2 I - r_i r_i^T),
     r_i = X_i - centroid: the least-squares rigid fit of the patch motion, exact for rigid
     motion and adding no stiffness between patch nodes. Returns (T (6, 3n), centroid).
+
+    Parameters
+    ----------
+    X : (n, 3) array_like of float
+        m, the patch nodes (not all on one line, or S is singular).
+
+    Returns
+    -------
+    T : (6, 3 n) ndarray of float
+        Master (u, theta) = T u_patch, u_patch interleaved x, y, z per node.
+    centroid : (3,) ndarray of float
+        m, the master's position.
     """
     X = np.asarray(X, float)
     c = X.mean(axis=0)

@@ -51,7 +51,31 @@ class UffError(ValueError):
 
 @dataclass(frozen=True, eq=False)
 class TimeHistory:
-    """One channel: ``data[k]`` at t = t0_s + k dt_s, at ``node`` along ``direction``."""
+    """One channel: ``data[k]`` at t = t0_s + k dt_s, at ``node`` along ``direction``.
+
+    Parameters
+    ----------
+    name : str
+        Channel name (e.g. ``beam_s1:z``).
+    node : int
+        UFF node number.
+    direction : int
+        UFF code: 1, 2, 3 = +X, +Y, +Z; negative: opposite; 0: scalar.
+    quantity : str
+        A key of ``QUANTITIES`` (displacement, velocity, acceleration, force, reaction_force).
+    data : (n,) array_like of float
+        The samples, in the SI unit of ``quantity`` (stored as float).
+    dt_s : float
+        s, sampling step, > 0.
+    t0_s : float
+        s, time of the first sample.
+
+    Raises
+    ------
+    UffError
+        An unknown quantity or direction, a step that is not finite and > 0, or data that is not
+        a real non-empty 1-D series.
+    """
 
     name: str
     node: int
@@ -92,7 +116,23 @@ def _name10(name: str) -> str:
 
 
 def write_uff58(path: str | Path, channels, *, binary: bool = True, model: str = "bearingshaft") -> None:
-    """Write ``channels`` (TimeHistory) to ``path`` as dataset 58 records (replacing the file)."""
+    """Write ``channels`` (TimeHistory) to ``path`` as dataset 58 records (replacing the file).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file, replaced if it exists.
+    channels : iterable of TimeHistory
+        Written in order, one record each.
+    binary : bool
+        Binary 58b records (exact samples) rather than ASCII 58.
+    model : str
+        The records' second ID line.
+
+    Returns
+    -------
+    None
+    """
     import pyuff
 
     path = Path(path)
@@ -129,6 +169,21 @@ def read_uff58(path: str | Path) -> list[TimeHistory]:
     A record is refused unless it is a real, evenly sampled time response (function type 1)
     of a quantity in :data:`QUANTITIES` whose unit label (if given) is that quantity's SI
     unit; records of other dataset types (units, geometry) are skipped.
+
+    Parameters
+    ----------
+    path : str or Path
+        A universal file.
+
+    Returns
+    -------
+    list of TimeHistory
+        One per dataset 58 record, in file order.
+
+    Raises
+    ------
+    UffError
+        No such file, an unreadable file, no dataset 58, or a record refused as above.
     """
     import pyuff
 

@@ -12,6 +12,19 @@ def write_vtu(fe, fields: dict[str, np.ndarray], path: str | Path) -> None:
 
     Only the corner nodes carry points in the file (the mesh's hexahedra); higher-order DOFs
     are left out. The cell data ``part`` numbers the solid parts.
+
+    Parameters
+    ----------
+    fe : FESystem
+        The assembled model (mesh and nodal DOF map).
+    fields : dict of str to (n_dofs,) ndarray of float
+        Name -> displacement vector (e.g. a mode shape), written as float32 point vectors.
+    path : str or Path
+        The .vtu file.
+
+    Returns
+    -------
+    None
     """
     import meshio
 

@@ -24,7 +24,21 @@ GMSH_HEX8 = 5  # gmsh element type of the 8-node hexahedron
 
 @contextmanager
 def gmsh_session(name: str = "model", verbose: bool = False):
-    """Initialise gmsh, yield ``gmsh.model`` with a fresh OCC model, always finalise."""
+    """Initialise gmsh, yield ``gmsh.model`` with a fresh OCC model, always finalise.
+
+    Parameters
+    ----------
+    name : str
+        Name of the gmsh model added.
+    verbose : bool
+        Let gmsh print to the terminal (``General.Terminal``).
+
+    Yields
+    ------
+    gmsh.model
+        The ``gmsh.model`` namespace, with a fresh model ``name`` current; ``gmsh.finalize()`` runs on
+        leaving the block, also on an exception.
+    """
     import gmsh
 
     gmsh.initialize(["-noenv"] if hasattr(gmsh, "initialize") else [], readConfigFiles=False)
@@ -42,6 +56,21 @@ class MeshData:
 
     ``hexes`` use the gmsh/meshio node order; ``node_sets`` map a physical name (seat
     faces, sensor vertices, bungee points) to indices into ``points``.
+
+    Attributes
+    ----------
+    points : (n_nodes, 3) ndarray of float
+        m, node coordinates (x along the beam, y lateral, z up).
+    hexes : (n_cells, 8) ndarray of int
+        Node indices into ``points`` of each 8-node hexahedron, gmsh/meshio order.
+    cell_part : (n_cells,) ndarray of int
+        Index into ``part_names`` of each cell's part.
+    part_names : tuple of str
+        The parts meshed ('beam', 'tube').
+    node_sets : dict of str to ndarray of int
+        Physical name -> node indices into ``points`` (seat faces, sensor vertices, bungee points).
+    wall_time_s : float
+        s, wall time of building the gmsh model and meshing it.
     """
 
     points: np.ndarray  # m, (n_nodes, 3)
@@ -103,7 +132,20 @@ def _grid(values) -> np.ndarray:
 
 
 def beam_grid(g: AssemblyGeometry) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Block grid lines of the beam in x, y, z."""
+    """Block grid lines of the beam in x, y, z.
+
+    Parameters
+    ----------
+    g : AssemblyGeometry
+        Beam dimensions, seat positions and size.
+
+    Returns
+    -------
+    xs, ys, zs : ndarray of float
+        m, sorted unique grid coordinates (rounded to 1e-12 m). x: beam ends, both seat edges and
+        axes at x = -+L, and the centre; y: the beam sides, the seat edges and 0; z: the beam's
+        bottom and top faces.
+    """
     s, L, l2 = g.seat_diameter / 2, g.L, g.beam_length / 2
     xs = _grid([-l2, -L - s, -L, -L + s, 0, L - s, L, L + s, l2])
     ys = _grid([-g.beam_width / 2, -s, 0, s, g.beam_width / 2])
@@ -112,7 +154,20 @@ def beam_grid(g: AssemblyGeometry) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def tube_grid(g: AssemblyGeometry) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Block grid lines of the tube in x, y, z (wall cells only are built)."""
+    """Block grid lines of the tube in x, y, z (wall cells only are built).
+
+    Parameters
+    ----------
+    g : AssemblyGeometry
+        Tube dimensions, seat positions and size.
+
+    Returns
+    -------
+    xs, ys, zs : ndarray of float
+        m, sorted unique grid coordinates (rounded to 1e-12 m). x: the tube ends, seat edges and
+        axes at x = -+L, and the centre; y: outer and inner walls, seat edges and 0; z: outer and
+        inner faces of the bottom and top walls.
+    """
     s, L, lt = g.seat_diameter / 2, g.L, g.tube_length / 2
     W, H = g.tube_outer_width / 2, g.tube_outer_height / 2
     w, h = g.tube_inner_width / 2, g.tube_inner_height / 2

@@ -25,6 +25,39 @@ class AssemblyGeometry:
     section from its mass and bending stiffness (kappa) and takes its length, seat and spring
     sizes from the calibration against Table 2. A second set of defaults here would describe a
     beam that no stage analyses. Only the meshing controls the model does not set have defaults.
+
+    Parameters
+    ----------
+    L : float
+        m, half-distance between the spring/tip axes (Table 1); the seats are at x = +-L.
+    beam_length, beam_width, beam_height : float
+        m, the beam's extent along x, y and z.
+    seat_diameter : float
+        m, side of the square spring seat / contact patch (the coil diameter).
+    spring_length : float
+        m, installed length of a suspension spring (beam face to tube inner wall).
+    tube_clearance_y : float
+        m, lateral gap between a beam side and the tube's inner wall.
+    tube_overhang : float
+        m, tube length beyond each beam end.
+    tube_wall : float
+        m, wall thickness of the box tube.
+    element_size : float
+        m, target element edge along the long directions.
+    wall_layers : int
+        Elements through the tube wall (the paper: at least three).
+    section_layers : int
+        Minimum elements across each beam sub-block in y and z.
+    parts : tuple of str
+        Which solids to build, a non-empty subset of ``PARTS`` ('beam', 'tube'); the tube needs
+        the beam.
+
+    Raises
+    ------
+    ValueError
+        A dimension that is not a finite number > 0, unknown or inconsistent ``parts``, a layer
+        count below 1, seats off the beam or overlapping (L <= seat_diameter / 2), a seat wider
+        than the beam or the tube, or a tube wall too thick for the section.
     """
 
     L: float  # m, half-distance between the spring/tip axes (Table 1)

@@ -61,7 +61,17 @@ T = TypeVar("T")
 
 
 def manifest_path(path: str | Path) -> Path:
-    """The manifest of the entry whose data file is ``path``: ``<path>.json``."""
+    """The manifest of the entry whose data file is ``path``: ``<path>.json``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The entry's data file.
+
+    Returns
+    -------
+    Path
+    """
     path = Path(path)
     return path.with_name(path.name + MANIFEST_SUFFIX)
 
@@ -111,6 +121,18 @@ def atomic_write(path: str | Path, write: Callable[[BinaryIO], None]) -> str:
     """Write a file by ``write(f)`` to a unique temporary sibling and move it into place; its sha256.
 
     Readers see the old file or the new one, never a part; concurrent writers do not collide.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file written (its folder must exist).
+    write : callable
+        ``write(f)`` writes the whole content to the binary file object ``f``.
+
+    Returns
+    -------
+    str
+        sha256 (hex) of the bytes written.
     """
     path = Path(path)
     tmp, digest, _ = _write_temp(path, write)
@@ -127,6 +149,26 @@ def write_entry(path: str | Path, write: Callable[[BinaryIO], None], inputs_sha2
     """Store a cache entry: the data by ``write(f)`` at ``path``, then its manifest (module docstring).
 
     Raises OSError where the folder cannot be written (the caller decides whether that matters).
+
+    Parameters
+    ----------
+    path : str or Path
+        The data file; its folder is created if needed.
+    write : callable
+        ``write(f)`` writes the data to the binary file object ``f``.
+    inputs_sha256 : str
+        Hash of everything the data was computed from, recorded in the manifest.
+    info : dict, optional
+        JSON-serialisable description kept in the manifest's ``info``.
+
+    Returns
+    -------
+    None
+
+    Raises
+    ------
+    OSError
+        The folder or a file cannot be written (no temporary file is left behind).
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -184,7 +226,17 @@ def _check(path: Path, inputs_sha256: str, load: Callable[[BinaryIO], T]) -> tup
 
 
 def remove_entry(path: str | Path) -> None:
-    """Remove an entry's data and manifest (either may be absent)."""
+    """Remove an entry's data and manifest (either may be absent).
+
+    Parameters
+    ----------
+    path : str or Path
+        The entry's data file.
+
+    Returns
+    -------
+    None
+    """
     path = Path(path)
     for p in (manifest_path(path), path):
         with contextlib.suppress(FileNotFoundError):
@@ -197,6 +249,20 @@ def load_entry(path: str | Path, inputs_sha256: str, load: Callable[[BinaryIO], 
     ``load(f)`` decodes the data from a binary file object holding exactly the checked bytes.
     None means: no entry, or a bad one that was removed and reported (module docstring);
     the caller rebuilds.
+
+    Parameters
+    ----------
+    path : str or Path
+        The entry's data file.
+    inputs_sha256 : str
+        Hash the manifest must name.
+    load : callable
+        ``load(f) -> T``; any exception it raises marks the entry corrupt.
+
+    Returns
+    -------
+    T or None
+        What ``load`` returned, or None.
     """
     path = Path(path)
     value, reason = _check(path, inputs_sha256, load)
@@ -232,6 +298,24 @@ def call_numba_kernel(kernel, *args):
     are there as imported names, and a caller's recompilation loads theirs), and the call is
     made again: numba recompiles and overwrites the bad files. Uses numba's private
     ``Dispatcher._cache.flush()``; without it the error propagates.
+
+    Parameters
+    ----------
+    kernel : numba Dispatcher
+        A compiled ``@njit(cache=True)`` function.
+    *args
+        Its arguments.
+
+    Returns
+    -------
+    object
+        What the kernel returns.
+
+    Raises
+    ------
+    Exception
+        Whatever the kernel raises that is not a numba cache error, or a cache error when the
+        kernel's cache cannot be flushed.
     """
     try:
         return kernel(*args)

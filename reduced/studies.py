@@ -130,6 +130,23 @@ def relative_error(x: np.ndarray, x_ref: np.ndarray) -> float:
 
     ``x`` may hold NaN (a run that failed shows as NaN); ``x_ref`` must be finite, not all
     zero, and of the same shape.
+
+    Parameters
+    ----------
+    x : array_like of float
+        The values compared (NaN allowed).
+    x_ref : array_like of float
+        The reference, same shape.
+
+    Returns
+    -------
+    float
+        max |x - x_ref| / max |x_ref| (NaN if x holds NaN).
+
+    Raises
+    ------
+    InvalidArgument
+        Shapes that differ, an empty x, or an x_ref not finite or all zero.
     """
     x, x_ref = np.asarray(x, dtype=float), np.asarray(x_ref, dtype=float)
     if x.shape != x_ref.shape or x.size == 0:
@@ -158,6 +175,26 @@ def fit_order(h: np.ndarray, err: np.ndarray, lo: float = 1e-12, hi: float = 1e-
 
     NaN when fewer than two points lie in that range (the arguments were valid, but the
     steps never reached the asymptotic range: the caller says so).
+
+    Parameters
+    ----------
+    h : (k,) sequence of float
+        The steps, > 0, at least two.
+    err : (k,) array_like of float
+        The error at each step, >= 0 (NaN for a failed run).
+    lo, hi : float
+        The asymptotic range of the error, 0 < lo < hi.
+
+    Returns
+    -------
+    float
+        The fitted order (least-squares slope), or NaN.
+
+    Raises
+    ------
+    InvalidArgument
+        lo or hi out of range, fewer than two steps or a step <= 0, or errors not one per step,
+        negative or infinite.
     """
     func = "fit_order"
     lo = _number(func, "lo", lo, "must be a finite number > 0", lambda v: v > 0)
@@ -196,6 +233,23 @@ def work_precision(
     > 0 with 1 to ``MAX_SAMPLES`` samples, at least two distinct ``explicit_omega_dt`` in
     (0, ``EXPLICIT_OMEGA_DT_MAX``], ``dop853_rtol`` in (0, 1) (at rtol >= 1 DOP853 controls
     no digit), ``repeats`` >= 1, x0 and v0 finite with one value per DOF, not both zero.
+
+    Parameters
+    ----------
+    system : the gap system run
+    x0, v0 : (n,) m and m/s, its initial state
+    window_s, sample_rate_hz : s and Hz of each run
+    explicit_omega_dt : rad, the explicit steps as omega_max dt
+    dop853_rtol : DOP853's relative tolerances (may be empty)
+    repeats : runs timed per setting, the best kept (one for DOP853)
+    progress : None or a callable taking the fraction done
+
+    Returns
+    -------
+    rows, order : list of dict, float
+        Rows ``method``, ``setting``, ``runtime_s`` (s), ``error`` (relative max-norm against the
+        exact run; the exact run's against DOP853 with events), ``n_steps``, and ``dt`` (s) for the
+        explicit rows; the explicit method's fitted order (:func:`fit_order`, NaN outside its range).
     """
     func = "work_precision"
     if not isinstance(system, GapSystem):
@@ -253,7 +307,23 @@ STIFF_FIELDS = ["k_g", "gap", "speed", "c", "method", "status", "energy_J", "ene
 
 
 def discrete_case(base: DiscreteParams) -> CaseFactory:
-    """Cases of the three-mass model: v(0) = [0, 0, speed] on its coordinates."""
+    """Cases of the three-mass model: v(0) = [0, 0, speed] on its coordinates.
+
+    Parameters
+    ----------
+    base : DiscreteParams
+        The model; each case replaces its k_g, g and c.
+
+    Returns
+    -------
+    callable
+        ``make(k_g, gap, speed, c) -> (system, x0, v0)``, N/m, m, m/s, N s/m.
+
+    Raises
+    ------
+    InvalidArgument
+        ``base`` not a DiscreteParams.
+    """
     if not isinstance(base, DiscreteParams):
         raise _refuse("discrete_case", "base", base, "must be a reduced.DiscreteParams")
 
@@ -270,6 +340,23 @@ def rom_case(rom: ReducedModel, spec: RomSpec) -> CaseFactory:
     The velocity is given at the points and realized in the three lowest open-gap modes
     (:func:`reduced.models.initial.initial_state`), which do not depend on the contact, so the
     unit-speed state is formed once and scaled.
+
+    Parameters
+    ----------
+    rom : ReducedModel
+        The reduced model.
+    spec : RomSpec
+        Its specification; each case replaces its k_g, gap and c_points.
+
+    Returns
+    -------
+    callable
+        ``make(k_g, gap, speed, c) -> (system, x0, v0)``, N/m, m, m/s, N s/m (x0 = 0).
+
+    Raises
+    ------
+    InvalidArgument
+        ``rom`` or ``spec`` of the wrong type.
     """
     if not isinstance(rom, ReducedModel):
         raise _refuse("rom_case", "rom", rom, "must be a reduced.ReducedModel")
@@ -355,6 +442,22 @@ def stiff_cases(
     numbers; duration_s and sample_rate_hz > 0 with 1 to ``MAX_SAMPLES`` samples a run;
     methods (and long_methods) non-empty lists from :data:`reduced.transient.integrate.METHODS`;
     long_duration_s >= 0; max_steps > 0 (inf allowed); step_basis "top" or "contact".
+
+    Parameters
+    ----------
+    base : DiscreteParams or a case factory ``make(k_g, gap, speed, c) -> (system, x0, v0)``
+    k_g, gap, speed, c : N/m, m, m/s, N s/m: the values combined (every combination is run)
+    duration_s, sample_rate_hz : s and Hz of each run
+    methods : the integrators run on every case
+    progress : None or a callable taking the fraction done (above)
+    long_duration_s, long_methods : s, the long nominal runs (0: none), and their integrators
+    max_steps : most steps an explicit run may take
+    step_basis : the explicit integrator's step basis
+
+    Returns
+    -------
+    list of dict
+        One row per run: the :data:`STIFF_FIELDS` and ``duration_s``.
     """
     func = "stiff_cases"
     if isinstance(base, DiscreteParams):
@@ -420,6 +523,11 @@ def rom_convergence(
         (``info["timing_s"]["craig_bampton"]`` is the build time reported).
     full_freq_hz : {"open", "closed": (k,) Hz}, the full model's contact-coupled frequencies.
     x0_points, v0_points : (3,) m and m/s at the points x1, x2, x3 (:func:`initial_state`).
+    window_s, sample_rate_hz : s and Hz of each ringdown.
+    n_compare : frequencies compared per state (below).
+    repeats, budget_s : runs timed per setting, and s spent on one setting (below).
+    progress : None or a callable taking the fraction done.
+    step_basis : "top" or "contact", the explicit run's step basis.
 
     Frequency error = max over the first min(n_compare, n, k) modes of |f_r - f| / f (open
     and closed gap). Ringdown error = relative max-norm (:func:`relative_error`) of the
@@ -433,6 +541,15 @@ def rom_convergence(
     with "open" and "closed" arrays of positive frequencies; three finite point values in
     x0_points and v0_points, not all zero; window_s, sample_rate_hz > 0 with 1 to
     ``MAX_SAMPLES`` samples; n_compare, repeats >= 1; budget_s > 0 (inf allowed).
+
+    Returns
+    -------
+    list of dict
+        Per mode count, ascending: ``n_modes``, ``n_dofs``, ``open_freq_error`` and
+        ``closed_freq_error`` (with the per-mode ``*_freq_errors``), ``n_freq_compared``,
+        ``build_s``, ``exact_s``, ``exact_events``, ``explicit_s``, ``explicit_steps``,
+        ``omega_max``, ``explicit_error``, ``energy_J``, ``ringdown_error`` and
+        ``explicit_ringdown_error``.
     """
     x0_points, v0_points, window_s, sample_rate_hz, n_compare, repeats, budget_s, step_basis = (
         _rom_convergence_args(roms, full_freq_hz, x0_points, v0_points, window_s, sample_rate_hz, n_compare,

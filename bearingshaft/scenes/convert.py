@@ -55,7 +55,28 @@ def _coerce(value, typ, where: str):
 
 
 def from_table(cls: type, table: dict, where: str):
-    """Build dataclass ``cls`` from a TOML table, naming ``where`` in every error."""
+    """Build dataclass ``cls`` from a TOML table, naming ``where`` in every error.
+
+    Parameters
+    ----------
+    cls : type
+        A dataclass whose field types are float, int, str, bool, tuples of them, or optional ones.
+    table : dict
+        The TOML table.
+    where : str
+        Where the table is (file and table), for the messages.
+
+    Returns
+    -------
+    object
+        ``cls(**table)`` with the values converted.
+
+    Raises
+    ------
+    SceneError
+        Not a table, an unknown key (with the nearest known one), a value of the wrong type, not
+        finite or out of range, or one ``cls`` refuses.
+    """
     if not isinstance(table, dict):
         raise SceneError(f"{where}: expected a table, got {show(table)}")
     hints = typing.get_type_hints(cls)

@@ -12,7 +12,19 @@ class SceneError(ValueError):
 
 
 def suggest(word: str, known) -> str:
-    """' (did you mean X?)' for the closest of ``known`` to a misspelled ``word``, else ''."""
+    """' (did you mean X?)' for the closest of ``known`` to a misspelled ``word``, else ''.
+
+    Parameters
+    ----------
+    word : str
+        The word given.
+    known : iterable of str
+        The words allowed.
+
+    Returns
+    -------
+    str
+    """
     close = difflib.get_close_matches(str(word), list(known), n=1, cutoff=0.6)
     return f" (did you mean {close[0]!r}?)" if close else ""
 

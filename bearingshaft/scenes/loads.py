@@ -15,7 +15,23 @@ LOAD_DIRECTIONS = ("gap",)  # the models here move only along their gaps' direct
 
 @dataclass(frozen=True, slots=True)
 class HalfSineLoadSpec:
-    """A hammer blow: peak_N sin(pi (t - start_s) / duration_s) on [start_s, start_s + duration_s]."""
+    """A hammer blow: peak_N sin(pi (t - start_s) / duration_s) on [start_s, start_s + duration_s].
+
+    Parameters
+    ----------
+    kind : str
+        "half_sine".
+    point : str
+        The model's point it acts at.
+    direction : str
+        "gap", the only direction of these models.
+    peak_N : float
+        N, peak force.
+    duration_s : float
+        s, length of the half-sine.
+    start_s : float
+        s, start of the blow.
+    """
 
     kind: str = "half_sine"
     point: str = "x2"  # where it acts (the model's point names)
@@ -30,7 +46,25 @@ class HalfSineLoadSpec:
 
 @dataclass(frozen=True, slots=True)
 class HarmonicLoadSpec:
-    """A shaker: amplitude_N cos(2 pi freq_hz (t - start_s) + phase_deg) from start_s on."""
+    """A shaker: amplitude_N cos(2 pi freq_hz (t - start_s) + phase_deg) from start_s on.
+
+    Parameters
+    ----------
+    kind : str
+        "harmonic".
+    point : str
+        The model's point it acts at.
+    direction : str
+        "gap".
+    amplitude_N : float
+        N.
+    freq_hz : float
+        Hz.
+    phase_deg : float
+        degrees.
+    start_s : float
+        s, when the shaker starts.
+    """
 
     kind: str = "harmonic"
     point: str = "x2"
@@ -46,7 +80,21 @@ class HarmonicLoadSpec:
 
 @dataclass(frozen=True, slots=True)
 class TabulatedLoadSpec:
-    """A measured force: CSV (time [s], force [N]) or UFF 58, piecewise linear, zero outside."""
+    """A measured force: CSV (time [s], force [N]) or UFF 58, piecewise linear, zero outside.
+
+    Parameters
+    ----------
+    kind : str
+        "tabulated".
+    point : str
+        The model's point it acts at.
+    direction : str
+        "gap".
+    file : str
+        CSV (time [s], force [N]) or UFF 58 file, path from the working directory.
+    start_s : float
+        s, added to the file's times.
+    """
 
     kind: str = "tabulated"
     point: str = "x2"
@@ -70,7 +118,30 @@ MAX_LOADS = 64  # loads in one scene
 
 
 def parse_loads(value, where: str, point_names: tuple[str, ...]) -> tuple[tuple, tuple]:
-    """([[load]] specs, their signals), every key checked; ``where`` names the file."""
+    """([[load]] specs, their signals), every key checked; ``where`` names the file.
+
+    Parameters
+    ----------
+    value : object
+        The scene's ``load`` value (an array of tables).
+    where : str
+        The scene file, for the messages.
+    point_names : tuple of str
+        The model's points.
+
+    Returns
+    -------
+    specs : tuple
+        One HalfSineLoadSpec, HarmonicLoadSpec or TabulatedLoadSpec per table.
+    signals : tuple
+        Their time functions (:mod:`reduced.models.loads`).
+
+    Raises
+    ------
+    SceneError
+        Not an array of tables, an empty one, more than ``MAX_LOADS``, an unknown kind, key, point
+        or direction, or a load :mod:`reduced.models.loads` refuses.
+    """
     if not isinstance(value, list) or not all(isinstance(t, dict) for t in value):
         raise SceneError(f"{where} load: expected an array of tables ([[load]]), got {show(value)}")
     if not value:

@@ -16,5 +16,22 @@ MODEL_KINDS: dict[str, object] = {"discrete": DiscreteParams, "assembly": _assem
 
 
 def model_class(kind: str) -> type:
+    """The dataclass of [model] ``kind`` (the 3-D model's is imported only when asked for).
+
+    Parameters
+    ----------
+    kind : str
+        A key of ``MODEL_KINDS``: "discrete", "rom" or "assembly".
+
+    Returns
+    -------
+    type
+        DiscreteParams, RomSpec or fem.model.AssemblyModel.
+
+    Raises
+    ------
+    KeyError
+        An unknown kind.
+    """
     entry = MODEL_KINDS[kind]
     return entry if isinstance(entry, type) else entry()

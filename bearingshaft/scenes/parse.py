@@ -217,7 +217,23 @@ def builtin_names() -> list[str]:
 
 
 def load_scene(name_or_path: str) -> Scene:
-    """A built-in scene by name, or a scene from a TOML file path."""
+    """A built-in scene by name, or a scene from a TOML file path.
+
+    Parameters
+    ----------
+    name_or_path : str
+        A path ending in .toml or that exists, else the name of a built-in scene.
+
+    Returns
+    -------
+    Scene
+
+    Raises
+    ------
+    SceneError
+        An unreadable file, not UTF-8 text, an unknown name (with the nearest one), or a scene
+        :func:`parse_scene` refuses.
+    """
     path = Path(name_or_path)
     if path.suffix == ".toml" or path.exists():
         try:

@@ -25,7 +25,35 @@ from bearingshaft.scenes.tables import (
 
 @dataclass(frozen=True, slots=True)
 class Scene:
-    """One case: a model and the stages to run on it."""
+    """One case: a model and the stages to run on it.
+
+    Attributes
+    ----------
+    name : str
+        The scene's name (file stem or built-in name).
+    description : str
+        One line from the file.
+    model_kind : str
+        "discrete", "rom" or "assembly".
+    model : DiscreteParams, RomSpec or fem.model.AssemblyModel
+        The [model] table.
+    source : str
+        The TOML text as read, kept with every result.
+    origin : str
+        Where it was read from, for messages.
+    initial : InitialSpec
+        [initial], the points' initial state.
+    loads : tuple
+        The [[load]] specs (HalfSineLoadSpec, HarmonicLoadSpec, TabulatedLoadSpec).
+    load_signals : tuple
+        Their time functions (:mod:`reduced.models.loads`).
+    modal, ringdown, spectrogram, symmetry, nnm, fep : table dataclass or None
+        The tables of the same names (:mod:`bearingshaft.scenes.tables`), None where the scene has none.
+    work_precision, stiff_cases, rom_convergence, verify, frc, hammer : table dataclass or None
+        Likewise.
+    sweep : SweepSpec or None
+        [sweep], run by ``bearingshaft sweep``.
+    """
 
     name: str
     description: str

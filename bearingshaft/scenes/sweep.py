@@ -23,7 +23,23 @@ INT_PATTERN = re.compile(r"^[+-]?\d+$")
 # -- the design -------------------------------------------------------------------------------
 @dataclass(frozen=True, slots=True)
 class Vary:
-    """One varied key: its values (list or LO:HI:N range), or a range LO:HI for a random design."""
+    """One varied key: its values (list or LO:HI:N range), or a range LO:HI for a random design.
+
+    Parameters
+    ----------
+    key : str
+        The scene key: ``model.g``, ``initial.v0_m_s[1]``, ``load[0].peak_N``.
+    values : tuple
+        The values of a grid or zip design.
+    low, high : float, optional
+        A random design's range.
+    log : bool
+        The values (or the random draws) are spaced geometrically.
+    integer : bool
+        The range's ends are written as integers: values are rounded.
+    text : str
+        As written, for messages.
+    """
 
     key: str  # "model.g", "initial.v0_m_s[1]", "load[0].peak_N"
     values: tuple = ()  # the values of a grid or zip design
@@ -40,7 +56,25 @@ class Vary:
 
 @dataclass(frozen=True, slots=True)
 class SweepSpec:
-    """The ``[sweep]`` table (or ``--vary`` and its options)."""
+    """The ``[sweep]`` table (or ``--vary`` and its options).
+
+    Parameters
+    ----------
+    vary : tuple of Vary
+        The varied keys.
+    design : {'grid', 'zip', 'random'}
+        Every combination, the i-th values together, or random draws in the ranges.
+    samples : int
+        Random design: number of cases.
+    seed : int
+        Random design: seed.
+    plots : tuple of str
+        Metric columns drawn (default: the ``DEFAULT_PLOTS`` that exist).
+    x : str
+        Column drawn on the x axis instead of the varied key (one varied key).
+    overlay : str
+        "nnm_stability" or "".
+    """
 
     vary: tuple[Vary, ...] = ()
     design: str = "grid"
@@ -80,6 +114,25 @@ def parse_values(key: str, value, where: str) -> Vary:
     Strings: ``a,b,c`` (a list), ``LO:HI:N`` (N values, linear), ``LO:HI:N:log`` (geometric),
     ``LO:HI`` or ``LO:HI:log`` (a range for the random design). TOML lists and numbers are
     values as they are.
+
+    Parameters
+    ----------
+    key : str
+        The scene key varied (checked by :func:`check_key`).
+    value : list, number, bool or str
+        The values, as above.
+    where : str
+        Where they were given, for the messages.
+
+    Returns
+    -------
+    Vary
+
+    Raises
+    ------
+    SweepError
+        A bad key, an empty list, a nested value, a malformed range, a log range through 0, HI <= LO
+        for a range, or a count that is not an integer in [1, ``MAX_CASES``].
     """
     check_key(key, where)
     if isinstance(value, list):
@@ -129,7 +182,22 @@ def parse_values(key: str, value, where: str) -> Vary:
 
 
 def parse_vary_option(text: str) -> Vary:
-    """``--vary KEY=VALUES`` as a :class:`Vary`."""
+    """``--vary KEY=VALUES`` as a :class:`Vary`.
+
+    Parameters
+    ----------
+    text : str
+        ``KEY=VALUES``.
+
+    Returns
+    -------
+    Vary
+
+    Raises
+    ------
+    SweepError
+        No ``=`` or no key, or values :func:`parse_values` refuses.
+    """
     key, sep, values = text.partition("=")
     key = key.strip()
     if not sep or not key:
@@ -138,7 +206,25 @@ def parse_vary_option(text: str) -> Vary:
 
 
 def check_key(key: str, where: str) -> None:
-    """``key`` is TABLE.KEY, TABLE.KEY[i] or load[i].KEY of a scene table."""
+    """``key`` is TABLE.KEY, TABLE.KEY[i] or load[i].KEY of a scene table.
+
+    Parameters
+    ----------
+    key : str
+        The key.
+    where : str
+        Where it was given, for the messages.
+
+    Returns
+    -------
+    None
+
+    Raises
+    ------
+    SweepError
+        Not of that form, an unknown table, or an index on a table that is not [[load]] (or none on
+        one that is).
+    """
     m = KEY_PATTERN.match(key)
     if m is None:
         raise SweepError(f"{where}: {key!r} is not a scene key: write TABLE.KEY (e.g. model.g), TABLE.KEY[i] "
@@ -153,7 +239,25 @@ def check_key(key: str, where: str) -> None:
 
 
 def parse_sweep_table(table, origin: str) -> SweepSpec:
-    """The scene's ``[sweep]`` table, every key checked (the cases themselves: :func:`build_plan`)."""
+    """The scene's ``[sweep]`` table, every key checked (the cases themselves: :func:`build_plan`).
+
+    Parameters
+    ----------
+    table : dict
+        The [sweep] table.
+    origin : str
+        The scene file, for the messages.
+
+    Returns
+    -------
+    SweepSpec
+
+    Raises
+    ------
+    SweepError
+        Not a table, an unknown key, a value of the wrong type, or a design rule broken
+        (:func:`check_spec`).
+    """
     where = f"{origin} [sweep]"
     if not isinstance(table, dict):
         raise SweepError(f"{where}: expected a table, got {table!r}"[:200])
@@ -182,7 +286,26 @@ def parse_sweep_table(table, origin: str) -> SweepSpec:
 
 
 def check_spec(spec: SweepSpec, where: str) -> SweepSpec:
-    """The design's own rules (the values are checked case by case later)."""
+    """The design's own rules (the values are checked case by case later).
+
+    Parameters
+    ----------
+    spec : SweepSpec
+        The sweep.
+    where : str
+        Where it was given, for the messages.
+
+    Returns
+    -------
+    SweepSpec
+        ``spec``.
+
+    Raises
+    ------
+    SweepError
+        An unknown design or overlay, a key varied twice, ranges in a grid or zip design (or values
+        in a random one), a random design without samples, or zip values of unequal counts.
+    """
     if not isinstance(spec.design, str) or spec.design not in DESIGNS:
         raise SweepError(f"{where} design: unknown design {spec.design!r}{suggest(str(spec.design), DESIGNS)} "
                          f"(known: {', '.join(DESIGNS)})")

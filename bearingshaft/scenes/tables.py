@@ -20,6 +20,13 @@ class InitialSpec:
 
     For the discrete model the points are its DOFs. A reduced model takes the point values
     in its lowest three open-gap modes (heave, pitch, first bending), as the discrete model.
+
+    Parameters
+    ----------
+    x0_m : tuple of float
+        m, displacement of each point x1, x2, x3.
+    v0_m_s : tuple of float
+        m/s, velocity of each point.
     """
 
     x0_m: tuple[float, ...] = (0.0, 0.0, 0.0)  # m, displacement of each point
@@ -29,17 +36,43 @@ class InitialSpec:
 
 @dataclass(frozen=True, slots=True)
 class RingdownSpec:
-    """Free response from the initial state."""
+    """Free response from the initial state.
+
+    Parameters
+    ----------
+    method : {'exact', 'explicit', 'dop853'}
+        The integrator.
+    duration_s : float
+        s, > 0.
+    sample_rate_hz : float
+        Hz, output sampling, > 0.
+    dt_s : float, optional
+        s, explicit step (default: omega_dt / omega_ref).
+    omega_dt : float
+        rad, explicit step as omega_ref dt, in (0, ``EXPLICIT_OMEGA_DT_MAX``].
+    step_basis : {'top', 'contact'}
+        omega_ref: the top closed-gap frequency, or that of the three lowest modes that move the
+        gaps (top mode capped at omega_max dt = 1).
+    rtol : float
+        DOP853 relative tolerance, in (0, 1).
+    atol : float, optional
+        m, DOP853 absolute tolerance (default rtol x max(largest stop offset, 1e-3 m)).
+
+    Raises
+    ------
+    ValueError
+        A value outside its range.
+    """
 
     method: str = "exact"  # exact | explicit | dop853
     duration_s: float = 2.0  # s
     sample_rate_hz: float = 20000.0  # Hz, output sampling
-    dt_s: float | None = None  # s, explicit step (default: omega_dt / omega_max)
+    dt_s: float | None = None  # s, explicit step (default: omega_dt / omega_ref)
     omega_dt: float = 0.05  # rad, explicit step: omega_ref dt
     step_basis: str = "top"  # omega_ref: "top" closed-gap frequency, or "contact" (the three lowest
     # modes that move the gaps, as the discrete model has; top mode capped at omega_max dt = 1)
     rtol: float = 1e-10  # dop853 relative tolerance
-    atol: float | None = None  # m, dop853 absolute tolerance (default rtol x gap)
+    atol: float | None = None  # m, dop853 absolute tolerance (default rtol x max(largest stop offset, 1 mm))
 
     def __post_init__(self) -> None:
         check(self.method in METHODS, f"method must be one of {', '.join(METHODS)}, got {self.method!r}")
@@ -56,7 +89,26 @@ class RingdownSpec:
 
 @dataclass(frozen=True, slots=True)
 class SpectrogramSpec:
-    """Short-time Fourier transform (Hann window) of one DOF."""
+    """Short-time Fourier transform (Hann window) of one DOF.
+
+    Parameters
+    ----------
+    dof : str
+        Which DOF to transform.
+    window_s : float
+        s, Hann window length, > 0.
+    overlap : float
+        Fraction of the window shared by neighbouring frames, in [0, 1).
+    fmax_hz : float
+        Hz, top of the plot, > 0.
+    db_range : float
+        dB shown below the peak, > 0.
+
+    Raises
+    ------
+    ValueError
+        A value outside its range.
+    """
 
     dof: str = "x1"  # which DOF to transform
     window_s: float = 0.05  # s, Hann window length
@@ -71,7 +123,20 @@ class SpectrogramSpec:
 
 @dataclass(frozen=True, slots=True)
 class SymmetrySpec:
-    """Symmetry-breaking plot: |x_a - x_b| against time (Fig. 4)."""
+    """Symmetry-breaking plot: |x_a - x_b| against time (Fig. 4).
+
+    Parameters
+    ----------
+    dofs : tuple of str
+        The two DOFs a symmetric motion keeps equal.
+    methods : tuple of str
+        Integrators compared.
+
+    Raises
+    ------
+    ValueError
+        Not two different DOFs, or an unknown method.
+    """
 
     dofs: tuple[str, ...] = ("x1", "x3")  # the pair that a symmetric motion keeps equal
     methods: tuple[str, ...] = ("exact", "explicit", "dop853")  # integrators compared
@@ -84,7 +149,20 @@ class SymmetrySpec:
 
 @dataclass(frozen=True, slots=True)
 class NNMSpec:
-    """Frequency-energy relations of the nonlinear normal modes."""
+    """Frequency-energy relations of the nonlinear normal modes.
+
+    Parameters
+    ----------
+    n_energy : int
+        Number of energies, log-spaced, >= 2.
+    energy_min_J, energy_max_J : float
+        J, the range, 0 < min < max.
+
+    Raises
+    ------
+    ValueError
+        A value outside its range.
+    """
 
     n_energy: int = 400  # number of energies, log-spaced
     energy_min_J: float = 1e-4  # J
@@ -98,7 +176,28 @@ class NNMSpec:
 
 @dataclass(frozen=True, slots=True)
 class FEPSpec:
-    """Frequency-energy plots by HB, shooting and their stability (issue 3) -> stage nnm."""
+    """Frequency-energy plots by HB, shooting and their stability (issue 3) -> stage nnm.
+
+    Parameters
+    ----------
+    harmonics : tuple of int
+        HB orders drawn in fep.png (1: the paper's Fig. 2), in [1, MAX_HARMONICS].
+    convergence_harmonics : tuple of int
+        H of the hb_convergence study.
+    samples_study_harmonics : int
+        H at which the AFT sample count N is varied.
+    samples : tuple of int
+        N values of that study, each > 2 samples_study_harmonics.
+    energy_max_J : float
+        J, every branch runs at least this far.
+    n_shooting : int
+        Shooting orbits per NNM (log-spaced in energy), >= 2.
+
+    Raises
+    ------
+    ValueError
+        A value outside its range.
+    """
 
     harmonics: tuple[int, ...] = (1, 15)  # HB orders drawn in fep.png (1: the paper's Fig. 2)
     convergence_harmonics: tuple[int, ...] = (1, 3, 5, 9, 15, 25, 50)  # hb_convergence study
@@ -120,7 +219,26 @@ class FEPSpec:
 
 @dataclass(frozen=True, slots=True)
 class WorkPrecisionSpec:
-    """Error against run time of the three integrators over a short window."""
+    """Error against run time of the three integrators over a short window.
+
+    Parameters
+    ----------
+    window_s : float
+        s, the window compared (before chaotic divergence dominates).
+    sample_rate_hz : float
+        Hz, grid on which errors are measured.
+    explicit_omega_dt : tuple of float
+        rad, explicit steps, at least 3, in (0, ``EXPLICIT_OMEGA_DT_MAX``].
+    dop853_rtol : tuple of float
+        DOP853 tolerances, in (0, 1).
+    repeats : int
+        Best-of timing, >= 1.
+
+    Raises
+    ------
+    ValueError
+        A value outside its range.
+    """
 
     window_s: float = 0.05  # s, before chaotic divergence dominates
     sample_rate_hz: float = 20000.0  # Hz, grid on which errors are measured
@@ -139,7 +257,33 @@ class WorkPrecisionSpec:
 
 @dataclass(frozen=True, slots=True)
 class StiffCasesSpec:
-    """Sweep over stiff and extreme parameters (every combination is run)."""
+    """Sweep over stiff and extreme parameters (every combination is run).
+
+    Parameters
+    ----------
+    k_g : tuple of float
+        N/m, > 0.
+    gap : tuple of float
+        m, >= 0.
+    speed : tuple of float
+        m/s, initial velocity of mass 3, nonzero.
+    c : tuple of float
+        N s/m, >= 0.
+    duration_s : float
+        s.
+    sample_rate_hz : float
+        Hz.
+    methods : tuple of str
+        Integrators run.
+    long_duration_s : float
+        s, also run the nominal case (first k_g, Table-1 gap, 200 m/s) this long for every c
+        (0: no long runs).
+
+    Raises
+    ------
+    ValueError
+        A value outside its range.
+    """
 
     k_g: tuple[float, ...] = (3.502e7, 1e9, 1e11)  # N/m
     gap: tuple[float, ...] = (0.0, 2.54e-4, 1e-2)  # m
@@ -163,7 +307,28 @@ class StiffCasesSpec:
 
 @dataclass(frozen=True, slots=True)
 class ModalSpec:
-    """Modal analysis of a 3-D model (kind = "assembly"): correlation, MAC, pictures."""
+    """Modal analysis of a 3-D model (kind = "assembly"): correlation, MAC, pictures.
+
+    Parameters
+    ----------
+    n_modes : int
+        Modes computed, rigid-body ones included, >= 12.
+    shift_hz : float
+        Hz, the shift is sigma = -(2 pi shift_hz)^2.
+    solver : {'pardiso', 'superlu'}
+        Sparse factorization (superlu without pypardiso).
+    test_shapes : str
+        UFF (dataset 55) or CSV file of test mode shapes; "" for the FE auto-MAC.
+    pictures : bool
+        Mode-shape pictures rendered with pyvista off screen.
+    vtu : bool
+        modes.vtu of the labelled modes for ParaView.
+
+    Raises
+    ------
+    ValueError
+        A value outside its range.
+    """
 
     n_modes: int = 20  # modes computed, rigid-body ones included
     shift_hz: float = 1.0  # Hz, the shift is sigma = -(2 pi shift_hz)^2 (K - sigma M > 0)
@@ -180,7 +345,26 @@ class ModalSpec:
 
 @dataclass(frozen=True, slots=True)
 class RomConvergenceSpec:
-    """Reduced model against its number of fixed-interface modes (kind = "rom")."""
+    """Reduced model against its number of fixed-interface modes (kind = "rom").
+
+    Parameters
+    ----------
+    modes : tuple of int
+        Fixed-interface mode counts, at least two, >= 0; the largest is the reference.
+    window_s : float
+        s, ringdown window over which the error is measured.
+    sample_rate_hz : float
+        Hz, grid on which errors are measured.
+    n_compare : int
+        Contact-coupled frequencies compared (open and closed gap), >= 1.
+    repeats : int
+        Best-of timing, >= 1.
+
+    Raises
+    ------
+    ValueError
+        A value outside its range.
+    """
 
     modes: tuple[int, ...] = (1, 2, 5, 10, 20, 50)  # fixed-interface modes; the largest is the reference
     window_s: float = 0.05  # s, ringdown window over which the error is measured
@@ -198,7 +382,28 @@ class RomConvergenceSpec:
 
 @dataclass(frozen=True, slots=True)
 class VerifySpec:
-    """Reduction against the discrete model: identified parameters, frequencies, NNMs, ringdowns."""
+    """Reduction against the discrete model: identified parameters, frequencies, NNMs, ringdowns.
+
+    Parameters
+    ----------
+    duration_s : float
+        s, ringdown of each of the paper's three initial conditions.
+    sample_rate_hz : float
+        Hz.
+    method : str
+        Ringdown integrator.
+    energy_max_J : float
+        J, NNM backbones (HB, H = 1) up to this energy.
+    window_s : float
+        s, spectrogram window.
+    fmax_hz : float
+        Hz, top of the spectrograms.
+
+    Raises
+    ------
+    ValueError
+        A value outside its range.
+    """
 
     duration_s: float = 2.0  # s, ringdown of each of the paper's three initial conditions
     sample_rate_hz: float = 20000.0  # Hz
@@ -215,7 +420,46 @@ class VerifySpec:
 @dataclass(frozen=True, slots=True)
 class FRCSpec:
     """Forced-response curves by HB under a harmonic load at one point, verified by a stepped
-    sine of the exact integrator (issue 11) -> stage frc (reduced.periodic.frc)."""
+    sine of the exact integrator (issue 11) -> stage frc (reduced.periodic.frc).
+
+    Parameters
+    ----------
+    point : str
+        Where the load P cos(2 pi f t) acts (a point name).
+    levels_N : tuple of float
+        N, load amplitudes P: one curve each.
+    freq_min_hz, freq_max_hz : float
+        Hz, the band.
+    harmonics : int
+        H of the curves in frc.csv and frc.png (odd with ``odd_harmonics``).
+    odd_harmonics : bool
+        Odd harmonics only (a half-wave symmetric response; stability sees all).
+    convergence_harmonics : tuple of int
+        H of the error-against-H study.
+    convergence_level_N : float
+        N, the level of that study.
+    max_steps : int
+        Continuation steps per curve at most.
+    hill_points : int
+        Hill's method on at most this many points per curve (0: none).
+    shooting_points : int
+        Floquet multipliers by shooting on the exact flow, points per curve (0: none).
+    shooting_segments : int
+        Segments of the multiple shooting.
+    stepped_sine_points : int
+        Frequencies per level, each swept up and down (0: no stepped sine).
+    stepped_sine_tol : float
+        Settled when the predicted distance to the periodic orbit is below this, in (0, 1).
+    stepped_sine_max_s : float
+        s, simulated time per frequency at most before "not settled".
+    backbone_scales : tuple of float
+        Damping and load scaled together (backbone check), in (0, 1].
+
+    Raises
+    ------
+    ValueError
+        A value outside its range.
+    """
 
     point: str = "x2"  # where the load P cos(2 pi f t) acts (a point name)
     levels_N: tuple[float, ...] = (0.1, 1.0, 10.0)  # N, load amplitudes P: one curve each
@@ -258,7 +502,44 @@ class FRCSpec:
 class HammerSpec:
     """A hammer blow on the beam of the reduced apparatus, recorded on every rig channel
     (issue 12) -> stage hammer (reduced.models.rig). The record's length, sampling and
-    integrator are [ringdown]'s."""
+    integrator are [ringdown]'s.
+
+    Parameters
+    ----------
+    location_m : tuple of float
+        m, point struck (default: the beam's top face at mid-span, under the tube's hole).
+    direction : tuple of float
+        The blow's direction, 3 numbers, not all zero.
+    peak_N : float
+        N, the nominal blow.
+    duration_s : float
+        s, length of the half-sine.
+    start_s : float
+        s, pre-trigger: the blow starts here.
+    levels_N : tuple of float
+        N, the level sweep.
+    force_file : str
+        A measured force history (CSV t_s,force_N or UFF 58) instead of the half-sine.
+    seismic_mass_kg : float
+        kg, tip assembly above each load cell's gauge.
+    load_cell : str
+        The load cell of fig10.png (one of ``fem.rig.TIP_CELLS``).
+    compare : tuple of str
+        Channels compared with a measured test (default: all but the hammer).
+    compare_window_s : tuple of float
+        s, (start, end) of the error measures (default: the record).
+    linear_check : bool
+        The open-gap response against the full 3-D model's modal superposition.
+    linear_check_max_hz : float
+        Hz, full-model modes up to this in that reference.
+    backbone_modes : int
+        NNM backbones overlaid on fig11.png (0: none).
+
+    Raises
+    ------
+    ValueError
+        A value outside its range, or a force file that does not exist.
+    """
 
     location_m: tuple[float, ...] = ()  # m, point struck (default: the beam's top face at mid-span,
     # under the tube's hole)

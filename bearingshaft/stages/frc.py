@@ -434,12 +434,37 @@ and frc_backbone.png."""
 
 
 def frc_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
-    """Compute and write the stage in one call (the pipeline calls :func:`compute` and :func:`write`)."""
+    """Compute and write the stage in one call (the pipeline calls :func:`compute` and :func:`write`).
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with an [frc] table.
+    writer : StageWriter
+        Where the files go.
+    progress : bool
+        Show progress bars.
+
+    Returns
+    -------
+    None
+    """
     write(compute(scene, progress, writer.scratch), writer)
 
 
 def estimate(scene: Scene) -> list[Estimate]:
-    """Hill's method: the first-order form of the quadratic eigenproblem at the largest H."""
+    """Hill's method: the first-order form of the quadratic eigenproblem at the largest H.
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with an [frc] table.
+
+    Returns
+    -------
+    list of Estimate
+        One: bytes of the Hill matrices at the largest H (``HILL_COPIES`` copies).
+    """
     f = scene.frc
     n = n_dofs(scene)
     H = max((f.harmonics, *f.convergence_harmonics))
@@ -454,7 +479,19 @@ __all__ = ["DESCRIPTION", "FRCResult", "compute", "estimate", "frc_stage", "orbi
 
 def write(result, writer) -> None:
     """The stage's files and figures from ``result`` (:mod:`bearingshaft.stages.frc_files`; matplotlib
-    is loaded only here, so computing never loads it)."""
+    is loaded only here, so computing never loads it).
+
+    Parameters
+    ----------
+    result : FRCResult
+        What :func:`compute` returned.
+    writer : StageWriter
+        Where the files go (its ``stats`` are filled for provenance.json).
+
+    Returns
+    -------
+    None
+    """
     from bearingshaft.stages import frc_files
 
     frc_files.write(result, writer)

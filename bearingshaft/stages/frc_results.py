@@ -10,7 +10,35 @@ import numpy as np
 # -- what the stage computed ---------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class PointCheck:
-    """Hill's method and shooting at one point of a curve, beside its monodromy verdict."""
+    """Hill's method and shooting at one point of a curve, beside its monodromy verdict.
+
+    Attributes
+    ----------
+    index : int
+        The point on the curve.
+    contact : bool
+        A stop closes somewhere along its orbit.
+    shot : bool
+        Shooting was tried here.
+    freq_hz : float
+        Hz, the point's excitation frequency.
+    mono : float
+        max |mu| of the orbit monodromy.
+    mono_stable : bool
+        The monodromy's verdict.
+    hill : float
+        max |mu| by Hill's method (nan where not run).
+    hill_stable : bool or None
+        Hill's verdict, None where not run.
+    shoot : float
+        max |mu| of the exact orbit (nan where not found).
+    shoot_stable : bool or None
+        Shooting's verdict, None where not found.
+    shoot_amp : (p,) ndarray of float or None
+        m, the exact orbit's amplitude at each output point.
+    shoot_note : str
+        Why shooting failed ("" otherwise).
+    """
 
     index: int  # the point on the curve
     contact: bool  # a stop closes somewhere along its orbit
@@ -28,7 +56,23 @@ class PointCheck:
 
 @dataclass(frozen=True, eq=False)
 class ConvergenceRun:
-    """One H of the convergence study at ``[frc] convergence_level_N``."""
+    """One H of the convergence study at ``[frc] convergence_level_N``.
+
+    Attributes
+    ----------
+    H : int
+        Harmonics of the curve.
+    curve : FRCBranch or ContinuationError
+        The curve, or the error of a curve that could not start (no stability).
+    err_stepped_sine : list of float
+        max relative amplitude error at each periodic stepped-sine point.
+    err_shooting : list of float
+        max relative amplitude error at each exact orbit found.
+    shooting_failed : int
+        Contact shooting points where no HB solution or no exact orbit was found.
+    wall_s : float
+        s, wall time of this H.
+    """
 
     H: int
     curve: object  # FRCBranch, or the ContinuationError of a curve that could not start (no stability)
@@ -46,6 +90,37 @@ class FRCResult:
     kept as its :class:`reduced.periodic.continuation.ContinuationError` (reported, not raised).
     Keys: P the load level [N], ``direction`` "up" or "down", ``scale`` a factor of
     ``[frc] backbone_scales``.
+
+    Attributes
+    ----------
+    scene_name : str
+        The scene's name.
+    spec : FRCSpec
+        The [frc] table.
+    names : tuple of str
+        Output points.
+    load_col : int
+        Index of the point the load acts at.
+    curves : dict
+        P -> FRCBranch or ContinuationError, H = [frc] harmonics.
+    events : dict
+        P -> (k,) Hz where the sweeps must jump (folds, ends of stable pieces).
+    checks : dict
+        P -> list of PointCheck.
+    sweeps : dict
+        P -> {direction: SteppedSine} (empty without a stepped sine).
+    sweep_hb : dict
+        (P, direction) -> per sweep frequency the HB amplitudes (p,) in m there, or None.
+    convergence : list of ConvergenceRun
+        One per H of [frc] convergence_harmonics.
+    backbone_curves : dict
+        (P, scale) -> FRCBranch (H = 1, damping and load scaled).
+    backbones : dict
+        Linear mode -> (freq_hz (k,), amplitudes (k, p) in m) of its NNM backbone.
+    peaks : dict
+        (P, scale) -> (Hz, m), the peak of the backbone curve at the load point.
+    nearest : dict
+        (P, scale) -> (mode, log distance) of the nearest backbone to that peak.
     """
 
     scene_name: str

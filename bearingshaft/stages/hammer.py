@@ -303,6 +303,8 @@ def mode_classes(freq_hz, labels: dict) -> list[str]:
     -------
     list of str, one per mode
 
+    Examples
+    --------
     >>> mode_classes([0.4, 11.0, 20.0, 900.0], {"bounce": (2, 20.0, 0.9), "roll": (1, 11.0, 0.8)})
     ['bungee', 'roll', 'bounce', 'elastic']
     """

@@ -21,7 +21,23 @@ from reduced.models.rig import VirtualRig
 
 @dataclass(frozen=True, eq=False)
 class MeasuredTest:
-    """A measured test's channels and how the model is to be driven to compare with it."""
+    """A measured test's channels and how the model is to be driven to compare with it.
+
+    Attributes
+    ----------
+    channels : list of TimeHistory
+        Every channel of the test file.
+    signal : Tabulated or None
+        The test's hammer force; None: no force channel, the scene's blow is used.
+    level_N : float or None
+        N, the peak of that force.
+    driven : str
+        What drives the model, as the summary says it.
+    duration_s : float
+        s, the test's longest channel.
+    sample_rate_hz : float
+        Hz, the test's sampling.
+    """
 
     channels: list[TimeHistory]
     signal: Tabulated | None  # the test's hammer force (Tabulated), None: no force channel, use the scene's blow

@@ -130,6 +130,18 @@ def fig10(path: Path, rig: VirtualRig, rec: Record, spec) -> None:
 def where(location: tuple[float, float, float]) -> str:
     """The struck point, m, as the figures and hammer.md say it (mm, one decimal).
 
+    Parameters
+    ----------
+    location : (float, float, float)
+        m, the point struck.
+
+    Returns
+    -------
+    str
+        mm, one decimal each.
+
+    Examples
+    --------
     >>> where((0.0, -0.00125, 0.0254))
     '(0.0, -1.2, 25.4) mm'
     """
@@ -151,7 +163,18 @@ def _spectro(ax, rec: Record, channel: int, scene: Scene, fmax: float, db_range:
 
 
 def spectrogram_channel(scene: Scene) -> str:
-    """The channel of Fig. 11: [spectrogram] dof if it names one, else the middle beam accelerometer's z."""
+    """The channel of Fig. 11: [spectrogram] dof if it names one, else the middle beam accelerometer's z.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene (its [spectrogram] table, if any).
+
+    Returns
+    -------
+    str
+        A rig channel name such as ``beam_s3:z``.
+    """
     sp = scene.spectrogram
     return sp.dof if sp is not None and ":" in sp.dof else "beam_s3:z"
 

@@ -73,7 +73,23 @@ def full_modes(fe, max_hz: float, progress: bool):
 
 @dataclass(frozen=True, eq=False)
 class FullReference:
-    """The full 3-D model's open-gap response to a blow, on the rig's channels but the hammer."""
+    """The full 3-D model's open-gap response to a blow, on the rig's channels but the hammer.
+
+    Attributes
+    ----------
+    names : list of str
+        Accelerometer axes, then ``TIP_CELLS`` (their seismic inertia only: the gaps never close).
+    data : (len(names), N) ndarray of float
+        m/s^2 and N, acquired at the scene's rate as the rig's channels.
+    n_dofs : int
+        DOFs of the full model.
+    n_modes : int
+        Its modes in the superposition.
+    top_hz : float
+        Hz, the highest of them.
+    cond_V : float
+        Condition number of the damped modal basis.
+    """
 
     names: list[str]  # accelerometer axes, then TIP_CELLS (their seismic inertia only: the gaps never close)
     data: np.ndarray  # (len(names), N) acquired at the scene's rate, as the rig's channels

@@ -20,7 +20,29 @@ from reduced.models.rig import VirtualRig
 
 @dataclass(frozen=True, eq=False)
 class Record:
-    """One virtual test: every channel at the sample times, and what the integrator reported."""
+    """One virtual test: every channel at the sample times, and what the integrator reported.
+
+    Attributes
+    ----------
+    level_N : float
+        N, the blow's peak.
+    t : (N,) ndarray of float
+        s, the sample times.
+    data : (n_channels, N) ndarray of float
+        Every rig channel (m/s^2 or N), in the rig's channel order.
+    x, v : (N, n) ndarray of float
+        The reduced state (for the modal energy at the end).
+    energy : (N,) ndarray of float
+        J.
+    dissipated : (N,) ndarray of float
+        J, work of the damping.
+    external : (N,) ndarray of float
+        J, work of the hammer.
+    stats : dict
+        The integrator's statistics.
+    balance_error : float
+        Relative energy-balance error of the run.
+    """
 
     level_N: float  # N, the blow's peak
     t: np.ndarray  # (N,) s
@@ -41,6 +63,39 @@ class LinearCheck:
     ``errors`` maps (band, window) to rms(a_rom - a_full) / rms(a_full) per channel, band
     ``"band"`` (both low-passed at ``band_hz``) or ``"raw"``, window ``"50ms"`` (the first
     ``window_s`` after the blow) or ``"record"`` (from the blow to the end).
+
+    Attributes
+    ----------
+    names : list of str
+        The compared channels: accelerometer axes, then the tip load cells.
+    errors : dict
+        {(band, window): (len(names),) relative RMS error}.
+    near_zero : (len(names),) ndarray of bool
+        An axis judged against its sensor's largest.
+    worst : float
+        The worst band-limited error over the window.
+    worst_channel : str
+        The channel it is on.
+    worst_raw : float
+        The worst error without the low-pass.
+    n_full_modes : int
+        Modes of the full model in the reference.
+    cond_V : float
+        Condition number of the full model's damped modal basis.
+    t : (k,) ndarray of float
+        s, the figure's window: start_s <= t <= start_s + window_s.
+    rom_band : (k,) ndarray of float
+        The worst channel of the reduced model, low-passed at band_hz, in that window.
+    full_band : (k,) ndarray of float
+        The same of the full model.
+    band_hz : float
+        Hz, the band of the comparisons.
+    window_s : float
+        s, the window after the blow.
+    bound : float
+        The issue's bound on the band-limited error (1 %).
+    text : str
+        The paragraph of hammer.md.
     """
 
     names: list[str]  # the compared channels: accelerometer axes, then the tip load cells
@@ -62,7 +117,31 @@ class LinearCheck:
 
 @dataclass(frozen=True, eq=False)
 class VirtualTest:
-    """The virtual hammer test: the nominal record, the level sweep, backbones and the linear check."""
+    """The virtual hammer test: the nominal record, the level sweep, backbones and the linear check.
+
+    Attributes
+    ----------
+    scene : Scene
+        The scene.
+    rig : VirtualRig
+        The reduced apparatus with its channels.
+    labels : dict
+        {label: (mode index, freq_hz, score)} of the six pseudo-rigid open-gap modes.
+    records : dict
+        {level_N: Record}, in increasing level.
+    summary : dict
+        {level_N: :func:`bearingshaft.stages.hammer.level_summary` dict}, the same levels.
+    backbones : dict
+        {label: (energy_J, freq_hz)} NNM backbones (HB, H = 1).
+    linear : LinearCheck or None
+        The open-gap check against the full model, when asked for.
+    end_share_s : float
+        s, the energy "at the end" is the mean over the record's last end_share_s.
+    stats : dict
+        For provenance.json.
+    lines : tuple of str
+        The stage's summary lines.
+    """
 
     scene: Scene
     rig: VirtualRig
@@ -83,7 +162,29 @@ class VirtualTest:
 
 @dataclass(frozen=True, eq=False)
 class Comparison:
-    """The model run at a measured test's sampling, driven by its hammer, compared channel for channel."""
+    """The model run at a measured test's sampling, driven by its hammer, compared channel for channel.
+
+    Attributes
+    ----------
+    scene : Scene
+        The scene.
+    test_file : str
+        The measured test (UFF 58).
+    driven : str
+        What drove the model (the test's hammer channel, or the scene's blow).
+    model : list of TimeHistory
+        Every channel of the model run.
+    pairs : list of ChannelPair
+        Model and test channels matched (:func:`bearingshaft.correlate.match_channels`).
+    rows : list of dict
+        Error measures, one per pair (:func:`bearingshaft.correlate.channel_errors`).
+    window_s : (float, float) or None
+        s, the compared window ([hammer] compare_window_s).
+    stats : dict
+        For provenance.json.
+    lines : tuple of str
+        The stage's summary lines.
+    """
 
     scene: Scene
     test_file: str

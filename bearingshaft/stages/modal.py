@@ -170,7 +170,18 @@ no MAC files."""
 
 
 def estimate(scene: Scene) -> list[Estimate]:
-    """Mesh, K and M, the sparse Cholesky factor and the Krylov basis of the modal analysis."""
+    """Mesh, K and M, the sparse Cholesky factor and the Krylov basis of the modal analysis.
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with a [modal] table and a 3-D model.
+
+    Returns
+    -------
+    list of Estimate
+        One: :func:`bearingshaft.stages.modal.modal_estimate` of the model.
+    """
     return [modal_estimate(scene.model, scene.modal.n_modes)]
 
 
@@ -208,7 +219,19 @@ def modal_estimate(model, n_modes: int) -> Estimate:
 
 def write(result, writer) -> None:
     """The stage's files and figures from ``result`` (:mod:`bearingshaft.stages.modal_files`; matplotlib
-    is loaded only here, so computing never loads it)."""
+    is loaded only here, so computing never loads it).
+
+    Parameters
+    ----------
+    result : ModalStageResult
+        What :func:`compute` returned.
+    writer : StageWriter
+        Where the files go (its ``stats`` are filled for provenance.json).
+
+    Returns
+    -------
+    None
+    """
     from bearingshaft.stages import modal_files
 
     modal_files.write(result, writer)

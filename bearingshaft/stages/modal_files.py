@@ -29,6 +29,19 @@ FREE_BEAM_FIELDS = ["mode", "description", "freq_hz", "theory", "theory_hz", "er
 def freq_text(f: float, shift_hz: float) -> str:
     """A frequency as written: 0 for a rigid-body mode, else :data:`FREQ_DIGITS` significant digits.
 
+    Parameters
+    ----------
+    f : float
+        Hz, the frequency.
+    shift_hz : float
+        Hz, the modal analysis's shift: below ``RIGID_FLOOR`` x shift_hz a mode is rigid.
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
     >>> freq_text(1.2e-4, 1.0), freq_text(17.97912345, 1.0)
     ('0', '17.9791')
     """
@@ -38,6 +51,18 @@ def freq_text(f: float, shift_hz: float) -> str:
 def pct_text(v: float) -> str:
     """An error in percent as written, empty if there is none.
 
+    Parameters
+    ----------
+    v : float
+        %, the error (nan for none).
+
+    Returns
+    -------
+    str
+        Signed, ``PCT_DECIMALS`` decimals, or ''.
+
+    Examples
+    --------
     >>> pct_text(-0.12345), pct_text(float("nan"))
     ('-0.123', '')
     """

@@ -82,7 +82,21 @@ def _nnm2_exact(scene: Scene, progress: bool) -> NNM2Exact:
 
 
 def nnm_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
-    """Compute and write the stage in one call (the pipeline calls :func:`compute` and :func:`write`)."""
+    """Compute and write the stage in one call (the pipeline calls :func:`compute` and :func:`write`).
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with an [nnm] or [fep] table.
+    writer : StageWriter
+        Where the files go.
+    progress : bool
+        Show progress bars.
+
+    Returns
+    -------
+    None
+    """
     write(compute(scene, progress, writer.scratch), writer)
 
 
@@ -96,7 +110,18 @@ hb_convergence_timing.csv and .png, and fep.md (a reduced model)."""
 
 
 def estimate(scene: Scene) -> list[Estimate]:
-    """HB Jacobians of the [fep] study and the [nnm] energy grid."""
+    """HB Jacobians of the [fep] study and the [nnm] energy grid.
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with an [nnm] or [fep] table.
+
+    Returns
+    -------
+    list of Estimate
+        One per table present: HB Jacobians at the largest H of [fep], the [nnm] energy grid.
+    """
     n = n_dofs(scene)
     out = []
     if scene.fep is not None:
@@ -115,7 +140,19 @@ __all__ = ["CHECK_CHI", "DESCRIPTION", "compute", "estimate", "nnm_stage", "writ
 
 def write(result, writer) -> None:
     """The stage's files and figures from ``result`` (:mod:`bearingshaft.stages.nnm_files`; matplotlib
-    is loaded only here, so computing never loads it)."""
+    is loaded only here, so computing never loads it).
+
+    Parameters
+    ----------
+    result : NNMResult
+        What :func:`compute` returned.
+    writer : StageWriter
+        Where the files go (its ``stats`` are filled for provenance.json).
+
+    Returns
+    -------
+    None
+    """
     from bearingshaft.stages import nnm_files
 
     nnm_files.write(result, writer)

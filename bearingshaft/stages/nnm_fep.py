@@ -80,7 +80,19 @@ OFF_BACKBONE_TOL = 1e-3  # fep.md: a shooting orbit that no H of the study comes
 
 @dataclass(frozen=True)
 class ExactReference:
-    """A closed-form frequency-energy relation of one followed NNM: the HB study's reference."""
+    """A closed-form frequency-energy relation of one followed NNM: the HB study's reference.
+
+    Attributes
+    ----------
+    nnm : int
+        0-based position among the followed NNMs.
+    freq_hz : callable
+        Energy [J] -> frequency [Hz], on arrays.
+    grazing_energy_J : float
+        J, where the NNM first touches a stop.
+    label : str
+        Legend label.
+    """
 
     nnm: int  # 0-based position among the followed NNMs
     freq_hz: Callable[[np.ndarray], np.ndarray]  # energy [J] -> frequency [Hz]
@@ -95,6 +107,25 @@ class FEPModel:
     ``modes`` are the 0-based open-gap linear modes followed (NNM k + 1 starts from
     ``modes[k]``); ``study`` the position of the NNM on which every H and every N of the
     convergence study runs; ``exact`` the closed-form reference if the model has one.
+
+    Attributes
+    ----------
+    system : GapSystem
+        The conservative gap system.
+    modes : tuple of int
+        0-based open-gap linear modes followed.
+    kind : {'discrete', 'rom'}
+        The model's kind.
+    exact : ExactReference or None
+        The closed-form reference, if any.
+    study : int
+        Position of the NNM of the convergence study.
+    shooting : dict
+        Options of :func:`reduced.periodic.shooting.shooting_branch`.
+    hill : dict
+        Options of :func:`reduced.periodic.stability.hill`.
+    branch : dict
+        Options of :func:`reduced.periodic.backbones.nnm_branch`.
     """
 
     system: GapSystem
@@ -169,7 +200,21 @@ def _hb_at(b, E_q):
 
 def fep_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
     """Compute and write the [fep] files alone (module docstring; the nnm stage does both with the
-    rest of its files)."""
+    rest of its files).
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with an [fep] table.
+    writer : StageWriter
+        Where the files go.
+    progress : bool
+        Show progress bars.
+
+    Returns
+    -------
+    None
+    """
     from bearingshaft.stages.nnm_files import write_fep  # matplotlib: loaded only when files are written
 
     write_fep(compute_fep(scene, progress), writer)

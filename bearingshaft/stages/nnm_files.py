@@ -39,6 +39,18 @@ def unit_shape(phi: np.ndarray) -> np.ndarray:
     ``argmax |phi|`` alone picks between x1 and -x3 of an antisymmetric mode by round-off, which
     flips the sign of the written shape from one machine to another.
 
+    Parameters
+    ----------
+    phi : (n,) ndarray of float
+        A mode shape (not all zero).
+
+    Returns
+    -------
+    (n,) ndarray of float
+        phi / phi[k], k the first entry within ``TIE`` of the largest magnitude.
+
+    Examples
+    --------
     >>> unit_shape(np.array([0.5, 0.0, -0.5 - 1e-12])).tolist()
     [1.0, 0.0, -1.000000000002]
     """
@@ -184,6 +196,16 @@ def fep_markdown(fep: FEPResult) -> str:
     near grazing, orbits shifted by a resonance of higher order than any H of the study)
     are listed, not compared. Numbers to 2 digits: the file is a science file (rerun
     byte-identical; run times are in hb_convergence_timing.csv).
+
+    Parameters
+    ----------
+    fep : FEPResult
+        The [fep] study of a model whose ``summary`` is set (no closed form).
+
+    Returns
+    -------
+    str
+        The Markdown text, lines joined by newlines.
     """
     return "\n".join(_md_model(fep) + _md_converged(fep) + _md_off_backbone(fep) + _md_failures(fep)
                      + _md_tongues(fep) + _md_stability(fep))

@@ -108,13 +108,36 @@ gap_modes.vtu."""
 
 
 def estimate(scene: Scene) -> list[Estimate]:
-    """Nothing beyond the 3-D model's own build, which the reduced-model cache bounds (no estimate)."""
+    """Nothing beyond the 3-D model's own build, which the reduced-model cache bounds (no estimate).
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with a reduced model.
+
+    Returns
+    -------
+    list of Estimate
+        Empty: nothing beyond the 3-D model's own build.
+    """
     return []
 
 
 def write(result, writer) -> None:
     """The stage's files and figures from ``result`` (:mod:`bearingshaft.stages.reduce_files`; matplotlib
-    is loaded only here, so computing never loads it)."""
+    is loaded only here, so computing never loads it).
+
+    Parameters
+    ----------
+    result : ReduceResult
+        What :func:`compute` returned.
+    writer : StageWriter
+        Where the files go (its ``stats`` are filled for provenance.json).
+
+    Returns
+    -------
+    None
+    """
     from bearingshaft.stages import reduce_files
 
     reduce_files.write(result, writer)

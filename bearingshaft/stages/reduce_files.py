@@ -27,6 +27,19 @@ CHECK_FIELDS = ["check", "value", "tolerance", "passed"]
 def gap_rows_text(rows: list[dict]) -> list[dict]:
     """The rows of ``gap_modes.csv`` formatted to their converged digits.
 
+    Parameters
+    ----------
+    rows : list of dict
+        ``state``, ``full_mode``, ``full_hz``, ``reduced_mode``, ``reduced_hz``, ``error_pct``,
+        ``mac``, ``basis_fraction`` per row.
+
+    Returns
+    -------
+    list of dict
+        The same keys, the numbers as text (other keys dropped).
+
+    Examples
+    --------
     >>> gap_rows_text([{"state": "open", "full_mode": 3, "full_hz": 731.3612345, "reduced_mode": 3,
     ...                 "reduced_hz": 731.3651, "error_pct": -0.000004, "mac": 0.99999991,
     ...                 "basis_fraction": 0.9999999}])[0]
@@ -43,6 +56,18 @@ def gap_rows_text(rows: list[dict]) -> list[dict]:
 def check_rows_text(checks: list[dict]) -> list[dict]:
     """The rows of ``cb_check.csv``: residuals to 3 significant digits.
 
+    Parameters
+    ----------
+    checks : list of dict
+        :func:`reduced.models.craig_bampton.cb_check` rows.
+
+    Returns
+    -------
+    list of dict
+        The rows with ``value`` and ``tolerance`` as text.
+
+    Examples
+    --------
     >>> check_rows_text([{"check": "M symmetric", "value": 1.234567e-16, "tolerance": 1e-12, "passed": True}])
     [{'check': 'M symmetric', 'value': '1.23e-16', 'tolerance': '1e-12', 'passed': True}]
     """

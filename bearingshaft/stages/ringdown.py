@@ -63,7 +63,27 @@ RESTART_OFFSET = 7  # seed 0 is repeated with PIECES + this many restart pieces:
 def run_ringdown(scene: Scene, system: GapSystem, P: np.ndarray, method: str, progress: bool,
                  out: str | Path | None = None) -> RingdownResult | RingdownFile:
     """The scene's ringdown of ``system`` (points P) from its initial state, by ``method``, with a
-    progress bar: in memory, or streamed into the file ``out`` (returned as a RingdownFile)."""
+    progress bar: in memory, or streamed into the file ``out`` (returned as a RingdownFile).
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with a [ringdown] table (its initial state and loads).
+    system : GapSystem
+        The model's system.
+    P : (points, n) ndarray of float
+        The points as rows of its DOFs.
+    method : {'exact', 'explicit', 'dop853'}
+        The integrator.
+    progress : bool
+        Show a progress bar.
+    out : str or Path, optional
+        Stream the run into this .npz.
+
+    Returns
+    -------
+    RingdownResult or RingdownFile
+    """
     spec = scene.ringdown
     x0, v0 = scene_initial_state(scene, system, P)
     bar = ProgressBar(f"{scene.name}: {method}", progress)
@@ -76,7 +96,29 @@ def run_ringdown(scene: Scene, system: GapSystem, P: np.ndarray, method: str, pr
 
 def stream_ringdown(scene: Scene, system: GapSystem, P: np.ndarray, method: str, x0: np.ndarray, v0: np.ndarray,
                     progress=None) -> RingdownStream:
-    """The scene's ringdown (with its loads) from (x0, v0) by ``method``, as a stream of chunks."""
+    """The scene's ringdown (with its loads) from (x0, v0) by ``method``, as a stream of chunks.
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with a [ringdown] table.
+    system : GapSystem
+        The model's system.
+    P : (points, n) ndarray of float
+        The points as rows of its DOFs (for the loads).
+    method : {'exact', 'explicit', 'dop853'}
+        The integrator.
+    x0 : (n,) ndarray of float
+        m, initial displacement.
+    v0 : (n,) ndarray of float
+        m/s, initial velocity.
+    progress : callable, optional
+        Called with the fraction done.
+
+    Returns
+    -------
+    RingdownStream
+    """
     spec = scene.ringdown
     return ringdown_stream(system, x0, v0, spec.duration_s, spec.sample_rate_hz, method, progress=progress,
                            **ringdown_options(scene, P))
@@ -92,6 +134,23 @@ def stage_estimate(scene: Scene, n_dofs: int, n_stops: int = 4, method: str | No
     (at most MAX_FRAMES x the rows up to fmax_hz) and ``MATPLOTLIB_BYTES``; none of it grows
     with duration_s. Disk: ringdown.npz (:func:`ringdown_disk_bytes`) plus, while the
     symmetry study runs, 8 bytes a sample for each method compared (temporary files).
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with a [ringdown] table.
+    n_dofs : int
+        DOFs of its model.
+    n_stops : int
+        Stops of its model.
+    method : str, optional
+        The integrator (default the scene's).
+
+    Returns
+    -------
+    dict of str to int
+        ``memory`` and ``disk``, bytes. Without a reference check the code counts two streams at
+        once (2 x the larger of the run's and an exact run's peak), not one.
     """
     from reduced.transient import store
     from reduced.transient.integrate import ringdown_disk_bytes, ringdown_peak_bytes
@@ -116,7 +175,24 @@ def stage_estimate(scene: Scene, n_dofs: int, n_stops: int = 4, method: str | No
 
 
 def point_series(x: np.ndarray, P: np.ndarray, names: tuple[str, ...], name: str) -> np.ndarray:
-    """The displacement of point ``name`` over time from DOF histories x (n_t, n)."""
+    """The displacement of point ``name`` over time from DOF histories x (n_t, n).
+
+    Parameters
+    ----------
+    x : (n_t, n) ndarray of float
+        m, DOF histories.
+    P : (points, n) ndarray of float
+        The points as rows of the DOFs.
+    names : tuple of str
+        Point names, one per row of P.
+    name : str
+        The point wanted.
+
+    Returns
+    -------
+    (n_t,) ndarray of float
+        m.
+    """
     return x @ P[names.index(name)]
 
 
@@ -124,7 +200,23 @@ def backbone_curves(model, system: GapSystem | None = None, n_modes: int = 3
                     ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Frequency-energy curves to overlay: HB (H = 1) of the lowest ``n_modes`` NNMs whose linear
     modes move the gaps (an assembly's swinging on its bungees does not), and the exact NNM 2 of
-    a symmetric discrete model."""
+    a symmetric discrete model.
+
+    Parameters
+    ----------
+    model : DiscreteParams or RomSpec
+        The scene's model.
+    system : GapSystem, optional
+        Its system (default ``model.system()``).
+    n_modes : int
+        Lowest gap-moving modes followed.
+
+    Returns
+    -------
+    dict of str to (ndarray, ndarray)
+        Label -> (energy_J, freq_hz): ``"NNM k, HB H=1"`` and, for a symmetric discrete model,
+        ``"NNM 2, exact"`` on 400 energies from 1e-4 to 1e5 J.
+    """
     from reduced.periodic import nnm2
     from reduced.periodic.backbones import hb_backbones
 
@@ -210,7 +302,8 @@ def spectrogram_of(scene: Scene, res, P: np.ndarray, system: GapSystem) -> Spect
     ----------
     scene : a scene with a [spectrogram] table
     res : the run (a RingdownFile or RingdownResult), read chunk by chunk
-    P : (points, n) the points' displacements from the DOFs; system : the run's gap system
+    P : (points, n) the points' displacements from the DOFs
+    system : the run's gap system
 
     Returns
     -------
@@ -256,7 +349,9 @@ def compare_with_exact(scene: Scene, res: RingdownFile | RingdownResult, P: np.n
 
     Parameters
     ----------
-    scene : the scene; res : its run (read chunk by chunk); P : (points, n) the points' displacements
+    scene : the scene
+    res : its run (read chunk by chunk)
+    P : (points, n) the points' displacements
     progress : show a progress bar
 
     Returns
@@ -366,8 +461,10 @@ def symmetry_runs(scene: Scene, res: RingdownFile | RingdownResult, P: np.ndarra
 
     Parameters
     ----------
-    scene : a scene with a [symmetry] table; res : its run (read chunk by chunk)
-    P : (points, n) the points' displacements; workdir : the stage's scratch folder
+    scene : a scene with a [symmetry] table
+    res : its run (read chunk by chunk)
+    P : (points, n) the points' displacements
+    workdir : the stage's scratch folder
     progress : show progress bars
 
     Returns
@@ -463,7 +560,18 @@ other than exact, its comparison with the exact integrator: reference.csv and ly
 
 
 def estimate(scene: Scene) -> list[Estimate]:
-    """The streamed run's chunks, the spectrogram's frames and the figures; disk: ringdown.npz."""
+    """The streamed run's chunks, the spectrogram's frames and the figures; disk: ringdown.npz.
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with a [ringdown] table.
+
+    Returns
+    -------
+    list of Estimate
+        One (:func:`stage_estimate`).
+    """
     r = scene.ringdown
     est = stage_estimate(scene, n_dofs(scene))
     samples = r.duration_s * r.sample_rate_hz + 1

@@ -69,7 +69,27 @@ def write(result: RingdownOutcome, writer: StageWriter) -> None:
 def write_spectrogram(scene: Scene, method: str, sample_rate_hz: float, data: SpectrogramData, env: dict,
                       writer: StageWriter) -> None:
     """spectrogram.png: the spectrogram of the [spectrogram] point with the NNM curves mapped onto
-    time through the run's energy envelope ``env["E"]``."""
+    time through the run's energy envelope ``env["E"]``.
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with a [spectrogram] table.
+    method : str
+        The run's integrator (in the title).
+    sample_rate_hz : float
+        Hz, the run's sampling.
+    data : SpectrogramData
+        The spectrogram and its overlays.
+    env : dict
+        :func:`bearingshaft.plots.ringdown_envelopes` of the run (``env["E"]`` is used).
+    writer : StageWriter
+        Where the figure goes.
+
+    Returns
+    -------
+    None
+    """
     sp, S = scene.spectrogram, data.spectrogram
     t_E, E = env["E"].upper()
     thinned = f", hop {S.hop / sample_rate_hz:.3g} s" if S.hop > round(sp.window_s * sample_rate_hz
@@ -110,7 +130,9 @@ def write_reference(scene: Scene, res, cmp, writer: StageWriter) -> dict:
 
     Parameters
     ----------
-    scene, res : the scene and its run; cmp : a :class:`~bearingshaft.stages.ringdown_results.ReferenceComparison`
+    scene, res : the scene and its run
+    cmp : a :class:`~bearingshaft.stages.ringdown_results.ReferenceComparison`
+    writer : the stage's :class:`~bearingshaft.output.StageWriter`
 
     Returns
     -------
@@ -210,7 +232,23 @@ def _reference_line(scene: Scene, method: str, run_r, seed_r: list, onset: float
 def write_symmetry(scene: Scene, n_samples: int, sym: SymmetryData, writer: StageWriter) -> None:
     """``symmetry_seeds.csv`` (one row per seed), ``symmetry.csv`` (one row per case: the seeded runs,
     then each method's round-off run), ``symmetry.png``, ``writer.stats["symmetry"]`` and the summary
-    line of the study (:func:`bearingshaft.stages.ringdown.symmetry_runs`)."""
+    line of the study (:func:`bearingshaft.stages.ringdown.symmetry_runs`).
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with a [symmetry] table.
+    n_samples : int
+        Samples of the run.
+    sym : SymmetryData
+        The study.
+    writer : StageWriter
+        Where the files go.
+
+    Returns
+    -------
+    None
+    """
     for method, wall in sym.wall_s.items():
         writer.stats.setdefault("symmetry_wall_s", {})[method] = wall
     band = (BREAK_THRESHOLD_M * GROWTH_BAND, BREAK_THRESHOLD_M)

@@ -79,10 +79,24 @@ class Asymmetry:
 class ReferenceComparison:
     """The run against the exact integrator (:func:`bearingshaft.stages.ringdown.compare_with_exact`).
 
-    ``run`` and each of ``seeds`` are :class:`reduced.transient.compare.Comparison` results (the run,
+    ``run`` and each of ``seeds`` are :class:`reduced.transient.compare.RunComparison` results (the run,
     and each displaced exact run, against the exact run); ``lyapunov`` the
     :class:`reduced.transient.compare.LyapunovEstimate` of each displaced pair; the exact run's
-    statistics and tolerance."""
+    statistics and tolerance.
+
+    Attributes
+    ----------
+    run : RunComparison
+        The run against the exact run.
+    seeds : list of RunComparison
+        Each displaced exact run against the exact run.
+    lyapunov : list of LyapunovEstimate
+        Of each displaced pair.
+    exact_stats : dict
+        The exact run's statistics.
+    exact_tolerance : float
+        m, the exact run's tolerance.
+    """
 
     run: object
     seeds: list
@@ -93,7 +107,19 @@ class ReferenceComparison:
 
 @dataclass(frozen=True, eq=False)
 class SpectrogramData:
-    """The spectrogram of one point's displacement, with what is drawn over it."""
+    """The spectrogram of one point's displacement, with what is drawn over it.
+
+    Attributes
+    ----------
+    point : int
+        Index of the point (``scene.model.point_names``).
+    spectrogram : Spectrogram
+        Of its displacement (m^2/Hz).
+    f_open_hz : ndarray of float
+        Hz, the open-gap frequencies of the lowest modes that move the gaps.
+    curves : dict
+        Label -> (E [J], f [Hz]): the NNM frequency-energy curves overlaid.
+    """
 
     point: int  # index of the point (scene.model.point_names)
     spectrogram: Spectrogram
@@ -103,7 +129,29 @@ class SpectrogramData:
 
 @dataclass(frozen=True, eq=False)
 class SymmetryData:
-    """The symmetry study (:func:`bearingshaft.stages.ringdown.symmetry_runs`)."""
+    """The symmetry study (:func:`bearingshaft.stages.ringdown.symmetry_runs`).
+
+    Attributes
+    ----------
+    pair : (str, str)
+        The two points.
+    primary : str
+        The stage's method: its run is the one drawn.
+    points : Envelope
+        The pair's two points over the primary run, m.
+    runs : dict
+        Method -> (Asymmetry, tolerance [m]) of the round-off runs.
+    t_tol : dict
+        Method -> s, when |x_a - x_b| first exceeds the method's tolerance (None: never).
+    wall_s : dict
+        Method -> s, wall time of the runs of the other methods.
+    seeded : list of Asymmetry
+        Each seeded exact run.
+    thetas : list of float
+        rad, the phase of each seed's perturbation.
+    restarted_t_break : float or None
+        s, break time of seed 0 again on another restart grid.
+    """
 
     pair: tuple[str, str]
     primary: str  # the stage's method: its run is the one drawn
@@ -118,7 +166,29 @@ class SymmetryData:
 
 @dataclass(frozen=True, eq=False)
 class RingdownOutcome:
-    """What the ringdown stage computed: the run streamed into ``ringdown.npz`` and its analyses."""
+    """What the ringdown stage computed: the run streamed into ``ringdown.npz`` and its analyses.
+
+    Attributes
+    ----------
+    scene : Scene
+        The scene.
+    method : str
+        The integrator.
+    system : GapSystem
+        The model run.
+    P : (points, n) ndarray of float
+        The points' displacements from the DOFs.
+    run : RingdownFile
+        The run, read lazily from ringdown.npz.
+    loads : Loads or None
+        The scene's loads.
+    reference : ReferenceComparison or None
+        For a reduced model not run by the exact method.
+    spectrogram : SpectrogramData or None
+        With [spectrogram].
+    symmetry : SymmetryData or None
+        With [symmetry].
+    """
 
     scene: Scene
     method: str

@@ -145,7 +145,18 @@ for a reduced model); rom_convergence.csv, rom_convergence_timing.csv and .png; 
 
 
 def estimate(scene: Scene) -> list[Estimate]:
-    """The sampled histories each study holds at once."""
+    """The sampled histories each study holds at once.
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with [work_precision], [stiff_cases] or [rom_convergence] tables.
+
+    Returns
+    -------
+    list of Estimate
+        One per study table present (:func:`bearingshaft.estimates.history_bytes`).
+    """
     n = n_dofs(scene)
     out = []
     if scene.work_precision is not None:
@@ -171,7 +182,19 @@ def estimate(scene: Scene) -> list[Estimate]:
 
 def write(result, writer) -> None:
     """The stage's files and figures from ``result`` (:mod:`bearingshaft.stages.study_files`; matplotlib
-    is loaded only here, so computing never loads it)."""
+    is loaded only here, so computing never loads it).
+
+    Parameters
+    ----------
+    result : StudyResult
+        What :func:`compute` returned.
+    writer : StageWriter
+        Where the files go (its ``stats`` are filled for provenance.json).
+
+    Returns
+    -------
+    None
+    """
     from bearingshaft.stages import study_files
 
     study_files.write(result, writer)

@@ -44,6 +44,17 @@ class StudyResult:
 def step_basis(scene: Scene) -> str:
     """The explicit step basis of the scene's ringdown (reduced.transient.explicit), "top" without one.
 
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+
+    Returns
+    -------
+    {'top', 'contact'}
+
+    Examples
+    --------
     >>> from bearingshaft.scenes import load_scene
     >>> step_basis(load_scene("rom-impulse")), step_basis(load_scene("verify-reduction"))
     ('contact', 'top')

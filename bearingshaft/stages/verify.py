@@ -214,7 +214,18 @@ residuals.csv, verify.csv (frequencies), nnm_backbones.csv, verify.png and verif
 
 
 def estimate(scene: Scene) -> list[Estimate]:
-    """Three models x three ringdowns held at once."""
+    """Three models x three ringdowns held at once.
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with a [verify] table.
+
+    Returns
+    -------
+    list of Estimate
+        One: nine sampled histories (three models x three ringdowns).
+    """
     v = scene.verify
     samples = v.duration_s * v.sample_rate_hz + 1
     return [Estimate("verify", history_bytes(samples, n_dofs(scene), 3 * 3),
@@ -223,7 +234,19 @@ def estimate(scene: Scene) -> list[Estimate]:
 
 def write(result, writer) -> None:
     """The stage's files and figures from ``result`` (:mod:`bearingshaft.stages.verify_files`; matplotlib
-    is loaded only here, so computing never loads it)."""
+    is loaded only here, so computing never loads it).
+
+    Parameters
+    ----------
+    result : VerifyResult
+        What :func:`compute` returned.
+    writer : StageWriter
+        Where the files go (its ``stats`` are filled for provenance.json).
+
+    Returns
+    -------
+    None
+    """
     from bearingshaft.stages import verify_files
 
     verify_files.write(result, writer)

@@ -243,7 +243,15 @@ def case_metrics(scene: Scene, folder: Path) -> dict:
 # -- the NNM stability overlay ----------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class NnmStability:
-    """The overlay of a sweep over energies: NNM 1 and 3 stability rows (STABILITY_FIELDS)."""
+    """The overlay of a sweep over energies: NNM 1 and 3 stability rows (STABILITY_FIELDS).
+
+    Attributes
+    ----------
+    rows : list of dict
+        One per NNM and energy, NNM 1 first (:func:`nnm_stability`).
+    symmetry_seeds : int
+        Seeded runs of each case's symmetry study (the figure's title says it).
+    """
 
     rows: list[dict]  # one per NNM and energy, NNM 1 first (:func:`nnm_stability`)
     symmetry_seeds: int  # seeded runs of each case's symmetry study (the figure's title says it)

@@ -70,7 +70,25 @@ def design_points(spec: SweepSpec) -> list[tuple]:
 # -- the cases --------------------------------------------------------------------------------
 @dataclass(frozen=True, slots=True)
 class Case:
-    """One case of a sweep: its values, its scene's TOML text and the stages it runs."""
+    """One case of a sweep: its values, its scene's TOML text and the stages it runs.
+
+    Attributes
+    ----------
+    case_id : str
+        Short hash of its values (:func:`case_id`), its folder's name.
+    values : tuple
+        ((key, value), ...) in the order of the design's keys.
+    text : str
+        The case's scene (TOML), as its folder's scene.toml.
+    name : str
+        The case scene's name.
+    origin : str
+        Where it came from, for messages.
+    stages : tuple of str
+        The stages it runs, in pipeline order.
+    shared_key : str
+        The reduction a reduced-model case needs (see ``_reduction_key``), "" for none.
+    """
 
     case_id: str
     values: tuple  # ((key, value), ...) in the order of the design's keys
@@ -83,7 +101,21 @@ class Case:
 
 @dataclass(frozen=True, eq=False)
 class SweepPlan:
-    """A validated sweep: the base scene, its design and every case."""
+    """A validated sweep: the base scene, its design and every case.
+
+    Attributes
+    ----------
+    scene : Scene
+        The base scene.
+    spec : SweepSpec
+        The design.
+    cases : tuple of Case
+        Every case, in design order.
+    source : str
+        Where the design came from: "--vary" or "<scene> [sweep]".
+    shared : dict
+        Reduction key -> RomSpec to build once.
+    """
 
     scene: Scene
     spec: SweepSpec
@@ -95,6 +127,18 @@ class SweepPlan:
 def case_id(values) -> str:
     """Short hash of a case's values: sha256 of their JSON (floats as Python writes them).
 
+    Parameters
+    ----------
+    values : iterable of (str, object)
+        (key, value) pairs, JSON-serialisable.
+
+    Returns
+    -------
+    str
+        The first ``ID_DIGITS`` hex digits.
+
+    Examples
+    --------
     >>> case_id((("model.g", 1e-4),)), case_id((("model.g", 0.0001),)) == case_id((("model.g", 1e-4),))
     ('c8ce40a978bb', True)
     """
@@ -105,6 +149,17 @@ def case_id(values) -> str:
 def show_values(values) -> str:
     """A case's values as refusals and summaries write them.
 
+    Parameters
+    ----------
+    values : iterable of (str, object)
+        (key, value) pairs.
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
     >>> show_values((("model.g", 0.0001), ("ringdown.method", "exact")))
     "model.g = 0.0001, ringdown.method = 'exact'"
     """

@@ -297,6 +297,8 @@ def run_sweep(plan: SweepPlan, out: str | Path, *, client=None, scheduler: str |
     out : the sweep's folder (a folder per case, the tables, the figures)
     client : an existing :class:`distributed.Client` (kept open); else ``scheduler`` (an address)
         or a LocalCluster of ``workers`` processes, closed at the end
+    scheduler : address of a running scheduler (:func:`dask_client`), without ``client``
+    workers : LocalCluster worker processes without ``client`` or ``scheduler`` (default: one per core)
     progress : show a bar of the cases
     write : compute the overlay and write the tables, figures, scene and provenance
         (:func:`bearingshaft.sweep.tables.write_results`)

@@ -24,7 +24,24 @@ LAST = ("status", "resumed", "run_time_s", "worker", "message")
 
 @dataclass(frozen=True, eq=False)
 class SweepResult:
-    """The rows of a sweep (design order) and where they were written."""
+    """The rows of a sweep (design order) and where they were written.
+
+    Attributes
+    ----------
+    rows : list of dict
+        One per case run, design order: its values, metrics and ``status``, ``resumed``,
+        ``run_time_s``, ``worker``, ``message``.
+    out : Path
+        The sweep's folder.
+    wall_s : float
+        s, wall time of the cases.
+    workers : int
+        Dask workers.
+    where : str
+        "LocalCluster(n)" or the scheduler's address.
+    stability : NnmStability or None
+        The NNM stability overlay, when asked for and written.
+    """
 
     rows: list[dict]
     out: Path

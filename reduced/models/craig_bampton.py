@@ -46,7 +46,26 @@ DENSE_MAX = 600  # DOFs up to which the fixed-interface problem is solved densel
 
 @dataclass(frozen=True, eq=False)
 class CBModel:
-    """A Craig-Bampton reduced model: q = [u_b (nb); eta (nq)]."""
+    """A Craig-Bampton reduced model: q = [u_b (nb); eta (nq)].
+
+    Attributes
+    ----------
+    M : (nb + nq, nb + nq) ndarray of float
+        Reduced mass matrix V^T M V, V = [Psi, Phi] (kg for the u_b block, 1 on the eta block).
+    K : (nb + nq, nb + nq) ndarray of float
+        Reduced stiffness matrix V^T K V (N/m for the u_b block, rad^2/s^2 on the eta block).
+    Psi : (N, nb) ndarray of float
+        Constraint modes, T Psi = I.
+    Phi : (N, nq) ndarray of float
+        Fixed-interface modes kept, mass-normalised (1/sqrt(kg)).
+    omega_fixed : (nq,) ndarray of float
+        rad/s, their frequencies.
+    boundary_names : tuple of str
+        Name of each interface row.
+    stats : dict
+        ``wall_s``, ``static_s`` (s), ``n_full``, ``n_boundary``, ``n_modes``, ``n_computed``,
+        ``n_uncoupled_skipped`` and ``eig`` (dense or sparse shift-invert).
+    """
 
     M: np.ndarray  # (nb + nq, nb + nq) kg
     K: np.ndarray  # (nb + nq, nb + nq) N/m
@@ -90,6 +109,21 @@ def null_space_basis(T: np.ndarray) -> sp.csr_matrix:
 
     The pivots come from a column-pivoted QR of T on its nonzero columns, so T_p is well
     conditioned; u_p = -T_p^-1 T_r u_r.
+
+    Parameters
+    ----------
+    T : (nb, N) ndarray of float
+        Interface rows, linearly independent.
+
+    Returns
+    -------
+    (N, N - nb) scipy.sparse.csr_matrix
+        Z: the pivot DOFs' rows are -T_p^-1 T_r, the other DOFs' rows the identity.
+
+    Raises
+    ------
+    ValueError
+        Rows of T linearly dependent (a pivot below 1e-12 of the largest).
     """
     nb, N = T.shape
     cols = np.flatnonzero(np.any(T != 0.0, axis=0))
@@ -146,10 +180,24 @@ def craig_bampton(
     T : (nb, N) interface rows, linearly independent
     n_modes : keep this many fixed-interface modes (None: all, or all below ``cutoff_hz``)
     cutoff_hz : keep only modes at or below this frequency
+    boundary_names : a name per interface row (default b0, b1, ...)
     coupled_only : count and keep only modes with |M_bq[:, j]| > coupling_tol sqrt(max M_bb)
+    coupling_tol : the threshold of ``coupled_only``, relative (above)
     dense : solve the fixed-interface problem densely (default: N <= DENSE_MAX or all modes)
     mode_filter : with ``coupled_only``, a function of the modes Phi (N, k) returning a (k,) bool
         mask of the modes allowed as well (e.g. the symmetric ones, whose coupling is not noise)
+
+    Returns
+    -------
+    CBModel
+        Reduced matrices on q = [u_b; eta], the constraint and fixed-interface modes kept, and
+        statistics (times, modes computed, uncoupled modes skipped).
+
+    Raises
+    ------
+    ValueError
+        T without N columns or with dependent rows, n_modes < 0, or fewer (coupled)
+        fixed-interface modes than ``n_modes`` when no cutoff is given.
     """
     t0 = time.perf_counter()
     T = np.atleast_2d(np.asarray(T, dtype=float))
@@ -219,6 +267,30 @@ def cb_check(cb: CBModel, K_full=None, M_full=None, n_compare: int = 6, omega_fu
     full ones from above. With ``rigid`` (N, r) rigid-body motions of the full model and its
     mass ``M_rigid``: the reduced model's mass on their projection q = Mr^-1 V^T M R equals
     R^T M R (mass and inertia), to ``rigid_tol`` relative (exact only when R is in span V).
+
+    Parameters
+    ----------
+    cb : CBModel
+        The reduced model.
+    K_full, M_full : (N, N) array or sparse matrix, optional
+        The full matrices: their ``n_compare`` lowest frequencies (a dense eigensolution) are the
+        reference when ``omega_full`` is not given; ``M_full`` is also the mass of the rigid check.
+    n_compare : int
+        Frequencies compared when they are computed from K_full, M_full.
+    omega_full : (n,) ndarray of float, optional
+        rad/s, the full model's lowest frequencies, ascending.
+    rigid : (N, r) ndarray of float, optional
+        Rigid-body motions of the full model.
+    M_rigid : (N, N) array or sparse matrix, optional
+        Mass for the rigid check (default ``M_full``).
+    rigid_tol : float
+        Tolerance of the rigid-body mass check, relative to sqrt(diag) scales.
+
+    Returns
+    -------
+    list of dict
+        One per check: ``check`` (its name), ``value``, ``tolerance`` and ``passed`` (value <=
+        tolerance; >= for the frequency bound, whose tolerance is -1e-9).
     """
     nb = cb.nb
     Mqq, Kqq, Kbq = cb.M[nb:, nb:], cb.K[nb:, nb:], cb.K[:nb, nb:]

@@ -36,7 +36,27 @@ MARGIN = 1.2  # the fine Nyquist frequency exceeds the model's highest frequency
 
 
 def oversampling(f_max_hz: float, sample_rate_hz: float, margin: float = MARGIN) -> int:
-    """The smallest integer q with q fs / 2 >= margin f_max (at least 1)."""
+    """The smallest integer q with q fs / 2 >= margin f_max (at least 1).
+
+    Parameters
+    ----------
+    f_max_hz : float
+        Hz, highest frequency the model rings at, >= 0.
+    sample_rate_hz : float
+        Hz, fs of the record, > 0.
+    margin : float
+        Factor by which the fine Nyquist frequency exceeds f_max.
+
+    Returns
+    -------
+    int
+        q >= 1.
+
+    Raises
+    ------
+    ValueError
+        f_max_hz negative or not finite, or sample_rate_hz not > 0.
+    """
     if not (np.isfinite(f_max_hz) and f_max_hz >= 0 and sample_rate_hz > 0):
         raise ValueError(f"need f_max_hz >= 0 and sample_rate_hz > 0, got {f_max_hz!r}, {sample_rate_hz!r}")
     return max(1, math.ceil(2.0 * margin * f_max_hz / sample_rate_hz))
@@ -44,7 +64,25 @@ def oversampling(f_max_hz: float, sample_rate_hz: float, margin: float = MARGIN)
 
 @dataclass(frozen=True)
 class Acquisition:
-    """Anti-alias filter and decimation of channels computed at ``oversample`` x ``sample_rate_hz``."""
+    """Anti-alias filter and decimation of channels computed at ``oversample`` x ``sample_rate_hz``.
+
+    Parameters
+    ----------
+    sample_rate_hz : float
+        Hz, fs, the rate of the record, > 0.
+    oversample : int
+        q >= 1: the channels are computed at q fs.
+    passband : float
+        Edge of the flat band as a fraction of fs, in (0, 0.5).
+    atten_db : float
+        dB, stop-band attenuation from fs/2 on.
+
+    Raises
+    ------
+    ValueError
+        A rate not > 0, an oversampling factor that is not an integer >= 1, or a passband
+        outside (0, 0.5).
+    """
 
     sample_rate_hz: float  # Hz, fs: the rate of the record
     oversample: int = 1  # q: the channels are computed at q fs

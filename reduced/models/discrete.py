@@ -23,7 +23,30 @@ from reduced.models.gaps import GapSystem, two_sided_stops
 
 @dataclass(frozen=True, slots=True)
 class DiscreteParams:
-    """Three-mass model of the bearing-and-shaft assembly (SI units, Table 1 defaults)."""
+    """Three-mass model of the bearing-and-shaft assembly (SI units, Table 1 defaults).
+
+    Parameters
+    ----------
+    k_s : float
+        N/m, one suspension spring (a pair at each outer mass), > 0.
+    kappa : float
+        N m/rad, torsional spring emulating the shaft's bending, >= 0.
+    k_g : float
+        N/m, gap (impact tip) spring, >= 0.
+    L : float
+        m, half-length of the shaft, > 0.
+    g : float
+        m, radial clearance at each tip, >= 0.
+    m1, m2, m3 : float
+        kg, left, middle and right masses, > 0.
+    c : float
+        N s/m, viscous damping on every mass (C = c I), >= 0.
+
+    Raises
+    ------
+    ValueError
+        A value that is not a finite number (a bool included), or outside its range.
+    """
 
     k_s: float = 8.03e3  # N/m, one suspension spring (a pair at each outer mass)
     kappa: float = 79161.0  # N m/rad, torsional spring emulating the shaft's bending

@@ -222,6 +222,28 @@ def two_sided_stops(
 
     Each row gives an upper stop (offset +gap, side +1) followed by a lower one
     (offset -gap, side -1) with the same tip number.
+
+    Parameters
+    ----------
+    rows : (T, n) array_like of float
+        One gap coordinate per row, s_i = rows[i] @ x (m).
+    k : float or (T,) array_like of float
+        N/m, contact stiffness of each tip (broadcast).
+    gap : float or (T,) array_like of float
+        m, clearance of each tip, >= 0 (broadcast).
+    names : tuple of str
+        T tip names; the stops are named ``<name>+`` and ``<name>-``.
+
+    Returns
+    -------
+    dict
+        Keyword arguments of :class:`GapSystem`: ``B`` (2T, n), ``k`` (2T,), ``offset`` (2T,),
+        ``side`` (2T,), ``tip`` (2T,) and ``stop_names`` (2T names).
+
+    Raises
+    ------
+    ValueError
+        A negative or NaN gap.
     """
     rows = np.atleast_2d(np.asarray(rows, dtype=float))
     T = rows.shape[0]

@@ -26,7 +26,32 @@ MOVES = 1e-2  # a mode moves the points if |P phi| exceeds this fraction of the 
 
 def initial_state(M: np.ndarray, K: np.ndarray, P: np.ndarray, x0_points, v0_points
                   ) -> tuple[np.ndarray, np.ndarray]:
-    """(x0, v0) on the model's coordinates from the displacement and velocity of its points."""
+    """(x0, v0) on the model's coordinates from the displacement and velocity of its points.
+
+    Parameters
+    ----------
+    M, K : (n, n) ndarray of float
+        kg and N/m, the model's open-gap mass and stiffness.
+    P : (r, n) array_like of float
+        The points as rows of the coordinates (the identity for the discrete model).
+    x0_points : (r,) array_like of float
+        m, displacement of each point.
+    v0_points : (r,) array_like of float
+        m/s, velocity of each point.
+
+    Returns
+    -------
+    x0 : (n,) ndarray of float
+        m, initial displacement on the coordinates.
+    v0 : (n,) ndarray of float
+        m/s, initial velocity on the coordinates.
+
+    Raises
+    ------
+    ValueError
+        Fewer coordinates than points, fewer than r of the lowest r + 20 modes move the points,
+        or P Phi_r too ill-conditioned (cond > 1e10) to set the points independently.
+    """
     P = np.atleast_2d(np.asarray(P, float))
     d0, w0 = np.array(x0_points, float), np.array(v0_points, float)
     r, n = P.shape

@@ -53,7 +53,19 @@ def _finite(name: str, v, *, lo: float | None = None, lo_open: bool = False) -> 
 
 @dataclass(frozen=True)
 class Piece:
-    """p(t_a + s) = Re(F e^{i omega s}) + p0 + p1 s on one interval between breakpoints."""
+    """p(t_a + s) = Re(F e^{i omega s}) + p0 + p1 s on one interval between breakpoints.
+
+    Parameters
+    ----------
+    F : complex
+        N, complex amplitude of the harmonic term at s = 0.
+    omega : float
+        rad/s, its frequency (0: none).
+    p0 : float
+        N, constant term.
+    p1 : float
+        N/s, slope.
+    """
 
     F: complex = 0.0j  # N
     omega: float = 0.0  # rad/s
@@ -66,7 +78,22 @@ ZERO = Piece()
 
 @dataclass(frozen=True)
 class HalfSine:
-    """A hammer blow: p = peak sin(pi (t - start) / duration) on [start, start + duration]."""
+    """A hammer blow: p = peak sin(pi (t - start) / duration) on [start, start + duration].
+
+    Parameters
+    ----------
+    peak_N : float
+        N, P, finite (either sign).
+    duration_s : float
+        s, d > 0.
+    start_s : float
+        s, t0 >= 0.
+
+    Raises
+    ------
+    LoadError
+        A value that is not a finite number, or outside its range.
+    """
 
     peak_N: float
     duration_s: float
@@ -114,7 +141,24 @@ class HalfSine:
 
 @dataclass(frozen=True)
 class Harmonic:
-    """A shaker: p = amplitude cos(2 pi freq (t - start) + phase) for t >= start."""
+    """A shaker: p = amplitude cos(2 pi freq (t - start) + phase) for t >= start.
+
+    Parameters
+    ----------
+    amplitude_N : float
+        N, A, finite (either sign).
+    freq_hz : float
+        Hz, Omega / (2 pi), > 0.
+    phase_deg : float
+        degrees, phi.
+    start_s : float
+        s, t0 >= 0.
+
+    Raises
+    ------
+    LoadError
+        A value that is not a finite number, or outside its range.
+    """
 
     amplitude_N: float
     freq_hz: float
@@ -165,7 +209,23 @@ class Harmonic:
 
 @dataclass(frozen=True, eq=False)
 class Tabulated:
-    """A measured force: piecewise linear through (t_s[k], force_N[k]), zero outside."""
+    """A measured force: piecewise linear through (t_s[k], force_N[k]), zero outside.
+
+    Parameters
+    ----------
+    t_s : (K,) array_like of float
+        s, sample times, >= 0 and strictly increasing, 2 to ``MAX_TABLE_SAMPLES`` of them.
+    force_N : (K,) array_like of float
+        N, the force at each time.
+    source : str
+        The file it was read from, for messages and provenance.
+
+    Raises
+    ------
+    LoadError
+        Columns of unequal length or not 1-D, too few or too many samples, non-finite values, or
+        times that do not increase strictly from >= 0.
+    """
 
     t_s: np.ndarray
     force_N: np.ndarray
@@ -242,8 +302,31 @@ Signal = HalfSine | Harmonic | Tabulated
 def read_force_history(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """(t [s], p [N]) from a CSV (two columns, optional header) or a UFF file with a 58 record.
 
-    A UFF file with several 58 records must have exactly one whose ordinate is a force
-    (specific data type 13 excitation force, or 9 reaction force).
+    A UFF file must have exactly one 58 record whose ordinate is an excitation force (specific
+    data type 13), taken beside any reaction forces (9), or else exactly one force record of
+    either type.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``.uff`` / ``.unv`` universal file, or a text file: two numbers a line separated by a
+        comma, semicolon, tab or spaces; blank lines, ``#`` comments and header lines before the
+        first sample are skipped.
+
+    Returns
+    -------
+    t : (K,) ndarray of float
+        s, sample times (checked by :class:`Tabulated`, not here).
+    p : (K,) ndarray of float
+        N, the force.
+
+    Raises
+    ------
+    LoadError
+        No such file, unreadable text, a line after the first sample that is not two numbers,
+        no samples; for a UFF file: a record refused by :func:`fem.uff.read_uff58`, or not
+        exactly one force record (one excitation force, type 13, is taken among reaction-force
+        records of type 9).
     """
     path = Path(path)
     if not path.is_file():
@@ -391,7 +474,21 @@ class Loads:
 @dataclass(frozen=True, eq=False)
 class PieceTable:
     """Piece i holds on [starts[i], starts[i+1]) (the last one to the end of the run):
-    p_l(starts[i] + s) = Re(F[i, l] e^{i omega[i, l] s}) + p0[i, l] + p1[i, l] s."""
+    p_l(starts[i] + s) = Re(F[i, l] e^{i omega[i, l] s}) + p0[i, l] + p1[i, l] s.
+
+    Attributes
+    ----------
+    starts : (P,) ndarray of float
+        s, start of each piece, increasing.
+    F : (P, L) ndarray of complex
+        N, complex amplitude of each load's harmonic term at the piece's start.
+    omega : (P, L) ndarray of float
+        rad/s, its frequency.
+    p0 : (P, L) ndarray of float
+        N, constant term.
+    p1 : (P, L) ndarray of float
+        N/s, slope.
+    """
 
     starts: np.ndarray  # (P,) s
     F: np.ndarray  # (P, L) complex, N
@@ -408,7 +505,29 @@ class PieceTable:
 
 
 def point_loads(signals, points, point_rows: np.ndarray, point_names) -> Loads:
-    """Loads acting at named points: b_l = the row of ``point_rows`` of point ``points[l]``."""
+    """Loads acting at named points: b_l = the row of ``point_rows`` of point ``points[l]``.
+
+    Parameters
+    ----------
+    signals : sequence of HalfSine, Harmonic or Tabulated
+        The L time functions p_l(t).
+    points : sequence of str
+        The point each load acts at, one per signal.
+    point_rows : (r, n) array_like of float
+        The model's points as rows of its coordinates.
+    point_names : sequence of str
+        Name of each row of ``point_rows``.
+
+    Returns
+    -------
+    Loads
+        b of shape (L, n).
+
+    Raises
+    ------
+    LoadError
+        An unknown point, or rows that do not match the signals.
+    """
     names = tuple(point_names)
     rows = []
     for l, p in enumerate(points):

@@ -36,7 +36,19 @@ SEISMIC_MASS_KG = 0.04  # kg, tip + bolt + half the load cell above its gauge (h
 
 @dataclass(frozen=True, slots=True)
 class Channel:
-    """One channel as the rig names it, with its UFF node and direction code."""
+    """One channel as the rig names it, with its UFF node and direction code.
+
+    Parameters
+    ----------
+    name : str
+        ``<sensor>:<axis>``, a tip load cell (``TIP_CELLS``) or ``hammer``.
+    node : int
+        UFF node number.
+    direction : int
+        UFF code: 1, 2, 3 = +X, +Y, +Z; negative: the opposite sense.
+    kind : {'accelerometer', 'load_cell', 'hammer'}
+        Sets the quantity (``KIND_QUANTITY``) and unit (m/s^2 or N).
+    """
 
     name: str
     node: int
@@ -54,7 +66,27 @@ class Channel:
 
 @dataclass(frozen=True, eq=False)
 class VirtualRig:
-    """The reduced apparatus, its channels and the hammer's unit load vector."""
+    """The reduced apparatus, its channels and the hammer's unit load vector.
+
+    Attributes
+    ----------
+    system : GapSystem
+        The reduced apparatus with its four stops x1+, x1-, x3+, x3-.
+    channels : tuple of Channel
+        Accelerometer axes, then the four tip load cells (``TIP_CELLS`` order), then the hammer.
+    acc_rows : (n_acc, n) ndarray of float
+        Reduced rows of the accelerometer axes, in channel order (displacement = row @ q, m).
+    seat_rows : (4, n) ndarray of float
+        Reduced rows of the tip seats' vertical displacement, ``TIP_CELLS`` order.
+    b : (n,) ndarray of float
+        Reduced load of a unit hammer force (per N).
+    location : tuple of 3 float
+        m, the point struck.
+    direction : tuple of 3 float
+        Unit vector of the blow.
+    seismic_mass_kg : float
+        kg, m_a, the mass above each load cell's gauge.
+    """
 
     system: GapSystem
     channels: tuple[Channel, ...]
@@ -88,7 +120,31 @@ class VirtualRig:
 
 
 def virtual_rig(rom, location, direction, seismic_mass_kg: float = SEISMIC_MASS_KG) -> VirtualRig:
-    """The rig of a reduced assembly model ``rom`` (built with its outputs) struck at ``location``."""
+    """The rig of a reduced assembly model ``rom`` (built with its outputs) struck at ``location``.
+
+    Parameters
+    ----------
+    rom : ReducedModel
+        A reduced model of the whole assembly built with its rig outputs (sensor axes and
+        ``seat:<cell>`` rows) and its mesh.
+    location : array_like of 3 float
+        m, the point struck, on the beam.
+    direction : array_like of 3 float
+        The blow's direction (normalised here).
+    seismic_mass_kg : float
+        kg, m_a, >= 0.
+
+    Returns
+    -------
+    VirtualRig
+
+    Raises
+    ------
+    ValueError
+        A model without rig outputs (not the assembly), a negative or non-finite seismic mass, a
+        zero direction, a location off the beam, a model without a mesh, or stops other than
+        x1+, x1-, x3+, x3-.
+    """
     if not rom.output_names or not any(n.startswith("seat:") for n in rom.output_names):
         raise ValueError("the virtual hammer test needs a reduced model of the whole assembly "
                          "([model] layout = \"assembly\") built with its rig outputs")

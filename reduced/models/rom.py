@@ -43,7 +43,40 @@ RIGID_TOL = 1e-6  # relative error allowed on the in-plane rigid mass and inerti
 
 @dataclass(frozen=True, slots=True)
 class RomSpec:
-    """How to build a reduced model (scene ``[model] kind = "rom"``), SI units."""
+    """How to build a reduced model (scene ``[model] kind = "rom"``), SI units.
+
+    Parameters
+    ----------
+    layout : {'beam-grounded', 'assembly'}
+        Tips fixed, or tips bolted to the tube (whole assembly on its bungees).
+    n_modes : int
+        Fixed-interface modes kept (the coupled ones when ``planar``), >= 0.
+    cutoff_hz : float
+        Hz, keep only modes at or below this, at most ``n_modes`` of them (0: no cut-off).
+    planar : bool
+        Keep only modes the tips' in-plane contact can excite (symmetric in y and coupled).
+    k_g : float
+        N/m, tip contact stiffness, > 0.
+    gap : float
+        m, tip clearance, >= 0.
+    c_points : float
+        N s/m, dashpot at each of x1, x2, x3 (the discrete model's c), >= 0.
+    alpha : float
+        1/s, mass-proportional damping alpha Mr, >= 0.
+    element_size : float
+        m, 3-D mesh size, > 0.
+    element : {'hex8', 'hex20', 'hex27'}
+        Solid element.
+    rom_file : str
+        Load this rom.npz (path from the working directory) instead of building; k_g, gap and
+        damping still apply. '' to build or use the cache.
+
+    Raises
+    ------
+    ValueError
+        An unknown layout or element, a value that is not a finite number or outside its range,
+        or a ``rom_file`` that does not exist.
+    """
 
     layout: str = "beam-grounded"  # beam-grounded (tips fixed) | assembly (tips on the tube)
     n_modes: int = 5  # fixed-interface modes kept (the coupled ones when planar)
@@ -109,7 +142,42 @@ class RomSpec:
 
 @dataclass(frozen=True, eq=False)
 class ReducedModel:
-    """Reduced matrices on q = [x1, x3, eta_1..n] with the map back to the 3-D model."""
+    """Reduced matrices on q = [x1, x3, eta_1..n] with the map back to the 3-D model.
+
+    Attributes
+    ----------
+    M, K, C : (n, n) ndarray of float
+        Reduced mass, stiffness and damping on q = [x1, x3, eta_1..n] (kg, N/m, N s/m on the
+        gap coordinates).
+    P : (3, n) ndarray of float
+        Rows of the points x1, x2, x3 in q.
+    omega_fixed : (n - 2,) ndarray of float
+        rad/s, fixed-interface frequencies.
+    k_g : float
+        N/m, tip contact stiffness.
+    gap : float
+        m, tip clearance.
+    dof_names : tuple of str
+        ``x1``, ``x3``, ``eta1`` ...
+    checks : list of dict
+        :func:`reduced.models.craig_bampton.cb_check` rows.
+    info : dict
+        Provenance: spec, sizes, timings, source hash.
+    Psi : (N, 2) ndarray of float or None
+        Constraint modes, for expansion to the 3-D mesh.
+    Phi : (N, n - 2) ndarray of float or None
+        Fixed-interface modes.
+    dof_map : dict of str to ndarray
+        Interface and point rows on the full DOFs: ``{interface,points}_{row,dof,weight}`` (row r
+        of T is sum_k weight_k u[dof_k] over row == r).
+    output_names : tuple of str
+        The rig's measured motions (:mod:`fem.rig`): sensor axes, ``seat:<cell>``.
+    output_rows : (len(output_names), n) ndarray of float or None
+        Each output is row @ q (m).
+    mesh : dict
+        ``points``, ``hexes``, ``cell_part``, ``beam_part``, ``element``: a point load anywhere on
+        the beam without meshing again (:meth:`point_load`).
+    """
 
     M: np.ndarray  # (n, n) kg
     K: np.ndarray  # (n, n) N/m
@@ -226,7 +294,31 @@ def _sparse_rows(rows: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def build_rom(spec: RomSpec, fe=None, progress: bool = False) -> tuple[ReducedModel, object]:
-    """Mesh and assemble the 3-D model (unless ``fe`` is given), reduce it; (rom, fe)."""
+    """Mesh and assemble the 3-D model (unless ``fe`` is given), reduce it; (rom, fe).
+
+    Parameters
+    ----------
+    spec : RomSpec
+        What to build (``rom_file`` is not read here).
+    fe : FESystem, optional
+        The 3-D model already assembled (default: built from ``spec.fe_model()``).
+    progress : bool
+        Print a line before meshing.
+
+    Returns
+    -------
+    rom : ReducedModel
+        With C = c_points P^T P + alpha M, the Craig-Bampton checks, DOF map, rig outputs and
+        mesh.
+    fe : FESystem
+        The 3-D model it was reduced from.
+
+    Raises
+    ------
+    ValueError
+        As :func:`reduced.models.craig_bampton.craig_bampton` (too few coupled modes) or
+        :func:`fem.contact.mirror_map` (a mesh not symmetric in y, when planar).
+    """
     from fem.contact import contact_pairs, contact_rows, mirror_map, point_rows
     from fem.model import build_system
     from reduced.models.craig_bampton import cb_check, craig_bampton
@@ -333,7 +425,19 @@ def _cache_path(spec: RomSpec, inputs: str | None = None) -> Path:
 
 def store_in_cache(rom: ReducedModel, spec: RomSpec) -> None:
     """Keep ``rom`` where :func:`cached_rom` looks for ``spec``, with its manifest (a read-only
-    cache is skipped: the model is then rebuilt when next needed)."""
+    cache is skipped: the model is then rebuilt when next needed).
+
+    Parameters
+    ----------
+    rom : ReducedModel
+        The model built for ``spec``.
+    spec : RomSpec
+        Its specification (its reduction inputs key the entry).
+
+    Returns
+    -------
+    None
+    """
     inputs = _inputs_hash(spec)
     try:
         write_entry(_cache_path(spec, inputs), rom._write_npz, inputs,
@@ -349,6 +453,18 @@ def cached_rom(spec: RomSpec, progress: bool = False) -> ReducedModel:
     file cannot be read, is reported in one line, removed and rebuilt (:mod:`reduced.cache`).
     The contact (k_g, gap) and damping do not enter the reduction (the interface is the
     gap coordinate itself), so they are applied after loading.
+
+    Parameters
+    ----------
+    spec : RomSpec
+        What to build.
+    progress : bool
+        Print a line when the 3-D model is built.
+
+    Returns
+    -------
+    ReducedModel
+        With the contact and damping of ``spec``.
     """
     inputs = _inputs_hash(spec)
     rom = load_entry(_cache_path(spec, inputs), inputs, ReducedModel.load)

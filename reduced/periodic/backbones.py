@@ -26,7 +26,21 @@ NNM_STEPS = ContinuationOptions(ds=0.05, ds_max=0.3, max_steps=3000)  # in log10
 
 
 def grazing_amplitude(system: GapSystem, phi: np.ndarray) -> float:
-    """Modal amplitude a (phi mass-normalised) at which mode phi first reaches a stop."""
+    """Modal amplitude a (phi mass-normalised) at which mode phi first reaches a stop.
+
+    Parameters
+    ----------
+    system : GapSystem
+        Its stop rows B and offsets (the clearances).
+    phi : (n,) ndarray of float
+        A mode shape, mass-normalised.
+
+    Returns
+    -------
+    float
+        sqrt(kg) m, min_j |offset_j| / |B_j phi| over the stops the mode moves (|B_j phi| above
+        1e-12 of the largest); inf if it moves none.
+    """
     s = np.abs(system.B @ phi)
     with np.errstate(divide="ignore"):
         a = np.where(s > 1e-12 * np.max(s), np.abs(system.offset) / s, np.inf)
@@ -40,6 +54,35 @@ class NNMBranch:
     ``segment`` numbers the continued pieces: a new piece starts after an internal
     resonance tongue was stepped over (``tongues`` says where); points of different pieces
     are not joined by a computed path.
+
+    Attributes
+    ----------
+    mode : int
+        0-based index of the open-gap linear mode it starts from.
+    H : int
+        Harmonics.
+    N : int
+        AFT samples per period.
+    energy_J : (n_points,) ndarray of float
+        J, mean total energy of each point.
+    freq_hz : (n_points,) ndarray of float
+        Hz, frequency of each point.
+    X : (n_points, n (2H+1)) ndarray of float
+        HB coefficients (m on physical coordinates), layout of :mod:`reduced.periodic.hb`.
+    omega : (n_points,) ndarray of float
+        rad/s.
+    segment : (n_points,) ndarray of int
+        Continued piece of each point.
+    branches : list of Branch
+        The continuation data of each piece.
+    residual : NNMResidual
+        The residual continued.
+    wall_s : float
+        s, wall time.
+    tongues : list of dict
+        The internal-resonance tongues met: ``harmonic``, ``energy_J``, ``freq_hz``, ``action``.
+    notes : list of str
+        Remarks on the run.
     """
 
     mode: int  # 0-based index of the linear mode it starts from
@@ -76,6 +119,24 @@ def harmonic_ratio(hb: HarmonicBalance, X: np.ndarray, measure: str | int = "dis
     (a reduced model's local modes) holds most of the energy while its displacement is
     still small (k a_k / a_1 = 1 at k = 11 is a displacement ratio of 0.09). ``measure`` may
     also be a harmonic number k: that harmonic's velocity ratio k a_k / a_1.
+
+    Parameters
+    ----------
+    hb : HarmonicBalance
+        The discretisation X belongs to.
+    X : (n (2H+1),) ndarray of float
+        HB coefficients.
+    measure : {'displacement', 'velocity'} or int
+        Ratio of mass-norm amplitudes sqrt(c_k^T M c_k + s_k^T M s_k), or the same weighted by k,
+        or the velocity ratio of one harmonic k.
+
+    Returns
+    -------
+    ratio : float
+        The largest ratio over k >= 2 (or that of harmonic ``measure``); 0 when H < 2 or the
+        fundamental is zero.
+    k : int
+        The harmonic it belongs to (1 when the ratio is 0).
     """
     Xm = hb.unpack(X)
     amp = np.array(
@@ -498,6 +559,27 @@ def hb_backbones(
     The paper's Fig. 2 curves with ``harmonics = 1``. Where a branch folds back in energy
     (an internal resonance at H > 1) the points are still returned sorted by energy, so
     use a one-harmonic branch for overlays.
+
+    Parameters
+    ----------
+    system : GapSystem
+        The system (its damping is not used: NNMs of the conservative system).
+    harmonics : int
+        H, in [1, MAX_HARMONICS].
+    energy_max_J : float
+        J, the branches are continued up to this energy, > 0.
+    modes : iterable of int, optional
+        0-based open-gap modes (default: all n).
+
+    Returns
+    -------
+    dict of str to (ndarray, ndarray)
+        ``"NNM <mode + 1>"`` -> (energy_J, freq_hz), J and Hz, sorted by energy.
+
+    Raises
+    ------
+    InvalidArgument
+        A harmonic count or energy out of range, or an argument :func:`nnm_branch` refuses.
     """
     _check.integer("harmonics", harmonics, lo=1, hi=MAX_HARMONICS)
     _check.positive("energy_max_J", energy_max_J, "J")
@@ -529,6 +611,27 @@ def hb_point_at_energy(
     with the analytic dE/dy of :meth:`reduced.periodic.hb.NNMResidual.energy_gradient`.
     Raises :class:`reduced.periodic.hb.NewtonError` on failure. Used to compare HB with exact
     orbits at exactly the same energy, with no interpolation along the branch.
+
+    Parameters
+    ----------
+    res : NNMResidual
+        The NNM residual.
+    y_guess : (res.size,) ndarray of float
+        A nearby point of the branch, in the unknowns of ``res``.
+    energy_J : float
+        J, E*, the energy wanted (> 0).
+    tol : float
+        Newton tolerance.
+
+    Returns
+    -------
+    (res.size,) ndarray of float
+        The point y at energy E*.
+
+    Raises
+    ------
+    NewtonError
+        Newton did not converge.
     """
 
     def fun(y):

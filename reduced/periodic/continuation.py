@@ -46,7 +46,31 @@ class ContinuationError(RuntimeError):
 
 @dataclass(eq=False)
 class Branch:
-    """Points of a continued branch and diagnostics."""
+    """Points of a continued branch and diagnostics.
+
+    Attributes
+    ----------
+    y : (n_points, p+1) ndarray of float
+        The points, in the scaled unknowns of the residual.
+    tangent : (n_points, p+1) ndarray of float
+        Unit tangent at each point.
+    ds : (n_points,) ndarray of float
+        Step that reached each point (0 for the start).
+    n_iter : (n_points,) ndarray of int
+        Newton iterations per point.
+    folds : list of (int, int)
+        (point index, coordinate index) where a watched coordinate turned back.
+    status : {'stop', 'max_steps', 'min_step'}
+        Why the run ended.
+    n_rejected : int
+        Steps rejected (and halved).
+    wall_s : float
+        s, wall time.
+    data : list
+        ``callback(y)`` of each point.
+    corners : list of int
+        Indices of the points reached by a corner step.
+    """
 
     y: np.ndarray  # (n_points, p+1)
     tangent: np.ndarray  # (n_points, p+1)
@@ -101,6 +125,35 @@ class ContinuationOptions:
     :func:`reduced.periodic.frc.frc`), each with its own defaults as an instance varied by
     :meth:`replace`. Checked on construction (one-line
     :class:`reduced._checks.InvalidArgument` naming the field).
+
+    Parameters
+    ----------
+    ds : float
+        First step, > 0.
+    ds_min : float
+        A step halved below this tries a corner step, then the run ends ("min_step").
+    ds_max : float
+        Largest step.
+    max_steps : int
+        Most points.
+    max_iter : int
+        Newton iterations of a corrector; a step needing more is halved.
+    good_iter : int
+        A corrector converged in at most this many iterations grows the step.
+    growth : float
+        By this factor, up to ``ds_max``.
+    max_angle_deg : float
+        deg, largest turn of the tangent over one step (above ``corner_ds``).
+    corner_ds : float
+        At or below this step a larger turn is a corner of the branch: accepted.
+    tol : float
+        Newton tolerance of the start point and the correctors.
+
+    Raises
+    ------
+    InvalidArgument
+        A float field that is not a finite number > 0, or an integer field that is not an
+        integer >= 1.
 
     Examples
     --------
@@ -159,6 +212,7 @@ def continue_branch(
     y0 : initial guess; corrected with coordinate ``param`` held fixed
     param : the coordinate that starts the branch (its tangent component has the sign
         of ``direction`` at the start) and whose folds are always reported
+    direction : +1 or -1 (only its sign is used): the sense the branch leaves y0 in ``param``
     options : the step control (default :class:`ContinuationOptions`)
     stop : y -> bool, ends the run after the first point where it is true
     monitor : further coordinates whose folds are reported

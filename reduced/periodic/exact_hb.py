@@ -48,7 +48,18 @@ ROOT_ITERATIONS = 100  # safeguarded Newton steps per root (bisection alone need
 
 
 def default_root_samples(H: int) -> int:
-    """Phases per period bracketing the extrema of each stop's motion: a power of 2, >= 8 (2H+1), >= 64."""
+    """Phases per period bracketing the extrema of each stop's motion: a power of 2, >= 8 (2H+1), >= 64.
+
+    Parameters
+    ----------
+    H : int
+        Harmonics.
+
+    Returns
+    -------
+    int
+        max(64, 2^ceil(log2(ROOT_SAMPLES_PER_COEFFICIENT (2H + 1)))).
+    """
     return max(64, int(2 ** math.ceil(math.log2(ROOT_SAMPLES_PER_COEFFICIENT * (2 * H + 1)))))
 
 
@@ -159,7 +170,22 @@ def _intervals(p, dp, ext, n_ext, alpha, beta):
 
 
 def series_extrema(a: np.ndarray, Nab: np.ndarray, samples: int) -> np.ndarray:
-    """Sorted phases in [0, 2 pi) of the extrema of the series a (HB row layout); empty if a is constant."""
+    """Sorted phases in [0, 2 pi) of the extrema of the series a (HB row layout); empty if a is constant.
+
+    Parameters
+    ----------
+    a : (2H+1,) ndarray of float
+        Coefficients [c_0, c_1, s_1, ..., c_H, s_H] of one scalar series.
+    Nab : (2H+1, 2H+1) ndarray of float
+        d/dtau on the coefficients (:attr:`HarmonicBalance.Nab`).
+    samples : int
+        Phases per period on which the derivative's sign changes bracket the extrema.
+
+    Returns
+    -------
+    (k,) ndarray of float
+        rad, the phases of the extrema, each refined to round-off.
+    """
     da = np.ascontiguousarray(Nab @ a)
     out = np.empty(samples + 1)
     n = call_numba_kernel(_extrema, da, np.ascontiguousarray(Nab @ da), int(samples), out)
@@ -170,7 +196,25 @@ def contact_intervals(p: np.ndarray, Nab: np.ndarray, samples: int, extrema: np.
                       ) -> tuple[np.ndarray, np.ndarray]:
     """(alpha, beta): the phase intervals [alpha_i, beta_i] (0 <= alpha_i < 2 pi, beta_i > alpha_i)
     where the series p (HB row layout) is positive. ``extrema``: those of p or of any series
-    that differs from p by a constant and a sign (default :func:`series_extrema` of p)."""
+    that differs from p by a constant and a sign (default :func:`series_extrema` of p).
+
+    Parameters
+    ----------
+    p : (2H+1,) array_like of float
+        Coefficients of the series (a stop's penetration side (s - o)).
+    Nab : (2H+1, 2H+1) ndarray of float
+        d/dtau on the coefficients.
+    samples : int
+        Phases per period bracketing the extrema (when they are not given).
+    extrema : ndarray of float, optional
+        rad, sorted phases of the extrema.
+
+    Returns
+    -------
+    alpha, beta : (k,) ndarray of float
+        rad, starts and ends of the intervals (an interval may run past 2 pi); empty if p is never
+        positive, [0] and [2 pi] if it always is.
+    """
     p = np.ascontiguousarray(p, dtype=float)
     ext = series_extrema(p, Nab, samples) if extrema is None else np.ascontiguousarray(extrema)
     alpha = np.empty(max(ext.size, 1))
@@ -219,7 +263,19 @@ class ExactGapBalance(HarmonicBalance):
     """:class:`HarmonicBalance` of a gap system whose stop forces are projected exactly (module
     docstring), not by AFT. ``N`` is the number of phases that bracket the extrema of each
     stop's motion (and of :meth:`time_series`): :func:`default_root_samples`. Everything built
-    on :meth:`aft` (:meth:`residual`, :meth:`hill_matrices`) uses the exact projection."""
+    on :meth:`aft` (:meth:`residual`, :meth:`hill_matrices`) uses the exact projection.
+
+    Parameters
+    ----------
+    M, K, force, H, N, C
+        As :class:`HarmonicBalance`; ``force`` must be a :class:`GapForce` and ``N`` is the number
+        of root-bracketing phases (:func:`default_root_samples`).
+
+    Raises
+    ------
+    InvalidArgument
+        As :class:`HarmonicBalance`, or a force that is not a GapForce.
+    """
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -244,6 +244,19 @@ class BranchStability:
     ``multipliers`` are those of :func:`orbit_monodromy` at every point; ``hill`` Hill's
     multipliers at the points ``hill_index``; ``bifurcations`` (point index, kind), kind in
     :data:`BIFURCATIONS`, the index being the first point past the crossing.
+
+    Attributes
+    ----------
+    multipliers : (k, 2n) ndarray of complex
+        Floquet multipliers of the orbit monodromy at every point, by decreasing modulus.
+    stable : (k,) ndarray of bool
+        All |mu| <= 1 + ``STABILITY_TOL``.
+    bifurcations : list of (int, str)
+        (first point past the crossing, kind in ``BIFURCATIONS``).
+    hill_index : (h,) ndarray of int
+        Points where Hill's method ran.
+    hill : (h, 2n) ndarray of complex
+        Hill's multipliers there.
     """
 
     multipliers: np.ndarray  # (k, 2n) complex, by decreasing modulus
@@ -297,7 +310,25 @@ def branch_stability(fb: ForcedBalance, Z: np.ndarray, omega: np.ndarray, folds:
 # -- Floquet multipliers by shooting on the forced exact flow --------------------------------------
 @dataclass(frozen=True, eq=False)
 class ForcedOrbit:
-    """A periodic orbit of the forced exact flow and its Floquet multipliers."""
+    """A periodic orbit of the forced exact flow and its Floquet multipliers.
+
+    Attributes
+    ----------
+    x0 : (n,) ndarray of float
+        m, displacement at t = 0 (the load's phase origin).
+    v0 : (n,) ndarray of float
+        m/s, velocity at t = 0.
+    period_s : float
+        s, the load's period.
+    monodromy : (2n, 2n) ndarray of float
+        d y(T) / d y(0), y = [x; v].
+    multipliers : (2n,) ndarray of complex
+        Its eigenvalues, by decreasing modulus.
+    closure : float
+        |y(T) - y(0)| / max|y(0)|, displacements and velocities scaled apart.
+    n_iter : int
+        Newton iterations.
+    """
 
     x0: np.ndarray  # m, (n,) at t = 0 (the load's phase origin)
     v0: np.ndarray  # m/s

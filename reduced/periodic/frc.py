@@ -127,6 +127,59 @@ class FRCBranch:
     subset where Hill's matrix is large). ``bifurcations`` lists (point index, kind), kind in
     :data:`reduced.periodic.forced_stability.BIFURCATIONS`, the index being the first point past
     the crossing; ``folds`` the indices where the curve turned in frequency.
+
+    Attributes
+    ----------
+    amplitude_N : float
+        N, P.
+    H : int
+        Harmonics.
+    harmonics : {'all', 'odd'}
+        The harmonic set balanced.
+    freq_hz : (k,) ndarray of float
+        Hz, excitation frequency of each point.
+    omega : (k,) ndarray of float
+        rad/s.
+    X : (k, 2H+1, n) ndarray of float
+        m, HB coefficients of every DOF.
+    z : (k, size) ndarray of float
+        Free unknowns of the condensed balance.
+    point_names : tuple of str
+        Names of the output points.
+    point_rows : (p, n) ndarray of float
+        The output points as rows of the DOFs.
+    amplitude_m : (k, p) ndarray of float
+        m, max |x| over one period at each point.
+    harmonic_amplitude_m : (k, p, H + 1) ndarray of float
+        m, amplitude of each harmonic at each point.
+    multipliers : (k, 2n) ndarray of complex
+        Floquet multipliers of the orbit monodromy, by decreasing modulus.
+    stable : (k,) ndarray of bool
+        From the multipliers.
+    hill_index : (h,) ndarray of int
+        Points where Hill's method ran.
+    hill : (h, 2n) ndarray of complex
+        Hill's multipliers there.
+    bifurcations : list of (int, str)
+        (first point past the crossing, kind).
+    folds : list of int
+        Points where the curve turned in frequency.
+    balance : ForcedBalance
+        The condensed balance solved.
+    x_ref : float
+        m, scale of the contact coordinates in the continuation.
+    status : str
+        :func:`reduced.periodic.continuation.continue_branch`'s status of each piece, joined by '+'.
+    n_rejected : int
+        Continuation steps rejected.
+    wall_s : float
+        s, continuation and amplitudes.
+    stability_wall_s : float
+        s, monodromy and Hill.
+    notes : list of str
+        Remarks (where each piece ended).
+    segment : (k,) ndarray of int
+        Continued piece of each point (0; 1 for a second piece).
     """
 
     amplitude_N: float
@@ -210,9 +263,11 @@ def frc(
         band (above f_max, or below f_min after a fold). If it ends inside the band (the step
         fell below its minimum in an internal-resonance tongue, or ``max_steps``), a second
         piece is continued down from f_max (``FRCBranch.segment``; the notes say where each ended)
-    H : harmonics; ``harmonics`` "all" or "odd" (half-wave symmetric response, module docstring)
+    H : harmonics
+    harmonics : "all" or "odd" (half-wave symmetric response, module docstring)
     N : phases bracketing the extrema of each contact coordinate (default
         :func:`reduced.periodic.exact_hb.default_root_samples`)
+    phase_deg : deg, phase of the load, amplitude_N cos(Omega t + phase)
     point_rows, point_names : (p, n) output points (default: the DOFs)
     x_ref : m, scale of the contact coordinates in the continuation (default
         :func:`default_x_ref`)

@@ -61,14 +61,31 @@ class NewtonError(RuntimeError):
 
 
 def default_samples(H: int) -> int:
-    """AFT samples per period for H harmonics with a gap force: a power of 2, >= 32 (2H+1)."""
+    """AFT samples per period for H harmonics with a gap force: a power of 2, >= 32 (2H+1).
+
+    Parameters
+    ----------
+    H : int
+        Harmonics.
+
+    Returns
+    -------
+    int
+        N = 2^ceil(log2(SAMPLES_PER_COEFFICIENT (2H + 1))).
+    """
     return int(2 ** math.ceil(math.log2(SAMPLES_PER_COEFFICIENT * (2 * H + 1))))
 
 
 # -- nonlinear forces in AFT form ------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class GapForce:
-    """f_nl(x) = B^T f(B x) of a :class:`GapSystem`; df/dx = sum_j k_j [closed_j] B_j^T B_j."""
+    """f_nl(x) = B^T f(B x) of a :class:`GapSystem`; df/dx = sum_j k_j [closed_j] B_j^T B_j.
+
+    Parameters
+    ----------
+    system : GapSystem
+        The stops: rows B (m, n), stiffness k, offsets and sides.
+    """
 
     system: GapSystem
 
@@ -95,7 +112,13 @@ class GapForce:
 
 @dataclass(frozen=True, eq=False)
 class CubicForce:
-    """f_nl(x) = gamma x^3 on every DOF (for tests: the Duffing oscillator)."""
+    """f_nl(x) = gamma x^3 on every DOF (for tests: the Duffing oscillator).
+
+    Parameters
+    ----------
+    gamma : (n,) ndarray of float
+        N/m^3, cubic stiffness on each DOF.
+    """
 
     gamma: np.ndarray  # N/m^3, (n,)
 
@@ -156,6 +179,36 @@ class HarmonicBalance:
 
     ``force(xs) -> (f (N, n), w (N, r))`` and ``force.Q`` (r, n, n) give the nonlinear force
     and its Jacobian df/dx = sum_r w_r Q_r at the samples (see the module docstring).
+
+    Parameters
+    ----------
+    M, K : (n, n) ndarray of float
+        Mass and stiffness (kg, N/m on physical coordinates).
+    force : callable
+        ``force(xs) -> (f (N, n), w (N, r))`` with a ``Q`` (r, n, n) attribute, e.g.
+        :class:`GapForce` or :class:`CubicForce`; an optional ``potential(xs) -> (N,)``.
+    H : int
+        Harmonics, >= 0.
+    N : int
+        AFT samples per period, > 2H.
+    C : (n, n) ndarray of float, optional
+        N s/m; None for the conservative (NNM) problem.
+
+    Attributes
+    ----------
+    E : (N, 2H+1) ndarray of float
+        Synthesis matrix, x_i = E[i] X.
+    P : (2H+1, N) ndarray of float
+        Projection matrix, P E = I.
+    Nab : (2H+1, 2H+1) ndarray of float
+        d/dtau on the coefficients.
+    Qr : (r, n, n) ndarray of float
+        ``force.Q``.
+
+    Raises
+    ------
+    InvalidArgument
+        H or N not an integer in range, or N <= 2H.
     """
 
     M: np.ndarray
@@ -361,6 +414,15 @@ class NNMResidual:
         [ A(omega) Psi + F(a Psi) / a - delta omega kron(Nab, M) Psi ] / omega_ref^2 = 0
         Psi_{s_1}[ref] = 0                                   (phase: sine of DOF ref)
         Psi_{c_1}^T M Psi_{c_1} + Psi_{s_1}^T M Psi_{s_1} - 1 = 0   (amplitude normalisation)
+
+    Parameters
+    ----------
+    hb : HarmonicBalance
+        The discretisation (conservative: ``C`` None, for an NNM).
+    omega_ref : float
+        rad/s, scale of omega and delta (the linear mode's frequency).
+    ref : int
+        DOF whose fundamental sine coefficient fixes the phase.
     """
 
     hb: HarmonicBalance
@@ -478,7 +540,19 @@ class NNMResidual:
 # -- Newton ---------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class NewtonResult:
-    """Converged point of :func:`newton`."""
+    """Converged point of :func:`newton`.
+
+    Attributes
+    ----------
+    y : ndarray of float
+        The solution.
+    residual_norm : float
+        ||R(y)||_inf.
+    n_iter : int
+        Newton iterations made.
+    jacobian : ndarray of float
+        dR/dy at y (square, as solved).
+    """
 
     y: np.ndarray
     residual_norm: float
@@ -497,6 +571,29 @@ def newton(
     small residual, or ``||R||_inf`` is at the round-off level of the first residual.
     Raises :class:`NewtonError` after ``max_iter`` iterations, on a singular Jacobian,
     a non-finite residual, or a step longer than ``max_step``.
+
+    Parameters
+    ----------
+    fun : callable
+        ``fun(y) -> (R (p,), dR/dy (p, p))``.
+    y0 : (p,) array_like of float
+        Starting point.
+    tol : float
+        Relative step tolerance.
+    max_iter : int
+        Most iterations.
+    max_step : float, optional
+        Largest ||dy||_inf allowed (None: any).
+
+    Returns
+    -------
+    NewtonResult
+
+    Raises
+    ------
+    NewtonError
+        No convergence, a singular Jacobian, a non-finite residual, a step beyond ``max_step``,
+        or a converged step whose residual is not small (above 1e-6 max(||R0||, 1) and 1e-8).
     """
     y = np.array(y0, dtype=float)
     R, J = fun(y)

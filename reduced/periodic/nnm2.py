@@ -47,7 +47,21 @@ def _require_symmetric(p: DiscreteParams) -> None:
 
 
 def amplitude_from_energy(p: DiscreteParams, energy_J: np.ndarray) -> np.ndarray:
-    """m, turning-point amplitude x0 of NNM 2 with total energy E (inverts E(x0))."""
+    """m, turning-point amplitude x0 of NNM 2 with total energy E (inverts E(x0)).
+
+    Parameters
+    ----------
+    p : DiscreteParams
+        The three-mass model (k_s, k_g, g).
+    energy_J : float or array_like of float
+        J, total energy E >= 0.
+
+    Returns
+    -------
+    ndarray of float
+        m, x0 >= 0, the shape of ``energy_J``: sqrt(E / (2 k_s)) up to the grazing energy
+        2 k_s g^2, the positive root of E(x0) above it.
+    """
     E = np.asarray(energy_J, dtype=float)
     below = np.sqrt(E / (2.0 * p.k_s))
     kt = 2.0 * p.k_s + p.k_g
@@ -57,13 +71,47 @@ def amplitude_from_energy(p: DiscreteParams, energy_J: np.ndarray) -> np.ndarray
 
 
 def energy_from_amplitude(p: DiscreteParams, x0: np.ndarray) -> np.ndarray:
-    """J, total energy of NNM 2 at rest at amplitude x0: 2 k_s x0^2 + k_g (x0 - g)_+^2."""
+    """J, total energy of NNM 2 at rest at amplitude x0: 2 k_s x0^2 + k_g (x0 - g)_+^2.
+
+    Parameters
+    ----------
+    p : DiscreteParams
+        The three-mass model (k_s, k_g, g).
+    x0 : float or array_like of float
+        m, turning-point amplitude (its absolute value is used).
+
+    Returns
+    -------
+    ndarray of float
+        J, the shape of ``x0``.
+    """
     x0 = np.abs(np.asarray(x0, dtype=float))
     return 2.0 * p.k_s * x0**2 + p.k_g * np.maximum(x0 - p.g, 0.0) ** 2
 
 
 def period_from_amplitude(p: DiscreteParams, x0: np.ndarray, *, paper: bool = False) -> np.ndarray:
-    """s, period of NNM 2 at amplitude x0 (exact; ``paper=True`` uses the printed Eq. 13)."""
+    """s, period of NNM 2 at amplitude x0 (exact; ``paper=True`` uses the printed Eq. 13).
+
+    Parameters
+    ----------
+    p : DiscreteParams
+        The three-mass model, m1 == m3.
+    x0 : float or array_like of float
+        m, turning-point amplitude (its absolute value is used).
+    paper : bool
+        T_s by the paper's printed Eq. (13) instead of the corrected form.
+
+    Returns
+    -------
+    ndarray of float
+        s, T_g + T_s for x0 > g, 2 pi / omega_0 at and below it (with g = 0: 2 pi / omega_c for
+        any x0 > 0).
+
+    Raises
+    ------
+    ValueError
+        m1 != m3.
+    """
     _require_symmetric(p)
     x0 = np.abs(np.asarray(x0, dtype=float))
     w0 = np.sqrt(2.0 * p.k_s / p.m1)
@@ -83,7 +131,27 @@ def period_from_amplitude(p: DiscreteParams, x0: np.ndarray, *, paper: bool = Fa
 
 
 def frequency_from_energy(p: DiscreteParams, energy_J: np.ndarray, *, paper: bool = False) -> np.ndarray:
-    """Hz, frequency of NNM 2 at total energy E (exact unless ``paper=True``)."""
+    """Hz, frequency of NNM 2 at total energy E (exact unless ``paper=True``).
+
+    Parameters
+    ----------
+    p : DiscreteParams
+        The three-mass model, m1 == m3.
+    energy_J : float or array_like of float
+        J, total energy.
+    paper : bool
+        As :func:`period_from_amplitude`.
+
+    Returns
+    -------
+    ndarray of float
+        Hz, 1 / period, the shape of ``energy_J``.
+
+    Raises
+    ------
+    ValueError
+        m1 != m3.
+    """
     x0 = amplitude_from_energy(p, energy_J)
     return 1.0 / period_from_amplitude(p, x0, paper=paper)
 
@@ -97,6 +165,27 @@ def period_by_integration(p: DiscreteParams, x0: float, rtol: float = 1e-13) -> 
     the event-driven integrator. SciPy looks for events only at step ends, so a contact
     shorter than a step would be missed: the step is capped at 0.05 / omega_closed, which
     resolves contacts down to x0 = (1 + 1e-6) g.
+
+    Parameters
+    ----------
+    p : DiscreteParams
+        The three-mass model, m1 == m3 (its damping c is set to zero).
+    x0 : float
+        m, turning-point amplitude of x1 (x3 = -x0).
+    rtol : float
+        DOP853's relative tolerance (the absolute one is rtol g).
+
+    Returns
+    -------
+    float
+        s, the time of the next maximum of x1.
+
+    Raises
+    ------
+    ValueError
+        m1 != m3 (from :func:`period_from_amplitude`, used for the time span).
+    RuntimeError
+        No period within three periods of the closed form's guess.
     """
     from dataclasses import replace
 

@@ -32,7 +32,18 @@ FLOQUET_TOL = 1e-6  # |mu| - 1 above this is unstable. The trivial pair at +1 is
 
 
 def drop_trivial_pair(mu: np.ndarray) -> np.ndarray:
-    """mu without the two multipliers nearest +1 (a conservative autonomous orbit has them)."""
+    """mu without the two multipliers nearest +1 (a conservative autonomous orbit has them).
+
+    Parameters
+    ----------
+    mu : (2n,) array_like of complex
+        Floquet multipliers.
+
+    Returns
+    -------
+    (2n - 2,) ndarray of complex
+        The others, in their original order (empty when 2n <= 2).
+    """
     mu = np.asarray(mu)
     if mu.size <= 2:
         return mu[:0]
@@ -52,7 +63,31 @@ class ShootingError(RuntimeError):
 
 @dataclass(frozen=True, eq=False)
 class PeriodicOrbit:
-    """One periodic orbit of the exact flow and its Floquet multipliers."""
+    """One periodic orbit of the exact flow and its Floquet multipliers.
+
+    Attributes
+    ----------
+    x0 : (n,) ndarray of float
+        m, displacement at t = 0 (a turning point of DOF ``ref``).
+    v0 : (n,) ndarray of float
+        m/s, velocity at t = 0.
+    period_s : float
+        s, T.
+    energy_J : float
+        J, total energy of the orbit.
+    monodromy : (2n, 2n) ndarray of float
+        d y(T) / d y(0), y = [x; v].
+    multipliers : (2n,) ndarray of complex
+        Its eigenvalues, by decreasing modulus.
+    closure : float
+        Scaled residual |y(T) - y(0)| (relative to the orbit's scale) at the solution.
+    n_iter : int
+        Gauss-Newton iterations.
+    n_events : int
+        Contact events over one period.
+    wall_s : float
+        s, wall time.
+    """
 
     x0: np.ndarray  # m, (n,)
     v0: np.ndarray  # m/s, (n,)
@@ -85,12 +120,38 @@ class PeriodicOrbit:
 
 
 def conservative(system: GapSystem) -> GapSystem:
-    """The same system with C = 0 (NNMs are orbits of the undamped system)."""
+    """The same system with C = 0 (NNMs are orbits of the undamped system).
+
+    Parameters
+    ----------
+    system : GapSystem
+        Any gap system.
+
+    Returns
+    -------
+    GapSystem
+        A copy with C = 0.
+    """
     return replace(system, C=np.zeros_like(system.C))
 
 
 def energy_gradient(system: GapSystem, x: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """dE/d[x; v] = [K x + B^T f(B x); M v]."""
+    """dE/d[x; v] = [K x + B^T f(B x); M v].
+
+    Parameters
+    ----------
+    system : GapSystem
+        The system.
+    x : (n,) ndarray of float
+        m, displacement.
+    v : (n,) ndarray of float
+        m/s, velocity.
+
+    Returns
+    -------
+    (2n,) ndarray of float
+        N and kg m/s.
+    """
     return np.concatenate([system.K @ x + system.contact_force(x), system.M @ v])
 
 
@@ -116,6 +177,41 @@ def shoot(
     ``max_events``, an iterate whose period holds more contact events counts as a failed
     flow (a chattering iterate far from any NNM orbit, which has a few impacts per period:
     its flow costs ~1 ms an event).
+
+    Parameters
+    ----------
+    flow : Flow
+        The exact flow of the undamped system.
+    x0 : (n,) array_like of float
+        m, guessed displacement at t = 0.
+    v0 : (n,) array_like of float
+        m/s, guessed velocity (its ``ref`` entry is set to zero).
+    period_s : float
+        s, guessed period.
+    energy_J : float
+        J, E*, the energy of the orbit wanted.
+    ref : int, optional
+        DOF whose velocity is zero at t = 0 (default: the largest |x0|).
+    tol : float
+        Scaled residual at which the iterations stop early; an orbit is accepted at a residual
+        <= 1e-9 whatever ``tol`` is.
+    max_iter : int
+        Gauss-Newton iterations at most.
+    stall : int, optional
+        Give up when this many iterations have not halved the residual.
+    max_events : int, optional
+        Most contact events allowed in one period of an iterate.
+
+    Returns
+    -------
+    PeriodicOrbit
+
+    Raises
+    ------
+    ValueError
+        A damped system.
+    ShootingError
+        As above, or the flow fails at the initial guess.
     """
     with single_thread_blas():
         return _shoot(flow, x0, v0, period_s, energy_J, ref=ref, tol=tol, max_iter=max_iter, stall=stall,
@@ -204,7 +300,17 @@ def mirror_mode(orbit: PeriodicOrbit) -> str:
     """"antisymmetric" or "symmetric": the eigenvector of the largest Floquet multiplier of an orbit of a
     mirror-symmetric 3-DOF model (state [x1, x2, x3, v1, v2, v3], mirror x1 <-> x3), by which part is
     larger: |e_x1 - e_x3| + |e_v1 - e_v3| (antisymmetric) or |e_x1 + e_x3| + |e_v1 + e_v3| + 2 |e_x2, e_v2|
-    (symmetric). An orbit unstable with an antisymmetric eigenvector is one a symmetric motion leaves."""
+    (symmetric). An orbit unstable with an antisymmetric eigenvector is one a symmetric motion leaves.
+
+    Parameters
+    ----------
+    orbit : PeriodicOrbit
+        An orbit of a mirror-symmetric three-DOF model.
+
+    Returns
+    -------
+    {'antisymmetric', 'symmetric'}
+    """
     lam, vec = np.linalg.eig(orbit.monodromy)
     e = vec[:, int(np.argmax(np.abs(lam)))]
     anti = float(np.linalg.norm(e[[0, 3]] - e[[2, 5]]))
@@ -215,7 +321,22 @@ def mirror_mode(orbit: PeriodicOrbit) -> str:
 def floquet_scan(system: GapSystem, modes, energies_J: np.ndarray) -> dict[int, list]:
     """{mode: [PeriodicOrbit or None per energy]}: shooting along NNM ``mode`` (0-based) of the undamped
     ``system`` at each energy (:func:`shooting_branch` on the exact flow, guided by the HB branch with
-    one harmonic), on one BLAS thread."""
+    one harmonic), on one BLAS thread.
+
+    Parameters
+    ----------
+    system : GapSystem
+        The system (made undamped here).
+    modes : iterable of int
+        0-based NNMs.
+    energies_J : (k,) array_like of float
+        J, the energies, increasing.
+
+    Returns
+    -------
+    dict of int to list
+        Mode -> a :class:`PeriodicOrbit` or None per energy.
+    """
     from reduced.periodic.backbones import nnm_branch
 
     cons = conservative(system)
@@ -259,6 +380,18 @@ def shoot_multiple(
     monodromy's amplification, so the basin is much wider than single shooting's where the
     orbit is very unstable (near grazing). The monodromy is the product of the segment
     Jacobians at the solution. Raises :class:`ShootingError` on failure.
+
+    Parameters
+    ----------
+    flow : the exact flow of the undamped system (:func:`conservative`)
+    Y : (M, 2n) guessed states [x; v] at t = k T / M
+    period_s, energy_J : s, the guessed period T; J, the energy E* of the orbit wanted
+    ref : DOF whose velocity is zero at t = 0 (default: the largest |x| of Y[0])
+    tol, max_iter : scaled residual to reach (accepted at <= 1e-9), Gauss-Newton iterations at most
+
+    Returns
+    -------
+    PeriodicOrbit
     """
     t0 = time.perf_counter()
     system = flow.system

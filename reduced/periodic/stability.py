@@ -37,6 +37,19 @@ HILL_TOL = 1e-3  # max |mu| - 1 above this is unstable for Hill (truncation and 
 
 @dataclass(frozen=True, eq=False)
 class HillResult:
+    """Floquet exponents and multipliers of an HB solution by Hill's method (:func:`hill`).
+
+    Attributes
+    ----------
+    exponents : (k,) ndarray of complex
+        1/s, the Floquet exponents kept (k = 2n, fewer with ``strict_zone``), in the order of
+        ``multipliers``.
+    multipliers : (k,) ndarray of complex
+        exp(lam T), by decreasing modulus.
+    tol : float
+        |mu| - 1 above this is unstable (:attr:`stable`).
+    """
+
     exponents: np.ndarray  # (2n,) complex, 1/s
     multipliers: np.ndarray  # (2n,) complex, sorted by decreasing modulus
     tol: float
@@ -72,6 +85,30 @@ def hill(hb: HarmonicBalance, X: np.ndarray, omega: float, tol: float = HILL_TOL
     H omega (a reduced model's local modes, up to 78 kHz) has fewer than 2n exponents in the
     first zone: the 2n smallest |Im| then include copies from the zone edge |Im| = omega,
     truncation artefacts with |mu| up to 1.05 on orbits that Floquet finds stable.
+
+    Parameters
+    ----------
+    hb : HarmonicBalance
+        The discretisation of the solution.
+    X : (n (2H+1),) ndarray of float
+        HB coefficients.
+    omega : float
+        rad/s, the solution's frequency.
+    tol : float
+        Stability tolerance stored in the result.
+    solver : {'qz', 'standard'}
+        Eigensolver (above).
+    strict_zone : bool
+        Keep only the exponents with |Im lam| <= omega / 2.
+
+    Returns
+    -------
+    HillResult
+
+    Raises
+    ------
+    ValueError
+        An unknown ``solver``.
     """
     if solver not in HILL_SOLVERS:
         raise ValueError(f"solver must be one of {', '.join(HILL_SOLVERS)}, got {solver!r}")
@@ -102,6 +139,22 @@ def hill(hb: HarmonicBalance, X: np.ndarray, omega: float, tol: float = HILL_TOL
 
 @dataclass(frozen=True, eq=False)
 class StabilityComparison:
+    """Floquet (shooting) and Hill stability verdicts side by side, one entry per energy (:func:`compare`).
+
+    Attributes
+    ----------
+    energy_J : (k,) ndarray of float
+        J.
+    floquet_max : (k,) ndarray of float
+        max |mu| from shooting (nan where shooting failed).
+    hill_max : (k,) ndarray of float
+        max |mu| from Hill's method.
+    floquet_stable, hill_stable : (k,) ndarray of bool
+        The two verdicts.
+    agree : (k,) ndarray of bool
+        The verdicts agree (True where shooting failed: nothing to compare).
+    """
+
     energy_J: np.ndarray
     floquet_max: np.ndarray  # max |mu| from shooting (nan where shooting failed)
     hill_max: np.ndarray
@@ -115,7 +168,25 @@ class StabilityComparison:
 
 
 def compare(energy_J, floquet_max, floquet_stable, hill_max, hill_stable) -> StabilityComparison:
-    """Side-by-side stability verdicts; ``agree`` is False where they differ."""
+    """Side-by-side stability verdicts; ``agree`` is False where they differ.
+
+    Parameters
+    ----------
+    energy_J : (k,) array_like of float
+        J.
+    floquet_max : (k,) array_like of float
+        max |mu| by shooting, nan where it failed.
+    floquet_stable : (k,) array_like of bool
+        Shooting's verdict.
+    hill_max : (k,) array_like of float
+        max |mu| by Hill's method.
+    hill_stable : (k,) array_like of bool
+        Hill's verdict.
+
+    Returns
+    -------
+    StabilityComparison
+    """
     fm = np.asarray(floquet_max, float)
     fs = np.asarray(floquet_stable, bool)
     hs = np.asarray(hill_stable, bool)

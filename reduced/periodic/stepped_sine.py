@@ -38,6 +38,29 @@ class SteppedSine:
     (x1, x3: zero on the symmetric orbit). ``settle_error``: the
     predicted distance of the last state from the periodic orbit (relative), from the
     period-to-period change d and its contraction rho, d rho / (1 - rho).
+
+    Attributes
+    ----------
+    amplitude_N : float
+        N, amplitude of the load.
+    freq_hz : (k,) ndarray of float
+        Hz, the frequencies in sweep order.
+    point_names : tuple of str
+        Names of the output points.
+    amplitude_m : (k, p) ndarray of float
+        m, max |x| of each point over the last period (over the last window if not settled).
+    response : list of str
+        'periodic', 'settling', 'period_2' or 'not_settled' per frequency.
+    settle_error : (k,) ndarray of float
+        Predicted relative distance of the last state from the periodic orbit.
+    settle_s : (k,) ndarray of float
+        s, simulated time spent at each frequency.
+    asymmetry : (k,) ndarray of float
+        For the ``mirror`` pair.
+    wall_s : (k,) ndarray of float
+        s, wall time per frequency.
+    final_state : (2n,) ndarray of float
+        [x; v] where the sweep ended.
     """
 
     amplitude_N: float

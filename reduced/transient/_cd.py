@@ -135,7 +135,21 @@ def _cd_small(AT, dtGKT, dtGBT, L, B, offset, side, k, x, vh, dt, n_steps, every
 
 
 def pad(a: np.ndarray, rows: int | None, cols: int | None) -> np.ndarray:
-    """``a`` zero-padded to (rows, cols) (None: keep that size), C-contiguous."""
+    """``a`` zero-padded to (rows, cols) (None: keep that size), C-contiguous.
+
+    Parameters
+    ----------
+    a : array_like of float
+        A vector or a matrix.
+    rows, cols : int or None
+        Size wanted along each axis, >= the present one (None: keep it); ``cols`` is ignored for
+        a vector.
+
+    Returns
+    -------
+    ndarray of float
+        A new C-contiguous array.
+    """
     a = np.atleast_1d(a)
     shape = (a.shape[0] if rows is None else rows,) + ((a.shape[1] if cols is None else cols,) if a.ndim == 2 else ())
     out = np.zeros(shape)

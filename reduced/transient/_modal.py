@@ -60,7 +60,21 @@ BUFFER_FULL = 1  # kernel status (free and forced): the sample buffer is full in
 @nb.njit(cache=True, inline="always")
 def switch_stop(active, tip, j_ev):
     """The contact state after stop ``j_ev`` crosses: an active stop opens; closing a stop opens
-    its tip's other stop (at zero gap both cross together) and activates it."""
+    its tip's other stop (at zero gap both cross together) and activates it.
+
+    Parameters
+    ----------
+    active : (m,) ndarray of bool
+        The closed stops, changed in place.
+    tip : (m,) ndarray of int
+        Tip of each stop (a clearance's two stops share it).
+    j_ev : int
+        The stop that crossed.
+
+    Returns
+    -------
+    None
+    """
     if active[j_ev]:
         active[j_ev] = False
         return
@@ -559,6 +573,24 @@ def flow_jacobian(tb, seg_s, seg_tau, n_seg, J):
 
     exp(A_s tau) z = Re sum_{i<K} U[:, i] e^{lam_i tau} (Uinv z)_i for a real z (the kept-term form of
     V diag(e^{lam tau}) V^-1, module docstring), applied to each column of J.
+
+    Parameters
+    ----------
+    tb : tuple
+        The free segments' tables (:func:`reduced.transient.exact_tables.modal_table`); entries 0
+        (kept terms per state), 1 (lam), 3 (U^T as Re/Im) and 4 (Uinv) are read.
+    seg_s : (n_seg,) ndarray of int
+        Contact state of each segment.
+    seg_tau : (n_seg,) ndarray of float
+        s, duration of each segment.
+    n_seg : int
+        Segments to apply, in order.
+    J : (2n, 2n) ndarray of float
+        The matrix multiplied, overwritten.
+
+    Returns
+    -------
+    None
     """
     nK, lam, UT, Uinv = tb[0], tb[1], tb[3], tb[4]
     N = J.shape[0]

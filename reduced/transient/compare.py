@@ -53,7 +53,23 @@ def _slice(c: Chunk, i: int, j: int) -> Chunk:
 
 def aligned(*runs: Iterable[Chunk]) -> Iterator[tuple[Chunk, ...]]:
     """Tuples of chunks covering the same samples, from chunk sequences with any boundaries.
-    Stops at the end of the shortest run."""
+    Stops at the end of the shortest run.
+
+    Parameters
+    ----------
+    *runs : iterable of Chunk
+        Chunk sequences on one sample grid, each starting at the same sample.
+
+    Yields
+    ------
+    tuple of Chunk
+        One chunk of each run, all covering the same samples.
+
+    Raises
+    ------
+    ValueError
+        Chunks that do not start at the same sample.
+    """
     its = [iter(r) for r in runs]
     cur = [None] * len(its)
     off = [0] * len(its)
@@ -75,7 +91,18 @@ def aligned(*runs: Iterable[Chunk]) -> Iterator[tuple[Chunk, ...]]:
 
 def energy_norm_matrix(system: GapSystem) -> np.ndarray:
     """K_n of the state norm x^T K_n x + v^T M v: K if positive definite, else the closed-gap
-    stiffness, else omega_max^2 M."""
+    stiffness, else omega_max^2 M.
+
+    Parameters
+    ----------
+    system : GapSystem
+        The system.
+
+    Returns
+    -------
+    (n, n) ndarray of float
+        N/m.
+    """
     for K in (system.K, system.closed_stiffness()):
         if np.all(np.linalg.eigvalsh(0.5 * (K + K.T)) > 0):
             return K
@@ -83,7 +110,24 @@ def energy_norm_matrix(system: GapSystem) -> np.ndarray:
 
 
 def state_norm(Kn: np.ndarray, M: np.ndarray, x: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """sqrt(x^T K_n x + v^T M v) for x, v of shape (..., n)."""
+    """sqrt(x^T K_n x + v^T M v) for x, v of shape (..., n).
+
+    Parameters
+    ----------
+    Kn : (n, n) ndarray of float
+        N/m, from :func:`energy_norm_matrix`.
+    M : (n, n) ndarray of float
+        kg.
+    x : (..., n) ndarray of float
+        m.
+    v : (..., n) ndarray of float
+        m/s.
+
+    Returns
+    -------
+    ndarray of float
+        sqrt(J), the root of twice the linear energy of the state, shape (...).
+    """
     q = np.einsum("...i,ij,...j->...", x, Kn, x) + np.einsum("...i,ij,...j->...", v, M, v)
     return np.sqrt(np.maximum(q, 0.0))
 
@@ -91,7 +135,17 @@ def state_norm(Kn: np.ndarray, M: np.ndarray, x: np.ndarray, v: np.ndarray) -> n
 # -- Lyapunov exponent -----------------------------------------------------------------------
 @dataclass
 class LineFit:
-    """Running least squares of y = a + b t (sums only: memory independent of the samples)."""
+    """Running least squares of y = a + b t (sums only: memory independent of the samples).
+
+    Attributes
+    ----------
+    n : int
+        Points added.
+    st, sy, stt, sty, syy : float
+        Sums of t, y, t^2, t y and y^2, with t measured from ``t_first``.
+    t_first, t_last : float
+        First and last t added (nan before any).
+    """
 
     n: int = 0
     st: float = 0.0
@@ -134,7 +188,25 @@ class LineFit:
 
 
 def separation_exponent(t: np.ndarray, D: np.ndarray) -> float:
-    """1/s, the least-squares slope of ln D(t) over the samples with D > 0 (NaN if fewer than 2)."""
+    """1/s, the least-squares slope of ln D(t) over the samples with D > 0 (NaN if fewer than 2).
+
+    Parameters
+    ----------
+    t : (k,) array_like of float
+        s, times.
+    D : (k,) array_like of float
+        The separation at each time (>= 0; zeros are left out).
+
+    Returns
+    -------
+    float
+        1/s.
+
+    Raises
+    ------
+    InvalidArgument
+        t not a finite 1-D series, or D not of its shape.
+    """
     t = _check.series("t", t)
     D = np.asarray(D, dtype=float)
     if D.shape != t.shape:
@@ -150,7 +222,31 @@ ONSET_FACTOR = 100.0  # the separation has started to grow once its window maxim
 
 @dataclass(frozen=True)
 class LyapunovEstimate:
-    """The largest Lyapunov exponent of a motion from the divergence of two runs (module docstring)."""
+    """The largest Lyapunov exponent of a motion from the divergence of two runs (module docstring).
+
+    Attributes
+    ----------
+    exponent_per_s : float
+        1/s, lambda: slope of ln D over the growth phase.
+    delta : float
+        Initial separation, relative to the state's norm.
+    saturation : float
+        The separation saturates where D exceeds this fraction of the state's norm.
+    window_s : float
+        s, windows over which D is maximised.
+    onset_s : float
+        s, start of the growth phase (inf: D never grew ``ONSET_FACTOR`` x; fitted over the run).
+    saturation_s : float
+        s, when the separation saturated (inf: not within the run).
+    fit_start_s, fit_end_s : float
+        s, first and last window centres fitted.
+    ln_growth : float
+        ln D at the end of the fit less ln D at its start: the e-foldings fitted.
+    residual : float
+        rms of ln D about the fitted line.
+    n_windows : int
+        Windows fitted.
+    """
 
     exponent_per_s: float  # 1/s, lambda: slope of ln D over the growth phase
     delta: float  # initial separation, relative to the state's norm
@@ -178,7 +274,35 @@ class LyapunovEstimate:
 
 class LyapunovAccumulator:
     """Feed aligned chunks of the reference run and the displaced one; ``feed`` returns False
-    once the separation has saturated (the runs may then be stopped); ``result()`` fits."""
+    once the separation has saturated (the runs may then be stopped); ``result()`` fits.
+
+    Parameters
+    ----------
+    system : GapSystem
+        The system run (its norm matrix :func:`energy_norm_matrix` and M).
+    n_samples : int
+        Samples of each run.
+    sample_rate_hz : float
+        Hz.
+    delta : float
+        Initial separation, relative (recorded in the result).
+    saturation : float
+        Fraction of the state's norm at which the separation saturates.
+    window_s : float
+        s, windows over which D is maximised (lengthened to at most ``MAX_WINDOWS`` windows and to
+        a whole number of samples).
+
+    Attributes
+    ----------
+    window_s : float
+        s, the window used.
+    Dmax : ndarray of float
+        Largest D in each window so far.
+    n_seen : int
+        Samples fed before saturation.
+    saturation_s : float
+        s, when D first exceeded ``saturation`` |y_a| (inf until then).
+    """
 
     def __init__(self, system: GapSystem, n_samples: int, sample_rate_hz: float, delta: float, saturation: float,
                  window_s: float) -> None:
@@ -241,7 +365,31 @@ class LyapunovAccumulator:
 def displaced_state(system: GapSystem, x0: np.ndarray, v0: np.ndarray, delta: float, seed: int
                     ) -> tuple[np.ndarray, np.ndarray]:
     """(x0 + dx, v0 + dv) with (dx, dv) in a random direction (``seed``) of energy norm
-    delta |(x0, v0)|."""
+    delta |(x0, v0)|.
+
+    Parameters
+    ----------
+    system : GapSystem
+        The system (its energy norm).
+    x0 : (n,) ndarray of float
+        m, the reference displacement.
+    v0 : (n,) ndarray of float
+        m/s, the reference velocity.
+    delta : float
+        Size of the displacement relative to |(x0, v0)|.
+    seed : int
+        Seed of the random direction.
+
+    Returns
+    -------
+    x, v : (n,) ndarray of float
+        m and m/s.
+
+    Raises
+    ------
+    InvalidArgument
+        A state at rest.
+    """
     Kn = energy_norm_matrix(system)
     rng = np.random.default_rng(seed)
     n = system.n
@@ -260,6 +408,8 @@ def largest_lyapunov(system: GapSystem, x0, v0, duration_s: float, sample_rate_h
 
     Parameters
     ----------
+    system : the gap system
+    x0, v0 : (n,) m and m/s, the reference state; the other run starts ``delta`` from it
     duration_s : s, longest time followed (the runs stop once the separation saturates)
     sample_rate_hz : Hz, samples of the separation
     method, options : integrator (:func:`~reduced.transient.integrate.ringdown_stream`)
@@ -267,6 +417,11 @@ def largest_lyapunov(system: GapSystem, x0, v0, duration_s: float, sample_rate_h
     saturation : in (0, 1): the fit ends where the separation exceeds this fraction of the state
     window_s : s, the separation is maximized over windows this long (a few periods of the motion)
     seed : direction of the displacement
+    chunk_samples : samples per chunk of the two streams (default: the integrator's)
+
+    Returns
+    -------
+    LyapunovEstimate
     """
     from reduced.transient.integrate import ringdown_stream
 
@@ -294,7 +449,25 @@ def largest_lyapunov(system: GapSystem, x0, v0, duration_s: float, sample_rate_h
 # -- comparison of two runs -------------------------------------------------------------------
 def stop_closures(system: GapSystem, x: np.ndarray, closed_before: np.ndarray | None) -> tuple[int, np.ndarray]:
     """(number of open -> closed transitions of the stops over samples x (k, n), the closed state
-    of the last sample); ``closed_before`` is the state of the sample before x (None: the first)."""
+    of the last sample); ``closed_before`` is the state of the sample before x (None: the first).
+
+    Parameters
+    ----------
+    system : GapSystem
+        The stops.
+    x : (k, n) ndarray of float
+        m, consecutive samples.
+    closed_before : (m,) ndarray of bool or None
+        Closed stops at the sample before x (None: x starts the run, its first sample counts no
+        closure).
+
+    Returns
+    -------
+    count : int
+        Open -> closed transitions within x (and from ``closed_before`` to x[0]).
+    closed : (m,) ndarray of bool
+        Closed stops at the last sample (``closed_before`` if x is empty).
+    """
     closed = system.penetration(x) > 0.0
     if closed.shape[0] == 0:
         return 0, closed_before
@@ -304,7 +477,31 @@ def stop_closures(system: GapSystem, x: np.ndarray, closed_before: np.ndarray | 
 
 @dataclass
 class RunComparison:
-    """A run against a reference: what stays comparable when the motion is chaotic (module docstring)."""
+    """A run against a reference: what stays comparable when the motion is chaotic (module docstring).
+
+    Attributes
+    ----------
+    windows_s : tuple of float
+        s, ends of the pointwise-error windows [0, window].
+    pointwise_error : tuple of float
+        max |p - p_ref| / max |p_ref| at the points over each window.
+    energy_window_s : float
+        s, length of the energy-envelope windows.
+    energy_t : (w,) ndarray of float
+        s, window centres.
+    energy_run, energy_ref : (w,) ndarray of float
+        J, mean energy of the run and of the reference in each window.
+    closures_run, closures_ref : int
+        Stop closures (impacts) counted from the samples.
+    freq_t : (f,) ndarray of float
+        s, spectrogram frame centres.
+    freq_run, freq_ref : (f,) ndarray of float
+        Hz, dominant frequency of each frame.
+    freq_resolution_hz : float
+        Hz, one frequency bin (nan without a spectrogram).
+    window_err, window_ref : (w,) ndarray of float
+        m, max |p - p_ref| and max |p_ref| in each energy window.
+    """
 
     windows_s: tuple[float, ...]  # ends of the pointwise-error windows
     pointwise_error: tuple[float, ...]  # max |p - p_ref| / max |p_ref| at the points, over [0, window]
@@ -360,6 +557,29 @@ class ComparisonAccumulator:
 
     ``points`` (k, n): rows giving the compared point displacements from the DOFs;
     ``freq_point``: which row's spectrogram is compared (window ``window_s``, ``overlap``).
+
+    Parameters
+    ----------
+    system : GapSystem
+        The system run (stops, for the closures).
+    n_samples : int
+        Samples of each run.
+    sample_rate_hz : float
+        Hz.
+    points : (k, n) ndarray of float
+        Rows giving the compared point displacements from the DOFs.
+    windows_s : tuple of float
+        s, ends of the pointwise-error windows.
+    energy_window_s : float
+        s, energy-envelope window (lengthened to at most ``MAX_WINDOWS`` windows).
+    freq_point : int
+        Row of ``points`` whose spectrogram is compared.
+    window_s : float
+        s, spectrogram window.
+    overlap : float
+        Spectrogram overlap, in [0, 1).
+    fmin_hz : float
+        Hz, lowest frequency a dominant frequency may have.
     """
 
     system: GapSystem
@@ -442,7 +662,40 @@ def compare_runs(system: GapSystem, run: Iterable[Chunk], ref: Iterable[Chunk], 
                  energy_window_s: float = 0.05, freq_point: int = 0, window_s: float = 0.05, overlap: float = 0.9,
                  fmin_hz: float = 0.0) -> RunComparison:
     """``run`` against ``ref`` (chunk sequences of the same grid, e.g. ``res.chunks()``, a
-    :class:`RingdownFile` or a stream), in one pass: see :class:`RunComparison`."""
+    :class:`RingdownFile` or a stream), in one pass: see :class:`RunComparison`.
+
+    Parameters
+    ----------
+    system : GapSystem
+        The system both runs integrate.
+    run, ref : iterable of Chunk
+        The run and its reference, on the same sample grid.
+    n_samples : int
+        Samples of each run.
+    sample_rate_hz : float
+        Hz.
+    points : (k, n) array_like of float
+        Rows giving the compared points from the DOFs.
+    windows_s : tuple of float
+        s, ends of the pointwise-error windows, > 0.
+    energy_window_s : float
+        s, > 0.
+    freq_point : int
+        Row of ``points`` whose spectrogram is compared.
+    window_s, overlap : float
+        s and fraction, the spectrogram's window and overlap.
+    fmin_hz : float
+        Hz, lowest dominant frequency.
+
+    Returns
+    -------
+    RunComparison
+
+    Raises
+    ------
+    InvalidArgument
+        A system, count, rate, window or point row out of range.
+    """
     _check.gap_system(system)
     n_samples = _check.integer("n_samples", n_samples)
     sample_rate_hz = _check.positive("sample_rate_hz", sample_rate_hz, "Hz")
@@ -462,7 +715,26 @@ def compare_runs(system: GapSystem, run: Iterable[Chunk], ref: Iterable[Chunk], 
 
 def binned(op, values: np.ndarray, start: int, per: int) -> tuple[int, np.ndarray]:
     """(first bin, op.reduceat of ``values`` (k, ...) over the bins of ``per`` samples): samples
-    start .. start + k - 1 fall in bins start // per ...; the first and last may be partial."""
+    start .. start + k - 1 fall in bins start // per ...; the first and last may be partial.
+
+    Parameters
+    ----------
+    op : numpy ufunc
+        The reduction (``np.add``, ``np.maximum``).
+    values : (k, ...) ndarray
+        Consecutive samples ``start`` .. ``start + k - 1``.
+    start : int
+        Index of the first sample.
+    per : int
+        Samples per bin.
+
+    Returns
+    -------
+    first : int
+        Index of the first bin touched.
+    reduced : ndarray
+        One reduction per bin touched.
+    """
     k = values.shape[0]
     first = start // per
     edges = np.arange((first + 1) * per, start + k, per) - start

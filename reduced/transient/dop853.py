@@ -200,6 +200,24 @@ class Dop853Stepper(_stepper.Stepper):
     vector field: a leg ends at a stop crossing (``events``) or a load breakpoint, and the next
     starts from the state there. A step whose samples overflow the buffer finishes them in the
     next call, before the stepper moves on.
+
+    Parameters
+    ----------
+    system, n_samples, sample_rate_hz, loads, report
+        As :class:`reduced.transient.stepper.Stepper`.
+    x0 : (n,) ndarray of float
+        m, initial displacement.
+    v0 : (n,) ndarray of float
+        m/s, initial velocity.
+    duration_s : float
+        s, length of the run.
+    options : Dop853Options
+        rtol, atol and events, checked.
+
+    Raises
+    ------
+    RuntimeError
+        (from :meth:`step`) DOP853's step size became too small.
     """
 
     method = "dop853"
@@ -372,6 +390,11 @@ def stream_dop853(
     ``chunk_samples`` (default: the whole run in one), the same bits whatever it is
     (:class:`Dop853Stepper`).
 
+    Parameters
+    ----------
+    system, x0, v0, duration_s, sample_rate_hz, rtol, atol, events, loads, progress : as :func:`integrate_dop853`
+    chunk_samples : samples a chunk (default: the whole run in one)
+
     Returns
     -------
     RingdownStream : the run, computed as it is read
@@ -397,6 +420,10 @@ def integrate_dop853(
 
     Parameters
     ----------
+    system : the gap system
+    x0, v0 : (n,) initial displacement [m] and velocity [m/s]
+    duration_s : s, length of the run (> 0)
+    sample_rate_hz : Hz, output sampling (> 0)
     rtol : relative tolerance, in (0, 1)
     atol : m, absolute tolerance (> 0); default rtol x (largest stop offset or 1e-3 m)
     events : restart at every stop crossing (the reference mode, see the module docstring)
@@ -404,6 +431,10 @@ def integrate_dop853(
         coordinates: M x'' + C x' + K x + B^T f(B x) = f_ext(t); restarts at its breakpoints, and
         its work int v^T f_ext dt (an extra state) is ``result.external``
     progress : None or a callable taking the fraction done
+
+    Returns
+    -------
+    RingdownResult : the run held in memory, with the solver's statistics (nfev, n_steps, n_events)
     """
     return stream_dop853(system, x0, v0, duration_s, sample_rate_hz, rtol=rtol, atol=atol, events=events,
                          loads=loads, progress=progress).collect()

@@ -164,6 +164,27 @@ class ExactStepper(_stepper.Stepper):
     at its end. A group is cut into runs where the loads start or stop being all zero: a free run
     (no load acting) goes to :func:`reduced.transient._modal._free_kernel`, a forced one to
     :func:`reduced.transient._exact_kernels._forced_kernel`.
+
+    Parameters
+    ----------
+    system, n_samples, sample_rate_hz, loads, report
+        As :class:`reduced.transient.stepper.Stepper`; the run itself is on
+        ``system.fold_zero_gap_tips()``.
+    x0 : (n,) ndarray of float
+        m, initial displacement.
+    v0 : (n,) ndarray of float
+        m/s, initial velocity.
+    duration_s : float
+        s, length of the run.
+    options : ExactOptions
+        chunks and max_events, checked.
+
+    Raises
+    ------
+    ExactIntegratorError
+        A system or load the closed form cannot treat (:func:`reduced.transient.exact_tables.state_table`,
+        :func:`reduced.transient.exact_tables.forced_table`); later, from :meth:`step`, too many
+        events, an infeasible contact state or a non-finite state.
     """
 
     method = "exact"
@@ -316,6 +337,11 @@ def stream_exact(
     ``chunk_samples`` (default: the whole run in one), the same bits whatever ``chunk_samples``
     is (:class:`ExactStepper`).
 
+    Parameters
+    ----------
+    system, x0, v0, duration_s, sample_rate_hz, loads, chunks, max_events, progress : as :func:`integrate_exact`
+    chunk_samples : samples a chunk (default: the whole run in one)
+
     Returns
     -------
     RingdownStream : the run, computed as it is read
@@ -356,6 +382,11 @@ def integrate_exact(
         ``MAX_PIECE_S``), at whose ends the closed form restarts and ``progress`` (a
         callable taking the fraction done) is called
     max_events : refuse (ExactIntegratorError) a run with more contact events than this
+    progress : None or a callable taking the fraction done, called at the end of each piece
+
+    Returns
+    -------
+    RingdownResult : the run, with the statistics (n_events, n_march, n_states, cond_V, n_pieces)
 
     The whole run is held in memory; :func:`stream_exact` gives it chunk by chunk.
     """

@@ -32,7 +32,23 @@ class ExactIntegratorError(RuntimeError):
 
 @dataclass(frozen=True, eq=False)
 class StateTable:
-    """Closed-form data of every contact state, indexed by sum_j active_j 2^j."""
+    """Closed-form data of every contact state, indexed by sum_j active_j 2^j.
+
+    Attributes
+    ----------
+    lam : (S, 2n) ndarray of complex
+        1/s, eigenvalues of A_s per state (S = 2^m, indexed by sum_j active_j 2^j).
+    V : (S, 2n, 2n) ndarray of complex
+        Eigenvectors, A_s V = V diag(lam).
+    Vinv : (S, 2n, 2n) ndarray of complex
+        Their inverse.
+    yp : (S, 2n) ndarray of float
+        Equilibrium [K_s^-1 F_s; 0] (m, m/s).
+    valid : (S,) ndarray of bool
+        Feasible states (the others are zero).
+    cond : (S,) ndarray of float
+        Condition number of V: the closed form loses cond eps |y|.
+    """
 
     lam: np.ndarray  # (S, 2n) complex, eigenvalues
     V: np.ndarray  # (S, 2n, 2n) complex, eigenvectors
@@ -88,7 +104,25 @@ def state_table(system: GapSystem) -> StateTable:
     K_s = K + sum_j active_j k_j B_j^T B_j and F_s = sum_j active_j k_j o_j B_j for all states at once,
     y_p = K_s^-1 F_s by stacked LU (a mirrored state's F_s is the exact negative of its twin's, and so
     is its y_p). The dense algebra runs on one BLAS thread (:func:`reduced._blas.single_thread_blas`):
-    these matrices are small, and threads on busy cores cost far more than they save."""
+    these matrices are small, and threads on busy cores cost far more than they save.
+
+    Parameters
+    ----------
+    system : GapSystem
+        The system.
+
+    Returns
+    -------
+    StateTable
+
+    Raises
+    ------
+    InvalidArgument
+        Not a GapSystem.
+    ExactIntegratorError
+        A state with a zero-frequency mode (undamped), nearly defective (cond(V) > ``MAX_COND``)
+        or unstable.
+    """
     _check.gap_system(system)
     n, m = system.n, system.m
     S = 2**m
@@ -160,6 +194,15 @@ def modal_table(system: GapSystem, table: StateTable) -> tuple:
     coefficient, z), G = U_v^T C U_v, H = U_v^T C conj(U_v) (U_v: the velocity rows). The distinct
     decompositions are worked out together; states with fewer terms are padded with zeros; an
     infeasible state has K = -1.
+
+    Parameters
+    ----------
+    system, table : the gap system and its :class:`StateTable`
+
+    Returns
+    -------
+    tuple
+        (K, lam, |lam|, U^T, Uinv, |Uinv|, y_p, B U, |B U|, B y_p, work, H_ii, pointer, i, k, kind, coefficient, z)
     """
     n = system.n
     S = table.lam.shape[0]
@@ -244,7 +287,21 @@ def modal_table(system: GapSystem, table: StateTable) -> tuple:
 
 @dataclass(frozen=True, eq=False)
 class ForcedTable:
-    """Per-state data of the loads (see the module docstring)."""
+    """Per-state data of the loads (see the module docstring).
+
+    Attributes
+    ----------
+    omega : (L,) ndarray of float
+        rad/s, each load's harmonic frequency (0: no harmonic term).
+    Y : (S, 2n, L) ndarray of complex
+        [H_l b_l; i omega_l H_l b_l] per state, H_l = (K_s - omega_l^2 M + i omega_l C)^-1 (m/N).
+    U : (S, 2n, L) ndarray of complex
+        Modal loads V^-1 [0; M^-1 b_l].
+    Sb : (S, n, L) ndarray of float
+        K_s^-1 b_l, static deflections (m/N): scales of the round-off.
+    b : (L, n) ndarray of float
+        Load directions.
+    """
 
     omega: np.ndarray  # (L,) rad/s, each load's harmonic frequency (0: no harmonic term)
     Y: np.ndarray  # (S, 2n, L) complex, [H_l b_l; i omega_l H_l b_l], H_l = (K_s - omega_l^2 M + i omega_l C)^-1
@@ -255,7 +312,27 @@ class ForcedTable:
 
 def forced_table(system: GapSystem, table: StateTable, loads) -> ForcedTable:
     """Per-state particular solutions of ``loads`` (a :class:`~reduced.models.loads.Loads`) for the
-    exact integrator and the flow; refuses an undamped resonance or a state with a rigid-body mode."""
+    exact integrator and the flow; refuses an undamped resonance or a state with a rigid-body mode.
+
+    Parameters
+    ----------
+    system : GapSystem
+        The system.
+    table : StateTable
+        Its states (:func:`state_table`).
+    loads : Loads
+        The loads, b (L, n) and their harmonic frequencies.
+
+    Returns
+    -------
+    ForcedTable
+
+    Raises
+    ------
+    ExactIntegratorError
+        A state with a rigid-body mode, or a load at an undamped resonance of a state (within
+        ``RESONANCE_REL``).
+    """
     n = system.n
     b = np.ascontiguousarray(loads.b, dtype=float)
     omega = loads.omegas()
@@ -302,7 +379,25 @@ def _state_name(system: GapSystem, active: np.ndarray) -> str:
 
 
 def forced_arrays(ft: ForcedTable, pieces) -> tuple:
-    """The forcing arguments of the kernels: the table and the pieces (a PieceTable)."""
+    """The forcing arguments of the kernels: the table and the pieces (a PieceTable).
+
+    Parameters
+    ----------
+    ft : ForcedTable
+        The loads' per-state data.
+    pieces : PieceTable
+        The loads' pieces on the run's breakpoint grid.
+
+    Returns
+    -------
+    tuple
+        (omega, Y, U, b, starts, F, p0, p1), C-contiguous where the kernels need it.
+
+    Raises
+    ------
+    ExactIntegratorError
+        A piece whose frequency is not its load's (an internal error).
+    """
     on = pieces.F != 0.0
     if np.any(on & (pieces.omega != ft.omega[None, :])):
         raise ExactIntegratorError("internal: a load piece's frequency differs from its load's")

@@ -59,7 +59,25 @@ class StepTooLargeError(ValueError):
 
 def stability_limit(system: GapSystem) -> tuple[float, float]:
     """(omega_max [rad/s], dt_crit [s]) of the closed state, with damping in the top mode: the damped
-    bound of the lagged-velocity variant, conservative for this scheme (module docstring)."""
+    bound of the lagged-velocity variant, conservative for this scheme (module docstring).
+
+    Parameters
+    ----------
+    system : GapSystem
+        The system; its closed-gap stiffness and damping are used.
+
+    Returns
+    -------
+    omega_max : float
+        rad/s, top frequency of the closed state.
+    dt_crit : float
+        s, 2 / omega (sqrt(1 + xi^2) - xi), xi the damping ratio of the top mode (inf if omega = 0).
+
+    Raises
+    ------
+    InvalidArgument
+        Not a GapSystem.
+    """
     _check.gap_system(system)
     lam, phi = eigh(system.closed_stiffness(), system.M)
     omega = math.sqrt(max(lam[-1], 0.0))
@@ -72,7 +90,34 @@ def stability_limit(system: GapSystem) -> tuple[float, float]:
 def default_step(system: GapSystem, omega_dt: float = DEFAULT_OMEGA_DT, step_basis: str = "top"
                  ) -> tuple[float, float, float, float]:
     """(dt, omega_max, omega_ref, dt_limit): the step :func:`integrate_explicit` takes unless given one,
-    before it is rounded to the output interval (see its docstring for ``step_basis``)."""
+    before it is rounded to the output interval (see its docstring for ``step_basis``).
+
+    Parameters
+    ----------
+    system : GapSystem
+        The system.
+    omega_dt : float
+        rad, the step as omega_ref dt, in (0, 2 SWITCHING_SAFETY].
+    step_basis : {'top', 'contact'}
+        omega_ref: omega_max, or :func:`contact_omega` capped at omega_max dt = ``TOP_CAP``.
+
+    Returns
+    -------
+    dt : float
+        s, min(omega_dt / omega_ref, dt_limit), and at most TOP_CAP / omega_max for 'contact'
+        (inf if omega_max is 0).
+    omega_max, omega_ref : float
+        rad/s.
+    dt_limit : float
+        s, ``SWITCHING_SAFETY`` x the stability limit.
+
+    Raises
+    ------
+    InvalidArgument
+        Not a GapSystem, or an unknown basis.
+    StepTooLargeError
+        ``omega_dt`` out of range.
+    """
     _check.gap_system(system)
     step_basis = _check.choice("step_basis", step_basis, STEP_BASES)
     omega_dt = _checked_omega_dt(omega_dt)
@@ -98,7 +143,25 @@ def contact_omega(system: GapSystem, n: int = 3) -> float:
     """rad/s, the top closed-gap frequency of the system seen through its ``n`` lowest open-gap
     modes that move the gaps (Phi_n: for the discrete model all its modes):
     omega^2 = max eig(Phi_n^T K_closed Phi_n), with Phi_n mass-normalized. It grows with k_g as
-    the discrete model's omega_max does, so a stiff penalty is still resolved."""
+    the discrete model's omega_max does, so a stiff penalty is still resolved.
+
+    Parameters
+    ----------
+    system : GapSystem
+        The system.
+    n : int
+        Lowest gap-moving open-gap modes used, in [1, system.n].
+
+    Returns
+    -------
+    float
+        rad/s.
+
+    Raises
+    ------
+    InvalidArgument
+        Not a GapSystem, or n out of range.
+    """
     from reduced.models.modes import moving_modes
 
     _check.gap_system(system)
@@ -247,6 +310,25 @@ class ExplicitStepper(_stepper.Stepper):
     call stops at the buffer's end, at the next progress mark (when progress is reported) and,
     under loads, after ``LOAD_BLOCK_STEPS`` steps (the loads at each step are tabulated a call).
     Models of at most ``_cd.SMALL_N`` DOFs run the register kernel :func:`reduced.transient._cd._cd_small`.
+
+    Parameters
+    ----------
+    system, n_samples, sample_rate_hz, loads, report
+        As :class:`reduced.transient.stepper.Stepper`.
+    x0 : (n,) ndarray of float
+        m, initial displacement.
+    v0 : (n,) ndarray of float
+        m/s, initial velocity.
+    duration_s : float
+        s, length of the run (the grid is set by ``n_samples``).
+    options : ExplicitOptions
+        dt or omega_dt with step_basis, and chunks, checked.
+
+    Raises
+    ------
+    StepTooLargeError
+        A ``dt`` beyond ``SWITCHING_SAFETY`` x the stability limit, or more than ``MAX_STEPS``
+        steps.
     """
 
     method = "explicit"
@@ -408,6 +490,12 @@ def stream_explicit(
     ``chunk_samples`` (default: the whole run in one), the same bits as those of an unchunked
     run (:class:`ExplicitStepper`).
 
+    Parameters
+    ----------
+    system, x0, v0, duration_s, sample_rate_hz, dt, omega_dt, step_basis, loads, chunks, progress : as
+        :func:`integrate_explicit`
+    chunk_samples : samples a chunk (default: the whole run in one)
+
     Returns
     -------
     RingdownStream : the run, computed as it is read
@@ -450,6 +538,28 @@ def integrate_explicit(
     It is then shortened so that the output interval 1 / sample_rate_hz is a whole number of steps.
     ``progress`` (a callable taking the fraction done) is called ``chunks`` times.
     The whole run is held in memory; :func:`stream_explicit` gives it chunk by chunk.
+
+    Parameters
+    ----------
+    system : the gap system
+    x0, v0 : (n,) initial displacement [m] and velocity [m/s]
+    duration_s : s, length of the run (> 0)
+    sample_rate_hz : Hz, output sampling (> 0)
+    dt : s, the step, or None for ``omega_dt / omega_ref``
+    omega_dt : rad, in (0, 2 ``SWITCHING_SAFETY``]
+    step_basis : "top" or "contact" (above)
+    loads : None or a :class:`~reduced.models.loads.Loads` (above)
+    chunks : progress reports a run
+    progress : None or a callable taking the fraction done
+
+    Returns
+    -------
+    RingdownResult : the run, with the statistics (n_steps, dt, omega_max, omega_dt, omega_ref, dt_stable)
+
+    Raises
+    ------
+    StepTooLargeError
+        A step beyond the stability margin, or more than ``MAX_STEPS`` steps.
     """
     return stream_explicit(system, x0, v0, duration_s, sample_rate_hz, dt=dt, omega_dt=omega_dt,
                            step_basis=step_basis, loads=loads, chunks=chunks, progress=progress).collect()

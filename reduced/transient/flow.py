@@ -170,7 +170,21 @@ def _settle(B, offset, side, active, y, j_ev, settle_all):
 
 @dataclass(frozen=True, eq=False)
 class FlowResult:
-    """y(T) and, when asked, dy(T)/dy(0) (the monodromy when T is a period)."""
+    """y(T) and, when asked, dy(T)/dy(0) (the monodromy when T is a period).
+
+    Attributes
+    ----------
+    y : (2n,) ndarray of float
+        [x; v] at the end, m and m/s.
+    active : (m,) ndarray of bool
+        Contact state at the end.
+    jacobian : (2n, 2n) ndarray of float or None
+        dy(T)/dy(0), when asked.
+    n_events : int
+        Contact events crossed.
+    segments : (ndarray of int, ndarray of float)
+        Contact state index and duration (s) of each segment.
+    """
 
     y: np.ndarray  # (2n,) [x; v] at T
     active: np.ndarray  # (m,) contact state at T
@@ -187,6 +201,22 @@ class Flow:
     With ``loads`` (a :class:`~reduced.models.loads.Loads`), ``flow(x0, v0, T, t0=t0)`` is the
     forced flow from the absolute time t0 to t0 + T; the Jacobian is still the product of the
     segment exponentials, as the particular solution does not depend on y(t0) (module docstring).
+
+    Parameters
+    ----------
+    system : GapSystem
+        The system (every contact state a stable oscillator, as for the exact integrator).
+    table : StateTable, optional
+        Its state table, if already decomposed.
+    loads : Loads, optional
+        External loads (the forced flow).
+
+    Raises
+    ------
+    InvalidArgument
+        A system, table or loads of the wrong kind.
+    ExactIntegratorError
+        A system or load the closed form cannot treat.
     """
 
     def __init__(self, system: GapSystem, table: StateTable | None = None, loads=None) -> None:

@@ -44,7 +44,23 @@ FIXED_BYTES = 2 * 2**20  # imports aside: kernels' scratch, the DOP853 stages, t
 
 
 def default_chunk_samples(n_dofs: int) -> int:
-    """Samples in a chunk of a streamed run of ``n_dofs`` DOFs: ``CHUNK_BYTES`` of t, x, v, W."""
+    """Samples in a chunk of a streamed run of ``n_dofs`` DOFs: ``CHUNK_BYTES`` of t, x, v, W.
+
+    Parameters
+    ----------
+    n_dofs : int
+        DOFs of the model, >= 1.
+
+    Returns
+    -------
+    int
+        max(``MIN_CHUNK_SAMPLES``, ``CHUNK_BYTES`` // (8 (2 n + 2))).
+
+    Raises
+    ------
+    InvalidArgument
+        n_dofs not an integer >= 1.
+    """
     n_dofs = _check.integer("n_dofs", n_dofs)
     return max(MIN_CHUNK_SAMPLES, CHUNK_BYTES // (FLOAT * (2 * n_dofs + 2)))  # the module's value at call time
 
@@ -62,6 +78,36 @@ def ringdown_peak_bytes(n_dofs: int, duration_s: float, sample_rate_hz: float, m
     (``ringdown(..., out=path)``); the exact method adds its state table,
     3 x 2^m (2n)^2 complex numbers. ``n_stops`` is m (4 for two two-sided tips). A ``forced``
     run (``loads``) holds one float more a sample: the work of the loads.
+
+    Parameters
+    ----------
+    n_dofs : int
+        n.
+    duration_s : float
+        s.
+    sample_rate_hz : float
+        Hz.
+    method : {'exact', 'explicit', 'dop853'}
+        The integrator (the explicit and DOP853 ones count 4 n^2 floats of matrices instead of the
+        state table).
+    n_stops : int
+        m, in [0, 16].
+    streamed : bool
+        Two chunks held rather than the whole run.
+    chunk_samples : int, optional
+        Samples a chunk when streamed.
+    forced : bool
+        The run has loads.
+
+    Returns
+    -------
+    int
+        bytes.
+
+    Raises
+    ------
+    InvalidArgument
+        An argument out of range (a run without samples included).
     """
     n = _check.integer("n_dofs", n_dofs)
     N = sample_count(duration_s, sample_rate_hz)
@@ -82,7 +128,29 @@ def ringdown_peak_bytes(n_dofs: int, duration_s: float, sample_rate_hz: float, m
 def ringdown_disk_bytes(n_dofs: int, duration_s: float, sample_rate_hz: float, *, forced: bool = False) -> int:
     """Bytes of ``ringdown.npz`` for a run: 8 (2 n + 3) N (t, x, v, energy and dissipated,
     stored uncompressed, see :mod:`reduced.transient.store`; 8 N more for ``external`` in a
-    ``forced`` run) plus about 5 kB of headers and small members."""
+    ``forced`` run) plus about 5 kB of headers and small members.
+
+    Parameters
+    ----------
+    n_dofs : int
+        n.
+    duration_s : float
+        s.
+    sample_rate_hz : float
+        Hz.
+    forced : bool
+        The run has loads (``external`` is stored).
+
+    Returns
+    -------
+    int
+        bytes (:func:`reduced.transient.store.npz_disk_bytes`).
+
+    Raises
+    ------
+    InvalidArgument
+        An argument out of range.
+    """
     n = _check.integer("n_dofs", n_dofs)
     N = sample_count(duration_s, sample_rate_hz)
     forced = _check.flag("forced", forced)
@@ -146,8 +214,9 @@ def ringdown_stream(
 
     Parameters
     ----------
-    The arguments of :func:`ringdown` but ``out`` and ``max_memory_bytes``; ``chunk_samples``
-    defaults to :func:`default_chunk_samples`.
+    system, x0, v0, duration_s, sample_rate_hz, method : as :func:`ringdown`
+    dt, omega_dt, step_basis, rtol, atol, loads, progress : as :func:`ringdown`
+    chunk_samples : samples a chunk (default :func:`default_chunk_samples`)
 
     Returns
     -------
@@ -189,8 +258,11 @@ def ringdown(
 
     Parameters
     ----------
-    system : the gap system; x0, v0 : (n,) m and m/s
-    duration_s : s (> 0); sample_rate_hz : Hz (> 0), output grid t_k = k / sample_rate_hz
+    system : the gap system
+    x0, v0 : (n,) m and m/s
+    duration_s : s (> 0)
+    sample_rate_hz : Hz (> 0), output grid t_k = k / sample_rate_hz
+    method : "exact", "explicit" or "dop853" (:data:`reduced.transient.methods.METHODS`)
     dt, omega_dt, step_basis : explicit step (:func:`~reduced.transient.explicit.integrate_explicit`)
     rtol, atol : DOP853 tolerances, rtol in (0, 1), atol > 0 m
     loads : None (free response) or a :class:`~reduced.models.loads.Loads` on the system's n
@@ -203,6 +275,11 @@ def ringdown(
         returned as a :class:`~reduced.transient.store.RingdownFile`
     chunk_samples : samples a chunk when streaming (default :func:`default_chunk_samples`);
         it never changes the samples, only the memory
+    max_memory_bytes : bytes, the largest peak allowed a run held in memory (``out`` None)
+
+    Returns
+    -------
+    RingdownResult or RingdownFile : in memory, or the file written
 
     Every argument is checked before any work (a ValueError naming it).
     """

@@ -28,7 +28,18 @@ TIMING_STATS = ("wall_s",)  # wall-clock stats: provenance only, never written i
 
 
 def zeros_view(N: int) -> np.ndarray:
-    """(N,) read-only zeros that take no memory: the work of the loads of a free run."""
+    """(N,) read-only zeros that take no memory: the work of the loads of a free run.
+
+    Parameters
+    ----------
+    N : int
+        Length.
+
+    Returns
+    -------
+    (N,) ndarray of float
+        A read-only broadcast view of one 0.0.
+    """
     return np.broadcast_to(np.float64(0.0), (N,))
 
 
@@ -127,6 +138,36 @@ class RingdownStream:
     The chunking never changes the samples: each integrator carries its full state from
     one chunk to the next (see their docstrings). ``blocks`` yields (start, x, v, W) for a free
     run and (start, x, v, W, W_ext) for a forced one (``loads`` given).
+
+    Parameters
+    ----------
+    system : GapSystem
+        The system reported (the chunks compute their energies with it).
+    method : str
+        Integrator name.
+    n_samples : int
+        Samples of the whole run.
+    sample_rate_hz : float
+        Hz.
+    chunk_samples : int
+        Samples a chunk (the last may be shorter).
+    blocks : iterator of tuple
+        (start, x, v, W[, W_ext]) of each chunk, as the integrator produces them.
+    tolerance : callable
+        ``tolerance(max |x|) -> m``, the run's displacement accuracy.
+    stats : dict
+        The integrator's statistics (completed as the run ends).
+    loads : Loads, optional
+        The loads of a forced run.
+
+    Attributes
+    ----------
+    tolerance : float
+        m, set once the last chunk has been produced (nan before).
+    finished : bool
+        The stream has produced its last chunk.
+    max_abs_x : float
+        m, largest |x| produced so far.
     """
 
     def __init__(self, system: GapSystem, method: str, n_samples: int, sample_rate_hz: float, chunk_samples: int,
@@ -209,7 +250,24 @@ class RingdownStream:
 
 def balance_error(E: np.ndarray, W: np.ndarray, Wext: np.ndarray, forced: bool) -> float:
     """max_t |E(0) + W_ext - W - E| / scale, scale = max(E(0), max E, max |W_ext|) for a forced run
-    and E(0) for a free one (see :attr:`RingdownResult.energy_balance_error`); 0 for a zero scale."""
+    and E(0) for a free one (see :attr:`RingdownResult.energy_balance_error`); 0 for a zero scale.
+
+    Parameters
+    ----------
+    E : (N,) ndarray of float
+        J, mechanical energy at each sample.
+    W : (N,) ndarray of float
+        J, work dissipated by the damping since t = 0.
+    Wext : (N,) ndarray of float
+        J, work of the loads since t = 0.
+    forced : bool
+        Scale as for a forced run.
+
+    Returns
+    -------
+    float
+        Relative energy-balance error.
+    """
     if not E.size:
         return 0.0
     scale = max(float(E[0]), float(np.max(E)), float(np.max(np.abs(Wext)))) if forced else float(E[0])
@@ -260,12 +318,48 @@ def _small_members(system: GapSystem, method: str, tolerance: float, s: _Summary
 
 
 def sample_count(duration_s: float, sample_rate_hz: float) -> int:
-    """Samples on the grid 0, 1/fs, ..., up to duration (inclusive when it falls on the grid)."""
+    """Samples on the grid 0, 1/fs, ..., up to duration (inclusive when it falls on the grid).
+
+    Parameters
+    ----------
+    duration_s : float
+        s, > 0.
+    sample_rate_hz : float
+        Hz, > 0.
+
+    Returns
+    -------
+    int
+        floor(duration_s sample_rate_hz (1 + 1e-12)) + 1.
+
+    Raises
+    ------
+    InvalidArgument
+        A duration or rate that is not a finite number > 0.
+    """
     duration_s = number("duration_s", duration_s, lo=0.0, unit="s")
     sample_rate_hz = number("sample_rate_hz", sample_rate_hz, lo=0.0, unit="Hz")
     return int(np.floor(duration_s * sample_rate_hz * (1.0 + 1e-12))) + 1
 
 
 def sample_times(duration_s: float, sample_rate_hz: float) -> np.ndarray:
-    """s, the output grid 0, 1/fs, ..., up to duration (inclusive when it falls on the grid)."""
+    """s, the output grid 0, 1/fs, ..., up to duration (inclusive when it falls on the grid).
+
+    Parameters
+    ----------
+    duration_s : float
+        s, > 0.
+    sample_rate_hz : float
+        Hz, > 0.
+
+    Returns
+    -------
+    (N,) ndarray of float
+        s, j / sample_rate_hz for j < :func:`sample_count`.
+
+    Raises
+    ------
+    InvalidArgument
+        As :func:`sample_count`.
+    """
     return np.arange(sample_count(duration_s, sample_rate_hz)) / sample_rate_hz

@@ -32,6 +32,22 @@ MIN_SAMPLES = 8  # shorter records (or segments) give NaN: no peak to speak of
 def segment_length(n_samples: int, sample_rate_hz: float, resolution_hz: float) -> int:
     """Samples in a segment whose DFT bins are ``resolution_hz`` apart, at most the record, at least MIN_SAMPLES.
 
+    Parameters
+    ----------
+    n_samples : int
+        Samples of the record.
+    sample_rate_hz : float
+        Hz.
+    resolution_hz : float
+        Hz, the bin spacing wanted.
+
+    Returns
+    -------
+    int
+        min(n_samples, max(MIN_SAMPLES, round(sample_rate_hz / resolution_hz))).
+
+    Examples
+    --------
     >>> segment_length(10_000, 1000.0, 2.0), segment_length(300, 1000.0, 2.0), segment_length(100, 1000.0, 500.0)
     (500, 300, 8)
     """

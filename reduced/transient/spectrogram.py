@@ -38,7 +38,21 @@ LEADING_ZEROS = 1  # hann(n, sym=False)[0] == 0: a frame's first sample is never
 
 @dataclass(frozen=True, eq=False)
 class Spectrogram:
-    """|STFT|^2 of a signal: ``power[f, t]`` on ``freq_hz`` x ``t``."""
+    """|STFT|^2 of a signal: ``power[f, t]`` on ``freq_hz`` x ``t``.
+
+    Attributes
+    ----------
+    t : (n_frames,) ndarray of float
+        s, frame centres.
+    freq_hz : (n_freq,) ndarray of float
+        Hz, bin frequencies from 0.
+    power : (n_freq, n_frames) ndarray of float
+        Power spectral density, signal units^2 / Hz.
+    hop : int
+        Samples between frames.
+    n_win : int
+        Samples in a window.
+    """
 
     t: np.ndarray  # s, frame centres
     freq_hz: np.ndarray  # Hz
@@ -57,7 +71,30 @@ def frame_grid(n_samples: int, sample_rate_hz: float, window_s: float, overlap: 
                max_frames: int | None = None) -> tuple[int, int, int, int]:
     """(n_win, hop, p_lo, p_hi): window and hop in samples and the frames p_lo <= p < p_hi inside
     the record (ShortTimeFFT's ``lower_border_end`` and ``upper_border_begin``: the periodic
-    Hann window's first value is 0, so a frame may start one sample before the record)."""
+    Hann window's first value is 0, so a frame may start one sample before the record).
+
+    Parameters
+    ----------
+    n_samples : int
+        Samples of the record.
+    sample_rate_hz : float
+        Hz.
+    window_s : float
+        s, window length (n_win = max(8, round(window_s fs))).
+    overlap : float
+        Fraction of a window shared by consecutive frames, in [0, 1).
+    max_frames : int, optional
+        Lengthen the hop so that at most this many frames lie inside the record.
+
+    Returns
+    -------
+    n_win, hop, p_lo, p_hi : int
+
+    Raises
+    ------
+    InvalidArgument
+        A window longer than the record.
+    """
     n_win = max(8, int(round(window_s * sample_rate_hz)))
     if n_win > n_samples:
         raise _check.InvalidArgument(f"window_s = {window_s} s is longer than the record "
@@ -86,6 +123,30 @@ class StftAccumulator:
     Holds the samples of the frame being assembled and the frames kept (rows up to
     ``fmax_hz``), never the record. ``mean`` is subtracted from every sample (the record's
     mean for a global detrend, as :func:`spectrogram`; 0 when it is not known in advance).
+
+    Parameters
+    ----------
+    n_samples : int
+        Samples of the record.
+    sample_rate_hz : float
+        Hz.
+    window_s : float
+        s, window length.
+    overlap : float
+        In [0, 1).
+    mean : float
+        Subtracted from every sample.
+    fmax_hz : float, optional
+        Keep the bins up to this frequency (default all).
+    max_frames : int, optional
+        Most frames kept (the hop is lengthened; None: no limit).
+    t0 : float
+        s, time of sample 0 (shifts the frame times).
+
+    Raises
+    ------
+    InvalidArgument
+        An argument out of range, or a window longer than the record.
     """
 
     def __init__(self, n_samples: int, sample_rate_hz: float, window_s: float, overlap: float, *,
@@ -166,7 +227,34 @@ def spectrogram_chunks(chunks: Iterable[tuple[int, np.ndarray]], n_samples: int,
                        max_frames: int | None = MAX_FRAMES, t0: float = 0.0) -> Spectrogram:
     """The spectrogram of a record given as consecutive (start, samples) chunks (see the module
     docstring); ``mean`` is subtracted first (pass the record's mean for :func:`spectrogram`'s
-    global detrend)."""
+    global detrend).
+
+    Parameters
+    ----------
+    chunks : iterable of (int, ndarray)
+        (index of the first sample, samples) of consecutive chunks of the record.
+    n_samples : int
+        Samples of the record.
+    sample_rate_hz : float
+        Hz.
+    window_s : float
+        s, window length.
+    overlap : float
+        In [0, 1).
+    mean, fmax_hz, max_frames, t0
+        As :class:`StftAccumulator`.
+
+    Returns
+    -------
+    Spectrogram
+
+    Raises
+    ------
+    InvalidArgument
+        As :class:`StftAccumulator`.
+    ValueError
+        Chunks that are not consecutive, or a record not fed to its end.
+    """
     acc = StftAccumulator(n_samples, sample_rate_hz, window_s, overlap, mean=mean, fmax_hz=fmax_hz,
                           max_frames=max_frames, t0=t0)
     for start, y in chunks:
@@ -180,10 +268,16 @@ def spectrogram(t: np.ndarray, y: np.ndarray, window_s: float, overlap: float, *
 
     Parameters
     ----------
-    t : (N,) s, uniform, increasing; y : (N,) the signal
-    window_s : s, window length (> 0, at most the record); overlap : in [0, 1)
-    fmax_hz : keep frequencies up to this (default all); max_frames : lengthen the hop to keep
-        at most this many frames (default: no limit)
+    t : (N,) s, uniform, increasing
+    y : (N,) the signal
+    window_s : s, window length (> 0, at most the record)
+    overlap : in [0, 1)
+    fmax_hz : keep frequencies up to this (default all)
+    max_frames : lengthen the hop to keep at most this many frames (default: no limit)
+
+    Returns
+    -------
+    Spectrogram : frames centred at t[0] + p hop / fs, power in units of y^2 / Hz
     """
     t = _check.series("t", t, min_len=2)
     y = _check.series("y", y)
@@ -197,7 +291,27 @@ def spectrogram(t: np.ndarray, y: np.ndarray, window_s: float, overlap: float, *
 
 
 def curve_in_time(energy_t: np.ndarray, energy_J: np.ndarray, freq_hz: np.ndarray) -> np.ndarray:
-    """Hz, f(E(t)) from a frequency-energy curve (NaN outside the curve's energy range)."""
+    """Hz, f(E(t)) from a frequency-energy curve (NaN outside the curve's energy range).
+
+    Parameters
+    ----------
+    energy_t : (k,) array_like of float
+        J, the ringdown's energy at each time of interest.
+    energy_J : (m,) array_like of float
+        J, the curve's energies, > 0 (any order).
+    freq_hz : (m,) array_like of float
+        Hz, the curve's frequency at each energy.
+
+    Returns
+    -------
+    (k,) ndarray of float
+        Hz.
+
+    Raises
+    ------
+    InvalidArgument
+        energy_J not 1-D, or freq_hz not of its shape.
+    """
     energy_t = np.asarray(energy_t, dtype=float)
     E = np.asarray(energy_J, dtype=float)
     f = np.asarray(freq_hz, dtype=float)

@@ -32,7 +32,30 @@ class Buffer:
     """Samples j0 .. j0 + k - 1 of a run of N at fs Hz, in the arrays of a stepper's layout.
 
     ``t`` are their times, ``t_after`` the time of the first sample after them (inf at the end of
-    the run), ``filled`` how many are written (a stepper writes them in order)."""
+    the run), ``filled`` how many are written (a stepper writes them in order).
+
+    Parameters
+    ----------
+    j0 : int
+        Index of its first sample in the run.
+    k : int
+        Samples it holds.
+    n_samples : int
+        Samples of the whole run.
+    sample_rate_hz : float
+        Hz.
+    arrays : tuple of ndarray
+        Storage in the stepper's layout (:meth:`Stepper.arrays`).
+
+    Attributes
+    ----------
+    t : (k,) ndarray of float
+        s, times of its samples.
+    t_after : float
+        s, time of the next sample (inf at the end of the run).
+    filled : int
+        Samples written so far.
+    """
 
     __slots__ = ("j0", "k", "t", "t_after", "arrays", "filled")
 
@@ -106,6 +129,7 @@ def run(stepper_class: type[Stepper], system: GapSystem, x0, v0, duration_s: flo
     ----------
     stepper_class : the method's :class:`Stepper`, built as
         ``stepper_class(system, x0, v0, duration_s, n_samples, sample_rate_hz, options, loads, report)``
+    system : the gap system
     x0, v0 : (n,) m and m/s
     duration_s, sample_rate_hz : s (> 0) and Hz (> 0)
     options : the method's frozen options dataclass; its ``checked(system)`` validates it

@@ -94,6 +94,13 @@ class NpzStreamWriter:
     ``arrays`` maps each large member to (shape, dtype); :meth:`append` adds rows to one
     member in order; :meth:`close` takes the small members and finishes the archive.
     Used as a context manager, an exception removes the partial file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The .npz written (in place only when :meth:`close` completes).
+    arrays : dict of str to (tuple of int, dtype)
+        Each large member's shape and dtype, in file order.
     """
 
     def __init__(self, path: str | Path, arrays: dict[str, tuple[tuple[int, ...], np.dtype]]) -> None:
@@ -191,7 +198,20 @@ class NpzStreamWriter:
 
 def npz_disk_bytes(shapes: dict[str, tuple[int, ...]], small_bytes: int = 4096) -> int:
     """Bytes of an .npz written by :class:`NpzStreamWriter` with float64 members ``shapes``
-    (headers included) and about ``small_bytes`` of small members."""
+    (headers included) and about ``small_bytes`` of small members.
+
+    Parameters
+    ----------
+    shapes : dict of str to tuple of int
+        Shape of each float64 member.
+    small_bytes : int
+        bytes allowed for the small members.
+
+    Returns
+    -------
+    int
+        bytes, an estimate of the file's size (from above for the headers).
+    """
     total = small_bytes + 200  # central directory end records
     for name, shape in shapes.items():
         total += 2 * (_LOCAL.size + len(name) + 4 + _Z64_CENTRAL.size) + 128  # headers and .npy header
@@ -236,9 +256,22 @@ def _index(path: Path) -> dict[str, _Array]:
 class Chunk:
     """Consecutive samples ``start .. start + len(t)`` of a ringdown.
 
-    Attributes: t (k,) s; x, v (k, n) m and m/s; dissipated (k,) J; energy (k,) J
-    (computed from x and v by ``system`` when not given); external (k,) J, the work of the
-    loads int_0^t v^T f_ext dt (zeros for a free run; None when not read).
+    Attributes
+    ----------
+    start : int
+        Index of the first sample in the run.
+    t : (k,) ndarray of float
+        s.
+    x, v : (k, n) ndarray of float
+        m and m/s.
+    dissipated : (k,) ndarray of float
+        J, work dissipated by the damping since t = 0.
+    system : GapSystem or None
+        Computes ``energy`` from x and v when it is not given.
+    energy : (k,) ndarray of float
+        J (a property; given as ``_energy``, or computed once by ``system``).
+    external : (k,) ndarray of float or None
+        J, the work of the loads int_0^t v^T f_ext dt (zeros for a free run; None when not read).
     """
 
     start: int
@@ -268,6 +301,33 @@ class RingdownFile:
     without ``external`` gives a read-only view of zeros);
     the summaries (``energy_balance_error``, ``tolerance``, ``stats``) are the small members.
     A file written by ``np.savez_compressed`` (older runs) is read too, sequentially.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ringdown .npz (written by :meth:`RingdownStream.save` or ``np.savez_compressed``).
+    system : GapSystem, optional
+        The system run: its energies for chunks that lack them.
+
+    Attributes
+    ----------
+    method : str
+        Integrator name.
+    tolerance, energy_balance_error : float
+        m and relative (nan when the file lacks them).
+    dof_names : tuple of str
+        Names of the coordinates.
+    stats : dict
+        The integrator's statistics (``stat_*`` members).
+    n_samples, n : int
+        Samples and DOFs.
+    sample_rate_hz : float
+        Hz (from the member, or from t[1] - t[0] in older files).
+
+    Raises
+    ------
+    InvalidArgument
+        No such file, not a readable .npz, or a file without the histories of a ringdown.
     """
 
     def __init__(self, path: str | Path, system=None) -> None:
