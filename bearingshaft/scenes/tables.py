@@ -417,6 +417,9 @@ class VerifySpec:
         positive(self, "duration_s", "sample_rate_hz", "energy_max_J", "window_s", "fmax_hz")
 
 
+FRC_CURVES = ("auto", "hb", "shooting")  # [frc] curve: how the drawn curve of each level is computed
+
+
 @dataclass(frozen=True, slots=True)
 class FRCSpec:
     """Forced-response curves by HB under a harmonic load at one point, verified by a stepped
@@ -454,6 +457,22 @@ class FRCSpec:
         s, simulated time per frequency at most before "not settled".
     backbone_scales : tuple of float
         Damping and load scaled together (backbone check), in (0, 1].
+    curve : {'auto', 'hb', 'shooting'}
+        The drawn curve of each level: HB at ``harmonics``, the orbits of the exact flow continued
+        by multiple shooting, or (auto) HB where its amplitudes no longer move with H (within
+        ``hb_converged_tol`` of the next lower H of ``convergence_harmonics``), else shooting.
+    hb_converged_tol : float
+        Relative change of the amplitudes below which HB counts as converged, in (0, 1).
+    branch_switching : bool
+        Follow the families born at the exact curve's pitchforks and period doublings.
+    max_families : int
+        Families switched onto per level at most.
+    family_steps : int
+        Points of a switched family at most.
+    switching_max_s : float
+        s per level after which no new family is started.
+    shooting_steps : int
+        Points of the main exact family at most.
 
     Raises
     ------
@@ -477,6 +496,13 @@ class FRCSpec:
     stepped_sine_tol: float = 1e-6  # settled when the predicted distance to the periodic orbit is below this
     stepped_sine_max_s: float = 10.0  # s, simulated time per frequency at most before "not settled"
     backbone_scales: tuple[float, ...] = (1.0, 0.1, 0.01)  # damping and load scaled together (backbone check)
+    curve: str = "auto"  # the drawn curve: "hb", "shooting" (exact flow) or "auto" (HB where converged in H)
+    hb_converged_tol: float = 1e-4  # HB converged: amplitudes within this of the next lower H's
+    branch_switching: bool = True  # follow the families born at pitchforks and period doublings
+    max_families: int = 12  # families switched onto per level at most
+    family_steps: int = 3000  # points of a switched family at most
+    switching_max_s: float = 300.0  # s per level after which no new family is started
+    shooting_steps: int = 30000  # points of the main exact family at most
 
     def __post_init__(self) -> None:
         each(self, "levels_N", lambda v: v > 0, "> 0 N")
@@ -496,6 +522,12 @@ class FRCSpec:
         check(self.stepped_sine_points >= 0, f"stepped_sine_points must be >= 0, got {self.stepped_sine_points!r}")
         tolerance(self, "stepped_sine_tol")
         each(self, "backbone_scales", lambda v: 0 < v <= 1, "in (0, 1] (damping and load scaled down together)")
+        check(self.curve in FRC_CURVES, f"curve must be one of {', '.join(FRC_CURVES)}, got {self.curve!r}")
+        tolerance(self, "hb_converged_tol")
+        positive(self, "switching_max_s")
+        for key in ("max_families", "family_steps", "shooting_steps"):
+            check(getattr(self, key) >= (0 if key == "max_families" else 1),
+                  f"{key} must be >= {0 if key == 'max_families' else 1}, got {getattr(self, key)!r}")
 
 
 @dataclass(frozen=True, slots=True)

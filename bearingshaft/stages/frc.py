@@ -39,7 +39,7 @@ from tqdm import tqdm
 from bearingshaft.estimates import FLOAT, HILL_COPIES, Estimate, n_dofs
 from bearingshaft.output import StageWriter
 from bearingshaft.scenes import Scene
-from bearingshaft.stages.frc_results import ConvergenceRun, FRCResult, PointCheck
+from bearingshaft.stages.frc_results import ConvergedCurve, ConvergenceRun, FRCResult, PointCheck
 from bearingshaft.systems import model_system
 from reduced._blas import single_thread_blas
 from reduced.models.gaps import GapSystem
@@ -47,9 +47,12 @@ from reduced.models.loads import Harmonic, Loads
 from reduced.models.modes import linear_modes
 from reduced.periodic.backbones import NNM_STEPS, nnm_branch
 from reduced.periodic.continuation import ContinuationError
+from reduced.periodic.exact_frc import ExactFRCOptions, exact_frc, hb_start
+from reduced.periodic.exact_hb import default_root_samples
+from reduced.periodic.forced_balance import ForcedBalance, ForcedResidual
 from reduced.periodic.forced_stability import HILL_TOL, ShootingError, floquet_by_shooting, forced_hill, hb_states
 from reduced.periodic.frc import FRC_STEPS, FRCBranch, _synthesis, frc, max_abs_over_period, solution_at_frequency
-from reduced.periodic.hb import NewtonError, _derivative_matrix
+from reduced.periodic.hb import NewtonError, _derivative_matrix, newton
 from reduced.periodic.stepped_sine import SteppedSine, stepped_sine
 from reduced.transient.flow import Flow
 from reduced.transient.integrate import ringdown
@@ -60,6 +63,7 @@ BACKBONE_SAMPLES = 4096  # AFT samples of the H = 1 backbone (its AFT error near
 BACKBONE_ENERGY_FACTOR = 4.0  # backbones run to this many times the energy of the most energetic peak drawn
 BACKBONE_DS = 0.01  # continuation step of the backbones (log10 amplitude): polyline error ~1e-7 at the peaks
 ORBIT_SAMPLES = 2048  # samples of one period of an exact orbit for its amplitude
+HB_CHECK_POINTS = 200  # points of an HB curve compared with the next lower H at most
 
 
 def compute(scene: Scene, progress: bool, workdir=None) -> FRCResult:
@@ -88,12 +92,17 @@ def _compute(scene: Scene, progress: bool) -> FRCResult:
     load_col = names.index(spec.point)
     b = rows[load_col]
     levels = list(spec.levels_N)
-    n_tasks = 3 * len(levels) + len(spec.convergence_harmonics) + len(levels) * len(spec.backbone_scales) + 1
+    n_tasks = 4 * len(levels) + len(spec.convergence_harmonics) + len(levels) * len(spec.backbone_scales) + 1
     bar = tqdm(total=n_tasks, desc=f"{scene.name}: forced response", disable=not progress, unit="task")
     curves = {}
     for P in levels:
         bar.set_postfix_str(f"HB {P:g} N, H={spec.harmonics}")
         curves[P] = _curve(system, b, P, spec, spec.harmonics, rows, names, hill_points=0)
+        bar.update()
+    converged = {}
+    for P in levels:
+        bar.set_postfix_str(f"converged curve {P:g} N")
+        converged[P] = converged_curve(system, b, P, spec, curves[P], rows, names)
         bar.update()
     checks = {}
     for P in levels:
@@ -110,7 +119,7 @@ def _compute(scene: Scene, progress: bool) -> FRCResult:
     backbone = _backbone_check(system, b, rows, names, spec, load_col, curves, bar)
     bar.close()
     return FRCResult(scene.name, spec, names, load_col, curves, {P: _events(br, load_col) for P, br in curves.items()},
-                     checks, sweeps, sweep_hb, convergence, *backbone)
+                     checks, sweeps, sweep_hb, convergence, *backbone, converged=converged)
 
 
 def _curve(system, b, P, spec, H, rows, names, **kw):
@@ -132,6 +141,126 @@ def _evenly(k: int, count: int) -> np.ndarray:
     if count <= 0 or k == 0:
         return np.zeros(0, int)
     return np.unique(np.round(np.linspace(0, k - 1, min(count, k))).astype(int))
+
+
+# -- the converged curve of each level --------------------------------------------------------------
+def check_harmonics(spec) -> int:
+    """H of the balance the HB curve is compared with: the largest of ``convergence_harmonics`` below
+    ``harmonics`` (odd with odd_harmonics), else the next lower H of the set (0 if H = 1).
+
+    >>> from bearingshaft.scenes.tables import FRCSpec
+    >>> check_harmonics(FRCSpec()), check_harmonics(FRCSpec(harmonics=3, convergence_harmonics=(3, 5)))
+    (9, 1)
+    """
+    H, step = spec.harmonics, 2 if spec.odd_harmonics else 1
+    lower = [h for h in spec.convergence_harmonics if h < H and (h % 2 == 1 or not spec.odd_harmonics)]
+    return max(lower) if lower else max(H - step, 0)
+
+
+def hb_change(br: FRCBranch, H_check: int, max_points: int = HB_CHECK_POINTS) -> float:
+    """Largest relative change from the HB curve ``br`` to the balance with ``H_check`` harmonics at
+    the same frequencies, of the amplitudes (every output point) and, where a stop closes, of its
+    penetration max|B_j x| - |o_j| (relative to the larger of the two; the contact itself, which
+    the amplitude hides: a penetration 20 % off changes a 1.01 g amplitude by 0.2 %). Newton at each
+    frequency (at most ``max_points`` of the curve's points, evenly spread) from the curve's own
+    coefficients cut to H_check; inf where Newton does not converge.
+
+    Parameters
+    ----------
+    br : the HB curve
+    H_check : harmonics of the comparison (>= 1)
+    max_points : points compared at most
+
+    Returns
+    -------
+    float
+        The largest change over the points.
+    """
+    fb0 = br.balance
+    s = fb0.system
+    fb = ForcedBalance(s, fb0.b, fb0.amplitude_N, fb0.phase_deg, H_check, default_root_samples(H_check), fb0.odd)
+    res = ForcedResidual(fb, br.x_ref, float(br.omega.max()))
+    n = res.size
+    gap = np.abs(s.offset)
+    worst = 0.0
+    for i in _evenly(len(br.freq_hz), max_points):
+        q = fb0.full_q(br.z[i])[: 2 * H_check + 1]
+        lw = math.log(br.omega[i] / res.omega_ref)
+
+        def fun(v, lw=lw):
+            R, J = res(np.append(v, lw))
+            return R, J[:, :n]
+
+        try:
+            v = newton(fun, q[fb.keep].ravel() / br.x_ref, tol=1e-12, max_iter=30).y
+        except NewtonError:
+            return math.inf
+        X = fb.response(v * br.x_ref, float(br.omega[i]))
+        amp = max_abs_over_period(X, br.point_rows)
+        worst = max(worst, float(np.max(np.abs(amp / br.amplitude_m[i] - 1.0))))
+        pen = max_abs_over_period(X, s.B) - gap
+        pen0 = max_abs_over_period(br.X[i], s.B) - gap
+        both = np.maximum(pen, pen0)
+        closed = both > 0.0
+        if np.any(closed):
+            worst = max(worst, float(np.max(np.abs(pen - pen0)[closed] / both[closed])))
+    return worst
+
+
+def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: np.ndarray, names: tuple
+                    ) -> ConvergedCurve:
+    """The drawn curve of level P (``[frc] curve``): HB at ``harmonics`` where its amplitudes move by no
+    more than ``hb_converged_tol`` from the next lower H (:func:`check_harmonics`), else the families
+    of exact periodic orbits continued by multiple shooting from the HB orbit at f_min
+    (:func:`reduced.periodic.exact_frc.exact_frc`, with branch switching as the table says). If
+    shooting fails, HB is drawn and the reason says it is not converged.
+
+    Parameters
+    ----------
+    system, b, P : the gap system, the load direction (n,) and its amplitude (N)
+    spec : the [frc] table
+    br : the HB curve of the level (or the ContinuationError of one that could not start)
+    rows, names : the output points
+
+    Returns
+    -------
+    ConvergedCurve
+    """
+    t0 = time.perf_counter()
+    ok = not isinstance(br, Exception)
+    contact = bool(np.any(_in_contact(system, br))) if ok else True
+    Hc = check_harmonics(spec)
+    change = hb_change(br, Hc) if ok and Hc >= 1 else math.nan
+    method = spec.curve
+    if method == "auto":
+        method = "hb" if ok and change <= spec.hb_converged_tol else "shooting"
+    if method == "hb":
+        why = (f"HB at H = {spec.harmonics}: its amplitudes{' and penetrations' if contact else ''} move by at most "
+               f"{change:.2g} (relative) from H = {Hc} ({'a stop closes' if contact else 'no stop closes'} along it)")
+        return ConvergedCurve(P, "hb", why, spec.harmonics, Hc, change, contact, None, "", time.perf_counter() - t0)
+    S = spec.shooting_segments + spec.shooting_segments % 2
+    opts = ExactFRCOptions(segments=S, branch_switching=spec.branch_switching, max_families=spec.max_families,
+                           family_steps=spec.family_steps, max_steps=spec.shooting_steps,
+                           deadline_s=spec.switching_max_s)
+    try:
+        if ok:
+            start = hb_states(br.X[0], float(br.omega[0]), S)
+            x_ref = br.x_ref
+        else:
+            start = hb_start(system, b, P, spec.freq_min_hz, S)
+            x_ref = float(np.max(np.abs(start[:, : system.n])))
+        ex = exact_frc(system, b, P, spec.freq_min_hz, spec.freq_max_hz, start, point_rows=rows, point_names=names,
+                       x_ref=x_ref, options=opts)
+    except (ShootingError, ContinuationError, NewtonError, RuntimeError) as exc:
+        err = " ".join(str(exc).split())[:200]
+        why = f"shooting failed ({err}): the HB curve at H = {spec.harmonics} is drawn and is NOT converged"
+        return ConvergedCurve(P, "hb", why, spec.harmonics, Hc, change, contact, None, err, time.perf_counter() - t0)
+    why = (f"exact flow, by shooting: HB at H = {spec.harmonics} moves by {change:.2g} (relative, amplitudes"
+           f"{' and penetrations' if contact else ''}) from H = {Hc}"
+           + (" (a stop closes along it: HB in contact needs H ~ 255, tests/test_frc_contact.py)" if contact else ""))
+    if spec.curve == "shooting":
+        why = "exact flow, by shooting ([frc] curve = \"shooting\")"
+    return ConvergedCurve(P, "shooting", why, spec.harmonics, Hc, change, contact, ex, "", time.perf_counter() - t0)
 
 
 # -- Hill and shooting at selected points ---------------------------------------------------------
@@ -473,8 +602,8 @@ def estimate(scene: Scene) -> list[Estimate]:
                      "[frc] harmonics or convergence_harmonics")]
 
 
-__all__ = ["DESCRIPTION", "FRCResult", "compute", "estimate", "frc_stage", "orbit_amplitude", "shooting_error",
-           "write"]
+__all__ = ["DESCRIPTION", "FRCResult", "check_harmonics", "compute", "converged_curve", "estimate", "frc_stage",
+           "hb_change", "orbit_amplitude", "shooting_error", "write"]
 
 
 def write(result, writer) -> None:

@@ -13,6 +13,8 @@ runs here.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from bearingshaft.digits import sig
@@ -25,7 +27,13 @@ CONVERGENCE_FIELDS = ["level", "harmonics", "status", "n_points", "f_reached_hz"
                       "lowest_fold_hz", "n_vs_stepped_sine", "max_rel_err_vs_stepped_sine", "n_vs_shooting",
                       "n_shooting_failed", "max_rel_err_vs_shooting", "median_rel_err_vs_shooting"]
 BIFURCATION_FIELDS = ["level", "harmonics", "kind", "index", "freq_hz", "amplitude_m", "max_abs_mu_before",
-                      "max_abs_mu_after"]
+                      "max_abs_mu_after", "method", "family", "family_kind", "located_hz", "critical_mu", "grazing",
+                      "child_family", "note"]
+FRC_FIELDS = ["level", "method", "harmonics", "freq_hz", "point", "amplitude_m", "stable", "bifurcation", "response",
+              "segment", "drawn", "family", "family_kind", "period_k", "receptance_m_per_N"]
+FAMILY_FIELDS = ["level", "family", "kind", "period_k", "parent_family", "parent_index", "born_at", "n_points",
+                 "freq_min_hz", "freq_max_hz", "stable_points", "max_amplitude_m", "max_abs_mu", "n_bifurcations",
+                 "status", "wall_s", "notes"]
 BACKBONE_FIELDS = ["level", "scale", "load_N", "nnm", "peak_freq_hz", "peak_amplitude_m", "log_distance", "note"]
 
 
@@ -57,8 +65,10 @@ def write(result: FRCResult, writer: StageWriter) -> None:
         stats["speed_ratio_stepped_sine_over_hb"] = {f"H={h}": round(t_ss / t, 2) for h, t in t_hb.items() if t > 0}
     write_rows(writer.path("frc_backbone.csv"), _backbone_rows(result), fields=BACKBONE_FIELDS)
     writer.stats["frc"] = stats
-    _plot_frc(writer.path("frc.png"), result.curves, sweeps, result.backbones, names, spec, result.scene_name,
+    _plot_frc(writer.path("frc.png"), drawn_curves(result), sweeps, result.backbones, names, spec, result.scene_name,
               result.events)
+    writer.path("frc.md").write_text(frc_markdown(result), encoding="utf-8")
+    stats["converged"] = _converged_stats(result)
     _plot_backbone(writer.path("frc_backbone.png"), result.backbone_curves, result.backbones, names, result.load_col,
                    spec, result.peaks)
     _plot_convergence(writer.path("frc_convergence_timing.png"), conv_rows, timing_rows, Pc)
@@ -124,9 +134,9 @@ def _stepped_sine_rows(result: FRCResult, stats: dict) -> list[dict]:
 
 
 def _curve_files(result: FRCResult, writer: StageWriter, stats: dict) -> None:
-    """frc.csv, frc_harmonics.csv, frc_bifurcations.csv, frc_stability.csv; the stability counts
-    per level into ``stats["stability"]``."""
-    rows_csv, harm_rows, bif_rows, stab_rows = [], [], [], []
+    """frc.csv, frc_harmonics.csv, frc_bifurcations.csv, frc_stability.csv, frc_families.csv; the
+    stability counts per level into ``stats["stability"]``."""
+    rows_csv, harm_rows, bif_rows, stab_rows, fam_rows = [], [], [], [], []
     for P in result.spec.levels_N:
         br = result.curves[P]
         if not isinstance(br, Exception):
@@ -148,8 +158,15 @@ def _curve_files(result: FRCResult, writer: StageWriter, stats: dict) -> None:
                                      "freq_hz": sig(float(f), DIGITS), "point": nm,
                                      "amplitude_m": sig(float(ss.amplitude_m[j, c]), DIGITS),
                                      "stable": _bool(ss.response[j] != "not_settled"), "bifurcation": "",
-                                     "response": ss.response[j], "segment": ""})
-    write_rows(writer.path("frc.csv"), rows_csv)
+                                     "response": ss.response[j], "segment": "",
+                                     "receptance_m_per_N": sig(float(ss.amplitude_m[j, c]) / P, DIGITS)})
+        cc = result.converged.get(P)
+        if cc is not None and cc.exact is not None:
+            rows_csv += _exact_rows(result, P, cc.exact)
+            bif_rows += _exact_bifurcation_rows(result, P, cc.exact)
+            fam_rows += _family_rows(P, cc.exact)
+    write_rows(writer.path("frc.csv"), rows_csv, fields=FRC_FIELDS)
+    write_rows(writer.path("frc_families.csv"), fam_rows, fields=FAMILY_FIELDS)
     write_rows(writer.path("frc_harmonics.csv"), harm_rows)
     write_rows(writer.path("frc_bifurcations.csv"), bif_rows, fields=BIFURCATION_FIELDS)
     write_rows(writer.path("frc_stability.csv"), stab_rows)
@@ -159,10 +176,27 @@ def _curve_rows(result: FRCResult, P: float, br) -> list[dict]:
     """frc.csv rows of one HB curve: each point at each output point."""
     H = result.spec.harmonics
     labels = br.bifurcation_labels()
+    cc = result.converged.get(P)
+    drawn = _bool(cc is None or cc.method == "hb")
     return [{"level": P, "method": "hb", "harmonics": H, "freq_hz": sig(br.freq_hz[i], DIGITS), "point": nm,
              "amplitude_m": sig(float(br.amplitude_m[i, c]), DIGITS), "stable": _bool(br.stable[i]),
-             "bifurcation": labels[i], "response": "", "segment": int(br.segment[i])}
+             "bifurcation": labels[i], "response": "", "segment": int(br.segment[i]), "drawn": drawn, "family": 0,
+             "family_kind": "main", "period_k": 1, "receptance_m_per_N": sig(float(br.amplitude_m[i, c]) / P, DIGITS)}
             for i in range(len(br.freq_hz)) for c, nm in enumerate(result.names)]
+
+
+def _exact_rows(result: FRCResult, P: float, ex) -> list[dict]:
+    """frc.csv rows of the exact families of one level (method "shooting"): each point at each output point."""
+    out = []
+    for k, fam in enumerate(ex.families):
+        labels = fam.bifurcation_labels()
+        out += [{"level": P, "method": "shooting", "harmonics": "", "freq_hz": sig(fam.freq_hz[i], DIGITS), "point": nm,
+                 "amplitude_m": sig(float(fam.amplitude_m[i, c]), DIGITS), "stable": _bool(fam.stable[i]),
+                 "bifurcation": labels[i], "response": "", "segment": int(fam.segment[i]), "drawn": "true",
+                 "family": k, "family_kind": fam.kind, "period_k": fam.periods,
+                 "receptance_m_per_N": sig(float(fam.amplitude_m[i, c]) / P, DIGITS)}
+                for i in range(len(fam.freq_hz)) for c, nm in enumerate(result.names)]
+    return out
 
 
 def _harmonic_rows(result: FRCResult, P: float, br) -> list[dict]:
@@ -180,7 +214,47 @@ def _bifurcation_rows(result: FRCResult, P: float, br) -> list[dict]:
     return [{"level": P, "harmonics": H, "kind": kind, "index": int(i), "freq_hz": sig(br.freq_hz[i], DIGITS),
              "amplitude_m": sig(float(br.amplitude_m[i, col]), DIGITS),
              "max_abs_mu_before": sig(float(np.abs(br.multipliers[i - 1, 0])), 6),
-             "max_abs_mu_after": sig(float(np.abs(br.multipliers[i, 0])), 6)} for i, kind in br.bifurcations]
+             "max_abs_mu_after": sig(float(np.abs(br.multipliers[i, 0])), 6), "method": "hb", "family": 0,
+             "family_kind": "main"} for i, kind in br.bifurcations]
+
+
+def _exact_bifurcation_rows(result: FRCResult, P: float, ex) -> list[dict]:
+    """frc_bifurcations.csv rows of the exact families: every crossing, with where it was located, its
+    critical multiplier and the family switched onto (or why not)."""
+    col = result.load_col
+    sw = {(r["family"], r["index"], r["kind"]): r for r in ex.switches}
+    rows = []
+    for k, fam in enumerate(ex.families):
+        for i, kind in fam.bifurcations:
+            r = sw.get((k, i, kind), {})
+            crit = r.get("critical")
+            rows.append({"level": P, "harmonics": "", "kind": kind, "index": int(i),
+                         "freq_hz": sig(fam.freq_hz[i], DIGITS),
+                         "amplitude_m": sig(float(fam.amplitude_m[i, col]), DIGITS),
+                         "max_abs_mu_before": sig(float(np.abs(fam.multipliers[i - 1, 0])), 6),
+                         "max_abs_mu_after": sig(float(np.abs(fam.multipliers[i, 0])), 6), "method": "shooting",
+                         "family": k, "family_kind": fam.kind,
+                         "located_hz": sig(r["located_hz"], DIGITS) if "located_hz" in r else "",
+                         "critical_mu": sig(float(crit.real), 6) if crit is not None else "",
+                         "grazing": _bool(r["grazing"]) if "grazing" in r else "",
+                         "child_family": r["child"] if r.get("child", -1) >= 0 else "", "note": r.get("note", "")})
+    return rows
+
+
+def _family_rows(P: float, ex) -> list[dict]:
+    """frc_families.csv: one row per exact family of a level."""
+    rows = []
+    for k, fam in enumerate(ex.families):
+        pf, pi, born = fam.parent if fam.parent is not None else ("", "", "")
+        rows.append({"level": P, "family": k, "kind": fam.kind, "period_k": fam.periods, "parent_family": pf,
+                     "parent_index": pi, "born_at": born, "n_points": len(fam.freq_hz),
+                     "freq_min_hz": sig(float(fam.freq_hz.min()), DIGITS),
+                     "freq_max_hz": sig(float(fam.freq_hz.max()), DIGITS), "stable_points": int(np.sum(fam.stable)),
+                     "max_amplitude_m": sig(float(np.max(fam.amplitude_m)), DIGITS),
+                     "max_abs_mu": sig(float(np.max(np.abs(fam.multipliers[:, 0]))), 6),
+                     "n_bifurcations": len(fam.bifurcations), "status": fam.status, "wall_s": round(fam.wall_s, 3),
+                     "notes": "; ".join(fam.notes)})
+    return rows
 
 
 def _stability_row(result: FRCResult, P: float, br, r: PointCheck) -> dict:
@@ -259,6 +333,102 @@ def _backbone_rows(result: FRCResult) -> list[dict]:
     return rows
 
 
+# -- the drawn curve of each level -----------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class DrawnCurve:
+    """The exact families of one level as one curve to draw (each family's pieces kept apart): the
+    fields :func:`_plot_frc` reads of an HB curve."""
+
+    freq_hz: np.ndarray
+    amplitude_m: np.ndarray
+    stable: np.ndarray
+    segment: np.ndarray
+    label: str
+
+    def pieces(self) -> list[np.ndarray]:
+        return [np.flatnonzero(self.segment == k) for k in np.unique(self.segment)]
+
+
+def drawn_curves(result: FRCResult) -> dict:
+    """P -> the drawn curve of each level: the HB curve, or its exact families (:class:`DrawnCurve`)."""
+    out = {}
+    for P, br in result.curves.items():
+        cc = result.converged.get(P)
+        if cc is None or cc.exact is None:
+            out[P] = br
+            continue
+        fams = cc.exact.families
+        seg = np.concatenate([1000 * k + f.segment for k, f in enumerate(fams)])
+        out[P] = DrawnCurve(np.concatenate([f.freq_hz for f in fams]), np.concatenate([f.amplitude_m for f in fams]),
+                            np.concatenate([f.stable for f in fams]), seg,
+                            f"exact flow ({len(fams)} famil{'y' if len(fams) == 1 else 'ies'})")
+    return out
+
+
+def _label(br) -> str:
+    """The legend of a drawn curve."""
+    return getattr(br, "label", None) or f"HB H={br.H}"
+
+
+def _converged_stats(result: FRCResult) -> dict:
+    """Per level: what is drawn and why, and the exact families' sizes and times."""
+    out = {}
+    for P, cc in result.converged.items():
+        d = {"method": cc.method, "reason": cc.reason, "hb_change": None if not np.isfinite(cc.hb_change)
+             else sig(cc.hb_change, 3), "wall_s": round(cc.wall_s, 3)}
+        if cc.exact is not None:
+            d["families"] = [{"kind": f.kind, "points": len(f.freq_hz), "status": f.status,
+                              "wall_s": round(f.wall_s, 3)} for f in cc.exact.families]
+            d["switches_followed"] = sum(r["child"] >= 0 for r in cc.exact.switches)
+            d["switches_not_followed"] = sum(r["child"] < 0 for r in cc.exact.switches)
+        out[f"{P:g} N"] = d
+    return out
+
+
+def frc_markdown(result: FRCResult) -> str:
+    """frc.md: per level, which curve is drawn and why, its families, bifurcations and branch switches."""
+    spec = result.spec
+    lines = [f"# Forced response: {result.scene_name}", "",
+             f"Load P cos(2 pi f t) at {spec.point}, {spec.freq_min_hz:g}-{spec.freq_max_hz:g} Hz. The drawn curve "
+             f"of each level (`[frc] curve = \"{spec.curve}\"`) is HB at H = {spec.harmonics} where its amplitudes "
+             f"move by at most {spec.hb_converged_tol:g} from the next lower H, else the periodic orbits of the exact "
+             "flow continued by multiple shooting (no harmonics), with their Floquet multipliers (frc.csv: `drawn`, "
+             "`method`, `family`).", ""]
+    for P in spec.levels_N:
+        cc = result.converged.get(P)
+        if cc is None:
+            continue
+        lines += [f"## {P:g} N: {'exact flow (shooting)' if cc.method == 'shooting' else f'HB, H = {cc.hb_H}'}", "",
+                  cc.reason + ".", ""]
+        ex = cc.exact
+        if ex is None:
+            continue
+        lines += ["| family | kind | period | born at | points | f [Hz] | stable points | max amplitude [m] | "
+                  "max abs mu | ended |", "|---|---|---|---|---|---|---|---|---|---|"]
+        for k, f in enumerate(ex.families):
+            born = "f_min" if f.parent is None else f"{f.parent[2]} of family {f.parent[0]} at " \
+                f"{ex.families[f.parent[0]].freq_hz[f.parent[1]]:.5g} Hz"
+            lines.append(f"| {k} | {f.kind} | {f.periods} T | {born} | {len(f.freq_hz)} | {f.freq_hz.min():.5g}-"
+                         f"{f.freq_hz.max():.5g} | {int(np.sum(f.stable))} | {np.max(f.amplitude_m):.4g} | "
+                         f"{np.max(np.abs(f.multipliers[:, 0])):.3g} | {f.status} |")
+        kinds = {}
+        for f in ex.families:
+            for _, kd in f.bifurcations:
+                kinds[kd] = kinds.get(kd, 0) + 1
+        followed = [r for r in ex.switches if r["child"] >= 0]
+        skipped = [r for r in ex.switches if r["child"] < 0]
+        lines += ["", "Bifurcations: " + (", ".join(f"{n} {kd}" for kd, n in sorted(kinds.items())) or "none") + ".",
+                  f"Branch points (pitchforks, period doublings) met: {len(ex.switches)}; switched onto a new family: "
+                  f"{len(followed)}; not followed: {len(skipped)}"
+                  + (" (" + "; ".join(sorted({r['note'].split(':')[0] for r in skipped if r['note']})) + ")"
+                     if skipped else "") + ". Each is a row of frc_bifurcations.csv.",
+                  f"Run time {ex.wall_s:.1f} s (main family {ex.families[0].wall_s:.1f} s).", ""]
+        for note in [n for f in ex.families for n in f.notes][:10]:
+            lines.append(f"- {note}")
+        lines.append("")
+    return "\n".join(lines)
+
+
 # -- the figures -------------------------------------------------------------------------------------
 def _plot_frc(path, curves, sweeps, bb, names, spec, title, events) -> None:
     """frc.png: top row, every output point over the band (log-log); bottom row, the jump region
@@ -282,7 +452,7 @@ def _plot_frc(path, curves, sweeps, bb, names, spec, title, events) -> None:
                     continue
                 for idx in br.pieces():
                     a, fr, stb = br.amplitude_m[idx, c], br.freq_hz[idx], br.stable[idx]
-                    ax.plot(fr, np.where(stb, a, np.nan), "-", color=col, lw=1.1, label=f"{P:g} N, HB H={br.H}")
+                    ax.plot(fr, np.where(stb, a, np.nan), "-", color=col, lw=1.1, label=f"{P:g} N, {_label(br)}")
                     uns = ~stb
                     edge = uns | np.roll(uns, 1) | np.roll(uns, -1)  # join the dashed pieces to the solid ones
                     ax.plot(fr, np.where(edge, a, np.nan), "--", color=col, lw=0.7)
@@ -393,4 +563,4 @@ def _plot_convergence(path, conv_rows, timing_rows, Pc) -> None:
     plt.close(fig)
 
 
-__all__ = ["ConvergenceRun", "FRCResult", "PointCheck", "write"]
+__all__ = ["ConvergenceRun", "DrawnCurve", "FRCResult", "PointCheck", "drawn_curves", "frc_markdown", "write"]

@@ -71,6 +71,7 @@ SYMMETRY_TOL = 1e-7  # relative: an orbit whose symmetry-breaking part is below 
 REAL_TOL = 1e-6  # relative imaginary part below which an eigenvalue is real
 CORRECTOR_TOL = 1e-8  # last Newton step of a corrector, relative (the point is then within ~1e-16 of the curve)
 CLOSE_STEPS, CLOSE_DIST = 20, 1e-3  # a family back within CLOSE_DIST of its first point after CLOSE_STEPS is closed
+START_HARMONICS = 15  # harmonics of the balance that guesses the first orbit
 BISECTIONS = 12  # bisections locating a crossing between two points (the bracket shrinks 4096 times)
 SWITCH_H = (1e-3, 3e-4, 3e-3)  # offsets tried along the critical eigenvector (scaled unknowns), in order
 FAMILY_KINDS = ("main", "asymmetric", "half_wave_broken", "asymmetric_half_wave", "period_2")
@@ -665,53 +666,83 @@ def _switch(parent_res: ShootingResidual, analyser: _Analyser, y_bp: np.ndarray,
 
 
 def _breaking(res: ShootingResidual, kind: str, sym: Symmetry):
-    """Y -> the norm of the symmetry-breaking part of the scaled nodes of a family born at a
-    ``kind`` crossing (zero on the parent family): the mirror-antisymmetric part, the
-    half-wave-symmetric part, both, or the difference between the two load periods."""
+    """Y -> the symmetry-breaking part of the scaled nodes of a family born at a ``kind`` crossing
+    (zero on the parent family), flattened: the mirror-antisymmetric part, the half-wave-symmetric
+    part, both, or the difference between the two load periods of a period-2 orbit."""
     S, N = res.segments, 2 * res.n
     Rs = sym.state_mirror()
 
-    def mirror(Yn):
-        return 0.5 * float(np.linalg.norm(Yn - Yn @ Rs.T))
-
-    def half(Yn):
-        return 0.5 * float(np.linalg.norm(Yn[S // 2:] + Yn[: S // 2]))
-
-    def measure(y):
+    def part(y):
         Yn = y[: res.size].reshape(S, N)
         if kind == "pitchfork_mirror":
-            return mirror(Yn)
+            return 0.5 * (Yn - Yn @ Rs.T).ravel()
         if kind == "pitchfork_half_wave":
-            return half(Yn)
+            return 0.5 * (Yn[S // 2:] + Yn[: S // 2]).ravel()
         if kind == "pitchfork_mirror_half_wave":
-            return max(mirror(Yn), half(Yn))
-        return 0.5 * float(np.linalg.norm(Yn[S // 2:] - Yn[: S // 2]))  # period doubling: S = 2 S_parent
+            return np.concatenate([0.5 * (Yn - Yn @ Rs.T).ravel(), 0.5 * (Yn[S // 2:] + Yn[: S // 2]).ravel()])
+        return 0.5 * (Yn[S // 2:] - Yn[: S // 2]).ravel()  # period doubling: S = 2 S_parent
 
-    return measure
+    return part
 
 
 class _Watch:
     """The stop of a switched family: it rejoined its parent (its symmetry-breaking part, having
-    doubled, fell below a quarter of its start) or closed on itself (back within CLOSE_DIST of its
+    doubled, fell below a quarter of its start, or reversed between two points: the family passed
+    through the parent at another branch point) or closed on itself (back within CLOSE_DIST of its
     first point after CLOSE_STEPS points)."""
 
-    def __init__(self, measure, y0: np.ndarray) -> None:
-        self.measure = measure
+    def __init__(self, part, y0: np.ndarray) -> None:
+        self.part = part
         self.y0 = y0
-        self.b0 = measure(y0)
+        self.prev = part(y0)
+        self.b0 = float(np.linalg.norm(self.prev))
         self.peak = self.b0
         self.steps = 0
         self.reason = ""
 
     def __call__(self, y: np.ndarray) -> bool:
         self.steps += 1
-        b = self.measure(y)
-        self.peak = max(self.peak, b)
-        if self.peak > 2.0 * self.b0 and b < 0.25 * self.b0:
+        p = self.part(y)
+        b = float(np.linalg.norm(p))
+        if self.peak > 2.0 * self.b0 and (b < 0.25 * self.b0 or float(p @ self.prev) < 0.0):
             self.reason = "rejoined"
         elif self.steps > CLOSE_STEPS and float(np.linalg.norm(y - self.y0)) < CLOSE_DIST:
             self.reason = "closed"
+        self.peak = max(self.peak, b)
+        self.prev = p
         return bool(self.reason)
+
+
+def hb_start(system: GapSystem, load: np.ndarray, amplitude_N: float, freq_hz: float, segments: int,
+             H: int = START_HARMONICS) -> np.ndarray:
+    """(segments, 2n) a guess of the forced orbit at ``freq_hz``: the states of its harmonic balance
+    (odd harmonics if the stops are symmetric, else all; condensed, the stop forces projected
+    exactly; :func:`reduced.periodic.frc._start`, which raises the load gradually where the
+    stops are already closed) at the nodes' phases.
+
+    Parameters
+    ----------
+    system, load, amplitude_N : the gap system, the force direction (n,) and P (N)
+    freq_hz : Hz
+    segments : nodes
+    H : harmonics
+
+    Returns
+    -------
+    ndarray
+        (segments, 2n) states [x; v] at the phases 2 pi k / segments.
+    """
+    from reduced.periodic.exact_hb import default_root_samples
+    from reduced.periodic.forced_balance import ForcedBalance, ForcedResidual
+    from reduced.periodic.forced_stability import hb_states
+    from reduced.periodic.frc import _start, default_x_ref
+
+    odd = find_symmetry(system, load).half_wave
+    fb = ForcedBalance(system, np.asarray(load, float), float(amplitude_N), 0.0, H, default_root_samples(H), odd)
+    w = 2.0 * math.pi * freq_hz
+    res = ForcedResidual(fb, default_x_ref(fb, 0.5 * freq_hz, 2.0 * freq_hz), w)
+    z, w = res.z_omega(_start(res, w))
+    return hb_states(fb.response(z, w), w, segments)
 
 
 # -- the driver -----------------------------------------------------------------------------------
@@ -876,4 +907,5 @@ def _child(fam: OrbitFamily, res: ShootingResidual, an: _Analyser, i: int, kind:
     return (fam_new, res_new, an_new, end), info
 
 
-__all__ = ["ExactFRC", "ExactFRCOptions", "FAMILY_KINDS", "OrbitFamily", "Symmetry", "exact_frc", "find_symmetry"]
+__all__ = ["ExactFRC", "ExactFRCOptions", "FAMILY_KINDS", "OrbitFamily", "Symmetry", "exact_frc", "find_symmetry",
+           "hb_start"]
