@@ -64,6 +64,7 @@ BACKBONE_ENERGY_FACTOR = 4.0  # backbones run to this many times the energy of t
 BACKBONE_DS = 0.01  # continuation step of the backbones (log10 amplitude): polyline error ~1e-7 at the peaks
 ORBIT_SAMPLES = 2048  # samples of one period of an exact orbit for its amplitude
 HB_CHECK_POINTS = 200  # points of an HB curve compared with the next lower H at most
+START_GUESSES = 12  # HB orbits tried as guesses of the first exact orbit (f_min first)
 
 
 def compute(scene: Scene, progress: bool, workdir=None) -> FRCResult:
@@ -243,8 +244,10 @@ def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: 
                            family_steps=spec.family_steps, max_steps=spec.shooting_steps,
                            deadline_s=spec.switching_max_s)
     try:
-        if ok:
-            start = hb_states(br.X[0], float(br.omega[0]), S)
+        if ok:  # the HB orbits at f_min, then at points spread over the curve (where HB is far from exact)
+            idx = np.concatenate([[0], _evenly(len(br.freq_hz), START_GUESSES)[1:]])
+            start = [(float(br.freq_hz[i]), hb_states(br.X[i], float(br.omega[i]), S)) for i in idx
+                     if spec.freq_min_hz <= br.freq_hz[i] <= spec.freq_max_hz]
             x_ref = br.x_ref
         else:
             start = hb_start(system, b, P, spec.freq_min_hz, S)

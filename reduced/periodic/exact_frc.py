@@ -70,7 +70,9 @@ from reduced.periodic.shooting import ShootingError
 SYMMETRY_TOL = 1e-7  # relative: an orbit whose symmetry-breaking part is below this has the symmetry
 REAL_TOL = 1e-6  # relative imaginary part below which an eigenvalue is real
 CORRECTOR_TOL = 1e-8  # last Newton step of a corrector, relative (the point is then within ~1e-16 of the curve)
+RETRACE_DIST, RETRACE_ARC, RETRACE_BATCH = 0.03, 1.0, 500  # _Retrace: distance, arclength, tree rebuilds
 CLOSE_STEPS, CLOSE_DIST = 20, 1e-3  # a family back within CLOSE_DIST of its first point after CLOSE_STEPS is closed
+LOAD_STEPS = 400  # continuation steps in the load of the first orbit at most
 START_HARMONICS = 15  # harmonics of the balance that guesses the first orbit
 BISECTIONS = 12  # bisections locating a crossing between two points (the bracket shrinks 4096 times)
 SWITCH_H = (1e-3, 3e-4, 3e-3)  # offsets tried along the critical eigenvector (scaled unknowns), in order
@@ -108,6 +110,12 @@ class ExactFRCOptions:
         Generations of switching (1: families off the main curve only).
     deadline_s : float
         s of wall time after which no new family is started (the main one always runs).
+    velocity_scale : {'fastest', 'omega'}
+        Unit of the nodes' velocities in the continuation's unknowns (times x_ref): the angular
+        frequency of the fastest mode with every stop open ('fastest'), or the load's (Omega).
+        With Omega the ringing of a fast mode between impacts, whose phase at the nodes spins
+        as Omega changes, dominates a step's length (its velocity is Omega_mode / Omega times its
+        displacement): the curve takes several times more points for the same resolution.
     """
 
     segments: int = SEGMENTS
@@ -123,6 +131,7 @@ class ExactFRCOptions:
     family_steps: int = 4000
     depth: int = 1
     deadline_s: float = math.inf
+    velocity_scale: str = "fastest"
 
     def __post_init__(self) -> None:
         _check.integer("segments", self.segments, lo=2)
@@ -137,6 +146,7 @@ class ExactFRCOptions:
         _check.integer("max_families", self.max_families, lo=0)
         _check.integer("depth", self.depth, lo=0)
         _check.flag("branch_switching", self.branch_switching)
+        _check.choice("velocity_scale", self.velocity_scale, ("fastest", "omega"))
 
     def continuation(self, max_steps: int) -> ContinuationOptions:
         # tol bounds the last Newton step: the error after it is ~ its square (quadratic convergence)
@@ -416,6 +426,44 @@ class _Budget:
         return self.spent < self.deadline_s
 
 
+class _Retrace:
+    """Whether a family has come back onto its own path, going the same way (it is cycling around a
+    closed loop, or a step jumped back onto a stretch already traced): a point within
+    ``RETRACE_DIST`` of an earlier point more than ``RETRACE_ARC`` of arclength behind, with
+    tangents within 25 degrees. Candidates come from a k-d tree of a few fixed random projections
+    of the points (rebuilt every RETRACE_BATCH points; the newer ones are checked directly)."""
+
+    def __init__(self, dim: int) -> None:
+        rng = np.random.default_rng(0)
+        self.Pm = rng.standard_normal((dim, 6)) / math.sqrt(dim)
+        self.Y = np.empty((1024, dim))
+        self.T = np.empty((1024, dim))
+        self.s = np.empty(1024)
+        self.k = 0
+        self.tree, self.n_tree = None, 0
+
+    def add(self, y: np.ndarray, t: np.ndarray) -> bool:
+        """Record the point y with its tangent t; True if it retraces the path (see the class)."""
+        from scipy.spatial import cKDTree
+
+        k = self.k
+        s = self.s[k - 1] + float(np.linalg.norm(y - self.Y[k - 1])) if k else 0.0
+        cand = np.arange(self.n_tree, k)
+        if self.tree is not None:
+            cand = np.concatenate([cand, np.array(self.tree.query_ball_point(y @ self.Pm, RETRACE_DIST), int)])
+        cand = cand[s - self.s[cand] > RETRACE_ARC]
+        hit = bool(cand.size) and bool(np.any((np.linalg.norm(self.Y[cand] - y, axis=1) < RETRACE_DIST)
+                                              & (self.T[cand] @ t > 0.9)))
+        if k == self.Y.shape[0]:
+            self.Y, self.T = np.vstack([self.Y, np.empty_like(self.Y)]), np.vstack([self.T, np.empty_like(self.T)])
+            self.s = np.concatenate([self.s, np.empty_like(self.s)])
+        self.Y[k], self.T[k], self.s[k] = y, t, s
+        self.k = k + 1
+        if self.k - self.n_tree >= RETRACE_BATCH:
+            self.tree, self.n_tree = cKDTree(self.Y[: self.k] @ self.Pm), self.k
+        return hit
+
+
 def _follow(res: ShootingResidual, y0: np.ndarray, param: int, direction: float, opts: ExactFRCOptions,
             max_steps: int, band: tuple[float, float], analyser: _Analyser, stop_extra=None, progress=None):
     """Continue a family from y0 (a solution): the points and their data, piece by piece (a piece
@@ -425,7 +473,16 @@ def _follow(res: ShootingResidual, y0: np.ndarray, param: int, direction: float,
     lo, hi = band
     cos_max = math.cos(math.radians(opts.max_angle_deg))
 
+    retrace = _Retrace(res.size + 1)
+    last = {}
+
     def stop(y):
+        t = last.get("t") if last.get("y") is not None and np.array_equal(last["y"], y) else None
+        if t is None:
+            t = tangent(res(y)[1])
+        if retrace.add(y, t):
+            last["retraced"] = True
+            return True
         return (not lo - 1e-12 <= y[i_w] <= hi + 1e-12) or (stop_extra is not None and stop_extra(y))
 
     def reject(yo, yn):
@@ -434,6 +491,7 @@ def _follow(res: ShootingResidual, y0: np.ndarray, param: int, direction: float,
         if dn == 0.0:
             return False
         t = tangent(res(yn)[1], d / dn)
+        last["y"], last["t"] = yn, t
         return abs(float(t @ d)) < cos_max * dn  # landed on a neighbouring sheet
 
     def corner_coords(y, t):
@@ -456,13 +514,17 @@ def _follow(res: ShootingResidual, y0: np.ndarray, param: int, direction: float,
                                  callback=analyser.point, reject=reject, progress=prog, corner_coords=corner_coords)
         finally:
             res.guard = None
+        if last.pop("retraced", False):
+            br.status = "retraced"
+            notes.append(f"came back onto its own path at {res.omega(br.y[-1]) / (2 * math.pi):.6g} Hz (a closed "
+                         "loop, or a step that jumped back onto a stretch already traced): stopped there")
         Ys.append(br.y)
         data += br.data
         folds += [i + total for i, c in br.folds if c == i_w]
         seg.append(np.full(len(br.y), k))
         statuses.append(br.status)
         total += len(br.y)
-        if br.status != "min_step" or stop(br.y[-1]):
+        if br.status != "min_step" or not lo - 1e-12 <= br.y[-1][i_w] <= hi + 1e-12:
             break
         restart = _restart(res, br.y[-1], br.tangent[-1], br.y[max(len(br.y) - 5, 0)])
         if restart is None:
@@ -622,11 +684,11 @@ def _switch(parent_res: ShootingResidual, analyser: _Analyser, y_bp: np.ndarray,
     nodes, w = parent_res.nodes(y_bp)
     S = parent_res.segments
     if kind == "period_doubling":
-        res = ShootingResidual(parent_res.flow, 2 * S, 2, parent_res.x_ref, parent_res.omega_ref)
+        res = ShootingResidual(parent_res.flow, 2 * S, 2, parent_res.x_ref, parent_res.omega_ref, parent_res.omega_v)
         nodes = np.concatenate([nodes, nodes])
         seq = list(Js) * 2
     else:
-        res = ShootingResidual(parent_res.flow, S, 1, parent_res.x_ref, parent_res.omega_ref)
+        res = ShootingResidual(parent_res.flow, S, 1, parent_res.x_ref, parent_res.omega_ref, parent_res.omega_v)
         seq = list(Js)
     dY = [e]
     for Jk in seq[:-1]:
@@ -745,23 +807,103 @@ def hb_start(system: GapSystem, load: np.ndarray, amplitude_N: float, freq_hz: f
     return hb_states(fb.response(z, w), w, segments)
 
 
+class _LoadResidual:
+    """R of a shooting residual at its fixed frequency with the load continued instead:
+    y = [Y nodes, ln(P / P_0)] (dR/d ln P by forward differences: only the start uses it)."""
+
+    def __init__(self, res: ShootingResidual, omega: float, P0: float) -> None:
+        self.res, self.P0 = res, P0
+        self.lw = math.log(omega / res.omega_ref)
+        self.size = res.size
+
+    def _at(self, y: np.ndarray, lp: float):
+        self.res.flow.amplitude_N = self.P0 * math.exp(lp)
+        self.res.forget()
+        return self.res(np.append(y[: self.size], self.lw))
+
+    def __call__(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        h = 1e-7
+        Rp, _ = self._at(y, y[self.size] + h)
+        R, J = self._at(y, y[self.size])
+        Jy = J.copy()
+        Jy[:, self.size] = (Rp - R) / h
+        return R, Jy
+
+
+def first_orbit(res: ShootingResidual, guess: np.ndarray, omega: float) -> np.ndarray:
+    """The scaled point of the orbit at Omega: Newton from the guessed nodes, or, where that fails
+    (hard contact at the start: the HB guess of the three-mass model at 10 N, 10 Hz is too far),
+    the orbit continued in the load (pseudo-arclength in ln P, through its folds and grazings)
+    from the linear orbit at a load that closes no stop up to P.
+
+    Parameters
+    ----------
+    res : the shooting residual (its flow's load amplitude is P)
+    guess : (S, 2n) guessed nodes
+    omega : rad/s
+
+    Returns
+    -------
+    ndarray
+        The scaled point Y. Raises ShootingError if neither way finds the orbit.
+    """
+    try:
+        return shoot_at(res, guess, omega)
+    except ShootingError as exc:
+        first = exc
+    flow = res.flow
+    P = flow.amplitude_N
+    sy = flow.system
+    t0, _ = res.times(omega)
+    Y0, _ = flow.particular(omega)
+    # state 0 (no stop closed): the linear orbit per newton at the nodes
+    lin = (Y0[0, :, 0][None, :] * np.exp(1j * (omega * t0 + flow.phase))[:, None]).real
+    reach = float(np.max(np.abs(lin[:, : sy.n] @ sy.B.T) / np.maximum(np.abs(sy.offset), 1e-300)))
+    P0 = min(0.5 / max(reach, 1e-300), P)  # N: a load at which no stop closes (lin is per newton)
+    lr = _LoadResidual(res, omega, P0)
+    y0 = np.append(res.point(lin * P0, omega)[: res.size], 0.0)
+    top = math.log(P / P0)
+    try:
+        br = continue_branch(lr, y0, param=res.size, direction=1.0,
+                             options=ContinuationOptions(ds=0.05, ds_max=0.2, ds_min=1e-9, max_steps=LOAD_STEPS),
+                             stop=lambda y: y[res.size] >= top)
+        if br.status != "stop":
+            raise first
+        ya, yb = br.y[-2], br.y[-1]
+        th = (top - ya[res.size]) / (yb[res.size] - ya[res.size])
+        nodes = res.nodes(np.append(((1 - th) * ya + th * yb)[: res.size], math.log(omega / res.omega_ref)))[0]
+        flow.amplitude_N = P
+        res.forget()
+        return shoot_at(res, nodes, omega)
+    except (ContinuationError, ShootingError):
+        raise first from None
+    finally:
+        flow.amplitude_N = P
+        res.forget()
+
+
 # -- the driver -----------------------------------------------------------------------------------
 def exact_frc(system: GapSystem, load: np.ndarray, amplitude_N: float, f_min_hz: float, f_max_hz: float,
-              start_nodes: np.ndarray, *, point_rows: np.ndarray | None = None, point_names: tuple | None = None,
+              starts, *, point_rows: np.ndarray | None = None, point_names: tuple | None = None,
               x_ref: float, options: ExactFRCOptions | None = None, mirror: np.ndarray | None = None,
               progress=None) -> ExactFRC:
     """The forced-response families of ``system`` under load (n,) x amplitude_N cos(Omega t) on its
-    exact flow, from f_min to f_max (module docstring).
+    exact flow over [f_min, f_max] (module docstring).
+
+    The main family is continued from the first guess of ``starts`` whose orbit is found
+    (:func:`first_orbit`), down to f_min and up to f_max; then, as the options say, the families
+    born at its pitchforks and period doublings.
 
     Parameters
     ----------
     system : the gap system (damped)
     load : (n,) force direction b
     amplitude_N : N, P > 0
-    f_min_hz, f_max_hz : Hz, the band; the main family starts at f_min
-    start_nodes : (S', 2n) a guess of the orbit at f_min at S' equally spaced phases (e.g. the HB
-        orbit's states, :func:`reduced.periodic.forced_stability.hb_states`); S' is taken as the
-        number of segments of the main family
+    f_min_hz, f_max_hz : Hz, the band
+    starts : (S, 2n) a guess of the orbit at f_min at S = ``options.segments`` equally spaced phases
+        (e.g. the HB orbit's states, :func:`reduced.periodic.forced_stability.hb_states`), or a
+        sequence of (freq_hz, such a guess) tried in order; the linear orbit at f_max is tried
+        last where it closes no stop
     point_rows, point_names : (p, n) output points (default: the DOFs)
     x_ref : m, scale of the displacements
     options : :class:`ExactFRCOptions`
@@ -773,7 +915,7 @@ def exact_frc(system: GapSystem, load: np.ndarray, amplitude_N: float, f_min_hz:
     -------
     ExactFRC
         The families with stability, bifurcations and the switches made. Raises
-        :class:`reduced.periodic.shooting.ShootingError` if no orbit is found at f_min.
+        :class:`reduced.periodic.shooting.ShootingError` if no guess leads to an orbit.
     """
     _check.gap_system(system)
     b = _check.vector("load", load, system.n)
@@ -786,23 +928,50 @@ def exact_frc(system: GapSystem, load: np.ndarray, amplitude_N: float, f_min_hz:
     rows = np.eye(system.n) if point_rows is None else np.atleast_2d(np.asarray(point_rows, float))
     names = tuple(point_names) if point_names is not None else tuple(system.dof_names)
     x_ref = _check.positive("x_ref", x_ref, "m")
-    start_nodes = np.atleast_2d(np.asarray(start_nodes, float))
+    if isinstance(starts, np.ndarray):
+        starts = [(f0, starts)]
+    starts = [(float(f), np.atleast_2d(np.asarray(g, float))) for f, g in starts]
+    for f, g in starts:
+        if g.shape != (opts.segments, 2 * system.n) or not f0 <= f <= f1:
+            raise _check.InvalidArgument(f"a start must be a frequency in the band and ({opts.segments}, "
+                                         f"{2 * system.n}) nodes, got {f!r} Hz and {g.shape}")
     with single_thread_blas():
-        return _exact_frc(system, b, P, f0, f1, start_nodes, rows, names, x_ref, opts,
+        return _exact_frc(system, b, P, f0, f1, starts, rows, names, x_ref, opts,
                           find_symmetry(system, b, mirror), progress)
 
 
-def _exact_frc(system, b, P, f0, f1, start_nodes, rows, names, x_ref, opts, sym, progress) -> ExactFRC:
+def _main_start(res: ShootingResidual, starts: list, f1: float) -> tuple[np.ndarray, list[str]]:
+    """(the scaled point of the first orbit found from ``starts``, then the linear orbit at f1 where
+    it closes no stop; notes on the guesses that failed). Raises ShootingError if none."""
+    flow = res.flow
+    w1 = 2 * math.pi * f1
+    t0, _ = res.times(w1)
+    lin = (flow.particular(w1)[0][0, :, 0][None, :] * np.exp(1j * (w1 * t0 + flow.phase))[:, None]).real
+    lin = lin * flow.amplitude_N
+    sy = flow.system
+    cand = list(starts)
+    if np.all(np.max(np.abs(lin[:, : sy.n] @ sy.B.T), axis=0) < np.abs(sy.offset)):
+        cand.append((f1, lin))
+    notes = []
+    for k, (f, g) in enumerate(cand):
+        try:
+            return (first_orbit(res, g, 2 * math.pi * f) if k == 0 else shoot_at(res, g, 2 * math.pi * f)), notes
+        except ShootingError as exc:
+            notes.append(f"no orbit from the guess at {f:.6g} Hz ({' '.join(str(exc).split())[:80]})")
+    raise ShootingError("no periodic orbit from any guess: " + "; ".join(notes))
+
+
+def _exact_frc(system, b, P, f0, f1, starts, rows, names, x_ref, opts, sym, progress) -> ExactFRC:
     budget = _Budget(opts.deadline_s)
     flow = ForcedFlow(system, b, P)
     w0, w1 = 2 * math.pi * f0, 2 * math.pi * f1
     S = opts.segments
-    res = ShootingResidual(flow, S, 1, x_ref, w1)
+    omega_v = None
+    if opts.velocity_scale == "fastest":
+        omega_v = float(np.sqrt(np.max(np.linalg.eigvals(np.linalg.solve(system.M, system.K)).real)))
+    res = ShootingResidual(flow, S, 1, x_ref, w1, omega_v)
     band = (math.log(w0 / w1), 0.0)
-    guess = start_nodes
-    if guess.shape[0] != S:
-        raise _check.InvalidArgument(f"start_nodes must have {S} rows (options.segments), got {guess.shape[0]}")
-    y0 = shoot_at(res, guess, w0)
+    y0, start_notes = _main_start(res, starts, f1)
     nodes0, _ = res.nodes(y0)
     probe = _Analyser(res, sym, False, False, rows)
     a0, hw0 = probe.measures(nodes0)
@@ -814,12 +983,43 @@ def _exact_frc(system, b, P, f0, f1, start_nodes, rows, names, x_ref, opts, sym,
             progress(min(max((y[res.size] - band[0]) / (band[1] - band[0]), 0.0), 1.0))
 
     t0 = time.perf_counter()
-    Y, data, folds, seg, st, notes = _follow(res, y0, res.size, 1.0, opts, opts.max_steps, band, an, progress=prog)
+    parts = []
+    for direction in (-1.0, 1.0):  # down to f_min, then up to f_max, from the first orbit
+        if direction < 0 and y0[res.size] <= band[0] + 1e-12 or direction > 0 and y0[res.size] >= band[1] - 1e-12:
+            continue
+        parts.append((direction, _follow(res, y0, res.size, direction, opts, opts.max_steps, band, an,
+                                         progress=prog)))
+    Y, data, folds, seg, st, notes = _join(parts)
+    notes = start_notes + notes
     families = [_family("main", 1, res, Y, data, folds, seg, st, notes, None, time.perf_counter() - t0, an)]
     switches = []
     if opts.branch_switching and opts.max_families > 0:
         _switch_all(families, switches, {0: (res, an)}, opts, band, rows, sym, budget)
     return ExactFRC(P, names, rows, families, switches, sym, opts, x_ref, budget.spent)
+
+
+def _join(parts: list) -> tuple:
+    """One family from the runs down and up from the same first point: the run down reversed (its
+    first point, shared, dropped), then the run up; indices and pieces renumbered so that the first
+    point's piece is one piece."""
+    if len(parts) == 1 and parts[0][0] > 0:
+        return parts[0][1]
+    down = dict(parts)[-1.0]
+    Yd, dd, fd, sd, std, nd = down
+    top = int(sd.max())
+    Y, data, seg = Yd[::-1], dd[::-1], top - sd[::-1]
+    folds = [len(Yd) - 1 - i for i in fd]
+    st, notes = list(std), list(nd)
+    if len(parts) == 2:
+        Yu, du, fu, su, stu, nu = parts[1][1]
+        n0 = len(Yd) - 1
+        Y = np.concatenate([Y[:-1], Yu])
+        data = data[:-1] + du
+        seg = np.concatenate([seg[:-1], su + top])
+        folds += [n0 + i for i in fu]
+        st += stu
+        notes += nu
+    return Y, data, sorted(folds), seg, st, notes
 
 
 def _switch_all(families, switches, residuals, opts, band, rows, sym, budget) -> None:
@@ -908,4 +1108,4 @@ def _child(fam: OrbitFamily, res: ShootingResidual, an: _Analyser, i: int, kind:
 
 
 __all__ = ["ExactFRC", "ExactFRCOptions", "FAMILY_KINDS", "OrbitFamily", "Symmetry", "exact_frc", "find_symmetry",
-           "hb_start"]
+           "first_orbit", "hb_start"]

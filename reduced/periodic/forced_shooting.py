@@ -286,9 +286,10 @@ def _vector_field(Minv, K, C, B, kst, offset, side, b, p, y, out):
 
 
 @nb.njit(cache=True)
-def _residual_kernel(lam, V, Vinv, yp, valid, B, offset, side, kst, Minv, K, C, bvec, amp, phase, Yv, d, h, hmin,
-                     omega, fU, fb, seg_state, seg_tau, R, J, Js, n_events, st_state, st_tau, st_n):
-    """R and dR/dY (:class:`ShootingResidual`) at the scaled nodes Yv (S, 2n), D sqrt(S) = d (2n,),
+def _residual_kernel(lam, V, Vinv, yp, valid, B, offset, side, kst, Minv, K, C, bvec, amp, phase, Yv, d, dv, h,
+                     hmin, omega, fU, fb, seg_state, seg_tau, R, J, Js, n_events, st_state, st_tau, st_n):
+    """R and dR/dY (:class:`ShootingResidual`) at the scaled nodes Yv (S, 2n), D sqrt(S) = d (2n,) (dv:
+    Omega dD/dOmega / D of the velocity rows, 1 if they scale with Omega, else 0),
     segment length h and frequency omega, in place, with the segments' monodromies Js and events,
     and each node's contact-state stretches (st_state, st_tau, st_n; st_n[k] = -1 if more than fit).
     Returns (0, -1) or (status < 0, the node whose march failed)."""
@@ -347,10 +348,10 @@ def _residual_kernel(lam, V, Vinv, yp, valid, B, offset, side, kst, Minv, K, C, 
         for r in range(N):
             acc = omega * z[r] - f1[r] * (t0k + h)
             for c in range(N):
-                u = f0[c] * t0k + (Yv[k, c] * d[c] if c >= n else 0.0)
+                u = f0[c] * t0k + (dv * Yv[k, c] * d[c] if c >= n else 0.0)
                 acc += Jk[r, c] * u
             if r >= n:
-                acc -= y[r]
+                acc -= dv * y[r]
             J[o + r, M] = acc / d[r]
     return 0, -1
 
@@ -539,9 +540,10 @@ class ForcedFlow:
             out = self._Y[omega] = (Y, Yd)
         return out
 
-    def residual(self, Yv: np.ndarray, d: np.ndarray, h: float, omega: float):
+    def residual(self, Yv: np.ndarray, d: np.ndarray, h: float, omega: float, dv: float = 1.0):
         """(R (2nS,), dR/dY (2nS, 2nS + 1), segment monodromies (S, 2n, 2n), events per segment (S,))
-        of :class:`ShootingResidual` at the scaled nodes Yv (S, 2n) with scales d (2n,), in one numba call.
+        of :class:`ShootingResidual` at the scaled nodes Yv (S, 2n) with scales d (2n,) (dv: 1 if the velocity
+        scales grow with Omega, 0 if fixed), in one numba call.
 
         Raises
         ------
@@ -558,7 +560,8 @@ class ForcedFlow:
         stretches = (np.empty((S, MAX_STRETCHES), np.int64), np.empty((S, MAX_STRETCHES)), np.empty(S, np.int64))
         status, k = call_numba_kernel(_residual_kernel, tb.lam, tb.V, tb.Vinv, tb.yp, tb.valid, sy.B, sy.offset,
                                       sy.side, sy.k, self._Minv, sy.K, sy.C, self.b, self.amplitude_N, self.phase, Yv,
-                                      np.ascontiguousarray(d, dtype=float), float(h), self.hmin, float(omega), self._U,
+                                      np.ascontiguousarray(d, dtype=float), float(dv), float(h), self.hmin,
+                                      float(omega), self._U,
                                       self._fb, self._seg_state, self._seg_tau, R, J, Js, n_ev, *stretches)
         if status != 0:
             raise ShootingError(f"the exact flow failed from node {k} at {omega / (2 * math.pi):.6g} Hz: "
@@ -680,6 +683,7 @@ class ShootingResidual:
     periods: int
     x_ref: float
     omega_ref: float
+    omega_v: float | None = None  # rad/s, fixed velocity scale (None: Omega)
     _memo: dict = field(default_factory=dict, repr=False)
     _events: dict = field(default_factory=dict, repr=False)
     _segments: tuple | None = field(default=None, repr=False)
@@ -694,11 +698,17 @@ class ShootingResidual:
         """Unknowns besides the frequency: 2 n S."""
         return 2 * self.n * self.segments
 
+    def velocity_scale(self, omega: float) -> float:
+        """rad/s: the velocities are in units of this times the displacement scale: Omega, or a fixed
+        ``omega_v`` (the fastest mode's: its ringing, spinning with Omega, then weighs what its
+        displacement does in a step's length)."""
+        return omega if self.omega_v is None else self.omega_v
+
     def scale(self, omega: float) -> np.ndarray:
         """(2n,) D sqrt(S): x_ref for displacements, Omega x_ref for velocities, times sqrt(S) so that
         a step's length is the RMS change of the nodes whatever S is."""
         c = math.sqrt(self.segments) * self.x_ref
-        return np.concatenate([np.full(self.n, c), np.full(self.n, omega * c)])
+        return np.concatenate([np.full(self.n, c), np.full(self.n, self.velocity_scale(omega) * c)])
 
     def omega(self, Y: np.ndarray) -> float:
         return float(self.omega_ref * math.exp(Y[self.size]))
@@ -726,7 +736,7 @@ class ShootingResidual:
         w = self.omega(Y)
         _, h = self.times(w)
         R, J, Js, n_ev, st = self.flow.residual(Y[: self.size].reshape(self.segments, 2 * self.n), self.scale(w), h,
-                                                 w)
+                                                 w, 1.0 if self.omega_v is None else 0.0)
         self._memo.clear()
         self._memo[key] = (R, J)
         self._events[key] = int(n_ev.sum())
@@ -748,6 +758,12 @@ class ShootingResidual:
             from reduced.periodic.hb import NewtonError
 
             raise NewtonError("a grazing contact crossed in a long step")
+
+    def forget(self) -> None:
+        """Drop the memoised evaluations (after the flow's load changed)."""
+        self._memo.clear()
+        self._events.clear()
+        self._segments = None
 
     def events(self, Y: np.ndarray) -> int:
         """Contact events over the orbit's period at the point Y (a stop closing or opening): it
