@@ -116,7 +116,14 @@ def render_shapes(fe, shapes: list[tuple[str, np.ndarray]], path: str | Path, co
 
 def panel(mesh, title: str, u: np.ndarray) -> dict:
     """What one panel draws: the shape ``u`` (n_nodes, 3), its scale (:func:`drawing_scale`), ``mag``
-    = |u| / max |u|, and a title with the largest displacement drawn (mm) and each part's largest |u|."""
+    = |u| / max |u|, and a title with the largest displacement drawn (mm) and each part's largest |u|.
+
+    Parameters
+    ----------
+    mesh : the model's mesh (points, hexes, parts)
+    title : the shape's name
+    u : (n_nodes, 3) the shape at the mesh's nodes
+    """
     s = drawing_scale(mesh.points, mesh.hexes, u)
     mag = np.linalg.norm(u, axis=1)
     top = float(mag.max()) or 1.0

@@ -113,12 +113,24 @@ def _save(fig, path: Path, dpi: int = 120) -> None:
 
 
 def fig10(path: Path, rig: VirtualRig, rec: Record, spec) -> None:
-    """``fig10.png``: :func:`draw_fig10` saved."""
+    """``fig10.png``: :func:`draw_fig10` saved.
+
+    Parameters
+    ----------
+    path : the PNG written
+    rig, rec, spec : as :func:`draw_fig10`
+    """
     _save(draw_fig10(rig, rec, spec), path)
 
 
 def closed_samples(rig: VirtualRig, rec: Record) -> np.ndarray:
-    """(N,) bool, a tip gap is closed at the sample (as :func:`bearingshaft.stages.hammer.impacts` counts them)."""
+    """(N,) bool, a tip gap is closed at the sample (as :func:`bearingshaft.stages.hammer.impacts` counts them).
+
+    Parameters
+    ----------
+    rig : the rig that made ``rec`` (its stops)
+    rec : a record (its states ``x``)
+    """
     return np.any(rig.system.penetration(rec.x) > 0, axis=1)
 
 
@@ -275,7 +287,13 @@ def spectrogram_channel(scene: Scene) -> str:
 
 def fig11(path: Path, rig: VirtualRig, rec: Record, scene: Scene, labels: dict, curves: dict,
           gaps_open_s: float) -> None:
-    """``fig11.png``: :func:`draw_fig11` saved."""
+    """``fig11.png``: :func:`draw_fig11` saved.
+
+    Parameters
+    ----------
+    path : the PNG written
+    rig, rec, scene, labels, curves, gaps_open_s : as :func:`draw_fig11`
+    """
     _save(draw_fig11(rig, rec, scene, labels, curves, gaps_open_s), path)
 
 
@@ -283,6 +301,17 @@ def zoom_band_hz(labels: dict) -> float:
     """Hz, the top of Fig. 11's lower panel: the highest pseudo-rigid frequency and ZOOM_HEADROOM of it
     more, rounded up to 10 Hz.
 
+    Parameters
+    ----------
+    labels : {label: (mode index, freq_hz, score)} the pseudo-rigid modes
+
+    Returns
+    -------
+    float
+        Hz.
+
+    Examples
+    --------
     >>> zoom_band_hz({"bounce": (9, 19.6, 1.0), "roll": (11, 33.7, 1.0)}), zoom_band_hz({})
     (50.0, 50.0)
     """
@@ -422,14 +451,33 @@ def levels_csv(path: Path, summary: dict) -> None:
 
 
 def levels_figure(path: Path, rig: VirtualRig, records: dict, summary: dict, scene: Scene) -> None:
-    """``levels.png``: :func:`draw_levels` saved."""
+    """``levels.png``: :func:`draw_levels` saved.
+
+    Parameters
+    ----------
+    path : the PNG written
+    rig, records, summary, scene : as :func:`draw_levels`
+    """
     _save(draw_levels(rig, records, summary, scene), path, dpi=110)
 
 
 def levels_db_range(levels_N, db_range: float = SPECTRO_DB) -> float:
-    """dB, the span of ``levels.png``'s one colour scale: ``db_range`` below the strongest blow's
-    peak, and as much again below the weakest's (a response that grows with the force squared).
+    """dB, the span of ``levels.png``'s one colour scale: ``db_range`` plus 20 log10(strongest /
+    weakest blow), the dB by which a linear response to the weakest blow lies below the strongest's,
+    so that the weakest blow's panel still shows ``db_range`` dB of its own.
 
+    Parameters
+    ----------
+    levels_N : N, the blow levels
+    db_range : dB shown below each blow's own peak
+
+    Returns
+    -------
+    float
+        dB.
+
+    Examples
+    --------
     >>> levels_db_range([20.0, 2000.0], 80.0), levels_db_range([500.0], 80.0)
     (120.0, 80.0)
     """
