@@ -428,7 +428,8 @@ def _log_distance(f: float, A: float, curve, col: int) -> float:
 DESCRIPTION = """Forced-response curves under P cos(2 pi f t) at one point, by harmonic balance continued
 through folds, with stability (monodromy, Hill, shooting), bifurcations, a stepped sine up and
 down by the exact integrator, the error against H and run time, and the backbone check.
-Writes frc.csv, frc.png, frc_harmonics.csv, frc_bifurcations.csv, frc_stability.csv,
+Writes frc.csv, frc.png, frc_receptance.png (the response per newton, m/N), frc_harmonics.csv,
+frc_bifurcations.csv, frc_stability.csv,
 stepped_sine.csv, frc_convergence.csv, frc_convergence_timing.csv and .png, frc_backbone.csv
 and frc_backbone.png."""
 

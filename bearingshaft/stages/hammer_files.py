@@ -34,6 +34,13 @@ from reduced.transient.spectrogram import MAX_FRAMES, curve_in_time, spectrogram
 DIGITS = 6  # significant digits of the science files
 EVENT_DIGITS = 4  # quantities set by where a crossing lands (peak forces, times of contact)
 SPECTRO_DB = 80.0  # dB shown below each spectrogram's peak
+FIG10_SPAN_S = 0.1  # s, Fig. 10's window after the blow's start (then on to the end of a contact in progress)
+FIG10_MARGIN_S = 0.002  # s, open gaps shown after the last contact in Fig. 10's window
+BLOW_THRESHOLD = 1e-3  # the blow: where |hammer| exceeds this fraction of its peak (Fig. 10's inset)
+ZOOM_WINDOW_S = 0.5  # s, Fig. 11's low band: a window whose 2 Hz bins part most pseudo-rigid lines
+ZOOM_MIN_HZ = 50.0  # Hz, the least top of Fig. 11's low band
+ZOOM_HEADROOM = 1.3  # the low band reaches this much above the highest pseudo-rigid frequency (room for labels)
+LABEL_GAP = 0.06  # the names of the pseudo-rigid lines: at least this fraction of the band apart
 
 
 def write(result: VirtualTest | Comparison, writer: StageWriter) -> None:
@@ -66,7 +73,8 @@ def write_virtual_test(result: VirtualTest, writer: StageWriter) -> None:
     scene, rig, nominal = result.scene, result.rig, result.nominal
     write_record(writer, rig, nominal, scene)
     fig10(writer.path("fig10.png"), rig, nominal, scene.hammer)
-    fig11(writer.path("fig11.png"), rig, nominal, scene, result.labels, result.backbones)
+    fig11(writer.path("fig11.png"), rig, nominal, scene, result.labels, result.backbones,
+          result.summary[nominal.level_N]["gaps_open_after_s"])
     levels_csv(writer.path("levels.csv"), result.summary)
     levels_figure(writer.path("levels.png"), rig, result.records, result.summary, scene)
     if result.linear is not None:
@@ -99,32 +107,123 @@ def write_record(writer: StageWriter, rig: VirtualRig, rec: Record, scene: Scene
 
 
 # -- figures ---------------------------------------------------------------------------------
+def _save(fig, path: Path, dpi: int = 120) -> None:
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
 def fig10(path: Path, rig: VirtualRig, rec: Record, spec) -> None:
-    """The hammer force and one tip load cell against time (the paper's Fig. 10).
+    """``fig10.png``: :func:`draw_fig10` saved.
 
     Parameters
     ----------
     path : the PNG written
+    rig, rec, spec : as :func:`draw_fig10`
+    """
+    _save(draw_fig10(rig, rec, spec), path)
+
+
+def closed_samples(rig: VirtualRig, rec: Record) -> np.ndarray:
+    """(N,) bool, a tip gap is closed at the sample (as :func:`bearingshaft.stages.hammer.impacts` counts them).
+
+    Parameters
+    ----------
+    rig : the rig that made ``rec`` (its stops)
+    rec : a record (its states ``x``)
+    """
+    return np.any(rig.system.penetration(rec.x) > 0, axis=1)
+
+
+def fig10_window(t: np.ndarray, closed: np.ndarray, start_s: float, span_s: float = FIG10_SPAN_S,
+                 margin_s: float = FIG10_MARGIN_S) -> float:
+    """s, the end of Fig. 10's window: ``start_s + span_s``, moved on to the end of the contact in
+    progress then (so that the record never ends mid-impact) plus ``margin_s`` of open gaps, but
+    before the next contact starts; the record's end if it comes first.
+
+    Parameters
+    ----------
+    t : (N,) s, the sample times
+    closed : (N,) bool, a gap is closed at the sample
+    start_s : s, the blow's start
+    span_s : s, the window's length asked for
+    margin_s : s, open gaps shown after the last contact in the window
+
+    Returns
+    -------
+    float
+        s.
+
+    Examples
+    --------
+    >>> t = np.arange(0.0, 0.2, 1e-3)
+    >>> closed = (t > 0.105) & (t < 0.112)  # a contact from 106 to 111 ms
+    >>> round(fig10_window(t, closed, 0.0, 0.108, 0.002), 6)  # asked to end at 108 ms, mid-impact
+    0.114
+    """
+    k = min(int(np.searchsorted(t, start_s + span_s)), t.size - 1)
+    while k < t.size - 1 and closed[k]:
+        k += 1
+    nxt = np.flatnonzero(closed[k:])
+    stop = k + int(nxt[0]) - 1 if nxt.size else t.size - 1  # the last open sample before the next contact
+    k_end = min(int(np.searchsorted(t, t[k] + margin_s)), stop)
+    return float(t[max(k_end, k)])
+
+
+def draw_fig10(rig: VirtualRig, rec: Record, spec, closed: np.ndarray | None = None):
+    """The hammer force and one tip load cell against time (the paper's Fig. 10), with the blow
+    zoomed in an inset; the window ends with the gaps open (:func:`fig10_window`).
+
+    Parameters
+    ----------
     rig : the rig that made ``rec``
     rec : the nominal blow's record
     spec : the scene's [hammer] (start of the blow, the load cell drawn)
+    closed : (N,) bool, a gap is closed at the sample (default: from the record's states)
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     names = list(rig.names)
-    t_end = min(rec.t[-1], spec.start_s + 0.1)
+    if closed is None:
+        closed = closed_samples(rig, rec)
+    t_end = fig10_window(rec.t, closed, spec.start_s)
     keep = rec.t <= t_end
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(9, 6), sharex=True, constrained_layout=True)
-    a1.plot(rec.t[keep] * 1e3, rec.data[names.index("hammer")][keep], color="k", lw=1)
+    hammer = rec.data[names.index("hammer")]
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(9, 6.4), sharex=True, constrained_layout=True)
+    a1.plot(rec.t[keep] * 1e3, hammer[keep], color="k", lw=1)
     a1.set_ylabel("hammer force [N]")
     a2.plot(rec.t[keep] * 1e3, rec.data[names.index(spec.load_cell)][keep], color="tab:red", lw=0.8)
     a2.set_ylabel(f"{spec.load_cell} load cell [N]")
     a2.set_xlabel("time [ms]")
+    a2.set_xlim(rec.t[0] * 1e3, t_end * 1e3)
     for a in (a1, a2):
         a.grid(alpha=0.3)
-    a1.set_title(wrap_title(f"Virtual hammer test: {rec.level_N:g} N blow at {where(rig.location)} (top) and the "
-                            f"{spec.load_cell.replace('_', ' ')} load cell, contact force minus its seismic mass's "
-                            "inertia (bottom); compare the paper's Fig. 10"), fontsize=10)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _blow_inset(a1, rec.t, hammer)
+    a1.set_title(wrap_title(f"Virtual hammer test: {rec.level_N:g} N blow at {where(rig.location)} (top, the blow "
+                            f"zoomed in the inset) and the {spec.load_cell.replace('_', ' ')} load cell, contact force "
+                            "minus its seismic mass's inertia (bottom); the window ends with the gaps open; compare "
+                            "the paper's Fig. 10"), fontsize=10)
+    return fig
+
+
+def _blow_inset(ax, t: np.ndarray, hammer: np.ndarray) -> None:
+    """The blow (where |force| > 0.1 % of its peak) zoomed, half its length either side, in the top right."""
+    on = np.flatnonzero(np.abs(hammer) > BLOW_THRESHOLD * np.max(np.abs(hammer)))
+    if on.size == 0:
+        return
+    t0, t1 = t[on[0]], t[on[-1]]
+    pad = max(0.5 * (t1 - t0), 2 * (t[1] - t[0]))
+    sel = (t >= t0 - pad) & (t <= t1 + pad)
+    ins = ax.inset_axes([0.58, 0.3, 0.39, 0.62])
+    ins.plot(t[sel] * 1e3, hammer[sel], ".-", color="k", lw=1, ms=2.5)
+    ins.set_xlabel("time [ms]", fontsize=8)
+    ins.set_ylabel("force [N]", fontsize=8)
+    ins.tick_params(labelsize=7)
+    ins.grid(alpha=0.3)
+    # its length: between the zero samples either side of it
+    length = t[min(on[-1] + 1, t.size - 1)] - t[max(on[0] - 1, 0)]
+    ins.set_title(f"the blow, {1e3 * length:.3g} ms (dots: the samples)", fontsize=8)
 
 
 def where(location: tuple[float, float, float]) -> str:
@@ -149,16 +248,23 @@ def where(location: tuple[float, float, float]) -> str:
     return f"({x * 1e3:.1f}, {y * 1e3:.1f}, {z * 1e3:.1f}) mm"
 
 
-def _spectro(ax, rec: Record, channel: int, scene: Scene, fmax: float, db_range: float = SPECTRO_DB):
+def _spectrogram_db(rec: Record, channel: int, window_s: float, overlap: float, fmax: float):
+    """The channel's spectrogram, dB re 1 unit^2/Hz: (t, freq_hz, dB)."""
+    s = spectrogram(rec.t, rec.data[channel], window_s, overlap, fmax_hz=fmax)
+    return s.t, s.freq_hz, 10 * np.log10(np.maximum(s.power, 1e-300))
+
+
+def _spectro(ax, rec: Record, channel: int, scene: Scene, fmax: float, db_range: float = SPECTRO_DB,
+             top: float | None = None, window_s: float | None = None):
+    """A spectrogram panel: ``db_range`` dB below ``top`` (default: its own peak)."""
     sp = scene.spectrogram
     window, overlap = (sp.window_s, sp.overlap) if sp else (0.05, 0.9)
-    s = spectrogram(rec.t, rec.data[channel], window, overlap, fmax_hz=fmax)
-    db = 10 * np.log10(np.maximum(s.power, 1e-300))
-    top = float(db.max())
-    mesh = ax.pcolormesh(s.t, s.freq_hz, db, shading="nearest", cmap="viridis", vmin=top - db_range, vmax=top,
+    t, f, db = _spectrogram_db(rec, channel, window_s or window, overlap, fmax)
+    top = float(db.max()) if top is None else top
+    mesh = ax.pcolormesh(t, f, db, shading="nearest", cmap="viridis", vmin=top - db_range, vmax=top,
                          rasterized=True)
     ax.set_ylim(0, fmax)
-    ax.set_xlim(s.t[0], s.t[-1])
+    ax.set_xlim(rec.t[0], rec.t[-1])
     return mesh
 
 
@@ -179,44 +285,145 @@ def spectrogram_channel(scene: Scene) -> str:
     return sp.dof if sp is not None and ":" in sp.dof else "beam_s3:z"
 
 
-def fig11(path: Path, rig: VirtualRig, rec: Record, scene: Scene, labels: dict, curves: dict) -> None:
-    """Spectrogram of a beam accelerometer with the pseudo-rigid open-gap frequencies (dashed) and
-    the NNM backbones mapped onto time by the record's energy, f(E(t)).
+def fig11(path: Path, rig: VirtualRig, rec: Record, scene: Scene, labels: dict, curves: dict,
+          gaps_open_s: float) -> None:
+    """``fig11.png``: :func:`draw_fig11` saved.
 
     Parameters
     ----------
     path : the PNG written
+    rig, rec, scene, labels, curves, gaps_open_s : as :func:`draw_fig11`
+    """
+    _save(draw_fig11(rig, rec, scene, labels, curves, gaps_open_s), path)
+
+
+def zoom_band_hz(labels: dict) -> float:
+    """Hz, the top of Fig. 11's lower panel: the highest pseudo-rigid frequency and ZOOM_HEADROOM of it
+    more, rounded up to 10 Hz.
+
+    Parameters
+    ----------
+    labels : {label: (mode index, freq_hz, score)} the pseudo-rigid modes
+
+    Returns
+    -------
+    float
+        Hz.
+
+    Examples
+    --------
+    >>> zoom_band_hz({"bounce": (9, 19.6, 1.0), "roll": (11, 33.7, 1.0)}), zoom_band_hz({})
+    (50.0, 50.0)
+    """
+    top = max((v[1] for v in labels.values()), default=0.0)
+    return float(max(ZOOM_MIN_HZ, 10.0 * math.ceil(ZOOM_HEADROOM * top / 10.0)))
+
+
+def draw_fig11(rig: VirtualRig, rec: Record, scene: Scene, labels: dict, curves: dict, gaps_open_s: float):
+    """Spectrogram of a beam accelerometer (top: the scene's band) with the NNM backbones mapped onto
+    time by the record's energy, f(E(t)), drawn only while the gaps still close (up to
+    ``gaps_open_s``: after it the motion is linear and the map does not hold); below, the band of the
+    six pseudo-rigid open-gap modes (dashed, labelled) with a longer window that resolves them.
+
+    Parameters
+    ----------
     rig : the rig that made ``rec``
     rec : the nominal blow's record
     scene : the scene ([spectrogram]: channel, window, band, colour range)
     labels : {label: (mode index, freq_hz, score)} the pseudo-rigid modes
     curves : {label: (energy_J, freq_hz)} the NNM backbones
+    gaps_open_s : s, the gaps stay open after this time (0: they never close)
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     name = spectrogram_channel(scene)
-    fmax = scene.spectrogram.fmax_hz if scene.spectrogram else 1500.0
-    fig, ax = plt.subplots(figsize=(9, 5.5), constrained_layout=True)
-    mesh = _spectro(ax, rec, list(rig.names).index(name), scene, fmax,
-                    scene.spectrogram.db_range if scene.spectrogram else SPECTRO_DB)
-    fig.colorbar(mesh, ax=ax, label="PSD [dB re 1 (m/s^2)^2/Hz]")
-    rigid = sorted(labels.items(), key=lambda kv: kv[1][1])
-    for _, (_, f, _) in rigid:
-        ax.axhline(f, color="w", ls="--", lw=0.7, alpha=0.8)
-    if rigid:
-        ax.plot([], [], color="w", ls="--", lw=0.7,
-                label="pseudo-rigid: " + ", ".join(f"{k} {v[1]:.1f}" for k, v in rigid) + " Hz")
-    colors = ("r", "orange", "magenta", "cyan")
-    for i, (label, (E, f)) in enumerate(curves.items()):
-        ax.plot(rec.t, curve_in_time(np.maximum(rec.energy, 1e-300), E, f), color=colors[i % 4], lw=1.2,
-                label=label)
-    if curves or rigid:
-        ax.legend(loc="upper right", fontsize=7, framealpha=0.6)
-    ax.set_xlabel("time [s]")
+    sp = scene.spectrogram
+    fmax = sp.fmax_hz if sp else 1500.0
+    db_range = sp.db_range if sp else SPECTRO_DB
+    window = sp.window_s if sp else 0.05
+    channel = list(rig.names).index(name)
+    fzoom = min(zoom_band_hz(labels), fmax)
+    zoom_window = min(ZOOM_WINDOW_S, 0.25 * (rec.t[-1] - rec.t[0]))
+    fig, (ax, az) = plt.subplots(2, 1, figsize=(10, 8.4), sharex=True, constrained_layout=True,
+                                 gridspec_kw={"height_ratios": [3, 2]})
+    mesh = _spectro(ax, rec, channel, scene, fmax, db_range)
+    fig.colorbar(mesh, ax=ax, label="PSD [dB re 1 (m/s^2)^2/Hz]", pad=0.01)
+    hammer = rec.data[list(rig.names).index("hammer")]
+    on = np.flatnonzero(np.abs(hammer) > BLOW_THRESHOLD * np.max(np.abs(hammer)))
+    blow_end_s = float(rec.t[on[-1]]) if on.size else float(rec.t[0])
+    handles = _backbones_in_time(ax, rec, curves, blow_end_s, gaps_open_s, fmax)
+    ax.axhline(fzoom, color="w", ls=":", lw=0.8)
+    ax.text(rec.t[-1], fzoom, f" {fzoom:g} Hz: the lower panel below ", color="w", fontsize=8, ha="right",
+            va="bottom")
     ax.set_ylabel("frequency [Hz]")
-    ax.set_title(wrap_title(f"{name} after a {rec.level_N:g} N blow at {where(rig.location)}: spectrogram with the "
-                            "six pseudo-rigid open-gap frequencies (dashed) and the NNM backbones f(E(t)); compare "
-                            "the paper's Fig. 11"), fontsize=10)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    ax.set_title(wrap_title(f"{name} after a {rec.level_N:g} N blow at {where(rig.location)}: spectrogram "
+                            f"(Hann {window:g} s) with the NNM backbones f(E(t)) while the gaps close; compare the "
+                            "paper's Fig. 11", 110), fontsize=10)
+    mz = _spectro(az, rec, channel, scene, fzoom, db_range, window_s=zoom_window)
+    fig.colorbar(mz, ax=az, label="PSD [dB re 1 (m/s^2)^2/Hz]", pad=0.01)
+    _pseudo_rigid_lines(az, labels, fzoom)
+    for a in (ax, az):
+        if gaps_open_s > 0:
+            a.axvline(gaps_open_s, color="w", ls="-.", lw=1.0)
+    az.set_xlabel("time [s]")
+    az.set_ylabel("frequency [Hz]")
+    az.set_title(f"0-{fzoom:g} Hz (Hann {zoom_window:g} s: {1 / zoom_window:.2g} Hz bins): the six pseudo-rigid "
+                 "open-gap frequencies (dashed)", fontsize=10)
+    if gaps_open_s > 0:
+        handles.append(plt.Line2D([], [], color="k", ls="-.", lw=1.0,
+                                  label=f"the gaps stay open after {gaps_open_s:.3g} s"))
+    if handles:
+        fig.legend(handles=handles, loc="outside lower center", ncol=1, fontsize=9, frameon=False)
+    return fig
+
+
+def _backbones_in_time(ax, rec: Record, curves: dict, blow_end_s: float, gaps_open_s: float, fmax: float) -> list:
+    """Each backbone's f(E(t)) of the free motion, from the end of the blow to ``gaps_open_s`` (gid
+    ``backbone``); legend handles, with a line for those not drawn (no point in the record's
+    energies, the time or the band)."""
+    colors = ("r", "orange", "magenta", "cyan")
+    handles, hidden = [], []
+    upto = (rec.t >= blow_end_s) & (rec.t <= gaps_open_s)
+    for i, (label, (E, f)) in enumerate(curves.items()):
+        fe = curve_in_time(np.maximum(rec.energy[upto], 1e-300), E, f)
+        shown = np.isfinite(fe) & (fe <= fmax)
+        if not np.any(shown):
+            hidden.append(f"{label}: not drawn, {_why_hidden(rec, E, f, gaps_open_s, fmax)}")
+            continue
+        (line,) = ax.plot(rec.t[upto], fe, color=colors[i % 4], lw=1.4, label=f"{label}, f(E(t)) while the gaps close",
+                          gid="backbone")
+        handles.append(line)
+    for text in hidden:
+        handles.append(plt.Line2D([], [], color="none", label=text))
+    return handles
+
+
+def _why_hidden(rec: Record, E: np.ndarray, f: np.ndarray, gaps_open_s: float, fmax: float) -> str:
+    """Why a backbone has no point on Fig. 11."""
+    if gaps_open_s <= 0:
+        return "the gaps never close"
+    if np.min(f) > fmax:
+        return f"above the {fmax:g} Hz shown"
+    e_top = float(np.max(rec.energy))
+    if np.min(E) > e_top:
+        return f"its backbone starts at {np.min(E):.2g} J, above the record's peak energy {e_top:.2g} J"
+    return "outside the record's energies while the gaps close"
+
+
+def _pseudo_rigid_lines(ax, labels: dict, fzoom: float) -> None:
+    """Dashed lines at the pseudo-rigid frequencies, each named at the right edge (names spread apart)."""
+    rigid = sorted(((v[1], k) for k, v in labels.items() if v[1] <= fzoom))
+    gap = LABEL_GAP * fzoom
+    y_prev = -math.inf
+    for f, label in rigid:
+        ax.axhline(f, color="w", ls="--", lw=0.8, alpha=0.9)
+        y = max(f, y_prev + gap)
+        ax.annotate(f"{label} {f:.1f} Hz", xy=(1.0, f), xycoords=("axes fraction", "data"), xytext=(1.012, y),
+                    textcoords=("axes fraction", "data"), fontsize=8, va="center",
+                    arrowprops={"arrowstyle": "-", "lw": 0.5, "color": "0.3"})
+        y_prev = y
 
 
 # -- the level sweep ---------------------------------------------------------------------------
@@ -244,38 +451,90 @@ def levels_csv(path: Path, summary: dict) -> None:
 
 
 def levels_figure(path: Path, rig: VirtualRig, records: dict, summary: dict, scene: Scene) -> None:
-    """``levels.png``: one spectrogram of the Fig. 11 channel per blow level.
+    """``levels.png``: :func:`draw_levels` saved.
 
     Parameters
     ----------
     path : the PNG written
+    rig, records, summary, scene : as :func:`draw_levels`
+    """
+    _save(draw_levels(rig, records, summary, scene), path, dpi=110)
+
+
+def levels_db_range(levels_N, db_range: float = SPECTRO_DB) -> float:
+    """dB, the span of ``levels.png``'s one colour scale: ``db_range`` plus 20 log10(strongest /
+    weakest blow), the dB by which a linear response to the weakest blow lies below the strongest's,
+    so that the weakest blow's panel still shows ``db_range`` dB of its own.
+
+    Parameters
+    ----------
+    levels_N : N, the blow levels
+    db_range : dB shown below each blow's own peak
+
+    Returns
+    -------
+    float
+        dB.
+
+    Examples
+    --------
+    >>> levels_db_range([20.0, 2000.0], 80.0), levels_db_range([500.0], 80.0)
+    (120.0, 80.0)
+    """
+    lv = [abs(v) for v in levels_N if v]
+    return db_range + (20.0 * math.log10(max(lv) / min(lv)) if lv else 0.0)
+
+
+def draw_levels(rig: VirtualRig, records: dict, summary: dict, scene: Scene):
+    """One spectrogram of the Fig. 11 channel per blow level, on one colour scale (one colour bar):
+    the peak of the strongest blow's at the top, :func:`levels_db_range` below it.
+
+    Parameters
+    ----------
     rig : the rig that made the records
     records : {level_N: Record}
     summary : {level_N: level summary}, for the panels' titles
     scene : the scene ([spectrogram])
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     name = spectrogram_channel(scene)
-    fmax = scene.spectrogram.fmax_hz if scene.spectrogram else 1500.0
+    sp = scene.spectrogram
+    fmax = sp.fmax_hz if sp else 1500.0
+    window, overlap = (sp.window_s, sp.overlap) if sp else (0.05, 0.9)
+    channel = list(rig.names).index(name)
+    specs = {level: _spectrogram_db(rec, channel, window, overlap, fmax) for level, rec in records.items()}
+    top = max(float(db.max()) for _, _, db in specs.values())
+    span = levels_db_range(list(records), sp.db_range if sp else SPECTRO_DB)
     n = len(records)
     cols = 2 if n > 1 else 1
     nrows = math.ceil(n / cols)
-    fig, axes = plt.subplots(nrows, cols, figsize=(11, 2.8 * nrows + 0.8), sharex=True, sharey=True,
+    fig, axes = plt.subplots(nrows, cols, figsize=(11, 2.8 * nrows + 1.0), sharex=True, sharey=True,
                              constrained_layout=True, squeeze=False)
-    for ax, (level, rec) in zip(axes.ravel(), records.items(), strict=False):
-        _spectro(ax, rec, list(rig.names).index(name), scene, fmax)
+    mesh = None
+    for ax, (level, (t, f, db)) in zip(axes.ravel(), specs.items(), strict=False):
+        mesh = ax.pcolormesh(t, f, db, shading="nearest", cmap="viridis", vmin=top - span, vmax=top,
+                             rasterized=True)
+        ax.set_ylim(0, fmax)
+        rec = records[level]
+        ax.set_xlim(rec.t[0], rec.t[-1])
         s = summary[level]
-        ax.set_title(f"{level:g} N: {s['impacts_total']} impacts, gaps open after "
-                     f"{s['gaps_open_after_s']:.3g} s", fontsize=9)
+        what = (f"{s['impacts_total']} impacts, gaps open after {s['gaps_open_after_s']:.3g} s"
+                if s["impacts_total"] else "no impact: the gaps never close")
+        ax.set_title(f"{level:g} N: {what}", fontsize=9)
     for ax in axes.ravel()[n:]:
         ax.set_visible(False)
     for ax in axes[-1]:
         ax.set_xlabel("time [s]")
     for ax in axes[:, 0]:
         ax.set_ylabel("frequency [Hz]")
-    fig.suptitle(wrap_title(f"{name}: how the ringdown changes with the blow level (each panel {SPECTRO_DB:g} dB "
-                            "below its own peak)", 120), fontsize=10)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    if mesh is not None:
+        fig.colorbar(mesh, ax=axes, shrink=0.8, label="PSD [dB re 1 (m/s^2)^2/Hz], one scale for every panel")
+    fig.suptitle(wrap_title(f"{name}: how the ringdown changes with the blow level (Hann {window:g} s; one colour "
+                            f"scale, {span:.0f} dB below the strongest blow's peak)", 120), fontsize=10)
+    return fig
 
 
 # -- the linear check --------------------------------------------------------------------------
