@@ -73,7 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "results/<scene>/sweep/)")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     p.add_argument("--vary", action="append", metavar="KEY=VALUES",
-                   help="a varied scene key and its values, repeatable: model.g=1e-4:1e-3:9:log (N values, log or "
+                   help="a varied scene key and its values, repeatable: model.gap=1e-4:1e-3:9:log (N values, log or "
                    "lin), model.k_g=1e7,1e8,1e9 (a list), random design: model.c=0:8 (a range); replaces the "
                    "scene's [sweep.vary]")
     p.add_argument("--design", metavar="grid|zip|random", help="grid (product, default), zip, random (Latin "

@@ -12,6 +12,7 @@ from bearingshaft.scenes.errors import SceneError, show, suggest
 
 MAX_COUNT = 100_000  # largest count (energies, orbits, repeats, modes) a scene may ask for
 MAX_MAGNITUDE = 1e100  # no SI quantity here comes near; squares of larger values (energies) overflow
+RENAMED = {"g": "gap"}  # old key -> its name now (issue 24: one name for the gap in every model); refused with a hint
 
 
 # -- conversion --------------------------------------------------------------------------
@@ -83,7 +84,9 @@ def from_table(cls: type, table: dict, where: str):
     known = [f.name for f in fields(cls)]
     for key in table:
         if key not in known:
-            raise SceneError(f"{where}: unknown key {key!r}{suggest(key, known)} (known: {', '.join(known)})")
+            hint = (f" (did you mean {RENAMED[key]!r}? the key was renamed)" if RENAMED.get(key) in known
+                    else suggest(key, known))
+            raise SceneError(f"{where}: unknown key {key!r}{hint} (known: {', '.join(known)})")
     kwargs = {k: _coerce(v, hints[k], f"{where} {k}") for k, v in table.items()}
     try:
         return cls(**kwargs)

@@ -139,8 +139,8 @@ def case_id(values) -> str:
 
     Examples
     --------
-    >>> case_id((("model.g", 1e-4),)), case_id((("model.g", 0.0001),)) == case_id((("model.g", 1e-4),))
-    ('c8ce40a978bb', True)
+    >>> case_id((("model.gap", 1e-4),)), case_id((("model.gap", 0.0001),)) == case_id((("model.gap", 1e-4),))
+    ('5a2bdd9199f0', True)
     """
     blob = json.dumps([[k, v] for k, v in values], sort_keys=False, separators=(",", ":"))
     return hashlib.sha256(blob.encode()).hexdigest()[:ID_DIGITS]
@@ -160,8 +160,8 @@ def show_values(values) -> str:
 
     Examples
     --------
-    >>> show_values((("model.g", 0.0001), ("ringdown.method", "exact")))
-    "model.g = 0.0001, ringdown.method = 'exact'"
+    >>> show_values((("model.gap", 0.0001), ("ringdown.method", "exact")))
+    "model.gap = 0.0001, ringdown.method = 'exact'"
     """
     return ", ".join(f"{k} = {v!r}" for k, v in values)
 
