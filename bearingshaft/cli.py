@@ -17,12 +17,14 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+import time
 from pathlib import Path
 
 from bearingshaft import __version__
 from bearingshaft.budget import available_bytes, check_budget, estimates
 from bearingshaft.digits import human
 from bearingshaft.output import check_out_dir
+from bearingshaft.progress import run_total
 from bearingshaft.registry import BY_NAME, STAGES, stages_of
 from bearingshaft.scenes import Scene, SceneError, builtin_names, load_scene
 from reduced._checks import one_line
@@ -155,8 +157,10 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "run":
             names = args.scenes or builtin_names()
             runs = [_validated(n, args.out, parent=True) for n in names]  # validate all before running any
+            t_run = time.perf_counter()
             for scene, out in runs:
                 pipeline.run_scene(scene, out, progress=progress)
+            print(run_total(sum(len(stages_of(s)) for s, _ in runs), len(runs), time.perf_counter() - t_run))
             return 0
         test = getattr(args, "test_file", None)
         if test is not None and args.out is None:  # a comparison never mixes with the scene's own files

@@ -338,7 +338,6 @@ def test_a_corrupt_numba_cache_is_reported_and_recompiled(tmp_path, compiled_ker
 
 def test_atomic_write_gives_the_mode_of_a_plain_open(tmp_path):
     """mkstemp's 0600 would hide a results folder's rom.npz from colleagues: the file gets 0666 less the umask."""
-    import os
 
     from reduced.cache import atomic_write, current_umask
 

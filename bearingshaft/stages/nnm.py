@@ -12,10 +12,10 @@ written) writes the files listed in :data:`DESCRIPTION`.
 from __future__ import annotations
 
 import numpy as np
-from tqdm import tqdm
 
 from bearingshaft.estimates import COPIES, FLOAT, JACOBIAN_COPIES, Estimate, n_dofs
 from bearingshaft.output import StageWriter
+from bearingshaft.progress import bar as progress_bar
 from bearingshaft.scenes import Scene
 from bearingshaft.stages.nnm_fep import compute_fep
 from bearingshaft.stages.nnm_results import NNM2Exact, NNMResult
@@ -68,8 +68,7 @@ def _nnm2_exact(scene: Scene, progress: bool) -> NNM2Exact:
     f_paper = nnm2.frequency_from_energy(p, E, paper=True)
     checks = []
     if p.gap > 0:
-        for chi in tqdm(CHECK_CHI, desc=f"{scene.name}: NNM 2 periods by DOP853", disable=not progress,
-                        leave=False):
+        for chi in progress_bar(CHECK_CHI, desc=f"{scene.name}: NNM 2 periods by DOP853", enabled=progress):
             x0 = chi * p.gap
             T = nnm2.period_by_integration(p, x0)
             f_int = 1.0 / T
