@@ -91,7 +91,7 @@ class TabulatedLoadSpec:
     direction : str
         "gap".
     file : str
-        CSV (time [s], force [N]) or UFF 58 file, path from the working directory.
+        CSV (time [s], force [N]) or UFF 58 file, path from the scene file's folder.
     start_s : float
         s, added to the file's times.
     """
@@ -99,7 +99,7 @@ class TabulatedLoadSpec:
     kind: str = "tabulated"
     point: str = "x2"
     direction: str = "gap"
-    file: str = ""  # path from the working directory
+    file: str = ""  # path from the scene file's folder
     start_s: float = 0.0  # s, added to the file's times
 
     def signal(self, base: Path | None = None) -> Tabulated:
@@ -117,7 +117,8 @@ LoadSpec = HalfSineLoadSpec | HarmonicLoadSpec | TabulatedLoadSpec
 MAX_LOADS = 64  # loads in one scene
 
 
-def parse_loads(value, where: str, point_names: tuple[str, ...]) -> tuple[tuple, tuple]:
+def parse_loads(value, where: str, point_names: tuple[str, ...], base: str | Path | None = None
+                ) -> tuple[tuple, tuple]:
     """([[load]] specs, their signals), every key checked; ``where`` names the file.
 
     Parameters
@@ -128,6 +129,8 @@ def parse_loads(value, where: str, point_names: tuple[str, ...]) -> tuple[tuple,
         The scene file, for the messages.
     point_names : tuple of str
         The model's points.
+    base : str or Path, optional
+        The folder a tabulated load's ``file`` is relative to (the scene file's; None: the working directory).
 
     Returns
     -------
@@ -157,7 +160,7 @@ def parse_loads(value, where: str, point_names: tuple[str, ...]) -> tuple[tuple,
         if kind not in LOAD_KINDS:
             raise SceneError(f"{at} kind: unknown load {show(kind)}{suggest(kind, LOAD_KINDS)} "
                              f"(known: {', '.join(LOAD_KINDS)})")
-        spec = from_table(LOAD_KINDS[kind], table, f"{at} ({kind})")
+        spec = from_table(LOAD_KINDS[kind], table, f"{at} ({kind})", base)
         if spec.point not in point_names:
             raise SceneError(f"{at} point: unknown point {spec.point!r}{suggest(spec.point, point_names)} "
                              f"(known: {', '.join(point_names)})")

@@ -148,7 +148,7 @@ def _correlation(analysis, chosen: list[int], test_shapes: str) -> Correlation:
     all_s = beam_s + tube_s
     fe_all = analysis.sensor_shapes(all_s, chosen)
     test = _test_shapes(test_shapes, all_s) if test_shapes else None
-    note = "test shapes from " + test_shapes if test is not None else (
+    note = "test shapes from " + Path(test_shapes).name if test is not None else (
         "no test shapes given: FE auto-MAC (can the sensors tell the modes apart?)")
     macs = {}
     for set_name, sensors in sets.items():
