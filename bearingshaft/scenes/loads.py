@@ -33,12 +33,12 @@ class HalfSineLoadSpec:
         s, start of the blow.
     """
 
-    kind: str = "half_sine"
+    kind: str = "half_sine"  # the kind of load
     point: str = "x2"  # where it acts (the model's point names)
     direction: str = "gap"  # the gap direction (the only one these models have)
-    peak_N: float = 0.0  # N
-    duration_s: float = 1e-3  # s
-    start_s: float = 0.0  # s
+    peak_N: float = 0.0  # N, peak force
+    duration_s: float = 1e-3  # s, length of the half-sine
+    start_s: float = 0.0  # s, start of the blow
 
     def signal(self, base: Path | None = None) -> HalfSine:
         return HalfSine(self.peak_N, self.duration_s, self.start_s)
@@ -66,13 +66,13 @@ class HarmonicLoadSpec:
         s, when the shaker starts.
     """
 
-    kind: str = "harmonic"
-    point: str = "x2"
-    direction: str = "gap"
-    amplitude_N: float = 0.0  # N
-    freq_hz: float = 100.0  # Hz
-    phase_deg: float = 0.0  # degrees
-    start_s: float = 0.0  # s
+    kind: str = "harmonic"  # the kind of load
+    point: str = "x2"  # where it acts (the model's point names)
+    direction: str = "gap"  # the gap direction (the only one these models have)
+    amplitude_N: float = 0.0  # N, force amplitude
+    freq_hz: float = 100.0  # Hz, frequency
+    phase_deg: float = 0.0  # degrees, phase at start_s
+    start_s: float = 0.0  # s, when the shaker starts
 
     def signal(self, base: Path | None = None) -> Harmonic:
         return Harmonic(self.amplitude_N, self.freq_hz, self.phase_deg, self.start_s)
@@ -96,10 +96,10 @@ class TabulatedLoadSpec:
         s, added to the file's times.
     """
 
-    kind: str = "tabulated"
-    point: str = "x2"
-    direction: str = "gap"
-    file: str = ""  # path from the scene file's folder
+    kind: str = "tabulated"  # the kind of load
+    point: str = "x2"  # where it acts (the model's point names)
+    direction: str = "gap"  # the gap direction (the only one these models have)
+    file: str = ""  # CSV (time [s], force [N]) or UFF 58 file of the force history
     start_s: float = 0.0  # s, added to the file's times
 
     def signal(self, base: Path | None = None) -> Tabulated:

@@ -76,13 +76,13 @@ class SweepSpec:
         "nnm_stability" or "".
     """
 
-    vary: tuple[Vary, ...] = ()
-    design: str = "grid"
+    vary: tuple[Vary, ...] = ()  # [sweep.vary]: the varied keys and their values
+    design: str = "grid"  # grid (every combination) | zip (the i-th values together) | random
     samples: int = 0  # random design: number of cases
     seed: int = 0  # random design: seed
     plots: tuple[str, ...] = ()  # metric columns drawn (default: DEFAULT_PLOTS that exist)
     x: str = ""  # column drawn on the x axis instead of the varied key (one varied key)
-    overlay: str = ""  # "nnm_stability"
+    overlay: str = ""  # "nnm_stability": the Floquet stability of NNM 1 and 3 beside the plot
 
 
 def _literal(text: str):
