@@ -51,7 +51,8 @@ class LineBar:
         self.desc = desc
         self.n = 0.0
         self.postfix = ""
-        self.lines = 0  # tenths reported so far
+        self.lines = 0  # tenths passed so far
+        self.long = False  # expected to take LONG_S or more: its tenths are reported
         self.t0 = time.monotonic()
 
     def update(self, n: float = 1) -> None:
@@ -65,8 +66,9 @@ class LineBar:
             return
         self.lines = tenth
         elapsed = time.monotonic() - self.t0
-        if fraction <= 0 or elapsed / fraction < LONG_S:
+        if not self.long and (fraction <= 0 or elapsed / fraction < LONG_S):
             return
+        self.long = True  # once reported, every tenth is: a log that stops mid-way looks like a stall
         left = elapsed * (1.0 / fraction - 1.0)
         more = f" (about {left:.0f} s left)" if tenth < LINE_STEPS else ""
         note = f"; {self.postfix}" if self.postfix else ""

@@ -48,6 +48,16 @@ def test_long_computation_prints_one_line_per_tenth(clock, capsys):
     assert "left" not in lines[-1]
 
 
+def test_a_long_computation_that_speeds_up_reports_every_tenth(clock, capsys):
+    b = LineBar(total=10, desc="speeds up")
+    clock.t = LONG_S  # the first tenth is slow: long
+    b.update()
+    for _ in range(9):
+        clock.t += 0.01  # the rest is quick
+        b.update()
+    assert len(capsys.readouterr().err.splitlines()) == LINE_STEPS
+
+
 def test_short_computation_prints_nothing(clock, capsys):
     b = LineBar(range(50), desc="short")
     for _ in b:
