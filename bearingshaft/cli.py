@@ -6,8 +6,8 @@ Subcommands follow the pipeline (geometry -> fem -> reduced -> results):
 one), ``nnm``, ``study`` (error against run time, stiff cases), ``verify``
 (reduction against the discrete model), ``frc`` (forced-response curves), ``run`` (every
 stage of one or more scenes; all built-in scenes when none is named), ``check`` (validate scenes, their memory and the
-results folder without running anything), ``sweep`` (a scene over a design of parameter values, on Dask) and
-``scenes``.
+results folder without running anything), ``sweep`` (a scene over a design of parameter values, on Dask),
+``scenes`` (``--show NAME`` prints one) and ``keys`` (every table and key of a scene).
 Bad input gives a one-line message and exit code 2, before any work starts; nothing
 half-written is left behind. Every command ends with a summary naming the results folder.
 """
