@@ -144,10 +144,11 @@ def test_peak_memory_does_not_grow_with_duration(tmp_path, method):
 
 
 def test_estimates_of_memory_and_disk(tmp_path):
-    # a 1e4 s run at 20 kHz: 2e8 samples, 14.4 GB on disk, a few MB of memory when streamed
+    # a 1e4 s run at 20 kHz: 2e8 samples, 25.6 GB on disk (t, x, v, E, W, 4 stop forces, a: 16 floats a
+    # sample), a few MB of memory when streamed
     N = 200_000_001
     disk = ringdown_disk_bytes(3, 1e4, 20000.0)
-    assert disk == pytest.approx(8 * 9 * N, rel=1e-6)
+    assert disk == pytest.approx(8 * 16 * N, rel=1e-6)
     assert ringdown_peak_bytes(3, 1e4, 20000.0, streamed=True) < 64 * 2**20
     assert ringdown_peak_bytes(3, 1e4, 20000.0, streamed=False) > 8 * 8 * N
     assert default_chunk_samples(3) * 8 * 8 <= 8 * 2**20 + 64
@@ -432,8 +433,9 @@ def test_stage_estimate_bounds_the_stage_and_does_not_grow_with_duration(tmp_pat
     a, b = stage_estimate(short, 3), stage_estimate(long_, 3)
     # bounded: once a run is longer than a chunk, the estimate no longer grows
     assert a["memory"] < stage_estimate(mid, 3)["memory"] == b["memory"] < 200 * 2**20
-    # 1e4 s at 20 kHz: 14.4 GB of ringdown.npz and 3.2 GB of temporary |x1 - x3| for two methods
-    assert b["disk"] == pytest.approx(8 * 9 * 200_000_001 + 2 * 8 * 200_000_001, rel=1e-6)
+    # 1e4 s at 20 kHz: 25.6 GB of ringdown.npz (16 floats a sample: t, x, v, E, W, 4 stop forces, a) and
+    # 3.2 GB of temporary |x1 - x3| for two methods
+    assert b["disk"] == pytest.approx(8 * 16 * 200_000_001 + 2 * 8 * 200_000_001, rel=1e-6)
     rom = load_scene("rom-impulse")  # the reference check holds the run and four exact streams
     assert stage_estimate(rom, 12)["memory"] > stage_estimate(rom, 12, method="exact")["memory"]
     # it bounds what the stage holds (tracemalloc, this short scene: about 10-30 MB)

@@ -53,6 +53,8 @@ class Scene:
         Likewise.
     sweep : SweepSpec or None
         [sweep], run by ``bearingshaft sweep``.
+    folder : str
+        The folder its file paths are relative to (the scene file's; the package's for a built-in one).
     """
 
     name: str
@@ -77,4 +79,5 @@ class Scene:
     frc: FRCSpec | None = None
     hammer: HammerSpec | None = None
     sweep: SweepSpec | None = None  # [sweep]: run by `bearingshaft sweep`
+    folder: str = field(default="", repr=False)  # the folder its file paths are relative to (issue 24)
 

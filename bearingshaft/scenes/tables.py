@@ -65,7 +65,7 @@ class RingdownSpec:
     """
 
     method: str = "exact"  # exact | explicit | dop853
-    duration_s: float = 2.0  # s
+    duration_s: float = 2.0  # s, length of the run
     sample_rate_hz: float = 20000.0  # Hz, output sampling
     dt_s: float | None = None  # s, explicit step (default: omega_dt / omega_ref)
     omega_dt: float = 0.05  # rad, explicit step: omega_ref dt
@@ -165,8 +165,8 @@ class NNMSpec:
     """
 
     n_energy: int = 400  # number of energies, log-spaced
-    energy_min_J: float = 1e-4  # J
-    energy_max_J: float = 1e5  # J
+    energy_min_J: float = 1e-4  # J, lowest energy
+    energy_max_J: float = 1e5  # J, highest energy
 
     def __post_init__(self) -> None:
         check(self.n_energy >= 2, f"n_energy must be >= 2, got {self.n_energy!r}")
@@ -242,8 +242,9 @@ class WorkPrecisionSpec:
 
     window_s: float = 0.05  # s, before chaotic divergence dominates
     sample_rate_hz: float = 20000.0  # Hz, grid on which errors are measured
-    explicit_omega_dt: tuple[float, ...] = (0.8, 0.4, 0.2, 0.1, 0.05, 0.025, 0.0125, 0.00625, 0.003125)
-    dop853_rtol: tuple[float, ...] = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12, 1e-13)
+    explicit_omega_dt: tuple[float, ...] = (0.8, 0.4, 0.2, 0.1, 0.05, 0.025, 0.0125, 0.00625, 0.003125)  # rad,
+    # explicit steps as omega_max dt
+    dop853_rtol: tuple[float, ...] = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12, 1e-13)  # DOP853 relative tolerances
     repeats: int = 3  # best-of timing
 
     def __post_init__(self) -> None:
@@ -285,13 +286,13 @@ class StiffCasesSpec:
         A value outside its range.
     """
 
-    k_g: tuple[float, ...] = (3.502e7, 1e9, 1e11)  # N/m
-    gap: tuple[float, ...] = (0.0, 2.54e-4, 1e-2)  # m
+    k_g: tuple[float, ...] = (3.502e7, 1e9, 1e11)  # N/m, tip stiffnesses
+    gap: tuple[float, ...] = (0.0, 2.54e-4, 1e-2)  # m, clearances
     speed: tuple[float, ...] = (0.01, 200.0, 2000.0)  # m/s, initial velocity of mass 3
-    c: tuple[float, ...] = (0.0, 4.0, 400.0)  # N s/m
-    duration_s: float = 0.2  # s
-    sample_rate_hz: float = 5000.0  # Hz
-    methods: tuple[str, ...] = ("exact", "explicit")
+    c: tuple[float, ...] = (0.0, 4.0, 400.0)  # N s/m, damping on every mass
+    duration_s: float = 0.2  # s, length of each run
+    sample_rate_hz: float = 5000.0  # Hz, output sampling
+    methods: tuple[str, ...] = ("exact", "explicit")  # integrators run
     long_duration_s: float = 0.0  # s, also run the nominal case (first k_g, Table-1 gap, 200 m/s) this long
     # for every c (0: no long runs)
 
@@ -406,7 +407,7 @@ class VerifySpec:
     """
 
     duration_s: float = 2.0  # s, ringdown of each of the paper's three initial conditions
-    sample_rate_hz: float = 20000.0  # Hz
+    sample_rate_hz: float = 20000.0  # Hz, output sampling of the ringdowns
     method: str = "exact"  # ringdown integrator
     energy_max_J: float = 1e5  # J, NNM backbones (HB, H = 1) up to this energy
     window_s: float = 0.05  # s, spectrogram window

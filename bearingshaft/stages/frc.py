@@ -34,10 +34,10 @@ import warnings
 from dataclasses import replace
 
 import numpy as np
-from tqdm import tqdm
 
 from bearingshaft.estimates import FLOAT, HILL_COPIES, Estimate, n_dofs
 from bearingshaft.output import StageWriter
+from bearingshaft.progress import bar as progress_bar
 from bearingshaft.scenes import Scene
 from bearingshaft.stages.frc_results import ConvergenceRun, FRCResult, PointCheck
 from bearingshaft.systems import model_system
@@ -89,7 +89,7 @@ def _compute(scene: Scene, progress: bool) -> FRCResult:
     b = rows[load_col]
     levels = list(spec.levels_N)
     n_tasks = 3 * len(levels) + len(spec.convergence_harmonics) + len(levels) * len(spec.backbone_scales) + 1
-    bar = tqdm(total=n_tasks, desc=f"{scene.name}: forced response", disable=not progress, unit="task")
+    bar = progress_bar(total=n_tasks, desc=f"{scene.name}: forced response", enabled=progress, unit="task")
     curves = {}
     for P in levels:
         bar.set_postfix_str(f"HB {P:g} N, H={spec.harmonics}")

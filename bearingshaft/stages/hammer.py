@@ -38,10 +38,10 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from bearingshaft.estimates import COPIES, FLOAT, MATPLOTLIB_BYTES, Estimate, n_dofs
 from bearingshaft.output import StageWriter
+from bearingshaft.progress import bar as progress_bar
 from bearingshaft.scenes import HammerSpec, Scene, SceneError
 from bearingshaft.stages import hammer_compare, hammer_linear
 from bearingshaft.stages.hammer_results import Comparison, LinearCheck, Record, VirtualTest
@@ -409,7 +409,7 @@ def _virtual_test(scene: Scene, rom, rig: VirtualRig, lm, labels: dict, stats: d
     spec = scene.hammer
     levels = sorted({*spec.levels_N, spec.peak_N})
     records = {}
-    bar = tqdm(levels, desc=f"{scene.name}: virtual tests", unit="level", disable=not progress, leave=False)
+    bar = progress_bar(levels, desc=f"{scene.name}: virtual tests", unit="level", enabled=progress)
     for level in bar:
         records[level] = run_record(rig, blow(spec, level), scene, level)
     nominal = records[spec.peak_N]

@@ -606,7 +606,7 @@ def write_markdown(path: Path, result: VirtualTest) -> None:
     lines = [f"# Virtual hammer test: {scene.name}", "",
              f"Reduced apparatus: {rig.system.n} coordinates (x1, x3 and {rig.system.n - 2} fixed-interface modes), "
              f"{len(rig.channels)} channels. Blow: "
-             f"{'measured history ' + spec.force_file if spec.force_file else 'half-sine'}"
+             f"{'measured history ' + Path(spec.force_file).name if spec.force_file else 'half-sine'}"
              f" of {spec.duration_s * 1e3:g} ms at {where(rig.location)} along "
              f"{tuple(round(d, 6) for d in rig.direction)}, "
              f"starting at {spec.start_s:g} s; record {scene.ringdown.duration_s:g} s at "

@@ -1,7 +1,7 @@
 """The paper's three-mass model of the bearing-and-shaft assembly (Section 3, Eq. 9, Table 1).
 
 Masses m1, m2, m3 move vertically; the outer two hang on pairs of suspension springs k_s
-and meet two-sided stops of stiffness k_g after a clearance g; a torsional spring kappa at
+and meet two-sided stops of stiffness k_g after a clearance g (the field ``gap``); a torsional spring kappa at
 the middle mass gives the shaft's bending stiffness (half-length L):
 
     M = diag(m1, m2, m3),  C = c I,
@@ -35,7 +35,7 @@ class DiscreteParams:
         N/m, gap (impact tip) spring, >= 0.
     L : float
         m, half-length of the shaft, > 0.
-    g : float
+    gap : float
         m, radial clearance at each tip, >= 0.
     m1, m2, m3 : float
         kg, left, middle and right masses, > 0.
@@ -52,7 +52,7 @@ class DiscreteParams:
     kappa: float = 79161.0  # N m/rad, torsional spring emulating the shaft's bending
     k_g: float = 3.502e7  # N/m, gap (impact tip) spring
     L: float = 0.1614  # m, half-length of the shaft
-    g: float = 2.54e-4  # m, radial clearance at each tip
+    gap: float = 2.54e-4  # m, radial clearance at each tip
     m1: float = 0.629  # kg, left mass
     m2: float = 1.258  # kg, middle mass
     m3: float = 0.629  # kg, right mass
@@ -88,8 +88,8 @@ class DiscreteParams:
 
     @property
     def grazing_energy_nnm2(self) -> float:
-        """J, energy at which NNM 2 first touches the stops: 2 k_s g^2."""
-        return 2.0 * self.k_s * self.g**2
+        """J, energy at which NNM 2 first touches the stops: 2 k_s gap^2."""
+        return 2.0 * self.k_s * self.gap**2
 
     def system(self) -> GapSystem:
         """The model as a :class:`GapSystem` (stops on x1 and x3, two-sided)."""
@@ -98,7 +98,7 @@ class DiscreteParams:
             [[2 * self.k_s + a, -2 * a, a], [-2 * a, 4 * a, -2 * a], [a, -2 * a, 2 * self.k_s + a]]
         )
         stops = two_sided_stops(
-            np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]), self.k_g, self.g, ("x1", "x3")
+            np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]), self.k_g, self.gap, ("x1", "x3")
         )
         return GapSystem(
             M=np.diag([self.m1, self.m2, self.m3]),

@@ -68,7 +68,7 @@ class RomSpec:
     element : {'hex8', 'hex20', 'hex27'}
         Solid element.
     rom_file : str
-        Load this rom.npz (path from the working directory) instead of building; k_g, gap and
+        Load this rom.npz (in a scene: a path from the scene file's folder) instead of building; k_g, gap and
         damping still apply. '' to build or use the cache.
 
     Raises
@@ -88,8 +88,8 @@ class RomSpec:
     alpha: float = 0.0  # 1/s, mass-proportional damping alpha Mr
     element_size: float = 0.3  # m, 3-D mesh size (the mesh study's default)
     element: str = "hex20"  # hex8 | hex20 | hex27
-    rom_file: str = ""  # load this rom.npz (path from the working directory) instead of building;
-    # k_g, gap and damping still apply
+    rom_file: str = ""  # load this rom.npz instead of building (in a scene: a path from the scene file's
+    # folder); k_g, gap and damping still apply
 
     def __post_init__(self) -> None:
         if self.layout not in ROM_LAYOUTS:

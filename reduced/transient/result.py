@@ -22,7 +22,7 @@ import numpy as np
 
 from reduced._checks import integer, number
 from reduced.models.gaps import GapSystem
-from reduced.transient.store import HISTORIES, OPTIONAL, Chunk, NpzStreamWriter, RingdownFile
+from reduced.transient.store import DERIVED, HISTORIES, OPTIONAL, Chunk, NpzStreamWriter, RingdownFile
 
 TIMING_STATS = ("wall_s",)  # wall-clock stats: provenance only, never written into a science file
 
@@ -120,8 +120,8 @@ class RingdownResult:
         (the format of :mod:`reduced.transient.store`; wall-clock stats are left out)."""
         n, N = self.system.n, self.n_samples
         forced = self.loads is not None
-        with NpzStreamWriter(path, _history_shapes(N, n, forced)) as w:
-            summary = _Summary(forced=forced)
+        with NpzStreamWriter(path, _history_shapes(N, n, forced, self.system.m)) as w:
+            summary = _Summary(forced=forced, loads=self.loads)
             for c in self.chunks():
                 _write_chunk(w, c, summary)
             w.close(_small_members(self.system, self.method, self.tolerance, summary, self.sample_rate_hz,
@@ -237,8 +237,8 @@ class RingdownStream:
         """Write the run into an .npz as it is computed; the file, read lazily."""
         n, N = self.system.n, self.n_samples
         forced = self.loads is not None
-        summary = _Summary(forced=forced)
-        with NpzStreamWriter(path, _history_shapes(N, n, forced)) as w:
+        summary = _Summary(forced=forced, loads=self.loads)
+        with NpzStreamWriter(path, _history_shapes(N, n, forced, self.system.m)) as w:
             for c in self:
                 _write_chunk(w, c, summary)
             w.close(_small_members(self.system, self.method, self.tolerance, summary, self.sample_rate_hz,
@@ -276,19 +276,49 @@ def balance_error(E: np.ndarray, W: np.ndarray, Wext: np.ndarray, forced: bool) 
     return float(np.max(np.abs(E[0] - E - W + Wext)) / scale)
 
 
-def _history_shapes(N: int, n: int, forced: bool = False) -> dict:
-    shapes = {"t": (N,), "x": (N, n), "v": (N, n), "energy": (N,), "dissipated": (N,), "external": (N,)}
-    return {k: (shapes[k], np.float64) for k in HISTORIES if forced or k not in OPTIONAL}
+def _history_shapes(N: int, n: int, forced: bool = False, m: int = 0) -> dict:
+    shapes = {"t": (N,), "x": (N, n), "v": (N, n), "energy": (N,), "dissipated": (N,), "external": (N,),
+              "stop_force": (N, m), "a": (N, n)}
+    return {k: (shapes[k], np.float64) for k in (*HISTORIES, *DERIVED) if forced or k not in OPTIONAL}
 
 
 @dataclass
 class _Summary:
-    """Running energy-balance error while chunks are written (see :func:`balance_error`)."""
+    """Running energy-balance error while chunks are written (see :func:`balance_error`), and the
+    loads the accelerations need."""
 
     forced: bool = False
     E0: float | None = None
     balance: float = 0.0
     scale: float = 0.0
+    loads: object = None
+
+
+def accelerations(system: GapSystem, t: np.ndarray, x: np.ndarray, v: np.ndarray, loads=None) -> np.ndarray:
+    """m/s^2 (or the coordinates' units / s^2), the accelerations the equation of motion gives at samples:
+    a = M^-1 (f_ext(t) - C v - K x - B^T f(B x)).
+
+    Parameters
+    ----------
+    system : GapSystem
+        The system run.
+    t : (k,) ndarray of float
+        s, sample times (for the loads).
+    x, v : (k, n) ndarray of float
+        m and m/s at those times.
+    loads : Loads, optional
+        The loads of a forced run.
+
+    Returns
+    -------
+    (k, n) ndarray of float
+    """
+    rhs = -(v @ system.C + x @ system.K + system.contact_force(x))  # C, K symmetric: v @ C = (C v)^T
+    if loads is not None:
+        rhs += loads.force(t)
+    # times M^-1 by a product, row by row as the energies are: the same bits whatever the chunking (a
+    # multi-right-hand-side solve blocks its columns by their number)
+    return rhs @ np.linalg.inv(system.M)  # M symmetric: (M^-1 r)^T = r^T M^-1
 
 
 def _write_chunk(w: NpzStreamWriter, c: Chunk, s: _Summary) -> None:
@@ -307,12 +337,16 @@ def _write_chunk(w: NpzStreamWriter, c: Chunk, s: _Summary) -> None:
     w.append("dissipated", c.dissipated)
     if s.forced:
         w.append("external", c.external)
+    w.append("stop_force", np.ascontiguousarray(c.system.stop_force(c.x)) if c.system is not None
+             else np.zeros((len(c), 0)))
+    w.append("a", accelerations(c.system, c.t, c.x, c.v, s.loads))
 
 
 def _small_members(system: GapSystem, method: str, tolerance: float, s: _Summary, sample_rate_hz: float,
                    stats: dict) -> dict:
     balance = 0.0 if not s.scale else s.balance / s.scale
-    return {"dof_names": np.array(system.dof_names), "method": method, "tolerance": tolerance,
+    return {"dof_names": np.array(system.dof_names), "stop_names": np.array(system.stop_names, dtype=str),
+            "method": method, "tolerance": tolerance,
             "energy_balance_error": balance, "sample_rate_hz": sample_rate_hz,
             **{f"stat_{k}": v for k, v in stats.items() if np.isscalar(v) and k not in TIMING_STATS}}
 

@@ -9,7 +9,11 @@ independent of the run length:
 - the five histories ``t`` (N,), ``x`` (N, n), ``v`` (N, n), ``energy`` (N,) and
   ``dissipated`` (N,), and for a forced run (``loads``) a sixth, ``external`` (N,) (the work
   of the loads, int v^T f_ext dt; a file without it, a free run or an older file, reads it
-  as zeros), are zip64 members *stored* (not deflated): their sizes are known
+  as zeros), then what follows from each sample's state: ``stop_force`` (N, m), the force in
+  each stop (N, >= 0 in compression, the stops' order of the system: for the tips, the tip load
+  cells' contact force) and ``a`` (N, n), the accelerations M^-1 (f_ext - C v - K x - B^T f)
+  (m/s^2 on displacement coordinates; files written before issue 24 lack both), are zip64
+  members *stored* (not deflated): their sizes are known
   from N before the run starts, so each member's region is laid out up front and every
   chunk of samples is written at its place in all regions as it arrives (a CRC-32
   per member is carried along and patched into the headers at the end);
@@ -45,6 +49,7 @@ from reduced._checks import InvalidArgument, integer, show
 
 HISTORIES = ("t", "x", "v", "energy", "dissipated", "external")  # the per-sample members, in file order
 OPTIONAL = ("external",)  # histories a file may lack (free runs, older files): read as zeros
+DERIVED = ("stop_force", "a")  # per-sample members computed from the state as it is written (older files lack them)
 READ_CHUNK_SAMPLES = 1 << 16  # samples a chunk when a run is read back (about 4.7 MB for 3 DOFs)
 DOS_TIME, DOS_DATE = 0, (0 << 9) | (1 << 5) | 1  # 1980-01-01 00:00:00: no wall clock in the file
 ZIP64_VERSION = 45  # "version needed to extract" for zip64 (APPNOTE 4.4.3)
@@ -343,7 +348,7 @@ class RingdownFile:
             raise InvalidArgument(f"path {show(str(path))} is not a ringdown file: no {', '.join(missing)}")
         self.system = system
         with np.load(self.path, allow_pickle=False) as z:
-            small = {k: z[k] for k in z.files if k not in HISTORIES}
+            small = {k: z[k] for k in z.files if k not in HISTORIES and k not in DERIVED}
         self.method = str(small.get("method", ""))
         self.tolerance = float(small.get("tolerance", np.nan))
         self.energy_balance_error = float(small.get("energy_balance_error", np.nan))
@@ -363,6 +368,8 @@ class RingdownFile:
         if name in OPTIONAL and name not in self._arrays:
             stop = self.n_samples if stop is None else min(stop, self.n_samples)
             return np.zeros(max(0, stop - max(0, min(start, stop))))
+        if name in DERIVED and name not in self._arrays:
+            raise InvalidArgument(f"{self.path.name} has no {name} (written before they were stored); run it again")
         a = self._arrays[name]
         stop = a.shape[0] if stop is None else min(stop, a.shape[0])
         start = max(0, min(start, stop))
@@ -388,6 +395,8 @@ class RingdownFile:
     def _memmap(self, name: str) -> np.ndarray:
         if name in OPTIONAL and name not in self._arrays:
             return np.broadcast_to(np.float64(0.0), (self.n_samples,))
+        if name in DERIVED and name not in self._arrays:
+            raise InvalidArgument(f"{self.path.name} has no {name} (written before they were stored); run it again")
         a = self._arrays[name]
         if not a.stored:
             raise InvalidArgument(f"{self.path.name}: member {name} is compressed; read it with chunks()")
@@ -397,6 +406,8 @@ class RingdownFile:
 
     t = property(lambda self: self._memmap("t"), doc="s, (N,) memory-mapped")
     x = property(lambda self: self._memmap("x"), doc="m, (N, n) memory-mapped")
+    stop_force = property(lambda self: self._memmap("stop_force"), doc="N, (N, m) memory-mapped: force in each stop")
+    a = property(lambda self: self._memmap("a"), doc="m/s^2, (N, n) memory-mapped: accelerations")
     v = property(lambda self: self._memmap("v"), doc="m/s, (N, n) memory-mapped")
     energy = property(lambda self: self._memmap("energy"), doc="J, (N,) memory-mapped")
     dissipated = property(lambda self: self._memmap("dissipated"), doc="J, (N,) memory-mapped")
