@@ -120,16 +120,43 @@ def _seg_work(s, K, w, em, am1, tau, n, y0, yt, damped, slipping, wv, wf, LF, gr
 
 
 @nb.njit(cache=True, inline="always")
-def _switch(s, e, y, n, succ, reset, Bt, slider_tip, stop_tip):
-    """The state after event e of state s; a closing stop starts its tip's sliders unloaded (w = t)."""
-    if reset[s, e]:
-        for k in range(Bt.shape[0]):
-            if slider_tip[k] == stop_tip[e]:
-                acc = 0.0
-                for r in range(n):
-                    acc += Bt[k, r] * y[r]
-                y[2 * n + k] = acc
-    return succ[s, e]
+def _switch(s, e, y, n, succ, reset, fric):
+    """(state after event e of state s, friction work of the switch), y's sliders updated in place.
+
+    A closing stop starts its tip's sliders unloaded (w = t). A stick -> slip event puts the slider on the
+    cone, w = t -+ mu N / kt: the march locates the event to within its step floor, and the slip state
+    would keep the small excess |kt (t - w)| - mu N for good (it moves w with t -+ mu N / kt), so that the
+    first stick after it would leave the cone at once. Either way the tangential spring's energy released,
+    1/2 kt ((t - w_old)^2 - (t - w_new)^2), is friction work (a round-off amount), so the balance stays exact.
+    """
+    Bt, slider_tip, stop_tip, ekind, stop_of, B, kstop, offset, side, mu, kt = fric
+    p = Bt.shape[0]
+    m = B.shape[0]
+    s_new = succ[s, e]
+    dWf = 0.0
+    for k in range(p):
+        if reset[s, e]:
+            if slider_tip[k] != stop_tip[e]:
+                continue
+        elif not ((ekind[s, e] == 1 or ekind[s, e] == 2) and e - m == 2 * k + (ekind[s, e] - 1)):
+            continue
+        t = 0.0
+        for r in range(n):
+            t += Bt[k, r] * y[r]
+        w_old = y[2 * n + k]
+        if reset[s, e]:
+            w_new = t
+        else:
+            j = stop_of[s_new, k]
+            sx = 0.0
+            for r in range(n):
+                sx += B[j, r] * y[r]
+            N = kstop[j] * side[j] * (sx - offset[j])
+            sigma = 1.0 if ekind[s, e] == 1 else -1.0
+            w_new = t - sigma * mu[k] * N / kt[k]
+        dWf += 0.5 * kt[k] * ((t - w_old) * (t - w_old) - (t - w_new) * (t - w_new))
+        y[2 * n + k] = w_new
+    return s_new, dWf
 
 
 @nb.njit(cache=True, inline="always")
@@ -145,9 +172,9 @@ def _log(n_log, t, e, s, y, log_t, log_e, log_s, log_y):
 
 
 @nb.njit(cache=True)
-def _friction_free_kernel(modal, events, wv, wf, Bt, slider_tip, stop_tip, damped, n, y, s, t, bounds, c, t_samples,
-                          i_samp, t_after, out_y, out_W, out_Wf, W, Wf, hmin, floor, max_events, n_stuck, log_t,
-                          log_e, log_s, log_y, n_log):
+def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bounds, c, t_samples, i_samp, t_after,
+                          out_y, out_W, out_Wf, W, Wf, hmin, floor, max_events, n_stuck, log_t, log_e, log_s, log_y,
+                          n_log):
     """March events from t through the pieces ending at bounds[c], bounds[c + 1], ... (no loads), filling the
     sample buffer ``t_samples`` from i_samp (:func:`reduced.transient._modal._free_kernel` with friction).
 
@@ -156,7 +183,9 @@ def _friction_free_kernel(modal, events, wv, wf, Bt, slider_tip, stop_tip, dampe
     W + Wf (all the dissipated work), ``out_Wf`` Wf. When the buffer fills inside a segment that still has
     samples before its end, the kernel returns BUFFER_FULL without advancing it (the samples do not
     depend on the buffer size). Events are logged (time, slot, new state, y) while the log has room.
-    Returns (t, W, Wf, s, i_samp, n_events, n_iter, status, n_stuck, c, n_log).
+    ``fric`` holds the sliders' data for the switch (:func:`_switch`). A segment no longer than the march's
+    floor counts as one without progress (``n_stuck``). Returns (t, W, Wf, s, i_samp, n_events, n_iter,
+    status, n_stuck, c, n_log).
     """
     nK, lam, alam, UT, Uinv, aUinv, yp = modal
     EU, aEU, E0, Escale, eact, succ, reset, has_slip, LF = events
@@ -205,7 +234,7 @@ def _friction_free_kernel(modal, events, wv, wf, Bt, slider_tip, stop_tip, dampe
         Wf += dWf
         for r in range(N):
             y[r] = ytmp[r]
-        n_stuck = n_stuck + 1 if tau_ev == 0.0 else 0
+        n_stuck = n_stuck + 1 if tau_ev <= hmin else 0
         if n_stuck > STUCK_PER_EVENT * E:
             status = -4
             break
@@ -217,7 +246,8 @@ def _friction_free_kernel(modal, events, wv, wf, Bt, slider_tip, stop_tip, dampe
                 break
             t_end = bounds[c]
             continue
-        s = _switch(s, e_ev, y, n, succ, reset, Bt, slider_tip, stop_tip)
+        s, dWf = _switch(s, e_ev, y, n, succ, reset, fric)
+        Wf += dWf
         n_log = _log(n_log, t, e_ev, s, y, log_t, log_e, log_s, log_y)
         n_events += 1
         if n_events >= max_events:
@@ -559,10 +589,10 @@ def _aug_next_event(erow, ec, eact, s, yp_s, V_s, X, z, werr, poly, P, Qp, coef,
 
 
 @nb.njit(cache=True)
-def _friction_forced_kernel(lam, V, Vinv, yp, erow, ec, eact, succ, reset, Df, LF, has_slip, C, damped, n, Bt,
-                            slider_tip, stop_tip, y, s, t, t_end, t_samples, i_samp, t_after, out_y, out_W, out_Wf, W,
-                            Wf, hmin, floor, max_events, n_stuck, fz, fY, fU, fb, pstarts, pF, pp0, pp1, out_E, E,
-                            log_t, log_e, log_s, log_y, n_log):
+def _friction_forced_kernel(lam, V, Vinv, yp, erow, ec, eact, succ, reset, Df, LF, has_slip, C, damped, n, fric,
+                            y, s, t, t_end, t_samples, i_samp, t_after, out_y, out_W, out_Wf, W, Wf, hmin, floor,
+                            max_events, n_stuck, fz, fY, fU, fb, pstarts, pF, pp0, pp1, out_E, E, log_t, log_e, log_s,
+                            log_y, n_log):
     """March events from t to t_end under the loads (:func:`reduced.transient._exact_kernels._forced_kernel` on
     the augmented state y = [x; v; w] and its friction states): the forced closed form of each segment, its
     first event among the state's (gap, stick -> slip, slip -> stick), the viscous, friction and loads' work
@@ -630,7 +660,7 @@ def _friction_forced_kernel(lam, V, Vinv, yp, erow, ec, eact, succ, reset, Df, L
         W += dW
         for r in range(N):
             y[r] = ytmp[r]
-        n_stuck = n_stuck + 1 if tau_ev == 0.0 else 0
+        n_stuck = n_stuck + 1 if tau_ev <= hmin else 0
         if n_stuck > STUCK_PER_EVENT * E_slots:
             status = -4
             break
@@ -639,10 +669,122 @@ def _friction_forced_kernel(lam, V, Vinv, yp, erow, ec, eact, succ, reset, Df, L
             if t_lim < t_end:
                 continue
             break
-        s = _switch(s, e_ev, y, n, succ, reset, Bt, slider_tip, stop_tip)
+        s, dWf = _switch(s, e_ev, y, n, succ, reset, fric)
+        Wf += dWf
         n_log = _log(n_log, t, e_ev, s, y, log_t, log_e, log_s, log_y)
         n_events += 1
         if n_events >= max_events:
             status = -1
             break
     return t, W, Wf, E, s, i_samp, n_events, n_iter, status, n_stuck, n_log
+
+
+# -- central difference with friction (reduced.transient.friction.FrictionExplicitStepper) ---------------------
+@nb.njit(cache=True)
+def _cd_friction_kernel(AT, dtGKT, dtGBT, LT, B, offset, side, k, dtGBtT, Bt, slider_tip, stop_tip, mu, kt, x, vh, w,
+                        ft, dt, n_steps, every, out_x, out_v, out_W, out_w, out_Wf, W, pw_old, Wf, i0, dtGbT, b, P,
+                        out_E, E, pe_old):
+    """Advance n_steps of :func:`reduced.transient.explicit._cd_kernel` with the sliders' forces Bt^T f_t in the
+    velocity update, f_t by the return mapping at x_{n+1} (w = w_n on entry, w_{n+1} on exit):
+
+        N = k_j max(0, side_j (B_j x_{n+1} - o_j))   (the closed stop j of the slider's tip; 0 if open),
+        f_trial = kt (Bt x_{n+1} - w_n),
+        f = f_trial, w_{n+1} = w_n                      if |f_trial| <= mu N (stick),
+        f = sign(f_trial) mu N, w_{n+1} = t - f / kt    otherwise (slip; an open tip: f = 0, w = t).
+
+    The friction work of a step is the trapezoidal rule on f w': (f_n + f_{n+1}) / 2 (w_{n+1} - w_n), second
+    order through a smooth slip (``ft`` holds f_n on entry, f_{n+1} on exit). The return mapping itself takes
+    kt (w_{n+1} - w_n)^2 / 2 more out of the tangential spring a slipping step (it is backward Euler on the
+    slider), which the energy balance shows as the scheme's error. Stores x, the mean velocity, W + Wf, the
+    sliders and Wf every ``every`` steps. Returns (W, pw_old, Wf, i, E, pe_old)."""
+    n = x.shape[0]
+    m = B.shape[0]
+    p = Bt.shape[0]
+    r = LT.shape[0]
+    nl = b.shape[0]
+    f = np.empty(m)
+    acc = np.empty(n)
+    v_int = np.empty(n)
+    io = i0
+    left = every
+    for step in range(1, n_steps + 1):
+        for i in range(n):
+            x[i] += dt * vh[i]
+        for j in range(m):
+            s = -offset[j]
+            for c in range(n):
+                s += B[j, c] * x[c]
+            f[j] = k[j] * s if side[j] * s > 0.0 else 0.0
+        for q in range(p):
+            N = 0.0
+            for j in range(m):
+                if stop_tip[j] == slider_tip[q] and f[j] != 0.0:
+                    N = side[j] * f[j]
+            t = 0.0
+            for c in range(n):
+                t += Bt[q, c] * x[c]
+            ftr = kt[q] * (t - w[q])
+            cap = mu[q] * N
+            f_old = ft[q]
+            if abs(ftr) <= cap:
+                ft[q] = ftr
+            else:
+                ft[q] = cap if ftr > 0.0 else -cap
+                w_new = t - ft[q] / kt[q]
+                Wf += 0.5 * (f_old + ft[q]) * (w_new - w[q])
+                w[q] = w_new
+        for i in range(n):
+            acc[i] = 0.0
+        for c in range(n):
+            vc = vh[c]
+            xc = x[c]
+            for i in range(n):
+                acc[i] += AT[c, i] * vc - dtGKT[c, i] * xc
+        for j in range(m):
+            fj = f[j]
+            if fj != 0.0:
+                for i in range(n):
+                    acc[i] -= dtGBT[j, i] * fj
+        for q in range(p):
+            fq = ft[q]
+            if fq != 0.0:
+                for i in range(n):
+                    acc[i] -= dtGBtT[q, i] * fq
+        for q in range(nl):
+            pq = P[step - 1, q]
+            for i in range(n):
+                acc[i] += dtGbT[q, i] * pq
+        for i in range(n):
+            v_int[i] = 0.5 * (vh[i] + acc[i])
+            vh[i] = acc[i]
+        pw_new = 0.0
+        for q in range(r):
+            s = 0.0
+            for i in range(n):
+                s += LT[q, i] * v_int[i]
+            pw_new += s * s
+        W += 0.5 * dt * (pw_old + pw_new)
+        pw_old = pw_new
+        if nl:
+            pe_new = 0.0
+            for q in range(nl):
+                s = 0.0
+                for i in range(n):
+                    s += b[q, i] * v_int[i]
+                pe_new += s * P[step - 1, q]
+            E += 0.5 * dt * (pe_old + pe_new)
+            pe_old = pe_new
+        left -= 1
+        if left == 0:
+            left = every
+            for i in range(n):
+                out_x[io, i] = x[i]
+                out_v[io, i] = v_int[i]
+            for q in range(p):
+                out_w[io, q] = w[q]
+            out_W[io] = W + Wf
+            out_Wf[io] = Wf
+            if nl:
+                out_E[io] = E
+            io += 1
+    return W, pw_old, Wf, io, E, pe_old

@@ -33,7 +33,7 @@ from reduced._blas import single_thread_blas
 from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
 from reduced.transient import stepper as _stepper
-from reduced.transient._friction_kernels import _friction_forced_kernel, _friction_free_kernel
+from reduced.transient._friction_kernels import _cd_friction_kernel, _friction_forced_kernel, _friction_free_kernel
 from reduced.transient._modal import BUFFER_FULL, EPS
 from reduced.transient.exact import (
     HMIN_PERIODS,
@@ -46,6 +46,13 @@ from reduced.transient.exact import (
     _check_status,
 )
 from reduced.transient.exact_tables import forced_arrays
+from reduced.transient.explicit import (
+    DEFAULT_OMEGA_DT,
+    LOAD_BLOCK_STEPS,
+    ExplicitOptions,
+    ExplicitStepper,
+    _damping_factor,
+)
 from reduced.transient.friction_tables import (
     KIND_GAP,
     KIND_SLIP_END,
@@ -120,8 +127,18 @@ class FrictionEvents:
 
 
 def _unloaded(system: GapSystem, x0: np.ndarray, w0) -> np.ndarray:
-    """m, the sliders' initial positions: ``w0``, or Bt x0 (unloaded)."""
-    return system.friction.Bt @ x0 if w0 is None else np.asarray(w0, float)
+    """m, the sliders' initial positions: ``w0`` (a slider of a closed tip pulling harder than mu N put on the
+    cone, w = t -+ mu N / kt, as it would slip at once), or Bt x0 (unloaded)."""
+    fr = system.friction
+    if w0 is None:
+        return fr.Bt @ x0
+    w = np.array(w0, float)
+    closed, slip = _initial_states(system, x0, w)
+    t = fr.Bt @ x0
+    for q in np.flatnonzero(slip):
+        j = np.flatnonzero(closed & (system.tip == fr.tip[q]))[0]
+        w[q] = t[q] - slip[q] * fr.mu[q] * system.k[j] * system.penetration(x0)[j] / fr.k_t[q]
+    return w
 
 
 def initial_friction_state(system: GapSystem, table: FrictionTable, x0: np.ndarray, w0: np.ndarray) -> int:
@@ -183,9 +200,10 @@ class FrictionExactStepper(_stepper.Stepper):
         w0 = _unloaded(system, x0, options.w0)
         self.y = np.concatenate([x0, v0, w0])
         self.s = self.s0 = initial_friction_state(system, table, x0, w0)
-        self.slider_tip = np.ascontiguousarray(fr.tip)
-        self.stop_tip = np.concatenate([system.tip, np.full(2 * fr.p, -1)]).astype(np.int64)  # per event slot
-        self.Bt = np.ascontiguousarray(fr.Bt)
+        stop_tip = np.concatenate([system.tip, np.full(2 * fr.p, -1)]).astype(np.int64)  # the tip of each event slot
+        c = np.ascontiguousarray
+        self.fric = (c(fr.Bt), c(fr.tip), stop_tip, c(table.ekind), c(table.states.stop_of), c(system.B), c(system.k),
+                     c(system.offset), c(system.side), c(fr.mu), c(fr.k_t))
         self.floor, self.load_scale = self._scales(omega_max)
         t_end = max(duration_s, (n_samples - 1) / sample_rate_hz)
         self.n_pieces = n_pieces = max(options.chunks, math.ceil(t_end / MAX_PIECE_S))
@@ -296,18 +314,18 @@ class FrictionExactStepper(_stepper.Stepper):
             filled = buf.filled
             (self.t, self.W, self.Wf, self.s, buf.filled, ne, ni, status, self.n_stuck, self.c,
              self.n_log) = call_numba_kernel(
-                _friction_free_kernel, modal, events, wv, wf, self.Bt, self.slider_tip, self.stop_tip, self.damped,
-                self.n, self.y, self.s, self.t, bounds, self.c, buf.t, buf.filled, buf.t_after, out_y, out_W, out_Wf,
-                self.W, self.Wf, self.hmin, self.floor, left, self.n_stuck, *self.log, self.n_log)
+                _friction_free_kernel, modal, events, wv, wf, self.fric, self.damped, self.n, self.y, self.s, self.t,
+                bounds, self.c, buf.t, buf.filled, buf.t_after, out_y, out_W, out_Wf, self.W, self.Wf, self.hmin,
+                self.floor, left, self.n_stuck, *self.log, self.n_log)
             out_E[filled:buf.filled] = self.E  # a free stretch of a forced run: the loads' work stays
         else:
             tb = self.table
             (self.t, self.W, self.Wf, self.E, self.s, buf.filled, ne, ni, status,
              self.n_stuck, self.n_log) = call_numba_kernel(
                 _friction_forced_kernel, tb.lam, tb.V, tb.Vinv, tb.yp, tb.erow, tb.ec, tb.eact, tb.succ, tb.reset,
-                tb.Df, tb.LF, events[7], self.system.C, self.damped, self.n, self.Bt, self.slider_tip, self.stop_tip,
-                self.y, self.s, self.t, t_b, buf.t, buf.filled, buf.t_after, out_y, out_W, out_Wf, self.W, self.Wf,
-                self.hmin, self.floor, left, self.n_stuck, *self.fargs, out_E, self.E, *self.log, self.n_log)
+                tb.Df, tb.LF, events[7], self.system.C, self.damped, self.n, self.fric, self.y, self.s, self.t, t_b,
+                buf.t, buf.filled, buf.t_after, out_y, out_W, out_Wf, self.W, self.Wf, self.hmin, self.floor, left,
+                self.n_stuck, *self.fargs, out_E, self.E, *self.log, self.n_log)
         self.n_events += ne
         self.n_iter += ni
         self.stats.update(n_events=self.n_events, n_steps=self.n_events + 1, n_march=self.n_iter)
@@ -379,6 +397,135 @@ def integrate_exact_friction(system: GapSystem, x0, v0, duration_s: float, sampl
                                  max_events=max_events, log_events=log_events, progress=progress).collect()
 
 
+@dataclass(frozen=True, slots=True)
+class ExplicitFrictionOptions:
+    """Options of central difference with friction: those of :class:`reduced.transient.explicit.ExplicitOptions`
+    and the sliders' initial positions ``w0`` (m, (p,); None: unloaded, Bt x0)."""
+
+    dt: float | None = None
+    omega_dt: float = DEFAULT_OMEGA_DT
+    step_basis: str = "top"
+    chunks: int = PIECES
+    w0: tuple | None = None
+
+    def checked(self, system: GapSystem) -> ExplicitFrictionOptions:
+        """These options validated (ValueError naming the first bad one)."""
+        e = ExplicitOptions(self.dt, self.omega_dt, self.step_basis, self.chunks).checked(system)
+        w0 = None if self.w0 is None else tuple(_check.vector("w0", self.w0, system.p))
+        return ExplicitFrictionOptions(e.dt, e.omega_dt, e.step_basis, e.chunks, w0)
+
+
+class FrictionExplicitStepper(ExplicitStepper):
+    """Central difference with friction: :class:`reduced.transient.explicit.ExplicitStepper`'s scheme with the
+    sliders' forces by a return mapping at each step (:func:`reduced.transient._friction_kernels._cd_friction_kernel`).
+
+    Stability: the sticking tip is a linear spring kt Bt^T Bt, so the stiffest state is every tip closed and
+    sticking, K + sum k_g B^T B + sum kt Bt^T Bt (:meth:`reduced.models.gaps.GapSystem.closed_stiffness`), and
+    the step is refused beyond ``SWITCHING_SAFETY`` x 2 / omega_max of that state (with damping, as without
+    friction). A slipping tip is softer (its friction force follows N, not the tangential motion), and the
+    return mapping only takes energy out of the slider, so the sticking state sets the limit: central
+    difference grows just past omega_max dt = 2 with the tips held closed and sticking, and stays bounded just
+    below it (tests/test_friction.py).
+
+    Parameters
+    ----------
+    As :class:`reduced.transient.explicit.ExplicitStepper`; ``options`` an ExplicitOptions or an
+    :class:`ExplicitFrictionOptions` (with ``w0``).
+    """
+
+    friction = True
+
+    def __init__(self, system: GapSystem, x0: np.ndarray, v0: np.ndarray, duration_s: float, n_samples: int,
+                 sample_rate_hz: float, options, loads, report: bool) -> None:
+        if isinstance(options, ExplicitOptions):
+            options = ExplicitFrictionOptions(options.dt, options.omega_dt, options.step_basis, options.chunks)
+        self.w0 = _unloaded(system, x0, options.w0)
+        super().__init__(system, x0, v0, duration_s, n_samples, sample_rate_hz, options, loads, report)
+        self.stats["n_sliders"] = system.p
+
+    def _matrices(self) -> None:
+        """As :meth:`ExplicitStepper._matrices`, the generic kernel always, with (dt G Bt^T)^T for the sliders."""
+        system, n, dt = self.system, self.n, self.dt
+        fr = system.friction
+        M, C, K = system.M, system.C, system.K
+        G = np.linalg.inv(M + 0.5 * dt * C)
+        A = G @ (M - 0.5 * dt * C)
+        c = np.ascontiguousarray
+        self.L = L = _damping_factor(C)
+        b = c(self.loads.b) if self.forced else np.zeros((0, n))
+        self.small = False
+        self.kernel = _cd_friction_kernel
+        self.mats = (c(A.T), c((dt * (G @ K)).T), c((dt * (G @ system.B.T)).T), c(L.T), c(system.B), system.offset,
+                     system.side, system.k, c((dt * (G @ fr.Bt.T)).T), c(fr.Bt), c(fr.tip), c(system.tip), fr.mu,
+                     fr.k_t)
+        self.dtGbT, self.b = c((dt * (G @ b.T)).T), b
+
+    def _first_state(self, x0: np.ndarray, v0: np.ndarray) -> None:
+        """x_0, v_{1/2} = v_0 + dt/2 a_0 with the sliders' forces at x_0 (on the cone), the work sums' first terms."""
+        system, dt, fr = self.system, self.dt, self.system.friction
+        x, v = x0.copy(), v0.copy()
+        self.x0, self.v0 = x0.copy(), v0.copy()
+        N = np.zeros(fr.p)
+        f = system.stop_force(x0)
+        for q in range(fr.p):
+            N[q] = f[system.tip == fr.tip[q]].max(initial=0.0)
+        ft = np.clip(fr.force(x0, self.w0), -fr.mu * N, fr.mu * N)
+        rhs0 = -(system.K @ x) - system.contact_force(x) - fr.Bt.T @ ft - system.C @ v
+        if self.forced:
+            f0 = self.loads.force(0.0)
+            rhs0 = rhs0 + f0
+        a0 = np.linalg.solve(system.M, rhs0)
+        self.x, self.vh, self.w, self.ft = x, v + 0.5 * dt * a0, self.w0.copy(), ft
+        self.W, self.pw, self.Wf = 0.0, float(np.sum((v @ self.L) ** 2)), 0.0
+        self.E, self.pe = 0.0, (float(v @ f0) if self.forced else 0.0)
+
+    def arrays(self, k: int) -> tuple[np.ndarray, ...]:
+        p = self.system.p
+        return (np.empty((k, self.n)), np.empty((k, self.n)), np.empty(k), np.empty(k if self.forced else 0),
+                np.empty((k, p)), np.empty(k))
+
+    def block(self, buf) -> tuple[np.ndarray, ...]:
+        out_x, out_v, out_W, out_E, out_w, out_Wf = buf.arrays
+        return out_x, out_v, out_W, (out_E if self.forced else zeros_view(out_x.shape[0])), out_w, out_Wf
+
+    def step(self, buf) -> float | None:
+        """Sample 0 (the initial state) or one kernel call of whole output intervals."""
+        out_x, out_v, out_W, out_E, out_w, out_Wf = buf.arrays
+        N = self.n_samples
+        if buf.j0 == 0 and buf.filled == 0:
+            out_x[0], out_v[0], out_W[0], out_w[0], out_Wf[0] = self.x0, self.v0, 0.0, self.w0, 0.0
+            if self.forced:
+                out_E[0] = 0.0
+            buf.filled = 1
+            if N == 1:
+                self.finished = True
+                return 1.0
+            if buf.full:
+                return None
+        nout = min(buf.k - buf.filled, self.per_piece - self.done % self.per_piece)
+        P = np.zeros((0, 0))
+        if self.forced:
+            nout = min(nout, max(1, LOAD_BLOCK_STEPS // self.every))
+            steps = self.done * self.every + np.arange(1, nout * self.every + 1)
+            P = np.ascontiguousarray(self.loads.values(steps * self.dt))
+        self.W, self.pw, self.Wf, buf.filled, self.E, self.pe = call_numba_kernel(
+            self.kernel, *self.mats, self.x, self.vh, self.w, self.ft, self.dt, nout * self.every, self.every, out_x,
+            out_v, out_W, out_w, out_Wf, self.W, self.pw, self.Wf, buf.filled, self.dtGbT, self.b, P, out_E, self.E,
+            self.pe)
+        self.done += nout
+        if not np.all(np.isfinite(self.x)):
+            raise FloatingPointError(
+                f"central difference diverged before t = {self.done * (1.0 / self.sample_rate_hz):.4g} s "
+                f"(dt = {self.dt:.3g} s)")
+        self.finished = self.done == N - 1
+        if self.done % self.per_piece == 0 or self.finished:
+            return self.done / (N - 1)
+        return None
+
+
+_stepper.FRICTION_STEPPERS["explicit"] = FrictionExplicitStepper
+
+
 REFERENCE_NEWTON = 3  # Newton corrections of a reference event's time (the dense output locates it first)
 REFERENCE_EVENT_TOL = 1e-11  # x the run's displacement scale: an event function starting this near zero is
 # armed at this level (a function that starts at its threshold, as a closing stop's unloaded slider does, would
@@ -448,8 +595,12 @@ def _reference_switch(system: GapSystem, closed, slip, what, x, v, w) -> tuple:
                 dN = fr.mu[q] * system.k[j] * system.side[j] * (system.B[j] @ v)
                 rate = fr.k_t[q] * (fr.Bt[q] @ v)
                 slip[q] = 1 if rate - dN > 0.0 else (-1 if -rate - dN > 0.0 else 0)
-    elif what[0] == "slip":
-        slip[what[1]] = what[2]
+    elif what[0] == "slip":  # on the cone (the event is located to the integrator's tolerance)
+        q = what[1]
+        slip[q] = what[2]
+        j = np.flatnonzero(closed & (system.tip == fr.tip[q]))[0]
+        w[q] = fr.Bt[q] @ x - what[2] * fr.mu[q] * system.k[j] * system.side[j] * (system.B[j] @ x
+                                                                                  - system.offset[j]) / fr.k_t[q]
     else:
         slip[what[1]] = 0
     return closed, slip, w
@@ -600,8 +751,10 @@ def reference_dop853(system: GapSystem, x0, v0, duration_s: float, sample_rate_h
                 break
             continue
         what = events[i][0]
+        E_spring = system.friction.energy(z[:n], z[2 * n:2 * n + p])
         closed, slip, z[2 * n:2 * n + p] = _reference_switch(system, closed, slip, what, z[:n], z[n:2 * n],
                                                              z[2 * n:2 * n + p])
+        z[-2] += E_spring - system.friction.energy(z[:n], z[2 * n:2 * n + p])  # released by a slider's jump
         kind = "gap" if what[0] == "gap" else ("stick" if what[0] == "stick" else ("slip+" if what[2] > 0 else "slip-"))
         slot = what[1] if what[0] == "gap" else system.m + 2 * what[1] + (1 if kind == "slip-" else 0)
         log.append((t_end, slot, kind, z[:2 * n + p].copy()))

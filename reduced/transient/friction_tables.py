@@ -351,7 +351,7 @@ def friction_table(system: GapSystem, omega_ref: float) -> FrictionTable:
         for s in range(S):
             Ks, Fs, G, R, Q, smks = _state_parts(system, st.closed[s], st.slip[s], st.stop_of[s])
             Ks_all[s], R_all[s] = Ks, R
-            xp = solve(Ks, Fs) if np.any(Fs) else np.zeros(n)
+            xp = np.linalg.solve(Ks, Fs) if np.any(Fs) else np.zeros(n)
             yp[s, :n] = xp
             key = Ks.tobytes() + R.tobytes() + G.tobytes()
             if key not in cache:
@@ -362,7 +362,7 @@ def friction_table(system: GapSystem, omega_ref: float) -> FrictionTable:
                 for k in range(p):
                     Vs[2 * n + k, 2 * n + k] = 1.0
                     if np.any(G[:, k]):
-                        Vs[:n, 2 * n + k] = solve(Ks, G[:, k])
+                        Vs[:n, 2 * n + k] = np.linalg.solve(Ks, G[:, k])
                 sv = np.linalg.svd(Vs, compute_uv=False)
                 cs = sv[0] / sv[-1]
                 if not np.isfinite(cs) or cs > MAX_COND:
