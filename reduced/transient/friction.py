@@ -35,6 +35,7 @@ from reduced.models.gaps import GapSystem
 from reduced.transient import stepper as _stepper
 from reduced.transient._friction_kernels import _cd_friction_kernel, _friction_forced_kernel, _friction_free_kernel
 from reduced.transient._modal import BUFFER_FULL, EPS
+from reduced.transient.dop853 import Dop853Options
 from reduced.transient.exact import (
     HMIN_PERIODS,
     MAX_EVENTS,
@@ -751,12 +752,13 @@ def reference_dop853(system: GapSystem, x0, v0, duration_s: float, sample_rate_h
                 break
             continue
         what = events[i][0]
+        ended = 1 if what[0] == "stick" and slip[what[1]] < 0 else 0  # a slip - ends in slot m + 2 q + 1
         E_spring = system.friction.energy(z[:n], z[2 * n:2 * n + p])
         closed, slip, z[2 * n:2 * n + p] = _reference_switch(system, closed, slip, what, z[:n], z[n:2 * n],
                                                              z[2 * n:2 * n + p])
         z[-2] += E_spring - system.friction.energy(z[:n], z[2 * n:2 * n + p])  # released by a slider's jump
         kind = "gap" if what[0] == "gap" else ("stick" if what[0] == "stick" else ("slip+" if what[2] > 0 else "slip-"))
-        slot = what[1] if what[0] == "gap" else system.m + 2 * what[1] + (1 if kind == "slip-" else 0)
+        slot = what[1] if what[0] == "gap" else system.m + 2 * what[1] + (1 if kind == "slip-" else ended)
         log.append((t_end, slot, kind, z[:2 * n + p].copy()))
         if len(log) > max_events:
             raise RuntimeError(f"more than {max_events} events before t = {t0:.6g} s")
@@ -768,3 +770,44 @@ def reference_dop853(system: GapSystem, x0, v0, duration_s: float, sample_rate_h
                           method="dop853-restart", tolerance=float(rtol * x_scale),
                           stats={"n_events": len(log), "rtol": rtol}, external=We if loads is not None else None,
                           loads=loads, w=out[:, 2 * n:2 * n + p].copy(), friction=Wf.copy(), events=ev)
+
+
+class FrictionDop853Stepper(_stepper.Stepper):
+    """The 'dop853' method for a system with friction: :func:`reference_dop853` (DOP853 restarted at every
+    state change, with rtol of the options), run whole when set up and handed out buffer by buffer.
+
+    Parameters
+    ----------
+    As :class:`reduced.transient.dop853.Dop853Stepper`; ``options`` a Dop853Options (its rtol; atol is
+    rtol x each state's scale, :func:`reference_dop853`).
+    """
+
+    method = "dop853"
+    friction = True
+
+    def __init__(self, system: GapSystem, x0: np.ndarray, v0: np.ndarray, duration_s: float, n_samples: int,
+                 sample_rate_hz: float, options: Dop853Options, loads, report: bool) -> None:
+        super().__init__(system, n_samples, sample_rate_hz, loads, report)
+        self.res = reference_dop853(system, x0, v0, (n_samples - 1) / sample_rate_hz if n_samples > 1 else duration_s,
+                                    sample_rate_hz, loads=loads, rtol=options.rtol)
+        self.stats.update(self.res.stats)
+        self.events = self.res.events
+
+    def arrays(self, k: int) -> tuple[np.ndarray, ...]:
+        return ()
+
+    def block(self, buf) -> tuple[np.ndarray, ...]:
+        r, a, b = self.res, buf.j0, buf.j0 + buf.k
+        ext = r.external[a:b] if self.forced else zeros_view(buf.k)
+        return r.x[a:b], r.v[a:b], r.dissipated[a:b], ext, r.w[a:b], r.friction[a:b]
+
+    def step(self, buf) -> float | None:
+        buf.filled = buf.k
+        self.finished = buf.j0 + buf.k >= self.n_samples
+        return (buf.j0 + buf.k) / self.n_samples
+
+    def tolerance(self, amp: float) -> float:
+        return float(self.res.tolerance + self.res.stats["rtol"] * amp)
+
+
+_stepper.FRICTION_STEPPERS["dop853"] = FrictionDop853Stepper
