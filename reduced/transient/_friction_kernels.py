@@ -680,6 +680,32 @@ def _friction_forced_kernel(lam, V, Vinv, yp, erow, ec, eact, succ, reset, Df, L
 
 
 # -- central difference with friction (reduced.transient.friction.FrictionExplicitStepper) ---------------------
+@nb.njit(cache=True, inline="always")
+def _return_map(x, f, side, stop_tip, slider_tip, Bt, mu, kt, w, ft, Wf):
+    """The sliders' forces ft and positions w at x by the return mapping (:func:`_cd_friction_kernel`), f the
+    stops' forces; returns Wf plus the step's friction work (trapezoidal on f w')."""
+    n = x.shape[0]
+    for q in range(Bt.shape[0]):
+        N = 0.0
+        for j in range(f.shape[0]):
+            if stop_tip[j] == slider_tip[q] and f[j] != 0.0:
+                N = side[j] * f[j]
+        t = 0.0
+        for c in range(n):
+            t += Bt[q, c] * x[c]
+        ftr = kt[q] * (t - w[q])
+        cap = mu[q] * N
+        f_old = ft[q]
+        if abs(ftr) <= cap:
+            ft[q] = ftr
+        else:
+            ft[q] = cap if ftr > 0.0 else -cap
+            w_new = t - ft[q] / kt[q]
+            Wf += 0.5 * (f_old + ft[q]) * (w_new - w[q])
+            w[q] = w_new
+    return Wf
+
+
 @nb.njit(cache=True)
 def _cd_friction_kernel(AT, dtGKT, dtGBT, LT, B, offset, side, k, dtGBtT, Bt, slider_tip, stop_tip, mu, kt, x, vh, w,
                         ft, dt, n_steps, every, out_x, out_v, out_W, out_w, out_Wf, W, pw_old, Wf, i0, dtGbT, b, P,
@@ -715,24 +741,7 @@ def _cd_friction_kernel(AT, dtGKT, dtGBT, LT, B, offset, side, k, dtGBtT, Bt, sl
             for c in range(n):
                 s += B[j, c] * x[c]
             f[j] = k[j] * s if side[j] * s > 0.0 else 0.0
-        for q in range(p):
-            N = 0.0
-            for j in range(m):
-                if stop_tip[j] == slider_tip[q] and f[j] != 0.0:
-                    N = side[j] * f[j]
-            t = 0.0
-            for c in range(n):
-                t += Bt[q, c] * x[c]
-            ftr = kt[q] * (t - w[q])
-            cap = mu[q] * N
-            f_old = ft[q]
-            if abs(ftr) <= cap:
-                ft[q] = ftr
-            else:
-                ft[q] = cap if ftr > 0.0 else -cap
-                w_new = t - ft[q] / kt[q]
-                Wf += 0.5 * (f_old + ft[q]) * (w_new - w[q])
-                w[q] = w_new
+        Wf = _return_map(x, f, side, stop_tip, slider_tip, Bt, mu, kt, w, ft, Wf)
         for i in range(n):
             acc[i] = 0.0
         for c in range(n):

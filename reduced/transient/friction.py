@@ -346,8 +346,8 @@ def stream_exact_friction(system: GapSystem, x0, v0, duration_s: float, sample_r
 
     Parameters
     ----------
-    system, x0, v0, duration_s, sample_rate_hz, w0, loads, chunks, max_events, log_events, progress :
-        as :func:`integrate_exact_friction`
+    system, x0, v0, duration_s, sample_rate_hz : as :func:`integrate_exact_friction`
+    w0, loads, chunks, max_events, log_events, progress : as :func:`integrate_exact_friction`
     chunk_samples : samples a chunk (default: the whole run in one)
 
     Returns
@@ -400,8 +400,13 @@ def integrate_exact_friction(system: GapSystem, x0, v0, duration_s: float, sampl
 
 @dataclass(frozen=True, slots=True)
 class ExplicitFrictionOptions:
-    """Options of central difference with friction: those of :class:`reduced.transient.explicit.ExplicitOptions`
-    and the sliders' initial positions ``w0`` (m, (p,); None: unloaded, Bt x0)."""
+    """Options of central difference with friction.
+
+    Parameters
+    ----------
+    dt, omega_dt, step_basis, chunks : as :class:`reduced.transient.explicit.ExplicitOptions`
+    w0 : m, the sliders' initial positions (p,), or None: unloaded, w(0) = Bt x(0)
+    """
 
     dt: float | None = None
     omega_dt: float = DEFAULT_OMEGA_DT
