@@ -475,3 +475,27 @@ def test_ringdown_file_keeps_the_sliders(tmp_path):
     assert f.energy_balance_error == pytest.approx(r.energy_balance_error, rel=1e-12)
     (c,) = list(f.chunks(10_000, fields=("w",)))
     assert np.array_equal(c.w, r.w)
+
+
+def test_what_does_not_treat_friction_refuses_it():
+    # harmonic balance and the flow map (shooting) would drop the friction silently: refused by name, as the
+    # scene tables that run them are on the friction model; the scene itself parses, with its keys.
+    from bearingshaft.scenes import SceneError, load_scene, parse_scene
+    from reduced._checks import InvalidArgument
+    from reduced.periodic.hb import HarmonicBalance
+    from reduced.transient.flow import Flow
+
+    s = DiscreteFrictionParams().system()
+    for build in (lambda: HarmonicBalance.for_system(s, 3), lambda: Flow(s)):
+        with pytest.raises(InvalidArgument, match="friction"):
+            build()
+    scene = load_scene("discrete-friction")
+    assert scene.model_kind == "discrete_friction" and scene.model.mu == 0.3 and scene.model.k_t is None
+    text = ('[model]\nkind = "discrete_friction"\nmu = 0.5\nk_t = 1e7\n[initial]\nx0_m = [0.0, 0.0, 0.0, 0.0]\n'
+            'v0_m_s = [0.0, 0.0, 1.0, 0.1]\n'
+            '[ringdown]\nduration_s = 0.1\nsample_rate_hz = 1000.0\n')
+    assert parse_scene(text, "t", "t.toml").model.k_t == 1e7
+    with pytest.raises(SceneError, match=r"\[nnm\] does not treat friction"):
+        parse_scene(text + "[nnm]\n", "t", "t.toml")
+    with pytest.raises(SceneError, match="needs 4 values"):
+        parse_scene(text.replace("[0.0, 0.0, 1.0, 0.1]", "[0.0, 0.0, 1.0]"), "t", "t.toml")

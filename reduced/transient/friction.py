@@ -190,6 +190,7 @@ class FrictionExactStepper(_stepper.Stepper):
         if isinstance(options, ExactOptions):
             options = ExactFrictionOptions(options.chunks, options.max_events)
         self.options = options = options.checked(system)
+        self.run_system = system = system.fold_zero_gap_tips()  # zero-gap tips without friction: linear springs
         fr = system.friction
         self.p = fr.p
         with single_thread_blas():
@@ -242,7 +243,7 @@ class FrictionExactStepper(_stepper.Stepper):
 
     def _scales(self, omega_max: float) -> tuple[float, float]:
         """(floor, load_scale) in m, as :meth:`reduced.transient.exact.ExactStepper._scales`."""
-        system, n, y = self.system, self.n, self.y
+        system, n, y = self.run_system, self.n, self.y
         x_scale = np.abs(system.B) @ (np.abs(y[:n]) + np.abs(y[n:2 * n]) / omega_max)
         load_scale = 0.0
         if self.forced:
@@ -324,7 +325,7 @@ class FrictionExactStepper(_stepper.Stepper):
             (self.t, self.W, self.Wf, self.E, self.s, buf.filled, ne, ni, status,
              self.n_stuck, self.n_log) = call_numba_kernel(
                 _friction_forced_kernel, tb.lam, tb.V, tb.Vinv, tb.yp, tb.erow, tb.ec, tb.eact, tb.succ, tb.reset,
-                tb.Df, tb.LF, events[7], self.system.C, self.damped, self.n, self.fric, self.y, self.s, self.t, t_b,
+                tb.Df, tb.LF, events[7], self.run_system.C, self.damped, self.n, self.fric, self.y, self.s, self.t, t_b,
                 buf.t, buf.filled, buf.t_after, out_y, out_W, out_Wf, self.W, self.Wf, self.hmin, self.floor, left,
                 self.n_stuck, *self.fargs, out_E, self.E, *self.log, self.n_log)
         self.n_events += ne
