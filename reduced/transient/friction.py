@@ -698,7 +698,10 @@ def reference_dop853(system: GapSystem, x0, v0, duration_s: float, sample_rate_h
     |kt (t - w)| reaching mu N, the slip velocity passing zero) located by ``solve_ivp`` on the dense output
     and refined on the steps (:func:`_land_on_event`); the next state is decided from the physics at the
     event (:func:`_reference_switch`), and the run restarts from the state there. The viscous, friction and
-    loads' work are integrated as three more states. A load breakpoint also ends a leg.
+    loads' work are integrated as three more states. A load breakpoint also ends a leg. Like ``solve_ivp``
+    it sees an event by a sign change between two steps' ends, so a slip shorter than a step (the brief slips
+    of a stick whose force a moving load brings back past the cone once a stick period) can pass unseen;
+    the exact integrator's march cannot miss one (tests/test_friction.py, the moving belt).
 
     Parameters
     ----------
