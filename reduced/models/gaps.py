@@ -197,7 +197,9 @@ class GapSystem:
         return 0 if self.friction is None else self.friction.p
 
     def with_friction(self, friction: Friction | None) -> GapSystem:
-        """The same system with ``friction`` at its stops (None: frictionless)."""
+        """The same system with ``friction`` at its tips (None: frictionless; ``self`` when that is no change)."""
+        if friction is None and self.friction is None:
+            return self
         return replace(self, friction=friction)
 
     # -- forces and energy -------------------------------------------------------------
