@@ -130,6 +130,11 @@ def _check_tables_of_kind(sections: dict, kind: str, origin: str) -> None:
         for key in ("rom_convergence", "verify"):
             if key in sections:
                 raise SceneError(f"{origin}: [{key}] needs a reduced model (kind = \"rom\"), not {kind!r}")
+    if kind == "discrete_friction":  # harmonic balance and the studies do not treat friction yet
+        for key in ("nnm", "fep", "frc", "work_precision", "stiff_cases", "symmetry"):
+            if key in sections:
+                raise SceneError(f"{origin}: [{key}] does not treat friction; the model with friction "
+                                 "(kind = \"discrete_friction\") has [ringdown] and [spectrogram]")
 
 
 def _check_points(sections: dict, kind: str, model, origin: str, has_loads: bool) -> tuple[str, ...]:
