@@ -618,6 +618,8 @@ class FRFSpec:
         ``fe``: the 3-D model's modes (as the modal stage solves them); ``rom``: the reduced rig's.
     fe_modes : int
         Modes of the 3-D model solved for the MAC.
+    export_max_hz : float
+        Hz, FRFs and coherences are written up to this (frf.uff, frf.npz).
 
     Raises
     ------
@@ -640,10 +642,11 @@ class FRFSpec:
     modes_hz: tuple[float, ...] = ()  # Hz, pick the poles nearest these (default: automatic)
     mac_reference: str = "fe"  # fe (the 3-D model, as the modal stage) | rom (the reduced rig)
     fe_modes: int = 20  # modes of the 3-D model solved for the MAC
+    export_max_hz: float = 200.0  # Hz, FRFs and coherences written up to this (frf.uff, frf.npz)
 
     def __post_init__(self) -> None:
         check(self.blows >= 1, f"blows must be >= 1, got {self.blows!r}")
-        positive(self, "peak_N", "force_window_s")
+        positive(self, "peak_N", "force_window_s", "export_max_hz")
         check(0 <= self.peak_spread < 1, f"peak_spread must lie in [0, 1), got {self.peak_spread!r}")
         check(self.noise >= 0, f"noise must be >= 0, got {self.noise!r}")
         check(len(self.locations_m) == len(self.directions), f"locations_m and directions must pair up, got "

@@ -283,7 +283,8 @@ def compute(scene: Scene, progress: bool, workdir, test_file: str | None = None)
             f"(modes.csv, mac.csv)")
     return FRFResult(scene=scene, blows=blows, windows=windows, estimate=est, band=band, diagram=diagram,
                      selected=selected, lam=lam, added_zeta=added, fit=fit, acc_index=acc_idx,
-                     shapes=shapes * 1.0, complexity=complexity, model=model, mac_beam=mac_beam,
+                     shapes=shapes, shape_dofs=tuple(ACC_DOFS[r] for r in acc_rows),
+                     complexity=complexity, model=model, mac_beam=mac_beam,
                      mac_assembly=mac_assembly, match=match, geometry=geometry, stats=stats, lines=(line,))
 
 

@@ -148,7 +148,9 @@ class FRFResult:
     acc_index : (n_acc,) ndarray of int
         The accelerometer outputs (rows of the FRFs) the shapes are at.
     shapes : (n_acc, m) ndarray of float
-        Real mode shapes at those outputs.
+        Real mode shapes at those outputs, along +x, +y, +z.
+    shape_dofs : tuple of str
+        ``<sensor>:<axis>`` of each row of ``shapes``.
     complexity : (m,) ndarray of float
         Their complexity (0: a normal mode).
     model : ModelModes
@@ -178,6 +180,7 @@ class FRFResult:
     fit: LSFDFit
     acc_index: np.ndarray
     shapes: np.ndarray
+    shape_dofs: tuple[str, ...]
     complexity: np.ndarray
     model: ModelModes
     mac_beam: np.ndarray
