@@ -235,7 +235,7 @@ def read_uff58_functions(path: str | Path) -> list[FrequencyFunction]:
 
 
 @dataclass(frozen=True, eq=False)
-class TestGeometry:
+class SensorGeometry:
     """Nodes of a test (sensors, load cells, hammer references) and the trace lines between them.
 
     Parameters
@@ -272,14 +272,14 @@ class TestGeometry:
         object.__setattr__(self, "xyz", xyz)
 
 
-def write_geometry(path: str | Path, geometry: TestGeometry, dataset: int = 15) -> None:
+def write_geometry(path: str | Path, geometry: SensorGeometry, dataset: int = 15) -> None:
     """Write the nodes (dataset 15 or 2411) and the trace lines (dataset 82) of ``geometry`` to ``path``.
 
     Parameters
     ----------
     path : str or Path
         The file, replaced if it exists.
-    geometry : TestGeometry
+    geometry : SensorGeometry
         Nodes and trace lines.
     dataset : {15, 2411}
         The nodes' dataset: 15 (single precision, the classic one) or 2411 (double precision).
@@ -306,5 +306,5 @@ def write_geometry(path: str | Path, geometry: TestGeometry, dataset: int = 15) 
     pyuff.UFF(str(path)).write_sets(sets, mode="add")
 
 
-__all__ = ["FrequencyFunction", "write_uff58_functions", "read_uff58_functions", "TestGeometry", "write_geometry",
+__all__ = ["FrequencyFunction", "write_uff58_functions", "read_uff58_functions", "SensorGeometry", "write_geometry",
            "FRF", "COHERENCE"]

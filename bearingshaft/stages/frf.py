@@ -39,7 +39,7 @@ from fem.frf import exponential_correction, exponential_window, force_window, fr
 from fem.lscf import lscf, lsfd, real_shapes, receptance, select_modes
 from fem.mac import mac
 from fem.rig import AXES, BEAM_SENSORS, TIP_CELLS, TUBE_NODE0, TUBE_SENSORS, sensor_node, tip_node
-from fem.uff_frf import TestGeometry
+from fem.uff_frf import SensorGeometry
 
 TRIGGER_SHARE = 0.05  # the trigger: the force's first sample at 5 % of its peak
 PRE_SHARE = 0.1  # the windows start this share of the force window before the trigger
@@ -148,7 +148,18 @@ def _acc_rows(outputs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 # -- the model -----------------------------------------------------------------------------
 def model_modes(scene: Scene, rom, band_hz) -> ModelModes:
-    """The reduced rig's open-gap complex poles in the band, and the MAC reference shapes at ACC_DOFS."""
+    """The reduced rig's open-gap complex poles in the band, and the MAC reference shapes at ACC_DOFS.
+
+    Parameters
+    ----------
+    scene : the scene ([frf] mac_reference and fe_modes; [model] for the 3-D model)
+    rom : its reduced model
+    band_hz : Hz, (low, high)
+
+    Returns
+    -------
+    ModelModes
+    """
     from fem.modal_response import ModalModel
     from reduced.models.modes import linear_modes
 
@@ -177,8 +188,19 @@ def model_modes(scene: Scene, rom, band_hz) -> ModelModes:
                       f"reduced rig ({system.n} DOFs), its open-gap modes in the band")
 
 
-def test_geometry(scene: Scene, rom, ref_locations) -> TestGeometry:
-    """Nodes of the test (sensors, tip load cells, hammer references) and the wireframe's trace lines."""
+def test_geometry(scene: Scene, rom, ref_locations) -> SensorGeometry:
+    """Nodes of the test (sensors, tip load cells, hammer references) and the wireframe's trace lines.
+
+    Parameters
+    ----------
+    scene : the scene (its 3-D model's geometry places the sensors and tip seats)
+    rom : its reduced model (unused: the geometry is the 3-D model's)
+    ref_locations : m, the hammer references' points (nodes 301, 302, ...)
+
+    Returns
+    -------
+    SensorGeometry
+    """
     g = scene.model.fe_model().geometry()
     nodes, xyz, names = [], [], []
     for s, p in {**g.beam_sensors(), **g.tube_sensors()}.items():
@@ -197,7 +219,7 @@ def test_geometry(scene: Scene, rom, ref_locations) -> TestGeometry:
     t = TUBE_NODE0
     lines = (("beam top edges", (1, 3, 5, 6, 4, 2, 1)), ("tube", (t + 1, t + 2, t + 4, t + 3, t + 1)),
              ("tips", (201, 202, 0, 203, 204)))
-    return TestGeometry(np.array(nodes), np.array(xyz, float), tuple(names), lines)
+    return SensorGeometry(np.array(nodes), np.array(xyz, float), tuple(names), lines)
 
 
 # -- the stage ---------------------------------------------------------------------------------

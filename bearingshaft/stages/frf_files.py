@@ -58,7 +58,13 @@ def _export(result: FRFResult) -> slice:
 
 def write_functions(result: FRFResult, writer: StageWriter) -> None:
     """``frf.uff``: H1 of every response to every reference (type 4), then their coherences (type 6),
-    up to ``[frf] export_max_hz``; ``frf.npz``: the same with H2 and the force auto spectra."""
+    up to ``[frf] export_max_hz``; ``frf.npz``: the same with H2 and the force auto spectra.
+
+    Parameters
+    ----------
+    result : from :func:`bearingshaft.stages.frf.compute`
+    writer : the stage's writer
+    """
     est, b = result.estimate, result.blows
     keep = _export(result)
     f = est.freq_hz[keep]
@@ -84,7 +90,16 @@ def write_functions(result: FRFResult, writer: StageWriter) -> None:
 
 def mode_rows(result: FRFResult) -> list[dict]:
     """One row per identified mode: window-corrected frequency and damping, the window's share, the
-    model's pole, the best-matching reference mode by MAC."""
+    model's pole, the best-matching reference mode by MAC.
+
+    Parameters
+    ----------
+    result : from :func:`bearingshaft.stages.frf.compute`
+
+    Returns
+    -------
+    list of dict
+    """
     rows = []
     zeta_w = result.selected.zeta
     for k in range(result.lam.size):
@@ -107,7 +122,13 @@ def mode_rows(result: FRFResult) -> list[dict]:
 
 
 def write_modes(result: FRFResult, writer: StageWriter) -> None:
-    """``modes.csv`` and ``modes.uff`` (the real shapes at the sensors as UFF 55, x y z per sensor node)."""
+    """``modes.csv`` and ``modes.uff`` (the real shapes at the sensors as UFF 55, x y z per sensor node).
+
+    Parameters
+    ----------
+    result : from :func:`bearingshaft.stages.frf.compute`
+    writer : the stage's writer
+    """
     write_rows(writer.path("modes.csv"), mode_rows(result))
     sensors = list(dict.fromkeys(d.split(":")[0] for d in result.shape_dofs))
     full = np.zeros((3 * len(sensors), result.lam.size))
@@ -119,7 +140,13 @@ def write_modes(result: FRFResult, writer: StageWriter) -> None:
 
 
 def write_mac(result: FRFResult, writer: StageWriter) -> None:
-    """``mac.csv`` (beam and assembly sets, identified modes against the reference's) and ``mac.png``."""
+    """``mac.csv`` (beam and assembly sets, identified modes against the reference's) and ``mac.png``.
+
+    Parameters
+    ----------
+    result : from :func:`bearingshaft.stages.frf.compute`
+    writer : the stage's writer
+    """
     names = result.model.ref_names
     rows = []
     for label, M in (("beam", result.mac_beam), ("assembly", result.mac_assembly)):
@@ -145,7 +172,13 @@ def write_mac(result: FRFResult, writer: StageWriter) -> None:
 
 
 def draw_stabilization(result: FRFResult, path) -> None:
-    """The stabilization diagram over the band, on the mean receptance magnitude of the accelerometers."""
+    """The stabilization diagram over the band, on the mean receptance magnitude of the accelerometers.
+
+    Parameters
+    ----------
+    result : from :func:`bearingshaft.stages.frf.compute`
+    path : the PNG file
+    """
     from fem.lscf import receptance
 
     est, band = result.estimate, result.band
@@ -186,7 +219,13 @@ def draw_stabilization(result: FRFResult, path) -> None:
 
 
 def draw_frf(result: FRFResult, path) -> None:
-    """Per reference: |H1|, |H2| of its largest accelerometer response, the LSFD fit over the band, the coherence."""
+    """Per reference: |H1|, |H2| of its largest accelerometer response, the LSFD fit over the band, the coherence.
+
+    Parameters
+    ----------
+    result : from :func:`bearingshaft.stages.frf.compute`
+    path : the PNG file
+    """
     est, b = result.estimate, result.blows
     keep = _export(result)
     f = est.freq_hz[keep]
@@ -221,7 +260,16 @@ def draw_frf(result: FRFResult, path) -> None:
 
 
 def report(result: FRFResult) -> str:
-    """``frf.md``: what was averaged, the windows, the modes against the model, Table 3's MAC."""
+    """``frf.md``: what was averaged, the windows, the modes against the model, Table 3's MAC.
+
+    Parameters
+    ----------
+    result : from :func:`bearingshaft.stages.frf.compute`
+
+    Returns
+    -------
+    str, Markdown
+    """
     spec, b, w = result.scene.frf, result.blows, result.windows
     rows = mode_rows(result)
     lines = [f"# {result.scene.name}: FRFs and modal parameters", "",

@@ -14,12 +14,22 @@ import numpy as np
 from bearingshaft.scenes import Scene
 from fem.frf import FRFEstimate
 from fem.lscf import LSFDFit, OrderPoles, SelectedModes
-from fem.uff_frf import TestGeometry
+from fem.uff_frf import SensorGeometry
 
 
 @dataclass(frozen=True, slots=True)
 class Dof:
-    """A channel's place: its name, UFF node and direction code, and quantity (a key of ``fem.uff.QUANTITIES``)."""
+    """A channel's place: its name, UFF node and direction code, and quantity.
+
+    Attributes
+    ----------
+    name : str
+        The channel's name.
+    node, direction : int
+        UFF node and direction code.
+    quantity : str
+        A key of ``fem.uff.QUANTITIES``.
+    """
 
     name: str
     node: int
@@ -160,7 +170,7 @@ class FRFResult:
         all of them (the paper's Table 3 and Fig. 9).
     match : (m,) ndarray of int
         The model pole nearest each identified mode (index into ``model.freq_hz``).
-    geometry : TestGeometry
+    geometry : SensorGeometry
         Nodes and trace lines of the test.
     stats : dict
         For provenance.json.
@@ -186,7 +196,7 @@ class FRFResult:
     mac_beam: np.ndarray
     mac_assembly: np.ndarray
     match: np.ndarray
-    geometry: TestGeometry
+    geometry: SensorGeometry
     stats: dict
     lines: tuple[str, ...]
 

@@ -66,7 +66,17 @@ def default_references(rom) -> tuple[tuple[tuple[float, float, float], tuple[flo
 
 
 def references(scene: Scene, rom) -> list[VirtualRig]:
-    """The rig struck at each reference of [frf] (or :func:`default_references`); SceneError if one is off the beam."""
+    """The rig struck at each reference of [frf] (or :func:`default_references`); SceneError if one is off the beam.
+
+    Parameters
+    ----------
+    scene : the scene ([frf] locations_m and directions, [hammer] seismic_mass_kg)
+    rom : its reduced model
+
+    Returns
+    -------
+    list of VirtualRig, one per reference
+    """
     spec = scene.frf
     pairs = tuple(zip(spec.locations_m, spec.directions, strict=True)) or default_references(rom)
     rigs = []
