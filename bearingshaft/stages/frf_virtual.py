@@ -108,6 +108,48 @@ def _free_decay(W: np.ndarray, lam: np.ndarray, tau0: float, dtau: float, nt: in
     return out
 
 
+def _modal_start(rigs: list[VirtualRig], mm: ModalModel, phi: np.ndarray, t: np.ndarray, duration_s: float,
+                 start_s: float):
+    """The outputs during the blow at the times ``t`` inside it, and the free decay's rows and amplitudes.
+
+    Returns (rows_acc, rows_gap, W_acc, W_gap, pulses, cs, poles): for each rig, pulses[k] =
+    (acc, gap) at every time of ``t`` (zero before the blow, filled inside it) and cs[k] = V^-1 z(t1).
+    """
+    s = rigs[0].system
+    rows_acc = np.vstack([rigs[0].acc_rows, rigs[0].seat_rows]) @ phi  # accelerations
+    rows_gap = s.B @ phi  # displacements
+    na, ng = rows_acc.shape[0], rows_gap.shape[0]
+    p = mm.poles()
+    if p.n_rigid:
+        raise ValueError("the rig has free rigid-body modes: a blow would drift it; no FRF to estimate")
+    n, E = p.elastic_basis.shape[1], p.elastic_basis
+    t1 = start_s + duration_s
+    during = (t >= start_s) & (t < t1)
+    W_acc = (rows_acc @ E) @ p.V[n:] * p.lam[None]
+    W_gap = (rows_gap @ E) @ p.V[:n]
+    pulses, cs = [], []
+    for rig in rigs:
+        b = phi.T @ rig.b
+        acc = np.zeros((na, t.size))
+        gap = np.zeros((ng, t.size))
+        if during.any():
+            r = mm.half_sine_response(t[during], b, np.vstack([rows_acc, rows_gap]), 1.0, duration_s, start_s)
+            acc[:, during] = r.acceleration[:na]
+            gap[:, during] = r.displacement[na:]
+        end = mm.half_sine_response(np.array([t1]), b, np.eye(b.size), 1.0, duration_s, start_s)
+        cs.append(p.V_inv @ np.concatenate([E.T @ end.displacement[:, 0], E.T @ end.velocity[:, 0]]))
+        pulses.append((acc, gap))
+    return W_acc, W_gap, pulses, cs, p
+
+
+def _channels(rig: VirtualRig, acc: np.ndarray, force: np.ndarray) -> np.ndarray:
+    """The rig's channels from its accelerometer and seat accelerations: tip cells -+ m_a a_seat, the hammer last."""
+    n_acc = rig.acc_rows.shape[0]
+    sign = np.array([1.0 if cell.endswith("top") else -1.0 for cell in TIP_CELLS])[:, None]
+    cells = -sign * rig.seismic_mass_kg * acc[n_acc:]  # f_c = 0: the gaps are open
+    return np.vstack([acc[:n_acc], cells, np.broadcast_to(force, (1, acc.shape[1]))])
+
+
 def unit_blows(rigs: list[VirtualRig], mm: ModalModel, phi: np.ndarray, t: np.ndarray, duration_s: float,
                start_s: float) -> list[tuple[np.ndarray, np.ndarray]]:
     """Every channel of each rig (rig order, the hammer last) and every stop's penetration under a 1 N half-sine.
@@ -125,46 +167,68 @@ def unit_blows(rigs: list[VirtualRig], mm: ModalModel, phi: np.ndarray, t: np.nd
     list of (channels, penetration), one per rig: channels (n_channels, nt) per N of peak force,
     penetration (n_stops, nt) m per N, side B q (the offsets not subtracted)
     """
-    s = rigs[0].system
-    rows_acc = np.vstack([rigs[0].acc_rows, rigs[0].seat_rows]) @ phi  # accelerations
-    rows_gap = s.B @ phi  # displacements
-    na, ng = rows_acc.shape[0], rows_gap.shape[0]
-    p = mm.poles()
-    if p.n_rigid:
-        raise ValueError("the rig has free rigid-body modes: a blow would drift it; no FRF to estimate")
-    n, E = p.elastic_basis.shape[1], p.elastic_basis
+    W_acc, W_gap, pulses, cs, p = _modal_start(rigs, mm, phi, t, duration_s, start_s)
+    na = W_acc.shape[0]
     t1 = start_s + duration_s
-    during = (t >= start_s) & (t < t1)
     after = np.flatnonzero(t >= t1)
-    W_acc = (rows_acc @ E) @ p.V[n:] * p.lam[None]
-    W_gap = (rows_gap @ E) @ p.V[:n]
-    blocks, pulses = [], []
-    for rig in rigs:
-        b = phi.T @ rig.b
-        acc = np.zeros((na, t.size))
-        gap = np.zeros((ng, t.size))
-        if during.any():
-            r = mm.half_sine_response(t[during], b, np.vstack([rows_acc, rows_gap]), 1.0, duration_s, start_s)
-            acc[:, during] = r.acceleration[:na]
-            gap[:, during] = r.displacement[na:]
-        end = mm.half_sine_response(np.array([t1]), b, np.eye(b.size), 1.0, duration_s, start_s)
-        c = p.V_inv @ np.concatenate([E.T @ end.displacement[:, 0], E.T @ end.velocity[:, 0]])
-        blocks.append(np.vstack([W_acc, W_gap]) * c[None])
-        pulses.append((acc, gap))
     if after.size:
         dt = float(t[1] - t[0]) if t.size > 1 else 0.0
-        decay = _free_decay(np.vstack(blocks), p.lam, float(t[after[0]] - t1), dt, after.size)
+        rows = np.vstack([np.vstack([W_acc, W_gap]) * c[None] for c in cs])
+        decay = _free_decay(rows, p.lam, float(t[after[0]] - t1), dt, after.size)
     a = math.pi / duration_s
+    during = (t >= start_s) & (t < t1)
     force = np.where(during, np.sin(a * np.where(during, t - start_s, 0.0)), 0.0)
-    sign = np.array([1.0 if cell.endswith("top") else -1.0 for cell in TIP_CELLS])[:, None]
-    n_acc = rigs[0].acc_rows.shape[0]
     out = []
     for k, (rig, (acc, gap)) in enumerate(zip(rigs, pulses, strict=True)):
         if after.size:
-            rows = decay[k * (na + ng):(k + 1) * (na + ng)]
-            acc[:, after], gap[:, after] = rows[:na], rows[na:]
-        cells = -sign * rig.seismic_mass_kg * acc[n_acc:]  # f_c = 0: the gaps are open
-        out.append((np.vstack([acc[:n_acc], cells, force[None]]), s.side[:, None] * gap))
+            block = decay[k * (na + W_gap.shape[0]):(k + 1) * (na + W_gap.shape[0])]
+            acc[:, after], gap[:, after] = block[:na], block[na:]
+        out.append((_channels(rig, acc, force[None]), rig.system.side[:, None] * gap))
+    return out
+
+
+def recorded_unit_blows(rigs: list[VirtualRig], mm: ModalModel, phi: np.ndarray, acq, n_out: int,
+                        duration_s: float, start_s: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The channels of :func:`unit_blows` as the DAQ records them, and each stop's largest penetration.
+
+    The same as ``acq.acquire`` of :func:`unit_blows` at the fine rate, computed at the record's
+    rate where it can be: once the anti-alias filter (taps h, half length D, fine step delta)
+    sees only the free decay, a pole's filtered output is the pole's own times the filter's
+    response to it, H_f(lambda) = sum_j h[j] exp(lambda (D - j) delta), so those samples are the
+    free decay with amplitudes scaled by H_f, at the record's times (half the work, no filtering).
+    The penetration is checked at the fine samples up to there and at the record's after.
+
+    Parameters
+    ----------
+    rigs, mm, phi : as :func:`unit_blows`
+    acq : reduced.models.daq.Acquisition, the DAQ
+    n_out : samples of the record
+    duration_s, start_s : s, the half-sine's length and start
+
+    Returns
+    -------
+    list of (channels (n_channels, n_out) per N, largest penetration (n_stops,) m per N), one per rig
+    """
+    q, h = acq.oversample, acq.taps()
+    D = (len(h) - 1) // 2
+    delta = 1.0 / acq.fine_rate_hz
+    t1 = start_s + duration_s
+    n1 = math.ceil(t1 / delta - 1e-9)  # first fine sample of the free decay
+    k0 = min(n_out, math.ceil((n1 + D) / q))  # first record sample whose filter sees only the free decay
+    head = unit_blows(rigs, mm, phi, np.arange(q * max(k0 - 1, 0) + 1 + D) * delta, duration_s, start_s)
+    out = [(np.zeros((ch.shape[0], n_out)), pen.max(axis=1)) for ch, pen in head]
+    for (rec, _pen), (ch, _p) in zip(out, head, strict=True):
+        rec[:, :k0] = acq.acquire(ch, k0) if k0 else rec[:, :0]
+    if k0 < n_out:
+        W_acc, W_gap, _pulses, cs, p = _modal_start(rigs, mm, phi, np.zeros(0), duration_s, start_s)
+        Hf = np.exp(np.outer(p.lam, (D - np.arange(len(h))) * delta)) @ h
+        rows = np.vstack([np.vstack([W_acc * Hf[None], W_gap]) * c[None] for c in cs])
+        tail = _free_decay(rows, p.lam, k0 / acq.sample_rate_hz - t1, 1.0 / acq.sample_rate_hz, n_out - k0)
+        na, ng = W_acc.shape[0], W_gap.shape[0]
+        for k, (rig, (rec, pen)) in enumerate(zip(rigs, out, strict=True)):
+            block = tail[k * (na + ng):(k + 1) * (na + ng)]
+            rec[:, k0:] = _channels(rig, block[:na], np.zeros((1, 1)))
+            pen[:] = np.maximum(pen, (rig.system.side[:, None] * block[na:]).max(axis=1))
     return out
 
 
@@ -200,19 +264,17 @@ def virtual_blows(scene: Scene, rom, progress: bool = False) -> Blows:
     n_out = sample_count(rd.duration_s, fs)
     acq = Acquisition(fs, oversampling(lm.freq_hz.max(), fs))
     q = acq.oversample
-    t_fine = np.arange(q * (n_out - 1) + 1 + acq.tail_samples) / acq.fine_rate_hz
     rng = np.random.default_rng(spec.seed)
     n_ref = len(rigs)
     peaks = spec.peak_N * (1.0 + spec.peak_spread * rng.uniform(-1.0, 1.0, size=(n_ref, spec.blows)))
     force, resp, ref, closest = [], [], [], -math.inf
-    for k, (unit, pen) in enumerate(unit_blows(rigs, mm, lm.phi, t_fine, h.duration_s, h.start_s)):
-        gap = (system.offset * system.side)[None, :, None]  # m, each stop's clearance
-        worst = float(np.max(peaks[k][:, None, None] * pen[None] - gap))
+    recorded = recorded_unit_blows(rigs, mm, lm.phi, acq, n_out, h.duration_s, h.start_s)
+    for k, (rec, pen) in enumerate(recorded):  # rec: (n_channels, N) per N of peak
+        worst = float(np.max(peaks[k].max() * pen - system.offset * system.side))
         closest = max(closest, worst)
         if worst > 0:
             raise SceneError(f"{scene.origin} [frf] peak_N: a {peaks[k].max():.3g} N blow at reference {k + 1} "
                              f"closes a gap (by {worst:.3g} m); FRFs need the gaps open: lower peak_N")
-        rec = acq.acquire(unit, n_out)  # (n_channels, N) per N
         for P in peaks[k]:
             chans = P * rec
             if spec.noise > 0:
@@ -233,4 +295,4 @@ def virtual_blows(scene: Scene, rom, progress: bool = False) -> Blows:
                  f"{spec.peak_N:g} N +-{100 * spec.peak_spread:g} %, noise {100 * spec.noise:g} % of RMS)", info=info)
 
 
-__all__ = ["virtual_blows", "unit_blows", "references", "default_references"]
+__all__ = ["virtual_blows", "unit_blows", "recorded_unit_blows", "references", "default_references"]
