@@ -115,6 +115,7 @@ def mode_rows(result: FRFResult) -> list[dict]:
             "model_zeta": sig(mz, DIGITS), "zeta_error": sig(float(result.zeta[k]) - mz, 3),
             "stable_orders": int(result.selected.n_orders[k]), "complexity": round(float(result.complexity[k]), 4),
             "label": result.model.ref_names[best] if best >= 0 else "",
+            "label_freq_hz": sig(float(result.model.ref_freq_hz[best]), DIGITS) if best >= 0 else float("nan"),
             "mac_beam": round(float(result.mac_beam[k, best]), 4) if best >= 0 else float("nan"),
             "mac_assembly": round(float(result.mac_assembly[k, best]), 4) if best >= 0 else float("nan"),
         })
@@ -288,11 +289,11 @@ def report(result: FRFResult) -> str:
              f"Model: the reduced rig's open-gap complex poles (modal damping of its dashpots); MAC reference: "
              f"{result.model.source}.", "",
              "| mode | f (Hz) | model f (Hz) | error (%) | zeta (%) | model zeta (%) | window added (%) | label | "
-             "MAC beam | MAC assembly |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "its f (Hz) | MAC beam | MAC assembly |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['mode']} | {r['freq_hz']:.6g} | {r['model_freq_hz']:.6g} | {r['freq_error_pct']:.3g} | "
                      f"{100 * r['zeta']:.4g} | {100 * r['model_zeta']:.4g} | {100 * r['zeta_added']:.4g} | "
-                     f"{r['label']} | {r['mac_beam']:.4f} | {r['mac_assembly']:.4f} |")
+                     f"{r['label']} | {r['label_freq_hz']:.6g} | {r['mac_beam']:.4f} | {r['mac_assembly']:.4f} |")
     lines += ["", "Files: frf.uff (UFF 58, FRFs type 4 and coherences type 6), frf.npz, frf.png, stabilization.png, "
               "modes.csv, modes.uff (UFF 55), mac.csv, mac.png, geometry.uff (UFF 15 + 82), geometry_2411.uff "
               "(UFF 2411 + 82), geometry.csv.", ""]
