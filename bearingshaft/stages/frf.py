@@ -333,7 +333,7 @@ stabilization diagram, its stable poles the modes (damping corrected for the exp
 window), LSFD their shapes, compared by MAC with the 3-D model's modes (Table 3). Writes
 frf.uff (UFF 58: FRFs, function type 4, and coherences, type 6), frf.npz, frf.png,
 stabilization.png, modes.csv, modes.uff (UFF 55 shapes), mac.csv, mac.png, geometry.uff (UFF 15
-nodes and 82 trace lines), geometry_2411.uff (the same nodes as 2411) and frf.md."""
+nodes and 82 trace lines), geometry_2411.uff (the same nodes as 2411), geometry.csv and frf.md."""
 
 
 def estimate(scene: Scene) -> list[Estimate]:
