@@ -48,6 +48,7 @@ from bearingshaft.scenes.tables import (
     SECTIONS,
     FEPSpec,
     FRCSpec,
+    FRFSpec,
     HammerSpec,
     InitialSpec,
     ModalSpec,
@@ -65,4 +66,4 @@ __all__ = ["Scene", "SceneError", "SweepError", "SweepSpec", "Vary", "load_scene
            "from_table", "suggest", "SECTIONS", "MODEL_KINDS", "LOAD_KINDS", "model_class", "FEPSpec", "FRCSpec",
            "HammerSpec", "InitialSpec", "ModalSpec", "NNMSpec", "RingdownSpec", "RomConvergenceSpec",
            "SpectrogramSpec", "StiffCasesSpec", "SymmetrySpec", "VerifySpec", "WorkPrecisionSpec",
-           "HalfSineLoadSpec", "HarmonicLoadSpec", "TabulatedLoadSpec"]
+           "HalfSineLoadSpec", "HarmonicLoadSpec", "TabulatedLoadSpec", "FRFSpec"]
