@@ -7,52 +7,101 @@ are matched and compared channel for channel by :mod:`bearingshaft.correlate` (:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+import re
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from bearingshaft import correlate
+from bearingshaft import correlate, measures
 from bearingshaft.scenes import Scene, SceneError
-from bearingshaft.stages.hammer_results import Comparison, Record, histories
+from bearingshaft.stages.hammer_results import Comparison, Horizon, Record, histories
 from fem.uff import TimeHistory, UffError, read_uff58
 from reduced.models.loads import Tabulated
 from reduced.models.rig import VirtualRig
 
+LYAPUNOV_DELTA = 1e-9  # the second run's blow is this much (relative) stronger than the first's
+LYAPUNOV_SATURATION = 1e-3  # ... followed until it reaches this fraction of the state
+SEPARATION_WINDOW_S = 2e-3  # s, the separation is maximised over windows this long (a period of the kHz modes)
+CONTACT_TAIL_S = 0.05  # s, the runs go on this long after the model's last contact (then the motion is linear)
+# the horizon: where the mismatch over the blow, grown as the model grows it, reaches this share of the
+# signal (a quarter: the traces have parted; a blow's interpolation error grows from 5 % to 50 % within 2 ms)
+HORIZON_TOL = 0.25
+EPS0_MIN = 1e-9  # the mismatch over the blow is never taken below this (a file the model wrote itself)
+CHUNK_SAMPLES = 200  # samples a chunk of the two runs (they stop at the chunk where they saturate)
+
 
 @dataclass(frozen=True, eq=False)
 class MeasuredTest:
-    """A measured test's channels and how the model is to be driven to compare with it.
+    """A measured test's channels and the force that drives the model to compare with it.
 
     Attributes
     ----------
     channels : list of TimeHistory
-        Every channel of the test file.
-    signal : Tabulated or None
-        The test's hammer force; None: no force channel, the scene's blow is used.
-    level_N : float or None
+        Every channel of the test file, the hammer's as recorded.
+    signal : Tabulated
+        The force that drives the model: the hammer channel, through the force window if the
+        scene asks for one ([hammer] force_window).
+    level_N : float
         N, the peak of that force.
     driven : str
         What drives the model, as the summary says it.
     duration_s : float
-        s, the test's longest channel.
+        s, the test's record.
     sample_rate_hz : float
         Hz, the test's sampling.
+    window : ForceWindow
+        The force window found on the hammer channel (its pulse, its margins).
+    windowed : bool
+        The window was applied (``[hammer] force_window``); else the whole channel drives the model.
     """
 
     channels: list[TimeHistory]
-    signal: Tabulated | None  # the test's hammer force (Tabulated), None: no force channel, use the scene's blow
-    level_N: float | None  # N, the peak of that force
+    signal: Tabulated  # the force that drives the model
+    level_N: float  # N, the peak of that force
     driven: str  # what drives the model, as the summary says it
-    duration_s: float  # s, the test's longest channel
+    duration_s: float  # s, the test's record
     sample_rate_hz: float  # Hz, the test's sampling
+    window: correlate.ForceWindow  # the pulse and the window found on the hammer channel
+    windowed: bool  # the window was applied
+
+    @property
+    def free_after_s(self) -> float:
+        """s, the end of the blow: the force window's end (no force acts after it when it is applied)."""
+        return self.window.window_s[1]
+
+    @property
+    def pulse_start_s(self) -> float:
+        """s, the blow's first sample (the pre-trigger ends before it)."""
+        return self.window.pulse_s[0]
+
+
+def _complete(path: str) -> None:
+    """SceneError unless the file ends with a dataset delimiter (``-1`` on a line of its own): a file
+    cut short loses its last record without a word from the reader."""
+    with open(path, "rb") as fh:
+        fh.seek(0, 2)
+        size = fh.tell()
+        fh.seek(max(0, size - 256))
+        tail = fh.read()
+    if not re.search(rb"    -1[ \t]*[\r\n]*$", tail):  # the delimiter's I6 field; binary 58b ends it so too
+        raise SceneError(f"--test {path!r}: the file does not end with a dataset delimiter (-1): truncated "
+                         f"(its last record would be lost); copy it again")
 
 
 def read_test(scene: Scene, test_file: str) -> MeasuredTest:
     """The channels of ``test_file`` and the force that drives the model (SceneError, one line, if unusable).
 
+    The file is refused when it is truncated, and its records as
+    :func:`bearingshaft.correlate.check_test_channels` says (no hammer channel, two records for
+    one channel, non-finite samples, channels sampled or started differently, records of
+    different lengths); the records' units are checked by :func:`fem.uff.read_uff58`. The
+    hammer channel goes through the force window ([hammer] force_window, force_window_margin_s:
+    :func:`bearingshaft.correlate.force_window`).
+
     Parameters
     ----------
-    scene : the scene ([hammer] peak_N names the blow used when the test has no force channel)
+    scene : the scene ([hammer] force_window, force_window_margin_s)
     test_file : path of a UFF 58 file of time histories starting at t = 0
 
     Returns
@@ -64,52 +113,341 @@ def read_test(scene: Scene, test_file: str) -> MeasuredTest:
         test = read_uff58(test_file)
     except UffError as exc:
         raise SceneError(f"--test: {exc}") from None
-    forces = [c for c in test if c.quantity == "force"]
-    if len(forces) > 1:
-        raise SceneError(f"--test {test_file!r}: {len(forces)} force channels; a hammer test has one hammer")
-    ref = forces[0] if forces else test[0]
-    dt, t0 = ref.dt_s, ref.t0_s
-    if abs(t0) > 1e-12:
-        raise SceneError(f"--test {test_file!r}: the record starts at t0 = {t0!r} s; the model starts at rest at 0")
-    duration = (max(c.data.size for c in test) - 1) * dt
-    if forces:
-        signal = Tabulated(forces[0].t, forces[0].data, source=f"{test_file} ({forces[0].name})")
-        level = float(np.max(np.abs(forces[0].data)))
-        driven = f"the test's hammer channel {forces[0].name!r} (peak {level:.4g} N)"
-    else:
-        signal, level = None, None
-        driven = f"the scene's blow ({spec.peak_N:g} N): the test file has no force channel"
-    return MeasuredTest(test, signal, level, driven, duration, 1.0 / dt)
+    _complete(test_file)
+    try:
+        h = correlate.check_test_channels(test, source=repr(test_file))
+        ref = test[h]
+        window = correlate.force_window(ref, spec.force_window_margin_s, double_hit=spec.force_window,
+                                        source=f"{test_file!r} record {h + 1} ({ref.name!r})")
+    except correlate.ChannelError as exc:
+        raise SceneError(f"--test: {exc}") from None
+    if abs(ref.t0_s) > 1e-12:
+        raise SceneError(f"--test {test_file!r}: the record starts at t0 = {ref.t0_s!r} s; the model starts at rest "
+                         f"at 0")
+    force = window.channel if spec.force_window else ref
+    signal = Tabulated(force.t, force.data, source=f"{test_file} ({ref.name})")
+    level = float(np.max(np.abs(force.data)))
+    driven = f"the test's hammer channel {ref.name!r} (peak {level:.4g} N)"
+    if spec.force_window:
+        driven += f" through a {1e3 * window.margin_s:.3g} ms force window"
+    duration = (ref.data.size - 1) * ref.dt_s
+    return MeasuredTest(test, signal, level, driven, duration, 1.0 / ref.dt_s, window, spec.force_window)
 
 
-def compare(scene: Scene, rig: VirtualRig, rec: Record, test: MeasuredTest, test_file: str, stats: dict) -> Comparison:
-    """The model's record ``rec`` (run at the test's sampling) matched and compared with ``test``.
+def _window(spec, window_s, rec: Record) -> tuple[float, float]:
+    """s, the compared window: ``window_s`` (--window), else [hammer] compare_window_s, else the record."""
+    w = tuple(window_s) if window_s else tuple(spec.compare_window_s)
+    return (float(w[0]), float(w[1])) if w else (float(rec.t[0]), float(rec.t[-1]))
+
+
+def window_mismatch(pairs, floors: dict, window_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """(t, e): the test-model mismatch in consecutive windows of ``window_s`` from the record's start:
+    e_w = median over the pairs of rms_w(model - test) / max(rms_w(test), floor) (window centres t, s).
 
     Parameters
     ----------
-    scene : the scene ([hammer] compare, compare_window_s)
+    pairs : list of ChannelPair
+        The compared channels.
+    floors : dict
+        {name: (floor, basis)}.
+    window_s : float
+        s.
+
+    Returns
+    -------
+    (ndarray, ndarray)
+    """
+    al = [p.aligned() for p in pairs]
+    n = min(a.t.size for a in al)
+    per = max(1, int(round(window_s * al[0].sample_rate_hz)))
+    k = n // per
+    cut = slice(0, k * per)
+    m = np.array([a.model[cut] for a in al]).reshape(len(al), k, per)
+    x = np.array([a.test[cut] for a in al]).reshape(len(al), k, per)
+    floor = np.array([floors[p.name][0] for p in pairs])[:, None]
+    scale = np.maximum(np.sqrt(np.mean(x**2, axis=2)), floor)
+    err = np.divide(np.sqrt(np.mean((m - x) ** 2, axis=2)), scale, out=np.zeros_like(scale), where=scale > 0)
+    return al[0].t[cut].reshape(k, per).mean(axis=1), np.median(err, axis=0)
+
+
+def horizon(rig: VirtualRig, rec: Record, test: MeasuredTest, pairs, floors: dict, window_s: tuple[float, float],
+            ) -> Horizon:
+    """The predictability horizon of the model against the test (:class:`hammer_results.Horizon`).
+
+    Two exact runs of the model from rest (Long because the two runs, their separation in the
+    channels and in the state, the exponent and the horizon are one pass over the chunks): one
+    driven by the test's (windowed) hammer force, the other by that force times (1 + LYAPUNOV_DELTA),
+    a blow a hair stronger. While the motion is linear their channels differ by exactly delta
+    relative; impacts and then chaos grow the difference. In windows of SEPARATION_WINDOW_S the
+    relative separation of the compared channels is
+
+        e_w = median_c rms_w(ch_b - ch_a) / max(rms_w(ch_a), floor_c),     G_w = e_w / delta,
+
+    the factor by which the model itself grows a small difference of the blow by then, in the
+    metric of the pointwise errors. The test and the model differ by eps0 over the blow (the
+    median over the channels of the floored relative RMS error between the pulse's start and
+    the force window's end), which the model would show against itself after a blow
+    delta_eff = eps0 / G_blow stronger (G_blow: the runs' separation over the same span, in the
+    same metric, over delta: 1 when no gap closes during the blow); the horizon is the start of
+    the first window with delta_eff G_w >= HORIZON_TOL (extrapolated with the exponent past
+    saturation). The runs stop when
+    the state separation D = |y_b - y_a| (energy norm) reaches LYAPUNOV_SATURATION of the state,
+    or CONTACT_TAIL_S past the model's last contact (a motion whose gaps stay open is linear: a
+    difference no longer grows), or at the window's end. Chaos starts (the onset) in the first
+    window after the blow where G_w >= 100 (ONSET_FACTOR, :mod:`reduced.transient.compare`'s rule);
+    the largest Lyapunov exponent is the slope of ln max_w D from the window before it to
+    saturation.
+
+    Parameters
+    ----------
+    rig : VirtualRig
+        The model.
+    rec : Record
+        The model's record at the test's sampling (its states: the contacts).
+    test : MeasuredTest
+        The test (its force, its force window).
+    pairs : list of ChannelPair
+        The compared channels.
+    floors : dict
+        Their floors (:func:`bearingshaft.correlate.channel_floors`).
+    window_s : (float, float)
+        s, the compared window.
+
+    Returns
+    -------
+    Horizon
+    """
+    from reduced.transient.compare import ONSET_FACTOR, LineFit, aligned, binned, energy_norm_matrix, state_norm
+    from reduced.transient.integrate import ringdown_stream
+
+    system = rig.system
+    fs = test.sample_rate_hz
+    t_free = test.free_after_s
+    i_free = min(int(np.searchsorted(rec.t, t_free - 1e-6 / fs)), rec.t.size - 1)
+    span = (test.pulse_start_s, float(rec.t[i_free]))
+    errs = [r["rms_rel_error"] for r in correlate.channel_errors(pairs, window_s=span, floors=floors)]
+    eps0 = max(float(np.median(errs)), EPS0_MIN)
+    closed = np.flatnonzero(np.any(system.penetration(rec.x) > 0.0, axis=1))
+    last = float(rec.t[closed[-1]]) if closed.size else math.nan
+    end = min(window_s[1], (last if closed.size else t_free) + CONTACT_TAIL_S, float(rec.t[-1]))
+
+    def done(note, t=None, growth=None, lam=math.nan, onset=math.nan, chaotic=False, hz=math.inf,
+             delta_eff=math.nan):
+        t, growth = (np.empty(0), np.empty(0)) if t is None else (t, growth)
+        return Horizon(t_free, LYAPUNOV_DELTA, SEPARATION_WINDOW_S, t, growth, lam, onset, chaotic, eps0, span,
+                       HORIZON_TOL, hz, last, note, delta_eff)
+
+    if not closed.size or last <= t_free:
+        return done("the model's gaps do not close after the blow: its motion is linear, nearby motions do not "
+                    "separate, and the time-domain errors hold over the whole window")
+    if eps0 >= HORIZON_TOL:
+        return done(f"the model and the test already differ by {100 * eps0:.3g} % over the blow: no time-domain "
+                    f"comparison past it", hz=t_free)
+    sig_a = test.signal
+    sig_b = Tabulated(sig_a.t_s, (1.0 + LYAPUNOV_DELTA) * sig_a.force_N, source=sig_a.source)
+    zero = np.zeros(system.n)
+    runs = [ringdown_stream(system, zero, zero, end, fs, "exact", loads=rig.loads(sig), chunk_samples=CHUNK_SAMPLES)
+            for sig in (sig_a, sig_b)]
+    idx = [list(rig.names).index(p.name) for p in pairs]
+    floor = np.array([floors[p.name][0] for p in pairs])
+    per = max(1, int(round(SEPARATION_WINDOW_S * fs)))
+    n_win = -(-runs[0].n_samples // per)
+    ss_d, ss_a = np.zeros((n_win, len(idx))), np.zeros((n_win, len(idx)))
+    count, dmax, smax = np.zeros(n_win), np.zeros(n_win), np.zeros(n_win)
+    blow_d, blow_a = np.zeros(len(idx)), np.zeros(len(idx))  # sums of squares over the blow (eps0's span)
+    Kn = energy_norm_matrix(system)
+    n_seen = 0
+    try:
+        for ca, cb in aligned(*runs):
+            ch_a = rig.channel_data(ca.x, ca.v, sig_a(ca.t))[idx].T
+            ch_b = rig.channel_data(cb.x, cb.v, sig_b(cb.t))[idx].T
+            on = (ca.t >= span[0] - 0.5 / fs) & (ca.t <= span[1] + 0.5 / fs)
+            blow_d += np.sum((ch_b[on] - ch_a[on]) ** 2, axis=0)
+            blow_a += np.sum(ch_a[on] ** 2, axis=0)
+            k0, m = binned(np.add, (ch_b - ch_a) ** 2, ca.start, per)
+            sl = slice(k0, k0 + m.shape[0])
+            ss_d[sl] += m
+            ss_a[sl] += binned(np.add, ch_a**2, ca.start, per)[1]
+            count[sl] += binned(np.add, np.ones(len(ca)), ca.start, per)[1]
+            D = state_norm(Kn, system.M, cb.x - ca.x, cb.v - ca.v)
+            S = state_norm(Kn, system.M, ca.x, ca.v)
+            dmax[sl] = np.maximum(dmax[sl], binned(np.maximum, D, ca.start, per)[1])
+            smax[sl] = np.maximum(smax[sl], binned(np.maximum, S, ca.start, per)[1])
+            n_seen = sl.stop
+            if np.any(D > LYAPUNOV_SATURATION * S):
+                break
+    finally:
+        for r in runs:
+            r.close()
+    t = (np.arange(n_seen) + 0.5) * per / fs
+    cnt = np.maximum(count[:n_seen], 1.0)[:, None]
+    scale = np.maximum(np.sqrt(ss_a[:n_seen] / cnt), floor)
+    e = np.median(np.divide(np.sqrt(ss_d[:n_seen] / cnt), scale, out=np.zeros_like(scale), where=scale > 0), axis=1)
+    growth = e / LYAPUNOV_DELTA
+    n_blow = max(1, int(round((span[1] - span[0]) * fs)) + 1)
+    blow_scale = np.maximum(np.sqrt(blow_a / n_blow), floor)
+    g_blow = float(np.median(np.divide(np.sqrt(blow_d / n_blow), blow_scale, out=np.zeros_like(blow_scale),
+                                       where=blow_scale > 0))) / LYAPUNOV_DELTA
+    delta_eff = eps0 / g_blow if g_blow > 0 else eps0  # the mismatch as the blow's own: that much stronger
+    w_free = min(int(t_free * fs) // per, n_seen - 1)
+    saturated = bool(n_seen and dmax[n_seen - 1] > LYAPUNOV_SATURATION * smax[n_seen - 1])
+    fit_end = n_seen - 1 if saturated else n_seen  # the saturated window is past the fit
+    grown = np.flatnonzero(growth[w_free:fit_end] >= ONSET_FACTOR) + w_free
+    fit = LineFit()
+    first = max(int(grown[0]) - 1, w_free) if grown.size else w_free
+    keep = np.arange(first, fit_end)
+    keep = keep[dmax[keep] > 0]
+    fit.add(t[keep], np.log(dmax[keep]))
+    lam = fit.slope
+    onset = float(grown[0] * per / fs) if grown.size else math.inf
+    chaotic = bool(grown.size and lam > 0)
+    over = np.flatnonzero(delta_eff * growth >= HORIZON_TOL)
+    head = (f"the test and the model differ by {100 * eps0:.2g} % over the blow, as a blow {100 * delta_eff:.2g} % "
+            f"stronger would make the model differ from itself; ")
+    if over.size:
+        hz = float(over[0] * per / fs)
+        note = head + (f"the model grows such a difference {growth[over[0]]:.3g}-fold by {1e3 * hz:.4g} ms, to "
+                       f"{100 * HORIZON_TOL:g} % of the signal")
+    elif chaotic and saturated and growth[n_seen - 1] > 0:
+        hz = float(t[n_seen - 1]) + math.log(HORIZON_TOL / (delta_eff * growth[n_seen - 1])) / lam
+        note = head + (f"the two runs saturated before that reached {100 * HORIZON_TOL:g} %: extrapolated with the "
+                       f"exponent to {1e3 * hz:.4g} ms")
+    else:
+        hz = math.inf
+        note = head + (f"the model grows it at most {growth.max(initial=1.0):.3g}-fold within the window, never to "
+                       f"{100 * HORIZON_TOL:g} %")
+    return done(note, t, growth, lam, onset, chaotic, hz, delta_eff)
+
+
+def compare(scene: Scene, rig: VirtualRig, rec: Record, test: MeasuredTest, test_file: str, stats: dict, *,
+            window_s: tuple[float, float] | None = None, wanted: tuple[str, ...] = measures.MEASURES,
+            backbones: list | None = None) -> Comparison:
+    """The model's record ``rec`` (run at the test's sampling) matched and compared with ``test``.
+
+    The pointwise errors (:func:`bearingshaft.correlate.channel_errors`, with floors) are over the
+    window up to the predictability horizon (:func:`horizon`); the measures that survive chaos
+    (:func:`bearingshaft.measures.compare`) past it.
+
+    Parameters
+    ----------
+    scene : the scene ([hammer] compare, compare_window_s; [spectrogram] window_s, overlap, fmax_hz)
     rig : the rig that made ``rec``
     rec : the model's record, driven as ``test.driven`` says
     test : from :func:`read_test`
     test_file : the test file's path, as the files and messages name it
     stats : the stage's statistics so far (the rig's); the comparison's are added
+    window_s : s, the compared window (--window; default [hammer] compare_window_s, else the record)
+    wanted : the measures (--measures): among :data:`bearingshaft.measures.MEASURES`
+    backbones : the model's NNM backbones on channels (ChannelBackbone), for the ``backbone`` measure
 
     Returns
     -------
     Comparison (SceneError, one line, when the channels cannot be compared)
     """
-    spec = scene.hammer
+    spec, sp = scene.hammer, scene.spectrogram
     model = histories(rig, rec.t, rec.data)
+    window = _window(spec, window_s, rec)
+    noise_end = test.pulse_start_s - test.window.margin_s
+    noise = (float(rec.t[0]), noise_end) if noise_end > rec.t[0] else None
     try:
         pairs = correlate.match_channels(model, test.channels, list(spec.compare) or None, source=repr(test_file))
-        window = tuple(spec.compare_window_s) or None
-        rows = correlate.channel_errors(pairs, window_s=window)
+        floors = correlate.channel_floors(pairs, window, noise)
+        hz = horizon(rig, rec, test, pairs, floors, window)
+        hz = replace(hz, **dict(zip(("mismatch_t", "mismatch"), window_mismatch(pairs, floors, SEPARATION_WINDOW_S),
+                                    strict=True)))
+        rows = []
+        t_end = min(window[1], hz.horizon_s)
+        if "time" in wanted and t_end > window[0]:
+            rows = correlate.channel_errors(pairs, window_s=(window[0], t_end), floors=floors)
+        bbs = [b for b in (backbones or []) if any(p.name == b.channel for p in pairs)]
+        bands: dict = {}
+        for b in bbs:
+            bands.setdefault(b.channel, []).append((b.label, b.band_hz))
+        found = measures.compare(pairs, window, hz.horizon_s, floors, wanted, frame_s=sp.window_s if sp else 0.05,
+                                 overlap=sp.overlap if sp else 0.9, fmax_hz=sp.fmax_hz if sp else None,
+                                 free_s=test.free_after_s, bands=bands)
     except correlate.ChannelError as exc:
         raise SceneError(f"--test: {exc}") from None
-    worst = max(rows, key=lambda r: r["rms_rel_error"])
-    stats = {**stats, "test_file": str(test_file), "driven_by": test.driven, "n_compared": len(rows),
-             "worst_channel": worst["name"], "worst_rms_rel_error": worst["rms_rel_error"]}
-    line = (f"[{scene.name}] compared {len(rows)} channels with {test_file}: model driven by {test.driven}; worst "
-            f"{worst['name']} {100 * worst['rms_rel_error']:.3g} % RMS (test_errors.csv)")
+    curves = {(b.channel, b.label): b for b in bbs}
+    for (name, label), c in found.backbones.items():  # the ringdowns' backbones against the model's NNM's
+        hb = curves[(name, label)]
+        dm = measures.distance_to_curve(c.model, hb.amplitude, hb.freq_hz)
+        dx = measures.distance_to_curve(c.test, hb.amplitude, hb.freq_hz)
+        found.rows.append({"measure": "backbone", "channel": f"{name} ({label})",
+                           "statistic": "distance to the NNM backbone", "unit": "", "model": dm, "test": dx,
+                           "error": dx, "t_start_s": found.spans["backbone"][0], "t_end_s": found.spans["backbone"][1]})
+    stats = {**stats, "test_file": str(test_file), "driven_by": test.driven, "n_compared": len(pairs),
+             "force_window": test.window.describe() if test.windowed else "none",
+             "horizon_s": hz.horizon_s, "lyapunov_exponent_per_s": hz.exponent_per_s, "chaos_onset_s": hz.onset_s,
+             "eps0": hz.eps0, "measures": list(wanted),
+             "measure_medians": {m: found.summary(m) for m in wanted if m != "time"}}
+    if rows:
+        worst = max(rows, key=lambda r: r["rms_rel_error"])
+        stats.update(worst_channel=worst["name"], worst_rms_rel_error=worst["rms_rel_error"])
+    lines = (_summary_line(scene, test_file, test, hz, rows, found, len(pairs)),)
     return Comparison(scene=scene, test_file=str(test_file), driven=test.driven, model=model, pairs=pairs, rows=rows,
-                      window_s=window, stats=stats, lines=(line,))
+                      window_s=window, stats=stats, lines=lines, horizon=hz, measures=found, floors=floors,
+                      backbones=bbs, force_text=test.window.describe() if test.windowed else "no force window",
+                      wanted=tuple(wanted))
+
+
+def _summary_line(scene: Scene, test_file: str, test: MeasuredTest, hz: Horizon, rows: list, found, n: int) -> str:
+    text = f"[{scene.name}] compared {n} channels with {test_file}: model driven by {test.driven}; "
+    if math.isfinite(hz.horizon_s):
+        text += f"predictable to {1e3 * hz.horizon_s:.4g} ms"
+        if math.isfinite(hz.exponent_per_s):
+            text += f" (Lyapunov exponent {hz.exponent_per_s:.3g} 1/s)"
+    else:
+        text += "no predictability horizon within the window"
+    if rows:
+        worst = max(rows, key=lambda r: r["rms_rel_error"])
+        text += f"; worst {worst['name']} {100 * worst['rms_rel_error']:.3g} % RMS up to it"
+    past = [f"{m} {100 * found.summary(m):.2g} %" for m in ("ridges", "envelope", "backbone")
+            if math.isfinite(found.summary(m))]
+    if past:
+        text += "; after it (median over channels): " + ", ".join(past)
+    return text + " (test_compare.md)"
+
+
+def parse_window(text: str | None) -> tuple[float, float] | None:
+    """s, the window of ``--window START:END`` (None: not given); SceneError, one line, if malformed.
+
+    Parameters
+    ----------
+    text : str or None
+
+    Returns
+    -------
+    (float, float) or None
+
+    Examples
+    --------
+    >>> parse_window("0.01:0.5"), parse_window(None)
+    ((0.01, 0.5), None)
+    """
+    if text is None:
+        return None
+    try:
+        a, b = (float(v) for v in text.split(":"))
+    except ValueError:
+        raise SceneError(f"--window must be START:END in seconds (e.g. 0:0.5), got {text!r}") from None
+    if not (math.isfinite(a) and math.isfinite(b) and 0 <= a < b):
+        raise SceneError(f"--window must be START:END with 0 <= START < END, got {text!r}")
+    return a, b
+
+
+def parse_measures(text: str | None) -> tuple[str, ...]:
+    """The measures of ``--measures a,b,...`` (default every one); SceneError, one line, for an unknown one.
+
+    Parameters
+    ----------
+    text : str or None
+
+    Returns
+    -------
+    tuple of str
+    """
+    try:
+        return measures.parse_measures(text)
+    except correlate.ChannelError as exc:
+        raise SceneError(str(exc)) from None

@@ -8,11 +8,12 @@ both import it (neither imports the other's module).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from bearingshaft.correlate import ChannelPair
+from bearingshaft.measures import MeasureSet
 from bearingshaft.scenes import Scene
 from fem.uff import TimeHistory
 from reduced.models.rig import VirtualRig
@@ -161,6 +162,112 @@ class VirtualTest:
 
 
 @dataclass(frozen=True, eq=False)
+class Horizon:
+    """Where a pointwise comparison of the model with a test stops meaning anything
+    (:func:`bearingshaft.stages.hammer_compare.horizon`).
+
+    Two exact runs of the model from rest, the second's blow ``delta`` (relative) stronger,
+    separate by r(t), the median relative difference of the compared channels over windows of
+    ``window_s``; G(t) = r(t) / delta is how much the model itself grows a small difference of
+    the blow by t. The test and the model already differ by ``eps0`` (the median relative RMS
+    error over the blow, ``eps0_span_s``), as the model would differ from itself after a blow
+    ``delta_eff`` stronger; the horizon is the first t where delta_eff G(t) reaches
+    ``tolerance`` (past the measured growth, extrapolated with the exponent).
+
+    Attributes
+    ----------
+    start_s : float
+        s, the end of the blow (the force window's end: the model is free after it).
+    delta : float
+        The second run's blow is this much (relative) stronger.
+    window_s : float
+        s, the windows over which the separation is maximised.
+    t : (k,) ndarray of float
+        s, window centres (absolute times).
+    growth : (k,) ndarray of float
+        G(t), the median relative separation of the compared channels over delta in each window.
+    exponent_per_s : float
+        1/s, the largest Lyapunov exponent fitted over the growth phase (NaN: no run).
+    onset_s : float
+        s, absolute: where chaos starts, the first window after the blow with G >= 100 (inf: never;
+        NaN: no run).
+    chaotic : bool
+        Nearby motions of the model separate exponentially.
+    eps0 : float
+        The test-model mismatch the model's own divergence grows.
+    eps0_span_s : (float, float)
+        s, where eps0 is measured (the blow and its margin).
+    tolerance : float
+        The relative pointwise error at which time-domain comparison stops.
+    horizon_s : float
+        s, absolute (inf: the divergence never reaches the tolerance within the window).
+    last_contact_s : float
+        s, the model's last contact (NaN: it never closes a gap).
+    note : str
+        How the horizon was found, in words.
+    delta_eff : float
+        eps0 as a blow that much (relative) stronger: eps0 over the runs' own separation over the
+        blow, per delta (NaN: no runs).
+    mismatch_t : (w,) ndarray of float
+        s, centres of windows of ``window_s`` over the record.
+    mismatch : (w,) ndarray of float
+        The test-model mismatch in them: the median over the channels of the floored relative
+        RMS error (what delta_eff G(t) predicts).
+    """
+
+    start_s: float
+    delta: float
+    window_s: float
+    t: np.ndarray
+    growth: np.ndarray
+    exponent_per_s: float
+    onset_s: float
+    chaotic: bool
+    eps0: float
+    eps0_span_s: tuple[float, float]
+    tolerance: float
+    horizon_s: float
+    last_contact_s: float
+    note: str
+    delta_eff: float = float("nan")
+    mismatch_t: np.ndarray = field(default_factory=lambda: np.empty(0))
+    mismatch: np.ndarray = field(default_factory=lambda: np.empty(0))
+
+    @property
+    def lyapunov_time_s(self) -> float:
+        """s, 1 / exponent (inf when nearby motions do not separate)."""
+        return 1.0 / self.exponent_per_s if self.exponent_per_s > 0 else float("inf")
+
+
+@dataclass(frozen=True, eq=False)
+class ChannelBackbone:
+    """An NNM backbone (HB, H = 1) seen on one accelerometer axis: its displacement amplitude and frequency.
+
+    Attributes
+    ----------
+    label : str
+        The NNM, e.g. ``"NNM at 19.6 Hz"``.
+    channel : str
+        The channel it is drawn on (where it shows most).
+    amplitude : (m,) ndarray of float
+        m, the axis's fundamental displacement amplitude along the backbone.
+    freq_hz : (m,) ndarray of float
+        Hz.
+    energy_J : (m,) ndarray of float
+        J.
+    band_hz : (float, float)
+        Hz, the band a ringdown's component of this NNM is band-passed to.
+    """
+
+    label: str
+    channel: str
+    amplitude: np.ndarray
+    freq_hz: np.ndarray
+    energy_J: np.ndarray
+    band_hz: tuple[float, float]
+
+
+@dataclass(frozen=True, eq=False)
 class Comparison:
     """The model run at a measured test's sampling, driven by its hammer, compared channel for channel.
 
@@ -179,22 +286,40 @@ class Comparison:
     rows : list of dict
         Error measures, one per pair (:func:`bearingshaft.correlate.channel_errors`).
     window_s : (float, float) or None
-        s, the compared window ([hammer] compare_window_s).
+        s, the compared window (--window, else [hammer] compare_window_s; None: the record).
     stats : dict
         For provenance.json.
     lines : tuple of str
         The stage's summary lines.
+    horizon : Horizon or None
+        The predictability horizon; the pointwise ``rows`` are over the window up to it.
+    measures : MeasureSet or None
+        The measures that survive chaos (:func:`bearingshaft.measures.compare`).
+    floors : dict
+        {channel: (floor, basis)} of the relative errors (:func:`bearingshaft.correlate.channel_floors`).
+    backbones : list of ChannelBackbone
+        The model's NNM backbones on the channels their ringdown components are measured on.
+    force_text : str
+        How the hammer channel was windowed, in words.
+    wanted : tuple of str
+        The measures asked for (--measures).
     """
 
     scene: Scene
     test_file: str
-    driven: str  # what drove the model (the test's hammer channel, or the scene's blow)
+    driven: str  # what drove the model (the test's hammer channel)
     model: list[TimeHistory]  # every channel of the model run
     pairs: list[ChannelPair]  # model and test channels matched (bearingshaft.correlate.match_channels)
-    rows: list[dict]  # error measures, one per pair (bearingshaft.correlate.channel_errors)
-    window_s: tuple[float, float] | None  # s, the compared window ([hammer] compare_window_s)
+    rows: list[dict]  # error measures, one per pair, up to the horizon (bearingshaft.correlate.channel_errors)
+    window_s: tuple[float, float] | None  # s, the compared window (--window or [hammer] compare_window_s)
     stats: dict  # for provenance.json
     lines: tuple[str, ...]  # the stage's summary lines
+    horizon: Horizon | None = None  # the predictability horizon
+    measures: MeasureSet | None = None  # the measures that survive chaos
+    floors: dict = field(default_factory=dict)  # {channel: (floor, basis)}
+    backbones: list = field(default_factory=list)  # ChannelBackbone: the model's NNMs on their channels
+    force_text: str = ""  # how the hammer channel was windowed
+    wanted: tuple[str, ...] = ()  # the measures asked for
 
 
 def histories(rig: VirtualRig, t: np.ndarray, data: np.ndarray) -> list[TimeHistory]:
