@@ -303,9 +303,9 @@ def channel_backbones(rig: VirtualRig, n_modes: int, energy_max_J: float, sample
     Along a backbone x(tau) = c_0 + c_1 cos tau + s_1 sin tau (on the coupled subsystem,
     :func:`coupled_subsystem`), an accelerometer axis r moves with the fundamental displacement
     amplitude sqrt((r . c_1)^2 + (r . s_1)^2) (its acceleration's is omega^2 that); the axis
-    chosen is the one (among ``channels``) where it is largest at the backbone's lowest energy. The band of its ringdown component is
-    BAND_BELOW x the open-gap frequency to BAND_ABOVE x the backbone's frequency at
-    ``energy_max_J`` (at most 0.45 sample_rate_hz).
+    chosen is the one (among ``channels``) where it is largest at the backbone's lowest energy. The
+    band of its ringdown component is BAND_BELOW x the open-gap frequency to BAND_ABOVE x the
+    backbone's frequency at ``energy_max_J`` (at most 0.45 sample_rate_hz).
 
     Parameters
     ----------
