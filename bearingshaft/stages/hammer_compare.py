@@ -167,7 +167,7 @@ def window_mismatch(pairs, floors: dict, window_s: float) -> tuple[np.ndarray, n
     floor = np.array([floors[p.name][0] for p in pairs])[:, None]
     scale = np.maximum(np.sqrt(np.mean(x**2, axis=2)), floor)
     err = np.divide(np.sqrt(np.mean((m - x) ** 2, axis=2)), scale, out=np.zeros_like(scale), where=scale > 0)
-    return al[0].t[cut].reshape(k, per).mean(axis=1), np.median(err, axis=0)
+    return al[0].t[0] + (np.arange(k) + 0.5) * per / al[0].sample_rate_hz, np.median(err, axis=0)
 
 
 def horizon(rig: VirtualRig, rec: Record, test: MeasuredTest, pairs, floors: dict, window_s: tuple[float, float],

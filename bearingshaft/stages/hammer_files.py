@@ -449,10 +449,10 @@ def horizon_csv(path: Path, hz) -> None:
     path : the CSV written
     hz : the comparison's Horizon
     """
-    measured = dict(zip(np.round(hz.mismatch_t, 9), hz.mismatch, strict=True))
+    # both are windows of hz.window_s from the record's first sample: the k-th of one is the k-th of the other
     rows = [{"t_s": float(t), "growth": float(g), "predicted_mismatch": float(hz.delta_eff * g),
-             "measured_mismatch": float(measured.get(round(float(t), 9), math.nan))}
-            for t, g in zip(hz.t, hz.growth, strict=True)]
+             "measured_mismatch": float(hz.mismatch[k]) if k < hz.mismatch.size else math.nan}
+            for k, (t, g) in enumerate(zip(hz.t, hz.growth, strict=True))]
     write_rows(path, rows, ["t_s", "growth", "predicted_mismatch", "measured_mismatch"], float_format=f".{DIGITS}g")
 
 
