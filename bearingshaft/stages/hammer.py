@@ -23,9 +23,12 @@ found with a guarantee, :mod:`reduced.transient.exact`).
   open-gap response against the full 3-D model's modal superposition
   (:mod:`bearingshaft.stages.hammer_linear`);
 - with a measured test (``bearingshaft hammer --test FILE.uff``) instead of all the above: the
-  model driven by the measured hammer force at the test's sampling (:mod:`bearingshaft.stages.hammer_compare`,
-  :mod:`bearingshaft.correlate`), ``test_errors.csv``, ``test_compare.png``, ``test_spectrogram.png``
-  and ``model.uff``.
+  model driven by the measured hammer force (through a force window) at the test's sampling
+  (:mod:`bearingshaft.stages.hammer_compare`, :mod:`bearingshaft.correlate`), the predictability
+  horizon, pointwise errors up to it and the measures that survive chaos past it
+  (:mod:`bearingshaft.measures`): ``test_errors.csv``, ``test_measures.csv``, ``test_horizon.csv``,
+  ``test_compare.md``, ``test_compare.png``, ``test_spectrogram.png``, ``test_horizon.png``,
+  ``test_measures.png``, ``test_backbone.png`` and ``model.uff``.
 
 Numbers in the science files are written to 6 significant digits (to 4 for the quantities
 that depend on where the exact integrator lands a crossing), :mod:`bearingshaft.stages.hammer_files`.
@@ -557,8 +560,13 @@ as a test's DAQ would (six triaxial beam accelerometers, four triaxial tube sens
 load cells, the hammer). Writes hammer.npz, hammer.uff (UFF 58), channels.csv, fig10.png,
 fig11.png, levels.csv, levels.png, hammer.md and, with [hammer] linear_check, linear_check.csv
 and linear_check.png. With --test FILE.uff, instead, a measured test drives the model by its
-hammer channel at the test's sampling and every channel is compared: writes test_errors.csv,
-test_compare.png, test_spectrogram.png and model.uff (the model's channels, UFF 58)."""
+hammer channel (through a force window) at the test's sampling and every channel is compared:
+where chaos starts (the predictability horizon, from two exact runs of the model and its largest
+Lyapunov exponent), the pointwise errors up to it, and past it what survives chaos (spectrogram
+ridges, RMS envelope, impacts, the open-gap time, backbones of the free decay over the model's
+NNM backbones); --window START:END and --measures LIST choose what. Writes test_errors.csv,
+test_measures.csv, test_horizon.csv, test_compare.md, test_compare.png, test_spectrogram.png,
+test_horizon.png, test_measures.png, test_backbone.png and model.uff (the model's channels, UFF 58)."""
 
 
 def estimate(scene: Scene) -> list[Estimate]:
