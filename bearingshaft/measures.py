@@ -2,7 +2,7 @@
 
 An impacting ringdown is chaotic: two runs a hair apart agree sample for sample only up to a
 predictability horizon (the hammer stage finds it from the model's largest Lyapunov exponent,
-:mod:`bearingshaft.stages.hammer_compare`); past it a pointwise error says only that the traces
+:func:`bearingshaft.measured.horizon`); past it a pointwise error says only that the traces
 have parted. What a chaotic motion keeps, and what these functions compare, each on a
 :class:`bearingshaft.correlate.ChannelPair` (model and test samples on one grid) over a span
 ``span_s = (t_start_s, t_end_s)`` of absolute times:
@@ -820,8 +820,8 @@ def compare(pairs: list[ChannelPair], window_s: tuple[float, float], horizon_s: 
                 top = np.flatnonzero(np.isfinite(c.f_model) & np.isfinite(c.f_test))
                 fm = float(c.f_model[top[-1]]) if top.size else math.nan
                 fx = float(c.f_test[top[-1]]) if top.size else math.nan
-                rows.append(_row("backbone", name, "frequency at equal amplitude", "Hz", fm, fx, c.error, free)
-                            | {"statistic": "frequency at equal amplitude", "channel": f"{name} ({label})"})
+                rows.append(_row("backbone", f"{name} ({label})", "frequency at equal amplitude", "Hz", fm, fx,
+                                 c.error, free))
     spans = {"ridges": post, "impacts": post, "envelope": (a, b), "open": (a, b), "backbone": free}
     return MeasureSet(rows, out_r, out_e, out_i, out_b, {m: spans[m] for m in measures if m in spans})
 

@@ -351,7 +351,7 @@ def test_comparison_says_where_chaos_starts_and_what_matches_after(stage_run, tm
     samples after the blow). Past the horizon the spectrogram ridges of the beam still agree."""
     import csv
 
-    from bearingshaft.stages.hammer_compare import HORIZON_TOL
+    from bearingshaft.measured import HORIZON_TOL
 
     folder, scene, _ = stage_run
     out = tmp_path / "c"

@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from bearingshaft import measured
 from bearingshaft.estimates import COPIES, FLOAT, MATPLOTLIB_BYTES, Estimate, n_dofs
 from bearingshaft.output import StageWriter
 from bearingshaft.scenes import HammerSpec, Scene, SceneError
@@ -456,7 +457,7 @@ def compute(scene: Scene, progress: bool, workdir: Path | None = None, test_file
     test = None
     if test_file is not None:  # the test file and the options are checked before the model is built
         options = (hammer_compare.parse_window(window), hammer_compare.parse_measures(measures))
-        test = hammer_compare.read_test(scene, test_file)
+        test = measured.read_test(scene, test_file)
     elif window is not None or measures is not None:
         raise SceneError("--window and --measures choose what a comparison with a test measures: give --test FILE.uff")
     with single_thread_blas():

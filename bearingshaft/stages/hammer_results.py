@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bearingshaft.correlate import ChannelPair
+from bearingshaft.measured import Horizon
 from bearingshaft.measures import MeasureSet
 from bearingshaft.scenes import Scene
 from fem.uff import TimeHistory
@@ -159,84 +160,6 @@ class VirtualTest:
     def nominal(self) -> Record:
         """The record of the nominal blow, ``[hammer] peak_N``."""
         return self.records[self.scene.hammer.peak_N]
-
-
-@dataclass(frozen=True, eq=False)
-class Horizon:
-    """Where a pointwise comparison of the model with a test stops meaning anything
-    (:func:`bearingshaft.stages.hammer_compare.horizon`).
-
-    Two exact runs of the model from rest, the second's blow ``delta`` (relative) stronger,
-    separate by r(t), the median relative difference of the compared channels over windows of
-    ``window_s``; G(t) = r(t) / delta is how much the model itself grows a small difference of
-    the blow by t. The test and the model already differ by ``eps0`` (the median relative RMS
-    error over the blow, ``eps0_span_s``), as the model would differ from itself after a blow
-    ``delta_eff`` stronger; the horizon is the first t where delta_eff G(t) reaches
-    ``tolerance`` (past the measured growth, extrapolated with the exponent).
-
-    Attributes
-    ----------
-    start_s : float
-        s, the end of the blow (the force window's end: the model is free after it).
-    delta : float
-        The second run's blow is this much (relative) stronger.
-    window_s : float
-        s, the windows over which the separation is maximised.
-    t : (k,) ndarray of float
-        s, window centres (absolute times).
-    growth : (k,) ndarray of float
-        G(t), the median relative separation of the compared channels over delta in each window.
-    exponent_per_s : float
-        1/s, the largest Lyapunov exponent fitted over the growth phase (NaN: no run).
-    onset_s : float
-        s, absolute: where chaos starts, the first window after the blow with G >= 100 (inf: never;
-        NaN: no run).
-    chaotic : bool
-        Nearby motions of the model separate exponentially.
-    eps0 : float
-        The test-model mismatch the model's own divergence grows.
-    eps0_span_s : (float, float)
-        s, where eps0 is measured (the blow and its margin).
-    tolerance : float
-        The relative pointwise error at which time-domain comparison stops.
-    horizon_s : float
-        s, absolute (inf: the divergence never reaches the tolerance within the window).
-    last_contact_s : float
-        s, the model's last contact (NaN: it never closes a gap).
-    note : str
-        How the horizon was found, in words.
-    delta_eff : float
-        eps0 as a blow that much (relative) stronger: eps0 over the runs' own separation over the
-        blow, per delta (NaN: no runs).
-    mismatch_t : (w,) ndarray of float
-        s, centres of windows of ``window_s`` over the record.
-    mismatch : (w,) ndarray of float
-        The test-model mismatch in them: the median over the channels of the floored relative
-        RMS error (what delta_eff G(t) predicts).
-    """
-
-    start_s: float
-    delta: float
-    window_s: float
-    t: np.ndarray
-    growth: np.ndarray
-    exponent_per_s: float
-    onset_s: float
-    chaotic: bool
-    eps0: float
-    eps0_span_s: tuple[float, float]
-    tolerance: float
-    horizon_s: float
-    last_contact_s: float
-    note: str
-    delta_eff: float = float("nan")
-    mismatch_t: np.ndarray = field(default_factory=lambda: np.empty(0))
-    mismatch: np.ndarray = field(default_factory=lambda: np.empty(0))
-
-    @property
-    def lyapunov_time_s(self) -> float:
-        """s, 1 / exponent (inf when nearby motions do not separate)."""
-        return 1.0 / self.exponent_per_s if self.exponent_per_s > 0 else float("inf")
 
 
 @dataclass(frozen=True, eq=False)
