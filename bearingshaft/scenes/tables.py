@@ -535,6 +535,11 @@ class HammerSpec:
         Hz, full-model modes up to this in that reference.
     backbone_modes : int
         NNM backbones overlaid on fig11.png (0: none).
+    force_window : bool
+        With --test, the measured hammer channel through a force window (zero outside the pulse
+        and a margin) before it drives the model.
+    force_window_margin_s : float
+        s, the force window's margin on either side of the pulse (half-cosine tapered).
 
     Raises
     ------
@@ -557,6 +562,8 @@ class HammerSpec:
     linear_check: bool = False  # the open-gap response against the full 3-D model's modal superposition
     linear_check_max_hz: float = 20000.0  # Hz, full-model modes up to this in that reference
     backbone_modes: int = 3  # NNM backbones overlaid on fig11.png (0: none)
+    force_window: bool = True  # --test: the measured hammer channel zeroed outside its pulse and a margin
+    force_window_margin_s: float = 1e-3  # s, that margin on either side of the pulse (half-cosine tapered)
 
     def __post_init__(self) -> None:
         from fem.rig import TIP_CELLS
@@ -577,6 +584,8 @@ class HammerSpec:
             check(len(w) == 2 and 0 <= w[0] < w[1], f"compare_window_s must be (start, end), 0 <= start < end, "
                    f"got {w!r}")
         check(self.backbone_modes >= 0, f"backbone_modes must be >= 0, got {self.backbone_modes!r}")
+        check(self.force_window_margin_s >= 0, f"force_window_margin_s must be >= 0 s, got "
+              f"{self.force_window_margin_s!r}")
 
 
 
