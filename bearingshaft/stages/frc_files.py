@@ -7,7 +7,8 @@ response: one row per curve point or stepped-sine frequency and per output point
 ``stepped_sine.csv`` (each sweep point: how it settled, its amplitude against HB),
 ``frc_convergence.csv`` and ``frc_convergence_timing.csv`` / ``.png`` (run times: the
 project's ``_timing`` convention, tests/test_reproducible.py), ``frc_backbone.csv`` and
-``frc_backbone.png``. Amplitudes are written to :data:`DIGITS` significant digits; no solver
+``frc_backbone.png``; the response map's files (:mod:`bearingshaft.stages.frc_map_files`).
+Amplitudes are written to :data:`DIGITS` significant digits; no solver
 runs here.
 """
 
@@ -17,6 +18,7 @@ import numpy as np
 
 from bearingshaft.digits import sig
 from bearingshaft.output import StageWriter, write_rows
+from bearingshaft.stages import frc_map_files
 from bearingshaft.stages.frc_results import ConvergenceRun, FRCResult, PointCheck  # noqa: F401  (re-exported)
 
 DIGITS = 10  # significant digits of frequencies and amplitudes (a rerun on this machine: identical)
@@ -56,6 +58,7 @@ def write(result: FRCResult, writer: StageWriter) -> None:
                 and r["level"] == Pc and "monodromy" not in r["what"]}
         stats["speed_ratio_stepped_sine_over_hb"] = {f"H={h}": round(t_ss / t, 2) for h, t in t_hb.items() if t > 0}
     write_rows(writer.path("frc_backbone.csv"), _backbone_rows(result), fields=BACKBONE_FIELDS)
+    frc_map_files.write(result, writer, stats)  # response_map.csv, response_map_jumps.csv, response_map.png
     writer.stats["frc"] = stats
     _plot_frc(writer.path("frc.png"), result.curves, sweeps, result.backbones, names, spec, result.scene_name,
               result.events)
