@@ -23,6 +23,7 @@ from bearingshaft.stages.frc_results import ConvergenceRun, FRCResult, PointChec
 
 DIGITS = 10  # significant digits of frequencies and amplitudes (a rerun on this machine: identical)
 ERR_DIGITS = 3  # relative errors
+HILL_MATCH = 1e-3  # Hill's max |mu| within this (relative) of the monodromy's: the same multipliers
 CONVERGENCE_FIELDS = ["level", "harmonics", "status", "n_points", "f_reached_hz", "n_folds", "highest_fold_hz",
                       "lowest_fold_hz", "n_vs_stepped_sine", "max_rel_err_vs_stepped_sine", "n_vs_shooting",
                       "n_shooting_failed", "max_rel_err_vs_shooting", "median_rel_err_vs_shooting"]
@@ -141,6 +142,9 @@ def _curve_files(result: FRCResult, writer: StageWriter, stats: dict) -> None:
             stats["stability"][f"{P:g} N"] = {
                 "hill_points": sum(r["hill_stable"] != "" for r in st),
                 "hill_disagree": sum(r["hill_stable"] not in ("", r["monodromy_stable"]) for r in st),
+                # the verdicts can agree while the multipliers do not: Hill's max |mu| off the monodromy's by > 1e-3
+                "hill_mismatch": sum(c.hill_stable is not None and abs(c.hill / c.mono - 1.0) > HILL_MATCH
+                                     for c in result.checks[P]),
                 "shooting_points": sum(r["shooting_stable"] != "" for r in st),
                 "shooting_disagree": sum(r["shooting_stable"] not in ("", r["monodromy_stable"]) for r in st),
                 "shooting_failed": sum(r["note"] != "" for r in st)}
