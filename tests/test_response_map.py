@@ -17,12 +17,14 @@ import tomli_w
 from reduced.models.discrete import DiscreteParams
 from reduced.models.loads import Harmonic, Loads
 from reduced.periodic.response_map import (
+    SPECTRUM_BINS_PER_ORDER,
     MapOptions,
     _broadband,
     _returns,
     jumps,
     linear_contact_bands,
     map_frequencies,
+    order_spectrum,
     response_map,
 )
 from reduced.transient.integrate import ringdown
@@ -118,6 +120,20 @@ def test_broadband_tells_lines_from_noise():
     assert _broadband(np.ones(64)) == 0.0
 
 
+def test_order_spectra_show_lines_or_a_continuum(onset):
+    # periodic below contact: all the power at order 1 (the linear orbit); chaos: a continuum between the
+    # harmonics of the forcing (bins more than one bin away from an integer order)
+    periodic, chaotic = onset.points[0].spectrum, onset.points[4].spectrum
+    assert periodic[SPECTRUM_BINS_PER_ORDER] > 0.999 and abs(float(periodic.sum()) - 1.0) < 1e-5
+    order = np.arange(chaotic.size) / SPECTRUM_BINS_PER_ORDER
+    off = np.abs(order - np.round(order)) > 1.5 / SPECTRUM_BINS_PER_ORDER
+    assert chaotic[off].sum() > 0.05 and periodic[off].sum() < 1e-6, (chaotic[off].sum(), periodic[off].sum())
+    # a period-3 signal: lines at multiples of 1/3 only
+    t = np.arange(3 * 64) / 64
+    s = order_spectrum(np.cos(2 * np.pi * t / 3).reshape(3, 64), periodic=True)
+    assert np.argmax(s) == round(SPECTRUM_BINS_PER_ORDER / 3) and s.max() > 0.999
+
+
 def test_jumps_are_regime_changes_or_amplitude_steps_between_fine_neighbours():
     class P:
         def __init__(self, regime, amp, period=1):
@@ -173,3 +189,4 @@ def test_frc_stage_writes_the_response_map(tmp_path, monkeypatch):
     jumps_rows = list(csv.DictReader(open(tmp_path / "response_map_jumps.csv")))
     assert {r["direction"] for r in jumps_rows} == {"up", "down"}  # hysteresis: each sweep jumps in and out
     assert (tmp_path / "response_map.png").stat().st_size > 10_000
+    assert (tmp_path / "response_map_spectra.png").stat().st_size > 10_000

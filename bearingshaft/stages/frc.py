@@ -436,8 +436,8 @@ down by the exact integrator, the error against H and run time, and the backbone
 Writes frc.csv, frc.png, frc_harmonics.csv, frc_bifurcations.csv, frc_stability.csv,
 stepped_sine.csv, frc_convergence.csv, frc_convergence_timing.csv and .png, frc_backbone.csv
 and frc_backbone.png; the response map (each frequency of a dense stepped sine periodic, subharmonic,
-quasi-periodic or chaotic, with its Lyapunov exponent): response_map.csv, response_map_jumps.csv and
-response_map.png."""
+quasi-periodic or chaotic, with its Lyapunov exponent): response_map.csv, response_map_jumps.csv,
+response_map.png and response_map_spectra.png."""
 
 
 def frc_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:

@@ -9,7 +9,7 @@ the linear response reaches a stop or the HB curve at that level is in contact
 (:func:`contact_bands`), widened by :data:`BAND_MARGIN_HZ`; each sweep also keeps the fine step
 beyond it while its own response stays in contact. :func:`compute_maps` is called by
 :func:`bearingshaft.stages.frc.compute`; :mod:`bearingshaft.stages.frc_map_files` writes
-``response_map.csv``, ``response_map_jumps.csv`` and ``response_map.png``.
+``response_map.csv``, ``response_map_jumps.csv``, ``response_map.png`` and ``response_map_spectra.png``.
 """
 
 from __future__ import annotations

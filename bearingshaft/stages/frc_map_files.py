@@ -10,6 +10,9 @@ diagnostics (max |mu|, settled, contact, broadband, periods run). ``response_map
 jumps, each with the regimes and mean amplitudes on both sides. ``response_map.png``: per level, the
 brute-force bifurcation diagram (Poincare samples of x1 against frequency, up and down) under the
 HB curve (stable solid, unstable dashed) with the shooting orbits and the measured envelope.
+``response_map_spectra.png``: the order spectrum of x1 at every frequency of each sweep (response
+frequency over excitation frequency, power fraction in dB): lines at the integers for a periodic
+response, at multiples of 1/p for a subharmonic of period p, a continuum for chaos.
 """
 
 from __future__ import annotations
@@ -58,6 +61,7 @@ def write(result: FRCResult, writer, stats: dict) -> None:
     write_rows(writer.path("response_map_jumps.csv"), jumps, fields=JUMP_FIELDS)
     stats["response_map"] = st
     _plot_map(writer.path("response_map.png"), result, col)
+    _plot_spectra(writer.path("response_map_spectra.png"), result)
 
 
 def _bool(v) -> str:
@@ -191,3 +195,53 @@ def _plot_map(path, result: FRCResult, col: int) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def _edges(f: np.ndarray) -> np.ndarray:
+    """Cell edges around increasing centres f (midpoints; the ends mirrored).
+
+    >>> _edges(np.array([1.0, 2.0, 4.0])).tolist()
+    [0.5, 1.5, 3.0, 5.0]
+    """
+    mid = 0.5 * (f[1:] + f[:-1])
+    return np.concatenate([[f[0] - (mid[0] - f[0])], mid, [f[-1] + (f[-1] - mid[-1])]])
+
+
+def _plot_spectra(path, result: FRCResult) -> None:
+    """response_map_spectra.png: per level (columns) and sweep (rows), the order spectrum of x1 against the
+    excitation frequency, in dB of the power fraction (module docstring)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    maps = result.response_maps
+    fig, axs = plt.subplots(2, len(maps), figsize=(5.6 * len(maps), 7.0), squeeze=False)
+    im = None
+    for c, (P, lvl) in enumerate(maps.items()):
+        zoom = _zoom(lvl, result.spec)
+        for r, d in enumerate(("up", "down")):
+            ax = axs[r][c]
+            rm = lvl.sweeps.get(d)
+            if rm is None:
+                continue
+            order = np.argsort(rm.freq_hz)
+            f = rm.freq_hz[order]
+            S = np.array([rm.points[i].spectrum for i in order], float)
+            orders = rm.spectrum_orders
+            db = 10.0 * np.log10(np.maximum(S, 1e-12)).T
+            im = ax.pcolormesh(_edges(f), _edges(orders), db, vmin=-80.0, vmax=0.0, cmap="magma", shading="flat")
+            if zoom is None:
+                ax.set_xscale("log")
+            else:
+                ax.set_xlim(*zoom)
+            ax.set_title(f"{P:g} N, sweep {d}", fontsize=9)
+            ax.set_xlabel("excitation frequency [Hz]")
+            ax.set_ylabel("response frequency / excitation frequency")
+    if im is not None:
+        fig.colorbar(im, ax=axs, shrink=0.6, label="power fraction of x1 [dB]")
+    fig.suptitle(f"{result.scene_name}: order spectra of x1 over the recorded periods (lines: periodic or "
+                 "subharmonic; a continuum: chaos)", fontsize=9)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+

@@ -53,6 +53,8 @@ from reduced.transient.lyapunov import PeriodMap
 REGIMES = ("periodic", "subharmonic", "quasi_periodic", "chaotic")
 SPECTRAL_LINES = 5  # strongest lines of the Poincare spectrum counted as lines (their +-2 bins)
 JUMP_RATIO = 1.2  # a sweep jumps where the mean per-period max |x| changes by this factor between fine steps
+SPECTRUM_ORDERS = 4  # the order spectrum of x1 spans 0 .. this many times the forcing frequency ...
+SPECTRUM_BINS_PER_ORDER = 32  # ... in bins of 1/32 of it (a subharmonic of period p <= 8 has its lines apart)
 
 
 @dataclass(frozen=True, slots=True)
@@ -147,6 +149,9 @@ class PointResponse:
         Where the run ended (on the orbit when periodic).
     contact : bool
         A stop closed during the recorded periods (on the orbit when periodic).
+    spectrum : (SPECTRUM_ORDERS * SPECTRUM_BINS_PER_ORDER + 1,) ndarray of float32
+        The order spectrum of the first monitored row (:func:`order_spectrum`): the fraction of its power
+        (mean removed) in each bin of response frequency / forcing frequency.
     """
 
     regime: str
@@ -162,6 +167,7 @@ class PointResponse:
     n_periods: int
     state: np.ndarray
     contact: bool
+    spectrum: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -210,6 +216,11 @@ class ResponseMap:
         return np.array([[p.peak[:, row].min(), p.peak[:, row].mean(), p.peak[:, row].max()] for p in self.points])
 
     @property
+    def spectrum_orders(self) -> np.ndarray:
+        """The orders (response frequency / forcing frequency) of the bins of each point's ``spectrum``."""
+        return np.arange(SPECTRUM_ORDERS * SPECTRUM_BINS_PER_ORDER + 1) / SPECTRUM_BINS_PER_ORDER
+
+    @property
     def jump_hz(self) -> np.ndarray:
         """Hz, the frequencies where the sweep jumped."""
         return self.freq_hz[self.jump]
@@ -235,7 +246,7 @@ def map_frequencies(freq_min_hz: float, freq_max_hz: float, bands, step_hz: floa
     Examples
     --------
     >>> map_frequencies(10.0, 100.0, [(20.0, 20.3)], 0.1, 3).tolist()
-    [10.0, 20.0, 20.1, 20.2, 20.3, 31.6227766017, 100.0]
+    [10.0, 20.0, 20.1, 20.2, 20.3, 31.622776602, 100.0]
     """
     lo_all, hi_all = float(freq_min_hz), float(freq_max_hz)
     pts = list(np.geomspace(lo_all, hi_all, coarse_points)) if coarse_points > 0 else []
@@ -336,6 +347,32 @@ def _broadband(x: np.ndarray) -> float:
     return float(P[~keep].sum() / total)
 
 
+def order_spectrum(x: np.ndarray, periodic: bool = False) -> np.ndarray:
+    """The order spectrum of K periods of a signal sampled S times a period, x (K, S): the fraction of its
+    power (mean removed) in each bin of order = response frequency / forcing frequency, 0 .. SPECTRUM_ORDERS
+    in steps of 1 / SPECTRUM_BINS_PER_ORDER (float32). A Hann window over the K periods, unless ``periodic``
+    (x is one period of a K-periodic orbit: its lines fall on the orders j / K exactly).
+
+    Examples
+    --------
+    >>> t = np.arange(4 * 64) / 64  # 4 periods, 64 samples each
+    >>> s = order_spectrum((np.cos(2 * np.pi * t) + np.cos(2 * np.pi * 2.5 * t)).reshape(4, 64), periodic=True)
+    >>> [round(float(v), 6) for v in s[[32, 80]]], round(float(s.sum()), 6)
+    ([0.5, 0.5], 1.0)
+    """
+    K, S = x.shape
+    v = x.ravel() - np.mean(x)
+    if not periodic:
+        v = v * np.hanning(v.size)
+    P = np.abs(np.fft.rfft(v)) ** 2
+    order = np.arange(P.size) / K
+    keep = order <= SPECTRUM_ORDERS + 0.5 / SPECTRUM_BINS_PER_ORDER
+    out = np.zeros(SPECTRUM_ORDERS * SPECTRUM_BINS_PER_ORDER + 1)
+    np.add.at(out, np.round(order[keep] * SPECTRUM_BINS_PER_ORDER).astype(int), P[keep])
+    total = float(P.sum())
+    return (out / total if total > 0.0 else out).astype(np.float32)
+
+
 def _asymmetry(peak: np.ndarray, mirror) -> float:
     """max |x_a - x_b| / max(|x_a|, |x_b|) from the peaks of the rows (a, b, a - b) = mirror."""
     if mirror is None:
@@ -370,11 +407,12 @@ def _orbit_point(pm: PeriodMap, y: np.ndarray, J: np.ndarray, p: int, lam_tol: f
     """The response on a p-periodic orbit through y (monodromy J): its p periods' peaks and samples,
     the exponent log max |mu| / (p T)."""
     mu = float(np.max(np.abs(np.linalg.eigvals(J))))
-    r = pm.run(y, p, samples_per_period=opts.samples_per_period, inner_samples=opts.inner_samples)
+    r = pm.run(y, p, samples_per_period=opts.samples_per_period, inner_samples=opts.inner_samples,
+               record_samples=True)
     lam = math.log(max(mu, 1e-300)) / (p * pm.period_s)
     return PointResponse("periodic" if p == 1 else "subharmonic", p, lam, lam_tol, mu, True, r.peak,
                          r.poincare[:-1].copy(), _asymmetry(r.peak, mirror), 0.0, n_run + p, y.copy(),
-                         bool(r.n_events or np.any(r.active)))
+                         bool(r.n_events or np.any(r.active)), order_spectrum(r.samples[:, :, 0], periodic=True))
 
 
 def _finish_orbit(pm: PeriodMap, r, y: np.ndarray, d: np.ndarray, p: int, opts: MapOptions):
@@ -441,7 +479,7 @@ def classify(pm: PeriodMap, y0: np.ndarray, sigma: float, opts: MapOptions, mirr
         y, W, active, n_run = r.y, r.tangent, r.active, opts.n_transient
     for _ in range(opts.max_blocks):
         r = pm.run(y, opts.n_record, tangent=W, active=active, samples_per_period=opts.samples_per_period,
-                   inner_samples=opts.inner_samples)
+                   inner_samples=opts.inner_samples, record_samples=True)
         n_run += opts.n_record
         y, W, active = r.y, r.tangent, r.active
         logs = r.log_growth[:, 0] / pm.period_s
@@ -451,6 +489,7 @@ def classify(pm: PeriodMap, y0: np.ndarray, sigma: float, opts: MapOptions, mirr
         lam_tol = max(floor, 1.5 * float(np.std(quarters, ddof=1)))  # 3 standard errors of the mean of 4
         Y = r.poincare[1:]
         contact = bool(r.n_events or np.any(r.active))
+        spec = order_spectrum(r.samples[:, :, 0])
         d = _returns(Y, pm, opts.max_period, opts.n_record // 4)
         p = int(np.argmax(d <= opts.periodic_tol)) + 1 if np.any(d <= opts.periodic_tol) else 0
         if p or lam < -lam_tol or not contact:  # returned, contracting, or linear (a unique periodic attractor)
@@ -461,15 +500,16 @@ def classify(pm: PeriodMap, y0: np.ndarray, sigma: float, opts: MapOptions, mirr
         if lam > lam_tol or (abs(lam) <= floor and sure):
             regime = "chaotic" if lam > lam_tol else "quasi_periodic"
             return PointResponse(regime, 0, lam, lam_tol, float("nan"), True, r.peak, Y.copy(),
-                                 _asymmetry(r.peak, mirror), _broadband(Y[:, 0]), n_run, y.copy(), contact)
+                                 _asymmetry(r.peak, mirror), _broadband(Y[:, 0]), n_run, y.copy(), contact, spec)
     # undecided when the blocks ran out (a long transient, or an exponent within its error of 0): by its sign
     if lam > floor or abs(lam) <= floor:
         regime = "chaotic" if lam > floor else "quasi_periodic"
         return PointResponse(regime, 0, lam, lam_tol, float("nan"), False, r.peak, Y.copy(),
-                             _asymmetry(r.peak, mirror), _broadband(Y[:, 0]), n_run, y.copy(), contact)
+                             _asymmetry(r.peak, mirror), _broadband(Y[:, 0]), n_run, y.copy(), contact, spec)
     q = int(np.argmin(d)) + 1  # still contracting when the blocks ran out: the nearest return, not final
     return PointResponse("periodic" if q == 1 else "subharmonic", q, lam, lam_tol, float("nan"), False, r.peak,
-                         Y.copy(), _asymmetry(r.peak, mirror), _broadband(Y[:, 0]), n_run, y.copy(), contact)
+                         Y.copy(), _asymmetry(r.peak, mirror), _broadband(Y[:, 0]), n_run, y.copy(), contact,
+                         spec)
 
 
 # -- the sweep --------------------------------------------------------------------------------------------
@@ -573,5 +613,6 @@ def response_map(system: GapSystem, load, amplitude_N: float, freq_hz, *, direct
     return ResponseMap(P, direction, freqs, names, points, jumps(freqs, points, step), np.array(wall), opts)
 
 
-__all__ = ["REGIMES", "MapOptions", "PointResponse", "ResponseMap", "classify", "jumps", "linear_contact_bands",
-           "map_frequencies", "merge_bands", "response_map"]
+__all__ = ["REGIMES", "SPECTRUM_BINS_PER_ORDER", "SPECTRUM_ORDERS", "MapOptions", "PointResponse", "ResponseMap",
+           "classify", "jumps", "linear_contact_bands", "map_frequencies", "merge_bands", "order_spectrum",
+           "response_map"]
