@@ -313,6 +313,18 @@ class ReducedModel:
 def modal_ratios(modal_damping, count: int) -> np.ndarray:
     """(count,) the ratio of each mode, lowest first: the ratios given, the last repeated.
 
+    Parameters
+    ----------
+    modal_damping : sequence of float
+        The ratios given (``RomSpec.modal_damping``), at least one.
+    count : int
+        Modes.
+
+    Returns
+    -------
+    ndarray
+        (count,) float.
+
     Examples
     --------
     >>> modal_ratios((0.02, 0.001), 4).tolist(), modal_ratios((0.001,), 2).tolist()

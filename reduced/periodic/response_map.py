@@ -264,6 +264,18 @@ def map_frequencies(freq_min_hz: float, freq_max_hz: float, bands, step_hz: floa
 def merge_bands(bands, margin_hz: float = 0.0) -> list[tuple[float, float]]:
     """The union of intervals (lo, hi), each widened by ``margin_hz`` on both sides.
 
+    Parameters
+    ----------
+    bands : iterable of (lo, hi)
+        Hz, in any order, overlapping or not.
+    margin_hz : float
+        Hz, added on both sides of each.
+
+    Returns
+    -------
+    list of (lo, hi)
+        Hz, disjoint, increasing, rounded to 1e-9 Hz.
+
     Examples
     --------
     >>> merge_bands([(1.0, 2.0), (2.5, 3.0), (5.0, 6.0)], 0.3)
@@ -352,6 +364,18 @@ def order_spectrum(x: np.ndarray, periodic: bool = False) -> np.ndarray:
     power (mean removed) in each bin of order = response frequency / forcing frequency, 0 .. SPECTRUM_ORDERS
     in steps of 1 / SPECTRUM_BINS_PER_ORDER (float32). A Hann window over the K periods, unless ``periodic``
     (x is one period of a K-periodic orbit: its lines fall on the orders j / K exactly).
+
+    Parameters
+    ----------
+    x : (K, S) ndarray of float
+        The signal, period by period.
+    periodic : bool
+        x repeats after its K periods (no window).
+
+    Returns
+    -------
+    ndarray
+        (SPECTRUM_ORDERS * SPECTRUM_BINS_PER_ORDER + 1,) float32, summing to 1 (0 for a constant x).
 
     Examples
     --------
