@@ -19,6 +19,12 @@ give the same map, point for point (the sweeps are deterministic: seeded kicks a
 checked. Writes ``response_map_speed_timing.csv`` (level, way, frequencies, wall and CPU seconds, the
 target and whether it is met), ``response_map.csv`` (the maps, as the stage writes them) and
 ``response_map_speed.csv`` (per level and direction: regimes, jumps, the largest exponent).
+
+The dwell study (``--dwell-level``, default 1 N): near the upper end of the 1 N chaotic band the chaos
+is transient (a boundary crisis: lifetimes of 100-4000 periods), so where an up sweep jumps down depends
+on how long it dwells at each frequency, in a test as here. The up sweep is run again recording
+``DWELLS`` periods per frequency: ``response_map_dwell.csv`` gives its chaotic span and jumps for each,
+``response_map_dwell_timing.csv`` the run times.
 """
 
 from __future__ import annotations
@@ -44,6 +50,7 @@ from reduced.periodic.frc import frc  # noqa: E402
 from reduced.periodic.response_map import MapOptions, map_frequencies, response_map  # noqa: E402
 
 TARGET_S = 60.0  # the issue's target for one level, both directions, on 2 cores
+DWELLS = (128, 512, 2048)  # periods recorded per frequency in the dwell study
 
 
 def _sweep(args):
@@ -62,12 +69,36 @@ def _same(a, b) -> bool:
             and np.array_equal(a.lyapunov_per_s, b.lyapunov_per_s) and np.array_equal(a.peak_stats(), b.peak_stats()))
 
 
+def _dwell_study(system, b, P: float, spec, rows, names) -> tuple[list[dict], list[dict]]:
+    """The up sweep at P over its contact band again for each dwell of DWELLS (module docstring)."""
+    with single_thread_blas():
+        curve = frc(system, b, P, spec.freq_min_hz, spec.freq_max_hz, spec.harmonics,
+                    harmonics="odd" if spec.odd_harmonics else "all", point_rows=rows, point_names=names,
+                    max_steps=spec.max_steps, stability=False)
+    bands = contact_bands(system, b, P, spec, curve)
+    fr = map_frequencies(spec.freq_min_hz, spec.freq_max_hz, bands, spec.map_step_hz, 0)
+    out, timing = [], []
+    for n_record in DWELLS:
+        _, rm, wall, cpu = _sweep((system, b, P, fr, "up", rows, names, spec.map_step_hz, n_record))
+        chaos = rm.freq_hz[np.array([r == "chaotic" for r in rm.regime])]
+        out.append({"level": P, "direction": "up", "record_periods": n_record, "frequencies": rm.freq_hz.size,
+                    "chaotic": chaos.size, "chaotic_from_hz": f"{chaos.min():.4g}" if chaos.size else "",
+                    "chaotic_to_hz": f"{chaos.max():.4g}" if chaos.size else "",
+                    "jump_hz": ";".join(f"{f:.4g}" for f in rm.jump_hz),
+                    "unsettled": sum(not p.settled for p in rm.points)})
+        timing.append({"level": P, "record_periods": n_record, "wall_s": round(wall, 3), "cpu_s": round(cpu, 3)})
+        print(f"[response-map-speed] dwell {n_record} periods: chaotic {out[-1]['chaotic_from_hz']}-"
+              f"{out[-1]['chaotic_to_hz']} Hz ({wall:.1f} s)", flush=True)
+    return out, timing
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scene", default="discrete-frc")
     ap.add_argument("--levels", type=float, nargs="*", default=None, help="N (default: the scene's levels)")
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--out", default="results/response-map-speed")
+    ap.add_argument("--dwell-level", type=float, default=1.0, help="N, the level of the dwell study (0: none)")
     args = ap.parse_args(argv)
     scene = load_scene(args.scene)
     spec = scene.frc
@@ -120,6 +151,10 @@ def main(argv: list[str] | None = None) -> int:
                                 "unsettled": sum(not p.settled for p in rm.points),
                                 "jump_hz": ";".join(f"{f:.4g}" for f in rm.jump_hz),
                                 "max_lyapunov_per_s": f"{np.max(rm.lyapunov_per_s):.4g}"})
+        if args.dwell_level > 0:
+            dwell, dwell_t = _dwell_study(system, b, args.dwell_level, spec, rows, names)
+            write_rows(w.path("response_map_dwell.csv"), dwell)
+            write_rows(w.path("response_map_dwell_timing.csv"), dwell_t)
         write_rows(w.path("response_map_speed_timing.csv"), timing)
         write_rows(w.path("response_map.csv"), maps, fields=MAP_FIELDS)
         write_rows(w.path("response_map_speed.csv"), summary)

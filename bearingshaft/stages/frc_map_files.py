@@ -17,6 +17,8 @@ response, at multiples of 1/p for a subharmonic of period p, a continuum for cha
 
 from __future__ import annotations
 
+import textwrap
+
 import numpy as np
 
 from bearingshaft.digits import sig
@@ -190,11 +192,17 @@ def _plot_map(path, result: FRCResult, col: int) -> None:
             handles, labels = ax.get_legend_handles_labels()
             uniq.update(zip(labels, handles, strict=True))
         row[-1].legend(uniq.values(), uniq.keys(), fontsize=6, loc="best", markerscale=2)
-    fig.suptitle(f"{result.scene_name}: response map under a load at {result.spec.point} (stepped sine by the "
-                 "exact flow, up and down; regimes by Poincare samples and the largest Lyapunov exponent)", fontsize=9)
+    fig.suptitle(_title(f"{result.scene_name}: response map under a load at {result.spec.point} (stepped sine by "
+                        "the exact flow, up and down; regimes by Poincare samples and the largest Lyapunov exponent)",
+                        len(maps)), fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def _title(text: str, columns: int) -> str:
+    """The title in lines of about 60 characters per column of panels."""
+    return "\n".join(textwrap.wrap(text, width=60 * columns + 20))
 
 
 def _edges(f: np.ndarray) -> np.ndarray:
@@ -216,7 +224,7 @@ def _plot_spectra(path, result: FRCResult) -> None:
     import matplotlib.pyplot as plt
 
     maps = result.response_maps
-    fig, axs = plt.subplots(2, len(maps), figsize=(5.6 * len(maps), 7.0), squeeze=False)
+    fig, axs = plt.subplots(2, len(maps), figsize=(5.6 * len(maps) + 1.0, 7.0), squeeze=False, layout="constrained")
     im = None
     for c, (P, lvl) in enumerate(maps.items()):
         zoom = _zoom(lvl, result.spec)
@@ -240,8 +248,8 @@ def _plot_spectra(path, result: FRCResult) -> None:
             ax.set_ylabel("response frequency / excitation frequency")
     if im is not None:
         fig.colorbar(im, ax=axs, shrink=0.6, label="power fraction of x1 [dB]")
-    fig.suptitle(f"{result.scene_name}: order spectra of x1 over the recorded periods (lines: periodic or "
-                 "subharmonic; a continuum: chaos)", fontsize=9)
+    fig.suptitle(_title(f"{result.scene_name}: order spectra of x1 over the recorded periods (lines: periodic or "
+                        "subharmonic; a continuum: chaos)", len(maps)), fontsize=9)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
