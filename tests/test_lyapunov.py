@@ -60,7 +60,7 @@ def test_saltation_formula_on_a_force_step():
 
 def test_saltation_of_a_penalty_stop_is_the_identity():
     # on the surface s = o the stop force k (s - o) is 0 on both sides: f+ = f-, S = I exactly
-    g = PARAMS.g
+    g = PARAMS.gap
     for j, (x, v) in enumerate([([g, 1e-4, 0.0], [0.3, 0.1, 0.0]), ([g, 0.0, 0.0], [-0.2, 0.0, 0.0]),
                                 ([0.0, 0.0, -g], [0.0, 0.1, -0.1])]):
         stop = [0, 0, 3][j]
@@ -113,7 +113,7 @@ def test_tangent_and_two_runs_agree_in_chaos(chaos):
 def test_a_linear_systems_exponent_is_its_slowest_decay_rate():
     # a gap far beyond the motion: the map is exp(A T) plus a constant, lambda_i = Re(eig A), each twice
     # (a pair per mode); the largest is minus the slowest decay rate
-    sy = DiscreteParams(g=1.0).system()
+    sy = DiscreteParams(gap=1.0).system()
     n = sy.n
     Minv = np.linalg.inv(sy.M)
     A = np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ sy.K, -Minv @ sy.C]])

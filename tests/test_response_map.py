@@ -45,7 +45,7 @@ def onset():
 def test_a_linear_system_is_periodic_with_its_closed_form_orbit():
     # a gap beyond the motion: every response is the linear orbit, X = (K - w^2 M + i w C)^-1 b P, with the
     # multipliers of exp(A T): max |mu| = exp(-sigma T), sigma the slowest decay rate of all modes
-    sy = DiscreteParams(g=1.0).system()
+    sy = DiscreteParams(gap=1.0).system()
     f = np.array([12.0, 18.0, 25.0, 90.0, 400.0])
     rm = response_map(sy, LOAD, 1.0, f, point_rows=PARAMS.point_rows, point_names=PARAMS.point_names,
                       jump_step_hz=0.1)

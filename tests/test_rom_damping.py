@@ -72,7 +72,7 @@ def test_hill_sees_modes_far_above_h_omega(H):
     # a linear orbit: the multipliers are exp(lam_r T) of the damped modes, whatever the forcing. At 30 Hz
     # with H = 1 or 3, H Omega is far below the 700 Hz bending mode, whose exponent has no copy in the first
     # zone |Im lam| <= Omega / 2; the eigenvector centroid picks its unshifted copy (Lazarus & Thomas 2010)
-    s = DiscreteParams(g=1.0).system()
+    s = DiscreteParams(gap=1.0).system()
     br = frc(s, B2, 1.0, 30.0, 31.0, H=H, stability=True, hill_points=None)
     A = np.block([[np.zeros((3, 3)), np.eye(3)], [-np.linalg.solve(s.M, s.K), -np.linalg.solve(s.M, s.C)]])
     mu = np.exp(np.linalg.eigvals(A) / br.freq_hz[0])
