@@ -575,7 +575,7 @@ class HammerSpec:
     linear_check: bool = False  # the open-gap response against the full 3-D model's modal superposition
     linear_check_max_hz: float = 20000.0  # Hz, full-model modes up to this in that reference
     backbone_modes: int = 3  # NNM backbones overlaid on fig11.png (0: none)
-    force_window: bool = True  # --test: the measured hammer channel zeroed outside its pulse and a margin
+    force_window: bool = True  # with --test, the measured hammer channel zeroed outside its pulse and a margin
     force_window_margin_s: float = 1e-3  # s, that margin on either side of the pulse (half-cosine tapered)
 
     def __post_init__(self) -> None:
