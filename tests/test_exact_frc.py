@@ -15,7 +15,6 @@ import functools
 import math
 
 import numpy as np
-import pytest
 
 from reduced._blas import single_thread_blas
 from reduced.models.discrete import DiscreteParams

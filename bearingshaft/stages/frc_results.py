@@ -120,6 +120,26 @@ class ConvergedCurve:
     exact: object  # ExactFRC or None
     error: str = ""
     wall_s: float = 0.0
+class MapLevel:
+    """The response map at one load level (:mod:`bearingshaft.stages.frc_map`).
+
+    Attributes
+    ----------
+    level_N : float
+        N, the load amplitude P.
+    bands : list of (float, float)
+        Hz, the contact bands stepped at ``[frc] map_step_hz`` (the linear response's and the HB
+        curve's, widened), before the sweeps' own extensions.
+    sweeps : dict
+        ``up``/``down`` -> :class:`reduced.periodic.response_map.ResponseMap`.
+    wall_s : float
+        s, both sweeps.
+    """
+
+    level_N: float
+    bands: list
+    sweeps: dict
+    wall_s: float
 
 
 @dataclass(frozen=True, eq=False)
@@ -163,6 +183,8 @@ class FRCResult:
         (P, scale) -> (mode, log distance) of the nearest backbone to that peak.
     converged : dict
         P -> ConvergedCurve, the drawn curve of each level.
+    response_maps : dict
+        P -> MapLevel, the response map (empty when ``[frc] map_step_hz = 0``).
     """
 
     scene_name: str
@@ -180,3 +202,4 @@ class FRCResult:
     peaks: dict  # (P, scale) -> (Hz, m) the peak of the backbone curve at the load point
     nearest: dict  # (P, scale) -> (mode, log distance) of the nearest backbone to that peak
     converged: dict = field(default_factory=dict)  # P -> ConvergedCurve, the drawn curve of each level
+    response_maps: dict = field(default_factory=dict)  # P -> MapLevel (bearingshaft.stages.frc_map)
