@@ -120,6 +120,8 @@ class ConvergedCurve:
     exact: object  # ExactFRC or None
     error: str = ""
     wall_s: float = 0.0
+
+
 @dataclass(frozen=True, eq=False)
 class MapLevel:
     """The response map at one load level (:mod:`bearingshaft.stages.frc_map`).
