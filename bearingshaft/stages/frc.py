@@ -68,6 +68,9 @@ BACKBONE_DS = 0.01  # continuation step of the backbones (log10 amplitude): poly
 ORBIT_SAMPLES = 2048  # samples of one period of an exact orbit for its amplitude
 HB_CHECK_POINTS = 200  # points of an HB curve compared with the next lower H at most
 START_GUESSES = 12  # HB orbits tried as guesses of the first exact orbit (f_min first)
+RESONANCE_SPAN = 6.0  # a lightly damped mode's band: f_r (1 +- RESONANCE_SPAN zeta_r), its peak and flanks
+RESONANCE_POINTS = 8  # an HB curve with fewer points in that band has stepped over the peak: refined there
+RESONANCE_PEAK = 1.5  # ... where the linear response at f_r is this many times that at the band's edges
 
 
 def compute(scene: Scene, progress: bool, workdir=None) -> FRCResult:
@@ -128,10 +131,12 @@ def _compute(scene: Scene, progress: bool) -> FRCResult:
                      checks, sweeps, sweep_hb, convergence, *backbone, converged=converged, response_maps=maps)
 
 
-def _curve(system, b, P, spec, H, rows, names, **kw):
-    """One FRC with the scene's settings; a start that fails is reported, not raised."""
+def _curve(system, b, P, spec, H, rows, names, f_band=None, **kw):
+    """One FRC with the scene's settings (over ``f_band`` = (Hz, Hz) instead of the scene's band if
+    given); a start that fails is reported, not raised."""
+    f0, f1 = f_band or (spec.freq_min_hz, spec.freq_max_hz)
     try:
-        return frc(system, b, P, spec.freq_min_hz, spec.freq_max_hz, H,
+        return frc(system, b, P, f0, f1, H,
                    harmonics="odd" if spec.odd_harmonics else "all", point_rows=rows, point_names=names,
                    continuation=FRC_STEPS.replace(max_steps=spec.max_steps), **kw)
     except ContinuationError as exc:
@@ -243,7 +248,11 @@ def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: 
     if method == "hb":
         why = (f"HB at H = {spec.harmonics}: its amplitudes{' and penetrations' if contact else ''} move by at most "
                f"{change:.2g} (relative) from H = {Hc} ({'a stop closes' if contact else 'no stop closes'} along it)")
-        return ConvergedCurve(P, "hb", why, spec.harmonics, Hc, change, contact, None, "", time.perf_counter() - t0)
+        refined, notes = resonance_refinements(system, b, P, spec, br, rows, names) if ok else ((), [])
+        if notes:
+            why += "; " + "; ".join(notes)
+        return ConvergedCurve(P, "hb", why, spec.harmonics, Hc, change, contact, None, "", time.perf_counter() - t0,
+                              refined)
     S = spec.shooting_segments + spec.shooting_segments % 2
     opts = ExactFRCOptions(segments=S, branch_switching=spec.branch_switching, max_families=spec.max_families,
                            family_steps=spec.family_steps, max_steps=spec.shooting_steps,
@@ -269,6 +278,60 @@ def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: 
     if spec.curve == "shooting":
         why = "exact flow, by shooting ([frc] curve = \"shooting\")"
     return ConvergedCurve(P, "shooting", why, spec.harmonics, Hc, change, contact, ex, "", time.perf_counter() - t0)
+
+
+def resonance_refinements(system: GapSystem, b: np.ndarray, P: float, spec, br: FRCBranch, rows: np.ndarray,
+                          names: tuple) -> tuple[tuple, list[str]]:
+    """HB curves over the bands of the lightly damped linear modes that ``br`` steps over.
+
+    The continuation's unknowns are scaled by the largest response over the band (x_ref), so the
+    peak of a mode far above it (the 700 Hz bending mode of the three-mass model, zeta = 5.4e-4:
+    a half-power band of 0.76 Hz, a peak 1/40 of the 18 Hz one's) bends the scaled curve too little
+    for the step control to see it: the curve steps over the peak. For each open-gap mode of
+    frequency f_r and damping ratio zeta_r in the band with fewer than ``RESONANCE_POINTS`` points
+    of ``br`` in f_r (1 +- ``RESONANCE_SPAN`` zeta_r) whose linear response at the output points
+    peaks there (``RESONANCE_PEAK`` times the band's edges: a mode the load excites), the same HB
+    curve is continued over that band alone (its own x_ref: the peak is then its largest response),
+    with its stability.
+
+    Parameters
+    ----------
+    system, b, P : the gap system, the load direction (n,) and its amplitude (N)
+    spec : the [frc] table
+    br : the HB curve of the level
+    rows, names : the output points
+
+    Returns
+    -------
+    tuple
+        (the FRCBranch of each refined band, in increasing frequency; a note per band).
+    """
+    n = system.n
+    A = np.block([[np.zeros((n, n)), np.eye(n)], [-np.linalg.solve(system.M, system.K),
+                                                   -np.linalg.solve(system.M, system.C)]])
+    lam = np.linalg.eigvals(A)
+    lam = lam[lam.imag > 0]
+    out, notes = [], []
+    for lm in sorted(lam, key=lambda v: v.imag):
+        f_r, zeta = abs(lm) / (2 * np.pi), -lm.real / abs(lm)
+        lo, hi = f_r * (1 - RESONANCE_SPAN * zeta), f_r * (1 + RESONANCE_SPAN * zeta)
+        if not (0 < zeta < 1 / (2 * RESONANCE_SPAN)) or lo < spec.freq_min_hz or hi > spec.freq_max_hz:
+            continue
+        inside = int(np.sum((br.freq_hz >= lo) & (br.freq_hz <= hi)))
+        lin = [float(np.max(np.abs(rows @ np.linalg.solve(system.K - w**2 * system.M + 1j * w * system.C, b))))
+               for w in 2 * np.pi * np.array([lo, f_r, hi])]
+        if inside >= RESONANCE_POINTS or lin[1] < RESONANCE_PEAK * max(lin[0], lin[2]):
+            continue  # resolved, or the load does not excite the mode at the output points (no peak)
+        sub = _curve(system, b, P, spec, spec.harmonics, rows, names, hill_points=0, f_band=(lo, hi))
+        if isinstance(sub, Exception):
+            notes.append(f"the mode at {f_r:.5g} Hz (zeta {zeta:.2g}) stepped over ({inside} points) and its "
+                         f"band could not be continued: {' '.join(str(sub).split())[:120]}")
+            continue
+        out.append(sub)
+        notes.append(f"the mode at {f_r:.5g} Hz (zeta {zeta:.2g}) was stepped over ({inside} points in "
+                     f"{lo:.5g}-{hi:.5g} Hz): that band is drawn from its own HB curve ({len(sub.freq_hz)} points, "
+                     f"peak {np.max(sub.amplitude_m):.4g} m)")
+    return tuple(out), notes
 
 
 # -- Hill and shooting at selected points ---------------------------------------------------------

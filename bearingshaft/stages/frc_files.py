@@ -183,14 +183,22 @@ def _curve_files(result: FRCResult, writer: StageWriter, stats: dict) -> None:
 def _curve_rows(result: FRCResult, P: float, br) -> list[dict]:
     """frc.csv rows of one HB curve: each point at each output point."""
     H = result.spec.harmonics
-    labels = br.bifurcation_labels()
     cc = result.converged.get(P)
-    drawn = _bool(cc is None or cc.method == "hb")
-    return [{"level": P, "method": "hb", "harmonics": H, "freq_hz": sig(br.freq_hz[i], DIGITS), "point": nm,
-             "amplitude_m": sig(float(br.amplitude_m[i, c]), DIGITS), "stable": _bool(br.stable[i]),
-             "bifurcation": labels[i], "response": "", "segment": int(br.segment[i]), "drawn": drawn, "family": 0,
-             "family_kind": "main", "period_k": 1, "receptance_m_per_N": sig(float(br.amplitude_m[i, c]) / P, DIGITS)}
-            for i in range(len(br.freq_hz)) for c, nm in enumerate(result.names)]
+    refined = cc.refined if cc is not None and cc.exact is None else ()
+    bands = [(sub.freq_hz.min(), sub.freq_hz.max()) for sub in refined]
+    out = []
+    for k, curve in enumerate((br, *refined)):
+        labels = curve.bifurcation_labels()
+        for i in range(len(curve.freq_hz)):
+            f = curve.freq_hz[i]
+            drawn = cc is None or cc.method == "hb" and (k > 0 or not any(lo <= f <= hi for lo, hi in bands))
+            out += [{"level": P, "method": "hb", "harmonics": H, "freq_hz": sig(f, DIGITS), "point": nm,
+                     "amplitude_m": sig(float(curve.amplitude_m[i, c]), DIGITS), "stable": _bool(curve.stable[i]),
+                     "bifurcation": labels[i], "response": "", "segment": int(curve.segment[i]) + 1000 * k,
+                     "drawn": _bool(drawn), "family": 0, "family_kind": "main" if k == 0 else "main_refined",
+                     "period_k": 1, "receptance_m_per_N": sig(float(curve.amplitude_m[i, c]) / P, DIGITS)}
+                    for c, nm in enumerate(result.names)]
+    return out
 
 
 def _exact_rows(result: FRCResult, P: float, ex) -> list[dict]:
@@ -357,13 +365,47 @@ class DrawnCurve:
         return [np.flatnonzero(self.segment == k) for k in np.unique(self.segment)]
 
 
+def _spliced(br, refined: tuple) -> DrawnCurve:
+    """The HB curve ``br`` with each refined band's curve put in place of its points there (each
+    refined curve joined to the piece of ``br`` that steps over its band).
+
+    >>> from types import SimpleNamespace as NS
+    >>> br = NS(freq_hz=np.array([1.0, 2.0, 4.0]), amplitude_m=np.ones((3, 1)), stable=np.ones(3, bool),
+    ...         segment=np.zeros(3, int), H=3)
+    >>> sub = NS(freq_hz=np.array([2.5, 3.0, 3.5]), amplitude_m=2 * np.ones((3, 1)), stable=np.ones(3, bool))
+    >>> _spliced(br, (sub,)).freq_hz.tolist()
+    [1.0, 2.0, 2.5, 3.0, 3.5, 4.0]
+    """
+    f, a, st, seg = br.freq_hz, br.amplitude_m, br.stable, br.segment
+    for sub in refined:
+        lo, hi = sub.freq_hz.min(), sub.freq_hz.max()
+        keep = (f < lo) | (f > hi)
+        f, a, st, seg = f[keep], a[keep], st[keep], seg[keep]
+        j = next((i for i in range(len(f) - 1) if seg[i] == seg[i + 1] and min(f[i], f[i + 1]) < lo
+                  and max(f[i], f[i + 1]) > hi), None)
+        order = np.argsort(sub.freq_hz)
+        if j is None:  # no piece steps over it: a piece of its own
+            f, a = np.concatenate([f, sub.freq_hz]), np.concatenate([a, sub.amplitude_m])
+            st, seg = np.concatenate([st, sub.stable]), np.concatenate([seg, np.full(len(sub.freq_hz), seg.max() + 1)])
+            continue
+        if f[j] > f[j + 1]:
+            order = order[::-1]
+        f = np.concatenate([f[: j + 1], sub.freq_hz[order], f[j + 1:]])
+        a = np.concatenate([a[: j + 1], sub.amplitude_m[order], a[j + 1:]])
+        st = np.concatenate([st[: j + 1], sub.stable[order], st[j + 1:]])
+        seg = np.concatenate([seg[: j + 1], np.full(len(order), seg[j]), seg[j + 1:]])
+    return DrawnCurve(f, a, st, seg, f"HB H={br.H}, {len(refined)} resonance{'s' * (len(refined) != 1)} refined")
+
+
 def drawn_curves(result: FRCResult) -> dict:
-    """P -> the drawn curve of each level: the HB curve, or its exact families (:class:`DrawnCurve`)."""
+    """P -> the drawn curve of each level: the HB curve (with its refined resonances spliced in), or
+    its exact families (:class:`DrawnCurve`)."""
     out = {}
     for P, br in result.curves.items():
         cc = result.converged.get(P)
         if cc is None or cc.exact is None:
-            out[P] = br
+            out[P] = _spliced(br, cc.refined) if cc is not None and cc.refined and not isinstance(br, Exception) \
+                else br
             continue
         fams = cc.exact.families
         seg = np.concatenate([1000 * k + f.segment for k, f in enumerate(fams)])
@@ -503,7 +545,9 @@ def _legend_handles(result: FRCResult, colours: dict, backbones: bool) -> list:
     from matplotlib.lines import Line2D
 
     drawn = drawn_curves(result)
-    out = [Line2D([], [], color=colours[P], lw=3, label=f"P = {P:g} N: {_label(drawn[P])}") for P in sorted(drawn)
+    bad = {P for P, cc in result.converged.items() if cc.error}  # shooting failed: HB drawn, not converged
+    out = [Line2D([], [], color=colours[P], lw=3, label=f"P = {P:g} N: {_label(drawn[P])}"
+                  + (" (NOT converged)" if P in bad else "")) for P in sorted(drawn)
            if not isinstance(drawn[P], Exception)]
     out += [Line2D([], [], color=colours[P], lw=3, label=f"P = {P:g} N (no curve)") for P in sorted(drawn)
             if isinstance(drawn[P], Exception)]

@@ -108,6 +108,9 @@ class ConvergedCurve:
         Why shooting failed (then HB is drawn, marked as not converged).
     wall_s : float
         s, the comparison and the shooting.
+    refined : tuple
+        HB curves (FRCBranch) over the bands of lightly damped modes the HB curve stepped over
+        (:func:`bearingshaft.stages.frc.resonance_refinements`), drawn there instead of it.
     """
 
     level: float
@@ -120,6 +123,7 @@ class ConvergedCurve:
     exact: object  # ExactFRC or None
     error: str = ""
     wall_s: float = 0.0
+    refined: tuple = ()  # FRCBranch over the bands of modes the HB curve stepped over
 
 
 @dataclass(frozen=True, eq=False)
