@@ -37,7 +37,7 @@ FRC_FIELDS = ["level", "method", "harmonics", "freq_hz", "point", "amplitude_m",
               "segment", "drawn", "family", "family_kind", "period_k", "receptance_m_per_N"]
 FAMILY_FIELDS = ["level", "family", "kind", "period_k", "parent_family", "parent_index", "born_at", "n_points",
                  "freq_min_hz", "freq_max_hz", "stable_points", "max_amplitude_m", "max_abs_mu", "n_bifurcations",
-                 "status", "wall_s", "notes"]
+                 "status", "notes"]
 BACKBONE_FIELDS = ["level", "scale", "load_N", "nnm", "peak_freq_hz", "peak_amplitude_m", "log_distance", "note"]
 
 
@@ -268,7 +268,7 @@ def _family_rows(P: float, ex) -> list[dict]:
                      "freq_max_hz": sig(float(fam.freq_hz.max()), DIGITS), "stable_points": int(np.sum(fam.stable)),
                      "max_amplitude_m": sig(float(np.max(fam.amplitude_m)), DIGITS),
                      "max_abs_mu": sig(float(np.max(np.abs(fam.multipliers[:, 0]))), 6),
-                     "n_bifurcations": len(fam.bifurcations), "status": fam.status, "wall_s": round(fam.wall_s, 3),
+                     "n_bifurcations": len(fam.bifurcations), "status": fam.status,
                      "notes": "; ".join(fam.notes)})
     return rows
 
@@ -328,6 +328,14 @@ def _timing_rows(result: FRCResult) -> list[dict]:
         if not isinstance(br, Exception):
             rows.append({"level": P, "what": f"hb curve H={H} with monodromy stability", "harmonics": H,
                          "points": len(br.freq_hz), "wall_s": round(br.wall_s, 4)})
+        cc = result.converged.get(P)
+        if cc is not None:  # the drawn curve: the comparison in H, the refined bands or the exact families
+            rows.append({"level": P, "what": f"drawn curve ({cc.method})", "harmonics": "",
+                         "points": 0 if cc.exact is None else sum(len(f.freq_hz) for f in cc.exact.families),
+                         "wall_s": round(cc.wall_s, 4)})
+            for k, f in enumerate(cc.exact.families if cc.exact is not None else ()):
+                rows.append({"level": P, "what": f"exact family {k} ({f.kind})", "harmonics": "",
+                             "points": len(f.freq_hz), "wall_s": round(f.wall_s, 4)})
     return rows
 
 
@@ -472,7 +480,7 @@ def frc_markdown(result: FRCResult) -> str:
                   f"{len(followed)}; not followed: {len(skipped)}"
                   + (" (" + "; ".join(sorted({r['note'].split(':')[0] for r in skipped if r['note']})) + ")"
                      if skipped else "") + ". Each is a row of frc_bifurcations.csv.",
-                  f"Run time {ex.wall_s:.1f} s (main family {ex.families[0].wall_s:.1f} s).", ""]
+                  "Run times: frc_convergence_timing.csv.", ""]
         for note in [n for f in ex.families for n in f.notes][:10]:
             lines.append(f"- {note}")
         lines.append("")
