@@ -21,6 +21,8 @@ stop forces projected exactly, H = ``harmonics``) is continued in frequency over
 - the backbone check: with damping and load scaled down together (``backbone_scales``) the
   peak of each curve (H = 1) approaches the NNM backbone computed as the nnm stage does
   (:func:`reduced.periodic.backbones.nnm_branch`, H = 1, AFT with 4096 samples);
+- the drawn curve of each level (:func:`converged_curve`): HB where it no longer moves with H, else
+  the exact flow's families by shooting (:mod:`reduced.periodic.exact_frc`);
 - the response map (:mod:`bearingshaft.stages.frc_map`): a dense stepped sine up and down, each
   frequency classified by the exact flow and its Lyapunov exponent.
 
@@ -627,8 +629,12 @@ def _log_distance(f: float, A: float, curve, col: int) -> float:
 # -- the registry's contract (bearingshaft.registry) -------------------------------------------
 DESCRIPTION = """Forced-response curves under P cos(2 pi f t) at one point, by harmonic balance continued
 through folds, with stability (monodromy, Hill, shooting), bifurcations, a stepped sine up and
-down by the exact integrator, the error against H and run time, and the backbone check.
-Writes frc.csv, frc.png, frc_receptance.png (the response per newton, m/N), frc_harmonics.csv,
+down by the exact integrator, the error against H and run time, and the backbone check. The drawn
+curve of each level is converged ([frc] curve): HB where its amplitudes no longer move with H (with
+the lightly damped resonances it stepped over refined), else the families of periodic orbits of the
+exact flow by multiple shooting, with their stability and branch switching; frc.md says which and
+why, frc_families.csv lists the families. Writes frc.csv, frc.md, frc_families.csv, frc.png,
+frc_receptance.png (the response per newton, m/N), frc_harmonics.csv,
 frc_bifurcations.csv, frc_stability.csv,
 stepped_sine.csv, frc_convergence.csv, frc_convergence_timing.csv and .png, frc_backbone.csv
 and frc_backbone.png; the response map (each frequency of a dense stepped sine periodic, subharmonic,
