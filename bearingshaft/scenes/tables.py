@@ -503,17 +503,17 @@ class FRCSpec:
     stepped_sine_tol: float = 1e-6  # settled when the predicted distance to the periodic orbit is below this
     stepped_sine_max_s: float = 10.0  # s, simulated time per frequency at most before "not settled"
     backbone_scales: tuple[float, ...] = (1.0, 0.1, 0.01)  # damping and load scaled together (backbone check)
+    # the response map (issue 25): a stepped sine classified by the exact flow and its Lyapunov exponent
+    map_step_hz: float = 0.1  # Hz, step over the contact band (0: no map)
+    map_coarse_points: int = 24  # log-spaced frequencies over the band outside the contact band
+    map_periods: int = 128  # forcing periods recorded at each frequency
     curve: str = "auto"  # the drawn curve: "hb", "shooting" (exact flow) or "auto" (HB where converged in H)
     hb_converged_tol: float = 1e-4  # HB converged: amplitudes within this of the next lower H's
     branch_switching: bool = True  # follow the families born at pitchforks and period doublings
     max_families: int = 12  # families switched onto per level at most
     family_steps: int = 3000  # points of a switched family at most
-    switching_max_s: float = 300.0  # s per level after which no new family is started
+    switching_max_s: float = 300.0  # s, wall time per level after which no new family is started
     shooting_steps: int = 30000  # points of the main exact family at most
-    # the response map (issue 25): a stepped sine classified by the exact flow and its Lyapunov exponent
-    map_step_hz: float = 0.1  # Hz, step over the contact band (0: no map)
-    map_coarse_points: int = 24  # log-spaced frequencies over the band outside the contact band
-    map_periods: int = 128  # forcing periods recorded at each frequency
 
     def __post_init__(self) -> None:
         each(self, "levels_N", lambda v: v > 0, "> 0 N")
