@@ -279,7 +279,23 @@ def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: 
            + (" (a stop closes along it: HB in contact needs H ~ 255, tests/test_frc_contact.py)" if contact else ""))
     if spec.curve == "shooting":
         why = "exact flow, by shooting ([frc] curve = \"shooting\")"
-    return ConvergedCurve(P, "shooting", why, spec.harmonics, Hc, change, contact, ex, "", time.perf_counter() - t0)
+    fill, refined = np.zeros(0, bool), ()
+    lo, hi = float(ex.main.freq_hz.min()), float(ex.main.freq_hz.max())
+    if ok and (lo > spec.freq_min_hz * (1 + 1e-9) or hi < spec.freq_max_hz * (1 - 1e-9)):
+        # the main family ends inside the band (it retraced its path or left it): outside its range the
+        # HB points whose orbits close no stop are linear, HB exact to round-off there: drawn instead
+        outside = (br.freq_hz < lo) | (br.freq_hz > hi)
+        fill = outside & ~_in_contact(system, br)
+        refined, notes = resonance_refinements(system, b, P, spec, br, rows, names)
+        refined = tuple(r for r in refined if (r.freq_hz.max() < lo or r.freq_hz.min() > hi)
+                        and not np.any(_in_contact(system, r)))
+        why += (f"; the main exact family covers {lo:.5g}-{hi:.5g} Hz only: outside it the {int(fill.sum())} HB "
+                f"points whose orbits close no stop (linear: exact) are drawn, {int(np.sum(outside & ~fill))} "
+                "in contact are not")
+        if refined:
+            why += "; " + "; ".join(n for n in notes if "drawn from" in n)
+    return ConvergedCurve(P, "shooting", why, spec.harmonics, Hc, change, contact, ex, "", time.perf_counter() - t0,
+                          refined, fill)
 
 
 def resonance_refinements(system: GapSystem, b: np.ndarray, P: float, spec, br: FRCBranch, rows: np.ndarray,

@@ -184,14 +184,17 @@ def _curve_rows(result: FRCResult, P: float, br) -> list[dict]:
     """frc.csv rows of one HB curve: each point at each output point."""
     H = result.spec.harmonics
     cc = result.converged.get(P)
-    refined = cc.refined if cc is not None and cc.exact is None else ()
+    refined = cc.refined if cc is not None else ()
+    fill = cc.hb_fill if cc is not None else np.zeros(0, bool)
     bands = [(sub.freq_hz.min(), sub.freq_hz.max()) for sub in refined]
     out = []
     for k, curve in enumerate((br, *refined)):
         labels = curve.bifurcation_labels()
         for i in range(len(curve.freq_hz)):
             f = curve.freq_hz[i]
-            drawn = cc is None or cc.method == "hb" and (k > 0 or not any(lo <= f <= hi for lo, hi in bands))
+            # drawn: HB's level, or beside the exact families (hb_fill); a refined band's own curve there
+            drawn = cc is None or k > 0 or (cc.method == "hb" or (fill.size and fill[i])) \
+                and not any(lo <= f <= hi for lo, hi in bands)
             out += [{"level": P, "method": "hb", "harmonics": H, "freq_hz": sig(f, DIGITS), "point": nm,
                      "amplitude_m": sig(float(curve.amplitude_m[i, c]), DIGITS), "stable": _bool(curve.stable[i]),
                      "bifurcation": labels[i], "response": "", "segment": int(curve.segment[i]) + 1000 * k,
@@ -385,6 +388,7 @@ def _spliced(br, refined: tuple) -> DrawnCurve:
     [1.0, 2.0, 2.5, 3.0, 3.5, 4.0]
     """
     f, a, st, seg = br.freq_hz, br.amplitude_m, br.stable, br.segment
+    H = getattr(br, "H", None)
     for sub in refined:
         lo, hi = sub.freq_hz.min(), sub.freq_hz.max()
         keep = (f < lo) | (f > hi)
@@ -402,7 +406,7 @@ def _spliced(br, refined: tuple) -> DrawnCurve:
         a = np.concatenate([a[: j + 1], sub.amplitude_m[order], a[j + 1:]])
         st = np.concatenate([st[: j + 1], sub.stable[order], st[j + 1:]])
         seg = np.concatenate([seg[: j + 1], np.full(len(order), seg[j]), seg[j + 1:]])
-    return DrawnCurve(f, a, st, seg, f"HB H={br.H}, {len(refined)} resonance{'s' * (len(refined) != 1)} refined")
+    return DrawnCurve(f, a, st, seg, f"HB H={H}, {len(refined)} resonance{'s' * (len(refined) != 1)} refined")
 
 
 def drawn_curves(result: FRCResult) -> dict:
@@ -417,9 +421,17 @@ def drawn_curves(result: FRCResult) -> dict:
             continue
         fams = cc.exact.families
         seg = np.concatenate([1000 * k + f.segment for k, f in enumerate(fams)])
-        out[P] = DrawnCurve(np.concatenate([f.freq_hz for f in fams]), np.concatenate([f.amplitude_m for f in fams]),
-                            np.concatenate([f.stable for f in fams]), seg,
-                            f"exact flow ({len(fams)} famil{'y' if len(fams) == 1 else 'ies'})")
+        label = f"exact flow ({len(fams)} famil{'y' if len(fams) == 1 else 'ies'})"
+        parts = [(np.concatenate([f.freq_hz for f in fams]), np.concatenate([f.amplitude_m for f in fams]),
+                  np.concatenate([f.stable for f in fams]), seg)]
+        fill = cc.hb_fill
+        if fill.size and fill.any():  # HB beside the families, where no stop closes (frc.converged_curve)
+            idx = np.flatnonzero(fill)
+            pieces = np.concatenate([[0], np.cumsum(np.diff(idx) > 1)])  # a new piece at each gap
+            hb = _spliced(DrawnCurve(br.freq_hz[idx], br.amplitude_m[idx], br.stable[idx], pieces, ""), cc.refined)
+            parts.append((hb.freq_hz, hb.amplitude_m, hb.stable, hb.segment + 1000 * (len(fams) + 1)))
+            label += ", HB where no stop closes"
+        out[P] = DrawnCurve(*(np.concatenate([p[j] for p in parts]) for j in range(4)), label)
     return out
 
 

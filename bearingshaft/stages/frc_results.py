@@ -111,6 +111,9 @@ class ConvergedCurve:
     refined : tuple
         HB curves (FRCBranch) over the bands of lightly damped modes the HB curve stepped over
         (:func:`bearingshaft.stages.frc.resonance_refinements`), drawn there instead of it.
+    hb_fill : ndarray
+        (k,) bool over the HB curve's points: drawn beside the exact families (outside the main
+        family's range, where the orbit closes no stop); empty where HB is drawn or not needed.
     """
 
     level: float
@@ -124,6 +127,7 @@ class ConvergedCurve:
     error: str = ""
     wall_s: float = 0.0
     refined: tuple = ()  # FRCBranch over the bands of modes the HB curve stepped over
+    hb_fill: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # HB points drawn beside the families
 
 
 @dataclass(frozen=True, eq=False)
