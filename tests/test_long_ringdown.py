@@ -111,8 +111,10 @@ def test_peak_memory_does_not_grow_with_duration(tmp_path, method):
     fs, chunk = 200_000.0, 1000
     for duration in (0.02, 0.04):  # compile and warm caches first
         ringdown(sys, *IMPULSE, duration, fs, method, out=tmp_path / "w.npz", chunk_samples=chunk)
-    peaks = [_traced_peak(lambda d=d: ringdown(sys, *IMPULSE, d, fs, method, out=tmp_path / "r.npz",
-                                               chunk_samples=chunk)) for d in (0.04, 0.08)]
+    # the least of two runs of each: a one-time allocation of the process (numba reloading a kernel's cache
+    # that a test in another worker process rewrote) is not the run's; growth with the duration recurs
+    peaks = [min(_traced_peak(lambda d=d: ringdown(sys, *IMPULSE, d, fs, method, out=tmp_path / "r.npz",
+                                                   chunk_samples=chunk)) for _ in range(2)) for d in (0.04, 0.08)]
     assert peaks[1] < 1.2 * peaks[0], f"peak grew from {peaks[0]} to {peaks[1]} bytes"  # measured 0.9986-1.0001
     # No absolute bound on the traced peak (it was < 2e6 bytes): it moves with numpy's and numba's
     # internals and is a clock-like number of the machine. What keeps the streamed peak independent

@@ -130,7 +130,7 @@ def test_keys_command(capsys):
     assert len(rows) == len(ALL) and set(rows[0]) == {"table", "key", "type", "unit", "default", "allowed", "meaning"}
     assert main(["keys", "ringdwn"]) == 2
     assert "unknown table 'ringdwn' (did you mean 'ringdown'?)" in capsys.readouterr().err
-    assert set(select_tables("model")) == {"model.discrete", "model.rom", "model.assembly"}
+    assert set(select_tables("model")) == {"model.discrete", "model.discrete_friction", "model.rom", "model.assembly"}
 
 
 def test_scenes_show_prints_a_builtin_scene_to_start_from(capsys, tmp_path):

@@ -57,6 +57,8 @@ def parse_scene(text: str, default_name: str, origin: str, base: str | Path | No
                      folder=_folder(base), **sections)
     _check_tables_of_kind(sections, kind, origin)
     dof_names = _check_points(sections, kind, model, origin, "load" in data)
+    if "frf" in sections and "hammer" not in sections:  # the FRFs of the rig's hammer test
+        raise SceneError(f"{origin} [frf]: needs a [hammer] table (the rig, its channels and record)")
     loads, signals = _read_loads(data, sections, dof_names, origin, base)
     if "fep" in sections and "nnm" not in sections:
         raise SceneError(f"{origin}: [fep] needs an [nnm] table (its energy range and grid)")
@@ -130,6 +132,11 @@ def _check_tables_of_kind(sections: dict, kind: str, origin: str) -> None:
         for key in ("rom_convergence", "verify"):
             if key in sections:
                 raise SceneError(f"{origin}: [{key}] needs a reduced model (kind = \"rom\"), not {kind!r}")
+    if kind == "discrete_friction":  # harmonic balance and the studies do not treat friction yet
+        for key in ("nnm", "fep", "frc", "work_precision", "stiff_cases", "symmetry"):
+            if key in sections:
+                raise SceneError(f"{origin}: [{key}] does not treat friction; the model with friction "
+                                 "(kind = \"discrete_friction\") has [ringdown] and [spectrogram]")
 
 
 def _check_points(sections: dict, kind: str, model, origin: str, has_loads: bool) -> tuple[str, ...]:
@@ -184,11 +191,11 @@ def _check_frc(frc, kind: str, model, dof_names, origin: str) -> None:
     if frc.point not in dof_names:
         raise SceneError(f"{origin} [frc] point: unknown point {frc.point!r}{suggest(frc.point, dof_names)} "
                          f"(known: {', '.join(dof_names)})")
-    damping = (model.c,) if kind == "discrete" else (model.c_points, model.alpha)
+    damping = (model.c,) if kind == "discrete" else (model.c_points, model.alpha, *model.modal_damping)
     if not any(d > 0 for d in damping):
         raise SceneError(f"{origin} [frc]: the model has no damping ([model] "
-                         f"{'c' if kind == 'discrete' else 'c_points or alpha'} = 0), so no forced response "
-                         "settles and the curves have no peak; give the model damping")
+                         f"{'c' if kind == 'discrete' else 'c_points, alpha or modal_damping'} = 0), so no forced "
+                         "response settles and the curves have no peak; give the model damping")
 
 
 def _check_hammer(sections: dict, kind: str, model, origin: str, has_loads: bool) -> None:

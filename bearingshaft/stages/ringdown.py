@@ -222,7 +222,7 @@ def backbone_curves(model, system: GapSystem | None = None, n_modes: int = 3
     from reduced.periodic import nnm2
     from reduced.periodic.backbones import hb_backbones
 
-    system = model.system() if system is None else system
+    system = (model.system() if system is None else system).with_friction(None)  # the conservative NNMs
     curves = {f"{name}, HB H=1": c
               for name, c in hb_backbones(system, 1, modes=gap_moving_modes(system, "open", n_modes)).items()}
     if isinstance(model, DiscreteParams) and model.m1 == model.m3:

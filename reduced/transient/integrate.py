@@ -20,6 +20,7 @@ from pathlib import Path
 
 from reduced import _checks as _check
 from reduced.models.gaps import GapSystem
+from reduced.transient import friction as _friction  # noqa: F401 (registers the steppers of systems with friction)
 from reduced.transient import stepper as _stepper
 from reduced.transient.dop853 import Dop853Options, Dop853Stepper
 from reduced.transient.exact import ExactOptions, ExactStepper

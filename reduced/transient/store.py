@@ -50,6 +50,7 @@ from reduced._checks import InvalidArgument, integer, show
 HISTORIES = ("t", "x", "v", "energy", "dissipated", "external")  # the per-sample members, in file order
 OPTIONAL = ("external",)  # histories a file may lack (free runs, older files): read as zeros
 DERIVED = ("stop_force", "a")  # per-sample members computed from the state as it is written (older files lack them)
+FRICTION_HISTORIES = ("w", "friction")  # a run with friction: slider positions (N, p), friction work (N,)
 READ_CHUNK_SAMPLES = 1 << 16  # samples a chunk when a run is read back (about 4.7 MB for 3 DOFs)
 DOS_TIME, DOS_DATE = 0, (0 << 9) | (1 << 5) | 1  # 1980-01-01 00:00:00: no wall clock in the file
 ZIP64_VERSION = 45  # "version needed to extract" for zip64 (APPNOTE 4.4.3)
@@ -277,6 +278,10 @@ class Chunk:
         J (a property; given as ``_energy``, or computed once by ``system``).
     external : (k,) ndarray of float or None
         J, the work of the loads int_0^t v^T f_ext dt (zeros for a free run; None when not read).
+    w : (k, p) ndarray of float or None
+        m, the friction sliders' positions (None: no friction, or not read).
+    friction : (k,) ndarray of float or None
+        J, the part of ``dissipated`` done by friction (None: no friction, or not read).
     """
 
     start: int
@@ -287,11 +292,14 @@ class Chunk:
     system: object = None
     _energy: np.ndarray | None = None
     external: np.ndarray | None = None
+    w: np.ndarray | None = None
+    friction: np.ndarray | None = None
 
     @property
     def energy(self) -> np.ndarray:
         if self._energy is None:
-            self._energy = self.system.energy(self.x, self.v)
+            self._energy = (self.system.energy(self.x, self.v) if self.w is None else
+                            self.system.energy(self.x, self.v, self.w))
         return self._energy
 
     def __len__(self) -> int:
@@ -348,7 +356,7 @@ class RingdownFile:
             raise InvalidArgument(f"path {show(str(path))} is not a ringdown file: no {', '.join(missing)}")
         self.system = system
         with np.load(self.path, allow_pickle=False) as z:
-            small = {k: z[k] for k in z.files if k not in HISTORIES and k not in DERIVED}
+            small = {k: z[k] for k in z.files if k not in (*HISTORIES, *DERIVED, *FRICTION_HISTORIES)}
         self.method = str(small.get("method", ""))
         self.tolerance = float(small.get("tolerance", np.nan))
         self.energy_balance_error = float(small.get("energy_balance_error", np.nan))
@@ -412,6 +420,10 @@ class RingdownFile:
     energy = property(lambda self: self._memmap("energy"), doc="J, (N,) memory-mapped")
     dissipated = property(lambda self: self._memmap("dissipated"), doc="J, (N,) memory-mapped")
     external = property(lambda self: self._memmap("external"), doc="J, (N,) memory-mapped (zeros: a free run)")
+    w = property(lambda self: self._memmap("w") if "w" in self._arrays else None,
+                 doc="m, (N, p) memory-mapped slider positions (None: no friction)")
+    friction = property(lambda self: self._memmap("friction") if "friction" in self._arrays else None,
+                        doc="J, (N,) memory-mapped friction work (None: no friction)")
 
     @property
     def forced(self) -> bool:
@@ -419,19 +431,24 @@ class RingdownFile:
         return "external" in self._arrays
 
     def chunks(self, chunk_samples: int | None = None, start: int = 0, stop: int | None = None,
-               fields: tuple[str, ...] = HISTORIES) -> Iterator[Chunk]:
+               fields: tuple[str, ...] = HISTORIES + FRICTION_HISTORIES) -> Iterator[Chunk]:
         """Consecutive :class:`Chunk` of at most ``chunk_samples`` (default ``READ_CHUNK_SAMPLES``)
-        samples from ``start`` to ``stop``; only the histories in ``fields`` are read (the others are None)."""
+        samples from ``start`` to ``stop``; only the histories in ``fields`` are read (the others are None,
+        as are the friction histories of a run without friction)."""
         chunk_samples = integer("chunk_samples", READ_CHUNK_SAMPLES if chunk_samples is None else chunk_samples)
+        allowed = HISTORIES + FRICTION_HISTORIES
         for name in fields:
-            if name not in HISTORIES:
-                raise InvalidArgument(f"fields must name histories among {', '.join(HISTORIES)}, got {show(name)}")
+            if name not in allowed:
+                raise InvalidArgument(f"fields must name histories among {', '.join(allowed)}, got {show(name)}")
         stop = self.n_samples if stop is None else min(stop, self.n_samples)
         for i in range(start, stop, chunk_samples):
             j = min(i + chunk_samples, stop)
             a = {k: self.read(k, i, j) if k in fields else None for k in HISTORIES}
+            for k in FRICTION_HISTORIES:
+                a[k] = self.read(k, i, j) if k in fields and k in self._arrays else None
             t = a["t"] if a["t"] is not None else np.arange(i, j) / self.sample_rate_hz
-            yield Chunk(i, t, a["x"], a["v"], a["dissipated"], self.system, a["energy"], a["external"])
+            yield Chunk(i, t, a["x"], a["v"], a["dissipated"], self.system, a["energy"], a["external"], a["w"],
+                        a["friction"])
 
     @property
     def energy0(self) -> float:
