@@ -131,6 +131,9 @@ def cd_modal(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, offse
     Every loop over the n coordinates is an elementwise update or a dot product, compiled with
     reassociation (SIMD sums): a fixed order for a given build, so the samples do not depend on how a
     run is cut into calls, but not the physical kernel's order (its results are matched to round-off).
+
+    Long because it is one numba step loop: a helper called per step costs a call and its arrays' loads
+    in the 30-60 ns a step takes (two restructurings that hoisted the sums were slower, measured).
     """
     n = z.shape[0]
     p = UT.shape[0]
