@@ -243,6 +243,7 @@ def modal_explicit_rows(repeats: int) -> tuple[list[dict], list[dict]]:
     system, x0, v0 = scene_model("rom-impulse")
     rate = 3e7
     runs = {}
+    load0 = os.getloadavg()[0]
     for c in ("physical", "modal"):  # warm-up (compilation, the modal split of the model)
         integrate_explicit(system, x0, v0, LONG_S, FS, step_basis="contact", coordinates=c)
     walls = {"physical": [], "modal": []}
@@ -269,7 +270,8 @@ def modal_explicit_rows(repeats: int) -> tuple[list[dict], list[dict]]:
             "baseline_s": med["physical"], "ratio": med["physical"] / med["modal"],
             "error": f"first {WINDOW_S:g} s differs from the physical kernel by {head_diff(mo, ph, FS):.2g} of max |x| "
                      f"(round-off; the runs part later as the motion is chaotic); energy balance "
-                     f"{mo.energy_balance_error:.3g} (physical {ph.energy_balance_error:.3g})",
+                     f"{mo.energy_balance_error:.3g} (physical {ph.energy_balance_error:.3g}); machine load "
+                     f"(1 min) {load0:.1f} before, {os.getloadavg()[0]:.1f} after, on {os.cpu_count()} cores",
             "target": f">= {rate:.0e} steps/s (<= {steps / rate:.3g} s)", "met": steps / med["modal"] >= rate}
     form = mo.stats.get("coordinates")
     rl = roofline(system.n, 3, 2, steps / cpu["modal"])

@@ -51,8 +51,18 @@ LIMITS = (
      "result), a chain of dependent adds through memory; the kernel time is all of the run (cProfile), the "
      "matvec 9 ns and the dissipated-work sum 14 ns of the 63 ns a step. Keeping four rows' sums in scalars "
      "(same bits) was slower, 77-78 ms against 63-65 ms for 1e6 steps, as the column loop is already "
-     "vectorised; a modal form with a low-rank damping update would cut the flops by about 2.4x but change "
-     "the bits (untried)"),
+     "vectorised. The same scheme in the open-gap modal coordinates (the next row, opt-in as it changes the "
+     "bits) runs about 2x faster"),
+    ("explicit (central difference) ringdown in the open-gap modal coordinates",
+     "measured on a machine loaded 15-20 on 2 cores (its wall times are several times its CPU times; "
+     "the physical kernel, 63 ns a step unloaded in the row above, took 115-120 ns CPU a step beside it), so "
+     "the steps/s in CPU time and the ratio to the physical kernel are the figures to read: about 2x, "
+     "which puts the unloaded step near 30 ns (3e7 steps/s) but was not measured unloaded. The roofline in "
+     "the accuracy column: the step uses 12 % of the core's multiply-add peak and a fraction of its L1 "
+     "bandwidth; it is latency-bound, its sums over the coordinates (the tip rows, U^T y, the new velocity) "
+     "each waiting for the last. Two restructurings that take every sum at the step's start (one link "
+     "of latency a step instead of about four) were slower under this load (more flops on a shared core), "
+     "and were not kept"),
     ("exact vs DOP853 restarted at every crossing",
      "the exact run costs 1.7 us a contact event with its output samples (12,780 events and 40,000 samples "
      "in 21.6 ms on the 2 s window), within the 1-2 us the issue names as the limit of that work, and the "
