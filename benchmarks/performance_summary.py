@@ -56,10 +56,11 @@ LIMITS = (
      "vectorised. The same scheme in the open-gap modal coordinates (the next row, opt-in as it changes the "
      "bits) runs about 2x faster"),
     ("explicit (central difference) ringdown in the open-gap modal coordinates",
-     "measured on a machine loaded 15-20 on 2 cores (its wall times are several times its CPU times; "
-     "the physical kernel, 63 ns a step unloaded in the row above, took 115-120 ns CPU a step beside it), so "
-     "the steps/s in CPU time and the ratio to the physical kernel are the figures to read: about 2x, "
-     "which puts the unloaded step near 30 ns (3e7 steps/s) but was not measured unloaded. The roofline in "
+     "measured on a machine loaded 15-20 on 2 cores (wall times several times the CPU times; the physical "
+     "kernel took 115-120 ns of CPU a step beside it, against 63 ns unloaded in the row above, measured "
+     "before the reduced beam had modal damping on every mode), so the steps/s in CPU time and the ratio to "
+     "the physical kernel in the same process (about 1.9x) are the figures to read; the unloaded rate was "
+     "not measured. The roofline in "
      "the accuracy column: the step uses 12 % of the core's multiply-add peak and a fraction of its L1 "
      "bandwidth; it is latency-bound, its sums over the coordinates (the tip rows, U^T y, the new velocity) "
      "each waiting for the last. Two restructurings that take every sum at the step's start (one link "
