@@ -73,9 +73,12 @@ LIMITS = (
      "the 0.2 s window), and its relative speed moves with the machine (below): these rows met 1000x at "
      "1e-8 on the earlier machine and miss it here"),
     ("FE modal, 112,629 DOFs, 16 modes: mesh",
-     "of the 19.4 s, the mesh takes 1.0 s, assembly 1.4-2.7 s, the PARDISO Cholesky 5.7-7.7 s and the block "
-     "Krylov iteration 8.4-10.3 s (68 solves with the factor; modal_speed.csv). A second shift near 850 Hz "
-     "would cut the solves but costs a second factorization (untried)"),
+     "measured at load 12-21 on 2 cores (2026-11-26; wall times 4-10x the CPU times, PARDISO on one thread): "
+     "7.4x in CPU seconds (15.2 s against 112 s), 5.7x in wall time. Of ours, in CPU: the PARDISO "
+     "factorization (two-level, 0.6 + 4.5-4.9 s one thread unloaded), assembly 1-2 s and 68 solves with the "
+     "factor in the block Krylov iteration, the rest. 10x needs <= 11 CPU s here, the factor's forward and "
+     "back solves being the part left to cut (fewer solves: a shift inside the wanted band needs an "
+     "indefinite LDL^T; untried)"),
     ("FE modal, 112,629 DOFs: relative residual",
      "the twelve soft-spring modes (0.4-34 Hz) stop at 1-3x their round-off floor eps |||K| |phi||| / ||K phi||, "
      "above 1e-8 in double precision; the elastic modes reach 4-8e-10"),
