@@ -56,7 +56,7 @@ LIMITS = (
      "vectorised. The same scheme in the open-gap modal coordinates (the next row, opt-in as it changes the "
      "bits) runs about 2x faster"),
     ("explicit (central difference) ringdown in the open-gap modal coordinates",
-     "measured on a machine loaded 15-20 on 2 cores (wall times several times the CPU times; the physical "
+     "measured on a machine loaded 12-20 on 2 cores (wall times several times the CPU times; the physical "
      "kernel took 115-120 ns of CPU a step beside it, against 63 ns unloaded in the row above, measured "
      "before the reduced beam had modal damping on every mode), so the steps/s in CPU time and the ratio to "
      "the physical kernel in the same process (about 1.9x) are the figures to read; the unloaded rate was "
