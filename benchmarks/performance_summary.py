@@ -59,7 +59,7 @@ LIMITS = (
      "measured on a machine loaded 12-20 on 2 cores (wall times several times the CPU times; the physical "
      "kernel took 115-120 ns of CPU a step beside it, against 63 ns unloaded in the row above, measured "
      "before the reduced beam had modal damping on every mode), so the steps/s in CPU time and the ratio to "
-     "the physical kernel in the same process (about 1.9x) are the figures to read; the unloaded rate was "
+     "the physical kernel in the same process (1.7-1.9x) are the figures to read; the unloaded rate was "
      "not measured. The roofline in "
      "the accuracy column: the step uses 12 % of the core's multiply-add peak and a fraction of its L1 "
      "bandwidth; it is latency-bound, its sums over the coordinates (the tip rows, U^T y, the new velocity) "
