@@ -49,6 +49,40 @@ def estimates(scene: Scene) -> list[Estimate]:
     return [e for name in stages_of(scene) for e in BY_NAME[name].estimate(scene)]
 
 
+def stage_bytes(scene: Scene, stage: str) -> int:
+    """Peak bytes of ``stage`` of ``scene`` run in a process of its own (the largest of its estimates).
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+    stage : str
+        One of its stages.
+
+    Returns
+    -------
+    int
+        bytes.
+    """
+    return int(max((e.bytes for e in BY_NAME[stage].estimate(scene)), default=0))
+
+
+def job_bytes(stages) -> int:
+    """Peak bytes of ``stages`` ((scene, stage) pairs) run one after another in one process.
+
+    Parameters
+    ----------
+    stages : iterable of (Scene, str)
+        The stages, in the order they run.
+
+    Returns
+    -------
+    int
+        bytes.
+    """
+    return max((stage_bytes(scene, name) for scene, name in stages), default=0)
+
+
 def free_disk_bytes(out_dir: str | Path) -> int:
     """Bytes free on the file system that holds (or will hold) ``out_dir``.
 
