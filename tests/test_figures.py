@@ -290,7 +290,7 @@ def test_grid_axis_of_the_issue():
 def _sweep_rows():
     gaps = np.geomspace(1e-4, 1e-3, 5)
     forces = (200.0, 800.0, 1000.0, 2000.0)  # uneven on either scale: categorical
-    return gaps, forces, [{"model.g": g, "load[0].peak_N": P, "freq_early_hz": 100.0 * P / g * 1e-6,
+    return gaps, forces, [{"model.gap": g, "load[0].peak_N": P, "freq_early_hz": 100.0 * P / g * 1e-6,
                            "impacts": int(P / 10), "status": "ok"} for g, P in itertools.product(gaps, forces)]
 
 
@@ -299,10 +299,10 @@ def test_sweep_maps_name_their_axes_with_units():
 
     scene = load_scene("sweep-gap-kg")
     gaps, forces, rows = _sweep_rows()
-    spec = SimpleNamespace(vary=(Vary("model.g", tuple(gaps), log=True), Vary("load[0].peak_N", forces)),
+    spec = SimpleNamespace(vary=(Vary("model.gap", tuple(gaps), log=True), Vary("load[0].peak_N", forces)),
                            design="grid")
-    labels = (report.key_label(scene, "model.g"), "peak of the blow, load[0].peak_N [N]")
-    assert labels[0] == "radial clearance at each tip, model.g [m]"
+    labels = (report.key_label(scene, "model.gap"), "peak of the blow, load[0].peak_N [N]")
+    assert labels[0] == "radial clearance at each tip, model.gap [m]"
     fig = report.draw_maps(rows, spec, ["freq_early_hz", "impacts"], "t", (None, None), labels)
     try:
         ax = fig.axes[0]

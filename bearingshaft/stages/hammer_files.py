@@ -21,6 +21,7 @@ import numpy as np  # noqa: E402
 from bearingshaft import correlate  # noqa: E402
 from bearingshaft.correlate import ChannelError, ChannelPair  # noqa: E402
 from bearingshaft.digits import sig  # noqa: E402
+from bearingshaft.measures import MEASURE_FIELDS  # noqa: E402
 from bearingshaft.output import StageWriter, write_rows  # noqa: E402
 from bearingshaft.plots import Envelope, wrap_title  # noqa: E402
 from bearingshaft.scenes import Scene  # noqa: E402
@@ -606,7 +607,7 @@ def write_markdown(path: Path, result: VirtualTest) -> None:
     lines = [f"# Virtual hammer test: {scene.name}", "",
              f"Reduced apparatus: {rig.system.n} coordinates (x1, x3 and {rig.system.n - 2} fixed-interface modes), "
              f"{len(rig.channels)} channels. Blow: "
-             f"{'measured history ' + spec.force_file if spec.force_file else 'half-sine'}"
+             f"{'measured history ' + Path(spec.force_file).name if spec.force_file else 'half-sine'}"
              f" of {spec.duration_s * 1e3:g} ms at {where(rig.location)} along "
              f"{tuple(round(d, 6) for d in rig.direction)}, "
              f"starting at {spec.start_s:g} s; record {scene.ringdown.duration_s:g} s at "
@@ -661,32 +662,66 @@ def _level_text(s: dict, end_share_s: float) -> list[str]:
 
 # -- a measured test ---------------------------------------------------------------------------
 def write_comparison(result: Comparison, writer: StageWriter) -> None:
-    """``test_errors.csv``, ``test_compare.png``, ``test_spectrogram.png`` and ``model.uff``.
+    """The comparison with a measured test: ``test_errors.csv`` (pointwise, up to the horizon),
+    ``test_measures.csv`` (what survives chaos), ``test_horizon.csv``, ``test_compare.md``, the
+    figures ``test_compare.png``, ``test_spectrogram.png``, ``test_horizon.png``,
+    ``test_measures.png``, ``test_backbone.png`` (with backbones) and ``model.uff``.
 
     Parameters
     ----------
     result : the comparison with a measured test
     writer : the stage's writer
     """
-    scene, pairs = result.scene, result.pairs
+    scene, pairs, hz = result.scene, result.pairs, result.horizon
     correlate.write_errors_csv(result.rows, writer.path("test_errors.csv"))
+    ms = result.measures
+    write_rows(writer.path("test_measures.csv"), ms.rows if ms else [], MEASURE_FIELDS, float_format=f".{DIGITS}g")
+    if hz is not None:
+        horizon_csv(writer.path("test_horizon.csv"), hz)
+        horizon_figure(writer.path("test_horizon.png"), result)
+    horizon = hz.horizon_s if hz is not None else None
     comparison_figure(pairs, writer.path("test_compare.png"),
                       f"{scene.name} against {Path(result.test_file).name}: model driven by {result.driven}",
-                      window_s=result.window_s)
+                      window_s=result.window_s, horizon_s=horizon, rows=result.rows)
     name = spectrogram_channel(scene)
     pair = next((p for p in pairs if p.name == name), pairs[0])
     sp = scene.spectrogram
+    ridge = ms.ridges.get(pair.name) if ms else None
     spectrogram_pair_figure(pair, writer.path("test_spectrogram.png"), sp.window_s if sp else 0.05,
                             sp.overlap if sp else 0.9, sp.fmax_hz if sp else 1500.0,
-                            title=f"{pair.name}: model (left) and test (right)")
+                            title=f"{pair.name}: model (left) and test (right)", span_s=result.window_s,
+                            ridges=ridge, horizon_s=horizon)
+    if ms is not None and (ms.ridges or ms.envelopes or ms.impacts):
+        measures_figure(writer.path("test_measures.png"), result, pair.name)
+    if ms is not None and ms.backbones:
+        backbone_figure(writer.path("test_backbone.png"), result)
     write_uff58(writer.path("model.uff"), result.model, model=f"bearingshaft {scene.name}")
+    comparison_markdown(writer.path("test_compare.md"), result)
+
+
+def horizon_csv(path: Path, hz) -> None:
+    """``test_horizon.csv``: per window of the horizon's runs, G (the model's growth of a difference
+    of the blow), the mismatch it predicts (delta_eff G) and the mismatch measured.
+
+    Parameters
+    ----------
+    path : the CSV written
+    hz : the comparison's Horizon
+    """
+    # both are windows of hz.window_s from the record's first sample: the k-th of one is the k-th of the other
+    rows = [{"t_s": float(t), "growth": float(g), "predicted_mismatch": float(hz.delta_eff * g),
+             "measured_mismatch": float(hz.mismatch[k]) if k < hz.mismatch.size else math.nan}
+            for k, (t, g) in enumerate(zip(hz.t, hz.growth, strict=True))]
+    write_rows(path, rows, ["t_s", "growth", "predicted_mismatch", "measured_mismatch"], float_format=f".{DIGITS}g")
 
 
 def comparison_figure(pairs: list[ChannelPair], path: str | Path, title: str, channels: list[str] | None = None,
-                      window_s: tuple[float, float] | None = None) -> None:
-    """Model and test time histories overlaid, one panel per channel, each titled with its
-    rms_rel_error over the window. A long record is drawn as its min/max per pixel column
-    (:class:`bearingshaft.plots.Envelope`).
+                      window_s: tuple[float, float] | None = None, horizon_s: float | None = None,
+                      rows: list[dict] | None = None) -> None:
+    """Model and test time histories overlaid, one panel per channel, each titled with its relative
+    RMS error (from ``rows`` when given: up to the horizon, with its floor; else over the window).
+    A long record is drawn as its min/max per pixel column (:class:`bearingshaft.plots.Envelope`);
+    the predictability horizon, if given, is a dashed line.
 
     Parameters
     ----------
@@ -695,10 +730,13 @@ def comparison_figure(pairs: list[ChannelPair], path: str | Path, title: str, ch
     title : the figure's title
     channels : names of the pairs drawn, in this order (default: :func:`bearingshaft.correlate.default_channels`)
     window_s : (t_start_s, t_end_s), s, absolute times drawn (default: each pair's whole overlap)
+    horizon_s : s, the predictability horizon (None or inf: not drawn)
+    rows : :func:`bearingshaft.correlate.channel_errors` rows whose errors title the panels
     """
     chosen = correlate.select_pairs(pairs, channels)
     if not chosen:
         raise ChannelError("no channel to draw")
+    by_row = {r["name"]: r for r in rows or []}
     fig, axes = plt.subplots(len(chosen), 1, figsize=(9, 1.9 * len(chosen) + 1.0), sharex=True,
                              constrained_layout=True, squeeze=False)
     for ax, p in zip(axes[:, 0], chosen, strict=True):
@@ -709,10 +747,19 @@ def comparison_figure(pairs: list[ChannelPair], path: str | Path, title: str, ch
         t = t + a.t[0]
         ax.plot(t, y[:, 1], color="k", lw=0.8, label="test" + (" (sign flipped)" if p.flipped else ""))
         ax.plot(t, y[:, 0], color="C3", lw=0.8, alpha=0.85, label="model")
-        rms_x = correlate.rms(a.test)
-        err = correlate.rms(a.model - a.test) / rms_x if rms_x > 0 else math.inf
-        ax.set_title(f"{p.name} (node {p.node}, direction {correlate.direction_label(p.direction)}): "
-                     f"rms error {100 * err:.3g} %", fontsize=9, loc="left")
+        if p.name in by_row:
+            r = by_row[p.name]
+            judged = "" if r["judged_against"] == "itself" else f", judged against its {r['judged_against']}"
+            err = f"rms error {100 * r['rms_rel_error']:.3g} % to {1e3 * r['t_end_s']:.4g} ms{judged}"
+        elif rows is not None:
+            err = "no pointwise error: past the horizon"
+        else:
+            rms_x = correlate.rms(a.test)
+            err = f"rms error {100 * (correlate.rms(a.model - a.test) / rms_x if rms_x > 0 else math.inf):.3g} %"
+        ax.set_title(f"{p.name} (node {p.node}, direction {correlate.direction_label(p.direction)}): {err}",
+                     fontsize=9, loc="left")
+        if horizon_s is not None and math.isfinite(horizon_s) and a.t[0] < horizon_s < a.t[-1]:
+            ax.axvline(horizon_s, color="C0", ls="--", lw=1.0, label="predictability horizon")
         ax.set_ylabel(f"{p.quantity.replace('_', ' ')}\n[{p.unit}]", fontsize=9)
         ax.legend(loc="upper right", fontsize=7)
         ax.set_xlim(a.t[0], a.t[-1])
@@ -724,12 +771,15 @@ def comparison_figure(pairs: list[ChannelPair], path: str | Path, title: str, ch
 
 def spectrogram_pair_figure(pair: ChannelPair, path: str | Path, window_s: float, overlap: float, fmax_hz: float,
                             db_range: float = 60.0, title: str | None = None,
-                            span_s: tuple[float, float] | None = None) -> None:
+                            span_s: tuple[float, float] | None = None, ridges=None,
+                            horizon_s: float | None = None) -> None:
     """Spectrograms of the model (left) and the test (right) of one channel on one colour scale.
 
     ``window_s`` (s) and ``overlap`` are the STFT's (:func:`reduced.transient.spectrogram.spectrogram`:
     Hann window, PSD scaling, mean removed); the colour scale spans ``db_range`` dB below the
-    larger of the two maxima.
+    larger of the two maxima. With ``ridges`` (:class:`bearingshaft.measures.Ridges`) each
+    panel carries both ridges (model red, test white) over the frames compared, and with
+    ``horizon_s`` the predictability horizon (dashed).
 
     Parameters
     ----------
@@ -740,6 +790,8 @@ def spectrogram_pair_figure(pair: ChannelPair, path: str | Path, window_s: float
     db_range : dB shown below the larger maximum
     title : the figure's title (default: the channel's name)
     span_s : (t_start_s, t_end_s), s, absolute times drawn (default: the common samples)
+    ridges : Ridges or None, the ridges drawn over both panels
+    horizon_s : s, the predictability horizon (None or inf: not drawn)
     """
     a = pair.aligned(span_s)
     specs = []
@@ -757,6 +809,13 @@ def spectrogram_pair_figure(pair: ChannelPair, path: str | Path, window_s: float
                              rasterized=True)
         ax.set_title(label, fontsize=10)
         ax.set_xlabel("time [s]")
+        if ridges is not None:
+            ok = ridges.valid
+            ax.plot(ridges.t[ok], ridges.f_model[ok], ".", color="C3", ms=2, label="model ridge")
+            ax.plot(ridges.t[ok], ridges.f_test[ok], ".", color="w", ms=2, label="test ridge")
+            ax.legend(loc="upper right", fontsize=7)
+        if horizon_s is not None and math.isfinite(horizon_s):
+            ax.axvline(horizon_s, color="w", ls="--", lw=0.8)
         ax.set_ylim(0, fmax_hz)
     axes[0].set_ylabel("frequency [Hz]")
     fig.colorbar(mesh, ax=axes, label=f"PSD [dB re 1 ({pair.unit})^2/Hz]")
@@ -765,3 +824,242 @@ def spectrogram_pair_figure(pair: ChannelPair, path: str | Path, window_s: float
                             f"Hann {window_s:g} s, overlap {overlap:g})"), fontsize=10)
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def horizon_figure(path: Path, result: Comparison) -> None:
+    """The predictability horizon: the mismatch the model's own divergence predicts (delta_eff G(t))
+    against the one measured, on a log scale, with the tolerance, the onset and the horizon.
+
+    Parameters
+    ----------
+    path : the PNG written
+    result : the comparison
+    """
+    hz = result.horizon
+    fig, ax = plt.subplots(figsize=(9, 4.2), constrained_layout=True)
+    end = hz.t[-1] if hz.t.size else hz.start_s
+    end = max(end, hz.horizon_s if math.isfinite(hz.horizon_s) else 0.0) * 1.5 + 0.01
+    m = hz.mismatch_t <= end
+    ax.semilogy(1e3 * hz.mismatch_t[m], np.maximum(hz.mismatch[m], 1e-12), color="k", lw=1.2,
+                label="measured: test against model (median over channels)")
+    if hz.t.size and math.isfinite(hz.delta_eff):
+        ax.semilogy(1e3 * hz.t, np.maximum(hz.delta_eff * hz.growth, 1e-12), color="C3", lw=1.2,
+                    label=f"predicted: the model against itself after a blow {100 * hz.delta_eff:.2g} % stronger")
+    ax.axhline(hz.tolerance, color="0.5", ls=":", lw=1.0, label=f"tolerance {100 * hz.tolerance:g} %")
+    ax.axvspan(1e3 * hz.eps0_span_s[0], 1e3 * hz.eps0_span_s[1], color="C1", alpha=0.2, label="the blow (eps0)")
+    if math.isfinite(hz.horizon_s):
+        ax.axvline(1e3 * hz.horizon_s, color="C0", ls="--", label=f"horizon {1e3 * hz.horizon_s:.4g} ms")
+    if math.isfinite(hz.onset_s):
+        ax.axvline(1e3 * hz.onset_s, color="C2", ls="-.", label=f"chaos starts {1e3 * hz.onset_s:.4g} ms")
+    ax.set_xlim(0, 1e3 * end)
+    ax.set_ylim(1e-6, 10)
+    ax.set_xlabel("time [ms]")
+    ax.set_ylabel("relative RMS difference (2 ms windows)")
+    ax.legend(loc="lower right", fontsize=7)
+    lam = (f"largest Lyapunov exponent {hz.exponent_per_s:.3g} 1/s" if math.isfinite(hz.exponent_per_s)
+           else "no separation runs")
+    fig.suptitle(wrap_title(f"{result.scene.name} against {Path(result.test_file).name}: where pointwise comparison "
+                            f"stops ({lam})"), fontsize=10)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def measures_figure(path: Path, result: Comparison, channel: str) -> None:
+    """What survives chaos, on one channel and one load cell: the spectrogram ridges against time,
+    the RMS envelope, and the impacts' peak forces against time, model and test.
+
+    Parameters
+    ----------
+    path : the PNG written
+    result : the comparison
+    channel : the channel of the ridges and the envelope (the spectrogram's)
+    """
+    ms, hz = result.measures, result.horizon
+    cell = result.scene.hammer.load_cell
+    if cell not in ms.impacts and ms.impacts:
+        cell = next(iter(ms.impacts))
+    panels = [k for k, have in (("ridges", channel in ms.ridges), ("envelope", channel in ms.envelopes),
+                                ("impacts", cell in ms.impacts)) if have]
+    fig, axes = plt.subplots(len(panels), 1, figsize=(9, 2.6 * len(panels) + 0.8), sharex=True,
+                             constrained_layout=True, squeeze=False)
+    for ax, kind in zip(axes[:, 0], panels, strict=True):
+        if kind == "ridges":
+            r = ms.ridges[channel]
+            ok = r.valid
+            ax.plot(r.t[ok], r.f_test[ok], ".", color="k", ms=3, label="test")
+            ax.plot(r.t[ok], r.f_model[ok], ".", color="C3", ms=3, label="model")
+            ax.set_ylabel("ridge [Hz]")
+            ax.set_title(f"{channel}: spectrogram ridge, {100 * r.agreement:.3g} % of the frames within one bin "
+                         f"({r.bin_hz:.3g} Hz), median difference {100 * r.error:.2g} %", fontsize=9, loc="left")
+        elif kind == "envelope":
+            e = ms.envelopes[channel]
+            ax.semilogy(e.t, np.maximum(e.test, 1e-300), color="k", lw=1.0, label="test")
+            ax.semilogy(e.t, np.maximum(e.model, 1e-300), color="C3", lw=1.0, label="model")
+            ax.set_ylabel(f"RMS [{next(p.unit for p in result.pairs if p.name == channel)}]")
+            ax.set_title(f"{channel}: RMS envelope, error {100 * e.error:.3g} %", fontsize=9, loc="left")
+        else:
+            c = ms.impacts[cell]
+            ax.plot(c.test.start_s, c.test.peak_N, "o", mfc="none", color="k", ms=4,
+                    label=f"test: {c.test.count} impacts")
+            ax.plot(c.model.start_s, c.model.peak_N, "x", color="C3", ms=4, label=f"model: {c.model.count} impacts")
+            ax.axhline(c.test.threshold_N, color="0.5", ls=":", lw=0.8, label="threshold")
+            ax.set_ylabel("peak force [N]")
+            ax.set_title(f"{cell}: impacts as the load cell reads them (past the horizon)", fontsize=9, loc="left")
+        if hz is not None and math.isfinite(hz.horizon_s):
+            ax.axvline(hz.horizon_s, color="C0", ls="--", lw=0.8)
+        ax.legend(loc="upper right", fontsize=7)
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.suptitle(wrap_title(f"{result.scene.name} against {Path(result.test_file).name}: what survives chaos "
+                            f"(the dashed line: predictability horizon)"), fontsize=10)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def backbone_figure(path: Path, result: Comparison) -> None:
+    """Backbones from the ringdown: instantaneous frequency against amplitude of each NNM's component
+    of the free decay, test and model, over the model's NNM backbone (HB, H = 1) on the same channel.
+
+    Parameters
+    ----------
+    path : the PNG written
+    result : the comparison (its measures' backbones, its ChannelBackbone curves)
+    """
+    ms = result.measures
+    curves = {(b.channel, b.label): b for b in result.backbones}
+    keys = [k for k in ms.backbones if k in curves]
+    fig, axes = plt.subplots(1, len(keys), figsize=(4.6 * len(keys) + 0.6, 4.4), constrained_layout=True,
+                             squeeze=False)
+    for ax, key in zip(axes[0], keys, strict=True):
+        c, hb = ms.backbones[key], curves[key]
+        ax.semilogx(hb.amplitude, hb.freq_hz, color="C0", lw=1.5, label="NNM backbone (HB, H=1)")
+        ax.semilogx(c.test.amplitude, c.test.freq_hz, "o", mfc="none", color="k", ms=3, label="test ringdown")
+        ax.semilogx(c.model.amplitude, c.model.freq_hz, "x", color="C3", ms=3, label="model ringdown")
+        lo, hi = hb.band_hz
+        ax.set_ylim(lo, hi)
+        pts = np.concatenate([c.test.amplitude, c.model.amplitude])
+        if pts.size:
+            ax.set_xlim(pts.min() / 2, pts.max() * 2)
+        ax.set_xlabel(f"{key[0]}: displacement amplitude [m]")
+        ax.set_ylabel("frequency [Hz]")
+        ax.set_title(f"{hb.label}, band {lo:.3g}-{hi:.3g} Hz: model vs test {100 * c.error:.2g} %",
+                     fontsize=9)
+        ax.legend(loc="upper left", fontsize=7)
+    fig.suptitle(wrap_title(f"{result.scene.name} against {Path(result.test_file).name}: backbones from the free "
+                            f"decay (Hilbert on the band-passed channel) over the model's NNM backbones"), fontsize=10)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _pct(v: float) -> str:
+    return "-" if not math.isfinite(v) else f"{100 * v:.3g} %"
+
+
+def _horizon_text(result: Comparison) -> list[str]:
+    hz = result.horizon
+    out = ["## Where chaos starts (test_horizon.csv, test_horizon.png)", ""]
+    if math.isfinite(hz.exponent_per_s):
+        onset = f"from {1e3 * hz.onset_s:.4g} ms" if math.isfinite(hz.onset_s) else "never 100-fold within the runs"
+        out.append(f"- Largest Lyapunov exponent of the model along the record: {hz.exponent_per_s:.3g} 1/s "
+                   f"(Lyapunov time {1e3 * hz.lyapunov_time_s:.3g} ms); chaos starts {onset} (a difference of the "
+                   f"blow grown 100-fold in the compared channels).")
+    out.append(f"- Predictability horizon: **{_ms(hz.horizon_s)}**. {hz.note[0].upper() + hz.note[1:]}.")
+    if math.isfinite(hz.last_contact_s):
+        out.append(f"- The model's gaps stay open after {1e3 * hz.last_contact_s:.4g} ms.")
+    if hz.mismatch.size and math.isfinite(hz.horizon_s):
+        before = hz.mismatch[(hz.mismatch_t >= hz.start_s) & (hz.mismatch_t < hz.horizon_s)]
+        after = hz.mismatch[hz.mismatch_t >= hz.horizon_s]
+        if before.size and after.size:
+            out.append(f"- Measured mismatch (median over channels, 2 ms windows): at most {_pct(before.max())} from "
+                       f"the blow to the horizon, median {_pct(float(np.median(after)))} after it.")
+    return out + [""]
+
+
+def _ms(t: float) -> str:
+    return f"{1e3 * t:.4g} ms" if math.isfinite(t) else "none within the window"
+
+
+def _time_text(result: Comparison) -> list[str]:
+    out = ["## Up to the horizon: pointwise errors (test_errors.csv, test_compare.png)", ""]
+    if not result.rows:
+        return out + ["No pointwise errors: " + ("not asked for (--measures)." if "time" not in result.wanted
+                                                 else "the horizon precedes the window."), ""]
+    rows = sorted(result.rows, key=lambda r: -r["rms_rel_error"])
+    errs = [r["rms_rel_error"] for r in rows]
+    floored = sum(r["judged_against"] != "itself" for r in rows)
+    out.append(f"Over {1e3 * rows[0]['t_start_s']:.4g} .. {1e3 * rows[0]['t_end_s']:.4g} ms, relative RMS error "
+               f"rms(model - test) / max(rms(test), floor): median {_pct(float(np.median(errs)))}, worst "
+               f"{_pct(errs[0])} ({rows[0]['name']}); {floored} channels near zero judged against their sensor's "
+               f"largest axis or the noise before the blow.")
+    out += ["", "| channel | rms test | floor | judged against | error |", "|---|---|---|---|---|"]
+    out += [f"| {r['name']} | {r['rms_test']:.3g} {r['unit']} | {r['rms_floor']:.3g} | {r['judged_against']} | "
+            f"{_pct(r['rms_rel_error'])} |" for r in rows[:6]]
+    return out + [""]
+
+
+def _measure_text(result: Comparison) -> list[str]:
+    ms = result.measures
+    if ms is None or not ms.rows:
+        return []
+    out = ["## What survives chaos (test_measures.csv, test_measures.png, test_spectrogram.png)", ""]
+
+    def worst(measure, statistic):
+        rs = [r for r in ms.rows if r["measure"] == measure and r["statistic"] == statistic
+              and math.isfinite(r["error"])]
+        return max(rs, key=lambda r: abs(r["error"])) if rs else None
+
+    def span(m):
+        a, b = ms.spans[m]
+        return f"{1e3 * a:.4g} ms .. {b:.4g} s"
+
+    if ms.ridges:
+        agree = [r.agreement for r in ms.ridges.values() if math.isfinite(r.agreement)]
+        w = worst("ridges", "ridge frequency")
+        out.append(f"- Spectrogram ridges ({span('ridges')}): the dominant frequencies of model and test agree within "
+                   f"one bin in {_pct(float(np.median(agree)) if agree else math.nan)} of the frames (median over "
+                   f"{len(ms.ridges)} channels); median relative difference {_pct(ms.summary('ridges'))}"
+                   + (f", worst {_pct(w['error'])} ({w['channel']})." if w else "."))
+    if ms.envelopes:
+        w = worst("envelope", "RMS envelope")
+        out.append(f"- RMS envelope ({span('envelope')}): error {_pct(ms.summary('envelope'))} (median over "
+                   f"channels)" + (f", worst {_pct(w['error'])} ({w['channel']})." if w else "."))
+    if ms.impacts:
+        out.append(f"- Impacts past the horizon ({span('impacts')}), as the tip load cells read them:")
+        for name, c in ms.impacts.items():
+            out.append(f"  {name}: {c.model.count} (model) against {c.test.count} (test), "
+                       f"{c.model.rate_per_s:.3g} against {c.test.rate_per_s:.3g} 1/s; median peak "
+                       f"{c.model.peak_stat(0.5):.4g} against {c.test.peak_stat(0.5):.4g} N, largest "
+                       f"{c.model.peak_stat(1.0):.4g} against {c.test.peak_stat(1.0):.4g} N.")
+    opens = [r for r in ms.rows if r["measure"] == "open"]
+    if opens:
+        out.append("- Gaps open after (end of the last impact): " + "; ".join(
+            f"{r['channel']} {r['model']:.4g} s (model) against {r['test']:.4g} s" for r in opens) + ".")
+    for (name, label), c in ms.backbones.items():
+        dist = next((r for r in ms.rows if r["measure"] == "backbone" and r["statistic"] == "distance to the NNM "
+                     "backbone" and r["channel"] == f"{name} ({label})"), None)
+        text = (f"- Backbone of the {label} component on {name} (band {c.test.band_hz[0]:.3g}-{c.test.band_hz[1]:.3g} "
+                f"Hz, {c.test.t.size} test points): model against test at equal amplitude {_pct(c.error)}")
+        if dist is not None:
+            text += (f"; distance to the model's NNM backbone: test {_pct(dist['test'])}, model ringdown "
+                     f"{_pct(dist['model'])}")
+        out.append(text + " (test_backbone.png).")
+    return out + [""]
+
+
+def comparison_markdown(path: Path, result: Comparison) -> None:
+    """``test_compare.md``: where chaos starts, the pointwise errors up to it, what still matches after it.
+
+    Parameters
+    ----------
+    path : the Markdown file written
+    result : the comparison
+    """
+    a, b = result.window_s
+    lines = [f"# {result.scene.name} against {Path(result.test_file).name}", "",
+             f"The model ({result.stats.get('n_dofs')} coordinates) at the test's sampling, driven by {result.driven}; "
+             f"{result.force_text}. Compared: {len(result.pairs)} channels over {a:.4g} .. {b:.4g} s; measures: "
+             f"{', '.join(result.wanted)}.", ""]
+    if result.horizon is not None:
+        lines += _horizon_text(result)
+    lines += _time_text(result)
+    lines += _measure_text(result)
+    path.write_text("\n".join(lines))

@@ -185,7 +185,7 @@ def key_label(scene, key: str) -> str:
     Returns
     -------
     str
-        Such as ``'radial clearance at each tip, model.g [m]'``; a metric's label for a metric.
+        Such as ``'radial clearance at each tip, model.gap [m]'``; a metric's label for a metric.
     """
     m = KEY_PATTERN.match(key)
     if m is None:
