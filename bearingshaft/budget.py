@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import shutil
+from dataclasses import dataclass
 from pathlib import Path
 
 from bearingshaft.digits import human
@@ -49,8 +50,136 @@ def estimates(scene: Scene) -> list[Estimate]:
     return [e for name in stages_of(scene) for e in BY_NAME[name].estimate(scene)]
 
 
-def stage_bytes(scene: Scene, stage: str) -> int:
-    """Peak bytes of ``stage`` of ``scene`` run in a process of its own (the largest of its estimates).
+MIB = 2**20
+PROCESS_BYTES = 195 * MIB  # the interpreter with the package and matplotlib loaded: VmHWM of
+# `python -c "import bearingshaft.cli, matplotlib.pyplot"` measured 194.6 MiB (Python 3.11, numpy with MKL)
+MESH_IMPORTS_BYTES = 78 * MIB  # gmsh, scikit-fem and pyvista on top of it: measured 77.6 MiB more
+
+
+@dataclass(frozen=True, slots=True)
+class PeakModel:
+    """How the peak of one stage run in a process of its own is counted, beyond :data:`PROCESS_BYTES`.
+
+    Parameters
+    ----------
+    fixed : float
+        bytes: the stage's own modules, figures and work space, whatever the scene's sizes.
+    model_scale : float
+        x the 3-D model's arrays (:func:`fe_arrays_bytes`) when the stage builds the 3-D model.
+    data_scale : float
+        x the data the stage holds (the sum of its registry estimates, :mod:`bearingshaft.estimates`).
+    """
+
+    fixed: float
+    model_scale: float
+    data_scale: float
+
+
+# Calibrated on the peaks of every stage of every built-in scene run each in its own process
+# (benchmarks/memory_estimates.py, results/memory-estimates/estimates.csv): the estimate is at least the
+# measured peak and at most 1.3x it. A stage with one size among the scenes (hammer, frf: one scene each) has
+# its fixed term from that one measurement, not a law; the terms that grow with a scene's sizes are counted.
+PEAK_MODELS: dict[str, PeakModel] = {
+    # modal: its registry estimate is the whole modal solve's process (fem._modal_cost, fitted on meshes up to
+    # 648k DOFs without figures); here its arrays only, with the figures and VTK rendering in the fixed term
+    "modal": PeakModel(fixed=400 * MIB, model_scale=1.0, data_scale=0.0),
+    "reduce": PeakModel(fixed=400 * MIB, model_scale=1.0, data_scale=0.0),
+    "ringdown": PeakModel(fixed=50 * MIB, model_scale=1.0, data_scale=0.5),
+    "hammer": PeakModel(fixed=700 * MIB, model_scale=1.0, data_scale=1.0),
+    "frf": PeakModel(fixed=100 * MIB, model_scale=1.0, data_scale=1.0),
+    "nnm": PeakModel(fixed=50 * MIB, model_scale=1.0, data_scale=1.0),
+    "study": PeakModel(fixed=50 * MIB, model_scale=1.0, data_scale=1.0),
+    "verify": PeakModel(fixed=50 * MIB, model_scale=1.0, data_scale=1.0),
+    "frc": PeakModel(fixed=50 * MIB, model_scale=1.0, data_scale=1.0),
+}
+
+
+@dataclass(frozen=True, slots=True)
+class StagePeak:
+    """The estimated peak resident memory of one stage of a scene run in a process of its own.
+
+    Parameters
+    ----------
+    scene : str
+        The scene's name.
+    stage : str
+        The stage.
+    bytes : float
+        The estimate: process + fixed + model + data.
+    process, fixed, model, data : float
+        bytes of each term: the interpreter and imports, the stage's fixed working set, the 3-D model (0 unless the
+        stage builds it), the data it holds.
+    builds_model : bool
+        The stage meshes and assembles the 3-D model (a reduced model not yet in the cache, a stage that always
+        does, or a modal analysis).
+    """
+
+    scene: str
+    stage: str
+    bytes: float
+    process: float
+    fixed: float
+    model: float
+    data: float
+    builds_model: bool
+
+
+def fe_dofs(scene: Scene) -> int:
+    """DOFs of the scene's 3-D model, counted from its geometry before any meshing (0 without one).
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+
+    Returns
+    -------
+    int
+    """
+    from fem._modal_cost import count_dofs
+
+    model = scene.model
+    if scene.model_kind == "rom":
+        model = model.fe_model()
+    elif not hasattr(model, "geometry"):
+        return 0
+    return count_dofs(model.geometry(), model.element)
+
+
+def fe_arrays_bytes(scene: Scene, n_modes: int) -> float:
+    """bytes of the 3-D model's arrays at a modal solve of ``n_modes``: K and M, the factor, the Krylov basis.
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with a 3-D model (a modal scene or a reduced model's).
+    n_modes : int
+        Modes solved for.
+
+    Returns
+    -------
+    float
+        :func:`fem._modal_cost.modal_bytes` without its process base.
+    """
+    from fem._modal_cost import modal_bytes
+
+    b = modal_bytes(fe_dofs(scene), n_modes)
+    return float(b["matrices"] + b["factor"] + b["krylov"])
+
+
+def _model_modes(scene: Scene, stage: str) -> int:
+    """Modes of the 3-D model's solve that sizes the stage's Krylov basis."""
+    if stage == "modal":
+        return scene.modal.n_modes
+    if stage == "hammer":
+        return 96  # the linear check's modes to linear_check_max_hz (24, 48, 96: hammer_linear.full_modes)
+    if stage == "frf" and scene.frf.mac_reference == "fe":
+        return scene.frf.fe_modes
+    return scene.model.n_modes + 8  # the reduction's fixed-interface modes and the full model's gap modes
+
+
+def builds_model(scene: Scene, stage: str, cached: bool) -> bool:
+    """Does ``stage`` of ``scene`` mesh and assemble the 3-D model?
 
     Parameters
     ----------
@@ -58,29 +187,132 @@ def stage_bytes(scene: Scene, stage: str) -> int:
         The scene.
     stage : str
         One of its stages.
+    cached : bool
+        Its reduced model is in the cache (or in its ``rom_file``) when the stage starts.
 
     Returns
     -------
-    int
-        bytes.
+    bool
+        modal and reduce always; the hammer's linear check, the rom convergence study and an frf whose MAC
+        reference is the 3-D model always; any other stage of a reduced model when it is not cached.
     """
-    return int(max((e.bytes for e in BY_NAME[stage].estimate(scene)), default=0))
+    if stage in ("modal", "reduce"):
+        return True
+    if scene.model_kind != "rom":
+        return False
+    if (stage == "hammer" and scene.hammer.linear_check) or (stage == "study" and scene.rom_convergence is not None) \
+            or (stage == "frf" and scene.frf.mac_reference == "fe"):
+        return True
+    return not cached
 
 
-def job_bytes(stages) -> int:
-    """Peak bytes of ``stages`` ((scene, stage) pairs) run one after another in one process.
+def _cache_file(spec) -> Path:
+    """Where the reduced-model cache keeps ``spec``'s model (reduced.models.rom's own path: a helper there would
+    change the source hash that keys every cache entry)."""
+    from reduced.models.rom import _cache_path
+
+    return _cache_path(spec)
+
+
+def rom_cached(scene: Scene, stored: frozenset = frozenset()) -> bool:
+    """Is the scene's reduced model at hand without building: its ``rom_file``, the cache, or ``stored``?
 
     Parameters
     ----------
-    stages : iterable of (Scene, str)
-        The stages, in the order they run.
+    scene : Scene
+        A scene (a model other than a reduced one is never built: True).
+    stored : frozenset of Path
+        Cache files an earlier stage of the same job writes (``reduce`` stores its model).
 
     Returns
     -------
-    int
+    bool
+    """
+    if scene.model_kind != "rom" or scene.model.rom_file:
+        return True
+    path = _cache_file(scene.model)
+    return path in stored or path.exists()
+
+
+def stage_peak(scene: Scene, stage: str, cached: bool | None = None) -> StagePeak:
+    """The peak resident memory of ``stage`` of ``scene`` run in a process of its own, from the scene's sizes.
+
+    process (:data:`PROCESS_BYTES`) + the stage's fixed working set + the 3-D model when the stage builds it
+    (:data:`MESH_IMPORTS_BYTES` + ``model_scale`` x :func:`fe_arrays_bytes`) + ``data_scale`` x the data it
+    holds (its registry estimates), with the stage's :data:`PEAK_MODELS` entry.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+    stage : str
+        One of its stages.
+    cached : bool, optional
+        Its reduced model is in the cache when the stage starts (default: as the cache is now).
+
+    Returns
+    -------
+    StagePeak
+    """
+    pm = PEAK_MODELS[stage]
+    cached = rom_cached(scene) if cached is None else cached
+    build = builds_model(scene, stage, cached)
+    model = MESH_IMPORTS_BYTES + pm.model_scale * fe_arrays_bytes(scene, _model_modes(scene, stage)) if build else 0.0
+    data = pm.data_scale * sum(e.bytes for e in BY_NAME[stage].estimate(scene))
+    total = PROCESS_BYTES + pm.fixed + model + data
+    return StagePeak(scene.name, stage, total, PROCESS_BYTES, pm.fixed, model, data, build)
+
+
+def job_peaks(scenes) -> list[StagePeak]:
+    """Every stage of ``scenes`` in the order ``bearingshaft run`` runs them, each as :func:`stage_peak`, with
+    the cache as it will be: a ``reduce`` stores its model, so the stages after it load it.
+
+    Parameters
+    ----------
+    scenes : iterable of Scene
+        In the order they run.
+
+    Returns
+    -------
+    list of StagePeak
+    """
+    stored: set = set()
+    out = []
+    for scene in scenes:
+        for name in stages_of(scene):
+            out.append(stage_peak(scene, name, rom_cached(scene, frozenset(stored))))
+            if name == "reduce" and not scene.model.rom_file:
+                stored.add(_cache_file(scene.model))
+    return out
+
+
+JOB_RETAINED = 1.0  # share of an earlier stage's peak (less the process) a later stage of the same process cannot
+# reuse: numpy's freed arrays go back to the allocator, but MKL's, gmsh's and VTK's buffers and a fragmented heap
+# stay resident (measured in benchmarks/memory_estimates.py's job pass)
+
+
+def job_bytes(peaks: list[StagePeak]) -> float:
+    """The peak of a job running ``peaks``' stages one after another in one process (``bearingshaft run``).
+
+    A stage's peak in the job is its own plus what the earlier stages left resident and it cannot reuse:
+    ``max_i (peak_i + JOB_RETAINED x (max_{j<i} peak_j - PROCESS_BYTES))``: the largest stage's own peak with
+    ``JOB_RETAINED`` = 0, with 1 each stage on top of the largest before it (less the process, counted once).
+
+    Parameters
+    ----------
+    peaks : list of StagePeak
+        In the order they run (:func:`job_peaks`).
+
+    Returns
+    -------
+    float
         bytes.
     """
-    return max((stage_bytes(scene, name) for scene, name in stages), default=0)
+    best, before = 0.0, 0.0
+    for p in peaks:
+        best = max(best, p.bytes + JOB_RETAINED * max(0.0, before - PROCESS_BYTES))
+        before = max(before, p.bytes)
+    return best
 
 
 def free_disk_bytes(out_dir: str | Path) -> int:
@@ -138,4 +370,12 @@ def check_budget(scene: Scene, out_dir: str | Path | None = None, available: int
             raise SceneError(f"{scene.origin or scene.name} {e.key}: the {e.stage} stage would hold "
                              f"{human(e.bytes)} ({e.what}), more than the {human(HEADROOM * avail)} it may use "
                              f"of {human(avail)} available; {e.advice or 'lower ' + e.key.split('] ')[1]}")
+    for p in job_peaks([scene]):  # the whole process: imports, the 3-D model if the stage builds it, the data
+        if p.bytes > HEADROOM * avail:
+            own = [e for e in ests if e.stage == p.stage]
+            e = max(own, key=lambda e: e.bytes) if own else None
+            fix = (e.advice or "lower " + e.key.split("] ")[1]) if e else "free memory"
+            raise SceneError(f"{scene.origin or scene.name}{' ' + e.key if e else ''}: the {p.stage} stage's "
+                             f"process would peak at about {human(p.bytes)}, more than the "
+                             f"{human(HEADROOM * avail)} it may use of {human(avail)} available; {fix}")
     return ests

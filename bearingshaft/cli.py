@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 
 from bearingshaft import __version__
-from bearingshaft.budget import available_bytes, check_budget, estimates
+from bearingshaft.budget import available_bytes, check_budget, job_bytes, job_peaks
 from bearingshaft.digits import human
 from bearingshaft.output import check_out_dir
 from bearingshaft.progress import run_total
@@ -126,16 +126,30 @@ def _validated(name: str, out_arg: str | None, parent: bool) -> tuple[Scene, Pat
 def _check(args) -> int:
     names = ([args.scene_opt] if args.scene_opt else []) + args.scenes or builtin_names()
     single = len(names) == 1 and args.scene_opt is not None
+    scenes = []
     for name in names:
         scene, out = _validated(name, args.out, parent=not single)
-        ests = estimates(scene)
-        peak = f"peak memory about {human(max(e.bytes for e in ests))}" if ests else "3-D model: memory not estimated"
+        scenes.append(scene)
+        peaks = job_peaks([scene])
+        each = ", ".join(f"{p.stage} {human(p.bytes)}" + (" (builds the 3-D model)" if p.builds_model else "")
+                         for p in peaks)
+        peak = f"peak memory about {human(job_bytes(peaks))} ({each})" if peaks else "no stage"
         cases = _check_sweep(scene, out / "sweep") if scene.sweep is not None and scene.sweep.vary else None
         print(f"{scene.name}: valid; stages {', '.join(stages_of(scene)) or 'none'}; {peak} "
               f"of {human(available_bytes())} available; results in {out}")
         if cases:
             print(cases)
+    if len(scenes) > 1:
+        print(job_line(scenes))
     return 0
+
+
+def job_line(scenes: list[Scene]) -> str:
+    """The whole job's estimate: its stages in one process, as ``bearingshaft run`` runs them."""
+    peaks = job_peaks(scenes)
+    return (f"job: {len(peaks)} stages of {len(scenes)} scenes in one process: peak memory about "
+            f"{human(job_bytes(peaks))} (largest stage {human(max((p.bytes for p in peaks), default=0))}, with what "
+            f"the stages before it leave resident; bearingshaft.budget.job_bytes)")
 
 
 def _check_sweep(scene: Scene, out: Path) -> str:
@@ -199,6 +213,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "run":
             names = args.scenes or builtin_names()
             runs = [_validated(n, args.out, parent=True) for n in names]  # validate all before running any
+            print(job_line([s for s, _ in runs]), flush=True)
             t_run = time.perf_counter()
             for scene, out in runs:
                 pipeline.run_scene(scene, out, progress=progress)

@@ -1,35 +1,28 @@
 """Memory estimates against measured peaks: every stage of every built-in scene, and the whole job.
 
-    PYTHONPATH=. python benchmarks/memory_estimates.py [--scenes NAME ...] [--out results/memory]
-        [--no-job] [--reestimate]
+    PYTHONPATH=. python benchmarks/memory_estimates.py [--peaks results/performance/main_job.csv]
+        [--measure [--scenes NAME ...]] [--job] [--out results/memory-estimates]
 
-**Stages.** Every stage of every built-in scene (or of ``--scenes``) is run in the order
-``bearingshaft run`` runs them, each in its own process
-``python -m bearingshaft.cli STAGE --scene NAME --out TMP/NAME --no-progress``, so that its peak
-is its own: the peak resident set size of that process (``ru_maxrss`` from ``os.wait4``, what
-``/usr/bin/time -v`` calls "Maximum resident set size"), beside the stage's estimate
-(:func:`bearingshaft.budget.stage_bytes`, counted from the scene alone). A stage that compiled
-numba kernels (the cache files next to the sources grew) is run a second time, warm: the row
-keeps the warm peak, and ``compiling_peak_bytes`` the first (a fresh clone pays it once).
+**Stages.** For each stage of each built-in scene, its estimate (:func:`bearingshaft.budget.stage_peak`,
+counted from the scene alone, with the model cache as it was when the stage ran) beside its measured peak
+resident memory, the stage run in a process of its own:
 
-**Baseline.** A process that only imports what the stages import (numpy, scipy, numba,
-matplotlib, gmsh, scikit-fem, pyvista and the package): every peak includes it, so every
-estimate does (:data:`bearingshaft.estimates.BASELINE_BYTES`).
+- by default the peaks of ``benchmarks/main_job_cost.py`` (``--peaks``, its ``main_job.csv``: ``ru_maxrss``
+  of each stage's process; a stage during which the cache gained an entry built its reduced model);
+- with ``--measure``, measured again here: each stage as
+  ``python -c "...cli.main([STAGE, --scene, NAME, --out, TMP, --no-progress])"``, whose peak is the
+  ``VmHWM`` it reads from ``/proc/self/status`` as it ends (``ru_maxrss`` of a child started by
+  ``subprocess`` counts the parent's pages shared before ``exec``: a large parent would inflate it). The
+  cache state before each stage is the user's cache (``$BEARINGSHAFT_CACHE``) as the stages leave it.
 
-**Whole job.** Then (unless ``--no-job``) the same stages run one after another in one process,
-as ``bearingshaft run`` runs them: before each stage the process's peak is reset
-(``/proc/self/clear_refs``, Linux), after it the stage's peak in the job (``VmHWM``) and what it
-left resident (``VmRSS``) are read. The job's peak is compared with
-:func:`bearingshaft.budget.job_bytes`.
+**Whole job** (``--job``): the stages of every built-in scene run one after another in one process, as
+``bearingshaft run`` runs them; before each stage the process's high-water mark is reset
+(``/proc/self/clear_refs``, Linux) and after it the stage's peak in the job (``VmHWM``) and what it left
+resident (``VmRSS``) are read. The job's peak is compared with :func:`bearingshaft.budget.job_bytes`.
 
-Writes, in ``--out``: ``estimates.csv`` (scene, stage, estimate_bytes, peak_bytes, ratio =
-estimate / peak, compiling_peak_bytes, wall_s, exit_code), ``baseline.csv``, ``job.csv`` (per stage:
-rss_before_bytes, peak_in_job_bytes, rss_after_bytes, alone_peak_bytes), ``job_summary.csv`` and
-``estimates.png``. ``--reestimate`` recomputes the estimate columns of the CSV files already
-written (after a change of an estimate) without running anything.
-
-Measured on the 2-core machine: the stage pass takes about as long as the main job (13-20 min,
-more under load), the job pass as long again.
+Writes, in ``--out``: ``estimates.csv`` (scene, stage, estimate_mb, measured_mb, ratio = estimate / measured,
+builds_model, source), ``estimates.png`` and, with ``--job``, ``job.csv`` (per stage: rss_before_mb,
+peak_in_job_mb, rss_after_mb, estimate_mb) and ``job_summary.csv``. MB are MiB (2**20 bytes).
 """
 
 from __future__ import annotations
@@ -47,21 +40,17 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bearingshaft.budget import job_bytes, stage_bytes  # noqa: E402
+from bearingshaft.budget import job_bytes, job_peaks, rom_cached, stage_peak  # noqa: E402
 from bearingshaft.registry import stages_of  # noqa: E402
 from bearingshaft.scenes import builtin_names, load_scene  # noqa: E402
 
-FIELDS = ["scene", "stage", "estimate_bytes", "peak_bytes", "ratio", "compiling_peak_bytes", "wall_s", "exit_code"]
-JOB_FIELDS = ["scene", "stage", "rss_before_bytes", "peak_in_job_bytes", "rss_after_bytes", "alone_peak_bytes",
-              "estimate_bytes"]
-BASELINE_IMPORTS = ("numpy", "scipy.sparse.linalg", "scipy.linalg", "numba", "matplotlib.pyplot", "gmsh", "skfem",
-                    "pyvista", "bearingshaft.cli")
-RATIO_MAX = 1.3  # the issue's bound: estimate / peak in [1, RATIO_MAX]
-
-
-def numba_cache_files() -> int:
-    """numba's cache index files next to the sources (they grow when a stage compiles a kernel)."""
-    return sum(1 for d in ("reduced", "bearingshaft", "fem") for _ in (ROOT / d).rglob("*.nbi"))
+MIB = 2**20
+FIELDS = ["scene", "stage", "estimate_mb", "measured_mb", "ratio", "builds_model", "source"]
+JOB_FIELDS = ["scene", "stage", "rss_before_mb", "peak_in_job_mb", "rss_after_mb", "estimate_mb"]
+RATIO_MAX = 1.3  # the issue's bound: estimate / measured peak in [1, RATIO_MAX]
+PEAK_CODE = ("import sys\nfrom bearingshaft.cli import main\nrc = main(sys.argv[1:])\n"
+             "hwm = [line.split()[1] for line in open('/proc/self/status') if line.startswith('VmHWM:')][0]\n"
+             "print('VMHWM_KIB', hwm, flush=True)\nsys.exit(rc)\n")
 
 
 def child_env() -> dict:
@@ -71,21 +60,52 @@ def child_env() -> dict:
     return env
 
 
-def run_measured(argv: list[str], log: Path) -> tuple[int, float, int]:
-    """Run ``argv`` to completion in ROOT: (peak RSS bytes of it and its children, wall s, exit code)."""
+def stage_peak_measured(scene: str, stage: str, out: Path, env: dict | None = None) -> tuple[int, float, int]:
+    """Run ``stage`` of ``scene`` in a process of its own: (its VmHWM in bytes, wall s, exit code).
+
+    Parameters
+    ----------
+    scene, stage : str
+        What to run.
+    out : Path
+        Its results folder.
+    env : dict, optional
+        The child's environment (default: this one, with the checkout first on PYTHONPATH).
+
+    Returns
+    -------
+    tuple
+        (bytes, s, exit code); bytes is 0 if the stage failed before printing its peak.
+    """
     t0 = time.perf_counter()
-    with open(log, "wb") as fh:
-        proc = subprocess.Popen(argv, stdout=fh, stderr=subprocess.STDOUT, env=child_env(), cwd=ROOT)
-        _, status, usage = os.wait4(proc.pid, 0)
-    proc.returncode = os.waitstatus_to_exitcode(status)  # reaped here: keep Popen from waiting again
-    return usage.ru_maxrss * 1024, time.perf_counter() - t0, proc.returncode  # ru_maxrss: KiB on Linux
+    proc = subprocess.run([sys.executable, "-c", PEAK_CODE, stage, "--scene", scene, "--out", str(out),
+                           "--no-progress"], capture_output=True, text=True, env=env or child_env(), cwd=ROOT)
+    wall = time.perf_counter() - t0
+    hwm = [int(line.split()[1]) for line in proc.stdout.splitlines() if line.startswith("VMHWM_KIB ")]
+    if proc.returncode:
+        print((proc.stdout + proc.stderr)[-2000:], file=sys.stderr)
+    return (hwm[0] * 1024 if hwm else 0), wall, proc.returncode
 
 
-def measure_baseline(tmp: Path) -> dict:
-    code = "import importlib\nfor m in %r: importlib.import_module(m)" % (BASELINE_IMPORTS,)
-    peak, wall, rc = run_measured([sys.executable, "-c", code], tmp / "baseline.log")
-    return {"what": "imports: " + " ".join(BASELINE_IMPORTS), "peak_bytes": peak, "wall_s": round(wall, 1),
-            "exit_code": rc}
+def row(scene, stage: str, cached: bool, measured_bytes: float, source: str) -> dict:
+    p = stage_peak(scene, stage, cached)
+    return {"scene": scene.name, "stage": stage, "estimate_mb": round(p.bytes / MIB),
+            "measured_mb": round(measured_bytes / MIB), "ratio": round(p.bytes / measured_bytes, 3),
+            "builds_model": int(p.builds_model), "source": source}
+
+
+def from_peaks(path: Path) -> list[dict]:
+    """Rows from ``main_job_cost.py``'s CSV: the estimate with the cache state the stage met."""
+    rows = []
+    with open(path, newline="") as fh:
+        for r in csv.DictReader(fh):
+            if int(r["exit_code"]):
+                continue
+            scene = load_scene(r["scene"])
+            cached = r["stage"] == "reduce" or int(r["cache_after"]) == int(r["cache_before"])  # no entry built
+            rows.append(row(scene, r["stage"], cached, float(r["peak_mb"]) * MIB,
+                            f"{path.name}: ru_maxrss, own process"))
+    return rows
 
 
 def measure_stages(names: list[str], tmp: Path) -> list[dict]:
@@ -93,24 +113,15 @@ def measure_stages(names: list[str], tmp: Path) -> list[dict]:
     for name in names:
         scene = load_scene(name)
         for stage in stages_of(scene):
-            argv = [sys.executable, "-m", "bearingshaft.cli", stage, "--scene", name, "--out", str(tmp / name),
-                    "--no-progress"]
-            log = tmp / f"{name}.{stage}.log"
-            before = numba_cache_files()
-            peak, wall, rc = run_measured(argv, log)
-            compiling = ""
-            if rc == 0 and numba_cache_files() > before:  # it compiled kernels: measure it warm as well
-                compiling = peak
-                peak, wall, rc = run_measured(argv, log)
-            est = stage_bytes(scene, stage)
-            rows.append({"scene": name, "stage": stage, "estimate_bytes": est, "peak_bytes": peak,
-                         "ratio": round(est / peak, 3), "compiling_peak_bytes": compiling, "wall_s": round(wall, 1),
-                         "exit_code": rc})
-            print(f"{name:24s} {stage:9s} peak {peak / 2**20:7.0f} MiB  estimate {est / 2**20:7.0f} MiB  "
-                  f"ratio {est / peak:5.2f}  {wall:6.1f} s{'  (compiled: ' + str(compiling // 2**20) + ' MiB)' if compiling else ''}"
-                  f"{'  EXIT ' + str(rc) if rc else ''}", flush=True)
+            cached = rom_cached(scene)
+            peak, wall, rc = stage_peak_measured(name, stage, tmp / name)
             if rc:
-                print(log.read_text(errors="replace")[-2000:], file=sys.stderr)
+                print(f"{name} {stage}: exit {rc}", flush=True)
+                continue
+            rows.append(row(scene, stage, cached, peak, "VmHWM, own process (--measure)"))
+            r = rows[-1]
+            print(f"{name:24s} {stage:9s} measured {r['measured_mb']:6d} MiB  estimate {r['estimate_mb']:6d} MiB  "
+                  f"ratio {r['ratio']:5.2f}  {wall:6.1f} s", flush=True)
     return rows
 
 
@@ -133,136 +144,116 @@ def job_child(names: list[str], out: Path) -> int:
             with open("/proc/self/clear_refs", "w") as fh:
                 fh.write("5")  # reset VmHWM to the current RSS (Linux >= 4.0)
             pipeline.run_stage(scene, stage, out / name, progress=False)
-            print("JOB " + json.dumps({"scene": name, "stage": stage, "rss_before_bytes": before,
-                                       "peak_in_job_bytes": _status("VmHWM"), "rss_after_bytes": _status("VmRSS")}),
+            print("JOB " + json.dumps({"scene": name, "stage": stage, "rss_before": before,
+                                       "peak_in_job": _status("VmHWM"), "rss_after": _status("VmRSS")}),
                   flush=True)
     return 0
 
 
-def measure_job(names: list[str], tmp: Path) -> tuple[list[dict], int]:
-    argv = [sys.executable, str(Path(__file__).resolve()), "--job-child", "--out", str(tmp / "job"),
-            "--scenes", *names]
+def job_rows(log_text: str, names: list[str]) -> tuple[list[dict], dict]:
+    """The job pass's rows and summary from its log (lines ``JOB {...}``), with the estimates."""
+    recs = [json.loads(line[4:]) for line in log_text.splitlines() if line.startswith("JOB ")]
+    recs = [{k.removesuffix("_bytes"): v for k, v in r.items()} for r in recs]  # an earlier version's keys
+    peaks = job_peaks([load_scene(n) for n in names])
+    est = {(p.scene, p.stage): p.bytes for p in peaks}
+    rows = [{"scene": r["scene"], "stage": r["stage"], "rss_before_mb": round(r["rss_before"] / MIB),
+             "peak_in_job_mb": round(r["peak_in_job"] / MIB), "rss_after_mb": round(r["rss_after"] / MIB),
+             "estimate_mb": round(est[(r["scene"], r["stage"])] / MIB)} for r in recs]
+    measured = max(r["peak_in_job"] for r in recs)
+    estimate = job_bytes(peaks)
+    summary = {"stages": len(recs), "complete": int(len(recs) == len(peaks)),
+               "job_peak_mb": round(measured / MIB), "largest_stage_estimate_mb": round(max(est.values()) / MIB),
+               "job_estimate_mb": round(estimate / MIB), "ratio": round(estimate / measured, 3)}
+    return rows, summary
+
+
+def measure_job(names: list[str], tmp: Path) -> tuple[list[dict], dict]:
     log = tmp / "job.log"
-    peak, wall, rc = run_measured(argv, log)
-    rows = [json.loads(line[4:]) for line in log.read_text(errors="replace").splitlines() if line.startswith("JOB ")]
-    if rc:
-        print(log.read_text(errors="replace")[-3000:], file=sys.stderr)
-    print(f"job: {len(rows)} stages in one process, peak {peak / 2**20:.0f} MiB, {wall:.0f} s, exit {rc}", flush=True)
-    return rows, peak
-
-
-def read_csv(path: Path) -> list[dict]:
-    with open(path, newline="") as fh:
-        return list(csv.DictReader(fh))
+    t0 = time.perf_counter()
+    with open(log, "w") as fh:
+        rc = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--job-child", "--out", str(tmp / "job"),
+                             "--scenes", *names], stdout=fh, stderr=subprocess.STDOUT, env=child_env(),
+                            cwd=ROOT).returncode
+    rows, summary = job_rows(log.read_text(errors="replace"), names)
+    summary.update(wall_s=round(time.perf_counter() - t0, 1), exit_code=rc)
+    return rows, summary
 
 
 def write_csv(path: Path, fields: list[str], rows: list[dict]) -> None:
     with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=fields, extrasaction="ignore")
+        w = csv.DictWriter(fh, fieldnames=fields, extrasaction="ignore", lineterminator="\n")
         w.writeheader()
         w.writerows(rows)
 
 
-def reestimate(out: Path) -> None:
-    """The estimate columns of the files in ``out`` recomputed from the scenes (nothing is run)."""
-    rows = read_csv(out / "estimates.csv")
-    for r in rows:
-        r["estimate_bytes"] = stage_bytes(load_scene(r["scene"]), r["stage"])
-        r["ratio"] = round(r["estimate_bytes"] / int(r["peak_bytes"]), 3)
-    write_csv(out / "estimates.csv", FIELDS, rows)
-    if (out / "job.csv").exists():
-        job = read_csv(out / "job.csv")
-        for r in job:
-            r["estimate_bytes"] = stage_bytes(load_scene(r["scene"]), r["stage"])
-        write_csv(out / "job.csv", JOB_FIELDS, job)
-        summary = read_csv(out / "job_summary.csv")[0]
-        write_job_summary(out, job, int(summary["job_peak_bytes"]), float(summary["wall_s"]))
-
-
-def write_job_summary(out: Path, job: list[dict], peak: int, wall: float) -> None:
-    pairs = [(load_scene(r["scene"]), r["stage"]) for r in job]
-    est = job_bytes(pairs)
-    largest = max(int(r["alone_peak_bytes"]) for r in job if r["alone_peak_bytes"] not in ("", None))
-    write_csv(out / "job_summary.csv", ["stages", "job_peak_bytes", "largest_alone_peak_bytes", "estimate_bytes",
-                                        "ratio", "wall_s"],
-              [{"stages": len(job), "job_peak_bytes": peak, "largest_alone_peak_bytes": largest,
-                "estimate_bytes": est, "ratio": round(est / peak, 3), "wall_s": round(wall, 1)}])
-
-
-def plot(out: Path) -> None:
+def plot(rows: list[dict], path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    rows = read_csv(out / "estimates.csv")
-    base = read_csv(out / "baseline.csv")[0] if (out / "baseline.csv").exists() else None
     labels = [f"{r['scene']} {r['stage']}" for r in rows]
-    peak = [int(r["peak_bytes"]) / 2**30 for r in rows]
-    est = [float(r["estimate_bytes"]) / 2**30 for r in rows]
-    ratio = [float(r["ratio"]) for r in rows]
-    y = range(len(rows))
-    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12, 0.28 * len(rows) + 1.8), sharey=True,
-                                  gridspec_kw={"width_ratios": [3, 1.3]})
-    ax.barh([i + 0.2 for i in y], peak, height=0.4, color="tab:blue", label="measured peak (own process)")
-    ax.barh([i - 0.2 for i in y], est, height=0.4, color="tab:orange", label="estimate (from the scene)")
-    if base:
-        ax.axvline(int(base["peak_bytes"]) / 2**30, color="0.3", ls=":", label="baseline: the imports alone")
-    ax.set_yticks(list(y), labels, fontsize=8)
+    meas = [r["measured_mb"] / 1024 for r in rows]
+    est = [r["estimate_mb"] / 1024 for r in rows]
+    ratio = [r["ratio"] for r in rows]
+    y = list(range(len(rows)))
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12, 0.26 * len(rows) + 1.6), sharey=True,
+                                  gridspec_kw={"width_ratios": [3, 1.2]}, layout="constrained")
+    ax.barh([i - 0.2 for i in y], meas, height=0.4, color="tab:blue", label="measured peak (own process)")
+    ax.barh([i + 0.2 for i in y], est, height=0.4, color="tab:orange", label="estimate (from the scene)")
+    ax.set_yticks(y, labels, fontsize=8)
     ax.invert_yaxis()
     ax.set_xlabel("peak resident memory [GiB]")
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.6 / (0.28 * len(rows) + 1.8) * 4), ncol=3, fontsize=8)
-    ax2.scatter(ratio, list(y), color="k", s=12)
-    ax2.axvspan(1.0, RATIO_MAX, color="tab:green", alpha=0.15, label=f"1 to {RATIO_MAX}")
-    ax2.set_xlabel("estimate / peak")
-    ax2.set_xlim(min(0.5, min(ratio) - 0.05), max(1.5, max(ratio) + 0.05))
-    ax2.legend(loc="upper center", bbox_to_anchor=(0.5, -0.6 / (0.28 * len(rows) + 1.8) * 4), fontsize=8)
+    ax.legend(loc="lower right", fontsize=8)
+    ax.grid(axis="x", alpha=0.3)
+    ax2.axvspan(1.0, RATIO_MAX, color="tab:green", alpha=0.15, label=f"allowed: 1 to {RATIO_MAX}")
+    ax2.scatter(ratio, y, color="k", s=14, zorder=3)
+    ax2.set_xlabel("estimate / measured peak")
+    ax2.set_xlim(min(0.9, min(ratio) - 0.05), max(1.4, max(ratio) + 0.05))
+    ax2.legend(loc="lower right", fontsize=8)
     ax2.grid(axis="x", alpha=0.3)
-    fig.suptitle("Memory estimate against the measured peak, each stage in its own process")
-    fig.tight_layout()
-    fig.savefig(out / "estimates.png", dpi=120)
+    fig.suptitle("Memory estimate against the measured peak, each stage in a process of its own")
+    fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scenes", nargs="*", default=None, help="scenes to run (default: every built-in one)")
-    ap.add_argument("--out", default=str(ROOT / "results" / "memory"), help="folder of the CSV files and plot")
-    ap.add_argument("--no-job", action="store_true", help="skip the whole job in one process")
-    ap.add_argument("--reestimate", action="store_true", help="recompute the estimates of the CSV files in --out")
+    ap.add_argument("--peaks", default=str(ROOT / "results" / "performance" / "main_job.csv"),
+                    help="main_job_cost.py's CSV to read the peaks from (default results/performance/main_job.csv)")
+    ap.add_argument("--measure", action="store_true", help="measure each stage's peak here instead")
+    ap.add_argument("--job", action="store_true", help="also run the whole job in one process and compare its peak")
+    ap.add_argument("--scenes", nargs="*", default=None, help="scenes (default: every built-in one)")
+    ap.add_argument("--out", default=str(ROOT / "results" / "memory-estimates"), help="folder of the CSV and plot")
     ap.add_argument("--job-child", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--job-log", default=None, help=argparse.SUPPRESS)  # a job pass's log already written
     args = ap.parse_args(argv)
     names = args.scenes or builtin_names()
     out = Path(args.out)
     if args.job_child:
         return job_child(names, out)
-    if args.reestimate:
-        reestimate(out)
-        plot(out)
-        return 0
     out.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
+    print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())} at the start", flush=True)
     with tempfile.TemporaryDirectory(prefix="memory_estimates-") as tmp_name:
         tmp = Path(tmp_name)
-        base = measure_baseline(tmp)
-        write_csv(out / "baseline.csv", ["what", "peak_bytes", "wall_s", "exit_code"], [base])
-        print(f"baseline (imports alone): {base['peak_bytes'] / 2**20:.0f} MiB", flush=True)
-        rows = measure_stages(names, tmp)
+        rows = measure_stages(names, tmp) if args.measure else from_peaks(Path(args.peaks))
         write_csv(out / "estimates.csv", FIELDS, rows)
-        t_stages = time.perf_counter() - t0
-        if not args.no_job:
-            job, peak = measure_job(names, tmp)
-            alone = {(r["scene"], r["stage"]): r["peak_bytes"] for r in rows}
-            for r in job:
-                r["alone_peak_bytes"] = alone.get((r["scene"], r["stage"]), "")
-                r["estimate_bytes"] = stage_bytes(load_scene(r["scene"]), r["stage"])
+        plot(rows, out / "estimates.png")
+        if args.job or args.job_log:
+            if args.job_log:
+                job, summary = job_rows(Path(args.job_log).read_text(errors="replace"), names)
+            else:
+                job, summary = measure_job(names, tmp)
             write_csv(out / "job.csv", JOB_FIELDS, job)
-            write_job_summary(out, job, peak, time.perf_counter() - t0 - t_stages)
-    plot(out)
+            write_csv(out / "job_summary.csv", list(summary), [summary])
+            print(f"job in one process: measured {summary['job_peak_mb']} MiB, estimate "
+                  f"{summary['job_estimate_mb']} MiB (ratio {summary['ratio']}), {summary['stages']} stages")
     bad = [r for r in rows if not 1.0 <= r["ratio"] <= RATIO_MAX]
-    print(f"{len(rows)} stages in {t_stages / 60:.1f} min (total {(time.perf_counter() - t0) / 60:.1f} min); "
-          f"{len(bad)} estimates outside [1, {RATIO_MAX}] x the peak; written {out}")
-    return 0 if all(r["exit_code"] == 0 for r in rows) else 1
+    for r in bad:
+        print(f"outside [1, {RATIO_MAX}]: {r['scene']} {r['stage']} ratio {r['ratio']}")
+    print(f"{len(rows)} stages, ratios {min(r['ratio'] for r in rows):.2f} to {max(r['ratio'] for r in rows):.2f}; "
+          f"{len(bad)} outside [1, {RATIO_MAX}]; written {out}")
+    return 1 if bad else 0
 
 
 if __name__ == "__main__":
