@@ -6,6 +6,14 @@ disk in chunks, so its memory does not grow with its duration and its disk use i
 against the space free where it writes. A scene whose estimate exceeds the memory available
 (Linux ``MemAvailable``, less a margin) is refused in one line that gives the estimate and
 the key to change.
+
+What a stage's process peaks at (:func:`stage_peak`) adds to those the interpreter and its imports,
+the stage's fixed working set (figures, solver work space), the 3-D model when the stage builds it
+(always for modal and reduce; a reduced model not in the cache is built first) and is calibrated on
+the peaks measured for every stage of every built-in scene (``benchmarks/memory_estimates.py``,
+``results/memory-estimates/``: within 1 to 1.3 times each). :func:`job_bytes` is the peak of stages run
+one after another in one process, as ``bearingshaft run`` runs them: what an earlier stage held stays
+resident (allocator fragmentation, MKL's and VTK's buffers), so it is not the largest stage's peak.
 """
 
 from __future__ import annotations
@@ -64,15 +72,19 @@ class PeakModel:
     ----------
     fixed : float
         bytes: the stage's own modules, figures and work space, whatever the scene's sizes.
-    model_scale : float
-        x the 3-D model's arrays (:func:`fe_arrays_bytes`) when the stage builds the 3-D model.
     data_scale : float
         x the data the stage holds (the sum of its registry estimates, :mod:`bearingshaft.estimates`).
+    model_scale : float
+        x the 3-D model's arrays (:func:`fe_arrays_bytes`), for a stage whose work is on the 3-D model (modal,
+        reduce, the hammer's linear check, the rom convergence study, an frf with the 3-D model's MAC).
+    tables : tuple of (str, float)
+        bytes added when the scene has the table (its solver's work space, not sized by the estimates).
     """
 
     fixed: float
-    model_scale: float
-    data_scale: float
+    data_scale: float = 1.0
+    model_scale: float = 0.0
+    tables: tuple[tuple[str, float], ...] = ()
 
 
 # Calibrated on the peaks of every stage of every built-in scene run each in its own process
@@ -82,16 +94,23 @@ class PeakModel:
 PEAK_MODELS: dict[str, PeakModel] = {
     # modal: its registry estimate is the whole modal solve's process (fem._modal_cost, fitted on meshes up to
     # 648k DOFs without figures); here its arrays only, with the figures and VTK rendering in the fixed term
-    "modal": PeakModel(fixed=400 * MIB, model_scale=1.0, data_scale=0.0),
-    "reduce": PeakModel(fixed=400 * MIB, model_scale=1.0, data_scale=0.0),
-    "ringdown": PeakModel(fixed=50 * MIB, model_scale=1.0, data_scale=0.5),
-    "hammer": PeakModel(fixed=700 * MIB, model_scale=1.0, data_scale=1.0),
-    "frf": PeakModel(fixed=100 * MIB, model_scale=1.0, data_scale=1.0),
-    "nnm": PeakModel(fixed=50 * MIB, model_scale=1.0, data_scale=1.0),
-    "study": PeakModel(fixed=50 * MIB, model_scale=1.0, data_scale=1.0),
-    "verify": PeakModel(fixed=50 * MIB, model_scale=1.0, data_scale=1.0),
-    "frc": PeakModel(fixed=50 * MIB, model_scale=1.0, data_scale=1.0),
+    "modal": PeakModel(fixed=379 * MIB, data_scale=0.0, model_scale=0.65),
+    "reduce": PeakModel(fixed=466 * MIB, data_scale=0.0, model_scale=0.7),
+    "ringdown": PeakModel(fixed=68 * MIB, data_scale=0.4),
+    "hammer": PeakModel(fixed=0 * MIB, model_scale=2.0),
+    "frf": PeakModel(fixed=100 * MIB, model_scale=1.0),
+    "nnm": PeakModel(fixed=50 * MIB, tables=(("fep", 100 * MIB),)),
+    "study": PeakModel(fixed=67 * MIB, data_scale=0.05, model_scale=0.7),
+    "verify": PeakModel(fixed=73 * MIB),
+    "frc": PeakModel(fixed=146 * MIB, data_scale=0.0),
 }
+# A stage that finds its reduced model neither in the cache nor in a rom_file builds it first
+# (reduced.models.rom.cached_rom: mesh, assemble, reduce, store) and frees the 3-D model before its own work,
+# so its peak is the larger of its own and the build's: PROCESS_BYTES + MESH_IMPORTS_BYTES + BUILD_FIXED +
+# BUILD_SCALE x the arrays. Measured: rom-symmetric's ringdown (2,511 DOFs) peaked at 330 MiB with an empty
+# cache, 296 MiB with the model cached.
+BUILD_FIXED = 30 * MIB
+BUILD_SCALE = 1.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -107,8 +126,8 @@ class StagePeak:
     bytes : float
         The estimate: process + fixed + model + data.
     process, fixed, model, data : float
-        bytes of each term: the interpreter and imports, the stage's fixed working set, the 3-D model (0 unless the
-        stage builds it), the data it holds.
+        bytes of each term: the interpreter and imports, the stage's fixed working set, what the 3-D model adds
+        (0 unless the stage builds it), the data it holds.
     builds_model : bool
         The stage meshes and assembles the 3-D model (a reduced model not yet in the cache, a stage that always
         does, or a modal analysis).
@@ -237,9 +256,11 @@ def rom_cached(scene: Scene, stored: frozenset = frozenset()) -> bool:
 def stage_peak(scene: Scene, stage: str, cached: bool | None = None) -> StagePeak:
     """The peak resident memory of ``stage`` of ``scene`` run in a process of its own, from the scene's sizes.
 
-    process (:data:`PROCESS_BYTES`) + the stage's fixed working set + the 3-D model when the stage builds it
-    (:data:`MESH_IMPORTS_BYTES` + ``model_scale`` x :func:`fe_arrays_bytes`) + ``data_scale`` x the data it
-    holds (its registry estimates), with the stage's :data:`PEAK_MODELS` entry.
+    Its own work: :data:`PROCESS_BYTES` + the stage's fixed working set (and its tables') + ``data_scale`` x
+    the data it holds (its registry estimates) + for a stage whose work is on the 3-D model
+    :data:`MESH_IMPORTS_BYTES` + ``model_scale`` x :func:`fe_arrays_bytes`, with the stage's
+    :data:`PEAK_MODELS` entry; a stage that must first build its reduced model peaks at the larger of that
+    and the build's (:data:`BUILD_FIXED`).
 
     Parameters
     ----------
@@ -256,11 +277,18 @@ def stage_peak(scene: Scene, stage: str, cached: bool | None = None) -> StagePea
     """
     pm = PEAK_MODELS[stage]
     cached = rom_cached(scene) if cached is None else cached
-    build = builds_model(scene, stage, cached)
-    model = MESH_IMPORTS_BYTES + pm.model_scale * fe_arrays_bytes(scene, _model_modes(scene, stage)) if build else 0.0
+    fixed = pm.fixed + sum(b for table, b in pm.tables if getattr(scene, table, None) is not None)
     data = pm.data_scale * sum(e.bytes for e in BY_NAME[stage].estimate(scene))
-    total = PROCESS_BYTES + pm.fixed + model + data
-    return StagePeak(scene.name, stage, total, PROCESS_BYTES, pm.fixed, model, data, build)
+    own = PROCESS_BYTES + fixed + data
+    model = 0.0
+    if pm.model_scale and builds_model(scene, stage, cached=True):  # its own work is on the 3-D model
+        model = MESH_IMPORTS_BYTES + pm.model_scale * fe_arrays_bytes(scene, _model_modes(scene, stage))
+    elif builds_model(scene, stage, cached):  # only because the reduced model is not at hand
+        build = PROCESS_BYTES + MESH_IMPORTS_BYTES + BUILD_FIXED + BUILD_SCALE * fe_arrays_bytes(
+            scene, scene.model.n_modes + 8)
+        model = max(0.0, build - own)
+    return StagePeak(scene.name, stage, own + model, PROCESS_BYTES, fixed, model, data,
+                     builds_model(scene, stage, cached))
 
 
 def job_peaks(scenes) -> list[StagePeak]:

@@ -21,8 +21,9 @@ resident memory, the stage run in a process of its own:
 resident (``VmRSS``) are read. The job's peak is compared with :func:`bearingshaft.budget.job_bytes`.
 
 Writes, in ``--out``: ``estimates.csv`` (scene, stage, estimate_mb, measured_mb, ratio = estimate / measured,
-builds_model, source), ``estimates.png`` and, with ``--job``, ``job.csv`` (per stage: rss_before_mb,
-peak_in_job_mb, rss_after_mb, estimate_mb) and ``job_summary.csv``. MB are MiB (2**20 bytes).
+cached: the scene's reduced model was in the cache as the stage started, builds_model, source),
+``estimates.png`` and, with ``--job``, ``job.csv`` (per stage: rss_before_mb, peak_in_job_mb, rss_after_mb,
+estimate_mb) and ``job_summary.csv``. MB are MiB (2**20 bytes).
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ from bearingshaft.registry import stages_of  # noqa: E402
 from bearingshaft.scenes import builtin_names, load_scene  # noqa: E402
 
 MIB = 2**20
-FIELDS = ["scene", "stage", "estimate_mb", "measured_mb", "ratio", "builds_model", "source"]
+FIELDS = ["scene", "stage", "estimate_mb", "measured_mb", "ratio", "cached", "builds_model", "source"]
 JOB_FIELDS = ["scene", "stage", "rss_before_mb", "peak_in_job_mb", "rss_after_mb", "estimate_mb"]
 RATIO_MAX = 1.3  # the issue's bound: estimate / measured peak in [1, RATIO_MAX]
 PEAK_CODE = ("import sys\nfrom bearingshaft.cli import main\nrc = main(sys.argv[1:])\n"
@@ -91,7 +92,7 @@ def row(scene, stage: str, cached: bool, measured_bytes: float, source: str) -> 
     p = stage_peak(scene, stage, cached)
     return {"scene": scene.name, "stage": stage, "estimate_mb": round(p.bytes / MIB),
             "measured_mb": round(measured_bytes / MIB), "ratio": round(p.bytes / measured_bytes, 3),
-            "builds_model": int(p.builds_model), "source": source}
+            "cached": int(cached), "builds_model": int(p.builds_model), "source": source}
 
 
 def from_peaks(path: Path) -> list[dict]:
@@ -108,7 +109,8 @@ def from_peaks(path: Path) -> list[dict]:
     return rows
 
 
-def measure_stages(names: list[str], tmp: Path) -> list[dict]:
+def measure_stages(names: list[str], tmp: Path, partial: Path | None = None) -> list[dict]:
+    """Each stage measured in a process of its own; the rows so far rewritten to ``partial`` after each."""
     rows = []
     for name in names:
         scene = load_scene(name)
@@ -122,6 +124,8 @@ def measure_stages(names: list[str], tmp: Path) -> list[dict]:
             r = rows[-1]
             print(f"{name:24s} {stage:9s} measured {r['measured_mb']:6d} MiB  estimate {r['estimate_mb']:6d} MiB  "
                   f"ratio {r['ratio']:5.2f}  {wall:6.1f} s", flush=True)
+            if partial is not None:
+                write_csv(partial, FIELDS, rows)
     return rows
 
 
@@ -236,7 +240,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())} at the start", flush=True)
     with tempfile.TemporaryDirectory(prefix="memory_estimates-") as tmp_name:
         tmp = Path(tmp_name)
-        rows = measure_stages(names, tmp) if args.measure else from_peaks(Path(args.peaks))
+        rows = measure_stages(names, tmp, out / "estimates.partial.csv") if args.measure else \
+            from_peaks(Path(args.peaks))
         write_csv(out / "estimates.csv", FIELDS, rows)
         plot(rows, out / "estimates.png")
         if args.job or args.job_log:
