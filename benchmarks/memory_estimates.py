@@ -1,7 +1,7 @@
 """Memory estimates against measured peaks: every stage of every built-in scene, and the whole job.
 
     PYTHONPATH=. python benchmarks/memory_estimates.py [--peaks results/performance/main_job.csv]
-        [--measure [--scenes NAME ...]] [--job] [--out results/memory-estimates]
+        [--measure [--scenes NAME ...] | --reuse ESTIMATES.csv] [--job] [--out results/memory-estimates]
 
 **Stages.** For each stage of each built-in scene, its estimate (:func:`bearingshaft.budget.stage_peak`,
 counted from the scene alone, with the model cache as it was when the stage ran) beside its measured peak
@@ -13,7 +13,9 @@ resident memory, the stage run in a process of its own:
   ``python -c "...cli.main([STAGE, --scene, NAME, --out, TMP, --no-progress])"``, whose peak is the
   ``VmHWM`` it reads from ``/proc/self/status`` as it ends (``ru_maxrss`` of a child started by
   ``subprocess`` counts the parent's pages shared before ``exec``: a large parent would inflate it). The
-  cache state before each stage is the user's cache (``$BEARINGSHAFT_CACHE``) as the stages leave it.
+  cache state before each stage is the user's cache (``$BEARINGSHAFT_CACHE``) as the stages leave it;
+- with ``--reuse FILE``, the measured peaks and cache states of an ``estimates.csv`` written before (after a
+  change of the estimates: nothing is run), a stage it lacks from ``--peaks``.
 
 **Whole job** (``--job``): the stages of every built-in scene run one after another in one process, as
 ``bearingshaft run`` runs them; before each stage the process's high-water mark is reset
@@ -109,6 +111,21 @@ def from_peaks(path: Path) -> list[dict]:
     return rows
 
 
+def reused(path: Path) -> list[dict]:
+    """Rows of an ``estimates.csv`` written before (their measured peaks and cache states), re-estimated now."""
+    with open(path, newline="") as fh:
+        return [row(load_scene(r["scene"]), r["stage"], bool(int(r["cached"])), float(r["measured_mb"]) * MIB,
+                    r["source"]) for r in csv.DictReader(fh)]
+
+
+def in_job_order(rows: list[dict], names: list[str], fill: list[dict]) -> list[dict]:
+    """``rows`` in the order the job runs the stages, a stage they lack taken from ``fill`` if it has it."""
+    have = {(r["scene"], r["stage"]): r for r in fill}
+    have.update({(r["scene"], r["stage"]): r for r in rows})
+    order = [(n, st) for n in names for st in stages_of(load_scene(n))]
+    return [have[k] for k in order if k in have]
+
+
 def measure_stages(names: list[str], tmp: Path, partial: Path | None = None) -> list[dict]:
     """Each stage measured in a process of its own; the rows so far rewritten to ``partial`` after each."""
     rows = []
@@ -196,7 +213,7 @@ def plot(rows: list[dict], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    labels = [f"{r['scene']} {r['stage']}" for r in rows]
+    labels = [f"{r['scene']} {r['stage']}{' *' if r['source'].startswith('main_job') else ''}" for r in rows]
     meas = [r["measured_mb"] / 1024 for r in rows]
     est = [r["estimate_mb"] / 1024 for r in rows]
     ratio = [r["ratio"] for r in rows]
@@ -216,7 +233,10 @@ def plot(rows: list[dict], path: Path) -> None:
     ax2.set_xlim(min(0.9, min(ratio) - 0.05), max(1.4, max(ratio) + 0.05))
     ax2.legend(loc="lower right", fontsize=8)
     ax2.grid(axis="x", alpha=0.3)
-    fig.suptitle("Memory estimate against the measured peak, each stage in a process of its own")
+    older = any(r["source"].startswith("main_job") for r in rows)
+    fig.suptitle("Memory estimate against the measured peak, each stage in a process of its own"
+                 + ("\n(* peak from results/performance/main_job.csv, ru_maxrss; the others VmHWM measured here)"
+                    if older else ""))
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
@@ -226,6 +246,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--peaks", default=str(ROOT / "results" / "performance" / "main_job.csv"),
                     help="main_job_cost.py's CSV to read the peaks from (default results/performance/main_job.csv)")
     ap.add_argument("--measure", action="store_true", help="measure each stage's peak here instead")
+    ap.add_argument("--reuse", default=None, help="an estimates.csv measured before: its peaks re-estimated (the "
+                    "stages it lacks from --peaks)")
     ap.add_argument("--job", action="store_true", help="also run the whole job in one process and compare its peak")
     ap.add_argument("--scenes", nargs="*", default=None, help="scenes (default: every built-in one)")
     ap.add_argument("--out", default=str(ROOT / "results" / "memory-estimates"), help="folder of the CSV and plot")
@@ -240,8 +262,12 @@ def main(argv: list[str] | None = None) -> int:
     print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())} at the start", flush=True)
     with tempfile.TemporaryDirectory(prefix="memory_estimates-") as tmp_name:
         tmp = Path(tmp_name)
-        rows = measure_stages(names, tmp, out / "estimates.partial.csv") if args.measure else \
-            from_peaks(Path(args.peaks))
+        if args.measure:
+            rows = measure_stages(names, tmp, out / "estimates.partial.csv")
+        elif args.reuse:  # measured before (a --measure run's rows), the rest from --peaks
+            rows = in_job_order(reused(Path(args.reuse)), names, from_peaks(Path(args.peaks)))
+        else:
+            rows = from_peaks(Path(args.peaks))
         write_csv(out / "estimates.csv", FIELDS, rows)
         plot(rows, out / "estimates.png")
         if args.job or args.job_log:
