@@ -18,12 +18,13 @@ from reduced._blas import single_thread_blas
 from reduced.models.discrete import DiscreteFrictionParams
 from reduced.models.loads import Harmonic, Loads
 from reduced.periodic.forced_stability import forced_hill
-from reduced.periodic.frc import harmonic_amplitudes, max_abs_over_period
+from reduced.periodic.frc import harmonic_amplitudes, max_abs_over_period, solution_at_frequency
 from reduced.periodic.friction_aft import (
     SLIP,
     STICK,
     FrictionBalance,
     den_hartog_amplitude,
+    friction_frc,
     jenkins_describing_function,
     jenkins_loop,
 )
@@ -175,3 +176,20 @@ def test_hb_matches_the_exact_settled_orbit_through_stick_slip(freq_hz):
     assert abs(amp / last - 1.0) < 5e-3, (amp, last)
     with single_thread_blas():
         assert np.max(np.abs(forced_hill(fb, z, w))) <= 1.0 + HILL_TOL
+
+
+def test_friction_frc_continues_through_stick_slip():
+    # the continued curve (H = 9, coarse for speed) over 17-26 Hz at 4 N: it crosses the band, every point is
+    # stable by Hill's method (the exact runs settle on them: test above), and at 18 and 25 Hz it is within 6%
+    # of the exact settled orbits (3.2457e-4 m and 7.8484e-5 m, from the test above and
+    # results/friction-frc/friction_frc_checks.csv): H = 9 truncates the stick-slip kinks (4.8% and 2.9%
+    # measured; 7e-4 at H = 31)
+    s = coulomb(mu=0.3, kt=1e6, c=2.0)
+    br = friction_frc(s, B_X, 4.0, 17.0, 26.0, 9, samples=512, x_ref=1e-4)
+    assert br.status == "stop" and br.freq_hz.max() > 25.0  # left the band (its last point past 26 Hz dropped)
+    assert np.all(br.stable) and br.bifurcations == []
+    for f, exact in ((18.0, 3.2457e-4), (25.0, 7.8484e-5)):
+        amp, _, _ = solution_at_frequency(br, f)
+        assert abs(amp[0] / exact - 1.0) < 0.06, (f, amp[0], exact)
+        stick = br.balance.slider_state(br.z[np.argmin(np.abs(br.freq_hz - f))])[0, 1]
+        assert 0.0 < stick < 1.0  # the point sticks and slips
