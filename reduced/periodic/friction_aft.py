@@ -108,7 +108,8 @@ def jenkins_loop(t: np.ndarray, N: np.ndarray, k_t: float, mu: float) -> Jenkins
     """The stationary loop of a Jenkins element driven by t (Ns,) [m] under the normal force N (Ns,) [N].
 
     The return map of the module docstring, marched over two periods from f = 0 (the element unloaded at
-    the first sample), the second period kept.
+    the first sample), the second period kept. A loop that never slips nor opens is not unique (any w with
+    |k_t (t - w)| <= mu N is periodic): this one keeps the start's, f(tau_0) = 0.
 
     Parameters
     ----------
