@@ -158,7 +158,18 @@ def _check(args) -> int:
 
 
 def job_line(scenes: list[Scene]) -> str:
-    """The whole job's estimate: its stages in one process, as ``bearingshaft run`` runs them."""
+    """The whole job's estimate: its stages in one process, as ``bearingshaft run`` runs them.
+
+    Parameters
+    ----------
+    scenes : list of Scene
+        In the order they run.
+
+    Returns
+    -------
+    str
+        One line: stages, scenes, the job's peak (:func:`bearingshaft.budget.job_bytes`) and the largest stage's.
+    """
     peaks = job_peaks(scenes)
     return (f"job: {len(peaks)} stages of {len(scenes)} scenes in one process: peak memory about "
             f"{human(job_bytes(peaks))} (largest stage {human(max((p.bytes for p in peaks), default=0))}, with what "
