@@ -123,21 +123,21 @@ def _seg_work(s, K, w, em, am1, tau, n, y0, yt, damped, slipping, wv, wf, LF, gr
 def _switch(s, e, y, n, succ, reset, fric):
     """(state after event e of state s, friction work of the switch), y's sliders updated in place.
 
-    A closing stop starts its tip's sliders unloaded (w = t). A stick -> slip event puts the slider on the
+    A closing stop starts the sliders it engages unloaded (w = t). A stick -> slip event puts the slider on the
     cone, w = t -+ mu N / kt: the march locates the event to within its step floor, and the slip state
     would keep the small excess |kt (t - w)| - mu N for good (it moves w with t -+ mu N / kt), so that the
     first stick after it would leave the cone at once. Either way the tangential spring's energy released,
     1/2 kt ((t - w_old)^2 - (t - w_new)^2), is friction work (a round-off amount), so the balance stays exact.
     """
-    Bt, slider_tip, stop_tip, ekind, stop_of, B, kstop, offset, side, mu, kt = fric
+    Bt, slider_tip, stop_tip, slider_stop, ekind, stop_of, B, kstop, offset, side, mu, kt = fric
     p = Bt.shape[0]
     m = B.shape[0]
     s_new = succ[s, e]
     dWf = 0.0
     for k in range(p):
         if reset[s, e]:
-            if slider_tip[k] != stop_tip[e]:
-                continue
+            if slider_tip[k] != stop_tip[e] or (slider_stop[k] >= 0 and slider_stop[k] != e):
+                continue  # not engaged by the stop that closes (slot e < m is stop e)
         elif not ((ekind[s, e] == 1 or ekind[s, e] == 2) and e - m == 2 * k + (ekind[s, e] - 1)):
             continue
         t = 0.0
@@ -681,14 +681,14 @@ def _friction_forced_kernel(lam, V, Vinv, yp, erow, ec, eact, succ, reset, Df, L
 
 # -- central difference with friction (reduced.transient.friction.FrictionExplicitStepper) ---------------------
 @nb.njit(cache=True, inline="always")
-def _return_map(x, f, side, stop_tip, slider_tip, Bt, mu, kt, w, ft, Wf):
+def _return_map(x, f, side, stop_tip, slider_tip, slider_stop, Bt, mu, kt, w, ft, Wf):
     """The sliders' forces ft and positions w at x by the return mapping (:func:`_cd_friction_kernel`), f the
     stops' forces; returns Wf plus the step's friction work (trapezoidal on f w')."""
     n = x.shape[0]
     for q in range(Bt.shape[0]):
         N = 0.0
         for j in range(f.shape[0]):
-            if stop_tip[j] == slider_tip[q] and f[j] != 0.0:
+            if stop_tip[j] == slider_tip[q] and (slider_stop[q] < 0 or slider_stop[q] == j) and f[j] != 0.0:
                 N = side[j] * f[j]
         t = 0.0
         for c in range(n):
@@ -707,13 +707,13 @@ def _return_map(x, f, side, stop_tip, slider_tip, Bt, mu, kt, w, ft, Wf):
 
 
 @nb.njit(cache=True)
-def _cd_friction_kernel(AT, dtGKT, dtGBT, LT, B, offset, side, k, dtGBtT, Bt, slider_tip, stop_tip, mu, kt, x, vh, w,
-                        ft, dt, n_steps, every, out_x, out_v, out_W, out_w, out_Wf, W, pw_old, Wf, i0, dtGbT, b, P,
+def _cd_friction_kernel(AT, dtGKT, dtGBT, LT, B, offset, side, k, dtGBtT, Bt, slider_tip, stop_tip, slider_stop, mu,
+                        kt, x, vh, w, ft, dt, n_steps, every, out_x, out_v, out_W, out_w, out_Wf, W, pw_old, Wf, i0, dtGbT, b, P,
                         out_E, E, pe_old):
     """Advance n_steps of :func:`reduced.transient.explicit._cd_kernel` with the sliders' forces Bt^T f_t in the
     velocity update, f_t by the return mapping at x_{n+1} (w = w_n on entry, w_{n+1} on exit):
 
-        N = k_j max(0, side_j (B_j x_{n+1} - o_j))   (the closed stop j of the slider's tip; 0 if open),
+        N = k_j max(0, side_j (B_j x_{n+1} - o_j))   (the closed stop j that engages the slider; 0 if none),
         f_trial = kt (Bt x_{n+1} - w_n),
         f = f_trial, w_{n+1} = w_n                      if |f_trial| <= mu N (stick),
         f = sign(f_trial) mu N, w_{n+1} = t - f / kt    otherwise (slip; an open tip: f = 0, w = t).
@@ -741,7 +741,7 @@ def _cd_friction_kernel(AT, dtGKT, dtGBT, LT, B, offset, side, k, dtGBtT, Bt, sl
             for c in range(n):
                 s += B[j, c] * x[c]
             f[j] = k[j] * s if side[j] * s > 0.0 else 0.0
-        Wf = _return_map(x, f, side, stop_tip, slider_tip, Bt, mu, kt, w, ft, Wf)
+        Wf = _return_map(x, f, side, stop_tip, slider_tip, slider_stop, Bt, mu, kt, w, ft, Wf)
         for i in range(n):
             acc[i] = 0.0
         for c in range(n):

@@ -136,8 +136,9 @@ def _unloaded(system: GapSystem, x0: np.ndarray, w0) -> np.ndarray:
     w = np.array(w0, float)
     closed, slip = _initial_states(system, x0, w)
     t = fr.Bt @ x0
+    stop_of = fr.engaged_by(system.tip, closed)
     for q in np.flatnonzero(slip):
-        j = np.flatnonzero(closed & (system.tip == fr.tip[q]))[0]
+        j = stop_of[q]
         w[q] = t[q] - slip[q] * fr.mu[q] * system.k[j] * system.penetration(x0)[j] / fr.k_t[q]
     return w
 
@@ -204,7 +205,7 @@ class FrictionExactStepper(_stepper.Stepper):
         self.s = self.s0 = initial_friction_state(system, table, x0, w0)
         stop_tip = np.concatenate([system.tip, np.full(2 * fr.p, -1)]).astype(np.int64)  # the tip of each event slot
         c = np.ascontiguousarray
-        self.fric = (c(fr.Bt), c(fr.tip), stop_tip, c(table.ekind), c(table.states.stop_of), c(system.B), c(system.k),
+        self.fric = (c(fr.Bt), c(fr.tip), stop_tip, c(fr.stop), c(table.ekind), c(table.states.stop_of), c(system.B), c(system.k),
                      c(system.offset), c(system.side), c(fr.mu), c(fr.k_t))
         self.floor, self.load_scale = self._scales(omega_max)
         t_end = max(duration_s, (n_samples - 1) / sample_rate_hz)
@@ -463,7 +464,7 @@ class FrictionExplicitStepper(ExplicitStepper):
         self.small = False
         self.kernel = _cd_friction_kernel
         self.mats = (c(A.T), c((dt * (G @ K)).T), c((dt * (G @ system.B.T)).T), c(L.T), c(system.B), system.offset,
-                     system.side, system.k, c((dt * (G @ fr.Bt.T)).T), c(fr.Bt), c(fr.tip), c(system.tip), fr.mu,
+                     system.side, system.k, c((dt * (G @ fr.Bt.T)).T), c(fr.Bt), c(fr.tip), c(system.tip), c(fr.stop), fr.mu,
                      fr.k_t)
         self.dtGbT, self.b = c((dt * (G @ b.T)).T), b
 
@@ -474,8 +475,9 @@ class FrictionExplicitStepper(ExplicitStepper):
         self.x0, self.v0 = x0.copy(), v0.copy()
         N = np.zeros(fr.p)
         f = system.stop_force(x0)
+        eng = fr.engages(system.tip)
         for q in range(fr.p):
-            N[q] = f[system.tip == fr.tip[q]].max(initial=0.0)
+            N[q] = f[eng[q]].max(initial=0.0)
         ft = np.clip(fr.force(x0, self.w0), -fr.mu * N, fr.mu * N)
         rhs0 = -(system.K @ x) - system.contact_force(x) - fr.Bt.T @ ft - system.C @ v
         if self.forced:
@@ -545,7 +547,7 @@ def _physics(system: GapSystem, closed: np.ndarray, slip: np.ndarray):
     g(x, v, w)) ...], each firing when g rises through zero."""
     fr = system.friction
     B, k, o, side, tip = system.B, system.k, system.offset, system.side, system.tip
-    stop_of = np.array([(np.flatnonzero(closed & (tip == fr.tip[q])).tolist() or [-1])[0] for q in range(fr.p)])
+    stop_of = fr.engaged_by(tip, closed)
 
     def forces(x, v, w):
         fc = np.zeros(system.n)
@@ -583,14 +585,14 @@ def _physics(system: GapSystem, closed: np.ndarray, slip: np.ndarray):
 
 
 def _reference_switch(system: GapSystem, closed, slip, what, x, v, w) -> tuple:
-    """The friction state after event ``what`` at (x, v, w), from the physics: a closing starts its tip's
-    sliders unloaded (w = t) and sticking unless the spring force leaves the cone at once (its rate
+    """The friction state after event ``what`` at (x, v, w), from the physics: a closing starts the
+    sliders it engages unloaded (w = t) and sticking unless the spring force leaves the cone at once (its rate
     +-kt t' - mu N' > 0 with w' = 0), then slipping that way."""
     fr = system.friction
     closed, slip, w = closed.copy(), slip.copy(), w.copy()
     if what[0] == "gap":
         j = what[1]
-        mine = fr.tip == system.tip[j]
+        mine = fr.engages(system.tip)[:, j]
         if closed[j]:
             closed[j] = False
             slip[mine] = 0
@@ -605,7 +607,7 @@ def _reference_switch(system: GapSystem, closed, slip, what, x, v, w) -> tuple:
     elif what[0] == "slip":  # on the cone (the event is located to the integrator's tolerance)
         q = what[1]
         slip[q] = what[2]
-        j = np.flatnonzero(closed & (system.tip == fr.tip[q]))[0]
+        j = fr.engaged_by(system.tip, closed)[q]
         w[q] = fr.Bt[q] @ x - what[2] * fr.mu[q] * system.k[j] * system.side[j] * (system.B[j] @ x
                                                                                   - system.offset[j]) / fr.k_t[q]
     else:
@@ -642,9 +644,10 @@ def _initial_states(system: GapSystem, x0: np.ndarray, w0: np.ndarray) -> tuple[
             closed[j[np.argmax(pen[j])]] = True
     slip = np.zeros(fr.p, np.int8)
     f0 = fr.force(x0, w0)
+    stop_of = fr.engaged_by(system.tip, closed)
     for q in range(fr.p):
-        j = np.flatnonzero(closed & (system.tip == fr.tip[q]))
-        if j.size and abs(f0[q]) > fr.mu[q] * system.k[j[0]] * pen[j[0]]:
+        j = stop_of[q]
+        if j >= 0 and abs(f0[q]) > fr.mu[q] * system.k[j] * pen[j]:
             slip[q] = 1 if f0[q] > 0 else -1
     return closed, slip
 

@@ -35,7 +35,7 @@ linear function q = a^T y + c, signed so that q <= 0 until it fires, and scaled 
 march's floor and round-off bands are in metres):
 
     slot j < m        gap: q = +-side_j (B_j x - o_j), as without friction; a closing sets the
-                      sliders of the tip to stick, unloaded (w_k = t_k), an opening to follow;
+                      sliders it engages to stick, unloaded (w_k = t_k), an opening to follow;
     slot m + 2k       stick -> slip +: q = ((t_k - w_k) kt_k - mu_k N_j) / kt_k;
                       slip + -> stick: q = -w_k' / omega_ref (the slip velocity passes zero);
     slot m + 2k + 1   stick -> slip -: q = (-(t_k - w_k) kt_k - mu_k N_j) / kt_k;
@@ -114,7 +114,8 @@ class FrictionStates:
 
 def friction_states(system: GapSystem) -> FrictionStates:
     """Every feasible friction state of ``system``: each contact state (:meth:`GapSystem.feasible_states`)
-    with each slider of a closed tip sticking, slipping + or slipping - (3^(sliders engaged) states each).
+    with each slider a closed stop engages sticking, slipping + or slipping - (3^(sliders engaged) states each;
+    the others follow their coordinates).
 
     Parameters
     ----------
@@ -128,11 +129,7 @@ def friction_states(system: GapSystem) -> FrictionStates:
     fr = system.friction
     closed_list, slip_list, stop_list = [], [], []
     for closed in system.feasible_states():
-        stop_of = np.full(fr.p, -1, np.int64)
-        for k in range(fr.p):
-            j = np.flatnonzero(closed & (system.tip == fr.tip[k]))
-            if j.size:
-                stop_of[k] = j[0]
+        stop_of = fr.engaged_by(system.tip, closed).astype(np.int64)
         engaged = np.flatnonzero(stop_of >= 0)
         for code in np.ndindex(*(3,) * engaged.size):
             slip = np.zeros(fr.p, np.int8)
@@ -281,7 +278,7 @@ def _event_rows(system: GapSystem, st: FrictionStates, s: int, R: np.ndarray, om
             new[j] = True
             reset[j] = True
         new_slip = slip.copy()
-        new_slip[fr.tip == system.tip[j]] = STICK  # stick (closing) or follow (opening): both 0
+        new_slip[fr.tip == system.tip[j]] = STICK  # stick (engaged by the closing) or follow: both 0
         succ[j] = st.index(new, new_slip)
     for k in range(p):
         j = stop_of[k]
