@@ -118,11 +118,13 @@ def run_record(rig: VirtualRig, signal, scene: Scene, level_N: float, duration_s
     res = ringdown(rig.system, np.zeros(n), np.zeros(n), fine_duration, acq.fine_rate_hz, rd.method,
                    loads=rig.loads(signal), **solver_options(rd))
     keep = slice(0, q * (n_out - 1) + 1, q)
-    fine = rig.channel_data(res.x, res.v, signal(res.t))
+    fine = rig.channel_data(res.x, res.v, signal(res.t), res.w)
     data = np.vstack([acq.acquire(fine[:-1], n_out), fine[-1:, keep]])  # the hammer: the applied force itself
     stats = {**res.stats, "acquisition": acq.describe(), "oversample": q}
+    fr = rig.system.friction is not None
     return Record(level_N, res.t[keep], data, res.x[keep], res.v[keep], res.energy[keep], res.dissipated[keep],
-                  res.external[keep], stats, float(res.energy_balance_error))
+                  res.external[keep], stats, float(res.energy_balance_error), res.w[keep] if fr else None,
+                  res.friction[keep] if fr else None)
 
 
 def default_location(rom) -> tuple[float, float, float]:

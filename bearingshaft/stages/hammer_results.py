@@ -44,6 +44,10 @@ class Record:
         The integrator's statistics.
     balance_error : float
         Relative energy-balance error of the run.
+    w : (N, p) ndarray of float or None
+        m, the sliders' positions (friction at the tips; None without).
+    friction : (N,) ndarray of float or None
+        J, the friction work (part of ``dissipated``; None without friction).
     """
 
     level_N: float  # N, the blow's peak
@@ -56,6 +60,8 @@ class Record:
     external: np.ndarray  # (N,) J, work of the hammer
     stats: dict
     balance_error: float
+    w: np.ndarray | None = None  # (N, p) m, the sliders' positions (friction at the tips)
+    friction: np.ndarray | None = None  # (N,) J, the friction work (part of dissipated)
 
 
 @dataclass(frozen=True, eq=False)
