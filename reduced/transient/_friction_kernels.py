@@ -205,11 +205,21 @@ def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bound
     n_iter = 0
     status = 0
     t_end = bounds[c]
+    m = fric[6].shape[0]  # the stops: slots e >= m are the sliders'
+    e_prev = -1  # the slot of the last event
+    hold = -1  # a slider slot that may not fire within its round-off band in this segment (see below)
     while True:
         K = nK[s]
         slipping = has_slip[s]
         n_live = _ev_start(s, K, y, Uinv, aUinv, yp, EU, aEU, E0, Escale, eact, lam, alam, floor, w, werr, coef, lc,
                            l2c, a0, const, qtol, dnoise, live, dy, ay, gmul[s])
+        if hold >= 0 and live[hold]:
+            # a slider's slot fired twice in a row (a slip end, then at once the stick -> slip the same way, or
+            # back): at a grazing slip end (w' and w'' both near 0) the two bands of one decision disagree and
+            # the pair would repeat without end. The slot fires again only once it is past its band, q > 2 qtol:
+            # a round-off delay of a decision the flow then makes consistently (no energy is lost: the switch
+            # books the spring's change as friction work)
+            const[hold] -= 2.0 * qtol[hold]
         tau_lim = t_end - t
         capped = hseg[s] < tau_lim  # a growing state's segment ends where its terms have doubled at most
         if capped:
@@ -258,6 +268,8 @@ def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bound
             continue
         s, dWf = _switch(s, e_ev, y, n, succ, reset, fric)
         Wf += dWf
+        hold = e_ev if (e_ev == e_prev and e_ev >= m) else -1
+        e_prev = e_ev
         n_log = _log(n_log, t, e_ev, s, y, log_t, log_e, log_s, log_y)
         n_events += 1
         if n_events >= max_events:
