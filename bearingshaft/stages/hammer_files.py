@@ -159,7 +159,20 @@ def draw_friction(rig: VirtualRig, rec: Record, fc, scene: Scene, labels: dict):
 
 
 def friction_text(fc, end_share_s: float) -> list[str]:
-    """The section of hammer.md on friction at the tips."""
+    """The section of hammer.md on friction at the tips.
+
+    Parameters
+    ----------
+    fc : FrictionComparison
+        The nominal blow with friction and without.
+    end_share_s : float
+        s, the energy "at the end" is the mean over the record's last end_share_s.
+
+    Returns
+    -------
+    list of str
+        The section's lines.
+    """
     fpi = fc.friction_per_impact_J
     lines = ["", f"## Friction at the tips (friction.csv, friction.png): mu = {fc.mu:g}, k_t = {fc.k_t:.4g} N/m, "
              f"{' and '.join(fc.directions)}", "",

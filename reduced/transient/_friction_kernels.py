@@ -189,6 +189,9 @@ def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bound
     segments of at most hseg[s] = ln 2 / max Re(lam), the closed form restarted at their ends, and its growing
     terms bounded by their size there, gmul[s] (:func:`reduced.transient._modal._march`). Returns (t, W, Wf,
     s, i_samp, n_events, n_iter, status, n_stuck, c, n_log).
+
+    Long because it is the free kernel's loop with the friction work, the event switch and the hold of a
+    slider slot that fired twice in a row inlined, so that its arithmetic per segment reads in one place.
     """
     nK, lam, alam, UT, Uinv, aUinv, yp, gmul, hseg = modal
     EU, aEU, E0, Escale, eact, succ, reset, has_slip, LF = events
