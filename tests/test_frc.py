@@ -312,7 +312,8 @@ def _quick_scene() -> str:
     data = tomllib.loads((resources.files("bearingshaft") / "scenes" / "discrete-frc.toml").read_text("utf-8"))
     data["frc"].update({"levels_N": [1.0], "freq_max_hz": 40.0, "harmonics": 3,
                         "convergence_harmonics": [1, 3], "hill_points": 3, "shooting_points": 2,
-                        "stepped_sine_points": 6, "stepped_sine_max_s": 9.0, "backbone_scales": [1.0]})
+                        "stepped_sine_points": 6, "stepped_sine_max_s": 9.0, "backbone_scales": [1.0],
+                        "map_step_hz": 0.0})  # the response map: tests/test_response_map.py
     return tomli_w.dumps(data)
 
 

@@ -193,11 +193,11 @@ def _check_frc(frc, kind: str, model, dof_names, origin: str) -> None:
     if frc.point not in dof_names:
         raise SceneError(f"{origin} [frc] point: unknown point {frc.point!r}{suggest(frc.point, dof_names)} "
                          f"(known: {', '.join(dof_names)})")
-    damping = (model.c,) if kind == "discrete" else (model.c_points, model.alpha)
+    damping = (model.c,) if kind == "discrete" else (model.c_points, model.alpha, *model.modal_damping)
     if not any(d > 0 for d in damping):
         raise SceneError(f"{origin} [frc]: the model has no damping ([model] "
-                         f"{'c' if kind == 'discrete' else 'c_points or alpha'} = 0), so no forced response "
-                         "settles and the curves have no peak; give the model damping")
+                         f"{'c' if kind == 'discrete' else 'c_points, alpha or modal_damping'} = 0), so no forced "
+                         "response settles and the curves have no peak; give the model damping")
 
 
 def _check_hammer(sections: dict, kind: str, model, origin: str, has_loads: bool) -> None:

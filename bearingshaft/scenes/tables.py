@@ -455,6 +455,12 @@ class FRCSpec:
         s, simulated time per frequency at most before "not settled".
     backbone_scales : tuple of float
         Damping and load scaled together (backbone check), in (0, 1].
+    map_step_hz : float
+        Hz, the response map's step over the contact band (issue 25; 0: no map).
+    map_coarse_points : int
+        Log-spaced frequencies of the response map over the band outside the contact band.
+    map_periods : int
+        Forcing periods recorded at each frequency of the response map (>= 32).
 
     Raises
     ------
@@ -478,6 +484,10 @@ class FRCSpec:
     stepped_sine_tol: float = 1e-6  # settled when the predicted distance to the periodic orbit is below this
     stepped_sine_max_s: float = 10.0  # s, simulated time per frequency at most before "not settled"
     backbone_scales: tuple[float, ...] = (1.0, 0.1, 0.01)  # damping and load scaled together (backbone check)
+    # the response map (issue 25): a stepped sine classified by the exact flow and its Lyapunov exponent
+    map_step_hz: float = 0.1  # Hz, step over the contact band (0: no map)
+    map_coarse_points: int = 24  # log-spaced frequencies over the band outside the contact band
+    map_periods: int = 128  # forcing periods recorded at each frequency
 
     def __post_init__(self) -> None:
         each(self, "levels_N", lambda v: v > 0, "> 0 N")
@@ -497,6 +507,9 @@ class FRCSpec:
         check(self.stepped_sine_points >= 0, f"stepped_sine_points must be >= 0, got {self.stepped_sine_points!r}")
         tolerance(self, "stepped_sine_tol")
         each(self, "backbone_scales", lambda v: 0 < v <= 1, "in (0, 1] (damping and load scaled down together)")
+        check(self.map_step_hz >= 0, f"map_step_hz must be >= 0 Hz, got {self.map_step_hz!r}")
+        check(self.map_coarse_points >= 0, f"map_coarse_points must be >= 0, got {self.map_coarse_points!r}")
+        check(self.map_periods >= 32, f"map_periods must be >= 32, got {self.map_periods!r}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -562,7 +575,7 @@ class HammerSpec:
     linear_check: bool = False  # the open-gap response against the full 3-D model's modal superposition
     linear_check_max_hz: float = 20000.0  # Hz, full-model modes up to this in that reference
     backbone_modes: int = 3  # NNM backbones overlaid on fig11.png (0: none)
-    force_window: bool = True  # --test: the measured hammer channel zeroed outside its pulse and a margin
+    force_window: bool = True  # with --test, the measured hammer channel zeroed outside its pulse and a margin
     force_window_margin_s: float = 1e-3  # s, that margin on either side of the pulse (half-cosine tapered)
 
     def __post_init__(self) -> None:

@@ -8,7 +8,8 @@ response: one row per curve point or stepped-sine frequency and per output point
 ``stepped_sine.csv`` (each sweep point: how it settled, its amplitude against HB),
 ``frc_convergence.csv`` and ``frc_convergence_timing.csv`` / ``.png`` (run times: the
 project's ``_timing`` convention, tests/test_reproducible.py), ``frc_backbone.csv`` and
-``frc_backbone.png``. Amplitudes are written to :data:`DIGITS` significant digits; no solver
+``frc_backbone.png``; the response map's files (:mod:`bearingshaft.stages.frc_map_files`).
+Amplitudes are written to :data:`DIGITS` significant digits; no solver
 runs here.
 """
 
@@ -18,10 +19,12 @@ import numpy as np
 
 from bearingshaft.digits import sig
 from bearingshaft.output import StageWriter, write_rows
+from bearingshaft.stages import frc_map_files
 from bearingshaft.stages.frc_results import ConvergenceRun, FRCResult, PointCheck  # noqa: F401  (re-exported)
 
 DIGITS = 10  # significant digits of frequencies and amplitudes (a rerun on this machine: identical)
 ERR_DIGITS = 3  # relative errors
+HILL_MATCH = 1e-3  # Hill's max |mu| within this (relative) of the monodromy's: the same multipliers
 CONVERGENCE_FIELDS = ["level", "harmonics", "status", "n_points", "f_reached_hz", "n_folds", "highest_fold_hz",
                       "lowest_fold_hz", "n_vs_stepped_sine", "max_rel_err_vs_stepped_sine", "n_vs_shooting",
                       "n_shooting_failed", "max_rel_err_vs_shooting", "median_rel_err_vs_shooting"]
@@ -57,6 +60,7 @@ def write(result: FRCResult, writer: StageWriter) -> None:
                 and r["level"] == Pc and "monodromy" not in r["what"]}
         stats["speed_ratio_stepped_sine_over_hb"] = {f"H={h}": round(t_ss / t, 2) for h, t in t_hb.items() if t > 0}
     write_rows(writer.path("frc_backbone.csv"), _backbone_rows(result), fields=BACKBONE_FIELDS)
+    frc_map_files.write(result, writer, stats)  # response_map.csv, response_map_jumps.csv, response_map.png
     writer.stats["frc"] = stats
     _plot_frc(writer.path("frc.png"), result)
     _plot_receptance(writer.path("frc_receptance.png"), result)
@@ -139,6 +143,9 @@ def _curve_files(result: FRCResult, writer: StageWriter, stats: dict) -> None:
             stats["stability"][f"{P:g} N"] = {
                 "hill_points": sum(r["hill_stable"] != "" for r in st),
                 "hill_disagree": sum(r["hill_stable"] not in ("", r["monodromy_stable"]) for r in st),
+                # the verdicts can agree while the multipliers do not: Hill's max |mu| off the monodromy's by > 1e-3
+                "hill_mismatch": sum(c.hill_stable is not None and abs(c.hill / c.mono - 1.0) > HILL_MATCH
+                                     for c in result.checks[P]),
                 "shooting_points": sum(r["shooting_stable"] != "" for r in st),
                 "shooting_disagree": sum(r["shooting_stable"] not in ("", r["monodromy_stable"]) for r in st),
                 "shooting_failed": sum(r["note"] != "" for r in st)}

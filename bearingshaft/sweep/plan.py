@@ -264,7 +264,8 @@ def _reduction_key(model) -> str:
     from reduced.models.rom import RomSpec
 
     d = RomSpec()
-    spec = dataclasses.replace(model, k_g=d.k_g, gap=d.gap, c_points=d.c_points, alpha=d.alpha)
+    spec = dataclasses.replace(model, k_g=d.k_g, gap=d.gap, c_points=d.c_points, alpha=d.alpha,
+                               modal_damping=d.modal_damping)
     return hashlib.sha256(repr(spec).encode()).hexdigest()[:ID_DIGITS]
 
 
