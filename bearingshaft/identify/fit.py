@@ -14,6 +14,12 @@ so the pointwise block grows to the horizon of the fitted model and each block i
 misfit that is left (a first guess's horizon can end at the blow: the pointwise block then
 covers at least MIN_TIME_SPAN_S past it).
 
+The least squares find the nearest minimum, and a pointwise misfit has one wherever the model's first
+impacts fall a period early or late. So the fit starts where a scan puts it (``[identify] scan``
+points, 0: none): each parameter in turn over evenly spaced scaled values across its bounds, the
+others at the best found so far, with the target and weights at the scene's values; the cheapest
+point starts the first pass (a few dozen runs, in parallel batches of ``scan``).
+
 The Jacobian is by finite differences of ``step`` in theta (forward, backward at an upper
 bound), run with the point itself: a trial point and its p neighbours are one batch of p + 1 model
 runs in parallel (:class:`SerialEvaluator` here, :class:`bearingshaft.identify.run.DaskEvaluator`
@@ -36,7 +42,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -225,8 +231,9 @@ class _Runs:
     def jacobian(self, theta: np.ndarray, central: bool = False) -> np.ndarray:
         theta = np.asarray(theta, float).copy()
         plus = self.neighbours(theta)
-        if central:
-            minus = self.neighbours(theta, -1.0)
+        if central:  # the other side of each step; at a bound (both steps would be one point) theta itself
+            minus = [m if not np.array_equal(m, q) else theta.copy()
+                     for m, q in zip(self.neighbours(theta, -1.0), plus, strict=True)]
             evs = self.run([*plus, *minus], ["final"] * (2 * theta.size))
             cols = [(stacked(a.blocks, self.weights) - stacked(b.blocks, self.weights)) / (pa[j] - mb[j])
                     for j, (a, b, pa, mb) in enumerate(zip(evs[:theta.size], evs[theta.size:], plus, minus,
@@ -242,6 +249,41 @@ class _Runs:
 def _weights_at(runs_at, theta) -> dict[str, BlockWeight]:
     ev = runs_at([np.asarray(theta, float)])[0]
     return block_weights(ev.blocks)
+
+
+def _target(problem: Problem, theta):
+    spec, sp = problem.scene.identify, problem.scene.spectrogram
+    return define_target(problem, theta, spec.measures, envelope_window_s=spec.envelope_window_s,
+                         frame_s=sp.window_s if sp else 0.05, fmax_hz=sp.fmax_hz if sp else None)[0]
+
+
+def _scan(problem: Problem, evaluator, theta: np.ndarray, bounds, history: list, say) -> np.ndarray:
+    """The least squares' start: each parameter in turn over ``[identify] scan`` points across its bounds, the
+    others at the best so far, the target and weights at ``theta`` (module docstring)."""
+    spec = problem.scene.identify
+    target = _target(problem, theta)
+    handle = evaluator.put(target)
+    probe = _Runs(evaluator, handle, problem, {}, spec.step, bounds, 0, history)
+    weights = block_weights(probe.run([np.asarray(theta, float)], ["scan"])[0].blocks)
+    # the pointwise block is left out of the scan: a model a period early or late misfits it more than one that
+    # never closes a gap, while the envelopes see the impacts' energy whatever their phase
+    weights = {m: (w if m != "time" else replace(w, weight=0.0)) for m, w in weights.items()}
+    if not any(w.weight > 0 for w in weights.values()):
+        return np.asarray(theta, float)
+    runs = _Runs(evaluator, handle, problem, weights, spec.step, bounds, 0, history)
+    runs.cache.update(probe.cache)
+    best = np.asarray(theta, float).copy()
+    for j, par in enumerate(problem.parameters):
+        trial = []
+        for v in np.linspace(bounds[0][j], bounds[1][j], spec.scan):
+            t = best.copy()
+            t[j] = v
+            trial.append(t)
+        evs = runs.run([best, *trial], ["scan"] * (len(trial) + 1))
+        costs = [float(np.sum(stacked(e.blocks, weights) ** 2)) for e in evs]
+        best = [best, *trial][int(np.argmin(costs))].copy()
+        say(f"scan of {par.key}: {par.value(best[j]):.4g} (cost {min(costs):.4g})")
+    return best
 
 
 def identify(problem: Problem, evaluator=None, progress=None) -> Fit:
@@ -263,12 +305,10 @@ def identify(problem: Problem, evaluator=None, progress=None) -> Fit:
     Fit
     """
     from scipy.optimize import least_squares
-    from scipy.stats import t as student_t
 
     spec = problem.scene.identify
     evaluator = evaluator or SerialEvaluator(problem)
     say = progress or (lambda text: None)
-    sp = problem.scene.spectrogram
     t_start = time.perf_counter()
     bounds = (np.array([p.theta_bounds[0] for p in problem.parameters]),
               np.array([p.theta_bounds[1] for p in problem.parameters]))
@@ -277,12 +317,13 @@ def identify(problem: Problem, evaluator=None, progress=None) -> Fit:
     passes: list[Pass] = []
     runs = None
     target = None
+    if spec.scan:
+        theta = _scan(problem, evaluator, theta, bounds, history, say)
     for k in range(spec.passes):
-        target, _ = define_target(problem, theta, spec.measures, envelope_window_s=spec.envelope_window_s,
-                                  frame_s=sp.window_s if sp else 0.05, fmax_hz=sp.fmax_hz if sp else None)
+        target = _target(problem, theta)
         handle = evaluator.put(target)
         probe = _Runs(evaluator, handle, problem, {}, spec.step, bounds, k + 1, history)
-        weights = _weights_at(lambda ths: probe.run(ths, ["point"]), theta)
+        weights = block_weights(probe.run([np.asarray(theta, float)], ["point"])[0].blocks)
         runs = _Runs(evaluator, handle, problem, weights, spec.step, bounds, k + 1, history)
         runs.cache.update(probe.cache)
         r0 = runs.residuals(theta)
@@ -305,18 +346,18 @@ def identify(problem: Problem, evaluator=None, progress=None) -> Fit:
     J = runs.jacobian(theta, central=True)
     p = theta.size
     n_eff = float(sum(w.n_eff for w in weights.values()))
-    dof = max(n_eff - p, 1.0)
-    s2 = float(r @ r) / dof
-    JTJ = J.T @ J
-    cov = s2 * np.linalg.pinv(JTJ)
-    sig = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    corr = cov / np.outer(sig, sig) if np.all(sig > 0) else np.full((p, p), math.nan)
-    tq = float(student_t.ppf(0.5 + 0.5 * spec.confidence, dof))
+    norms = np.linalg.norm(J, axis=0)
+    seen = norms > 0  # a parameter the residuals do not see has no information: an unbounded interval
+    cov = np.full((p, p), math.nan)
+    cov_seen, s2, dof, tq = covariance(J[:, seen], r, n_eff, spec.confidence)
+    cov[np.ix_(seen, seen)] = cov_seen
+    sig = np.where(seen, np.sqrt(np.maximum(np.diag(cov), 0.0)), math.inf)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(sig, sig)
     ci = {}
     for i, par in enumerate(problem.parameters):
         lo, hi = par.value(theta[i] - tq * sig[i]), par.value(theta[i] + tq * sig[i])
         ci[par.key] = (min(lo, hi), max(lo, hi))
-    norms = np.linalg.norm(J, axis=0)
     Js = J / np.where(norms > 0, norms, 1.0)
     ev, vec = np.linalg.eigh(Js.T @ Js)
     cond = float(ev[-1] / ev[0]) if ev[0] > 0 else math.inf
@@ -326,6 +367,40 @@ def identify(problem: Problem, evaluator=None, progress=None) -> Fit:
              "passes": len(passes)}
     return Fit(problem, theta, problem.values(theta), ci, cov, corr, J, sig, s2, n_eff, dof, tq, cond, vec[:, 0],
                notes, weights, passes, history, target, stats)
+
+
+def covariance(J: np.ndarray, r: np.ndarray, n_eff: float, confidence: float) -> tuple[np.ndarray, float, float,
+                                                                                       float]:
+    """C = s^2 (J^T J)^+ of the scaled parameters, s^2 = |r|^2 / (N_eff - p), and the t quantile (module docstring).
+
+    Parameters
+    ----------
+    J : (N, p) ndarray of float
+        Jacobian of the weighted residuals at the optimum.
+    r : (N,) ndarray of float
+        The weighted residuals there.
+    n_eff : float
+        Their effective number of independent values.
+    confidence : float
+        In (0, 1).
+
+    Returns
+    -------
+    (C, s2, dof, t): dof = N_eff - p (at least 1), t = t_{(1 + confidence)/2, dof}.
+    """
+    from scipy.stats import t as student_t
+
+    p = J.shape[1]
+    dof = max(n_eff - p, 1.0)
+    s2 = float(r @ r) / dof
+    cov = s2 * np.linalg.pinv(J.T @ J)
+    return cov, s2, dof, float(student_t.ppf(0.5 + 0.5 * confidence, dof))
+
+
+def interval_half_widths(J: np.ndarray, r: np.ndarray, n_eff: float, confidence: float) -> np.ndarray:
+    """t sqrt(C_ii): the intervals' half widths in the scaled parameters (:func:`covariance`)."""
+    cov, _, _, tq = covariance(J, r, n_eff, confidence)
+    return tq * np.sqrt(np.maximum(np.diag(cov), 0.0))
 
 
 def identifiability_notes(problem: Problem, corr: np.ndarray, cond: float, weakest: np.ndarray, ci: dict,
@@ -385,5 +460,5 @@ def identifiability_notes(problem: Problem, corr: np.ndarray, cond: float, weake
     return notes
 
 
-__all__ = ["identify", "Fit", "Pass", "SerialEvaluator", "identifiability_notes", "CORRELATION_LIMIT",
-           "CONDITION_LIMIT"]
+__all__ = ["identify", "covariance", "interval_half_widths", "Fit", "Pass", "SerialEvaluator", "identifiability_notes",
+           "CORRELATION_LIMIT", "CONDITION_LIMIT"]

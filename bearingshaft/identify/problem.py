@@ -268,7 +268,8 @@ def define_target(problem: Problem, theta, measures: tuple[str, ...], *, envelop
 
 
 def measured_last(pair, window_s) -> float:
-    """s, the end of the test's last impact on a load cell (NaN: none) (:func:`bearingshaft.measures.impact_comparison`)."""
+    """s, the end of the test's last impact on a load cell (NaN: none)
+    (:func:`bearingshaft.measures.impact_comparison`)."""
     from bearingshaft.measures import impact_comparison
 
     c = impact_comparison(pair, window_s, window_s)
@@ -285,5 +286,5 @@ def horizon_text(target: Target) -> str:
     return f"pointwise from {1e3 * a:.4g} to {1e3 * b:.4g} ms (horizon {h})"
 
 
-__all__ = ["Problem", "make_problem", "channels_at", "rig_at", "record_at", "evaluate", "Evaluation", "define_target", "truncated",
-           "model_channels", "horizon_text", "MIN_TIME_SPAN_S"]
+__all__ = ["Problem", "make_problem", "channels_at", "rig_at", "record_at", "evaluate", "Evaluation", "define_target",
+           "truncated", "model_channels", "horizon_text", "MIN_TIME_SPAN_S"]

@@ -189,7 +189,9 @@ def history_figure(res: Identified, path) -> None:
         ax.plot(run, [h[p.key] for h in fit.history], ".", color="0.6", ms=3, label="every run")
         ax.plot([h["run"] for h in pts], [h[p.key] for h in pts], "o-", ms=3, label="trial points")
         lo, hi = fit.ci[p.key]
-        ax.axhspan(lo, hi, color="tab:red", alpha=0.15, label="interval")
+        bounded = math.isfinite(lo) and math.isfinite(hi) and (lo > 0 or p.scale != "log")
+        if bounded:  # an unbounded interval (a parameter the test does not see) draws no band
+            ax.axhspan(lo, hi, color="tab:red", alpha=0.15, label="interval")
         if p.scale == "log":
             ax.set_yscale("log")
         ax.set_ylabel(f"{p.key.split('.', 1)[1]} [{p.unit or '-'}]")

@@ -180,7 +180,7 @@ def _cells(target: Target, pairs):
 
 
 def _rel(m: float, x: float, floor: float = 0.0) -> float:
-    """(m - x) / max(|x|, floor), a missing model value (NaN: no impact) as 0 and a missing test value as no residual."""
+    """(m - x) / max(|x|, floor); a missing model value (NaN: no impact) as 0, a missing test value: no residual."""
     if not math.isfinite(x):
         return 0.0
     m = m if math.isfinite(m) else 0.0

@@ -707,17 +707,21 @@ class IdentifySpec:
         one that may be 0), one per parameter (default: log for a positive value, lin for 0).
     measures : tuple of str
         The residual blocks (``IDENTIFY_MEASURES``): ``time`` (pointwise, up to the predictability horizon),
-        ``envelope`` (log RMS envelope), ``ridges``, ``impacts``, ``open``.
+        ``envelope`` (log RMS envelope), ``decay`` (its shape after the last impact: the damping),
+        ``ridges``, ``impacts``, ``open``.
     window_s : tuple of float
         s, (start, end) of the test fitted (default: the whole record).
     envelope_window_s : float
         s, the RMS envelope's windows.
     step : float
-        The finite-difference step of the Jacobian in the scaled parameters (log: 0.05 is 5 %).
+        The finite-difference step of the Jacobian in the scaled parameters (log: 0.01 is 1 %).
     max_iterations : int
         Least-squares iterations per pass at most.
     passes : int
         Fits in turn, each with the horizon and the weights of the previous one's optimum.
+    scan : int
+        Where the fit starts: each parameter in turn over this many evenly spaced (scaled) values across
+        its bounds, the others at the best so far, the cheapest kept (0: at the scene's values).
     n_modes : int
         Fixed-interface modes kept in the fit, the lowest (0: all of the reduced model's).
     confidence : float
@@ -729,16 +733,18 @@ class IdentifySpec:
         A value outside its range, lists of different lengths, a key named twice.
     """
 
-    parameters: tuple[str, ...] = ("model.gap", "model.k_g", "model.c_points")  # [model] keys fitted
+    parameters: tuple[str, ...] = ("model.gap", "model.k_g", "model.modal_damping[0]")  # [model] keys fitted
     lower: tuple[float, ...] = ()  # each parameter's unit: lower bounds (default: the scene's value / 4)
     upper: tuple[float, ...] = ()  # upper bounds (default: the scene's value x 4)
     scales: tuple[str, ...] = ()  # log | lin, per parameter (default: log, lin for a value of 0)
-    measures: tuple[str, ...] = ("time", "envelope")  # residual blocks: time, envelope, ridges, impacts, open
+    measures: tuple[str, ...] = ("time", "envelope", "decay")  # residual blocks: time, envelope, decay, ridges,
+    # impacts, open
     window_s: tuple[float, ...] = ()  # s, (start, end) of the test fitted (default: the whole record)
     envelope_window_s: float = 0.05  # s, windows of the RMS envelope
-    step: float = 0.05  # finite-difference step of the Jacobian, in the scaled parameters (log: 5 %)
+    step: float = 0.01  # finite-difference step of the Jacobian, in the scaled parameters (log: 1 %)
     max_iterations: int = 15  # least-squares iterations per pass at most
     passes: int = 2  # fits in turn, each with the horizon and weights at the last one's optimum
+    scan: int = 12  # the start: each parameter over this many values across its bounds in turn (0: the scene's)
     n_modes: int = 0  # fixed-interface modes kept in the fit, the lowest (0: all)
     confidence: float = 0.95  # the intervals' confidence level
 
@@ -765,6 +771,7 @@ class IdentifySpec:
         check(0 < self.step <= 0.5, f"step must lie in (0, 0.5], got {self.step!r}")
         check(self.max_iterations >= 1, f"max_iterations must be >= 1, got {self.max_iterations!r}")
         check(1 <= self.passes <= 5, f"passes must lie in [1, 5], got {self.passes!r}")
+        check(self.scan == 0 or self.scan >= 3, f"scan must be 0 or >= 3, got {self.scan!r}")
         check(self.n_modes >= 0, f"n_modes must be >= 0, got {self.n_modes!r}")
         check(0 < self.confidence < 1, f"confidence must lie in (0, 1), got {self.confidence!r}")
 
