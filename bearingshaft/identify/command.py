@@ -40,9 +40,11 @@ def add_parser(sub) -> None:
     p = sub.add_parser(STAGE, help="fit the scene's uncertain parameters ([identify]: gap, contact stiffness, damping) "
                        "to a measured hammer test, on Dask; identified.csv with 95 % intervals",
                        description="Fit the parameters the scene's [identify] table names (by default the gap, the "
-                       "contact stiffness and the dashpots) to a measured hammer test (UFF 58), by least squares on "
-                       "the chaos-aware measures (pointwise up to the predictability horizon, the RMS envelope and its "
-                       "decay past it), the model runs on Dask (a LocalCluster, or --scheduler ADDRESS). Writes "
+                       "contact stiffness and the modal damping) to a measured hammer test (UFF 58), by least squares "
+                       "on the measures that survive chaos ([identify] measures: by default each load cell's first "
+                       "impact, the RMS envelopes, the impact statistics; optionally pointwise up to the "
+                       "predictability horizon), the model runs on Dask (a LocalCluster, or --scheduler ADDRESS). "
+                       "Writes "
                        "identified.csv (parameter, unit, initial, value, ci_low, ci_high), correlation.csv, "
                        "weights.csv, misfit_history.csv, identify.md, identified_overlay.png and misfit_history.png "
                        "into results/<scene>/identify-<test file>/ (or --out).")

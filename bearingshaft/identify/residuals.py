@@ -24,6 +24,10 @@ measured where, fixed while a least-squares pass runs):
     and those of the median, 90 % and largest peak forces (:func:`bearingshaft.measures.impact_comparison`).
 ``open``
     Per tip load cell: the time its last impact ends, relative to the test's (from the window's start).
+``first``
+    Per tip load cell: the first impact, before chaos has had time to act: the time its force first
+    rises through the impact threshold (linear between samples, so that it moves smoothly with the gap),
+    minus the test's, over the test's first impact's length; and its peak's relative error.
 
 How the blocks are weighted (:func:`block_weights`): block b is multiplied by
 w_b = sqrt(n_eff,b / n_b) / rms_b, where rms_b is its RMS at the point the weights are taken (the
@@ -214,7 +218,41 @@ def _open_block(target: Target, pairs) -> np.ndarray:
     return np.array(out).reshape(1, -1)
 
 
-BLOCKS = {"time": _time_block, "envelope": _envelope_block, "decay": _decay_block, "ridges": _ridge_block,
+def first_crossing(t: np.ndarray, z: np.ndarray, threshold: float) -> float:
+    """s, where ``z`` first rises through ``threshold``, linear between samples (NaN: never).
+
+    >>> round(first_crossing(np.arange(4) * 1.0, np.array([0.0, 1.0, 3.0, 5.0]), 2.0), 12)
+    1.5
+    """
+    above = np.flatnonzero(z > threshold)
+    if not above.size:
+        return math.nan
+    i = int(above[0])
+    if i == 0:
+        return float(t[0])
+    return float(t[i - 1] + (threshold - z[i - 1]) / (z[i] - z[i - 1]) * (t[i] - t[i - 1]))
+
+
+def _first_block(target: Target, pairs) -> np.ndarray:
+    out = []
+    for p in _cells(target, pairs):
+        c = measures.impact_comparison(p, target.window_s, target.window_s)
+        if c is None or not c.test.count:
+            out.append([0.0, 0.0])
+            continue
+        a = p.aligned(target.window_s)
+        thr = c.test.threshold_N
+        t_x = first_crossing(a.t, c.sense * a.test, thr)
+        t_m = first_crossing(a.t, c.sense * a.model, thr)
+        scale = max(float(c.test.end_s[0] - c.test.start_s[0]), 1.0 / a.sample_rate_hz)
+        t_m = t_m if math.isfinite(t_m) else target.window_s[1]
+        peak_m = c.model.peak_N[0] if c.model.count else 0.0
+        out.append([(t_m - t_x) / scale, _rel(peak_m, c.test.peak_N[0])])
+    return np.array(out).reshape(1, -1)
+
+
+BLOCKS = {"first": _first_block, "time": _time_block, "envelope": _envelope_block, "decay": _decay_block,
+          "ridges": _ridge_block,
           "impacts": _impact_block, "open": _open_block}
 
 

@@ -687,7 +687,7 @@ class FRFSpec:
         check(self.fe_modes >= 12, f"fe_modes must be >= 12 (6 rigid + 6 pseudo-rigid), got {self.fe_modes!r}")
 
 
-IDENTIFY_MEASURES = ("time", "envelope", "decay", "ridges", "impacts", "open")  # residual blocks of [identify]
+IDENTIFY_MEASURES = ("time", "envelope", "decay", "ridges", "impacts", "open", "first")  # residual blocks of [identify]
 
 
 @dataclass(frozen=True, slots=True)
@@ -706,7 +706,8 @@ class IdentifySpec:
         ``log`` (the fit varies ln p: a positive parameter over decades) or ``lin`` (p / (upper - lower):
         one that may be 0), one per parameter (default: log for a positive value, lin for 0).
     measures : tuple of str
-        The residual blocks (``IDENTIFY_MEASURES``): ``time`` (pointwise, up to the predictability horizon),
+        The residual blocks (``IDENTIFY_MEASURES``): ``first`` (each load cell's first impact: its time and
+        peak), ``time`` (pointwise, up to the predictability horizon),
         ``envelope`` (log RMS envelope), ``decay`` (its shape after the last impact: the damping),
         ``ridges``, ``impacts``, ``open``.
     window_s : tuple of float
@@ -737,8 +738,8 @@ class IdentifySpec:
     lower: tuple[float, ...] = ()  # each parameter's unit: lower bounds (default: the scene's value / 4)
     upper: tuple[float, ...] = ()  # upper bounds (default: the scene's value x 4)
     scales: tuple[str, ...] = ()  # log | lin, per parameter (default: log, lin for a value of 0)
-    measures: tuple[str, ...] = ("time", "envelope", "decay")  # residual blocks: time, envelope, decay, ridges,
-    # impacts, open
+    measures: tuple[str, ...] = ("first", "envelope", "impacts")  # residual blocks: first, time, envelope, decay,
+    # ridges, impacts, open
     window_s: tuple[float, ...] = ()  # s, (start, end) of the test fitted (default: the whole record)
     envelope_window_s: float = 0.05  # s, windows of the RMS envelope
     step: float = 0.01  # finite-difference step of the Jacobian, in the scaled parameters (log: 1 %)
