@@ -3,7 +3,7 @@
 :func:`dask_evaluator` opens a client by :func:`bearingshaft.sweep.run.dask_client` (a
 :class:`distributed.LocalCluster` of single-threaded worker processes, one per core, or the
 scheduler at an address), warms the workers up (numba's kernels loaded,
-:func:`bearingshaft.sweep.run._warm_up`), and scatters the :class:`~bearingshaft.identify.problem.Problem`
+:func:`bearingshaft.sweep.run.warm_up`), and scatters the :class:`~bearingshaft.identify.problem.Problem`
 (the reduced apparatus, the test) to every worker once; each pass's
 :class:`~bearingshaft.identify.residuals.Target` (the test's channels) is scattered once too. A
 batch of trial points (a point and its finite-difference neighbours) is then one task each.
@@ -14,7 +14,7 @@ from __future__ import annotations
 import contextlib
 
 from bearingshaft.identify.problem import Problem, channels_at, evaluate
-from bearingshaft.sweep.run import _warm_up, dask_client
+from bearingshaft.sweep.run import dask_client, warm_up
 
 
 class DaskEvaluator:
@@ -65,7 +65,7 @@ def dask_evaluator(problem: Problem, scheduler: str | None = None, workers: int 
     A context manager of DaskEvaluator.
     """
     with dask_client(scheduler, workers) as (client, where):
-        client.run(_warm_up)
+        client.run(warm_up)
         yield DaskEvaluator(client, problem, where)
 
 
