@@ -398,7 +398,19 @@ def covariance(J: np.ndarray, r: np.ndarray, n_eff: float, confidence: float) ->
 
 
 def interval_half_widths(J: np.ndarray, r: np.ndarray, n_eff: float, confidence: float) -> np.ndarray:
-    """t sqrt(C_ii): the intervals' half widths in the scaled parameters (:func:`covariance`)."""
+    """t sqrt(C_ii): the intervals' half widths in the scaled parameters (:func:`covariance`).
+
+    Parameters
+    ----------
+    J : (N, p) ndarray of float
+        Jacobian of the weighted residuals.
+    r : (N,) ndarray of float
+        The weighted residuals.
+    n_eff : float
+        Their effective number.
+    confidence : float
+        In (0, 1).
+    """
     cov, _, _, tq = covariance(J, r, n_eff, confidence)
     return tq * np.sqrt(np.maximum(np.diag(cov), 0.0))
 

@@ -79,7 +79,14 @@ class Problem:
 
 def truncated(system: GapSystem, n: int) -> GapSystem:
     """``system`` on its first ``n`` coordinates (x1, x3 and the lowest n - 2 fixed-interface modes:
-    the same as a reduction built with that many modes)."""
+    the same as a reduction built with that many modes).
+
+    Parameters
+    ----------
+    system : GapSystem
+    n : int
+        Coordinates kept.
+    """
     if n >= system.n:
         return system
     s = slice(0, n)
@@ -88,7 +95,14 @@ def truncated(system: GapSystem, n: int) -> GapSystem:
 
 
 def rig_at(problem: Problem, values: dict) -> VirtualRig:
-    """The rig with the parameters at ``values`` ({key: value}; the others the scene's)."""
+    """The rig with the parameters at ``values`` ({key: value}; the others the scene's).
+
+    Parameters
+    ----------
+    problem : Problem
+    values : dict
+        {key: value} of the fitted parameters.
+    """
     spec = with_values(problem.scene.model, values)
     system = truncated(problem.rom.with_contact(spec).system(), problem.n_keep)
     return replace(problem.rig, system=system)
@@ -137,14 +151,29 @@ def record_at(problem: Problem, theta) -> tuple[VirtualRig, Record]:
 
 
 def model_channels(problem: Problem, rig: VirtualRig, rec: Record) -> list:
-    """The compared channels of a record, as TimeHistory, in ``problem.names`` order."""
+    """The compared channels of a record, as TimeHistory, in ``problem.names`` order.
+
+    Parameters
+    ----------
+    problem : Problem
+    rig : VirtualRig
+    rec : Record
+        A run of ``rig``.
+    """
     by = {h.name: h for h in histories(rig, rec.t, rec.data)}
     return [by[n] for n in problem.names]
 
 
 def channels_at(problem: Problem, theta) -> tuple[np.ndarray, np.ndarray]:
     """(t, data): the compared channels (``problem.names`` order, rows) of the model at ``theta`` (a worker
-    runs it for the overlays)."""
+    runs it for the overlays).
+
+    Parameters
+    ----------
+    problem : Problem
+    theta : (p,) array_like of float
+        Scaled parameters.
+    """
     rig, rec = record_at(problem, theta)
     rows = [list(rig.names).index(n) for n in problem.names]
     return rec.t, rec.data[rows]
@@ -269,7 +298,15 @@ def define_target(problem: Problem, theta, measures: tuple[str, ...], *, envelop
 
 def measured_last(pair, window_s) -> float:
     """s, the end of the test's last impact on a load cell (NaN: none)
-    (:func:`bearingshaft.measures.impact_comparison`)."""
+    (:func:`bearingshaft.measures.impact_comparison`).
+
+    Parameters
+    ----------
+    pair : ChannelPair
+        A load cell's model and test channels.
+    window_s : (float, float)
+        s.
+    """
     from bearingshaft.measures import impact_comparison
 
     c = impact_comparison(pair, window_s, window_s)
@@ -277,7 +314,12 @@ def measured_last(pair, window_s) -> float:
 
 
 def horizon_text(target: Target) -> str:
-    """The pointwise block's span in words."""
+    """The pointwise block's span in words.
+
+    Parameters
+    ----------
+    target : Target
+    """
     a, b = target.time_span_s
     if not target.has_time:
         return "no pointwise block"

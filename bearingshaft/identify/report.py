@@ -32,7 +32,12 @@ PREFERRED = ("beam_s3:z", "tip_left_top", "beam_s1:z", "tube_s1:z")  # drawn fir
 
 
 def identified_rows(res: Identified) -> list[dict]:
-    """The rows of identified.csv."""
+    """The rows of identified.csv.
+
+    Parameters
+    ----------
+    res : Identified
+    """
     fit = res.fit
     return [{"parameter": p.key, "unit": p.unit, "initial": format(p.initial, DIGITS),
              "value": format(fit.values[p.key], DIGITS), "ci_low": format(fit.ci[p.key][0], ".3g"),
@@ -40,14 +45,24 @@ def identified_rows(res: Identified) -> list[dict]:
 
 
 def correlation_rows(res: Identified) -> list[dict]:
-    """The rows of correlation.csv: one per parameter, a column per parameter."""
+    """The rows of correlation.csv: one per parameter, a column per parameter.
+
+    Parameters
+    ----------
+    res : Identified
+    """
     keys = [p.key for p in res.fit.problem.parameters]
     return [{"parameter": k, **{c: format(float(res.fit.correlation[i, j]), ".4f") for j, c in enumerate(keys)}}
             for i, k in enumerate(keys)]
 
 
 def weight_rows(res: Identified) -> list[dict]:
-    """The rows of weights.csv."""
+    """The rows of weights.csv.
+
+    Parameters
+    ----------
+    res : Identified
+    """
     return [{"measure": w.measure, "n": w.n, "n_eff": format(w.n_eff, ".4g"), "rms": format(w.rms, ".4g"),
              "weight": format(w.weight, ".4g"), "share_of_information": format(w.n_eff / res.fit.n_eff, ".3f")}
             for w in res.fit.weights.values()]
@@ -75,7 +90,12 @@ def write(res: Identified, writer: StageWriter) -> None:
 
 
 def markdown(res: Identified) -> str:
-    """identify.md."""
+    """identify.md.
+
+    Parameters
+    ----------
+    res : Identified
+    """
     fit = res.fit
     spec = res.scene.identify
     ps = fit.problem.parameters
@@ -129,7 +149,14 @@ def _pick(names) -> list[int]:
 
 
 def overlay_figure(res: Identified, path) -> None:
-    """Test, first guess and identified model: the pointwise span (left) and RMS envelopes over the window (right)."""
+    """Test, first guess and identified model: the pointwise span (left) and RMS envelopes over the window (right).
+
+    Parameters
+    ----------
+    res : Identified
+    path : str or Path
+        The PNG written.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -169,7 +196,14 @@ def overlay_figure(res: Identified, path) -> None:
 
 
 def history_figure(res: Identified, path) -> None:
-    """The weighted cost of every trial point and each parameter against the run, by pass."""
+    """The weighted cost of every trial point and each parameter against the run, by pass.
+
+    Parameters
+    ----------
+    res : Identified
+    path : str or Path
+        The PNG written.
+    """
     import matplotlib
 
     matplotlib.use("Agg")

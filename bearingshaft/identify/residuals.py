@@ -131,7 +131,14 @@ def _time_block(target: Target, pairs) -> np.ndarray:
 
 def band_passed(pair: ChannelPair, band_hz) -> ChannelPair:
     """The pair with both channels band-passed to ``band_hz`` (zero-phase Butterworth of order
-    :data:`bearingshaft.measures.BAND_ORDER`, forward and back, over the whole record); unchanged for None."""
+    :data:`bearingshaft.measures.BAND_ORDER`, forward and back, over the whole record); unchanged for None.
+
+    Parameters
+    ----------
+    pair : ChannelPair
+    band_hz : (float, float) or ()
+        Hz.
+    """
     if not band_hz:
         return pair
     from scipy.signal import butter, sosfiltfilt
@@ -221,6 +228,15 @@ def _open_block(target: Target, pairs) -> np.ndarray:
 def first_crossing(t: np.ndarray, z: np.ndarray, threshold: float) -> float:
     """s, where ``z`` first rises through ``threshold``, linear between samples (NaN: never).
 
+    Parameters
+    ----------
+    t : (n,) ndarray of float
+        s.
+    z : (n,) ndarray of float
+    threshold : float
+
+    Examples
+    --------
     >>> round(first_crossing(np.arange(4) * 1.0, np.array([0.0, 1.0, 3.0, 5.0]), 2.0), 12)
     1.5
     """

@@ -28,7 +28,15 @@ from reduced.models.rig import VirtualRig, virtual_rig
 
 
 def scene_rig(scene: Scene, rom) -> VirtualRig:
-    """The rig of ``rom`` struck where the scene's [hammer] strikes it."""
+    """The rig of ``rom`` struck where the scene's [hammer] strikes it.
+
+    Parameters
+    ----------
+    scene : Scene
+        With [hammer].
+    rom : ReducedModel
+        Of the whole assembly.
+    """
     spec = scene.hammer
     location = tuple(spec.location_m) if spec.location_m else default_location(rom)
     return virtual_rig(rom, location, spec.direction, spec.seismic_mass_kg)
