@@ -77,13 +77,13 @@ def _scene(tmp_path, duration=0.1, passes=1, **replace):
     return path
 
 
-def _test_file(tmp_path, built, scene_path, truth, noise, level=None, name="test.uff"):
+def _test_file(tmp_path, built, scene_path, truth, noise, level=None, name="test.uff", seed=3):
     from bearingshaft.identify.virtual import write_virtual_test
     from bearingshaft.scenes import load_scene
 
     scene = load_scene(str(scene_path))
     path = tmp_path / name
-    write_virtual_test(path, scene, built, truth, noise, seed=3, level_N=level)
+    write_virtual_test(path, scene, built, truth, noise, seed=seed, level_N=level)
     return path
 
 
@@ -100,14 +100,15 @@ def _identified(folder) -> dict[str, dict]:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="known failure (issue 26): with the gaps closing the misfit is rough (impact "
-                   "counts jump, the pointwise misfit is needle-sharp in the gap) and the scan + trust-region fit "
-                   "stops near but not at the truth, with intervals too narrow to hold it (0.15 s: the damping "
-                   "is off by 2x)")
-def test_true_values_lie_in_the_intervals(built, tmp_path):
+@pytest.mark.xfail(strict=False, reason="not yet reliable (issue 26): with the gaps closing the misfit is rough "
+                   "(impact counts jump) and the fit can stop near but not at the truth with intervals too narrow "
+                   "to hold it; seeds 3 and 7 pass, 11 fails (and a 0.15 s record with narrower bounds misses the "
+                   "damping by 2x)")
+@pytest.mark.parametrize("seed", [3, 7, 11])
+def test_true_values_lie_in_the_intervals(built, tmp_path, seed):
     # a test made with gap, k_g and damping 1.18x, 1.43x and 3x the scene's, 2 % noise through the DAQ filter
     scene = _scene(tmp_path)
-    test = _test_file(tmp_path, built, scene, TRUTH, 0.02)
+    test = _test_file(tmp_path, built, scene, TRUTH, 0.02, seed=seed)
     out = tmp_path / "out"
     rc, text, err = _cli("identify", "--scene", str(scene), "--test", str(test), "--out", str(out),
                          "--workers", "0", "--no-progress")
