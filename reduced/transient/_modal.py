@@ -104,6 +104,17 @@ def _terms(lam, K, tau, e, ea):
         ea[i] = a
 
 
+@nb.njit(cache=True, inline="always")
+def _terms_at(lam, s, K, tau, e, ea):
+    """:func:`_terms` of state s, lam the (S, K) table (no view of a row: a view costs two atomic
+    reference counts in a loop)."""
+    for i in range(K):
+        a = math.exp(lam[s, i].real * tau)
+        b = lam[s, i].imag * tau
+        e[i] = complex(a * math.cos(b), a * math.sin(b))
+        ea[i] = a
+
+
 @nb.njit(cache=True)
 def _phi_int(z, tau):
     """I(z) = int_0^tau e^{z t} dt = tau (1 + z tau / 2 + (z tau)^2 / 6 + ...): a series for
@@ -124,6 +135,23 @@ def _terms_m1(lam, K, tau, e, em, am1):
     for i in range(K):
         a = lam[i].real * tau
         b = 0.5 * lam[i].imag * tau
+        sh = math.sin(b)
+        ch = math.cos(b)
+        cb = 1.0 - 2.0 * sh * sh
+        sb = 2.0 * sh * ch
+        x = math.expm1(a)
+        ea = 1.0 + x
+        e[i] = complex(ea * cb, ea * sb)
+        em[i] = complex(x * cb - 2.0 * sh * sh, ea * sb)
+        am1[i] = x
+
+
+@nb.njit(cache=True, inline="always")
+def _terms_m1_at(lam, s, K, tau, e, em, am1):
+    """:func:`_terms_m1` of state s, lam the (S, K) table (as :func:`_terms_at`)."""
+    for i in range(K):
+        a = lam[s, i].real * tau
+        b = 0.5 * lam[s, i].imag * tau
         sh = math.sin(b)
         ch = math.cos(b)
         cb = 1.0 - 2.0 * sh * sh
@@ -192,7 +220,7 @@ def _eval(s, K, UT, yp, w, e, out):
             out[r] += UT[s, 0, i, r] * ur - UT[s, 1, i, r] * ui
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _start(s, K, y, Uinv, aUinv, yp, BU, aBU, Byp, lam, alam, offset, side, active, floor, w, werr, coef, lc,
            l2c, a0, const, qtol, dnoise, live, dy, ay):
     """Segment start in state s: w = Uinv (y - y_p) and werr (its round-off, EPS sum |Uinv| (|y| + |y_p|)),
@@ -376,7 +404,7 @@ def _refine_smallest(m, live, hnext, P, tau, best, hmin):
         P[jm, 10] = 1.0
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _march(s, K, lam, alam, const, coef, lc, l2c, a0, qtol, dnoise, live, n_live, tau_limit, hmin, e, ea, hprev,
            hnext, P):
     """First crossing of any live stop in [0, tau_limit): (tau, j, n_iter), j = -1 if none, j = -2 if the
@@ -409,7 +437,7 @@ def _march(s, K, lam, alam, const, coef, lc, l2c, a0, qtol, dnoise, live, n_live
                 e[i] = 1.0
                 ea[i] = 1.0
         else:
-            _terms(lam[s], K, tau, e, ea)
+            _terms_at(lam, s, K, tau, e, ea)
         for j in range(m):
             if not live[j]:
                 continue
@@ -487,17 +515,26 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
     there are n_events + 1, and max_events must leave room for them).
     Returns (t, W, i_samp, n_events, n_iter, status, n_stuck, c): c the piece reached.
     """
+    N = y.shape[0]
+    return _free_run(tb, offset, side, tip, damped, y, active, t, bounds, c, t_samples, i_samp, t_after, out_y, out_W,
+                     W, hmin, floor, max_events, n_stuck, out_E, E, seg_s, seg_tau, _term_scratch(tb[1].shape[1]),
+                     _stop_scratch(offset.shape[0], tb[1].shape[1]), np.empty(N), np.empty(N), np.empty(N))
+
+
+@nb.njit(cache=True, _nrt=False)
+def _free_run(tb, offset, side, tip, damped, y, active, t, bounds, c, t_samples, i_samp, t_after, out_y, out_W,
+              W, hmin, floor, max_events, n_stuck, out_E, E, seg_s, seg_tau, terms, stops, ytmp, dy, ay):
+    """:func:`_free_kernel`'s march, on its scratch (``terms``: :func:`_term_scratch`, ``stops``:
+    :func:`_stop_scratch`, ytmp, dy, ay (2n,)). Compiled without numba's reference counting (``_nrt=False``:
+    it allocates nothing): every array passed to an inlined helper would otherwise cost two atomic
+    reference counts per call, a fifth of the march's time on a small system."""
     (nK, lam, alam, UT, Uinv, aUinv, yp, BU, aBU, Byp, Wm, Hd, ip, ii, ik, ikind, icoef, iz) = tb
     N = y.shape[0]
     m = offset.shape[0]
-    Kmax = lam.shape[1]
     ns = t_samples.shape[0]
     has_E = out_E.shape[0] > 0
-    w, werr, e, ea, em, am1, gr, gi = _term_scratch(Kmax)
-    coef, lc, l2c, a0, const, qtol, dnoise, live, hprev, hnext, P = _stop_scratch(m, Kmax)
-    ytmp = np.empty(N)
-    dy = np.empty(N)
-    ay = np.empty(N)
+    w, werr, e, ea, em, am1, gr, gi = terms
+    coef, lc, l2c, a0, const, qtol, dnoise, live, hprev, hnext, P = stops
     n_events = 0
     n_iter = 0
     status = 0
@@ -521,7 +558,7 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
         t_next = t_end if j_ev < 0 else t + tau_ev
         while i_samp < ns and t_samples[i_samp] <= t_next:
             tau = max(t_samples[i_samp] - t, 0.0)
-            _terms_m1(lam[s], K, tau, e, em, am1)
+            _terms_m1_at(lam, s, K, tau, e, em, am1)
             _eval(s, K, UT, yp, w, e, ytmp)
             out_W[i_samp] = W + ((_work(s, K, w, em, am1, tau, Wm, Hd, gr, gi)
                                   + (_work_near(s, w, tau, ip, ii, ik, ikind, icoef, iz) if near else 0.0))
@@ -535,7 +572,7 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
             status = BUFFER_FULL  # the segment is searched again with the next buffer: count it then
             break
         n_iter += it
-        _terms_m1(lam[s], K, tau_ev, e, em, am1)
+        _terms_m1_at(lam, s, K, tau_ev, e, em, am1)
         _eval(s, K, UT, yp, w, e, ytmp)
         if damped:
             W += _work(s, K, w, em, am1, tau_ev, Wm, Hd, gr, gi)
