@@ -54,6 +54,7 @@ CUBIC_REACH = 4.0  # the cubic bound is tried first on [0, CUBIC_REACH x the qua
 CUBIC_ITER = 3  # ... and on intervals moved this many times toward its step
 TAYLOR_ZT = 0.5  # |z tau| below which int_0^tau t^r e^{z t} dt is summed as a series ...
 TAYLOR_TERMS = 17  # ... of this many terms (0.5^18 / 18! ~ 6e-22: exact to round-off)
+MARCH_COLS = 13  # columns of the march's per-stop scratch P (:func:`_quadratic_step`)
 BUFFER_FULL = 1  # kernel status (free and forced): the sample buffer is full inside the present segment
 
 
@@ -285,7 +286,12 @@ def _cubic_step(q, d, Q2, d2, Q3):
     quadratic bound's step, or min(H, step with the curvature d2 + Q3 H / 3) (the cubic term is at
     most Q3 H / 3 h^2 / 2 on [0, H]), H moved ``CUBIC_ITER`` times toward that step (each move
     gives a larger safe step)."""
-    h = _step(q, d, Q2)
+    return _cubic_from(_step(q, d, Q2), q, d, d2, Q3)
+
+
+@nb.njit(cache=True)
+def _cubic_from(h, q, d, d2, Q3):
+    """:func:`_cubic_step` from h, the quadratic bound's step _step(q, d, Q2) (worked out already)."""
     if h == np.inf:
         return h
     H = CUBIC_REACH * h
@@ -369,8 +375,11 @@ def _quadratic_step(j, q, d, d2, Q2, Q3, split, slack, d_s, d2_s, q2_s, q3_s, P)
     """Stop j's safe step from its quadratic bounds (with the fast terms by their amplitude when
     ``split``), its sums kept in P[j] for the cubic bounds (:func:`_refine_smallest`)."""
     h = _step(q, d, Q2)
+    P[j, 11] = h
     if split and q + slack < 0.0:
-        h = max(h, _step(q + slack, d_s, q2_s))
+        hs = _step(q + slack, d_s, q2_s)
+        P[j, 12] = hs
+        h = max(h, hs)
     P[j, 0] = q
     P[j, 1] = d
     P[j, 2] = d2
@@ -397,9 +406,9 @@ def _refine_smallest(m, live, hnext, P, tau, best, hmin):
                 jm = j
         if jm < 0 or P[jm, 10] != 0.0 or tau + max(hm, hmin) >= best:
             return
-        h = max(hm, _cubic_step(P[jm, 0], P[jm, 1], P[jm, 3], P[jm, 2], P[jm, 4]))
+        h = max(hm, _cubic_from(P[jm, 11], P[jm, 0], P[jm, 1], P[jm, 2], P[jm, 4]))
         if P[jm, 5] < 0.0:
-            h = max(h, _cubic_step(P[jm, 5], P[jm, 6], P[jm, 8], P[jm, 7], P[jm, 9]))
+            h = max(h, _cubic_from(P[jm, 12], P[jm, 5], P[jm, 6], P[jm, 7], P[jm, 9]))
         hnext[jm] = h
         P[jm, 10] = 1.0
 
@@ -492,10 +501,10 @@ def _term_scratch(K):
 @nb.njit(cache=True)
 def _stop_scratch(m, K):
     """Per-stop scratch of the march (m stops, K terms): coef, lc, l2c (m, K) complex, a0 (m, K), const,
-    qtol, dnoise (m,), live (m,) bool, hprev, hnext (m,), P (m, 11) (:func:`_march`)."""
+    qtol, dnoise (m,), live (m,) bool, hprev, hnext (m,), P (m, MARCH_COLS) (:func:`_march`)."""
     return (np.empty((m, K), np.complex128), np.empty((m, K), np.complex128), np.empty((m, K), np.complex128),
             np.empty((m, K)), np.empty(m), np.empty(m), np.empty(m), np.empty(m, np.bool_), np.empty(m),
-            np.empty(m), np.empty((m, 11)))
+            np.empty(m), np.empty((m, MARCH_COLS)))
 
 
 @nb.njit(cache=True)
