@@ -75,7 +75,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from reduced import _checks as _check
-from reduced._blas import single_thread_blas
 from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
 from reduced.transient import stepper as _stepper
@@ -101,9 +100,11 @@ from reduced.transient.exact_tables import (  # noqa: F401 (re-exported: the tab
     ExactIntegratorError,
     ForcedTable,
     StateTable,
+    cached_forced_table,
     forced_arrays,
     forced_table,
     modal_table,
+    run_tables,
     state_table,
 )
 from reduced.transient.result import RingdownResult, RingdownStream
@@ -193,12 +194,12 @@ class ExactStepper(_stepper.Stepper):
                  sample_rate_hz: float, options: ExactOptions, loads, report: bool) -> None:
         super().__init__(system, n_samples, sample_rate_hz, loads, report)
         self.options = options
-        self.run_system = run = system.fold_zero_gap_tips()
-        with single_thread_blas():  # small dense problems: see state_table
-            self.table = table = state_table(run)
-            self.ft = forced_table(run, table, loads) if self.forced else None
-            omega_max = run.omega_max()
-            self.mt = modal_table(run, table)
+        tables = run_tables(system)  # kept for the last few systems run (their contents the key)
+        self.run_system = run = tables["run"]
+        self.table = table = tables["table"]
+        self.ft = cached_forced_table(tables, loads) if self.forced else None
+        omega_max = tables["omega_max"]
+        self.mt = tables["modal"]
         self.hmin = HMIN_PERIODS / omega_max
         self.y = np.concatenate([x0, v0])
         self.active = run.penetration(self.y[:self.n]) > 0.0
@@ -259,7 +260,9 @@ class ExactStepper(_stepper.Stepper):
 
     def block(self, buf: _stepper.Buffer) -> tuple[np.ndarray, ...]:
         out_y, out_W, out_E = buf.arrays
-        if not np.all(np.isfinite(out_y)):
+        # one pass without a temporary: a non-finite sample makes the sum non-finite (the full test
+        # only then, for a sum that overflowed)
+        if not np.isfinite(np.add.reduce(out_y, axis=None)) and not np.all(np.isfinite(out_y)):
             raise ExactIntegratorError("non-finite state: the contact states are ill-conditioned")
         n = self.n
         if self.forced:
