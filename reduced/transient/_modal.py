@@ -51,9 +51,11 @@ NOISE_FACTOR = 4.0  # margin on the propagated round-off of q and q'
 MAX_MARCH_ITER = 10_000_000  # per segment (per stop and segment in the forced march): a hang guard, never reached
 FAST_LT = 2.0  # |lam| h beyond which a term's amplitude bounds it better than its Taylor bound
 CUBIC_REACH = 4.0  # the cubic bound is tried first on [0, CUBIC_REACH x the quadratic bound's step] ...
-CUBIC_ITER = 3  # ... and on intervals moved this many times toward its step
+CUBIC_ITER = 1  # ... and on intervals moved this many times toward its step (more moves save march steps
+#   but cost more than they save on the scenes' systems: issue 28)
 TAYLOR_ZT = 0.5  # |z tau| below which int_0^tau t^r e^{z t} dt is summed as a series ...
 TAYLOR_TERMS = 17  # ... of this many terms (0.5^18 / 18! ~ 6e-22: exact to round-off)
+SAMPLE_ANCHOR = 32  # output samples: e^{lam tau} worked out afresh at least every this many, stepped between
 MARCH_COLS = 13  # columns of the march's per-stop scratch P (:func:`_quadratic_step`)
 BUFFER_FULL = 1  # kernel status (free and forced): the sample buffer is full inside the present segment
 
@@ -509,7 +511,7 @@ def _stop_scratch(m, K):
 
 @nb.njit(cache=True)
 def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_samples, i_samp, t_after, out_y, out_W,
-                 W, hmin, floor, max_events, n_stuck, out_E, E, seg_s, seg_tau):
+                 W, hmin, floor, max_events, n_stuck, out_E, E, seg_s, seg_tau, fs=0.0):
     """March events from t through the pieces ending at bounds[c], bounds[c + 1], ... (no loads), filling
     the sample buffer ``t_samples`` from i_samp.
 
@@ -522,17 +524,66 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
     ``seg_s`` is not empty, segment k's contact state and length go to seg_s[k], seg_tau[k] (for the
     flow's Jacobian, :func:`flow_jacobian`; a segment ends at an event or a bound, so with one bound
     there are n_events + 1, and max_events must leave room for them).
+    With ``fs`` > 0 the samples are t_j = j / fs (as the stepper's buffers hold them), and the terms
+    e^{lam tau} of consecutive samples of a segment are stepped, e^{lam (tau + 1/fs)} = e^{lam tau} e^{lam / fs}
+    (and e - 1, e^{Re(lam) tau} - 1 likewise, accurate however short tau is), instead of worked out afresh: a
+    sample then costs a few products instead of K exponentials. A sample is an anchor, worked out afresh, when
+    j is a multiple of SAMPLE_ANCHOR or the one before it is not in the segment (so the steps never add up
+    more than SAMPLE_ANCHOR roundings); a buffer that starts between anchors steps from the last anchor up to
+    its first sample, so the samples are the same bits whatever the buffers are.
     Returns (t, W, i_samp, n_events, n_iter, status, n_stuck, c): c the piece reached.
     """
     N = y.shape[0]
+    S, Kmax = tb[1].shape
     return _free_run(tb, offset, side, tip, damped, y, active, t, bounds, c, t_samples, i_samp, t_after, out_y, out_W,
-                     W, hmin, floor, max_events, n_stuck, out_E, E, seg_s, seg_tau, _term_scratch(tb[1].shape[1]),
-                     _stop_scratch(offset.shape[0], tb[1].shape[1]), np.empty(N), np.empty(N), np.empty(N))
+                     W, hmin, floor, max_events, n_stuck, out_E, E, seg_s, seg_tau, _term_scratch(Kmax),
+                     _stop_scratch(offset.shape[0], Kmax), np.empty(N), np.empty(N), np.empty(N), fs,
+                     (np.zeros(S, np.bool_), np.empty((S, Kmax), np.complex128), np.empty((S, Kmax), np.complex128),
+                      np.empty((S, Kmax))))
+
+
+@nb.njit(cache=True, inline="always")
+def _anchor(j, fs, t):
+    """Whether sample j (at j / fs) of a segment starting at t is worked out afresh (:func:`_free_kernel`)."""
+    return j % SAMPLE_ANCHOR == 0 or (j - 1) / fs <= t
+
+
+@nb.njit(cache=True, inline="always")
+def _sample_terms(lam, s, K, tau, e, em, am1, j, fs, t, stepped, steps):
+    """e, em = e - 1, am1 (:func:`_terms_m1_at`) at sample j (tau = j / fs - t, not below 0) of the segment
+    starting at t: afresh at an anchor (:func:`_anchor`); else one step from sample j - 1 when ``stepped``
+    (its terms are in e, em, am1), or from the last anchor. ``steps`` = (have, E, Em, Ah): per state,
+    e^{lam / fs}, its - 1 and expm1(Re(lam) / fs), worked out on first use. Returns True (the terms are
+    those of sample j)."""
+    if fs <= 0.0 or _anchor(j, fs, t):
+        _terms_m1_at(lam, s, K, tau, e, em, am1)
+        return True
+    have, Es, Ems, Ahs = steps
+    if not have[s]:
+        _terms_m1_at(lam, s, K, 1.0 / fs, e, em, am1)
+        for i in range(K):
+            Es[s, i] = e[i]
+            Ems[s, i] = em[i]
+            Ahs[s, i] = am1[i]
+        have[s] = True
+        stepped = False
+    j0 = j - 1
+    if not stepped:  # from the last anchor
+        while not _anchor(j0, fs, t):
+            j0 -= 1
+        _terms_m1_at(lam, s, K, max(j0 / fs - t, 0.0), e, em, am1)
+    for _ in range(j0, j):
+        for i in range(K):
+            a = Ahs[s, i]
+            e[i] = e[i] * Es[s, i]
+            em[i] = em[i] * Es[s, i] + Ems[s, i]
+            am1[i] = am1[i] + a + am1[i] * a
+    return True
 
 
 @nb.njit(cache=True, _nrt=False)
 def _free_run(tb, offset, side, tip, damped, y, active, t, bounds, c, t_samples, i_samp, t_after, out_y, out_W,
-              W, hmin, floor, max_events, n_stuck, out_E, E, seg_s, seg_tau, terms, stops, ytmp, dy, ay):
+              W, hmin, floor, max_events, n_stuck, out_E, E, seg_s, seg_tau, terms, stops, ytmp, dy, ay, fs, steps):
     """:func:`_free_kernel`'s march, on its scratch (``terms``: :func:`_term_scratch`, ``stops``:
     :func:`_stop_scratch`, ytmp, dy, ay (2n,)). Compiled without numba's reference counting (``_nrt=False``:
     it allocates nothing): every array passed to an inlined helper would otherwise cost two atomic
@@ -565,9 +616,11 @@ def _free_run(tb, offset, side, tip, damped, y, active, t, bounds, c, t_samples,
             status = -3
             break
         t_next = t_end if j_ev < 0 else t + tau_ev
+        stepped = False  # e, em, am1 hold the terms of the sample before
         while i_samp < ns and t_samples[i_samp] <= t_next:
             tau = max(t_samples[i_samp] - t, 0.0)
-            _terms_m1_at(lam, s, K, tau, e, em, am1)
+            j = round(t_samples[i_samp] * fs) if fs > 0.0 else 0
+            stepped = _sample_terms(lam, s, K, tau, e, em, am1, j, fs, t, stepped, steps)
             _eval(s, K, UT, yp, w, e, ytmp)
             out_W[i_samp] = W + ((_work(s, K, w, em, am1, tau, Wm, Hd, gr, gi)
                                   + (_work_near(s, w, tau, ip, ii, ik, ikind, icoef, iz) if near else 0.0))

@@ -304,7 +304,7 @@ class ExactStepper(_stepper.Stepper):
             self.t, self.W, buf.filled, ne, ni, status, self.n_stuck, self.c = call_numba_kernel(_free_kernel,
                 self.mt, run.offset, run.side, run.tip, self.damped, self.y, self.active, self.t, bounds, self.c,
                 buf.t, buf.filled, buf.t_after, out_y, out_W, self.W, self.hmin, self.floor, left, self.n_stuck,
-                out_E, self.E, NO_SEGMENTS, NO_TAU)
+                out_E, self.E, NO_SEGMENTS, NO_TAU, float(self.sample_rate_hz))
         else:
             self.t, self.W, self.E, buf.filled, ne, ni, status, self.n_stuck = call_numba_kernel(_forced_kernel,
                 tb.lam, tb.V, tb.Vinv, tb.yp, tb.valid, run.B, run.offset, run.side, run.tip, run.C, self.damped,
