@@ -55,6 +55,15 @@ def test_the_cache_keeps_only_the_last_few_systems():
     assert et.run_tables(P.system()) is not first  # evicted: worked out again
 
 
+def test_tables_too_large_to_keep_are_worked_out_each_time(monkeypatch):
+    et.clear_table_cache()
+    size = et._nbytes(et.run_tables(P.system()))  # the discrete model's: ~45 kB
+    assert 10_000 < size < 1_000_000
+    monkeypatch.setattr(et, "TABLE_CACHE_ENTRY_BYTES", size - 1)
+    et.clear_table_cache()
+    assert et.run_tables(P.system()) is not et.run_tables(P.system())
+
+
 def test_runs_with_kept_tables_are_the_bits_of_runs_without():
     # free and forced: a warm run (tables kept from the previous one) against a cold one
     system = P.system()

@@ -413,6 +413,7 @@ def forced_arrays(ft: ForcedTable, pieces) -> tuple:
 
 
 TABLE_CACHE_SIZE = 4  # systems (and, per system, loads) whose tables are kept by run_tables / cached_forced_table
+TABLE_CACHE_ENTRY_BYTES = 128 * 2**20  # tables larger than this are not kept (memory: at most 4 x this is held)
 _TABLES: OrderedDict = OrderedDict()  # fingerprint -> {"run", "table", "modal", "omega_max", "forced": OrderedDict}
 _TABLES_LOCK = threading.Lock()
 
@@ -434,14 +435,29 @@ def _system_key(system: GapSystem) -> bytes:
                         names)
 
 
+def _nbytes(value) -> int:
+    """Bytes of the arrays in a table (a dict, tuple or dataclass of arrays, nested)."""
+    if isinstance(value, np.ndarray):
+        return value.nbytes
+    if isinstance(value, dict):
+        return sum(_nbytes(v) for v in value.values())
+    if isinstance(value, (tuple, list)):
+        return sum(_nbytes(v) for v in value)
+    if isinstance(value, (StateTable, ForcedTable)):
+        return sum(_nbytes(v) for v in vars(value).values())
+    return 0
+
+
 def _kept(cache: OrderedDict, key, make):
     """cache[key], made by ``make()`` when absent; the least recently used entry beyond
-    TABLE_CACHE_SIZE is dropped."""
+    TABLE_CACHE_SIZE is dropped, and a value larger than TABLE_CACHE_ENTRY_BYTES is not kept."""
     with _TABLES_LOCK:
         if key in cache:
             cache.move_to_end(key)
             return cache[key]
     value = make()  # outside the lock: the tables of a large system take seconds
+    if _nbytes(value) > TABLE_CACHE_ENTRY_BYTES:
+        return value
     with _TABLES_LOCK:
         cache[key] = value
         cache.move_to_end(key)
