@@ -39,6 +39,8 @@ SOURCES = (
      "largest residual over its round-off floor, over all sizes and modes"),
     ("fep_headline.csv", "fep_machine.csv", "frequency-energy study (NNMs by HB and shooting)",
      "python benchmarks/fep_speed.py --repeats 3", ""),
+    ("job_headline.csv", "job_machine.csv", "the main job and the test suite, whole",
+     "PYTHONPATH=. python benchmarks/job_times.py", ""),
 )
 # what limits each target not met, from the profiles (a row matches by the start of its ``what``)
 LIMITS = (
