@@ -74,12 +74,13 @@ LIMITS = (
      "loosest rtol that reaches the error asked is cheap (1e-10 for 1e-6 on the 0.2 s window), and its "
      "relative speed moves with the machine and its load (below)"),
     ("exact ringdown, discrete-impulse",
-     "the machine's load (10-16 on 2 cores during this run: the explicit kernel ran at 1.25e7 steps/s against "
-     "6.4e7 at load ~1); in alternating same-process runs the free kernel is 1.6x the one before issue 28 "
-     "(13.6 against 21.8 ms CPU on the 2 s window, reduced/transient/_modal.py)"),
+     "the machine's load (integrator_machine.csv: 10-16 on 2 cores during the issue-28 runs, when the 3-DOF "
+     "explicit kernel, 6.4e7 steps/s at load ~1, ran at 1e7); in alternating same-process runs the free "
+     "kernel is 1.6x the one before issue 28 (13.6 against 21.8 ms CPU on the 2 s window, "
+     "reduced/transient/_modal.py)"),
     ("exact, hammer-test model",
-     "the machine's load (10-16 on 2 cores during this run; this row was met at load ~1 with the same "
-     "per-sample code)"),
+     "the machine's load (integrator_machine.csv: 10-16 on 2 cores during the issue-28 runs; this row was met "
+     "at load ~1 with the same per-sample code)"),
     ("FE modal, 112,629 DOFs, 16 modes: mesh",
      "measured at load 12-21 on 2 cores (2026-11-26; wall times 4-10x the CPU times, PARDISO on one thread): "
      "7.4x in CPU seconds (15.2 s against 112 s), 5.7x in wall time. Of ours, in CPU: the PARDISO "
