@@ -27,7 +27,7 @@ APP_FLOORS = (
     ("bearingshaft", "bearingshaft.scenes"),
     ("bearingshaft.digits", "bearingshaft.progress", "bearingshaft.output", "bearingshaft.estimates",
      "bearingshaft.systems", "bearingshaft.plots", "bearingshaft.render", "bearingshaft.correlate",
-     "bearingshaft.gap_modes", "bearingshaft.envelopes"),
+     "bearingshaft.gap_modes", "bearingshaft.envelopes", "bearingshaft.reproduction"),
     ("bearingshaft.stages",),
     ("bearingshaft.registry",),
     ("bearingshaft.budget", "bearingshaft.pipeline"),

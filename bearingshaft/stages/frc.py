@@ -38,6 +38,7 @@ from tqdm import tqdm
 
 from bearingshaft.estimates import FLOAT, HILL_COPIES, Estimate, n_dofs
 from bearingshaft.output import StageWriter
+from bearingshaft.reproduction import Reproduction, sensitive, within
 from bearingshaft.scenes import Scene
 from bearingshaft.stages.frc_results import ConvergenceRun, FRCResult, PointCheck
 from bearingshaft.systems import model_system
@@ -495,3 +496,22 @@ def write(result, writer) -> None:
     from bearingshaft.stages import frc_files
 
     frc_files.write(result, writer)
+
+
+# -- the reproduction report (bearingshaft.reproduction): how these files compare with the reference -----
+CONTINUATION = ("the points of an HB continuation through folds: its step path is set by the last bits of each Newton "
+                "solve, which another CPU changes")
+REPRODUCTION = Reproduction(rules=(
+    sensitive("frc.csv", why=CONTINUATION),
+    sensitive("frc_harmonics.csv", why=CONTINUATION),
+    sensitive("frc_bifurcations.csv", why=CONTINUATION + " (the folds and bifurcations found between its points)"),
+    sensitive("frc_stability.csv", why=CONTINUATION + " (stability at those points)"),
+    sensitive("frc_convergence.csv", why=CONTINUATION + " (points, reach, folds and errors at the points)"),
+    sensitive("stepped_sine.csv", why="the stepped sine at the HB curve's points, compared with HB there: "
+              + CONTINUATION),
+    # each peak is the parabola through the continuation's points around the largest amplitude: it moves with them
+    within("frc_backbone.csv", "peak_freq_hz", "peak_amplitude_m", rtol=1e-4,
+           why="peaks refined from the continuation's points, which round-off moves (6e-6 between two machines)"),
+    within("frc_backbone.csv", "log_distance", atol=1e-5,
+           why="distances from the backbone below 1e-5 are the peak's location error"),
+))

@@ -42,6 +42,7 @@ from tqdm import tqdm
 
 from bearingshaft.estimates import COPIES, FLOAT, MATPLOTLIB_BYTES, Estimate, n_dofs
 from bearingshaft.output import StageWriter
+from bearingshaft.reproduction import Reproduction, chaotic, exact, record, roundoff
 from bearingshaft.scenes import HammerSpec, Scene, SceneError
 from bearingshaft.stages import hammer_compare, hammer_linear
 from bearingshaft.stages.hammer_results import Comparison, LinearCheck, Record, VirtualTest
@@ -53,6 +54,12 @@ from reduced.models.rig import VirtualRig, virtual_rig
 LABEL_MAX_HZ = 100.0  # Hz, the pseudo-rigid modes are searched below this (Table 2: 10.9 to 33.7 Hz)
 END_SHARE_S = 0.1  # s, the energy "at the end" is the mean over the record's last 0.1 s
 OPEN_GAP_M = 1.0  # m, the linear check's gap: too large to close
+LYAPUNOV_SEEDS = 2  # exact runs of the nominal blow displaced by LYAPUNOV_DELTA: the record's largest Lyapunov exponent
+# (lyapunov.csv), from which the reproduction report computes how long its chaotic numbers are comparable; two, not
+# the ringdown study's three, since each costs a record (about 5 s)
+LYAPUNOV_DELTA = 1e-9  # relative (energy norm) size of the displacement, as the ringdown stage's reference check
+LYAPUNOV_SATURATION = 1e-3  # the separation has saturated at this fraction of the state's norm
+LYAPUNOV_WINDOW_S = 0.01  # s, windows over which the separation is maximized (a few periods of the 1737 Hz mode)
 
 
 # -- the run ------------------------------------------------------------------------------
@@ -413,6 +420,7 @@ def _virtual_test(scene: Scene, rom, rig: VirtualRig, lm, labels: dict, stats: d
     for level in bar:
         records[level] = run_record(rig, blow(spec, level), scene, level)
     nominal = records[spec.peak_N]
+    lyapunov = record_lyapunov(rig, blow(spec, spec.peak_N), scene, nominal)
     curves = backbones(rig, spec.backbone_modes, float(np.max(nominal.energy)))
     summary = {level: level_summary(rig, rec, lm, labels) for level, rec in records.items()}
     linear = _linear_check(scene, rom, rig, progress) if spec.linear_check else None
@@ -423,8 +431,55 @@ def _virtual_test(scene: Scene, rom, rig: VirtualRig, lm, labels: dict, stats: d
     stats.update({"levels": {str(k): v for k, v in summary.items()},
                   "wall_s": {str(k): r.stats.get("wall_s") for k, r in records.items()}})
     line = _summary_line(scene, rig, nominal, summary[spec.peak_N], linear)
+    stats["lyapunov_exponent_per_s"] = [e.exponent_per_s for e in lyapunov]
     return VirtualTest(scene=scene, rig=rig, labels=labels, records=records, summary=summary, backbones=curves,
-                       linear=linear, end_share_s=END_SHARE_S, stats=stats, lines=(line,))
+                       linear=linear, end_share_s=END_SHARE_S, stats=stats, lines=(line,), lyapunov=tuple(lyapunov))
+
+
+def record_lyapunov(rig: VirtualRig, signal, scene: Scene, rec: Record, seeds: int = LYAPUNOV_SEEDS) -> list:
+    """The largest Lyapunov exponent of a record's motion, from exact runs started ``LYAPUNOV_DELTA`` away.
+
+    The record starts at rest, so each displaced run starts LYAPUNOV_DELTA (relative, energy norm) away
+    from the static deflection under the blow's peak, shifted back to rest (as the ringdown stage's
+    reference check does for a forced run); it is run on the record's samples with the same force and
+    integrator, and the separation of its state from the record's is fitted
+    (:class:`reduced.transient.compare.LyapunovAccumulator`).
+
+    Parameters
+    ----------
+    rig : the virtual rig
+    signal : the hammer's force p(t), N
+    scene : the scene ([ringdown]: integrator and options)
+    rec : the record (its exact states at its samples)
+    seeds : displaced runs (directions 0 .. seeds - 1)
+
+    Returns
+    -------
+    list of LyapunovEstimate, one per seed
+    """
+    from reduced.transient.compare import LyapunovAccumulator, aligned, displaced_state
+    from reduced.transient.integrate import ringdown_stream
+    from reduced.transient.store import Chunk
+
+    system, rd = rig.system, scene.ringdown
+    loads = rig.loads(signal)
+    n, fs = len(rec.t), 1.0 / float(rec.t[1] - rec.t[0])
+    record = [Chunk(0, rec.t, rec.x, rec.v, rec.dissipated, system, rec.energy, rec.external)]
+    x_ref = np.linalg.solve(system.K, loads.b.sum(axis=0) * loads.max_abs())
+    out = []
+    for k in range(seeds):
+        x, v = displaced_state(system, x_ref, np.zeros(system.n), LYAPUNOV_DELTA, k)
+        run = ringdown_stream(system, x - x_ref, v, float(rec.t[-1]), fs, rd.method, loads=loads,
+                              **solver_options(rd))
+        acc = LyapunovAccumulator(system, n, fs, LYAPUNOV_DELTA, LYAPUNOV_SATURATION, LYAPUNOV_WINDOW_S)
+        try:
+            for a, b in aligned(record, run):
+                if not acc.feed(a, b):
+                    break
+        finally:
+            run.close()
+        out.append(acc.result())
+    return out
 
 
 def _linear_check(scene: Scene, rom, rig: VirtualRig, progress: bool) -> LinearCheck:
@@ -503,3 +558,18 @@ def estimate(scene: Scene) -> list[Estimate]:
 
 __all__ = ["compute", "write", "estimate", "DESCRIPTION", "run_record", "blow", "Record", "pseudo_rigid",
            "coupled_subsystem", "default_location", "impacts", "modal_energy_end", "backbones", "level_summary"]
+
+
+# -- the reproduction report (bearingshaft.reproduction): how these files compare with the reference -----
+IMPACTING = "of the impacting record, a chaotic motion"
+REPRODUCTION = Reproduction(lyapunov=("lyapunov.csv",), rules=(
+    record("hammer.uff", "not committed (.gitignore): the channels of hammer.npz"),
+    roundoff("levels.csv", "energy_balance_error"),
+    chaotic("levels.csv", "impacts*", "peak_contact_*", "gaps_open_after_s", "end_*",
+            why=f"impacts, peak tip forces, when the gaps stay open and where the energy ends {IMPACTING}"),
+    chaotic("hammer.md", r"^- (Impacts|Peak contact forces|The gaps stay open|Peak load-cell|Energy in the last)",
+            r"^\| [0-9.]+ \| [0-9]+ \| ",
+            why=f"impacts, peak tip forces, when the gaps stay open and where the energy ends {IMPACTING}"),
+    exact("lyapunov.csv", "seed", "delta", "saturation", "window_s"),
+    chaotic("lyapunov.csv", why="Lyapunov exponents fitted to the separation of chaotic records 1e-9 apart"),
+))

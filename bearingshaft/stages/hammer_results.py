@@ -141,6 +141,9 @@ class VirtualTest:
         For provenance.json.
     lines : tuple of str
         The stage's summary lines.
+    lyapunov : tuple of LyapunovEstimate
+        The nominal record's largest Lyapunov exponent, one estimate per displaced run
+        (:func:`bearingshaft.stages.hammer.record_lyapunov`).
     """
 
     scene: Scene
@@ -153,6 +156,7 @@ class VirtualTest:
     end_share_s: float  # s, the energy "at the end" is the mean over the record's last end_share_s
     stats: dict  # for provenance.json
     lines: tuple[str, ...]  # the stage's summary lines
+    lyapunov: tuple = ()  # LyapunovEstimate per displaced run of the nominal blow
 
     @property
     def nominal(self) -> Record:
