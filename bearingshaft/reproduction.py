@@ -3,25 +3,29 @@
 ``bearingshaft run`` writes into ``runs/<scene>/``; the committed ``results/<scene>/`` folders are
 the reference (``bearingshaft run --update-reference`` rewrites them). At the end of a run every
 file each stage wrote is compared with the reference's, as the stage declares in its registry
-entry (``Stage.reproduction``, a :class:`Reproduction` defined beside the stage's DESCRIPTION):
+entry (``Stage.reproduction``, a :class:`Reproduction`, ``REPRODUCTION`` at the end of the stage's module):
 
-- **deterministic** quantities (frequencies, errors, identified parameters, mode shapes) are
-  compared to the digits they are written with: text equality, cell by cell (CSV) or line by
-  line (Markdown, TOML). Each stage writes a number only to the digits another CPU's BLAS
+- **exact** (the default): deterministic quantities (frequencies, errors, identified parameters,
+  mode shapes), compared to the digits they are written with: text equality, cell by cell (CSV) or
+  line by line (Markdown, TOML), one unit in the last digit being a value at a rounding boundary
+  (:func:`one_unit_apart`). Each stage writes a number only to the digits another CPU's BLAS
   reproduces, and a round-off-level one as the power of ten that bounds it
-  (:func:`bearingshaft.digits.roundoff_bound`), so text equality is the right test; a
-  difference is a failure.
-- quantities of **chaotic** motion (impact counts, peak tip forces, when the gaps stay open) are
-  never failures: a difference is reported as "chaotic, not comparable past t = ... s", the
+  (:func:`bearingshaft.digits.roundoff_bound`); a difference is a failure.
+- **within** a stated tolerance (:func:`within`; a failure beyond it): numbers written with more
+  digits than another machine reproduces, magnitudes (DOP853's error stepping over contact
+  switches), round-off bounds (:func:`roundoff`: one decade).
+- **chaotic**: quantities of chaotic motion (impact counts, peak tip forces, when the gaps stay
+  open), never failures: a difference is reported as "chaotic, not comparable past t = ... s", the
   predictability horizon t_h = ln(:data:`HORIZON_TOL` / :data:`DELTA0`) / lambda, where lambda is
-  the largest Lyapunov exponent the run itself measured (the ``exponent_per_s`` column of the
-  file the stage names, the largest over its seeds);
-- **sensitive** quantities (not chaotic in time, but set by round-off through a discrete choice:
-  the points an HB continuation lands on, DOP853's error when it steps over contact switches, a
-  symmetry-break time set by round-off) are compared within a stated factor (a failure beyond
-  it) or, without one, reported as sensitive with the reason;
-- **figures** (and ParaView files): existence only;
-- **run records** (``provenance.json``, files named ``*timing*``): not compared.
+  the largest Lyapunov exponent the run itself measured (the ``exponent_per_s`` column of the file
+  the stage names, the largest over its chaotic seeds).
+- **sensitive**: set by round-off through a discrete choice (the points an HB continuation lands on,
+  a symmetry broken by round-off alone): reported with the reason, never a failure.
+- **figures** (and ParaView files): existence only; **run records** (``provenance.json``, files
+  named ``*timing*``, arrays that are not committed): not compared.
+
+A rule covers a file, some of its CSV columns (and rows) or Markdown lines; the rest of a file falls
+to its whole-file rule, else to :data:`DEFAULT_RULES`.
 
 The report (:func:`write_report`) is ``reproduction.md`` and ``reproduction.csv`` in the run's
 parent folder; :func:`summary` is what the command prints. :func:`failed` decides the exit status.
@@ -51,7 +55,7 @@ HORIZON_TOL = 1e-4  # relative: a chaotic quantity is written to 4 significant d
 # statuses of a report row
 REPRODUCED = "reproduced"  # equal to the digits written
 LAST_DIGIT = "last digit"  # one unit apart in the last digit written: the value lies at a rounding boundary
-WITHIN = "within tolerance"  # a sensitive quantity inside its stated factor
+WITHIN = "within tolerance"  # a quantity inside its stated tolerance
 DIFFERS = "DIFFERS"  # a deterministic quantity that did not reproduce: a failure
 MISSING = "MISSING"  # in the reference, not written by the run: a failure
 CHAOTIC_DIFF = "chaotic"  # differs, as chaotic motion does past its horizon: not a failure

@@ -157,17 +157,20 @@ def _run_main(argv: list[str], cwd: Path, monkeypatch) -> int:
 
 
 def test_run_writes_runs_and_the_report(tmp_path, monkeypatch, capsys):
+    """--update-reference writes results/ (the reference) and no report; a plain run writes runs/ and the
+    report, which passes against that reference and fails (exit 1) once one of its numbers is changed."""
     (tmp_path / "tiny.toml").write_text(TINY)
-    ref = tmp_path / "reference"
-    ref.mkdir()
-    assert _run_main(["run", "tiny.toml", "--no-progress", "--reference", str(ref)], tmp_path, monkeypatch) == 0
-    assert (tmp_path / "runs" / "tiny" / "work_precision.csv").is_file()
-    assert not (tmp_path / "results").exists()
-    assert "no reference" in (tmp_path / "runs" / "reproduction.md").read_text()
-    # the run becomes the reference: the next run reproduces it
-    shutil.copytree(tmp_path / "runs" / "tiny", ref / "tiny")
-    assert _run_main(["run", "tiny.toml", "--no-progress", "--reference", str(ref)], tmp_path, monkeypatch) == 0
+    assert _run_main(["run", "tiny.toml", "--no-progress", "--update-reference"], tmp_path, monkeypatch) == 0
+    ref = tmp_path / "results"
+    assert (ref / "tiny" / "work_precision.csv").is_file() and not (tmp_path / "runs").exists()
+    assert not (ref / "reproduction.md").exists()  # no report against itself
+    before = {p.name: p.read_bytes() for p in (ref / "tiny").iterdir()}
+    argv = ["run", "tiny.toml", "--no-progress", "--reference", "results"]
+    assert _run_main(argv, tmp_path, monkeypatch) == 0
     assert "reproduction: passed" in capsys.readouterr().out
+    assert (tmp_path / "runs" / "tiny" / "work_precision.csv").is_file()
+    assert "**Passed**" in (tmp_path / "runs" / "reproduction.md").read_text()
+    assert {p.name: p.read_bytes() for p in (ref / "tiny").iterdir()} == before  # the reference untouched
     # a deterministic number of the reference changed: exit 1, the file and the number named
     wp = ref / "tiny" / "work_precision.csv"
     lines = wp.read_text().splitlines()
@@ -176,22 +179,21 @@ def test_run_writes_runs_and_the_report(tmp_path, monkeypatch, capsys):
     cells[2] = "0.5"
     lines[row] = ",".join(cells)
     wp.write_text("\n".join(lines) + "\n")
-    assert _run_main(["run", "tiny.toml", "--no-progress", "--reference", str(ref)], tmp_path, monkeypatch) == 1
+    assert _run_main(argv, tmp_path, monkeypatch) == 1
     out = capsys.readouterr().out
     assert "reproduction: FAILED" in out and "tiny/work_precision.csv error [method=explicit, setting=omega_dt=0.1]: " \
         "reference '0.5'" in out
     with open(tmp_path / "runs" / "reproduction.csv", newline="") as fh:
         assert [r["file"] for r in csv.DictReader(fh) if r["status"] == DIFFERS] == ["work_precision.csv"]
-
-
-def test_update_reference_writes_results(tmp_path, monkeypatch):
-    (tmp_path / "tiny.toml").write_text(TINY)
-    assert _run_main(["study", "--scene", "tiny.toml", "--no-progress"], tmp_path, monkeypatch) == 0
-    assert (tmp_path / "runs" / "tiny" / "study.md").is_file() and not (tmp_path / "results").exists()
-    assert _run_main(["run", "tiny.toml", "--no-progress", "--update-reference"], tmp_path, monkeypatch) == 0
-    assert (tmp_path / "results" / "tiny" / "study.md").is_file()
-    assert not (tmp_path / "results" / "reproduction.md").exists()  # no report against itself
     assert _run_main(["run", "tiny.toml", "--update-reference", "--out", "x"], tmp_path, monkeypatch) == 2
+
+
+def test_subcommands_write_runs_unless_asked(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert cli._out_dir(None, "rom-impulse") == Path("runs") / "rom-impulse"
+    assert cli._out_dir(None, "rom-impulse", update_reference=True) == Path("results") / "rom-impulse"
+    args = cli.build_parser().parse_args(["ringdown", "--scene", "discrete-impulse", "--update-reference"])
+    assert args.update_reference
 
 
 def test_sweep_default_folder_is_under_runs(tmp_path, monkeypatch):
@@ -209,9 +211,11 @@ def test_sweep_default_folder_is_under_runs(tmp_path, monkeypatch):
     assert seen["out"] == Path("runs") / "sweep-gap-kg" / "sweep"
 
 
+@pytest.mark.slow
 def test_a_run_leaves_git_status_clean(tmp_path):
     """The README's main job in a copy of the repository (its tracked files, committed): the run goes to
-    runs/, which .gitignore names, and nothing tracked changes."""
+    runs/, which .gitignore names, and nothing tracked changes. Slow: numba compiles its kernels again in
+    the copy (its cache is keyed by the source's path), 1-2 min."""
     clone = tmp_path / "clone"
     files = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True).stdout.split(b"\0")
     for f in filter(None, files):

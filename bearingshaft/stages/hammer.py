@@ -19,6 +19,9 @@ found with a guarantee, :mod:`reduced.transient.exact`).
 - ``levels.csv``, ``levels.png``: the level sweep, one spectrogram per blow level;
 - ``hammer.md``: what happens, in numbers (peak tip forces, impacts, when the gaps stay
   open, which modes carry the energy at the end, energy balance);
+- ``lyapunov.csv``: the nominal record's largest Lyapunov exponent, from exact runs displaced by
+  1e-9 (:func:`record_lyapunov`): how long its chaotic numbers are comparable between two machines
+  (the reproduction report's horizon, :mod:`bearingshaft.reproduction`);
 - with ``[hammer] linear_check``: ``linear_check.csv`` and ``linear_check.png``, the
   open-gap response against the full 3-D model's modal superposition
   (:mod:`bearingshaft.stages.hammer_linear`);
@@ -526,7 +529,8 @@ def write(result: VirtualTest | Comparison, writer: StageWriter) -> None:
 DESCRIPTION = """Strike the reduced apparatus with the scene's blow at every level and record every rig channel
 as a test's DAQ would (six triaxial beam accelerometers, four triaxial tube sensors, four tip
 load cells, the hammer). Writes hammer.npz, hammer.uff (UFF 58), channels.csv, fig10.png,
-fig11.png, levels.csv, levels.png, hammer.md and, with [hammer] linear_check, linear_check.csv
+fig11.png, levels.csv, levels.png, hammer.md, lyapunov.csv (the record's largest Lyapunov
+exponent) and, with [hammer] linear_check, linear_check.csv
 and linear_check.png. With --test FILE.uff, instead, a measured test drives the model by its
 hammer channel at the test's sampling and every channel is compared: writes test_errors.csv,
 test_compare.png, test_spectrogram.png and model.uff (the model's channels, UFF 58)."""

@@ -12,8 +12,8 @@ Numbers are written to the digits that are converged, so that a rerun writes the
 bytes: frequencies to 6 significant digits, errors in percent to 4 decimals (1e-6
 relative: the full solver's eigenvalues are good to ~1e-9 above 100 Hz; below 1 Hz, the
 assembly's bungee modes, only to a few 1e-5, so their last digit and errors below 0.005 % are
-the solver's, not the reduction's), MAC and basis fractions to 6 decimals, check residuals
-to 3 significant digits. The full modes come from a single-threaded factorization
+the solver's, not the reduction's), MAC and basis fractions to 6 decimals, the residuals of the
+passed checks, round-off, as the power of ten that bounds them. The full modes come from a single-threaded factorization
 (fem.contact.gap_modes), so a rerun writes the same bytes. Timings go to
 ``provenance.json`` and ``rom.npz`` only.
 
