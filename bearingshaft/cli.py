@@ -75,8 +75,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR", help="parent folder of the results (default: runs/); the reproduction "
                    "report goes there too")
     _add_update_reference(p)
-    p.add_argument("--reference", metavar="DIR", help="parent folder of the reference results (default: the "
-                   "checkout's results/)")
+    p.add_argument("--reference", metavar="DIR", help="parent folder of the reference results (default: ./results/, "
+                   "else the checkout's results/)")
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
     p = sub.add_parser("check", help="validate scenes, their memory estimates and --out without running")
     p.add_argument("scenes", nargs="*", metavar="SCENE", help="scene names or TOML files (all built-in if none)")
@@ -121,7 +121,10 @@ def default_parent(update_reference: bool = False) -> Path:
 
 
 def reference_root() -> Path:
-    """The committed reference: ``results/`` of the checkout this package runs from, else ``./results``."""
+    """The reference the report reads: ``./results`` (where ``--update-reference`` writes), else the
+    ``results/`` of the checkout this package runs from."""
+    if REFERENCE.is_dir():
+        return REFERENCE
     here = Path(__file__).resolve().parent.parent / "results"
     return here if here.is_dir() else REFERENCE
 

@@ -543,6 +543,8 @@ def _compare_csv(f: _File, ref: Path, run: Path, whole: Rule) -> None:
             f.add(CHAOTIC_DIFF if rule.kind == CHAOTIC else SENSITIVE_DIFF, "rows", str(len(a) - 1),
                   str(len(b) - 1), f.note(rule))
         return
+    firsts = [r[0] for r in a[1:] if r]
+    repeated = {v for v in firsts if firsts.count(v) > 1}
     differing = 0
     for j, col in enumerate(header):
         grouped: dict[Rule, list[tuple[int, str, str]]] = {}
@@ -554,29 +556,22 @@ def _compare_csv(f: _File, ref: Path, run: Path, whole: Rule) -> None:
             differing += len(cells)
             if rule.kind in (CHAOTIC, SENSITIVE):
                 i, x, y = cells[0]
-                f.add(CHAOTIC_DIFF if rule.kind == CHAOTIC else SENSITIVE_DIFF,
-                      f"{col}: {len(cells)} of {len(a) - 1} rows", f"{x} [{_key(header, a[i])}]", y, f.note(rule))
+                f.add(CHAOTIC_DIFF if rule.kind == CHAOTIC else SENSITIVE_DIFF, f"{col}: {len(cells)} of {len(a) - 1} "
+                      f"rows", f"{x} [{_key(header, a[i], repeated)}]", y, f.note(rule))
                 continue
             for i, x, y in cells:
-                _judge(f, rule, f"{col} [{_key(header, a[i])}]", x, y)
+                _judge(f, rule, f"{col} [{_key(header, a[i], repeated)}]", x, y)
     if not differing:
         f.add(REPRODUCED, note="the same cells, written differently")
 
 
-def _key(header: list[str], row: list[str]) -> str:
-    """The row as the report names it: its first column (and second, when the first repeats as a label)."""
+def _key(header: list[str], row: list[str], repeated: set[str]) -> str:
+    """The row as the report names it: its first column, and its second when the first repeats (a label
+    such as ``state`` or ``level``) in the file."""
     k = f"{header[0]}={row[0]}" if row else ""
-    if len(header) > 1 and len(row) > 1 and not _number(row[0]):
+    if len(header) > 1 and len(row) > 1 and row[0] in repeated:
         k += f", {header[1]}={row[1]}"
     return k
-
-
-def _number(s: str) -> bool:
-    try:
-        float(s)
-    except ValueError:
-        return False
-    return True
 
 
 def _compare_text(f: _File, ref: Path, run: Path, whole: Rule) -> None:
