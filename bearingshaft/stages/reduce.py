@@ -148,9 +148,11 @@ def write(result, writer) -> None:
 REPRODUCTION = Reproduction(rules=(
     roundoff("cb_check.csv", "value"),
     # the assembly's bungee modes (0.4-2.4 Hz) are resolved to a few 1e-5 by the full and the reduced solver (module
-    # docstring): their sixth digit and errors below 0.005 % are the solvers', which another CPU changes
+    # docstring): their sixth digit and errors below 0.005 % are the solvers', which another CPU or thread count
+    # changes (up to 3e-5 in Hz and 0.0033 % in error between two machines, and between 1 and 2 threads); both are
+    # compared to 1e-4, the errors in percent to 0.01
     within("gap_modes.csv", "full_hz", "reduced_hz", rtol=1e-4,
            why="frequencies of the bungee modes below 3 Hz are resolved to a few 1e-5"),
-    within("gap_modes.csv", "error_pct", atol=0.005,
-           why="errors below 0.005 % are the solvers' (the bungee modes are resolved to a few 1e-5)"),
+    within("gap_modes.csv", "error_pct", atol=0.01,
+           why="errors of a few 0.001 % are the solvers' (the bungee modes are resolved to a few 1e-5)"),
 ))
