@@ -575,7 +575,7 @@ REPRODUCTION = Reproduction(lyapunov=("lyapunov.csv",), rules=(
     roundoff("levels.csv", "energy_balance_error"),
     chaotic("levels.csv", "impacts*", "peak_contact_*", "gaps_open_after_s", "end_*",
             why=f"impacts, peak tip forces, when the gaps stay open and where the energy ends {IMPACTING}"),
-    chaotic("hammer.md", r"^- (Impacts|Peak contact forces|The gaps stay open|Peak load-cell|Energy in the last)",
+    chaotic("hammer.md", r"^- (Impacts|Peak contact forces|The gaps stay open|Peak load-cell|Energy in the last|Chaos)",
             r"^\| [0-9.]+ \| [0-9]+ \| ",
             why=f"impacts, peak tip forces, when the gaps stay open and where the energy ends {IMPACTING}"),
     exact("lyapunov.csv", "seed", "delta", "saturation", "window_s"),

@@ -23,6 +23,7 @@ from bearingshaft.correlate import ChannelError, ChannelPair  # noqa: E402
 from bearingshaft.digits import roundoff_bound, sig, text, to_resolution  # noqa: E402
 from bearingshaft.output import StageWriter, write_rows  # noqa: E402
 from bearingshaft.plots import Envelope, wrap_title  # noqa: E402
+from bearingshaft.reproduction import DELTA0, HORIZON_TOL  # noqa: E402
 from bearingshaft.scenes import Scene  # noqa: E402
 from bearingshaft.stages.hammer_results import Comparison, LinearCheck, Record, VirtualTest, histories  # noqa: E402
 from fem.rig import TIP_CELLS  # noqa: E402
@@ -78,6 +79,19 @@ def write_virtual_test(result: VirtualTest, writer: StageWriter) -> None:
     if result.lyapunov:
         lyapunov_csv(writer.path("lyapunov.csv"), result.lyapunov)
     write_markdown(writer.path("hammer.md"), result)
+
+
+def _chaos_text(estimates) -> list[str]:
+    """The line of hammer.md that says how long the record's chaotic numbers are comparable (empty without
+    an exponent)."""
+    lam = max((e.exponent_per_s for e in estimates if e.chaotic and math.isfinite(e.exponent_per_s)), default=math.nan)
+    if not math.isfinite(lam) or lam <= 0:
+        return []
+    t_h = math.log(HORIZON_TOL / DELTA0) / lam  # the reproduction report's horizon
+    return [f"- Chaos: after the blow the motion separates from a run started 1e-9 away at up to {lam:.3g} /s "
+            f"(the largest Lyapunov exponent, lyapunov.csv), so round-off alone grows to 1e-4 of the state in "
+            f"{t_h:.2g} s: the impacts, peak forces, when the gaps stay open and the energy at the end differ from "
+            "one machine to another, and the reproduction report compares them as chaotic."]
 
 
 def lyapunov_csv(path: Path, estimates) -> None:
@@ -406,6 +420,7 @@ def write_markdown(path: Path, result: VirtualTest) -> None:
         lines.append(f"| {label} | {f:.4g} | {TABLE2_TEST_HZ[TABLE2_ORDER.index(label)]:.4g} | {sc:.3f} |")
     lines += ["", f"## The nominal blow, {spec.peak_N:g} N", ""]
     lines += _level_text(s, result.end_share_s)
+    lines += _chaos_text(result.lyapunov)
     lines += ["", "## Level sweep (levels.csv, levels.png)", "",
               "| level [N] | impacts | peak tip force [N] | gaps open after [s] | on the bungees at the end | "
               "the rest mostly in |", "|---|---|---|---|---|---|"]
