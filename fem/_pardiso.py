@@ -72,9 +72,10 @@ def has_pardiso() -> bool:
 
 DEFAULT_THREADS = 1  # PARDISO's and the model builds' OpenBLAS threads unless BEARINGSHAFT_THREADS is set: a count
 # that followed the machine's load (PARDISO) or its cores (OpenBLAS) made the results depend on them (assembly-modal:
-# the bungee modes' frequencies moved by up to 3e-4 between 1 and 2 PARDISO threads; the reduced apparatus's matrices
-# by 5e-8 between 1 and 2 OpenBLAS threads, which a chaotic hammer record magnifies); one thread gives the same bits
-# on every run, and on this shared 2-core machine costs little or nothing (benchmarks/fixed_threads.py)
+# the bungee modes' frequencies moved by 3e-4 between 1 and 2 PARDISO threads; the reduced apparatus's matrices by
+# 2e-10 of their largest entry between 1 and 2 OpenBLAS threads, which a chaotic hammer record magnifies); one thread
+# gives the same bits on every run: at load 6-7 on this 2-core machine it was 2-2.5x faster than two, on a quiet one
+# the 112,629-DOF modal analysis 6 % faster (results/fixed-threads/, results/performance/modal_speed.csv)
 
 
 def solver_threads() -> int:
