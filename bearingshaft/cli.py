@@ -6,8 +6,8 @@ Subcommands follow the pipeline (geometry -> fem -> reduced -> results):
 one), ``nnm``, ``study`` (error against run time, stiff cases), ``verify``
 (reduction against the discrete model), ``frc`` (forced-response curves), ``run`` (every
 stage of one or more scenes; all built-in scenes when none is named), ``check`` (validate scenes, their memory and the
-results folder without running anything), ``sweep`` (a scene over a design of parameter values, on Dask) and
-``scenes``.
+results folder without running anything), ``sweep`` (a scene over a design of parameter values, on Dask),
+``scenes`` (``--show NAME`` prints one) and ``keys`` (every table and key of a scene).
 Bad input gives a one-line message and exit code 2, before any work starts; nothing
 half-written is left behind. Every command ends with a summary naming the results folder.
 
@@ -22,12 +22,14 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+import time
 from pathlib import Path
 
 from bearingshaft import __version__
 from bearingshaft.budget import available_bytes, check_budget, estimates
 from bearingshaft.digits import human
 from bearingshaft.output import check_out_dir
+from bearingshaft.progress import run_total
 from bearingshaft.registry import BY_NAME, STAGES, stages_of
 from bearingshaft.scenes import Scene, SceneError, builtin_names, load_scene
 from reduced._checks import one_line
@@ -70,7 +72,13 @@ def build_parser() -> argparse.ArgumentParser:
         _add_common(p)
         for opt in stage.options:
             p.add_argument(opt.flag, dest=opt.name, metavar=opt.metavar, choices=opt.choices, help=opt.help)
-    p = sub.add_parser("run", help="every stage of the named scenes (all built-in scenes if none)")
+    p = sub.add_parser("run", help="every stage of the named scenes (all built-in scenes if none)",
+                       description="Run every stage of the named scenes (all built-in scenes if none is named), every "
+                       "scene validated first. Writes each stage's files, as its subcommand would, into the results "
+                       "folder <out>/<scene>/ (default runs/, which git ignores; --update-reference: results/); prints "
+                       "a summary line per stage and a total (stages, wall time, peak memory), then compares every "
+                       "stage's files with the reference results/<scene>/ and writes the reproduction report "
+                       "<out>/reproduction.md and .csv (exit 1 if a deterministic number did not reproduce).")
     p.add_argument("scenes", nargs="*", metavar="SCENE", help="scene names or TOML files")
     p.add_argument("--out", metavar="DIR", help="parent folder of the results (default: runs/); the reproduction "
                    "report goes there too")
@@ -78,21 +86,38 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reference", metavar="DIR", help="parent folder of the reference results (default: ./results/, "
                    "else the checkout's results/)")
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
-    p = sub.add_parser("check", help="validate scenes, their memory estimates and --out without running")
+    p = sub.add_parser("check", help="validate scenes, their memory estimates and --out without running",
+                       description="Validate scenes (all built-in scenes if none is named): every key, the memory "
+                       "each stage would need against the memory available, every case of a [sweep], and that "
+                       "the results folder can be written. Runs nothing and writes nothing; a line per scene.")
     p.add_argument("scenes", nargs="*", metavar="SCENE", help="scene names or TOML files (all built-in if none)")
     p.add_argument("--scene", dest="scene_opt", metavar="NAME_OR_TOML", help="one scene (as for the stages)")
     p.add_argument("--out", metavar="DIR", help="results folder to check (default: runs/<scene>/)")
-    sub.add_parser("scenes", help="list the built-in scenes")
+    p = sub.add_parser("scenes", help="list the built-in scenes, or print one (--show NAME)",
+                       description="List the built-in scenes with their stages and descriptions, or print one "
+                       "scene's TOML (--show NAME) to start a scene of your own from. Writes nothing.")
+    p.add_argument("--show", metavar="NAME", help="print this built-in scene's TOML")
+    p = sub.add_parser("keys", help="list every table and key of a scene: type, unit, default, allowed values",
+                       description="List the tables of a scene and each key's type, unit, default, allowed values "
+                       "and meaning, generated from the dataclasses that read them (units and meanings are their "
+                       "field comments, allowed values what their checks refuse). Writes nothing.")
+    p.add_argument("table", nargs="?", metavar="TABLE", help="one table (ringdown, model, model.rom, load, ...)")
+    p.add_argument("--csv", action="store_true", help="print CSV (table,key,type,unit,default,allowed,meaning)")
     # -- parameter sweeps on Dask (bearingshaft/sweep/) --
     p = sub.add_parser("sweep", help="run a scene over a design of parameter values on Dask (a local cluster, "
-                       "or --scheduler ADDRESS); sweep.parquet, sweep.csv, sweep.png")
+                       "or --scheduler ADDRESS); sweep.parquet, sweep.csv, sweep.png",
+                       description="Run a scene over a design of parameter values ([sweep] or --vary) on Dask, every "
+                       "case validated first. Writes a folder per case, sweep.parquet and sweep.csv (a row per "
+                       "case: its values, metrics and status), sweep.png, sweep_provenance.json and "
+                       "sweep_scene.toml into runs/<scene>/sweep/ (--update-reference: results/, or --out); "
+                       "finished cases are resumed.")
     p.add_argument("--scene", required=True, metavar="NAME_OR_TOML", help="built-in scene name or scene TOML file")
     p.add_argument("--out", metavar="DIR", help="folder of the case folders and tables (default: "
                    "runs/<scene>/sweep/)")
     _add_update_reference(p)
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     p.add_argument("--vary", action="append", metavar="KEY=VALUES",
-                   help="a varied scene key and its values, repeatable: model.g=1e-4:1e-3:9:log (N values, log or "
+                   help="a varied scene key and its values, repeatable: model.gap=1e-4:1e-3:9:log (N values, log or "
                    "lin), model.k_g=1e7,1e8,1e9 (a list), random design: model.c=0:8 (a range); replaces the "
                    "scene's [sweep.vary]")
     p.add_argument("--design", metavar="grid|zip|random", help="grid (product, default), zip, random (Latin "
@@ -173,6 +198,16 @@ def _check_sweep(scene: Scene, out: Path) -> str:
             f"{local_cores()} workers; tables in {out}")
 
 
+def _builtin(name: str) -> str:
+    """``name`` if it is a built-in scene, else a UserError naming the nearest."""
+    from bearingshaft.scenes import suggest
+
+    if name not in builtin_names():
+        raise UserError(f"--show: no built-in scene {name!r}{suggest(name, builtin_names())} "
+                        f"(built-in: {', '.join(builtin_names())})")
+    return name
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code (0 success, 1 solver failure, 2 bad input)."""
     parser = build_parser()
@@ -185,6 +220,18 @@ def main(argv: list[str] | None = None) -> int:
     from bearingshaft import pipeline
 
     try:
+        if args.command == "scenes" and args.show:
+            print(load_scene(_builtin(args.show)).source, end="")
+            return 0
+        if args.command == "keys":
+            from bearingshaft.scenes.keys import format_keys, keys_csv, select_tables, table_keys
+
+            try:
+                keys = [k for t, c in select_tables(args.table).items() for k in table_keys(t, c)]
+            except KeyError as exc:
+                raise UserError(exc.args[0]) from None
+            print((keys_csv if args.csv else format_keys)(keys), end="")
+            return 0
         if args.command == "scenes":
             for name in builtin_names():
                 scene = load_scene(name)
@@ -200,8 +247,10 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "run":
             names = args.scenes or builtin_names()
             runs = [_validated(n, args.out, True, args.update_reference) for n in names]  # all before any runs
+            t_run = time.perf_counter()
             for scene, out in runs:
                 pipeline.run_scene(scene, out, progress=progress)
+            print(run_total(sum(len(stages_of(s)) for s, _ in runs), len(runs), time.perf_counter() - t_run))
             return _reproduction(args, runs)
         test = getattr(args, "test_file", None)
         if test is not None and args.out is None:  # a comparison never mixes with the scene's own files

@@ -59,10 +59,12 @@ def n_dofs(scene: Scene) -> int:
     Returns
     -------
     int
-        3 for the discrete model, n_modes + 2 for a reduced one, 0 for a 3-D model.
+        3 for the discrete model (4 with friction), n_modes + 2 for a reduced one, 0 for a 3-D model.
     """
     if scene.model_kind == "discrete":
         return 3
+    if scene.model_kind == "discrete_friction":
+        return 4
     if scene.model_kind == "rom":
         return scene.model.n_modes + 2
     return 0

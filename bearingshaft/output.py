@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from bearingshaft import __version__
+from reduced.cache import current_umask
 
 
 def git_commit() -> str:
@@ -228,10 +229,12 @@ def _swap_in(new: Path, out: Path) -> None:
 
 @contextmanager
 def folder_lock(out: Path):
-    """Hold an exclusive lock on results folder ``out`` (a ``.<name>.lock`` file beside it).
+    """Hold an exclusive lock on results folder ``out`` (a ``.<name>.lock`` file beside it, removed
+    when released).
 
     Writers of one folder take turns only while they merge their files in; the work itself
-    runs in parallel. A lock dies with its process, so a killed run never blocks the next.
+    runs in parallel. A lock dies with its process, so a killed run never blocks the next (its
+    file stays until the next writer of the folder takes and releases the lock).
 
     Parameters
     ----------
@@ -243,12 +246,23 @@ def folder_lock(out: Path):
     None
     """
     lock_path = out.with_name(f".{out.name}.lock")
-    with open(lock_path, "a+b") as fh:
+    while True:
+        fh = open(lock_path, "a+b")  # noqa: SIM115 (closed below, after the unlink)
         fcntl.flock(fh, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(fh, fcntl.LOCK_UN)
+        try:  # the file we locked may have been removed by the holder before us: then lock the new one
+            same = os.path.samestat(os.fstat(fh.fileno()), os.stat(lock_path))
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        fh.close()
+    try:
+        yield
+    finally:
+        # removed while still held, so no lock file stays behind; a waiter on the removed file
+        # finds it gone (above) and takes a new one, so two holders never overlap
+        lock_path.unlink(missing_ok=True)
+        fh.close()
 
 
 def _remove_stale_scratch(out: Path) -> None:
@@ -328,6 +342,7 @@ def staged_output(out_dir: str | Path, scene_name: str, scene_source: str, stage
     out = check_out_dir(out_dir).absolute()
     out.parent.mkdir(parents=True, exist_ok=True)
     scratch = Path(tempfile.mkdtemp(prefix=f".{out.name}.{stage}.partial-{os.getpid()}-", dir=out.parent))
+    scratch.chmod(0o777 & ~current_umask())  # mkdtemp makes it drwx------; a results folder is the user's usual mode
     writer = StageWriter(scratch)
     try:
         yield writer

@@ -59,9 +59,9 @@ def ringdown_envelopes(res, chunk_samples: int | None = None, also=None, loads=N
     Returns
     -------
     dict
-        :class:`Envelope` per key: ``x`` (m, every DOF), ``E``, ``W``, ``balance`` (J) and, with
-        loads, ``Wext`` (J) and ``p`` (N, each load); plus ``E0`` (J, the first energy) and
-        ``scale`` (J).
+        :class:`Envelope` per key: ``x`` (m, every DOF), ``E``, ``W``, ``balance`` (J), with
+        loads ``Wext`` (J) and ``p`` (N, each load), with friction ``Wf`` (J, its part of W); plus
+        ``E0`` (J, the first energy) and ``scale`` (J).
     """
     n, N, fs = res.system.n, res.n_samples, res.sample_rate_hz
     env = {"x": Envelope(N, fs, n), "E": Envelope(N, fs, 1), "W": Envelope(N, fs, 1), "balance": Envelope(N, fs, 1)}
@@ -79,6 +79,8 @@ def ringdown_envelopes(res, chunk_samples: int | None = None, also=None, loads=N
         env["x"].add(c.start, c.x)
         env["E"].add(c.start, E)
         env["W"].add(c.start, c.dissipated)
+        if getattr(c, "friction", None) is not None:  # a run with friction: its part of W
+            env.setdefault("Wf", Envelope(N, fs, 1)).add(c.start, c.friction)
         env["balance"].add(c.start, np.abs(E0 + ext - E - c.dissipated))
         scale = max(scale, float(np.max(E)), float(np.max(np.abs(ext))))
         if loads is not None:
@@ -135,6 +137,8 @@ def ringdown_figure(res, path: Path, title: str, envelopes: dict | None = None, 
     top = env["scale"] or 1.0
     floor = ENERGY_FLOOR * top
     curves = (("E", "E(t)"), ("W", "dissipated W(t)")) + ((("Wext", "work of the loads W_ext(t)"),) if forced else ())
+    if "Wf" in env:
+        curves += (("Wf", "friction W_f(t), part of W"),)
     for key, label in curves:
         t, y = env[key].lines()
         ax[1].semilogy(t, np.maximum(y[:, 0], 0.1 * floor), label=label)

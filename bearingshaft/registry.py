@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 from bearingshaft.reproduction import Reproduction
 from bearingshaft.scenes import Scene
-from bearingshaft.stages import frc, hammer, modal, nnm, reduce, ringdown, study, verify
+from bearingshaft.stages import frc, frf, hammer, modal, nnm, reduce, ringdown, study, verify
 
 
 @dataclass(frozen=True, slots=True)
@@ -123,8 +123,20 @@ STAGES: tuple[Stage, ...] = (
           description=hammer.DESCRIPTION,
           options=(Option("--test", "test_file", "a measured test (UFF 58 time histories): the model is run at its "
                           "sampling, driven by its hammer channel, and compared channel for channel (default results "
-                          "folder: runs/<scene>/test-<file name>/)", metavar="FILE.uff"),),
+                          "folder: runs/<scene>/test-<file name>/)", metavar="FILE.uff"),
+                   Option("--window", "window", "with --test: the compared window in seconds (default [hammer] "
+                          "compare_window_s, else the record)", metavar="START:END"),
+                   Option("--measures", "measures", "with --test: the measures, comma separated, among time, ridges, "
+                          "envelope, impacts, open, backbone (default all)", metavar="LIST")),
           reproduction=hammer.REPRODUCTION),
+    Stage("frf", "[frf]", lambda s: s.frf is not None, frf.compute, frf.write, frf.estimate,
+          help="FRFs (H1, H2, coherence) and modal parameters (pLSCF, LSFD, MAC) of a hammer test; --test FILE.uff "
+               "for a measured one",
+          description=frf.DESCRIPTION,
+          options=(Option("--test", "test_file", "a measured test (UFF 58 time histories of repeated blows: each force "
+                          "record opens a blow) instead of the virtual one (default results folder: "
+                          "runs/<scene>/test-<file name>/)", metavar="FILE.uff"),),
+          reproduction=frf.REPRODUCTION),
     Stage("nnm", "[nnm]", lambda s: s.nnm is not None or s.fep is not None, nnm.compute, nnm.write,
           nnm.estimate, help="frequency-energy relations of the nonlinear normal modes",
           description=nnm.DESCRIPTION,

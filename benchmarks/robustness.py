@@ -140,6 +140,86 @@ def file_cases(tmp: Path) -> list[tuple[str, str, str, str]]:
     return rows
 
 
+def _test_channels(n: int = 4000, dt: float = 5e-5):
+    """A small valid hammer test: the hammer (a 1 ms half-sine of 500 N at 10 ms) and a triaxial
+    beam accelerometer, as a user's file would hold them."""
+    import numpy as np
+
+    from fem.uff import TimeHistory
+
+    t = np.arange(n) * dt
+    hammer = np.where((t >= 0.01) & (t <= 0.011), 500.0 * np.sin(np.pi * (t - 0.01) / 1e-3), 0.0)
+    acc = [TimeHistory(f"beam_s1:{a}", 1, d, "acceleration", np.sin(2 * np.pi * 731 * t) * np.exp(-3 * t) / d, dt)
+           for d, a in ((1, "x"), (2, "y"), (3, "z"))]
+    return [TimeHistory("hammer", 300, -3, "force", hammer, dt), *acc]
+
+
+def test_file_cases(tmp: Path) -> list[tuple[str, str, str, str]]:
+    """A measured test's file as user input (issue 26): ``hammer --scene hammer-test --test FILE``
+    refused in one line naming the record (or the file, for what concerns it whole), exit 2,
+    nothing written; a case whose message misses its words is "record not named"."""
+    from dataclasses import replace
+
+    from fem.uff import write_uff58
+
+    base = _test_channels()
+    files: dict[str, tuple[object, list[str]]] = {}
+
+    def noisy_double_hit(chs):
+        d = chs[0].data.copy()
+        d[1000:1010] += 150.0
+        return [replace(chs[0], data=d), *chs[1:]]
+
+    cases = {
+        "channels with different sampling": ([*base[:3], replace(base[3], dt_s=1e-4)],
+                                             ["record 4 ('beam_s1:z')", "sampled at 10000 Hz"]),
+        "missing hammer channel": (base[1:], ["no hammer channel"]),
+        "two records for one channel (same name)": ([*base, replace(base[1], node=7)],
+                                                    ["record 5 ('beam_s1:x')", "two records for one channel"]),
+        "two records for one channel (same node and axis)": ([*base, replace(base[3], name="acc z", direction=-3)],
+                                                             ["record 5 ('acc z')", "record 4 ('beam_s1:z')"]),
+        "two hammer channels": ([*base, replace(base[0], name="hammer 2", node=301)],
+                                ["record 5 ('hammer 2')", "second force channel"]),
+        "a channel starting later": ([*base[:2], replace(base[2], t0_s=1e-3), base[3]],
+                                     ["record 3 ('beam_s1:y')", "starts at"]),
+        "a record cut short": ([*base[:3], replace(base[3], data=base[3].data[:3000])],
+                               ["record 4 ('beam_s1:z')", "3000 samples"]),
+        "a double hit": (noisy_double_hit(base), ["record 1 ('hammer')", "double hit"]),
+    }
+    for name, (chs, words) in cases.items():
+        path = tmp / f"{name.replace(' ', '_')}.uff"
+        write_uff58(path, chs)
+        files[name] = (path, words)
+    good = tmp / "good.uff"
+    write_uff58(good, base)
+    cut = tmp / "truncated.uff"
+    cut.write_bytes(good.read_bytes()[: int(0.8 * good.stat().st_size)])
+    files["truncated file"] = (cut, ["truncated"])
+    asc = tmp / "ascii.uff"
+    write_uff58(asc, base, binary=False)
+    text = asc.read_text()
+    units = tmp / "units.uff"  # the y accelerometer's unit label edited to g
+    i = text.index("beam_s1:y")
+    units.write_text(text[:i] + text[i:].replace("m/s^2", "g    ", 1))
+    files["units that do not match"] = (units, ["record 3 (beam_s1:y)", "'g'", "m/s^2"])
+    marked = base[2].data.copy()
+    marked[1234] = 12345.0  # a value whose text is found and replaced (pyuff writes a NaN as 0)
+    write_uff58(asc, [*base[:2], replace(base[2], data=marked), base[3]], binary=False)
+    nan = tmp / "nan.uff"
+    value = "1.23450000000e+04"
+    nan.write_text(asc.read_text().replace(value, "NaN".rjust(len(value)), 1))
+    files["NaN samples"] = (nan, ["record 3 ('beam_s1:y')", "not finite", "t = 0.0617 s"])
+    rows = []
+    for name, (path, words) in files.items():
+        out = tmp / f"out-{path.stem}"
+        rc, err = _cli(["hammer", "--scene", "hammer-test", "--test", str(path), "--out", str(out), "--no-progress"])
+        verdict = _verdict(rc, err, out)
+        if verdict == "refused" and not all(w in err for w in words):
+            verdict = "record not named"
+        rows.append(("test files", name, verdict, err.strip()))
+    return rows
+
+
 def python_api_cases() -> list[tuple[str, str, str, str]]:
     """Python API calls with bad arguments: a ValueError naming the argument, at once."""
     import time
@@ -248,7 +328,8 @@ def cache_cases(tmp: Path) -> list[tuple[str, str, str, str]]:
 def main() -> None:
     OUT.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
-        rows = file_cases(Path(tmp)) + python_api_cases() + cache_cases(Path(tmp)) + mutation_cases()
+        rows = (file_cases(Path(tmp)) + test_file_cases(Path(tmp)) + python_api_cases() + cache_cases(Path(tmp))
+                + mutation_cases())
     # temporary paths differ from run to run: the record keeps what the user would read
     rows = [(c, k, v, re.sub(r"/tmp/[^/ ]+", "<tmp>", m)) for c, k, v, m in rows]
     with open(OUT / "cases.csv", "w", newline="") as fh:
@@ -261,7 +342,8 @@ def main() -> None:
              "Regenerated by `python benchmarks/robustness.py`. A case is refused cleanly when the command",
              "exits 2 with one line on stderr (naming the key), no traceback and no results folder; a corrupt",
              "cache entry is reported in one line and rebuilt (exit 0); a bad Python API argument raises a one-line",
-             "ValueError naming it. Every case is listed in `cases.csv`.", "",
+             "ValueError naming it; a bad test file (`hammer --test`) is refused so and its message names the record.",
+             "Every case is listed in `cases.csv`.", "",
              "| class | cases | refused cleanly |", "|---|---:|---:|"]
     lines += [f"| {c} | {total[c]} | {clean[c]} |" for c in total]
     lines += ["", f"All: {sum(clean.values())} of {sum(total.values())} refused cleanly.", ""]

@@ -128,7 +128,7 @@ def throughput(n_cases: int, repeats: int, tmp: Path) -> list[dict]:
     """The same cases in a loop, on LocalCluster(1) and on LocalCluster(2), each ``repeats`` times
     (the loop and the 1-worker cluster alternating); the best of the repeats (the least disturbed
     by other processes on a shared machine) is reported."""
-    plan = _plan(CASE_SCENE, "speed", f"model.g=1e-4:1e-3:{n_cases}:log")
+    plan = _plan(CASE_SCENE, "speed", f"model.gap=1e-4:1e-3:{n_cases}:log")
     _warm_up()
     run_case(plan.cases[0], str(tmp / "warm"))  # the loop's own warm-up (figures, fonts)
     loop, dask = [], {1: [], 2: []}

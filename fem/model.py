@@ -136,6 +136,8 @@ class AssemblyModel:
                 raise ValueError(f"{f.name} must be a finite number, got {v!r}")
             if f.name != "nu" and not v > 0:
                 raise ValueError(f"{f.name} must be > 0, got {v!r}")
+        if self.element not in ("hex8", "hex20", "hex27"):
+            raise ValueError(f"element must be hex8, hex20 or hex27, got {self.element!r}")
         Material(self.E, self.nu, self.rho)  # validates the material
         self.geometry()  # validates the geometry before any gmsh call
 

@@ -18,6 +18,8 @@ from importlib import import_module
 _PUBLIC = {
     "GapSystem": "reduced.models.gaps",
     "DiscreteParams": "reduced.models.discrete",
+    "DiscreteFrictionParams": "reduced.models.discrete",
+    "Friction": "reduced.models.gaps",
     "linear_modes": "reduced.models.modes",
     "RomSpec": "reduced.models.rom",
     "ReducedModel": "reduced.models.rom",

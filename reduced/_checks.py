@@ -381,6 +381,33 @@ def gap_system(value, name: str = "system"):
     return value
 
 
+def frictionless(system, what: str):
+    """``system``, refused if it has friction, which ``what`` does not treat (it would drop it silently).
+
+    Parameters
+    ----------
+    system : GapSystem
+        The system.
+    what : str
+        The solver, for the message.
+
+    Returns
+    -------
+    GapSystem
+        ``system``.
+
+    Raises
+    ------
+    InvalidArgument
+        The system has friction.
+    """
+    if getattr(system, "friction", None) is not None:
+        raise InvalidArgument(f"the system has friction at its tips, which {what} does not treat yet; run its "
+                              "ringdown (reduced.transient.integrate.ringdown), or drop the friction "
+                              "(system.with_friction(None))")
+    return system
+
+
 def loads(value, n: int, name: str = "loads"):
     """None or a :class:`~reduced.models.loads.Loads` of at least one load on the system's n coordinates.
 

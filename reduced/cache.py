@@ -96,9 +96,31 @@ def _locked(folder: Path) -> Iterator[None]:
         os.close(fd)  # closing releases the lock
 
 
+def current_umask() -> int:
+    """The process's umask, read without changing it (``/proc/self/status``; elsewhere by setting it
+    and putting it back, which another thread creating a file at that moment could notice).
+
+    Returns
+    -------
+    int
+        The mask, e.g. 0o022.
+    """
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 def _write_temp(path: Path, write: Callable[[BinaryIO], None]) -> tuple[Path, str, int]:
-    """Write a uniquely named temporary sibling of ``path``; (its path, sha256 hex, size in bytes)."""
+    """Write a uniquely named temporary sibling of ``path``; (its path, sha256 hex, size in bytes).
+    It gets the mode a plain ``open`` would give (mkstemp's is 0600: colleagues could not read it)."""
     fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.fchmod(fd, 0o666 & ~current_umask())
     tmp = Path(name)
     try:
         with os.fdopen(fd, "w+b") as f:
@@ -334,4 +356,5 @@ def call_numba_kernel(kernel, *args):
     return kernel(*args)
 
 
-__all__ = ["atomic_write", "write_entry", "load_entry", "remove_entry", "manifest_path", "call_numba_kernel"]
+__all__ = ["current_umask", "atomic_write", "write_entry", "load_entry", "remove_entry", "manifest_path",
+           "call_numba_kernel"]

@@ -328,7 +328,7 @@ def discrete_case(base: DiscreteParams) -> CaseFactory:
         raise _refuse("discrete_case", "base", base, "must be a reduced.DiscreteParams")
 
     def make(k_g: float, gap: float, speed: float, c: float):
-        system = replace(base, k_g=k_g, g=gap, c=c).system()
+        system = replace(base, k_g=k_g, gap=gap, c=c).system()
         return system, np.zeros(3), np.array([0.0, 0.0, speed])
 
     return make

@@ -334,3 +334,19 @@ def test_a_corrupt_numba_cache_is_reported_and_recompiled(tmp_path, compiled_ker
     assert err.startswith("numba cache of kernel in ") and err.endswith("; recompiling\n")
     assert err.count("\n") == 1, err
     assert _call_kernel(work) == (0, ["14.0", "1"], "")  # the bad files were rewritten
+
+
+def test_atomic_write_gives_the_mode_of_a_plain_open(tmp_path):
+    """mkstemp's 0600 would hide a results folder's rom.npz from colleagues: the file gets 0666 less the umask."""
+
+    from reduced.cache import atomic_write, current_umask
+
+    old = os.umask(0o027)
+    try:
+        assert current_umask() == 0o027
+        atomic_write(tmp_path / "a.bin", lambda fh: fh.write(b"x"))
+        plain = tmp_path / "b.bin"
+        plain.write_bytes(b"x")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "a.bin").stat().st_mode & 0o777 == plain.stat().st_mode & 0o777 == 0o640

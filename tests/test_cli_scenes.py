@@ -84,7 +84,7 @@ def test_nnm2_csv_of_builtin_scene_spans_the_required_energies(tmp_path):
         ("[model]\nm2 = nan\n", "m2: must be finite"),
         ("[model]\nk_s = 'stiff'\n", "k_s: expected a number"),
         ("[model]\nkind = 'ufo'\n", "unknown model 'ufo'"),
-        ("[model]\ngap = 1.0\n", "unknown key 'gap'"),
+        ("[model]\ng = 1.0\n", "unknown key 'g' (did you mean 'gap'? the key was renamed)"),  # issue 24: one name
         ("[ringdown]\nmethod = 'euler'\n", "method must be one of"),
         ("[ringdown]\nduration_s = -1.0\n", "duration_s must be > 0"),
         ("[ringdown]\nduraton_s = 1.0\n", "unknown key 'duraton_s'"),

@@ -282,3 +282,177 @@ def test_figures_are_written(tmp_path):
     with pytest.raises(ChannelError) as e:
         spectrogram_pair_figure(by["beam_s1:z"], tmp_path / "y.png", window_s=5.0, overlap=0.5, fmax_hz=500.0)
     assert "beam_s1:z" in refusal(e)
+
+
+# --- a test file is user input: its records checked as one test (issue 26) -----------------------
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+from bearingshaft.correlate import (  # noqa: E402
+    NEAR_ZERO,
+    NOISE_FACTOR,
+    channel_floors,
+    check_test_channels,
+    force_window,
+)
+
+CORRUPTIONS = ("nan", "duplicate name", "duplicate axis", "no hammer", "two hammers", "zero hammer", "sampling",
+               "start", "length")
+
+
+@st.composite
+def measured_files(draw):
+    """A valid test's records (a hammer and 1-6 accelerometer axes at distinct nodes and axes), in a random
+    order; the index of the hammer."""
+    n = draw(st.integers(8, 64))
+    dt = draw(st.sampled_from([1e-4, 5e-5, 1.953125e-5]))
+    axes = draw(st.lists(st.tuples(st.integers(1, 6), st.integers(1, 3)), min_size=1, max_size=6, unique=True))
+    rng = np.random.default_rng(draw(st.integers(0, 2**16)))
+    chans = [TimeHistory(f"s{node}:{'xyz'[d - 1]}", node, d * draw(st.sampled_from([1, -1])), "acceleration",
+                         rng.standard_normal(n), dt) for node, d in axes]
+    hammer = np.zeros(n)
+    hammer[n // 4] = draw(st.floats(1.0, 1e4))
+    h = draw(st.integers(0, len(chans)))
+    chans.insert(h, TimeHistory("hammer", 300, -3, "force", hammer, dt))
+    return chans, h
+
+
+@settings(max_examples=60, deadline=None)
+@given(measured_files())
+def test_a_valid_test_file_is_accepted(case):
+    chans, h = case
+    assert check_test_channels(chans) == h
+
+
+@settings(max_examples=150, deadline=None)
+@given(measured_files(), st.sampled_from(CORRUPTIONS), st.integers(0, 2**16))
+def test_a_corrupt_test_file_is_refused_in_one_line_naming_the_record(case, kind, seed):
+    """Each corruption of one record of a valid test is refused (ChannelError, one line) naming that
+    record as the file numbers it (1-based), with the word that says what is wrong."""
+    chans, h = case
+    rng = np.random.default_rng(seed)
+    others = [k for k in range(len(chans)) if k != h]
+    k = int(rng.choice(others))
+    c = chans[k]
+    needles = [f"record {k + 1} ({c.name!r})"]
+    if kind == "nan":
+        data = c.data.copy()
+        data[int(rng.integers(c.data.size))] = [np.nan, np.inf, -np.inf][int(rng.integers(3))]
+        chans[k] = replaced(c, data=data)
+        needles.append("not finite")
+    elif kind == "duplicate name":
+        chans.insert(k + 1, replaced(c, node=c.node + 100))
+        needles = [f"record {k + 2} ({c.name!r})", f"record {k + 1} is named", "two records for one channel"]
+    elif kind == "duplicate axis":
+        chans.insert(k + 1, replaced(c, name="again", direction=-c.direction))
+        needles = [f"record {k + 2} ('again')", f"record {k + 1} ({c.name!r})", "two records for one channel"]
+    elif kind == "no hammer":
+        del chans[h]
+        needles = ["no hammer channel", "force"]
+    elif kind == "two hammers":
+        chans[k] = replaced(c, quantity="force")
+        j = max(h, k)
+        needles = [f"record {j + 1}", "second force channel", f"record {min(h, k) + 1} is one"]
+    elif kind == "zero hammer":
+        chans[h] = replaced(chans[h], data=np.zeros(chans[h].data.size))
+        needles = [f"record {h + 1} ('hammer')", "zero throughout"]
+    elif kind == "sampling":
+        chans[k] = replaced(c, dt_s=c.dt_s * 2)
+        needles += ["sampled at", "Hz, the hammer channel"]
+    elif kind == "start":
+        chans[k] = replaced(c, t0_s=c.t0_s + 3 * c.dt_s)
+        needles += ["starts at", "start together"]
+    else:
+        chans[k] = replaced(c, data=c.data[:-1])
+        needles += [f"has {c.data.size - 1} samples", "cut short"]
+    with pytest.raises(ChannelError) as e:
+        check_test_channels(chans)
+    msg = refusal(e)
+    for needle in needles:
+        assert needle in msg, (kind, msg)
+
+
+def _half_sine(n=2000, dt=1e-5, start=500, width=100, peak=500.0):
+    t = np.arange(n) * dt
+    f = np.zeros(n)
+    k = np.arange(width + 1)
+    f[start:start + width + 1] = peak * np.sin(np.pi * k / width)
+    return t, f
+
+
+def test_force_window_keeps_the_pulse_and_zeroes_the_rest():
+    """A 1 ms half-sine of 500 N sampled at 100 kHz with 0.5 % noise and a 2 N offset: the pulse is
+    the run of samples above 2 % of the peak (sin(pi k / 100) >= 0.02: k = 1 .. 99, noise of 2.5 N
+    moves an edge by at most a sample), kept as recorded less the offset; a half-cosine over the
+    1 ms margins; zero outside."""
+    t, f = _half_sine()
+    rng = np.random.default_rng(1)
+    noisy = f + 2.0 + 2.5 * rng.standard_normal(f.size)
+    w = force_window(TimeHistory("hammer", 300, -3, "force", noisy, 1e-5), 1e-3)
+    assert w.offset_N == pytest.approx(2.0, abs=0.2)  # the median of 1900 noise samples: 2.5 N / sqrt(1900) x 1.25
+    assert w.noise_N == pytest.approx(2.5, rel=0.1)  # 1.4826 MAD of Gaussian noise
+    a, b = (round(x / 1e-5) for x in w.pulse_s)
+    assert abs(a - 501) <= 1 and abs(b - 599) <= 1
+    out = w.channel.data
+    np.testing.assert_array_equal(out[a:b + 1], noisy[a:b + 1] - w.offset_N)
+    m = 100  # the margin in samples
+    assert np.all(out[:a - m] == 0.0) and np.all(out[b + m + 1:] == 0.0)
+    taper = 0.5 * (1 + np.cos(np.pi * np.arange(1, m + 1) / (m + 1)))
+    np.testing.assert_allclose(out[b + 1:b + m + 1], (noisy[b + 1:b + m + 1] - w.offset_N) * taper, rtol=1e-15)
+    assert w.window_s == pytest.approx((t[a - m], t[b + m]))
+    assert "force window" in w.describe() and "\n" not in w.describe()
+
+
+def test_a_second_blow_outside_the_window_is_refused():
+    t, f = _half_sine()
+    f[1500:1520] += 200.0  # a double hit 10 ms later, 40 % of the peak
+    with pytest.raises(ChannelError) as e:
+        force_window(TimeHistory("hammer", 300, -3, "force", f, 1e-5), 1e-3, source="'x.uff' record 3 ('hammer')")
+    msg = refusal(e)
+    assert "'x.uff' record 3 ('hammer')" in msg and "double hit" in msg and "t = 0.015 s" in msg
+    w = force_window(TimeHistory("hammer", 300, -3, "force", f, 1e-5), 1e-3, double_hit=False)
+    assert w.pulse_s == pytest.approx((5.01e-3, 5.99e-3))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(100, 1500), st.integers(4, 200), st.floats(0.0, 0.01), st.floats(0.0, 2e-3), st.integers(0, 99))
+def test_force_window_property(start, width, noise, margin, seed):
+    """Whatever the pulse, the noise (up to 1 % of the peak) and the margin: the windowed force is the
+    recorded one less the offset over the pulse, and exactly zero farther than the margin from it."""
+    t, f = _half_sine(start=start, width=width)
+    f = f + noise * 500.0 * np.random.default_rng(seed).standard_normal(f.size)
+    w = force_window(TimeHistory("hammer", 300, -3, "force", f, 1e-5), margin, double_hit=False)
+    a, b = (round(x / 1e-5) for x in w.pulse_s)
+    assert a <= start + width // 2 <= b  # the peak is inside
+    np.testing.assert_array_equal(w.channel.data[a:b + 1], f[a:b + 1] - w.offset_N)
+    m = int(np.ceil(margin / 1e-5 - 1e-9))
+    assert np.all(w.channel.data[:max(a - m, 0)] == 0.0) and np.all(w.channel.data[b + m + 1:] == 0.0)
+
+
+def test_floors_judge_a_zero_axis_against_its_sensor_and_the_noise():
+    """rms(m - x) / max(rms_x, floor): the y axis of a sensor (1e-5 of its z) against 1 % of z; a
+    channel whose signal is below 3 x its noise before the blow against that."""
+    t = np.arange(N) * DT
+    sig = np.where(t > 0.1, np.sin(2 * np.pi * 50 * t), 0.0)
+    noise = 1e-3 * np.random.default_rng(2).standard_normal(N)
+    z = TimeHistory("a:z", 1, 3, "acceleration", sig, DT)
+    y = TimeHistory("a:y", 1, 2, "acceleration", 1e-5 * sig, DT)
+    c = TimeHistory("c:z", 2, 3, "acceleration", 1e-4 * sig + noise, DT)
+    model = [z, replaced(y, data=2e-5 * sig), replaced(c, data=np.zeros(N))]
+    pairs = match_channels(model, [z, y, c])
+    floors = channel_floors(pairs, noise_s=(0.0, 0.1))
+    rms_z = correlate_rms(sig)
+    assert floors["a:y"] == (pytest.approx(NEAR_ZERO * rms_z, rel=1e-12), "sensor")
+    assert floors["c:z"][1] == "noise"
+    assert floors["c:z"][0] == pytest.approx(NOISE_FACTOR * correlate_rms(noise[t <= 0.1]), rel=1e-9)
+    rows = {r["name"]: r for r in channel_errors(pairs, floors=floors)}
+    assert rows["a:z"]["rms_rel_error"] == 0.0 and rows["a:z"]["judged_against"] == "itself"
+    # the model's y is twice the test's: the error is rms(1e-5 sig) / (0.01 rms(sig)) = 1e-3, not 100 %
+    assert rows["a:y"]["rms_rel_error"] == pytest.approx(1e-3, rel=1e-9)
+    assert rows["a:y"]["judged_against"] == "sensor"
+    assert rows["c:z"]["judged_against"] == "noise" and rows["c:z"]["rms_rel_error"] < 1.0
+
+
+def correlate_rms(y):
+    return float(np.sqrt(np.mean(np.square(y))))

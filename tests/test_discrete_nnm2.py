@@ -36,7 +36,7 @@ def test_closed_gap_antisymmetric_mode():
 
 
 def test_energy_and_amplitude_are_inverse():
-    x0 = np.array([0.5, 1.0, 1.0001, 3.0, 100.0]) * P.g
+    x0 = np.array([0.5, 1.0, 1.0001, 3.0, 100.0]) * P.gap
     E = nnm2.energy_from_amplitude(P, x0)
     assert np.allclose(nnm2.amplitude_from_energy(P, E), x0, rtol=1e-13)
     x = np.array([x0[3], 0.0, -x0[3]])
@@ -46,7 +46,7 @@ def test_energy_and_amplitude_are_inverse():
 @pytest.mark.parametrize("chi", [1.0 + 1e-6, 1.0001, 1.01, 2.0, 100.0])
 def test_exact_relation_matches_integrated_period(chi):
     # DOP853 (rtol 1e-13, restarted at each stop crossing) on the full Eq. 9: ~1e-13 accurate
-    x0 = chi * P.g
+    x0 = chi * P.gap
     T_int = nnm2.period_by_integration(P, x0)
     assert nnm2.period_from_amplitude(P, x0) == pytest.approx(T_int, rel=1e-11)
 
@@ -54,7 +54,7 @@ def test_exact_relation_matches_integrated_period(chi):
 def test_paper_eq13_is_off_near_grazing():
     # The printed Eq. 13 drops the "- 1" under the root: 1.3 % off just above grazing,
     # exact only in the limit of deep contact.
-    x0 = (1.0 + 1e-6) * P.g
+    x0 = (1.0 + 1e-6) * P.gap
     T_int = nnm2.period_by_integration(P, x0)
     err = nnm2.period_from_amplitude(P, x0, paper=True) / T_int - 1
     assert err == pytest.approx(-0.01276, abs=5e-4)  # regression guard: period 1.28 % short, frequency 1.29 % high
@@ -64,7 +64,7 @@ def test_paper_eq13_is_off_near_grazing():
     K = P.k_g / (2 * P.k_s)
     w0 = np.sqrt(2 * P.k_s / P.m1)
     wc = w0 * np.sqrt(1 + K)
-    R = x0 / P.g * (1 + K) - K
+    R = x0 / P.gap * (1 + K) - K
     T_printed = 4 / wc * np.arccos(1 / R) + 4 / w0 * np.arctan(np.sqrt(1 + K) / R)
     assert T_printed / T_int - 1 == pytest.approx(err, rel=1e-9)
     # ... and the grazing limit in closed form: as x0 -> g the true period tends to 2 pi / omega_0 while
@@ -72,12 +72,12 @@ def test_paper_eq13_is_off_near_grazing():
     # (2 / pi) atan(1 / sqrt(1 + K)) = 1.363 % (K = 2181); at x0 = (1 + 1e-6) g, R - 1 = 2.2e-3, the
     # contact time (its own error there) takes 0.09 % back: -1.276 %, between the limit and 0
     limit = -2 / np.pi * np.arctan(1 / np.sqrt(1 + K))
-    near = (1.0 + 1e-13) * P.g  # R - 1 = 2e-10
+    near = (1.0 + 1e-13) * P.gap  # R - 1 = 2e-10
     assert nnm2.period_from_amplitude(P, near, paper=True) * w0 / (2 * np.pi) - 1 == pytest.approx(limit, rel=1e-4)
     assert nnm2.period_from_amplitude(P, near) * w0 / (2 * np.pi) - 1 == pytest.approx(0.0, abs=1e-4)
     assert limit < err < 0.0
-    assert nnm2.period_from_amplitude(P, 1e3 * P.g, paper=True) == pytest.approx(
-        nnm2.period_from_amplitude(P, 1e3 * P.g), rel=1e-12)
+    assert nnm2.period_from_amplitude(P, 1e3 * P.gap, paper=True) == pytest.approx(
+        nnm2.period_from_amplitude(P, 1e3 * P.gap), rel=1e-12)
 
 
 def test_relation_limits():
@@ -86,16 +86,16 @@ def test_relation_limits():
     fc = np.sqrt((2 * P.k_s + P.k_g) / P.m1) / (2 * np.pi)
     assert f[0] == pytest.approx(f0, rel=1e-14) and f[1] == pytest.approx(f0, rel=1e-12)
     assert f[2] == pytest.approx(fc, rel=1e-3)
-    f_zero_gap = nnm2.frequency_from_energy(replace(P, g=0.0), np.array([1.0]))
+    f_zero_gap = nnm2.frequency_from_energy(replace(P, gap=0.0), np.array([1.0]))
     assert f_zero_gap[0] == pytest.approx(fc, rel=1e-14)
 
 
 def test_unequal_outer_masses_refused():
     with pytest.raises(ValueError, match="m1 == m3"):
-        nnm2.period_from_amplitude(replace(P, m3=0.7), 2 * P.g)
+        nnm2.period_from_amplitude(replace(P, m3=0.7), 2 * P.gap)
 
 
-@pytest.mark.parametrize("field, value", [("m1", -1.0), ("k_s", 0.0), ("g", -1e-4), ("c", float("nan")),
+@pytest.mark.parametrize("field, value", [("m1", -1.0), ("k_s", 0.0), ("gap", -1e-4), ("c", float("nan")),
                                           ("kappa", float("inf"))])
 def test_invalid_parameters_refused(field, value):
     with pytest.raises(ValueError, match=field):

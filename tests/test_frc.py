@@ -40,7 +40,7 @@ def oscillator(c: float = 2.5, gap: float = 1e-3) -> GapSystem:
 # -- the linear limit -------------------------------------------------------------------------------
 def test_hb_equals_the_linear_frf_when_the_stops_never_close():
     # a gap of 1 m is never reached: HB with one harmonic is the FRF |(K - w^2 M + i w C)^-1 b P|
-    s = DiscreteParams(g=1.0).system()
+    s = DiscreteParams(gap=1.0).system()
     br = frc(s, B2, 2.0, 10.0, 900.0, H=1, stability=False)
     ref = linear_frf(s, B2, 2.0, br.freq_hz)
     err = np.max(np.abs(br.amplitude_m / ref - 1.0))
@@ -51,7 +51,7 @@ def test_hb_equals_the_linear_frf_when_the_stops_never_close():
 
 
 def test_more_harmonics_change_nothing_on_a_linear_curve():
-    s = DiscreteParams(g=1.0).system()
+    s = DiscreteParams(gap=1.0).system()
     br = frc(s, B2, 1.0, 15.0, 30.0, H=7, stability=False)
     assert np.max(np.abs(br.amplitude_m / linear_frf(s, B2, 1.0, br.freq_hz) - 1.0)) < 1e-10
 
@@ -62,7 +62,7 @@ def test_exact_projection_is_the_limit_of_aft(H):
     # AFT of a kinked force errs like N^-2: the exact projection is its limit
     rng = np.random.default_rng(H)
     ex = ExactGapBalance.for_system(P.system(), H, damped=True)
-    X = 5 * P.g * rng.standard_normal(ex.size) / np.arange(1, ex.size + 1)
+    X = 5 * P.gap * rng.standard_normal(ex.size) / np.arange(1, ex.size + 1)
     F = ex.aft(X)[0]
     Ns = [2**10, 2**12, 2**14]
     errs = [np.max(np.abs(HarmonicBalance.for_system(P.system(), H, N).aft(X)[0] - F)) / np.max(np.abs(F))
@@ -75,9 +75,9 @@ def test_exact_projection_is_the_limit_of_aft(H):
 def test_exact_projection_jacobian_matches_finite_differences():
     rng = np.random.default_rng(3)
     ex = ExactGapBalance.for_system(P.system(), 4, damped=True)
-    X = 5 * P.g * rng.standard_normal(ex.size) / np.arange(1, ex.size + 1)
+    X = 5 * P.gap * rng.standard_normal(ex.size) / np.arange(1, ex.size + 1)
     F, dF = ex.aft(X)
-    h = 1e-9 * P.g
+    h = 1e-9 * P.gap
     J = np.column_stack([(ex.aft(X + h * e)[0] - ex.aft(X - h * e)[0]) / (2 * h) for e in np.eye(ex.size)])
     # no kinks to step over: the exact projection is C^1 in X (round-off of F / h ~ 1e-7)
     assert np.max(np.abs(J - dF)) / np.max(np.abs(dF)) < 5e-6
@@ -108,7 +108,7 @@ def test_condensed_balance_solves_the_full_balance():
     F_ext[1] = B2
     R = ex.residual(X.ravel(), w)[0] - F_ext.ravel()
     assert np.max(np.abs(R)) < 1e-9  # N, against a 1 N load
-    assert np.max(max_abs_over_period(X, P.system().B)) > P.g  # in contact: the test means something
+    assert np.max(max_abs_over_period(X, P.system().B)) > P.gap  # in contact: the test means something
 
 
 def test_condensed_jacobian_matches_finite_differences():
@@ -212,7 +212,7 @@ def test_forced_hill_on_a_linear_orbit_is_the_damped_modes():
     # linear system: the multipliers are exp(lam_r T) of the damped modes, whatever the forcing.
     # Hill folds an exponent into the first zone only if H Omega exceeds its frequency: the
     # 700 Hz mode at 30 Hz needs H >= 24
-    s = DiscreteParams(g=1.0).system()
+    s = DiscreteParams(gap=1.0).system()
     br = frc(s, B2, 1.0, 30.0, 31.0, H=25, stability=True, hill_points=None)
     A = np.block([[np.zeros((3, 3)), np.eye(3)], [-np.linalg.solve(s.M, s.K), -np.linalg.solve(s.M, s.C)]])
     lam = np.linalg.eigvals(A)
@@ -249,7 +249,7 @@ def test_peaks_approach_the_backbone_as_damping_and_load_vanish_together():
 
 # -- the stepped sine ------------------------------------------------------------------------------------
 def test_stepped_sine_of_a_linear_system_is_the_frf():
-    s = DiscreteParams(g=1.0).system()
+    s = DiscreteParams(gap=1.0).system()
     f = np.array([12.0, 17.9, 25.0, 700.0])
     ss = stepped_sine(s, B2, 1.0, f, settle_tol=1e-8)
     assert all(r == "periodic" for r in ss.response)
@@ -312,7 +312,8 @@ def _quick_scene() -> str:
     data = tomllib.loads((resources.files("bearingshaft") / "scenes" / "discrete-frc.toml").read_text("utf-8"))
     data["frc"].update({"levels_N": [1.0], "freq_max_hz": 40.0, "harmonics": 3,
                         "convergence_harmonics": [1, 3], "hill_points": 3, "shooting_points": 2,
-                        "stepped_sine_points": 6, "stepped_sine_max_s": 9.0, "backbone_scales": [1.0]})
+                        "stepped_sine_points": 6, "stepped_sine_max_s": 9.0, "backbone_scales": [1.0],
+                        "map_step_hz": 0.0})  # the response map: tests/test_response_map.py
     return tomli_w.dumps(data)
 
 
@@ -357,7 +358,7 @@ def test_frc_stage_writes_its_files_and_reruns_byte_for_byte(tmp_path, monkeypat
     # shooting finds the symmetric contact orbit unstable. HB against the exact flow in contact, and a
     # settled exact response in contact compared with HB (10 N, 12.25 Hz, where a stable symmetric
     # contact orbit exists), are in test_frc_contact.py.
-    g = P.g
+    g = P.gap
     touching = [r for r in sweep if max(float(r["amplitude_x1_m"]), float(r["amplitude_x3_m"])) > g]
     assert len(touching) >= 2, "the sweeps never reach contact: the checks below would be empty"
     for r in touching:

@@ -51,7 +51,7 @@ from reduced.transient.integrate import ringdown
 
 P = DiscreteParams()
 S = P.system()
-G = P.g
+G = P.gap
 B2 = np.array([0.0, 1.0, 0.0])  # the load at x2
 H_CURVE = 15  # the continued curves' H (the discrete-frc scene's)
 H_LOW, H_HIGH = 127, 255  # HB at the frequency: the change from H_LOW to H_HIGH bounds H_HIGH's error

@@ -57,7 +57,7 @@ def test_residual_jacobian_matches_finite_differences(H):
     # a generic point in contact: random coefficients of a few gaps, well off every kink
     rng = np.random.default_rng(H)
     hb = HarmonicBalance.for_system(SYS, H)
-    X = 5 * P.g * rng.standard_normal(hb.size) / np.arange(1, hb.size + 1)
+    X = 5 * P.gap * rng.standard_normal(hb.size) / np.arange(1, hb.size + 1)
     omega = 900.0
     R, J, dRdw = hb.residual(X, omega)
     y = np.append(X, omega)

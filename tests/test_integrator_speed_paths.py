@@ -125,7 +125,7 @@ def test_densely_sampled_runs_keep_the_energy_balance_at_every_sample(case):
         system, x0, v0 = P.system(), *IMPULSE
     elif case == "graze":  # the antisymmetric NNM just above grazing: contacts of ~1e-5 of a period
         p = replace(P, c=0.0)
-        x0 = P.g * (1 + 1e-9)
+        x0 = P.gap * (1 + 1e-9)
         system, x0, v0 = p.system(), np.array([x0, 0.0, -x0]), np.zeros(3)
         T, fs = 0.08, 2e5  # 4 half periods: enter and leave at both tips in each
     elif case == "soft-damped":

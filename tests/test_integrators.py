@@ -72,7 +72,7 @@ def test_exact_sdnd101_closed_form():
 @pytest.mark.parametrize("mode", [0, 1, 2])
 def test_exact_pure_mode_is_a_damped_cosine(mode):
     # Equal masses make C = c I mass-proportional, so modes decouple; a wide gap keeps it linear.
-    p = replace(P, m2=P.m1, m3=P.m1, g=1e-2, c=4.0)
+    p = replace(P, m2=P.m1, m3=P.m1, gap=1e-2, c=4.0)
     sys = p.system()
     lm = linear_modes(sys, "open")
     phi, w = lm.phi[:, mode], lm.omega[mode]
@@ -241,7 +241,7 @@ def test_grazing_touch_is_not_missed():
     # would leave the stop force off and change the period by ~1e-6 relative.
     from reduced.periodic import nnm2
 
-    x0 = P.g * (1 + 1e-9)
+    x0 = P.gap * (1 + 1e-9)
     p = replace(P, c=0.0)
     T = nnm2.period_from_amplitude(p, x0)
     res = ringdown(p.system(), np.array([x0, 0, -x0]), np.zeros(3), 3 * T, 2000.0, "exact")
@@ -258,7 +258,7 @@ def test_grazing_touch_is_not_missed():
 )
 def test_exact_energy_balance_any_velocity(speed, gap, k_g, c):
     # A crossing stepped over would leave penalty energy unpaid for: E(0) != E(t) + W(t).
-    p = replace(P, g=gap, k_g=k_g, c=c)
+    p = replace(P, gap=gap, k_g=k_g, c=c)
     res = ringdown(p.system(), np.zeros(3), np.array([0.0, 0.0, speed]), 0.01, 20000.0, "exact")
     assert res.energy_balance_error < 1e-9
 
@@ -361,7 +361,7 @@ def test_spectrogram_of_a_long_record_keeps_every_kth_frame():
 # -- largest Lyapunov exponent against known exponents ------------------------------------------------
 def _linear(c: float):
     # equal masses and C = c I: every mode decays at c / (2 m); a 10 km gap is never reached
-    p = replace(P, m2=P.m1, m3=P.m1, g=1e4, c=max(c, 0.0))
+    p = replace(P, m2=P.m1, m3=P.m1, gap=1e4, c=max(c, 0.0))
     sys = p.system()
     if c < 0:
         sys = replace(sys, C=c * np.eye(3))

@@ -111,8 +111,10 @@ def test_peak_memory_does_not_grow_with_duration(tmp_path, method):
     fs, chunk = 200_000.0, 1000
     for duration in (0.02, 0.04):  # compile and warm caches first
         ringdown(sys, *IMPULSE, duration, fs, method, out=tmp_path / "w.npz", chunk_samples=chunk)
-    peaks = [_traced_peak(lambda d=d: ringdown(sys, *IMPULSE, d, fs, method, out=tmp_path / "r.npz",
-                                               chunk_samples=chunk)) for d in (0.04, 0.08)]
+    # the least of two runs of each: a one-time allocation of the process (numba reloading a kernel's cache
+    # that a test in another worker process rewrote) is not the run's; growth with the duration recurs
+    peaks = [min(_traced_peak(lambda d=d: ringdown(sys, *IMPULSE, d, fs, method, out=tmp_path / "r.npz",
+                                                   chunk_samples=chunk)) for _ in range(2)) for d in (0.04, 0.08)]
     assert peaks[1] < 1.2 * peaks[0], f"peak grew from {peaks[0]} to {peaks[1]} bytes"  # measured 0.9986-1.0001
     # No absolute bound on the traced peak (it was < 2e6 bytes): it moves with numpy's and numba's
     # internals and is a clock-like number of the machine. What keeps the streamed peak independent
@@ -144,10 +146,11 @@ def test_peak_memory_does_not_grow_with_duration(tmp_path, method):
 
 
 def test_estimates_of_memory_and_disk(tmp_path):
-    # a 1e4 s run at 20 kHz: 2e8 samples, 14.4 GB on disk, a few MB of memory when streamed
+    # a 1e4 s run at 20 kHz: 2e8 samples, 25.6 GB on disk (t, x, v, E, W, 4 stop forces, a: 16 floats a
+    # sample), a few MB of memory when streamed
     N = 200_000_001
     disk = ringdown_disk_bytes(3, 1e4, 20000.0)
-    assert disk == pytest.approx(8 * 9 * N, rel=1e-6)
+    assert disk == pytest.approx(8 * 16 * N, rel=1e-6)
     assert ringdown_peak_bytes(3, 1e4, 20000.0, streamed=True) < 64 * 2**20
     assert ringdown_peak_bytes(3, 1e4, 20000.0, streamed=False) > 8 * 8 * N
     assert default_chunk_samples(3) * 8 * 8 <= 8 * 2**20 + 64
@@ -432,8 +435,9 @@ def test_stage_estimate_bounds_the_stage_and_does_not_grow_with_duration(tmp_pat
     a, b = stage_estimate(short, 3), stage_estimate(long_, 3)
     # bounded: once a run is longer than a chunk, the estimate no longer grows
     assert a["memory"] < stage_estimate(mid, 3)["memory"] == b["memory"] < 200 * 2**20
-    # 1e4 s at 20 kHz: 14.4 GB of ringdown.npz and 3.2 GB of temporary |x1 - x3| for two methods
-    assert b["disk"] == pytest.approx(8 * 9 * 200_000_001 + 2 * 8 * 200_000_001, rel=1e-6)
+    # 1e4 s at 20 kHz: 25.6 GB of ringdown.npz (16 floats a sample: t, x, v, E, W, 4 stop forces, a) and
+    # 3.2 GB of temporary |x1 - x3| for two methods
+    assert b["disk"] == pytest.approx(8 * 16 * 200_000_001 + 2 * 8 * 200_000_001, rel=1e-6)
     rom = load_scene("rom-impulse")  # the reference check holds the run and four exact streams
     assert stage_estimate(rom, 12)["memory"] > stage_estimate(rom, 12, method="exact")["memory"]
     # it bounds what the stage holds (tracemalloc, this short scene: about 10-30 MB)

@@ -131,6 +131,7 @@ def test_eight_processes_writing_one_folder(tmp_path):
         assert p.returncode == 0, err
         assert err.strip() == ""
     assert _consistent(out) in {0.01 + 0.001 * i for i in range(8)}
+    assert not list(tmp_path.glob(".*.lock")), "a lock file stayed behind"
 
 
 def test_threads_writing_one_folder(tmp_path):
@@ -155,6 +156,24 @@ def test_threads_writing_one_folder(tmp_path):
     prov = json.loads((out / "provenance.json").read_text())
     assert set(prov["stages"]) == {"ringdown", "nnm"}
     _consistent(out)
+    assert not list(tmp_path.glob(".*.lock")), "a lock file stayed behind"
+
+
+@pytest.mark.parametrize("mask", [0o022, 0o027, 0o002])
+def test_results_folder_honours_the_umask(tmp_path, mask):
+    """The folder and every file get 0777 / 0666 less the user's umask (mkdtemp alone gives drwx------),
+    and no lock file stays beside them."""
+    out = tmp_path / "res"
+    code = ("import os, sys; os.umask(int(sys.argv[1], 8)); from bearingshaft.cli import main; "
+            "sys.exit(main(sys.argv[2:]))")
+    proc = subprocess.run([sys.executable, "-c", code, oct(mask), "ringdown", "--scene",
+                           str(_scene(tmp_path, 0.01)), "--out", str(out), "--no-progress"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert out.stat().st_mode & 0o777 == 0o777 & ~mask
+    for f in out.iterdir():
+        assert f.stat().st_mode & 0o777 == 0o666 & ~mask, f.name
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["case.toml", "res"]
 
 
 def _refused(args: list[str], capsys) -> str:

@@ -196,7 +196,7 @@ def test_rom_file_round_trip(tmp_path, rom5):
     m = back.dof_map
     assert np.array_equal(np.bincount(m["interface_row"]), [30, 30])
     assert np.allclose(m["interface_weight"], 1 / 30) and np.all(m["interface_dof"] < 2511)
-    other = back.with_contact(RomSpec(k_g=1e9, gap=0.0, c_points=0.0))
+    other = back.with_contact(RomSpec(k_g=1e9, gap=0.0, c_points=0.0, modal_damping=(0.0,)))
     assert other.system().k[0] == 1e9 and not np.any(other.C)
     (tmp_path / "bad.npz").write_bytes(b"not a file")
     with pytest.raises(ValueError, match="not a reduced model"):

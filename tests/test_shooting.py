@@ -18,12 +18,12 @@ FLOW = Flow(SYS)
 
 
 def test_monodromy_matches_finite_differences():
-    x0 = np.array([7.0 * P.g, 0.3 * P.g, -5.0 * P.g])
+    x0 = np.array([7.0 * P.gap, 0.3 * P.gap, -5.0 * P.gap])
     v0 = np.array([0.1, -0.2, 0.05])
     T = 0.0123
     r = FLOW(x0, v0, T, jacobian=True)
     assert r.n_events > 4
-    h = np.concatenate([np.full(3, 1e-6 * P.g), np.full(3, 1e-6)])
+    h = np.concatenate([np.full(3, 1e-6 * P.gap), np.full(3, 1e-6)])
     Jf = np.zeros((6, 6))
     for i in range(6):
         e = np.zeros(6)
@@ -35,7 +35,7 @@ def test_monodromy_matches_finite_differences():
 
 
 def test_flow_agrees_with_exact_integrator():
-    x0 = np.array([3.0 * P.g, 0.0, -0.5 * P.g])  # generic: no stop touched at t = 0
+    x0 = np.array([3.0 * P.gap, 0.0, -0.5 * P.gap])  # generic: no stop touched at t = 0
     v0 = np.array([0.0, 0.5, 0.0])
     res = integrate_exact(SYS, x0, v0, 0.01, 1e4)
     r = FLOW(x0, v0, float(res.t[-1]))
@@ -44,7 +44,7 @@ def test_flow_agrees_with_exact_integrator():
 
 @pytest.mark.parametrize("chi", [1.5, 10.0, 300.0])
 def test_nnm2_shooting_matches_exact_period(chi):
-    x0 = chi * P.g
+    x0 = chi * P.gap
     E = float(nnm2.energy_from_amplitude(P, x0))
     T_exact = float(nnm2.period_from_amplitude(P, x0))
     # start 3 % off in period and 1 % in shape: Gauss-Newton must find the orbit
@@ -60,7 +60,7 @@ def test_nnm2_shooting_matches_exact_period(chi):
 def test_linear_orbits_have_unit_multipliers():
     lin = linear_modes(SYS)
     for k in range(3):
-        x0 = 0.2 * P.g * lin.phi[:, k] / np.abs(lin.phi[:, k]).max()
+        x0 = 0.2 * P.gap * lin.phi[:, k] / np.abs(lin.phi[:, k]).max()
         E = float(SYS.energy(x0, np.zeros(3)))
         orb = shoot(FLOW, x0, np.zeros(3), 1.0 / lin.freq_hz[k], E)
         assert orb.freq_hz == pytest.approx(lin.freq_hz[k], rel=1e-13)

@@ -35,7 +35,7 @@ def toy_rom(c: float = 4.0) -> ReducedModel:
     M, K = P.system().M[np.ix_(order, order)], P.system().K[np.ix_(order, order)]
     Pm = np.eye(3)[:, order]  # x_points = Pm q
     C = c * Pm.T @ Pm
-    return ReducedModel(M, K, C, Pm, np.array([1000.0]), P.k_g, P.g, ("x1", "x3", "eta1"))
+    return ReducedModel(M, K, C, Pm, np.array([1000.0]), P.k_g, P.gap, ("x1", "x3", "eta1"))
 
 
 ROMS = {1: toy_rom(), 2: toy_rom()}

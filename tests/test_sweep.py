@@ -1,7 +1,7 @@
 """Sweeps on Dask (issue 13): the design, refusals before anything runs, closed-form metrics of a
 linear sweep, resume, failures as rows, and a worker killed mid-sweep.
 
-The closed form: with the gaps far away (g = 1 m, amplitudes of 1 mm) the 3-DOF model is
+The closed form: with the gaps far away (gap = 1 m, amplitudes of 1 mm) the 3-DOF model is
 linear, and x(0) = [d, 0, -d], v(0) = 0 starts its antisymmetric mode alone (m1 = m3, C = c I:
 the mode decouples). Its coordinate q = x1 = -x3 obeys m1 q'' + c q' + 2 k_s q = 0, so x1 rings at
 f_d = sqrt(2 k_s / m1 - sigma^2) / (2 pi), sigma = c / (2 m1), in every window, and its energy
@@ -43,7 +43,7 @@ LINEAR = f"""
 description = "linear antisymmetric mode"
 [model]
 kind = "discrete"
-g = 1.0
+gap = 1.0
 [initial]
 x0_m = [{D}, 0.0, {-D}]
 [ringdown]
@@ -78,7 +78,7 @@ def client():
 
 # -- the design --------------------------------------------------------------------------------
 @pytest.mark.parametrize("text, values", [
-    ("model.g=1e-4:1e-3:3:log", (1e-4, 10**-3.5, 1e-3)),
+    ("model.gap=1e-4:1e-3:3:log", (1e-4, 10**-3.5, 1e-3)),
     ("model.k_g=1e7,1e8", (1e7, 1e8)),
     ("model.c=0:8:5", (0, 2, 4, 6, 8)),  # integer ends: integers (the parser takes them for a float key)
     ("model.c=0.0:8.0:5", (0.0, 2.0, 4.0, 6.0, 8.0)),
@@ -138,22 +138,22 @@ def test_any_vary_text_parses_or_is_refused_in_one_line(text):
 
 # -- refusals: one line, exit 2, before anything runs -------------------------------------------
 @pytest.mark.parametrize("argv, expected", [
-    (["--vary", "model.gap=1e-4,2e-4"], "[model]: unknown key 'gap'"),
-    (["--vary", "model.g=-1e-3,1e-3"], "g must be >= 0, got -0.001"),
+    (["--vary", "model.g=1e-4,2e-4"], "[model]: unknown key 'g' (did you mean 'gap'? the key was renamed)"),
+    (["--vary", "model.gap=-1e-3,1e-3"], "gap must be >= 0, got -0.001"),
     (["--vary", "modle.g=1e-4"], "unknown table 'modle' (did you mean 'model'?)"),
-    (["--vary", "model.g=1e-4", "--design", "grd"], "unknown design 'grd' (did you mean 'grid'?)"),
-    (["--vary", "model.g=1e-4,2e-4", "--vary", "model.k_g=1e7", "--design", "zip"], "every key needs as many"),
-    (["--vary", "model.g=1e-4,2e-4", "--design", "random", "--samples", "4"], "the random design samples a range"),
-    (["--vary", "model.g=1e-4:1e-3", "--design", "grid"], "needs the values"),
-    (["--vary", "model.g=1e-4:1e-3:0"], "number of values must be an integer >= 1"),
-    (["--vary", "model.g=1e-4:1e-3:4:log", "--vary", "model.g=1e-4"], "model.g: the key is varied twice"),
+    (["--vary", "model.gap=1e-4", "--design", "grd"], "unknown design 'grd' (did you mean 'grid'?)"),
+    (["--vary", "model.gap=1e-4,2e-4", "--vary", "model.k_g=1e7", "--design", "zip"], "every key needs as many"),
+    (["--vary", "model.gap=1e-4,2e-4", "--design", "random", "--samples", "4"], "the random design samples a range"),
+    (["--vary", "model.gap=1e-4:1e-3", "--design", "grid"], "needs the values"),
+    (["--vary", "model.gap=1e-4:1e-3:0"], "number of values must be an integer >= 1"),
+    (["--vary", "model.gap=1e-4:1e-3:4:log", "--vary", "model.gap=1e-4"], "model.gap: the key is varied twice"),
     (["--vary", "nnm.n_energy=10,20"], "the scene has no [nnm] table"),
     (["--vary", "initial.v0_m_s[3]=1.0"], "v0_m_s has 3 values; [3] is not one"),
     (["--vary", "ringdown.duration_s=1.0,nan"], "duration_s: must be finite"),
     (["--vary", "ringdown.method=exact,rk4"], "method must be one of"),
-    (["--vary", "model.g=1e-4,1e-4"], "two cases have the same values"),
-    (["--vary", "model.g"], "expected KEY=VALUES"),
-    (["--vary", "model.g=1e-4", "--workers", "0"], "--workers: expected an integer >= 1"),
+    (["--vary", "model.gap=1e-4,1e-4"], "two cases have the same values"),
+    (["--vary", "model.gap"], "expected KEY=VALUES"),
+    (["--vary", "model.gap=1e-4", "--workers", "0"], "--workers: expected an integer >= 1"),
     ([], "the scene has no [sweep] table; give --vary"),
 ])
 def test_bad_sweep_is_one_line_exit_2_before_anything_runs(tmp_path, capsys, monkeypatch, argv, expected):
@@ -174,9 +174,9 @@ def test_bad_sweep_is_one_line_exit_2_before_anything_runs(tmp_path, capsys, mon
 
 
 @pytest.mark.parametrize("table, expected", [
-    ('[sweep]\ndesign = "grd"\n[sweep.vary]\n"model.g" = [1e-4]\n', "[sweep] design: unknown design 'grd'"),
+    ('[sweep]\ndesign = "grd"\n[sweep.vary]\n"model.gap" = [1e-4]\n', "[sweep] design: unknown design 'grd'"),
     ('[sweep]\nvary_ = 1\n', "[sweep]: unknown key 'vary_' (did you mean 'vary'?)"),
-    ('[sweep.vary]\n"model.g" = "1e-4:x:3"\n', "[sweep] vary model.g: 'x' is not a number"),
+    ('[sweep.vary]\n"model.gap" = "1e-4:x:3"\n', "[sweep] vary model.gap: 'x' is not a number"),
     ('[sweep]\nsamples = -1\n', "[sweep] samples: expected an integer >= 0"),
     ('[sweep]\noverlay = "nnm"\n', "[sweep] overlay: unknown overlay 'nnm'"),
 ])

@@ -43,7 +43,7 @@ def test_cb_form_of_the_three_mass_model_is_the_documented_one():
                          ids=["table1", "asymmetric"])
 def test_identification_of_the_own_cb_model_is_exact(p):
     cb = own_cb(p)
-    q, residuals = identify_discrete(cb.M, cb.K, p.L, k_g=p.k_g, g=p.g, c=p.c)
+    q, residuals = identify_discrete(cb.M, cb.K, p.L, k_g=p.k_g, gap=p.gap, c=p.c)
     assert_same_params(q, p)
     assert all(abs(v) < 1e-12 for v in residuals.values()), residuals
 
@@ -54,7 +54,7 @@ def test_identification_uses_the_first_mode_and_ignores_its_scale():
     S = np.diag([1.0, 1.0, -3.0])  # eta -> -3 eta: sign and normalization of the mode
     M, K = S @ cb.M @ S, S @ cb.K @ S
     q, residuals = identify_discrete(np.pad(M, (0, 1)) + np.diag([0, 0, 0, 1.0]),
-                                     np.pad(K, (0, 1)) + np.diag([0, 0, 0, 1e9]), p.L, k_g=p.k_g, g=p.g, c=p.c)
+                                     np.pad(K, (0, 1)) + np.diag([0, 0, 0, 1e9]), p.L, k_g=p.k_g, gap=p.gap, c=p.c)
     assert_same_params(q, p)
     assert residuals["M_qq"] == pytest.approx(8.0)  # the mode is no longer mass-normalized: reported
 
@@ -66,7 +66,7 @@ def test_residuals_report_what_the_three_mass_form_cannot_carry():
     K[0, 1] = K[1, 0] = -0.01 * 2 * p.k_s
     M = cb.M.copy()
     M[0, 1] = M[1, 0] = 1.05 * p.m2 / 4
-    _, residuals = identify_discrete(M, K, p.L, k_g=p.k_g, g=p.g, c=p.c)
+    _, residuals = identify_discrete(M, K, p.L, k_g=p.k_g, gap=p.gap, c=p.c)
     assert residuals["K_bb01"] == pytest.approx(-0.01, rel=1e-12)
     assert residuals["M_bb01"] == pytest.approx(0.05, rel=1e-12)
 
@@ -77,7 +77,7 @@ def test_identification_refuses_an_antisymmetric_first_mode():
     M = cb.M.copy()
     M[1, 2] = M[2, 1] = -M[0, 2]
     with pytest.raises(ValueError, match="first fixed-interface mode"):
-        identify_discrete(M, cb.K, p.L, k_g=p.k_g, g=p.g, c=p.c)
+        identify_discrete(M, cb.K, p.L, k_g=p.k_g, gap=p.gap, c=p.c)
 
 
 def predicted_full_modes() -> list[int]:

@@ -6,7 +6,8 @@ to run, a table absent is a stage skipped (and so never built). Layout::
     name = "discrete-impulse"          # optional, defaults to the file name
     description = "..."
     [model]          kind = "discrete" (DiscreteParams), "rom" (reduced.models.rom.RomSpec: the 3-D
-                     model reduced to its tips) or "assembly" (fem.model.AssemblyModel)
+                     model reduced to its tips), "assembly" (fem.model.AssemblyModel) or
+                     "discrete_friction" (DiscreteFrictionParams: + the axial motion u, friction mu, k_t)
     [initial]        x0_m, v0_m_s at the points x1, x2, x3
     [[load]]         external forces (half_sine, harmonic, tabulated) at named points: a
                      ringdown with loads is a forced transient (reduced.models.loads)
@@ -47,6 +48,7 @@ from bearingshaft.scenes.tables import (
     SECTIONS,
     FEPSpec,
     FRCSpec,
+    FRFSpec,
     HammerSpec,
     InitialSpec,
     ModalSpec,
@@ -64,4 +66,4 @@ __all__ = ["Scene", "SceneError", "SweepError", "SweepSpec", "Vary", "load_scene
            "from_table", "suggest", "SECTIONS", "MODEL_KINDS", "LOAD_KINDS", "model_class", "FEPSpec", "FRCSpec",
            "HammerSpec", "InitialSpec", "ModalSpec", "NNMSpec", "RingdownSpec", "RomConvergenceSpec",
            "SpectrogramSpec", "StiffCasesSpec", "SymmetrySpec", "VerifySpec", "WorkPrecisionSpec",
-           "HalfSineLoadSpec", "HarmonicLoadSpec", "TabulatedLoadSpec"]
+           "HalfSineLoadSpec", "HarmonicLoadSpec", "TabulatedLoadSpec", "FRFSpec"]

@@ -7,11 +7,14 @@ import math
 import types
 import typing
 from dataclasses import fields
+from pathlib import Path
 
 from bearingshaft.scenes.errors import SceneError, show, suggest
 
 MAX_COUNT = 100_000  # largest count (energies, orbits, repeats, modes) a scene may ask for
 MAX_MAGNITUDE = 1e100  # no SI quantity here comes near; squares of larger values (energies) overflow
+PATH_KEYS = ("file", "force_file", "test_shapes", "rom_file")  # keys naming a file: relative to the scene's folder
+RENAMED = {"g": "gap"}  # old key -> its name now (issue 24: one name for the gap in every model); refused with a hint
 
 
 # -- conversion --------------------------------------------------------------------------
@@ -54,7 +57,71 @@ def _coerce(value, typ, where: str):
     raise TypeError(f"unsupported field type {typ!r} at {where}")  # a bug, not bad input
 
 
-def from_table(cls: type, table: dict, where: str):
+def resolve_path(value: str, base: str | Path | None, where: str) -> str:
+    """The file a scene's path names: relative paths from ``base`` (the scene file's folder); it must exist.
+
+    Parameters
+    ----------
+    value : str
+        The path as the scene writes it ("" stays "").
+    base : str or Path, optional
+        The folder relative paths start from (None: the working directory).
+    where : str
+        File, table and key, for the message.
+
+    Returns
+    -------
+    str
+        The absolute path.
+
+    Raises
+    ------
+    SceneError
+        No such file, naming the folder looked in.
+    """
+    if not value:
+        return value
+    folder = Path(base if base is not None else ".").absolute()
+    path = Path(value).expanduser()
+    full = path if path.is_absolute() else folder / path
+    if not full.is_file():
+        looked = ("" if path.is_absolute() else
+                  f" in {str(folder)!r} (a path in a scene is relative to its file's folder)")
+        raise SceneError(f"{where}: no such file {value!r}{looked}")
+    return str(full)
+
+
+def absolute_paths(data: dict, base: str | Path | None) -> dict:
+    """Scene TOML data with every existing file of ``PATH_KEYS`` made absolute from ``base``, so the
+    scene reads the same from any folder (a sweep writes its cases elsewhere); a copy, others untouched.
+
+    Parameters
+    ----------
+    data : dict
+        The scene's TOML data.
+    base : str or Path, optional
+        The scene file's folder (None: the working directory).
+
+    Returns
+    -------
+    dict
+    """
+    folder = Path(base if base is not None else ".").absolute()
+
+    def fix(table):
+        if not isinstance(table, dict):
+            return table
+        out = dict(table)
+        for key in PATH_KEYS:
+            v = out.get(key)
+            if isinstance(v, str) and v and not Path(v).expanduser().is_absolute() and (folder / v).is_file():
+                out[key] = str(folder / v)
+        return out
+
+    return {k: [fix(t) for t in v] if isinstance(v, list) else fix(v) for k, v in data.items()}
+
+
+def from_table(cls: type, table: dict, where: str, base: str | Path | None = None):
     """Build dataclass ``cls`` from a TOML table, naming ``where`` in every error.
 
     Parameters
@@ -65,6 +132,9 @@ def from_table(cls: type, table: dict, where: str):
         The TOML table.
     where : str
         Where the table is (file and table), for the messages.
+    base : str or Path, optional
+        The folder the keys of ``PATH_KEYS`` are relative to (the scene file's; None: the working
+        directory); they are passed on as absolute paths of existing files.
 
     Returns
     -------
@@ -83,8 +153,13 @@ def from_table(cls: type, table: dict, where: str):
     known = [f.name for f in fields(cls)]
     for key in table:
         if key not in known:
-            raise SceneError(f"{where}: unknown key {key!r}{suggest(key, known)} (known: {', '.join(known)})")
+            hint = (f" (did you mean {RENAMED[key]!r}? the key was renamed)" if RENAMED.get(key) in known
+                    else suggest(key, known))
+            raise SceneError(f"{where}: unknown key {key!r}{hint} (known: {', '.join(known)})")
     kwargs = {k: _coerce(v, hints[k], f"{where} {k}") for k, v in table.items()}
+    for k in PATH_KEYS:
+        if isinstance(kwargs.get(k), str):
+            kwargs[k] = resolve_path(kwargs[k], base, f"{where} {k}")
     try:
         return cls(**kwargs)
     except (ValueError, TypeError) as exc:

@@ -33,12 +33,12 @@ class HalfSineLoadSpec:
         s, start of the blow.
     """
 
-    kind: str = "half_sine"
+    kind: str = "half_sine"  # the kind of load
     point: str = "x2"  # where it acts (the model's point names)
     direction: str = "gap"  # the gap direction (the only one these models have)
-    peak_N: float = 0.0  # N
-    duration_s: float = 1e-3  # s
-    start_s: float = 0.0  # s
+    peak_N: float = 0.0  # N, peak force
+    duration_s: float = 1e-3  # s, length of the half-sine
+    start_s: float = 0.0  # s, start of the blow
 
     def signal(self, base: Path | None = None) -> HalfSine:
         return HalfSine(self.peak_N, self.duration_s, self.start_s)
@@ -66,13 +66,13 @@ class HarmonicLoadSpec:
         s, when the shaker starts.
     """
 
-    kind: str = "harmonic"
-    point: str = "x2"
-    direction: str = "gap"
-    amplitude_N: float = 0.0  # N
-    freq_hz: float = 100.0  # Hz
-    phase_deg: float = 0.0  # degrees
-    start_s: float = 0.0  # s
+    kind: str = "harmonic"  # the kind of load
+    point: str = "x2"  # where it acts (the model's point names)
+    direction: str = "gap"  # the gap direction (the only one these models have)
+    amplitude_N: float = 0.0  # N, force amplitude
+    freq_hz: float = 100.0  # Hz, frequency
+    phase_deg: float = 0.0  # degrees, phase at start_s
+    start_s: float = 0.0  # s, when the shaker starts
 
     def signal(self, base: Path | None = None) -> Harmonic:
         return Harmonic(self.amplitude_N, self.freq_hz, self.phase_deg, self.start_s)
@@ -91,15 +91,15 @@ class TabulatedLoadSpec:
     direction : str
         "gap".
     file : str
-        CSV (time [s], force [N]) or UFF 58 file, path from the working directory.
+        CSV (time [s], force [N]) or UFF 58 file, path from the scene file's folder.
     start_s : float
         s, added to the file's times.
     """
 
-    kind: str = "tabulated"
-    point: str = "x2"
-    direction: str = "gap"
-    file: str = ""  # path from the working directory
+    kind: str = "tabulated"  # the kind of load
+    point: str = "x2"  # where it acts (the model's point names)
+    direction: str = "gap"  # the gap direction (the only one these models have)
+    file: str = ""  # CSV (time [s], force [N]) or UFF 58 file of the force history
     start_s: float = 0.0  # s, added to the file's times
 
     def signal(self, base: Path | None = None) -> Tabulated:
@@ -117,7 +117,8 @@ LoadSpec = HalfSineLoadSpec | HarmonicLoadSpec | TabulatedLoadSpec
 MAX_LOADS = 64  # loads in one scene
 
 
-def parse_loads(value, where: str, point_names: tuple[str, ...]) -> tuple[tuple, tuple]:
+def parse_loads(value, where: str, point_names: tuple[str, ...], base: str | Path | None = None
+                ) -> tuple[tuple, tuple]:
     """([[load]] specs, their signals), every key checked; ``where`` names the file.
 
     Parameters
@@ -128,6 +129,8 @@ def parse_loads(value, where: str, point_names: tuple[str, ...]) -> tuple[tuple,
         The scene file, for the messages.
     point_names : tuple of str
         The model's points.
+    base : str or Path, optional
+        The folder a tabulated load's ``file`` is relative to (the scene file's; None: the working directory).
 
     Returns
     -------
@@ -157,7 +160,7 @@ def parse_loads(value, where: str, point_names: tuple[str, ...]) -> tuple[tuple,
         if kind not in LOAD_KINDS:
             raise SceneError(f"{at} kind: unknown load {show(kind)}{suggest(kind, LOAD_KINDS)} "
                              f"(known: {', '.join(LOAD_KINDS)})")
-        spec = from_table(LOAD_KINDS[kind], table, f"{at} ({kind})")
+        spec = from_table(LOAD_KINDS[kind], table, f"{at} ({kind})", base)
         if spec.point not in point_names:
             raise SceneError(f"{at} point: unknown point {spec.point!r}{suggest(spec.point, point_names)} "
                              f"(known: {', '.join(point_names)})")

@@ -1,8 +1,10 @@
-"""The [model] kinds: the 3-DOF model, the reduced 3-D model and the 3-D assembly."""
+"""The [model] kinds: the 3-DOF model, the reduced 3-D model, the 3-D assembly, and the 3-DOF model with the
+beam's axial motion and friction at the tips (``discrete_friction``: keys ``mu`` and ``k_t``, N/m, default
+Mindlin's 0.82 k_g, see :class:`reduced.models.discrete.DiscreteFrictionParams`)."""
 
 from __future__ import annotations
 
-from reduced.models.discrete import DiscreteParams
+from reduced.models.discrete import DiscreteFrictionParams, DiscreteParams
 from reduced.models.rom import RomSpec
 
 
@@ -12,7 +14,8 @@ def _assembly_model():
     return AssemblyModel
 
 
-MODEL_KINDS: dict[str, object] = {"discrete": DiscreteParams, "assembly": _assembly_model, "rom": RomSpec}
+MODEL_KINDS: dict[str, object] = {"discrete": DiscreteParams, "assembly": _assembly_model, "rom": RomSpec,
+                                  "discrete_friction": DiscreteFrictionParams}
 
 
 def model_class(kind: str) -> type:
@@ -21,12 +24,12 @@ def model_class(kind: str) -> type:
     Parameters
     ----------
     kind : str
-        A key of ``MODEL_KINDS``: "discrete", "rom" or "assembly".
+        A key of ``MODEL_KINDS``: "discrete", "rom", "assembly" or "discrete_friction".
 
     Returns
     -------
     type
-        DiscreteParams, RomSpec or fem.model.AssemblyModel.
+        DiscreteParams, RomSpec, fem.model.AssemblyModel or DiscreteFrictionParams.
 
     Raises
     ------

@@ -17,7 +17,7 @@ from bearingshaft.scenes.sweep import parse_sweep_table
 from bearingshaft.scenes.tables import SECTIONS, InitialSpec
 
 
-def parse_scene(text: str, default_name: str, origin: str) -> Scene:
+def parse_scene(text: str, default_name: str, origin: str, base: str | Path | None = None) -> Scene:
     """A :class:`Scene` from TOML text.
 
     Parameters
@@ -28,6 +28,8 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
         Its name when the text gives none (the file's stem).
     origin : str
         Where the text comes from, named at the start of every error message.
+    base : str or Path, optional
+        The folder the scene's file paths are relative to (its file's folder; None: the working directory).
 
     Returns
     -------
@@ -41,9 +43,9 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
     """
     data = _read_toml(text, origin)
     name, description = _name_and_description(data, default_name, origin)
-    kind, model = _read_model(data, origin)
+    kind, model = _read_model(data, origin, base)
     sections = {
-        key: from_table(cls, data[key], f"{origin} [{key}]") for key, cls in SECTIONS.items() if key in data
+        key: from_table(cls, data[key], f"{origin} [{key}]", base) for key, cls in SECTIONS.items() if key in data
     }
     if "sweep" in data:  # the table only: its cases are built and checked by bearingshaft.sweep
         sections["sweep"] = parse_sweep_table(data["sweep"], origin)
@@ -52,10 +54,12 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
         if other:
             raise SceneError(f"{origin}: model kind {kind!r} takes only a [modal] table, got [{other[0]}]")
         return Scene(name=name, description=description, model_kind=kind, model=model, source=text, origin=origin,
-                     **sections)
+                     folder=_folder(base), **sections)
     _check_tables_of_kind(sections, kind, origin)
     dof_names = _check_points(sections, kind, model, origin, "load" in data)
-    loads, signals = _read_loads(data, sections, dof_names, origin)
+    if "frf" in sections and "hammer" not in sections:  # the FRFs of the rig's hammer test
+        raise SceneError(f"{origin} [frf]: needs a [hammer] table (the rig, its channels and record)")
+    loads, signals = _read_loads(data, sections, dof_names, origin, base)
     if "fep" in sections and "nnm" not in sections:
         raise SceneError(f"{origin}: [fep] needs an [nnm] table (its energy range and grid)")
     if "frc" in sections:
@@ -63,7 +67,11 @@ def parse_scene(text: str, default_name: str, origin: str) -> Scene:
     if ("spectrogram" in sections or "symmetry" in sections) and "ringdown" not in sections:
         raise SceneError(f"{origin}: [spectrogram] and [symmetry] need a [ringdown] table")
     return Scene(name=name, description=description, model_kind=kind, model=model, source=text, origin=origin,
-                 loads=loads, load_signals=signals, **sections)
+                 folder=_folder(base), loads=loads, load_signals=signals, **sections)
+
+
+def _folder(base: str | Path | None) -> str:
+    return str(Path(base if base is not None else ".").absolute())
 
 
 def _read_toml(text: str, origin: str) -> dict:
@@ -90,7 +98,7 @@ def _name_and_description(data: dict, default_name: str, origin: str) -> tuple[s
     return name, description
 
 
-def _read_model(data: dict, origin: str) -> tuple[str, object]:
+def _read_model(data: dict, origin: str, base: str | Path | None = None) -> tuple[str, object]:
     """(kind, model) of the [model] table (kind "discrete" when not given, and the message says so)."""
     model_table = data.get("model", {})
     if not isinstance(model_table, dict):
@@ -104,7 +112,7 @@ def _read_model(data: dict, origin: str) -> tuple[str, object]:
         raise SceneError(f"{origin} [model] kind: unknown model {show(kind)}{suggest(kind, MODEL_KINDS)} "
                          f"(known: {', '.join(MODEL_KINDS)})")
     try:
-        return kind, from_table(model_class(kind), model_table, f"{origin} [model]")
+        return kind, from_table(model_class(kind), model_table, f"{origin} [model]", base)
     except SceneError as exc:
         if "kind" in data.get("model", {}):
             raise
@@ -124,6 +132,11 @@ def _check_tables_of_kind(sections: dict, kind: str, origin: str) -> None:
         for key in ("rom_convergence", "verify"):
             if key in sections:
                 raise SceneError(f"{origin}: [{key}] needs a reduced model (kind = \"rom\"), not {kind!r}")
+    if kind == "discrete_friction":  # harmonic balance and the studies do not treat friction yet
+        for key in ("nnm", "fep", "frc", "work_precision", "stiff_cases", "symmetry"):
+            if key in sections:
+                raise SceneError(f"{origin}: [{key}] does not treat friction; the model with friction "
+                                 "(kind = \"discrete_friction\") has [ringdown] and [spectrogram]")
 
 
 def _check_points(sections: dict, kind: str, model, origin: str, has_loads: bool) -> tuple[str, ...]:
@@ -153,11 +166,12 @@ def _check_points(sections: dict, kind: str, model, origin: str, has_loads: bool
     return dof_names
 
 
-def _read_loads(data: dict, sections: dict, dof_names, origin: str) -> tuple[tuple, tuple]:
+def _read_loads(data: dict, sections: dict, dof_names, origin: str, base: str | Path | None = None
+                ) -> tuple[tuple, tuple]:
     """([[load]] specs, their signals): loads drive a [ringdown] within its duration, and no free study."""
     if "load" not in data:
         return (), ()
-    loads, signals = parse_loads(data["load"], origin, dof_names)
+    loads, signals = parse_loads(data["load"], origin, dof_names, base)
     if "ringdown" not in sections:
         raise SceneError(f"{origin} [[load]]: loads drive the ringdown stage; add a [ringdown] table")
     for key in ("work_precision", "stiff_cases", "rom_convergence", "verify"):
@@ -177,11 +191,11 @@ def _check_frc(frc, kind: str, model, dof_names, origin: str) -> None:
     if frc.point not in dof_names:
         raise SceneError(f"{origin} [frc] point: unknown point {frc.point!r}{suggest(frc.point, dof_names)} "
                          f"(known: {', '.join(dof_names)})")
-    damping = (model.c,) if kind == "discrete" else (model.c_points, model.alpha)
+    damping = (model.c,) if kind == "discrete" else (model.c_points, model.alpha, *model.modal_damping)
     if not any(d > 0 for d in damping):
         raise SceneError(f"{origin} [frc]: the model has no damping ([model] "
-                         f"{'c' if kind == 'discrete' else 'c_points or alpha'} = 0), so no forced response "
-                         "settles and the curves have no peak; give the model damping")
+                         f"{'c' if kind == 'discrete' else 'c_points, alpha or modal_damping'} = 0), so no forced "
+                         "response settles and the curves have no peak; give the model damping")
 
 
 def _check_hammer(sections: dict, kind: str, model, origin: str, has_loads: bool) -> None:
@@ -242,13 +256,14 @@ def load_scene(name_or_path: str) -> Scene:
             raise SceneError(f"{name_or_path}: cannot read scene file ({exc.strerror})") from None
         except UnicodeDecodeError:
             raise SceneError(f"{name_or_path}: not a text file (a scene is TOML in UTF-8)") from None
-        return parse_scene(text, path.stem, str(path))
+        return parse_scene(text, path.stem, str(path), path.absolute().parent)
     if name_or_path not in builtin_names():
         hint = suggest(name_or_path, builtin_names())
         raise SceneError(
             f"unknown scene {name_or_path!r}{hint}: not a file, and no built-in scene has that name"
             + ("" if hint else f" (built-in: {', '.join(builtin_names())})")
         )
-    text = (resources.files("bearingshaft") / "scenes" / f"{name_or_path}.toml").read_text(encoding="utf-8")
-    return parse_scene(text, name_or_path, f"scene {name_or_path}")
+    folder = resources.files("bearingshaft") / "scenes"
+    text = (folder / f"{name_or_path}.toml").read_text(encoding="utf-8")
+    return parse_scene(text, name_or_path, f"scene {name_or_path}", Path(str(folder)))
 

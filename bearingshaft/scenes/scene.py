@@ -9,6 +9,7 @@ from bearingshaft.scenes.sweep import SweepSpec
 from bearingshaft.scenes.tables import (
     FEPSpec,
     FRCSpec,
+    FRFSpec,
     HammerSpec,
     InitialSpec,
     ModalSpec,
@@ -51,8 +52,12 @@ class Scene:
         The tables of the same names (:mod:`bearingshaft.scenes.tables`), None where the scene has none.
     work_precision, stiff_cases, rom_convergence, verify, frc, hammer : table dataclass or None
         Likewise.
+    frf : FRFSpec or None
+        [frf], FRFs and modal parameters of a hammer test (needs [hammer]).
     sweep : SweepSpec or None
         [sweep], run by ``bearingshaft sweep``.
+    folder : str
+        The folder its file paths are relative to (the scene file's; the package's for a built-in one).
     """
 
     name: str
@@ -76,5 +81,7 @@ class Scene:
     verify: VerifySpec | None = None
     frc: FRCSpec | None = None
     hammer: HammerSpec | None = None
+    frf: FRFSpec | None = None  # [frf]: FRFs and modal parameters of a hammer test (issue 26)
     sweep: SweepSpec | None = None  # [sweep]: run by `bearingshaft sweep`
+    folder: str = field(default="", repr=False)  # the folder its file paths are relative to (issue 24)
 

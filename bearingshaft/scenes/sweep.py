@@ -28,7 +28,7 @@ class Vary:
     Parameters
     ----------
     key : str
-        The scene key: ``model.g``, ``initial.v0_m_s[1]``, ``load[0].peak_N``.
+        The scene key: ``model.gap``, ``initial.v0_m_s[1]``, ``load[0].peak_N``.
     values : tuple
         The values of a grid or zip design.
     low, high : float, optional
@@ -41,7 +41,7 @@ class Vary:
         As written, for messages.
     """
 
-    key: str  # "model.g", "initial.v0_m_s[1]", "load[0].peak_N"
+    key: str  # "model.gap", "initial.v0_m_s[1]", "load[0].peak_N"
     values: tuple = ()  # the values of a grid or zip design
     low: float | None = None  # a random design's range
     high: float | None = None
@@ -76,13 +76,13 @@ class SweepSpec:
         "nnm_stability" or "".
     """
 
-    vary: tuple[Vary, ...] = ()
-    design: str = "grid"
+    vary: tuple[Vary, ...] = ()  # [sweep.vary]: the varied keys and their values
+    design: str = "grid"  # grid (every combination) | zip (the i-th values together) | random
     samples: int = 0  # random design: number of cases
     seed: int = 0  # random design: seed
     plots: tuple[str, ...] = ()  # metric columns drawn (default: DEFAULT_PLOTS that exist)
     x: str = ""  # column drawn on the x axis instead of the varied key (one varied key)
-    overlay: str = ""  # "nnm_stability"
+    overlay: str = ""  # "nnm_stability": the Floquet stability of NNM 1 and 3 beside the plot
 
 
 def _literal(text: str):
@@ -201,7 +201,7 @@ def parse_vary_option(text: str) -> Vary:
     key, sep, values = text.partition("=")
     key = key.strip()
     if not sep or not key:
-        raise SweepError(f"--vary {text!r}: expected KEY=VALUES, e.g. model.g=1e-4:1e-3:9:log or model.k_g=1e7,1e8")
+        raise SweepError(f"--vary {text!r}: expected KEY=VALUES, e.g. model.gap=1e-4:1e-3:9:log or model.k_g=1e7,1e8")
     return parse_values(key, values, f"--vary {key}")
 
 
@@ -227,7 +227,7 @@ def check_key(key: str, where: str) -> None:
     """
     m = KEY_PATTERN.match(key)
     if m is None:
-        raise SweepError(f"{where}: {key!r} is not a scene key: write TABLE.KEY (e.g. model.g), TABLE.KEY[i] "
+        raise SweepError(f"{where}: {key!r} is not a scene key: write TABLE.KEY (e.g. model.gap), TABLE.KEY[i] "
                          "for an element of a list, or load[i].KEY")
     table = m["table"]
     if table not in TABLES:

@@ -65,7 +65,7 @@ class RingdownSpec:
     """
 
     method: str = "exact"  # exact | explicit | dop853
-    duration_s: float = 2.0  # s
+    duration_s: float = 2.0  # s, length of the run
     sample_rate_hz: float = 20000.0  # Hz, output sampling
     dt_s: float | None = None  # s, explicit step (default: omega_dt / omega_ref)
     omega_dt: float = 0.05  # rad, explicit step: omega_ref dt
@@ -165,8 +165,8 @@ class NNMSpec:
     """
 
     n_energy: int = 400  # number of energies, log-spaced
-    energy_min_J: float = 1e-4  # J
-    energy_max_J: float = 1e5  # J
+    energy_min_J: float = 1e-4  # J, lowest energy
+    energy_max_J: float = 1e5  # J, highest energy
 
     def __post_init__(self) -> None:
         check(self.n_energy >= 2, f"n_energy must be >= 2, got {self.n_energy!r}")
@@ -242,8 +242,9 @@ class WorkPrecisionSpec:
 
     window_s: float = 0.05  # s, before chaotic divergence dominates
     sample_rate_hz: float = 20000.0  # Hz, grid on which errors are measured
-    explicit_omega_dt: tuple[float, ...] = (0.8, 0.4, 0.2, 0.1, 0.05, 0.025, 0.0125, 0.00625, 0.003125)
-    dop853_rtol: tuple[float, ...] = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12, 1e-13)
+    explicit_omega_dt: tuple[float, ...] = (0.8, 0.4, 0.2, 0.1, 0.05, 0.025, 0.0125, 0.00625, 0.003125)  # rad,
+    # explicit steps as omega_max dt
+    dop853_rtol: tuple[float, ...] = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12, 1e-13)  # DOP853 relative tolerances
     repeats: int = 3  # best-of timing
 
     def __post_init__(self) -> None:
@@ -285,13 +286,13 @@ class StiffCasesSpec:
         A value outside its range.
     """
 
-    k_g: tuple[float, ...] = (3.502e7, 1e9, 1e11)  # N/m
-    gap: tuple[float, ...] = (0.0, 2.54e-4, 1e-2)  # m
+    k_g: tuple[float, ...] = (3.502e7, 1e9, 1e11)  # N/m, tip stiffnesses
+    gap: tuple[float, ...] = (0.0, 2.54e-4, 1e-2)  # m, clearances
     speed: tuple[float, ...] = (0.01, 200.0, 2000.0)  # m/s, initial velocity of mass 3
-    c: tuple[float, ...] = (0.0, 4.0, 400.0)  # N s/m
-    duration_s: float = 0.2  # s
-    sample_rate_hz: float = 5000.0  # Hz
-    methods: tuple[str, ...] = ("exact", "explicit")
+    c: tuple[float, ...] = (0.0, 4.0, 400.0)  # N s/m, damping on every mass
+    duration_s: float = 0.2  # s, length of each run
+    sample_rate_hz: float = 5000.0  # Hz, output sampling
+    methods: tuple[str, ...] = ("exact", "explicit")  # integrators run
     long_duration_s: float = 0.0  # s, also run the nominal case (first k_g, Table-1 gap, 200 m/s) this long
     # for every c (0: no long runs)
 
@@ -406,7 +407,7 @@ class VerifySpec:
     """
 
     duration_s: float = 2.0  # s, ringdown of each of the paper's three initial conditions
-    sample_rate_hz: float = 20000.0  # Hz
+    sample_rate_hz: float = 20000.0  # Hz, output sampling of the ringdowns
     method: str = "exact"  # ringdown integrator
     energy_max_J: float = 1e5  # J, NNM backbones (HB, H = 1) up to this energy
     window_s: float = 0.05  # s, spectrogram window
@@ -454,6 +455,12 @@ class FRCSpec:
         s, simulated time per frequency at most before "not settled".
     backbone_scales : tuple of float
         Damping and load scaled together (backbone check), in (0, 1].
+    map_step_hz : float
+        Hz, the response map's step over the contact band (issue 25; 0: no map).
+    map_coarse_points : int
+        Log-spaced frequencies of the response map over the band outside the contact band.
+    map_periods : int
+        Forcing periods recorded at each frequency of the response map (>= 32).
 
     Raises
     ------
@@ -477,6 +484,10 @@ class FRCSpec:
     stepped_sine_tol: float = 1e-6  # settled when the predicted distance to the periodic orbit is below this
     stepped_sine_max_s: float = 10.0  # s, simulated time per frequency at most before "not settled"
     backbone_scales: tuple[float, ...] = (1.0, 0.1, 0.01)  # damping and load scaled together (backbone check)
+    # the response map (issue 25): a stepped sine classified by the exact flow and its Lyapunov exponent
+    map_step_hz: float = 0.1  # Hz, step over the contact band (0: no map)
+    map_coarse_points: int = 24  # log-spaced frequencies over the band outside the contact band
+    map_periods: int = 128  # forcing periods recorded at each frequency
 
     def __post_init__(self) -> None:
         each(self, "levels_N", lambda v: v > 0, "> 0 N")
@@ -496,6 +507,9 @@ class FRCSpec:
         check(self.stepped_sine_points >= 0, f"stepped_sine_points must be >= 0, got {self.stepped_sine_points!r}")
         tolerance(self, "stepped_sine_tol")
         each(self, "backbone_scales", lambda v: 0 < v <= 1, "in (0, 1] (damping and load scaled down together)")
+        check(self.map_step_hz >= 0, f"map_step_hz must be >= 0 Hz, got {self.map_step_hz!r}")
+        check(self.map_coarse_points >= 0, f"map_coarse_points must be >= 0, got {self.map_coarse_points!r}")
+        check(self.map_periods >= 32, f"map_periods must be >= 32, got {self.map_periods!r}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -534,6 +548,11 @@ class HammerSpec:
         Hz, full-model modes up to this in that reference.
     backbone_modes : int
         NNM backbones overlaid on fig11.png (0: none).
+    force_window : bool
+        With --test, the measured hammer channel through a force window (zero outside the pulse
+        and a margin) before it drives the model.
+    force_window_margin_s : float
+        s, the force window's margin on either side of the pulse (half-cosine tapered).
 
     Raises
     ------
@@ -556,6 +575,8 @@ class HammerSpec:
     linear_check: bool = False  # the open-gap response against the full 3-D model's modal superposition
     linear_check_max_hz: float = 20000.0  # Hz, full-model modes up to this in that reference
     backbone_modes: int = 3  # NNM backbones overlaid on fig11.png (0: none)
+    force_window: bool = True  # with --test, the measured hammer channel zeroed outside its pulse and a margin
+    force_window_margin_s: float = 1e-3  # s, that margin on either side of the pulse (half-cosine tapered)
 
     def __post_init__(self) -> None:
         from fem.rig import TIP_CELLS
@@ -576,7 +597,94 @@ class HammerSpec:
             check(len(w) == 2 and 0 <= w[0] < w[1], f"compare_window_s must be (start, end), 0 <= start < end, "
                    f"got {w!r}")
         check(self.backbone_modes >= 0, f"backbone_modes must be >= 0, got {self.backbone_modes!r}")
+        check(self.force_window_margin_s >= 0, f"force_window_margin_s must be >= 0 s, got "
+              f"{self.force_window_margin_s!r}")
 
+
+
+@dataclass(frozen=True, slots=True)
+class FRFSpec:
+    """FRFs and modal parameters of a hammer test (issue 26) -> stage frf. Without ``--test`` the
+    blows are the virtual test's: the scene's reduced apparatus struck at each reference, at a
+    level that leaves the gaps open, recorded as a DAQ does ([ringdown] sample_rate_hz and
+    duration_s give the record); with ``--test`` they are a measured file's.
+
+    Parameters
+    ----------
+    blows : int
+        Blows averaged per reference.
+    peak_N : float
+        N, the virtual blows' nominal peak (must leave the gaps open).
+    peak_spread : float
+        The virtual blows' peaks vary by up to this fraction (uniform, seeded).
+    noise : float
+        Noise added to every virtual channel, a fraction of its RMS over the record.
+    seed : int
+        Seed of the spread and the noise.
+    locations_m : tuple of tuple of float
+        m, the virtual references' points on the beam (default: three, on the top, side and end faces).
+    directions : tuple of tuple of float
+        Their blow directions, one per location.
+    force_window_s : float
+        s, the force window's length after the trigger.
+    exp_end : float
+        The exponential window's value at the record's end, in (0, 1] (1: no window).
+    band_hz : tuple of float
+        Hz, (low, high): the band of the identification.
+    max_order : int
+        Highest model order of the stabilization diagram.
+    min_share : float
+        Share of the orders at which a pole must be stable to be a mode.
+    modes_hz : tuple of float
+        Hz, pick the stable poles nearest these instead (default: every persistent one).
+    mac_reference : str
+        ``fe``: the 3-D model's modes (as the modal stage solves them); ``rom``: the reduced rig's.
+    fe_modes : int
+        Modes of the 3-D model solved for the MAC.
+    export_max_hz : float
+        Hz, FRFs and coherences are written up to this (frf.uff, frf.npz).
+
+    Raises
+    ------
+    ValueError
+        A value outside its range.
+    """
+
+    blows: int = 5  # blows averaged per reference
+    peak_N: float = 20.0  # N, the virtual blows' peak: the gaps stay open (they close near 120 N)
+    peak_spread: float = 0.1  # the virtual peaks vary by up to +-10 %
+    noise: float = 0.0  # noise on every virtual channel, a fraction of its RMS
+    seed: int = 0  # seed of the spread and the noise
+    locations_m: tuple[tuple[float, ...], ...] = ()  # m, the references (default: top, side, end faces)
+    directions: tuple[tuple[float, ...], ...] = ()  # one per location
+    force_window_s: float = 0.005  # s, force window after the trigger
+    exp_end: float = 0.01  # exponential window's value at the record's end (1: none)
+    band_hz: tuple[float, ...] = (5.0, 45.0)  # Hz, band of the identification (the six pseudo-rigid modes)
+    max_order: int = 30  # highest model order of the stabilization diagram
+    min_share: float = 0.3  # share of the orders at which a pole must be stable to be a mode
+    modes_hz: tuple[float, ...] = ()  # Hz, pick the poles nearest these (default: automatic)
+    mac_reference: str = "fe"  # fe (the 3-D model, as the modal stage) | rom (the reduced rig)
+    fe_modes: int = 20  # modes of the 3-D model solved for the MAC
+    export_max_hz: float = 200.0  # Hz, FRFs and coherences written up to this (frf.uff, frf.npz)
+
+    def __post_init__(self) -> None:
+        check(self.blows >= 1, f"blows must be >= 1, got {self.blows!r}")
+        positive(self, "peak_N", "force_window_s", "export_max_hz")
+        check(0 <= self.peak_spread < 1, f"peak_spread must lie in [0, 1), got {self.peak_spread!r}")
+        check(self.noise >= 0, f"noise must be >= 0, got {self.noise!r}")
+        check(len(self.locations_m) == len(self.directions), f"locations_m and directions must pair up, got "
+              f"{len(self.locations_m)} and {len(self.directions)}")
+        for name in ("locations_m", "directions"):
+            check(all(len(v) == 3 for v in getattr(self, name)), f"{name}: every entry must be 3 numbers")
+        check(all(any(d != 0 for d in v) for v in self.directions), "directions: a zero vector")
+        check(0 < self.exp_end <= 1, f"exp_end must lie in (0, 1], got {self.exp_end!r}")
+        check(len(self.band_hz) == 2 and 0 < self.band_hz[0] < self.band_hz[1],
+              f"band_hz must be (low, high) with 0 < low < high, got {self.band_hz!r}")
+        check(self.max_order >= 2, f"max_order must be >= 2, got {self.max_order!r}")
+        check(0 < self.min_share <= 1, f"min_share must lie in (0, 1], got {self.min_share!r}")
+        each(self, "modes_hz", lambda v: self.band_hz[0] <= v <= self.band_hz[1], "inside band_hz")
+        check(self.mac_reference in ("fe", "rom"), f"mac_reference must be fe or rom, got {self.mac_reference!r}")
+        check(self.fe_modes >= 12, f"fe_modes must be >= 12 (6 rigid + 6 pseudo-rigid), got {self.fe_modes!r}")
 
 
 SECTIONS: dict[str, type] = {
@@ -593,4 +701,5 @@ SECTIONS: dict[str, type] = {
     "verify": VerifySpec,
     "frc": FRCSpec,
     "hammer": HammerSpec,
+    "frf": FRFSpec,
 }

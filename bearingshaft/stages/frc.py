@@ -20,7 +20,9 @@ stop forces projected exactly, H = ``harmonics``) is continued in frequency over
   and against the exact orbits of the shooting points, and its run time;
 - the backbone check: with damping and load scaled down together (``backbone_scales``) the
   peak of each curve (H = 1) approaches the NNM backbone computed as the nnm stage does
-  (:func:`reduced.periodic.backbones.nnm_branch`, H = 1, AFT with 4096 samples).
+  (:func:`reduced.periodic.backbones.nnm_branch`, H = 1, AFT with 4096 samples);
+- the response map (:mod:`bearingshaft.stages.frc_map`): a dense stepped sine up and down, each
+  frequency classified by the exact flow and its Lyapunov exponent.
 
 :func:`compute` runs all of it into an :class:`FRCResult`; :func:`write`
 (:mod:`bearingshaft.stages.frc_files`) writes the files listed in :data:`DESCRIPTION`.
@@ -34,12 +36,13 @@ import warnings
 from dataclasses import replace
 
 import numpy as np
-from tqdm import tqdm
 
 from bearingshaft.estimates import FLOAT, HILL_COPIES, Estimate, n_dofs
 from bearingshaft.output import StageWriter
+from bearingshaft.progress import bar as progress_bar
 from bearingshaft.reproduction import Reproduction, sensitive, within
 from bearingshaft.scenes import Scene
+from bearingshaft.stages.frc_map import compute_maps
 from bearingshaft.stages.frc_results import ConvergenceRun, FRCResult, PointCheck
 from bearingshaft.systems import model_system
 from reduced._blas import single_thread_blas
@@ -90,7 +93,8 @@ def _compute(scene: Scene, progress: bool) -> FRCResult:
     b = rows[load_col]
     levels = list(spec.levels_N)
     n_tasks = 3 * len(levels) + len(spec.convergence_harmonics) + len(levels) * len(spec.backbone_scales) + 1
-    bar = tqdm(total=n_tasks, desc=f"{scene.name}: forced response", disable=not progress, unit="task")
+    n_tasks += len(levels) if spec.map_step_hz > 0 else 0  # the response map (frc_map)
+    bar = progress_bar(total=n_tasks, desc=f"{scene.name}: forced response", enabled=progress, unit="task")
     curves = {}
     for P in levels:
         bar.set_postfix_str(f"HB {P:g} N, H={spec.harmonics}")
@@ -109,9 +113,10 @@ def _compute(scene: Scene, progress: bool) -> FRCResult:
     sweep_hb = {(P, d): _hb_at_sweep(curves[P], ss, load_col) for P in levels for d, ss in sweeps[P].items()}
     convergence = _convergence(system, b, spec, rows, names, load_col, curves, checks, sweeps, bar)
     backbone = _backbone_check(system, b, rows, names, spec, load_col, curves, bar)
+    maps = compute_maps(system, b, rows, names, spec, curves, bar)
     bar.close()
     return FRCResult(scene.name, spec, names, load_col, curves, {P: _events(br, load_col) for P, br in curves.items()},
-                     checks, sweeps, sweep_hb, convergence, *backbone)
+                     checks, sweeps, sweep_hb, convergence, *backbone, response_maps=maps)
 
 
 def _curve(system, b, P, spec, H, rows, names, **kw):
@@ -429,9 +434,12 @@ def _log_distance(f: float, A: float, curve, col: int) -> float:
 DESCRIPTION = """Forced-response curves under P cos(2 pi f t) at one point, by harmonic balance continued
 through folds, with stability (monodromy, Hill, shooting), bifurcations, a stepped sine up and
 down by the exact integrator, the error against H and run time, and the backbone check.
-Writes frc.csv, frc.png, frc_harmonics.csv, frc_bifurcations.csv, frc_stability.csv,
+Writes frc.csv, frc.png, frc_receptance.png (the response per newton, m/N), frc_harmonics.csv,
+frc_bifurcations.csv, frc_stability.csv,
 stepped_sine.csv, frc_convergence.csv, frc_convergence_timing.csv and .png, frc_backbone.csv
-and frc_backbone.png."""
+and frc_backbone.png; the response map (each frequency of a dense stepped sine periodic, subharmonic,
+quasi-periodic or chaotic, with its Lyapunov exponent): response_map.csv, response_map_jumps.csv,
+response_map.png and response_map_spectra.png."""
 
 
 def frc_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:

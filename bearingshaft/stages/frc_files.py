@@ -2,12 +2,14 @@
 
 ``frc.csv`` (level, method, harmonics, freq_hz, point, amplitude_m, stable, bifurcation,
 response: one row per curve point or stepped-sine frequency and per output point),
-``frc.png``, ``frc_harmonics.csv`` (amplitude per harmonic along each curve),
+``frc.png``, ``frc_receptance.png`` (the response per newton, m/N), ``frc_harmonics.csv``
+(amplitude per harmonic along each curve),
 ``frc_bifurcations.csv``, ``frc_stability.csv`` (monodromy, Hill and shooting side by side),
 ``stepped_sine.csv`` (each sweep point: how it settled, its amplitude against HB),
 ``frc_convergence.csv`` and ``frc_convergence_timing.csv`` / ``.png`` (run times: the
 project's ``_timing`` convention, tests/test_reproducible.py), ``frc_backbone.csv`` and
-``frc_backbone.png``. Amplitudes are written to :data:`DIGITS` significant digits; no solver
+``frc_backbone.png``; the response map's files (:mod:`bearingshaft.stages.frc_map_files`).
+Amplitudes are written to :data:`DIGITS` significant digits; no solver
 runs here.
 """
 
@@ -17,10 +19,12 @@ import numpy as np
 
 from bearingshaft.digits import sig
 from bearingshaft.output import StageWriter, write_rows
+from bearingshaft.stages import frc_map_files
 from bearingshaft.stages.frc_results import ConvergenceRun, FRCResult, PointCheck  # noqa: F401  (re-exported)
 
 DIGITS = 10  # significant digits of frequencies and amplitudes (a rerun on this machine: identical)
 ERR_DIGITS = 3  # relative errors
+HILL_MATCH = 1e-3  # Hill's max |mu| within this (relative) of the monodromy's: the same multipliers
 CONVERGENCE_FIELDS = ["level", "harmonics", "status", "n_points", "f_reached_hz", "n_folds", "highest_fold_hz",
                       "lowest_fold_hz", "n_vs_stepped_sine", "max_rel_err_vs_stepped_sine", "n_vs_shooting",
                       "n_shooting_failed", "max_rel_err_vs_shooting", "median_rel_err_vs_shooting"]
@@ -56,9 +60,10 @@ def write(result: FRCResult, writer: StageWriter) -> None:
                 and r["level"] == Pc and "monodromy" not in r["what"]}
         stats["speed_ratio_stepped_sine_over_hb"] = {f"H={h}": round(t_ss / t, 2) for h, t in t_hb.items() if t > 0}
     write_rows(writer.path("frc_backbone.csv"), _backbone_rows(result), fields=BACKBONE_FIELDS)
+    frc_map_files.write(result, writer, stats)  # response_map.csv, response_map_jumps.csv, response_map.png
     writer.stats["frc"] = stats
-    _plot_frc(writer.path("frc.png"), result.curves, sweeps, result.backbones, names, spec, result.scene_name,
-              result.events)
+    _plot_frc(writer.path("frc.png"), result)
+    _plot_receptance(writer.path("frc_receptance.png"), result)
     _plot_backbone(writer.path("frc_backbone.png"), result.backbone_curves, result.backbones, names, result.load_col,
                    spec, result.peaks)
     _plot_convergence(writer.path("frc_convergence_timing.png"), conv_rows, timing_rows, Pc)
@@ -138,6 +143,9 @@ def _curve_files(result: FRCResult, writer: StageWriter, stats: dict) -> None:
             stats["stability"][f"{P:g} N"] = {
                 "hill_points": sum(r["hill_stable"] != "" for r in st),
                 "hill_disagree": sum(r["hill_stable"] not in ("", r["monodromy_stable"]) for r in st),
+                # the verdicts can agree while the multipliers do not: Hill's max |mu| off the monodromy's by > 1e-3
+                "hill_mismatch": sum(c.hill_stable is not None and abs(c.hill / c.mono - 1.0) > HILL_MATCH
+                                     for c in result.checks[P]),
                 "shooting_points": sum(r["shooting_stable"] != "" for r in st),
                 "shooting_disagree": sum(r["shooting_stable"] not in ("", r["monodromy_stable"]) for r in st),
                 "shooting_failed": sum(r["note"] != "" for r in st)}
@@ -260,66 +268,180 @@ def _backbone_rows(result: FRCResult) -> list[dict]:
 
 
 # -- the figures -------------------------------------------------------------------------------------
-def _plot_frc(path, curves, sweeps, bb, names, spec, title, events) -> None:
+def _plot_frc(path, result: FRCResult) -> None:
+    """frc.png: :func:`draw_frc` saved."""
+    import matplotlib.pyplot as plt
+
+    fig = draw_frc(result)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _plot_receptance(path, result: FRCResult) -> None:
+    """frc_receptance.png: :func:`draw_receptance` saved."""
+    import matplotlib.pyplot as plt
+
+    fig = draw_receptance(result)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _level_colours(levels) -> dict:
+    """One colour per load level, in increasing level.
+
+    >>> _level_colours([10.0, 0.1, 1.0])
+    {0.1: 'C0', 1.0: 'C1', 10.0: 'C2'}
+    """
+    return {P: f"C{i % 10}" for i, P in enumerate(sorted(levels))}
+
+
+def _draw_curves(ax, result: FRCResult, c: int, colours: dict, per_newton: bool, backbones: bool) -> None:
+    """One output point's curves on ``ax``: per level its colour; HB stable solid, unstable dashed;
+    stepped sine up/down as triangles, open where it settled, filled where it did not; backbones
+    dotted black. ``per_newton``: every amplitude divided by its level (receptance, m/N), the
+    levels drawn from the highest, widest, to the lowest, narrowest: where they coincide each shows."""
+    levels = sorted(result.curves, reverse=per_newton)
+    for rank, P in enumerate(levels):
+        br = result.curves[P]
+        col, scale = colours[P], (1.0 / P if per_newton else 1.0)
+        lw = 1.2 + 1.4 * (len(levels) - 1 - rank) if per_newton else 1.2
+        if not isinstance(br, Exception):
+            for idx in br.pieces():
+                a, fr, stb = br.amplitude_m[idx, c] * scale, br.freq_hz[idx], br.stable[idx]
+                ax.plot(fr, np.where(stb, a, np.nan), "-", color=col, lw=lw)
+                uns = ~stb
+                edge = uns | np.roll(uns, 1) | np.roll(uns, -1)  # join the dashed pieces to the solid ones
+                ax.plot(fr, np.where(edge, a, np.nan), "--", color=col, lw=0.75 * lw)
+        for d, mk in (("up", "^"), ("down", "v")):
+            ss = result.sweeps.get(P, {}).get(d)
+            if ss is None:
+                continue
+            per = np.array([r in ("periodic", "settling") for r in ss.response])
+            ax.plot(ss.freq_hz[per], ss.amplitude_m[per, c] * scale, mk, mfc="none", mec=col, ms=6, mew=1.0,
+                    ls="none")
+            ax.plot(ss.freq_hz[~per], ss.amplitude_m[~per, c] * scale, mk, mfc=col, mec="k", ms=6, mew=0.6,
+                    ls="none")
+    if backbones:
+        for f, amps in result.backbones.values():
+            ax.plot(f, amps[:, c], ":", color="k", lw=1.3)
+
+
+def _legend_handles(result: FRCResult, colours: dict, backbones: bool) -> list:
+    """The legend: a colour per level, then a line or marker per kind of curve (black)."""
+    from matplotlib.lines import Line2D
+
+    H = next((br.H for br in result.curves.values() if not isinstance(br, Exception)), result.spec.harmonics)
+    out = [Line2D([], [], color=colours[P], lw=3, label=f"P = {P:g} N") for P in sorted(result.curves)]
+    out += [Line2D([], [], color="k", lw=1.2, label=f"harmonic balance (H = {H}), stable"),
+            Line2D([], [], color="k", lw=0.9, ls="--", label="harmonic balance, unstable")]
+    if any(result.sweeps.get(P) for P in result.curves):
+        out += [Line2D([], [], color="k", marker="^", mfc="none", ls="none", ms=6, label="stepped sine up, settled"),
+                Line2D([], [], color="k", marker="v", mfc="none", ls="none", ms=6, label="stepped sine down, settled"),
+                Line2D([], [], color="k", marker="^", mfc="0.5", mec="k", ls="none", ms=6,
+                       label="stepped sine, not settled\n(filled in the level's colour)")]
+    if backbones and result.backbones:
+        out.append(Line2D([], [], color="k", ls=":", lw=1.3, label="NNM backbones (H = 1)"))
+    return out
+
+
+def draw_frc(result: FRCResult):
     """frc.png: top row, every output point over the band (log-log); bottom row, the jump region
-    (linear axes): curves per level, stable solid, unstable dashed, stepped sine, backbones dotted."""
+    (linear axes). A colour per level; stable solid, unstable dashed; stepped sine up and down;
+    backbones dotted. The legend sits outside the axes, on the right.
+
+    Parameters
+    ----------
+    result : FRCResult
+        What :func:`bearingshaft.stages.frc.compute` returned.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    curves, names, spec, events = result.curves, result.names, result.spec, result.events
     p = len(names)
-    fig, axs = plt.subplots(2, p, figsize=(5.2 * p, 8.6), squeeze=False)
-    colors = {P: f"C{i}" for i, P in enumerate(curves)}
+    colours = _level_colours(curves)
+    fig, axs = plt.subplots(2, p, figsize=(4.6 * p + 3.2, 8.6), squeeze=False, constrained_layout=True)
     ev = np.concatenate([events[P] for P in curves] + [np.zeros(0)])
     zoom = (max(ev.min() / 1.15, spec.freq_min_hz), min(ev.max() * 1.15, spec.freq_max_hz)) if ev.size else None
+    good = [br for br in curves.values() if not isinstance(br, Exception)]
     for row in range(2):
         for c in range(p):
             ax = axs[row][c]
-            for P, br in curves.items():
-                col = colors[P]
-                if isinstance(br, Exception):
-                    continue
-                for idx in br.pieces():
-                    a, fr, stb = br.amplitude_m[idx, c], br.freq_hz[idx], br.stable[idx]
-                    ax.plot(fr, np.where(stb, a, np.nan), "-", color=col, lw=1.1, label=f"{P:g} N, HB H={br.H}")
-                    uns = ~stb
-                    edge = uns | np.roll(uns, 1) | np.roll(uns, -1)  # join the dashed pieces to the solid ones
-                    ax.plot(fr, np.where(edge, a, np.nan), "--", color=col, lw=0.7)
-                for d, mk in (("up", "^"), ("down", "v")):
-                    ss = sweeps.get(P, {}).get(d)
-                    if ss is None:
-                        continue
-                    per = np.array([r in ("periodic", "settling") for r in ss.response])
-                    ax.plot(ss.freq_hz[per], ss.amplitude_m[per, c], mk, mfc="none", mec=col, ms=6, mew=0.9,
-                            label=f"{P:g} N, stepped sine {d}")
-                    ax.plot(ss.freq_hz[~per], ss.amplitude_m[~per, c], mk, mfc="k", mec=col, ms=4, mew=0.6)
-            for r, (f, amps) in bb.items():
-                ax.plot(f, amps[:, c], ":", color="k", lw=1.2, label=f"NNM {r + 1} backbone (H=1)")
+            _draw_curves(ax, result, c, colours, per_newton=False, backbones=True)
             if row == 0:
                 ax.set_xscale("log")
                 ax.set_yscale("log")
                 ax.set_xlim(spec.freq_min_hz, spec.freq_max_hz)
-                good = [br.amplitude_m[:, c] for br in curves.values() if not isinstance(br, Exception)]
                 if good:
-                    ax.set_ylim(min(np.min(g) for g in good) / 2, max(np.max(g) for g in good) * 3)
+                    ax.set_ylim(min(np.min(br.amplitude_m[:, c]) for br in good) / 2,
+                                max(np.max(br.amplitude_m[:, c]) for br in good) * 3)
             elif zoom is not None:
                 ax.set_xlim(*zoom)
                 top = max((np.max(br.amplitude_m[(br.freq_hz >= zoom[0]) & (br.freq_hz <= zoom[1]), c], initial=0.0)
-                           for br in curves.values() if not isinstance(br, Exception)), default=1e-3)
+                           for br in good), default=1e-3)
                 ax.set_ylim(0.0, 1.15 * top)
             ax.set_xlabel("excitation frequency [Hz]")
             ax.set_ylabel(f"max |{names[c]}| over a period [m]")
             ax.grid(True, which="both", alpha=0.2)
-    handles, labels = axs[0][0].get_legend_handles_labels()
-    uniq = dict(zip(labels, handles, strict=True))
-    axs[0][0].legend(uniq.values(), uniq.keys(), fontsize=6, loc="lower left")
-    fig.suptitle(f"{title}: forced response to a load at {spec.point} (solid: stable, dashed: unstable; open "
-                 "markers: stepped sine settled, filled: not settled; dotted: backbone); bottom: the jump region",
-                 fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+            if row == 1:
+                ax.set_title(f"{names[c]}: the jump region (linear axes)", fontsize=9)
+            else:
+                ax.set_title(f"{names[c]}", fontsize=9)
+    fig.legend(handles=_legend_handles(result, colours, True), loc="outside right upper", fontsize=9,
+               frameon=False)
+    fig.suptitle(f"{result.scene_name}: forced response to P cos(2 pi f t) at {spec.point}; top: the whole band, "
+                 "bottom: the jump region", fontsize=10)
+    return fig
+
+
+def draw_receptance(result: FRCResult):
+    """frc_receptance.png: the response per newton of load, max |x| / P in m/N, at every output point
+    against frequency (log-log), a colour per level. Where the response is linear the curves of every
+    level lie on one another (the receptance a test's FRF measures); contact makes them part.
+
+    Parameters
+    ----------
+    result : FRCResult
+        What :func:`bearingshaft.stages.frc.compute` returned.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    curves, names, spec = result.curves, result.names, result.spec
+    p = len(names)
+    colours = _level_colours(curves)
+    fig, axs = plt.subplots(1, p, figsize=(4.6 * p + 3.2, 4.6), squeeze=False, constrained_layout=True)
+    good = {P: br for P, br in curves.items() if not isinstance(br, Exception)}
+    for c in range(p):
+        ax = axs[0][c]
+        _draw_curves(ax, result, c, colours, per_newton=True, backbones=False)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlim(spec.freq_min_hz, spec.freq_max_hz)
+        if good:
+            ax.set_ylim(min(np.min(br.amplitude_m[:, c]) / P for P, br in good.items()) / 2,
+                        max(np.max(br.amplitude_m[:, c]) / P for P, br in good.items()) * 3)
+        ax.set_xlabel("excitation frequency [Hz]")
+        ax.set_ylabel(f"max |{names[c]}| / P [m/N]")
+        ax.set_title(f"{names[c]} per newton at {spec.point}", fontsize=9)
+        ax.grid(True, which="both", alpha=0.2)
+    fig.legend(handles=_legend_handles(result, colours, False), loc="outside right upper", fontsize=9,
+               frameon=False)
+    fig.suptitle(f"{result.scene_name}: receptance, the response per newton of load at {spec.point} (m/N); where the "
+                 "gaps stay open every level lies on one curve", fontsize=10)
+    return fig
 
 
 def _plot_backbone(path, bb_curves, bb, names, load_col, spec, peaks) -> None:

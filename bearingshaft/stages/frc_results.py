@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -83,6 +83,29 @@ class ConvergenceRun:
 
 
 @dataclass(frozen=True, eq=False)
+class MapLevel:
+    """The response map at one load level (:mod:`bearingshaft.stages.frc_map`).
+
+    Attributes
+    ----------
+    level_N : float
+        N, the load amplitude P.
+    bands : list of (float, float)
+        Hz, the contact bands stepped at ``[frc] map_step_hz`` (the linear response's and the HB
+        curve's, widened), before the sweeps' own extensions.
+    sweeps : dict
+        ``up``/``down`` -> :class:`reduced.periodic.response_map.ResponseMap`.
+    wall_s : float
+        s, both sweeps.
+    """
+
+    level_N: float
+    bands: list
+    sweeps: dict
+    wall_s: float
+
+
+@dataclass(frozen=True, eq=False)
 class FRCResult:
     """Everything the frc stage computed (:func:`bearingshaft.stages.frc.compute`).
 
@@ -121,6 +144,8 @@ class FRCResult:
         (P, scale) -> (Hz, m), the peak of the backbone curve at the load point.
     nearest : dict
         (P, scale) -> (mode, log distance) of the nearest backbone to that peak.
+    response_maps : dict
+        P -> MapLevel, the response map (empty when ``[frc] map_step_hz = 0``).
     """
 
     scene_name: str
@@ -137,3 +162,4 @@ class FRCResult:
     backbones: dict  # linear mode -> (freq_hz (k,), amplitudes (k, p)) of its NNM backbone
     peaks: dict  # (P, scale) -> (Hz, m) the peak of the backbone curve at the load point
     nearest: dict  # (P, scale) -> (mode, log distance) of the nearest backbone to that peak
+    response_maps: dict = field(default_factory=dict)  # P -> MapLevel (bearingshaft.stages.frc_map)

@@ -26,9 +26,12 @@ found with a guarantee, :mod:`reduced.transient.exact`).
   open-gap response against the full 3-D model's modal superposition
   (:mod:`bearingshaft.stages.hammer_linear`);
 - with a measured test (``bearingshaft hammer --test FILE.uff``) instead of all the above: the
-  model driven by the measured hammer force at the test's sampling (:mod:`bearingshaft.stages.hammer_compare`,
-  :mod:`bearingshaft.correlate`), ``test_errors.csv``, ``test_compare.png``, ``test_spectrogram.png``
-  and ``model.uff``.
+  model driven by the measured hammer force (through a force window) at the test's sampling
+  (:mod:`bearingshaft.stages.hammer_compare`, :mod:`bearingshaft.correlate`), the predictability
+  horizon, pointwise errors up to it and the measures that survive chaos past it
+  (:mod:`bearingshaft.measures`): ``test_errors.csv``, ``test_measures.csv``, ``test_horizon.csv``,
+  ``test_compare.md``, ``test_compare.png``, ``test_spectrogram.png``, ``test_horizon.png``,
+  ``test_measures.png``, ``test_backbone.png`` and ``model.uff``.
 
 Numbers in the science files are written to 6 significant digits (to 4 for the quantities
 that depend on where the exact integrator lands a crossing), :mod:`bearingshaft.stages.hammer_files`.
@@ -41,14 +44,15 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
+from bearingshaft import measured
 from bearingshaft.estimates import COPIES, FLOAT, MATPLOTLIB_BYTES, Estimate, n_dofs
 from bearingshaft.output import StageWriter
+from bearingshaft.progress import bar as progress_bar
 from bearingshaft.reproduction import Reproduction, chaotic, exact, record, roundoff
 from bearingshaft.scenes import HammerSpec, Scene, SceneError
 from bearingshaft.stages import hammer_compare, hammer_linear
-from bearingshaft.stages.hammer_results import Comparison, LinearCheck, Record, VirtualTest
+from bearingshaft.stages.hammer_results import ChannelBackbone, Comparison, LinearCheck, Record, VirtualTest
 from bearingshaft.systems import solver_options
 from fem.rig import TIP_CELLS
 from reduced.models.loads import HalfSine, Tabulated
@@ -301,6 +305,71 @@ def backbones(rig: VirtualRig, n_modes: int, energy_max_J: float) -> dict:
     return {f"NNM at {f[0]:.1f} Hz (HB, H=1)": (E, f) for E, f in curves.values()}
 
 
+LINEAR_REACH = 1e-4  # an NNM backbone is drawn flat (the open-gap mode) down to this share of its first amplitude
+BAND_BELOW = 0.7  # a ringdown's NNM component is band-passed from this x its open-gap frequency ...
+BAND_ABOVE = 1.2  # ... to this x the backbone's frequency at the free decay's largest energy
+
+
+def channel_backbones(rig: VirtualRig, n_modes: int, energy_max_J: float, sample_rate_hz: float,
+                      channels: list[str] | None = None) -> list[ChannelBackbone]:
+    """HB (H = 1) backbones of the lowest ``n_modes`` NNMs that move the gaps, each seen on the
+    accelerometer axis where it shows most, for the ringdown backbones of a measured test.
+
+    Along a backbone x(tau) = c_0 + c_1 cos tau + s_1 sin tau (on the coupled subsystem,
+    :func:`coupled_subsystem`), an accelerometer axis r moves with the fundamental displacement
+    amplitude sqrt((r . c_1)^2 + (r . s_1)^2) (its acceleration's is omega^2 that); the axis
+    chosen is the one (among ``channels``) where it is largest at the backbone's lowest energy. The
+    band of its ringdown component is BAND_BELOW x the open-gap frequency to BAND_ABOVE x the
+    backbone's frequency at ``energy_max_J`` (at most 0.45 sample_rate_hz).
+
+    Parameters
+    ----------
+    rig : VirtualRig
+        The rig.
+    n_modes : int
+        Backbones (0: none).
+    energy_max_J : float
+        J, the free decay's largest energy: the backbones reach ten times it (at least 1 mJ).
+    sample_rate_hz : float
+        Hz, the test's sampling.
+    channels : list of str or None
+        The accelerometer axes allowed (default every one).
+
+    Returns
+    -------
+    list of ChannelBackbone
+    """
+    from reduced.models.modes import gap_moving_modes
+    from reduced.periodic.backbones import nnm_branch
+
+    if n_modes == 0:
+        return []
+    sub = coupled_subsystem(rig.system)
+    keep = [rig.system.dof_names.index(d) for d in sub.dof_names]
+    acc = [c.name for c in rig.channels][: len(rig.acc_rows)]
+    use = [i for i, name in enumerate(acc) if channels is None or name in channels]
+    if not use:
+        return []
+    R = rig.acc_rows[np.ix_(use, keep)]
+    out = []
+    for mode in gap_moving_modes(sub, "open", n_modes):
+        b = nnm_branch(sub, int(mode), H=1, energy_max_J=max(10.0 * energy_max_J, 1e-3))
+        order = np.argsort(b.energy_J, kind="stable")
+        E, f, X = b.energy_J[order], b.freq_hz[order], b.X[order]
+        n = sub.n
+        c1, s1 = X[:, n:2 * n], X[:, 2 * n:3 * n]
+        amp = np.hypot(c1 @ R.T, s1 @ R.T).T  # (channels, points), m
+        # below its first point an NNM is the open-gap mode (the branch starts where the gaps still stay
+        # open): the curve goes on flat down to LINEAR_REACH of that amplitude
+        amp = np.hstack([LINEAR_REACH * amp[:, :1], amp])
+        E, f = np.concatenate([[LINEAR_REACH**2 * E[0]], E]), np.concatenate([[f[0]], f])
+        k = int(np.argmax(amp[:, 0]))
+        f_top = float(np.interp(np.log(energy_max_J), np.log(E), f)) if energy_max_J > 0 else float(f[0])
+        band = (BAND_BELOW * float(f[0]), min(BAND_ABOVE * max(f_top, float(f[0])), 0.45 * sample_rate_hz))
+        out.append(ChannelBackbone(f"NNM at {f[0]:.1f} Hz", acc[use[k]], amp[k], f, E, band))
+    return out
+
+
 def mode_classes(freq_hz, labels: dict) -> list[str]:
     """A name for every open-gap mode: its pseudo-rigid label, "bungee" for the whole assembly
     swinging on its bungees (below half the lowest pseudo-rigid frequency), else "elastic".
@@ -374,8 +443,8 @@ def level_summary(rig: VirtualRig, rec: Record, lm, labels: dict) -> dict:
 
 
 # -- the stage ------------------------------------------------------------------------------
-def compute(scene: Scene, progress: bool, workdir: Path | None = None,
-            test_file: str | None = None) -> VirtualTest | Comparison:
+def compute(scene: Scene, progress: bool, workdir: Path | None = None, test_file: str | None = None,
+            window: str | None = None, measures: str | None = None) -> VirtualTest | Comparison:
     """Run the virtual test: every level, the backbones, the linear check; or compare a measured test.
 
     Parameters
@@ -385,6 +454,9 @@ def compute(scene: Scene, progress: bool, workdir: Path | None = None,
     workdir : the stage's scratch folder (unused: nothing is streamed to disk)
     test_file : a measured test (UFF 58): the model is run at its sampling, driven by its hammer
         channel, and compared with it instead of the virtual test
+    window : ``"START:END"``, s, the window compared with the test (default [hammer] compare_window_s)
+    measures : comma-separated measures of the comparison (default all:
+        :data:`bearingshaft.measures.MEASURES`)
 
     Returns
     -------
@@ -393,6 +465,12 @@ def compute(scene: Scene, progress: bool, workdir: Path | None = None,
     from reduced._blas import single_thread_blas
     from reduced.models.modes import linear_modes
 
+    test = None
+    if test_file is not None:  # the test file and the options are checked before the model is built
+        options = (hammer_compare.parse_window(window), hammer_compare.parse_measures(measures))
+        test = measured.read_test(scene, test_file)
+    elif window is not None or measures is not None:
+        raise SceneError("--window and --measures choose what a comparison with a test measures: give --test FILE.uff")
     with single_thread_blas():
         rom = scene.model.reduced(progress)
         rig = _rig(scene, rom)
@@ -400,8 +478,8 @@ def compute(scene: Scene, progress: bool, workdir: Path | None = None,
         labels = pseudo_rigid(rig, scene.model.fe_model().geometry(), lm)
         stats = {"n_dofs": rig.system.n, "location_m": list(rig.location), "direction": list(rig.direction),
                  "pseudo_rigid_hz": {k: v[1] for k, v in labels.items()}}
-        if test_file is not None:
-            return _compare(scene, rig, test_file, stats)
+        if test is not None:
+            return _compare(scene, rig, test, test_file, stats, *options)
         return _virtual_test(scene, rom, rig, lm, labels, stats, progress)
 
 
@@ -420,7 +498,7 @@ def _virtual_test(scene: Scene, rom, rig: VirtualRig, lm, labels: dict, stats: d
     spec = scene.hammer
     levels = sorted({*spec.levels_N, spec.peak_N})
     records = {}
-    bar = tqdm(levels, desc=f"{scene.name}: virtual tests", unit="level", disable=not progress, leave=False)
+    bar = progress_bar(levels, desc=f"{scene.name}: virtual tests", unit="level", enabled=progress)
     for level in bar:
         records[level] = run_record(rig, blow(spec, level), scene, level)
     nominal = records[spec.peak_N]
@@ -498,13 +576,23 @@ def _linear_check(scene: Scene, rom, rig: VirtualRig, progress: bool) -> LinearC
     return hammer_linear.linear_check(scene, rig, rec, progress)
 
 
-def _compare(scene: Scene, rig: VirtualRig, test_file: str, stats: dict) -> Comparison:
-    """The model at a measured test's sampling, driven by its hammer channel if it has one, compared."""
+def _compare(scene: Scene, rig: VirtualRig, test, test_file: str, stats: dict, window_s, wanted) -> Comparison:
+    """The model at a measured test's sampling, driven by its hammer channel (force-windowed), compared."""
     spec = scene.hammer
-    test = hammer_compare.read_test(scene, test_file)
-    signal, level = (test.signal, test.level_N) if test.signal is not None else (blow(spec, spec.peak_N), spec.peak_N)
-    rec = run_record(rig, signal, scene, level, duration_s=test.duration_s, sample_rate_hz=test.sample_rate_hz)
-    return hammer_compare.compare(scene, rig, rec, test, test_file, stats)
+    rec = run_record(rig, test.signal, scene, test.level_N, duration_s=test.duration_s,
+                     sample_rate_hz=test.sample_rate_hz)
+    curves = []
+    if "backbone" in wanted and spec.backbone_modes:
+        i = int(np.searchsorted(rec.t, test.free_after_s))
+        curves = channel_backbones(rig, spec.backbone_modes, float(np.max(rec.energy[i:])), test.sample_rate_hz,
+                                   list(spec.compare) or None)
+    return hammer_compare.compare(scene, rig, rec, test, test_file, {**stats, **_run_stats(rec)}, window_s=window_s,
+                                  wanted=wanted, backbones=curves)
+
+
+def _run_stats(rec: Record) -> dict:
+    keep = ("wall_s", "n_events", "n_breakpoints", "oversample")
+    return {f"model_{k}": rec.stats[k] for k in keep if k in rec.stats}
 
 
 def _summary_line(scene: Scene, rig: VirtualRig, rec: Record, s: dict, linear: LinearCheck | None) -> str:
@@ -536,8 +624,13 @@ load cells, the hammer). Writes hammer.npz, hammer.uff (UFF 58), channels.csv, f
 fig11.png, levels.csv, levels.png, hammer.md, lyapunov.csv (the record's largest Lyapunov
 exponent) and, with [hammer] linear_check, linear_check.csv
 and linear_check.png. With --test FILE.uff, instead, a measured test drives the model by its
-hammer channel at the test's sampling and every channel is compared: writes test_errors.csv,
-test_compare.png, test_spectrogram.png and model.uff (the model's channels, UFF 58)."""
+hammer channel (through a force window) at the test's sampling and every channel is compared:
+where chaos starts (the predictability horizon, from two exact runs of the model and its largest
+Lyapunov exponent), the pointwise errors up to it, and past it what survives chaos (spectrogram
+ridges, RMS envelope, impacts, the open-gap time, backbones of the free decay over the model's
+NNM backbones); --window START:END and --measures LIST choose what. Writes test_errors.csv,
+test_measures.csv, test_horizon.csv, test_compare.md, test_compare.png, test_spectrogram.png,
+test_horizon.png, test_measures.png, test_backbone.png and model.uff (the model's channels, UFF 58)."""
 
 
 def estimate(scene: Scene) -> list[Estimate]:
@@ -565,7 +658,8 @@ def estimate(scene: Scene) -> list[Estimate]:
 
 
 __all__ = ["compute", "write", "estimate", "DESCRIPTION", "run_record", "blow", "Record", "pseudo_rigid",
-           "coupled_subsystem", "default_location", "impacts", "modal_energy_end", "backbones", "level_summary"]
+           "coupled_subsystem", "default_location", "impacts", "modal_energy_end", "backbones", "level_summary",
+           "channel_backbones"]
 
 
 # -- the reproduction report (bearingshaft.reproduction): how these files compare with the reference -----

@@ -21,6 +21,7 @@ import numpy as np  # noqa: E402
 from bearingshaft import correlate  # noqa: E402
 from bearingshaft.correlate import ChannelError, ChannelPair  # noqa: E402
 from bearingshaft.digits import roundoff_bound, sig, text, to_resolution  # noqa: E402
+from bearingshaft.measures import MEASURE_FIELDS  # noqa: E402
 from bearingshaft.output import StageWriter, write_rows  # noqa: E402
 from bearingshaft.plots import Envelope, wrap_title  # noqa: E402
 from bearingshaft.reproduction import DELTA0, HORIZON_TOL  # noqa: E402
@@ -38,6 +39,13 @@ LINEAR_RESOLUTION = 1e-6  # linear check: a relative RMS error below this is wri
 # themselves move by ~1e-8 with the BLAS's rounding (another CPU), and such errors (axes near zero by symmetry) moved
 # by 40 % between two machines
 SPECTRO_DB = 80.0  # dB shown below each spectrogram's peak
+FIG10_SPAN_S = 0.1  # s, Fig. 10's window after the blow's start (then on to the end of a contact in progress)
+FIG10_MARGIN_S = 0.002  # s, open gaps shown after the last contact in Fig. 10's window
+BLOW_THRESHOLD = 1e-3  # the blow: where |hammer| exceeds this fraction of its peak (Fig. 10's inset)
+ZOOM_WINDOW_S = 0.5  # s, Fig. 11's low band: a window whose 2 Hz bins part most pseudo-rigid lines
+ZOOM_MIN_HZ = 50.0  # Hz, the least top of Fig. 11's low band
+ZOOM_HEADROOM = 1.3  # the low band reaches this much above the highest pseudo-rigid frequency (room for labels)
+LABEL_GAP = 0.06  # the names of the pseudo-rigid lines: at least this fraction of the band apart
 
 
 def write(result: VirtualTest | Comparison, writer: StageWriter) -> None:
@@ -70,7 +78,8 @@ def write_virtual_test(result: VirtualTest, writer: StageWriter) -> None:
     scene, rig, nominal = result.scene, result.rig, result.nominal
     write_record(writer, rig, nominal, scene)
     fig10(writer.path("fig10.png"), rig, nominal, scene.hammer)
-    fig11(writer.path("fig11.png"), rig, nominal, scene, result.labels, result.backbones)
+    fig11(writer.path("fig11.png"), rig, nominal, scene, result.labels, result.backbones,
+          result.summary[nominal.level_N]["gaps_open_after_s"])
     levels_csv(writer.path("levels.csv"), result.summary)
     levels_figure(writer.path("levels.png"), rig, result.records, result.summary, scene)
     if result.linear is not None:
@@ -156,32 +165,123 @@ def write_record(writer: StageWriter, rig: VirtualRig, rec: Record, scene: Scene
 
 
 # -- figures ---------------------------------------------------------------------------------
+def _save(fig, path: Path, dpi: int = 120) -> None:
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
 def fig10(path: Path, rig: VirtualRig, rec: Record, spec) -> None:
-    """The hammer force and one tip load cell against time (the paper's Fig. 10).
+    """``fig10.png``: :func:`draw_fig10` saved.
 
     Parameters
     ----------
     path : the PNG written
+    rig, rec, spec : as :func:`draw_fig10`
+    """
+    _save(draw_fig10(rig, rec, spec), path)
+
+
+def closed_samples(rig: VirtualRig, rec: Record) -> np.ndarray:
+    """(N,) bool, a tip gap is closed at the sample (as :func:`bearingshaft.stages.hammer.impacts` counts them).
+
+    Parameters
+    ----------
+    rig : the rig that made ``rec`` (its stops)
+    rec : a record (its states ``x``)
+    """
+    return np.any(rig.system.penetration(rec.x) > 0, axis=1)
+
+
+def fig10_window(t: np.ndarray, closed: np.ndarray, start_s: float, span_s: float = FIG10_SPAN_S,
+                 margin_s: float = FIG10_MARGIN_S) -> float:
+    """s, the end of Fig. 10's window: ``start_s + span_s``, moved on to the end of the contact in
+    progress then (so that the record never ends mid-impact) plus ``margin_s`` of open gaps, but
+    before the next contact starts; the record's end if it comes first.
+
+    Parameters
+    ----------
+    t : (N,) s, the sample times
+    closed : (N,) bool, a gap is closed at the sample
+    start_s : s, the blow's start
+    span_s : s, the window's length asked for
+    margin_s : s, open gaps shown after the last contact in the window
+
+    Returns
+    -------
+    float
+        s.
+
+    Examples
+    --------
+    >>> t = np.arange(0.0, 0.2, 1e-3)
+    >>> closed = (t > 0.105) & (t < 0.112)  # a contact from 106 to 111 ms
+    >>> round(fig10_window(t, closed, 0.0, 0.108, 0.002), 6)  # asked to end at 108 ms, mid-impact
+    0.114
+    """
+    k = min(int(np.searchsorted(t, start_s + span_s)), t.size - 1)
+    while k < t.size - 1 and closed[k]:
+        k += 1
+    nxt = np.flatnonzero(closed[k:])
+    stop = k + int(nxt[0]) - 1 if nxt.size else t.size - 1  # the last open sample before the next contact
+    k_end = min(int(np.searchsorted(t, t[k] + margin_s)), stop)
+    return float(t[max(k_end, k)])
+
+
+def draw_fig10(rig: VirtualRig, rec: Record, spec, closed: np.ndarray | None = None):
+    """The hammer force and one tip load cell against time (the paper's Fig. 10), with the blow
+    zoomed in an inset; the window ends with the gaps open (:func:`fig10_window`).
+
+    Parameters
+    ----------
     rig : the rig that made ``rec``
     rec : the nominal blow's record
     spec : the scene's [hammer] (start of the blow, the load cell drawn)
+    closed : (N,) bool, a gap is closed at the sample (default: from the record's states)
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     names = list(rig.names)
-    t_end = min(rec.t[-1], spec.start_s + 0.1)
+    if closed is None:
+        closed = closed_samples(rig, rec)
+    t_end = fig10_window(rec.t, closed, spec.start_s)
     keep = rec.t <= t_end
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(9, 6), sharex=True, constrained_layout=True)
-    a1.plot(rec.t[keep] * 1e3, rec.data[names.index("hammer")][keep], color="k", lw=1)
+    hammer = rec.data[names.index("hammer")]
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(9, 6.4), sharex=True, constrained_layout=True)
+    a1.plot(rec.t[keep] * 1e3, hammer[keep], color="k", lw=1)
     a1.set_ylabel("hammer force [N]")
     a2.plot(rec.t[keep] * 1e3, rec.data[names.index(spec.load_cell)][keep], color="tab:red", lw=0.8)
     a2.set_ylabel(f"{spec.load_cell} load cell [N]")
     a2.set_xlabel("time [ms]")
+    a2.set_xlim(rec.t[0] * 1e3, t_end * 1e3)
     for a in (a1, a2):
         a.grid(alpha=0.3)
-    a1.set_title(wrap_title(f"Virtual hammer test: {rec.level_N:g} N blow at {where(rig.location)} (top) and the "
-                            f"{spec.load_cell.replace('_', ' ')} load cell, contact force minus its seismic mass's "
-                            "inertia (bottom); compare the paper's Fig. 10"), fontsize=10)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _blow_inset(a1, rec.t, hammer)
+    a1.set_title(wrap_title(f"Virtual hammer test: {rec.level_N:g} N blow at {where(rig.location)} (top, the blow "
+                            f"zoomed in the inset) and the {spec.load_cell.replace('_', ' ')} load cell, contact force "
+                            "minus its seismic mass's inertia (bottom); the window ends with the gaps open; compare "
+                            "the paper's Fig. 10"), fontsize=10)
+    return fig
+
+
+def _blow_inset(ax, t: np.ndarray, hammer: np.ndarray) -> None:
+    """The blow (where |force| > 0.1 % of its peak) zoomed, half its length either side, in the top right."""
+    on = np.flatnonzero(np.abs(hammer) > BLOW_THRESHOLD * np.max(np.abs(hammer)))
+    if on.size == 0:
+        return
+    t0, t1 = t[on[0]], t[on[-1]]
+    pad = max(0.5 * (t1 - t0), 2 * (t[1] - t[0]))
+    sel = (t >= t0 - pad) & (t <= t1 + pad)
+    ins = ax.inset_axes([0.58, 0.3, 0.39, 0.62])
+    ins.plot(t[sel] * 1e3, hammer[sel], ".-", color="k", lw=1, ms=2.5)
+    ins.set_xlabel("time [ms]", fontsize=8)
+    ins.set_ylabel("force [N]", fontsize=8)
+    ins.tick_params(labelsize=7)
+    ins.grid(alpha=0.3)
+    # its length: between the zero samples either side of it
+    length = t[min(on[-1] + 1, t.size - 1)] - t[max(on[0] - 1, 0)]
+    ins.set_title(f"the blow, {1e3 * length:.3g} ms (dots: the samples)", fontsize=8)
 
 
 def where(location: tuple[float, float, float]) -> str:
@@ -206,16 +306,23 @@ def where(location: tuple[float, float, float]) -> str:
     return f"({x * 1e3:.1f}, {y * 1e3:.1f}, {z * 1e3:.1f}) mm"
 
 
-def _spectro(ax, rec: Record, channel: int, scene: Scene, fmax: float, db_range: float = SPECTRO_DB):
+def _spectrogram_db(rec: Record, channel: int, window_s: float, overlap: float, fmax: float):
+    """The channel's spectrogram, dB re 1 unit^2/Hz: (t, freq_hz, dB)."""
+    s = spectrogram(rec.t, rec.data[channel], window_s, overlap, fmax_hz=fmax)
+    return s.t, s.freq_hz, 10 * np.log10(np.maximum(s.power, 1e-300))
+
+
+def _spectro(ax, rec: Record, channel: int, scene: Scene, fmax: float, db_range: float = SPECTRO_DB,
+             top: float | None = None, window_s: float | None = None):
+    """A spectrogram panel: ``db_range`` dB below ``top`` (default: its own peak)."""
     sp = scene.spectrogram
     window, overlap = (sp.window_s, sp.overlap) if sp else (0.05, 0.9)
-    s = spectrogram(rec.t, rec.data[channel], window, overlap, fmax_hz=fmax)
-    db = 10 * np.log10(np.maximum(s.power, 1e-300))
-    top = float(db.max())
-    mesh = ax.pcolormesh(s.t, s.freq_hz, db, shading="nearest", cmap="viridis", vmin=top - db_range, vmax=top,
+    t, f, db = _spectrogram_db(rec, channel, window_s or window, overlap, fmax)
+    top = float(db.max()) if top is None else top
+    mesh = ax.pcolormesh(t, f, db, shading="nearest", cmap="viridis", vmin=top - db_range, vmax=top,
                          rasterized=True)
     ax.set_ylim(0, fmax)
-    ax.set_xlim(s.t[0], s.t[-1])
+    ax.set_xlim(rec.t[0], rec.t[-1])
     return mesh
 
 
@@ -236,44 +343,145 @@ def spectrogram_channel(scene: Scene) -> str:
     return sp.dof if sp is not None and ":" in sp.dof else "beam_s3:z"
 
 
-def fig11(path: Path, rig: VirtualRig, rec: Record, scene: Scene, labels: dict, curves: dict) -> None:
-    """Spectrogram of a beam accelerometer with the pseudo-rigid open-gap frequencies (dashed) and
-    the NNM backbones mapped onto time by the record's energy, f(E(t)).
+def fig11(path: Path, rig: VirtualRig, rec: Record, scene: Scene, labels: dict, curves: dict,
+          gaps_open_s: float) -> None:
+    """``fig11.png``: :func:`draw_fig11` saved.
 
     Parameters
     ----------
     path : the PNG written
+    rig, rec, scene, labels, curves, gaps_open_s : as :func:`draw_fig11`
+    """
+    _save(draw_fig11(rig, rec, scene, labels, curves, gaps_open_s), path)
+
+
+def zoom_band_hz(labels: dict) -> float:
+    """Hz, the top of Fig. 11's lower panel: the highest pseudo-rigid frequency and ZOOM_HEADROOM of it
+    more, rounded up to 10 Hz.
+
+    Parameters
+    ----------
+    labels : {label: (mode index, freq_hz, score)} the pseudo-rigid modes
+
+    Returns
+    -------
+    float
+        Hz.
+
+    Examples
+    --------
+    >>> zoom_band_hz({"bounce": (9, 19.6, 1.0), "roll": (11, 33.7, 1.0)}), zoom_band_hz({})
+    (50.0, 50.0)
+    """
+    top = max((v[1] for v in labels.values()), default=0.0)
+    return float(max(ZOOM_MIN_HZ, 10.0 * math.ceil(ZOOM_HEADROOM * top / 10.0)))
+
+
+def draw_fig11(rig: VirtualRig, rec: Record, scene: Scene, labels: dict, curves: dict, gaps_open_s: float):
+    """Spectrogram of a beam accelerometer (top: the scene's band) with the NNM backbones mapped onto
+    time by the record's energy, f(E(t)), drawn only while the gaps still close (up to
+    ``gaps_open_s``: after it the motion is linear and the map does not hold); below, the band of the
+    six pseudo-rigid open-gap modes (dashed, labelled) with a longer window that resolves them.
+
+    Parameters
+    ----------
     rig : the rig that made ``rec``
     rec : the nominal blow's record
     scene : the scene ([spectrogram]: channel, window, band, colour range)
     labels : {label: (mode index, freq_hz, score)} the pseudo-rigid modes
     curves : {label: (energy_J, freq_hz)} the NNM backbones
+    gaps_open_s : s, the gaps stay open after this time (0: they never close)
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     name = spectrogram_channel(scene)
-    fmax = scene.spectrogram.fmax_hz if scene.spectrogram else 1500.0
-    fig, ax = plt.subplots(figsize=(9, 5.5), constrained_layout=True)
-    mesh = _spectro(ax, rec, list(rig.names).index(name), scene, fmax,
-                    scene.spectrogram.db_range if scene.spectrogram else SPECTRO_DB)
-    fig.colorbar(mesh, ax=ax, label="PSD [dB re 1 (m/s^2)^2/Hz]")
-    rigid = sorted(labels.items(), key=lambda kv: kv[1][1])
-    for _, (_, f, _) in rigid:
-        ax.axhline(f, color="w", ls="--", lw=0.7, alpha=0.8)
-    if rigid:
-        ax.plot([], [], color="w", ls="--", lw=0.7,
-                label="pseudo-rigid: " + ", ".join(f"{k} {v[1]:.1f}" for k, v in rigid) + " Hz")
-    colors = ("r", "orange", "magenta", "cyan")
-    for i, (label, (E, f)) in enumerate(curves.items()):
-        ax.plot(rec.t, curve_in_time(np.maximum(rec.energy, 1e-300), E, f), color=colors[i % 4], lw=1.2,
-                label=label)
-    if curves or rigid:
-        ax.legend(loc="upper right", fontsize=7, framealpha=0.6)
-    ax.set_xlabel("time [s]")
+    sp = scene.spectrogram
+    fmax = sp.fmax_hz if sp else 1500.0
+    db_range = sp.db_range if sp else SPECTRO_DB
+    window = sp.window_s if sp else 0.05
+    channel = list(rig.names).index(name)
+    fzoom = min(zoom_band_hz(labels), fmax)
+    zoom_window = min(ZOOM_WINDOW_S, 0.25 * (rec.t[-1] - rec.t[0]))
+    fig, (ax, az) = plt.subplots(2, 1, figsize=(10, 8.4), sharex=True, constrained_layout=True,
+                                 gridspec_kw={"height_ratios": [3, 2]})
+    mesh = _spectro(ax, rec, channel, scene, fmax, db_range)
+    fig.colorbar(mesh, ax=ax, label="PSD [dB re 1 (m/s^2)^2/Hz]", pad=0.01)
+    hammer = rec.data[list(rig.names).index("hammer")]
+    on = np.flatnonzero(np.abs(hammer) > BLOW_THRESHOLD * np.max(np.abs(hammer)))
+    blow_end_s = float(rec.t[on[-1]]) if on.size else float(rec.t[0])
+    handles = _backbones_in_time(ax, rec, curves, blow_end_s, gaps_open_s, fmax)
+    ax.axhline(fzoom, color="w", ls=":", lw=0.8)
+    ax.text(rec.t[-1], fzoom, f" {fzoom:g} Hz: the lower panel below ", color="w", fontsize=8, ha="right",
+            va="bottom")
     ax.set_ylabel("frequency [Hz]")
-    ax.set_title(wrap_title(f"{name} after a {rec.level_N:g} N blow at {where(rig.location)}: spectrogram with the "
-                            "six pseudo-rigid open-gap frequencies (dashed) and the NNM backbones f(E(t)); compare "
-                            "the paper's Fig. 11"), fontsize=10)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    ax.set_title(wrap_title(f"{name} after a {rec.level_N:g} N blow at {where(rig.location)}: spectrogram "
+                            f"(Hann {window:g} s) with the NNM backbones f(E(t)) while the gaps close; compare the "
+                            "paper's Fig. 11", 110), fontsize=10)
+    mz = _spectro(az, rec, channel, scene, fzoom, db_range, window_s=zoom_window)
+    fig.colorbar(mz, ax=az, label="PSD [dB re 1 (m/s^2)^2/Hz]", pad=0.01)
+    _pseudo_rigid_lines(az, labels, fzoom)
+    for a in (ax, az):
+        if gaps_open_s > 0:
+            a.axvline(gaps_open_s, color="w", ls="-.", lw=1.0)
+    az.set_xlabel("time [s]")
+    az.set_ylabel("frequency [Hz]")
+    az.set_title(f"0-{fzoom:g} Hz (Hann {zoom_window:g} s: {1 / zoom_window:.2g} Hz bins): the six pseudo-rigid "
+                 "open-gap frequencies (dashed)", fontsize=10)
+    if gaps_open_s > 0:
+        handles.append(plt.Line2D([], [], color="k", ls="-.", lw=1.0,
+                                  label=f"the gaps stay open after {gaps_open_s:.3g} s"))
+    if handles:
+        fig.legend(handles=handles, loc="outside lower center", ncol=1, fontsize=9, frameon=False)
+    return fig
+
+
+def _backbones_in_time(ax, rec: Record, curves: dict, blow_end_s: float, gaps_open_s: float, fmax: float) -> list:
+    """Each backbone's f(E(t)) of the free motion, from the end of the blow to ``gaps_open_s`` (gid
+    ``backbone``); legend handles, with a line for those not drawn (no point in the record's
+    energies, the time or the band)."""
+    colors = ("r", "orange", "magenta", "cyan")
+    handles, hidden = [], []
+    upto = (rec.t >= blow_end_s) & (rec.t <= gaps_open_s)
+    for i, (label, (E, f)) in enumerate(curves.items()):
+        fe = curve_in_time(np.maximum(rec.energy[upto], 1e-300), E, f)
+        shown = np.isfinite(fe) & (fe <= fmax)
+        if not np.any(shown):
+            hidden.append(f"{label}: not drawn, {_why_hidden(rec, E, f, gaps_open_s, fmax)}")
+            continue
+        (line,) = ax.plot(rec.t[upto], fe, color=colors[i % 4], lw=1.4, label=f"{label}, f(E(t)) while the gaps close",
+                          gid="backbone")
+        handles.append(line)
+    for name in hidden:
+        handles.append(plt.Line2D([], [], color="none", label=name))
+    return handles
+
+
+def _why_hidden(rec: Record, E: np.ndarray, f: np.ndarray, gaps_open_s: float, fmax: float) -> str:
+    """Why a backbone has no point on Fig. 11."""
+    if gaps_open_s <= 0:
+        return "the gaps never close"
+    if np.min(f) > fmax:
+        return f"above the {fmax:g} Hz shown"
+    e_top = float(np.max(rec.energy))
+    if np.min(E) > e_top:
+        return f"its backbone starts at {np.min(E):.2g} J, above the record's peak energy {e_top:.2g} J"
+    return "outside the record's energies while the gaps close"
+
+
+def _pseudo_rigid_lines(ax, labels: dict, fzoom: float) -> None:
+    """Dashed lines at the pseudo-rigid frequencies, each named at the right edge (names spread apart)."""
+    rigid = sorted(((v[1], k) for k, v in labels.items() if v[1] <= fzoom))
+    gap = LABEL_GAP * fzoom
+    y_prev = -math.inf
+    for f, label in rigid:
+        ax.axhline(f, color="w", ls="--", lw=0.8, alpha=0.9)
+        y = max(f, y_prev + gap)
+        ax.annotate(f"{label} {f:.1f} Hz", xy=(1.0, f), xycoords=("axes fraction", "data"), xytext=(1.012, y),
+                    textcoords=("axes fraction", "data"), fontsize=8, va="center",
+                    arrowprops={"arrowstyle": "-", "lw": 0.5, "color": "0.3"})
+        y_prev = y
 
 
 # -- the level sweep ---------------------------------------------------------------------------
@@ -301,38 +509,90 @@ def levels_csv(path: Path, summary: dict) -> None:
 
 
 def levels_figure(path: Path, rig: VirtualRig, records: dict, summary: dict, scene: Scene) -> None:
-    """``levels.png``: one spectrogram of the Fig. 11 channel per blow level.
+    """``levels.png``: :func:`draw_levels` saved.
 
     Parameters
     ----------
     path : the PNG written
+    rig, records, summary, scene : as :func:`draw_levels`
+    """
+    _save(draw_levels(rig, records, summary, scene), path, dpi=110)
+
+
+def levels_db_range(levels_N, db_range: float = SPECTRO_DB) -> float:
+    """dB, the span of ``levels.png``'s one colour scale: ``db_range`` plus 20 log10(strongest /
+    weakest blow), the dB by which a linear response to the weakest blow lies below the strongest's,
+    so that the weakest blow's panel still shows ``db_range`` dB of its own.
+
+    Parameters
+    ----------
+    levels_N : N, the blow levels
+    db_range : dB shown below each blow's own peak
+
+    Returns
+    -------
+    float
+        dB.
+
+    Examples
+    --------
+    >>> levels_db_range([20.0, 2000.0], 80.0), levels_db_range([500.0], 80.0)
+    (120.0, 80.0)
+    """
+    lv = [abs(v) for v in levels_N if v]
+    return db_range + (20.0 * math.log10(max(lv) / min(lv)) if lv else 0.0)
+
+
+def draw_levels(rig: VirtualRig, records: dict, summary: dict, scene: Scene):
+    """One spectrogram of the Fig. 11 channel per blow level, on one colour scale (one colour bar):
+    the peak of the strongest blow's at the top, :func:`levels_db_range` below it.
+
+    Parameters
+    ----------
     rig : the rig that made the records
     records : {level_N: Record}
     summary : {level_N: level summary}, for the panels' titles
     scene : the scene ([spectrogram])
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     name = spectrogram_channel(scene)
-    fmax = scene.spectrogram.fmax_hz if scene.spectrogram else 1500.0
+    sp = scene.spectrogram
+    fmax = sp.fmax_hz if sp else 1500.0
+    window, overlap = (sp.window_s, sp.overlap) if sp else (0.05, 0.9)
+    channel = list(rig.names).index(name)
+    specs = {level: _spectrogram_db(rec, channel, window, overlap, fmax) for level, rec in records.items()}
+    top = max(float(db.max()) for _, _, db in specs.values())
+    span = levels_db_range(list(records), sp.db_range if sp else SPECTRO_DB)
     n = len(records)
     cols = 2 if n > 1 else 1
     nrows = math.ceil(n / cols)
-    fig, axes = plt.subplots(nrows, cols, figsize=(11, 2.8 * nrows + 0.8), sharex=True, sharey=True,
+    fig, axes = plt.subplots(nrows, cols, figsize=(11, 2.8 * nrows + 1.0), sharex=True, sharey=True,
                              constrained_layout=True, squeeze=False)
-    for ax, (level, rec) in zip(axes.ravel(), records.items(), strict=False):
-        _spectro(ax, rec, list(rig.names).index(name), scene, fmax)
+    mesh = None
+    for ax, (level, (t, f, db)) in zip(axes.ravel(), specs.items(), strict=False):
+        mesh = ax.pcolormesh(t, f, db, shading="nearest", cmap="viridis", vmin=top - span, vmax=top,
+                             rasterized=True)
+        ax.set_ylim(0, fmax)
+        rec = records[level]
+        ax.set_xlim(rec.t[0], rec.t[-1])
         s = summary[level]
-        ax.set_title(f"{level:g} N: {s['impacts_total']} impacts, gaps open after "
-                     f"{s['gaps_open_after_s']:.3g} s", fontsize=9)
+        what = (f"{s['impacts_total']} impacts, gaps open after {s['gaps_open_after_s']:.3g} s"
+                if s["impacts_total"] else "no impact: the gaps never close")
+        ax.set_title(f"{level:g} N: {what}", fontsize=9)
     for ax in axes.ravel()[n:]:
         ax.set_visible(False)
     for ax in axes[-1]:
         ax.set_xlabel("time [s]")
     for ax in axes[:, 0]:
         ax.set_ylabel("frequency [Hz]")
-    fig.suptitle(wrap_title(f"{name}: how the ringdown changes with the blow level (each panel {SPECTRO_DB:g} dB "
-                            "below its own peak)", 120), fontsize=10)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    if mesh is not None:
+        fig.colorbar(mesh, ax=axes, shrink=0.8, label="PSD [dB re 1 (m/s^2)^2/Hz], one scale for every panel")
+    fig.suptitle(wrap_title(f"{name}: how the ringdown changes with the blow level (Hann {window:g} s; one colour "
+                            f"scale, {span:.0f} dB below the strongest blow's peak)", 120), fontsize=10)
+    return fig
 
 
 # -- the linear check --------------------------------------------------------------------------
@@ -408,7 +668,7 @@ def write_markdown(path: Path, result: VirtualTest) -> None:
     lines = [f"# Virtual hammer test: {scene.name}", "",
              f"Reduced apparatus: {rig.system.n} coordinates (x1, x3 and {rig.system.n - 2} fixed-interface modes), "
              f"{len(rig.channels)} channels. Blow: "
-             f"{'measured history ' + spec.force_file if spec.force_file else 'half-sine'}"
+             f"{'measured history ' + Path(spec.force_file).name if spec.force_file else 'half-sine'}"
              f" of {spec.duration_s * 1e3:g} ms at {where(rig.location)} along "
              f"{tuple(round(d, 6) for d in rig.direction)}, "
              f"starting at {spec.start_s:g} s; record {scene.ringdown.duration_s:g} s at "
@@ -465,32 +725,66 @@ def _level_text(s: dict, end_share_s: float) -> list[str]:
 
 # -- a measured test ---------------------------------------------------------------------------
 def write_comparison(result: Comparison, writer: StageWriter) -> None:
-    """``test_errors.csv``, ``test_compare.png``, ``test_spectrogram.png`` and ``model.uff``.
+    """The comparison with a measured test: ``test_errors.csv`` (pointwise, up to the horizon),
+    ``test_measures.csv`` (what survives chaos), ``test_horizon.csv``, ``test_compare.md``, the
+    figures ``test_compare.png``, ``test_spectrogram.png``, ``test_horizon.png``,
+    ``test_measures.png``, ``test_backbone.png`` (with backbones) and ``model.uff``.
 
     Parameters
     ----------
     result : the comparison with a measured test
     writer : the stage's writer
     """
-    scene, pairs = result.scene, result.pairs
+    scene, pairs, hz = result.scene, result.pairs, result.horizon
     correlate.write_errors_csv(result.rows, writer.path("test_errors.csv"))
+    ms = result.measures
+    write_rows(writer.path("test_measures.csv"), ms.rows if ms else [], MEASURE_FIELDS, float_format=f".{DIGITS}g")
+    if hz is not None:
+        horizon_csv(writer.path("test_horizon.csv"), hz)
+        horizon_figure(writer.path("test_horizon.png"), result)
+    horizon = hz.horizon_s if hz is not None else None
     comparison_figure(pairs, writer.path("test_compare.png"),
                       f"{scene.name} against {Path(result.test_file).name}: model driven by {result.driven}",
-                      window_s=result.window_s)
+                      window_s=result.window_s, horizon_s=horizon, rows=result.rows)
     name = spectrogram_channel(scene)
     pair = next((p for p in pairs if p.name == name), pairs[0])
     sp = scene.spectrogram
+    ridge = ms.ridges.get(pair.name) if ms else None
     spectrogram_pair_figure(pair, writer.path("test_spectrogram.png"), sp.window_s if sp else 0.05,
                             sp.overlap if sp else 0.9, sp.fmax_hz if sp else 1500.0,
-                            title=f"{pair.name}: model (left) and test (right)")
+                            title=f"{pair.name}: model (left) and test (right)", span_s=result.window_s,
+                            ridges=ridge, horizon_s=horizon)
+    if ms is not None and (ms.ridges or ms.envelopes or ms.impacts):
+        measures_figure(writer.path("test_measures.png"), result, pair.name)
+    if ms is not None and ms.backbones:
+        backbone_figure(writer.path("test_backbone.png"), result)
     write_uff58(writer.path("model.uff"), result.model, model=f"bearingshaft {scene.name}")
+    comparison_markdown(writer.path("test_compare.md"), result)
+
+
+def horizon_csv(path: Path, hz) -> None:
+    """``test_horizon.csv``: per window of the horizon's runs, G (the model's growth of a difference
+    of the blow), the mismatch it predicts (delta_eff G) and the mismatch measured.
+
+    Parameters
+    ----------
+    path : the CSV written
+    hz : the comparison's Horizon
+    """
+    # both are windows of hz.window_s from the record's first sample: the k-th of one is the k-th of the other
+    rows = [{"t_s": float(t), "growth": float(g), "predicted_mismatch": float(hz.delta_eff * g),
+             "measured_mismatch": float(hz.mismatch[k]) if k < hz.mismatch.size else math.nan}
+            for k, (t, g) in enumerate(zip(hz.t, hz.growth, strict=True))]
+    write_rows(path, rows, ["t_s", "growth", "predicted_mismatch", "measured_mismatch"], float_format=f".{DIGITS}g")
 
 
 def comparison_figure(pairs: list[ChannelPair], path: str | Path, title: str, channels: list[str] | None = None,
-                      window_s: tuple[float, float] | None = None) -> None:
-    """Model and test time histories overlaid, one panel per channel, each titled with its
-    rms_rel_error over the window. A long record is drawn as its min/max per pixel column
-    (:class:`bearingshaft.plots.Envelope`).
+                      window_s: tuple[float, float] | None = None, horizon_s: float | None = None,
+                      rows: list[dict] | None = None) -> None:
+    """Model and test time histories overlaid, one panel per channel, each titled with its relative
+    RMS error (from ``rows`` when given: up to the horizon, with its floor; else over the window).
+    A long record is drawn as its min/max per pixel column (:class:`bearingshaft.plots.Envelope`);
+    the predictability horizon, if given, is a dashed line.
 
     Parameters
     ----------
@@ -499,10 +793,13 @@ def comparison_figure(pairs: list[ChannelPair], path: str | Path, title: str, ch
     title : the figure's title
     channels : names of the pairs drawn, in this order (default: :func:`bearingshaft.correlate.default_channels`)
     window_s : (t_start_s, t_end_s), s, absolute times drawn (default: each pair's whole overlap)
+    horizon_s : s, the predictability horizon (None or inf: not drawn)
+    rows : :func:`bearingshaft.correlate.channel_errors` rows whose errors title the panels
     """
     chosen = correlate.select_pairs(pairs, channels)
     if not chosen:
         raise ChannelError("no channel to draw")
+    by_row = {r["name"]: r for r in rows or []}
     fig, axes = plt.subplots(len(chosen), 1, figsize=(9, 1.9 * len(chosen) + 1.0), sharex=True,
                              constrained_layout=True, squeeze=False)
     for ax, p in zip(axes[:, 0], chosen, strict=True):
@@ -513,10 +810,19 @@ def comparison_figure(pairs: list[ChannelPair], path: str | Path, title: str, ch
         t = t + a.t[0]
         ax.plot(t, y[:, 1], color="k", lw=0.8, label="test" + (" (sign flipped)" if p.flipped else ""))
         ax.plot(t, y[:, 0], color="C3", lw=0.8, alpha=0.85, label="model")
-        rms_x = correlate.rms(a.test)
-        err = correlate.rms(a.model - a.test) / rms_x if rms_x > 0 else math.inf
-        ax.set_title(f"{p.name} (node {p.node}, direction {correlate.direction_label(p.direction)}): "
-                     f"rms error {100 * err:.3g} %", fontsize=9, loc="left")
+        if p.name in by_row:
+            r = by_row[p.name]
+            judged = "" if r["judged_against"] == "itself" else f", judged against its {r['judged_against']}"
+            err = f"rms error {100 * r['rms_rel_error']:.3g} % to {1e3 * r['t_end_s']:.4g} ms{judged}"
+        elif rows is not None:
+            err = "no pointwise error: past the horizon"
+        else:
+            rms_x = correlate.rms(a.test)
+            err = f"rms error {100 * (correlate.rms(a.model - a.test) / rms_x if rms_x > 0 else math.inf):.3g} %"
+        ax.set_title(f"{p.name} (node {p.node}, direction {correlate.direction_label(p.direction)}): {err}",
+                     fontsize=9, loc="left")
+        if horizon_s is not None and math.isfinite(horizon_s) and a.t[0] < horizon_s < a.t[-1]:
+            ax.axvline(horizon_s, color="C0", ls="--", lw=1.0, label="predictability horizon")
         ax.set_ylabel(f"{p.quantity.replace('_', ' ')}\n[{p.unit}]", fontsize=9)
         ax.legend(loc="upper right", fontsize=7)
         ax.set_xlim(a.t[0], a.t[-1])
@@ -528,12 +834,15 @@ def comparison_figure(pairs: list[ChannelPair], path: str | Path, title: str, ch
 
 def spectrogram_pair_figure(pair: ChannelPair, path: str | Path, window_s: float, overlap: float, fmax_hz: float,
                             db_range: float = 60.0, title: str | None = None,
-                            span_s: tuple[float, float] | None = None) -> None:
+                            span_s: tuple[float, float] | None = None, ridges=None,
+                            horizon_s: float | None = None) -> None:
     """Spectrograms of the model (left) and the test (right) of one channel on one colour scale.
 
     ``window_s`` (s) and ``overlap`` are the STFT's (:func:`reduced.transient.spectrogram.spectrogram`:
     Hann window, PSD scaling, mean removed); the colour scale spans ``db_range`` dB below the
-    larger of the two maxima.
+    larger of the two maxima. With ``ridges`` (:class:`bearingshaft.measures.Ridges`) each
+    panel carries both ridges (model red, test white) over the frames compared, and with
+    ``horizon_s`` the predictability horizon (dashed).
 
     Parameters
     ----------
@@ -544,6 +853,8 @@ def spectrogram_pair_figure(pair: ChannelPair, path: str | Path, window_s: float
     db_range : dB shown below the larger maximum
     title : the figure's title (default: the channel's name)
     span_s : (t_start_s, t_end_s), s, absolute times drawn (default: the common samples)
+    ridges : Ridges or None, the ridges drawn over both panels
+    horizon_s : s, the predictability horizon (None or inf: not drawn)
     """
     a = pair.aligned(span_s)
     specs = []
@@ -561,6 +872,13 @@ def spectrogram_pair_figure(pair: ChannelPair, path: str | Path, window_s: float
                              rasterized=True)
         ax.set_title(label, fontsize=10)
         ax.set_xlabel("time [s]")
+        if ridges is not None:
+            ok = ridges.valid
+            ax.plot(ridges.t[ok], ridges.f_model[ok], ".", color="C3", ms=2, label="model ridge")
+            ax.plot(ridges.t[ok], ridges.f_test[ok], ".", color="w", ms=2, label="test ridge")
+            ax.legend(loc="upper right", fontsize=7)
+        if horizon_s is not None and math.isfinite(horizon_s):
+            ax.axvline(horizon_s, color="w", ls="--", lw=0.8)
         ax.set_ylim(0, fmax_hz)
     axes[0].set_ylabel("frequency [Hz]")
     fig.colorbar(mesh, ax=axes, label=f"PSD [dB re 1 ({pair.unit})^2/Hz]")
@@ -569,3 +887,242 @@ def spectrogram_pair_figure(pair: ChannelPair, path: str | Path, window_s: float
                             f"Hann {window_s:g} s, overlap {overlap:g})"), fontsize=10)
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def horizon_figure(path: Path, result: Comparison) -> None:
+    """The predictability horizon: the mismatch the model's own divergence predicts (delta_eff G(t))
+    against the one measured, on a log scale, with the tolerance, the onset and the horizon.
+
+    Parameters
+    ----------
+    path : the PNG written
+    result : the comparison
+    """
+    hz = result.horizon
+    fig, ax = plt.subplots(figsize=(9, 4.2), constrained_layout=True)
+    end = hz.t[-1] if hz.t.size else hz.start_s
+    end = max(end, hz.horizon_s if math.isfinite(hz.horizon_s) else 0.0) * 1.5 + 0.01
+    m = hz.mismatch_t <= end
+    ax.semilogy(1e3 * hz.mismatch_t[m], np.maximum(hz.mismatch[m], 1e-12), color="k", lw=1.2,
+                label="measured: test against model (median over channels)")
+    if hz.t.size and math.isfinite(hz.delta_eff):
+        ax.semilogy(1e3 * hz.t, np.maximum(hz.delta_eff * hz.growth, 1e-12), color="C3", lw=1.2,
+                    label=f"predicted: the model against itself after a blow {100 * hz.delta_eff:.2g} % stronger")
+    ax.axhline(hz.tolerance, color="0.5", ls=":", lw=1.0, label=f"tolerance {100 * hz.tolerance:g} %")
+    ax.axvspan(1e3 * hz.eps0_span_s[0], 1e3 * hz.eps0_span_s[1], color="C1", alpha=0.2, label="the blow (eps0)")
+    if math.isfinite(hz.horizon_s):
+        ax.axvline(1e3 * hz.horizon_s, color="C0", ls="--", label=f"horizon {1e3 * hz.horizon_s:.4g} ms")
+    if math.isfinite(hz.onset_s):
+        ax.axvline(1e3 * hz.onset_s, color="C2", ls="-.", label=f"chaos starts {1e3 * hz.onset_s:.4g} ms")
+    ax.set_xlim(0, 1e3 * end)
+    ax.set_ylim(1e-6, 10)
+    ax.set_xlabel("time [ms]")
+    ax.set_ylabel("relative RMS difference (2 ms windows)")
+    ax.legend(loc="lower right", fontsize=7)
+    lam = (f"largest Lyapunov exponent {hz.exponent_per_s:.3g} 1/s" if math.isfinite(hz.exponent_per_s)
+           else "no separation runs")
+    fig.suptitle(wrap_title(f"{result.scene.name} against {Path(result.test_file).name}: where pointwise comparison "
+                            f"stops ({lam})"), fontsize=10)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def measures_figure(path: Path, result: Comparison, channel: str) -> None:
+    """What survives chaos, on one channel and one load cell: the spectrogram ridges against time,
+    the RMS envelope, and the impacts' peak forces against time, model and test.
+
+    Parameters
+    ----------
+    path : the PNG written
+    result : the comparison
+    channel : the channel of the ridges and the envelope (the spectrogram's)
+    """
+    ms, hz = result.measures, result.horizon
+    cell = result.scene.hammer.load_cell
+    if cell not in ms.impacts and ms.impacts:
+        cell = next(iter(ms.impacts))
+    panels = [k for k, have in (("ridges", channel in ms.ridges), ("envelope", channel in ms.envelopes),
+                                ("impacts", cell in ms.impacts)) if have]
+    fig, axes = plt.subplots(len(panels), 1, figsize=(9, 2.6 * len(panels) + 0.8), sharex=True,
+                             constrained_layout=True, squeeze=False)
+    for ax, kind in zip(axes[:, 0], panels, strict=True):
+        if kind == "ridges":
+            r = ms.ridges[channel]
+            ok = r.valid
+            ax.plot(r.t[ok], r.f_test[ok], ".", color="k", ms=3, label="test")
+            ax.plot(r.t[ok], r.f_model[ok], ".", color="C3", ms=3, label="model")
+            ax.set_ylabel("ridge [Hz]")
+            ax.set_title(f"{channel}: spectrogram ridge, {100 * r.agreement:.3g} % of the frames within one bin "
+                         f"({r.bin_hz:.3g} Hz), median difference {100 * r.error:.2g} %", fontsize=9, loc="left")
+        elif kind == "envelope":
+            e = ms.envelopes[channel]
+            ax.semilogy(e.t, np.maximum(e.test, 1e-300), color="k", lw=1.0, label="test")
+            ax.semilogy(e.t, np.maximum(e.model, 1e-300), color="C3", lw=1.0, label="model")
+            ax.set_ylabel(f"RMS [{next(p.unit for p in result.pairs if p.name == channel)}]")
+            ax.set_title(f"{channel}: RMS envelope, error {100 * e.error:.3g} %", fontsize=9, loc="left")
+        else:
+            c = ms.impacts[cell]
+            ax.plot(c.test.start_s, c.test.peak_N, "o", mfc="none", color="k", ms=4,
+                    label=f"test: {c.test.count} impacts")
+            ax.plot(c.model.start_s, c.model.peak_N, "x", color="C3", ms=4, label=f"model: {c.model.count} impacts")
+            ax.axhline(c.test.threshold_N, color="0.5", ls=":", lw=0.8, label="threshold")
+            ax.set_ylabel("peak force [N]")
+            ax.set_title(f"{cell}: impacts as the load cell reads them (past the horizon)", fontsize=9, loc="left")
+        if hz is not None and math.isfinite(hz.horizon_s):
+            ax.axvline(hz.horizon_s, color="C0", ls="--", lw=0.8)
+        ax.legend(loc="upper right", fontsize=7)
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.suptitle(wrap_title(f"{result.scene.name} against {Path(result.test_file).name}: what survives chaos "
+                            f"(the dashed line: predictability horizon)"), fontsize=10)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def backbone_figure(path: Path, result: Comparison) -> None:
+    """Backbones from the ringdown: instantaneous frequency against amplitude of each NNM's component
+    of the free decay, test and model, over the model's NNM backbone (HB, H = 1) on the same channel.
+
+    Parameters
+    ----------
+    path : the PNG written
+    result : the comparison (its measures' backbones, its ChannelBackbone curves)
+    """
+    ms = result.measures
+    curves = {(b.channel, b.label): b for b in result.backbones}
+    keys = [k for k in ms.backbones if k in curves]
+    fig, axes = plt.subplots(1, len(keys), figsize=(4.6 * len(keys) + 0.6, 4.4), constrained_layout=True,
+                             squeeze=False)
+    for ax, key in zip(axes[0], keys, strict=True):
+        c, hb = ms.backbones[key], curves[key]
+        ax.semilogx(hb.amplitude, hb.freq_hz, color="C0", lw=1.5, label="NNM backbone (HB, H=1)")
+        ax.semilogx(c.test.amplitude, c.test.freq_hz, "o", mfc="none", color="k", ms=3, label="test ringdown")
+        ax.semilogx(c.model.amplitude, c.model.freq_hz, "x", color="C3", ms=3, label="model ringdown")
+        lo, hi = hb.band_hz
+        ax.set_ylim(lo, hi)
+        pts = np.concatenate([c.test.amplitude, c.model.amplitude])
+        if pts.size:
+            ax.set_xlim(pts.min() / 2, pts.max() * 2)
+        ax.set_xlabel(f"{key[0]}: displacement amplitude [m]")
+        ax.set_ylabel("frequency [Hz]")
+        ax.set_title(f"{hb.label}, band {lo:.3g}-{hi:.3g} Hz: model vs test {100 * c.error:.2g} %",
+                     fontsize=9)
+        ax.legend(loc="upper left", fontsize=7)
+    fig.suptitle(wrap_title(f"{result.scene.name} against {Path(result.test_file).name}: backbones from the free "
+                            f"decay (Hilbert on the band-passed channel) over the model's NNM backbones"), fontsize=10)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _pct(v: float) -> str:
+    return "-" if not math.isfinite(v) else f"{100 * v:.3g} %"
+
+
+def _horizon_text(result: Comparison) -> list[str]:
+    hz = result.horizon
+    out = ["## Where chaos starts (test_horizon.csv, test_horizon.png)", ""]
+    if math.isfinite(hz.exponent_per_s):
+        onset = f"from {1e3 * hz.onset_s:.4g} ms" if math.isfinite(hz.onset_s) else "never 100-fold within the runs"
+        out.append(f"- Largest Lyapunov exponent of the model along the record: {hz.exponent_per_s:.3g} 1/s "
+                   f"(Lyapunov time {1e3 * hz.lyapunov_time_s:.3g} ms); chaos starts {onset} (a difference of the "
+                   f"blow grown 100-fold in the compared channels).")
+    out.append(f"- Predictability horizon: **{_ms(hz.horizon_s)}**. {hz.note[0].upper() + hz.note[1:]}.")
+    if math.isfinite(hz.last_contact_s):
+        out.append(f"- The model's gaps stay open after {1e3 * hz.last_contact_s:.4g} ms.")
+    if hz.mismatch.size and math.isfinite(hz.horizon_s):
+        before = hz.mismatch[(hz.mismatch_t >= hz.start_s) & (hz.mismatch_t < hz.horizon_s)]
+        after = hz.mismatch[hz.mismatch_t >= hz.horizon_s]
+        if before.size and after.size:
+            out.append(f"- Measured mismatch (median over channels, 2 ms windows): at most {_pct(before.max())} from "
+                       f"the blow to the horizon, median {_pct(float(np.median(after)))} after it.")
+    return out + [""]
+
+
+def _ms(t: float) -> str:
+    return f"{1e3 * t:.4g} ms" if math.isfinite(t) else "none within the window"
+
+
+def _time_text(result: Comparison) -> list[str]:
+    out = ["## Up to the horizon: pointwise errors (test_errors.csv, test_compare.png)", ""]
+    if not result.rows:
+        return out + ["No pointwise errors: " + ("not asked for (--measures)." if "time" not in result.wanted
+                                                 else "the horizon precedes the window."), ""]
+    rows = sorted(result.rows, key=lambda r: -r["rms_rel_error"])
+    errs = [r["rms_rel_error"] for r in rows]
+    floored = sum(r["judged_against"] != "itself" for r in rows)
+    out.append(f"Over {1e3 * rows[0]['t_start_s']:.4g} .. {1e3 * rows[0]['t_end_s']:.4g} ms, relative RMS error "
+               f"rms(model - test) / max(rms(test), floor): median {_pct(float(np.median(errs)))}, worst "
+               f"{_pct(errs[0])} ({rows[0]['name']}); {floored} channels near zero judged against their sensor's "
+               f"largest axis or the noise before the blow.")
+    out += ["", "| channel | rms test | floor | judged against | error |", "|---|---|---|---|---|"]
+    out += [f"| {r['name']} | {r['rms_test']:.3g} {r['unit']} | {r['rms_floor']:.3g} | {r['judged_against']} | "
+            f"{_pct(r['rms_rel_error'])} |" for r in rows[:6]]
+    return out + [""]
+
+
+def _measure_text(result: Comparison) -> list[str]:
+    ms = result.measures
+    if ms is None or not ms.rows:
+        return []
+    out = ["## What survives chaos (test_measures.csv, test_measures.png, test_spectrogram.png)", ""]
+
+    def worst(measure, statistic):
+        rs = [r for r in ms.rows if r["measure"] == measure and r["statistic"] == statistic
+              and math.isfinite(r["error"])]
+        return max(rs, key=lambda r: abs(r["error"])) if rs else None
+
+    def span(m):
+        a, b = ms.spans[m]
+        return f"{1e3 * a:.4g} ms .. {b:.4g} s"
+
+    if ms.ridges:
+        agree = [r.agreement for r in ms.ridges.values() if math.isfinite(r.agreement)]
+        w = worst("ridges", "ridge frequency")
+        out.append(f"- Spectrogram ridges ({span('ridges')}): the dominant frequencies of model and test agree within "
+                   f"one bin in {_pct(float(np.median(agree)) if agree else math.nan)} of the frames (median over "
+                   f"{len(ms.ridges)} channels); median relative difference {_pct(ms.summary('ridges'))}"
+                   + (f", worst {_pct(w['error'])} ({w['channel']})." if w else "."))
+    if ms.envelopes:
+        w = worst("envelope", "RMS envelope")
+        out.append(f"- RMS envelope ({span('envelope')}): error {_pct(ms.summary('envelope'))} (median over "
+                   f"channels)" + (f", worst {_pct(w['error'])} ({w['channel']})." if w else "."))
+    if ms.impacts:
+        out.append(f"- Impacts past the horizon ({span('impacts')}), as the tip load cells read them:")
+        for name, c in ms.impacts.items():
+            out.append(f"  {name}: {c.model.count} (model) against {c.test.count} (test), "
+                       f"{c.model.rate_per_s:.3g} against {c.test.rate_per_s:.3g} 1/s; median peak "
+                       f"{c.model.peak_stat(0.5):.4g} against {c.test.peak_stat(0.5):.4g} N, largest "
+                       f"{c.model.peak_stat(1.0):.4g} against {c.test.peak_stat(1.0):.4g} N.")
+    opens = [r for r in ms.rows if r["measure"] == "open"]
+    if opens:
+        out.append("- Gaps open after (end of the last impact): " + "; ".join(
+            f"{r['channel']} {r['model']:.4g} s (model) against {r['test']:.4g} s" for r in opens) + ".")
+    for (name, label), c in ms.backbones.items():
+        dist = next((r for r in ms.rows if r["measure"] == "backbone" and r["statistic"] == "distance to the NNM "
+                     "backbone" and r["channel"] == f"{name} ({label})"), None)
+        text = (f"- Backbone of the {label} component on {name} (band {c.test.band_hz[0]:.3g}-{c.test.band_hz[1]:.3g} "
+                f"Hz, {c.test.t.size} test points): model against test at equal amplitude {_pct(c.error)}")
+        if dist is not None:
+            text += (f"; distance to the model's NNM backbone: test {_pct(dist['test'])}, model ringdown "
+                     f"{_pct(dist['model'])}")
+        out.append(text + " (test_backbone.png).")
+    return out + [""]
+
+
+def comparison_markdown(path: Path, result: Comparison) -> None:
+    """``test_compare.md``: where chaos starts, the pointwise errors up to it, what still matches after it.
+
+    Parameters
+    ----------
+    path : the Markdown file written
+    result : the comparison
+    """
+    a, b = result.window_s
+    lines = [f"# {result.scene.name} against {Path(result.test_file).name}", "",
+             f"The model ({result.stats.get('n_dofs')} coordinates) at the test's sampling, driven by {result.driven}; "
+             f"{result.force_text}. Compared: {len(result.pairs)} channels over {a:.4g} .. {b:.4g} s; measures: "
+             f"{', '.join(result.wanted)}.", ""]
+    if result.horizon is not None:
+        lines += _horizon_text(result)
+    lines += _time_text(result)
+    lines += _measure_text(result)
+    path.write_text("\n".join(lines))

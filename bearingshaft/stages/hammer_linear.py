@@ -17,6 +17,7 @@ from bearingshaft.scenes import Scene
 from bearingshaft.stages.hammer_results import LinearCheck, Record
 from fem.rig import TIP_CELLS
 from reduced.models.rig import VirtualRig
+from reduced.models.rom import modal_ratios
 
 BAND_HZ = 2000.0  # Hz, the band of the comparisons: both signals low-passed alike (zero phase)
 CHECK_WINDOW_S = 0.05  # s, the linear check's window after the blow (as the mode-count study's)
@@ -104,7 +105,8 @@ def full_reference(scene: Scene, rig: VirtualRig, level_N: float, n_out: int, pr
     location and direction, on ``n_out`` samples at [ringdown]'s rate, by modal superposition.
 
     Its modes up to ``[hammer] linear_check_max_hz`` with the same damping (the dashpots
-    c_points at x1, x2, x3 and alpha M projected on the modes: Cm = c Phi^T P^T P Phi + alpha I,
+    c_points at x1, x2, x3 and alpha M projected on the modes, plus the modal damping zeta_r of
+    :func:`reduced.models.rom.damping_matrix`: Cm = c Phi^T P^T P Phi + alpha I + diag(2 zeta_r omega_r),
     not diagonal), in closed form from the pole-residue FRF (:class:`fem.modal_response.ModalModel`),
     acquired through the same anti-alias filter as the rig's channels (:mod:`reduced.models.daq`:
     computed at q fs with q from the top mode, so no mode above fs/2 folds into the band).
@@ -136,6 +138,7 @@ def full_reference(scene: Scene, rig: VirtualRig, level_N: float, n_out: int, pr
     phi, omega = modes.phi[:, keep], 2 * np.pi * modes.freq_hz[keep]
     Pr = np.vstack(list(point_rows(fe).values())) @ phi  # (3, m): x1, x2, x3 on the modes
     Cm = model.c_points * Pr.T @ Pr + model.alpha * np.eye(phi.shape[1])
+    Cm += np.diag(2.0 * modal_ratios(model.modal_damping, omega.size) * omega)  # the reduced model's modal damping
     b_full = point_load_vector(fe.mesh.points, fe.mesh.hexes, fe.solid.element, fe.mesh.cell_part,
                                fe.mesh.part_names.index("beam"), rig.location, rig.direction, fe.n_dofs)
     b_modal = np.asarray(b_full @ phi).ravel()

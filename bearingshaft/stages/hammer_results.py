@@ -8,11 +8,13 @@ both import it (neither imports the other's module).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from bearingshaft.correlate import ChannelPair
+from bearingshaft.measured import Horizon
+from bearingshaft.measures import MeasureSet
 from bearingshaft.scenes import Scene
 from fem.uff import TimeHistory
 from reduced.models.rig import VirtualRig
@@ -165,6 +167,34 @@ class VirtualTest:
 
 
 @dataclass(frozen=True, eq=False)
+class ChannelBackbone:
+    """An NNM backbone (HB, H = 1) seen on one accelerometer axis: its displacement amplitude and frequency.
+
+    Attributes
+    ----------
+    label : str
+        The NNM, e.g. ``"NNM at 19.6 Hz"``.
+    channel : str
+        The channel it is drawn on (where it shows most).
+    amplitude : (m,) ndarray of float
+        m, the axis's fundamental displacement amplitude along the backbone.
+    freq_hz : (m,) ndarray of float
+        Hz.
+    energy_J : (m,) ndarray of float
+        J.
+    band_hz : (float, float)
+        Hz, the band a ringdown's component of this NNM is band-passed to.
+    """
+
+    label: str
+    channel: str
+    amplitude: np.ndarray
+    freq_hz: np.ndarray
+    energy_J: np.ndarray
+    band_hz: tuple[float, float]
+
+
+@dataclass(frozen=True, eq=False)
 class Comparison:
     """The model run at a measured test's sampling, driven by its hammer, compared channel for channel.
 
@@ -183,22 +213,40 @@ class Comparison:
     rows : list of dict
         Error measures, one per pair (:func:`bearingshaft.correlate.channel_errors`).
     window_s : (float, float) or None
-        s, the compared window ([hammer] compare_window_s).
+        s, the compared window (--window, else [hammer] compare_window_s; None: the record).
     stats : dict
         For provenance.json.
     lines : tuple of str
         The stage's summary lines.
+    horizon : Horizon or None
+        The predictability horizon; the pointwise ``rows`` are over the window up to it.
+    measures : MeasureSet or None
+        The measures that survive chaos (:func:`bearingshaft.measures.compare`).
+    floors : dict
+        {channel: (floor, basis)} of the relative errors (:func:`bearingshaft.correlate.channel_floors`).
+    backbones : list of ChannelBackbone
+        The model's NNM backbones on the channels their ringdown components are measured on.
+    force_text : str
+        How the hammer channel was windowed, in words.
+    wanted : tuple of str
+        The measures asked for (--measures).
     """
 
     scene: Scene
     test_file: str
-    driven: str  # what drove the model (the test's hammer channel, or the scene's blow)
+    driven: str  # what drove the model (the test's hammer channel)
     model: list[TimeHistory]  # every channel of the model run
     pairs: list[ChannelPair]  # model and test channels matched (bearingshaft.correlate.match_channels)
-    rows: list[dict]  # error measures, one per pair (bearingshaft.correlate.channel_errors)
-    window_s: tuple[float, float] | None  # s, the compared window ([hammer] compare_window_s)
+    rows: list[dict]  # error measures, one per pair, up to the horizon (bearingshaft.correlate.channel_errors)
+    window_s: tuple[float, float] | None  # s, the compared window (--window or [hammer] compare_window_s)
     stats: dict  # for provenance.json
     lines: tuple[str, ...]  # the stage's summary lines
+    horizon: Horizon | None = None  # the predictability horizon
+    measures: MeasureSet | None = None  # the measures that survive chaos
+    floors: dict = field(default_factory=dict)  # {channel: (floor, basis)}
+    backbones: list = field(default_factory=list)  # ChannelBackbone: the model's NNMs on their channels
+    force_text: str = ""  # how the hammer channel was windowed
+    wanted: tuple[str, ...] = ()  # the measures asked for
 
 
 def histories(rig: VirtualRig, t: np.ndarray, data: np.ndarray) -> list[TimeHistory]:

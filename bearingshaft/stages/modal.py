@@ -34,6 +34,7 @@ import numpy as np
 
 from bearingshaft.digits import human
 from bearingshaft.estimates import Estimate
+from bearingshaft.progress import bar as progress_bar
 from bearingshaft.reproduction import Reproduction
 from bearingshaft.scenes import Scene
 from bearingshaft.stages.modal_results import Correlation, ModalStageResult
@@ -61,13 +62,11 @@ def compute(scene: Scene, progress: bool, workdir) -> ModalStageResult:
         The solved model with Table 2 and the MAC on the sensors, or, for the free beam, its
         elastic modes against beam theory.
     """
-    from tqdm import tqdm
-
     from fem.analysis import analyse
     from fem.labels import TABLE2_ORDER
 
     spec = scene.modal
-    bar = tqdm(total=len(STEPS), desc=f"modal {scene.name}", disable=not progress, unit="step")
+    bar = progress_bar(total=len(STEPS), desc=f"modal {scene.name}", enabled=progress, unit="step")
     done = []
 
     def step(name: str) -> None:
@@ -150,7 +149,7 @@ def _correlation(analysis, chosen: list[int], test_shapes: str) -> Correlation:
     all_s = beam_s + tube_s
     fe_all = analysis.sensor_shapes(all_s, chosen)
     test = _test_shapes(test_shapes, all_s) if test_shapes else None
-    note = "test shapes from " + test_shapes if test is not None else (
+    note = "test shapes from " + Path(test_shapes).name if test is not None else (
         "no test shapes given: FE auto-MAC (can the sensors tell the modes apart?)")
     macs = {}
     for set_name, sensors in sets.items():

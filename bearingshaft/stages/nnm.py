@@ -12,10 +12,10 @@ written) writes the files listed in :data:`DESCRIPTION`.
 from __future__ import annotations
 
 import numpy as np
-from tqdm import tqdm
 
 from bearingshaft.estimates import COPIES, FLOAT, JACOBIAN_COPIES, Estimate, n_dofs
 from bearingshaft.output import StageWriter
+from bearingshaft.progress import bar as progress_bar
 from bearingshaft.reproduction import Reproduction, exact, sensitive, within
 from bearingshaft.scenes import Scene
 from bearingshaft.stages.nnm_fep import compute_fep
@@ -68,10 +68,9 @@ def _nnm2_exact(scene: Scene, progress: bool) -> NNM2Exact:
     f_exact = nnm2.frequency_from_energy(p, E)
     f_paper = nnm2.frequency_from_energy(p, E, paper=True)
     checks = []
-    if p.g > 0:
-        for chi in tqdm(CHECK_CHI, desc=f"{scene.name}: NNM 2 periods by DOP853", disable=not progress,
-                        leave=False):
-            x0 = chi * p.g
+    if p.gap > 0:
+        for chi in progress_bar(CHECK_CHI, desc=f"{scene.name}: NNM 2 periods by DOP853", enabled=progress):
+            x0 = chi * p.gap
             T = nnm2.period_by_integration(p, x0)
             f_int = 1.0 / T
             f_ex = 1.0 / nnm2.period_from_amplitude(p, x0)
@@ -79,7 +78,7 @@ def _nnm2_exact(scene: Scene, progress: bool) -> NNM2Exact:
             checks.append({"x0_over_g": chi, "energy_J": float(nnm2.energy_from_amplitude(p, x0)),
                            "freq_integrated_hz": f_int, "freq_exact_hz": f_ex, "freq_paper_eq13_hz": f_pa,
                            "rel_err_exact": (f_ex - f_int) / f_int, "rel_err_paper": (f_pa - f_int) / f_int})
-    return NNM2Exact(E, f_exact, f_paper, checks, p.g > 0)
+    return NNM2Exact(E, f_exact, f_paper, checks, p.gap > 0)
 
 
 def nnm_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:

@@ -45,9 +45,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from tqdm import tqdm
 
 from bearingshaft.output import StageWriter
+from bearingshaft.progress import bar as progress_bar
 from bearingshaft.scenes import Scene
 from bearingshaft.stages.nnm_results import FEPResult, FEPSummary
 from bearingshaft.systems import model_system
@@ -245,7 +245,7 @@ def _compute_fep(scene: Scene, progress: bool) -> FEPResult:
     open_hz = linear_modes(system, "open").freq_hz[list(fm.modes)]
     closed_hz = linear_modes(system, "closed").freq_hz[list(gap_moving_modes(system, "closed", N_FOLLOWED))]
     jobs = _jobs(spec, fm)
-    bar = tqdm(total=len(jobs) + 3 * n, desc=f"{scene.name}: NNM backbones", disable=not progress, unit="branch")
+    bar = progress_bar(total=len(jobs) + 3 * n, desc=f"{scene.name}: NNM backbones", enabled=progress, unit="branch")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # LinAlgWarning from LU on rejected steps
         branches = _branches(fm, spec, jobs, bar)

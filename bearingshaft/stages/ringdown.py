@@ -14,6 +14,7 @@ Science files (CSV, npz) hold no wall-clock time: timings go to ``provenance.jso
 
 from __future__ import annotations
 
+import math
 import tempfile
 from pathlib import Path
 
@@ -36,6 +37,7 @@ from bearingshaft.stages.ringdown_results import (  # noqa: F401 (the study's co
     Asymmetry,
     ReferenceComparison,
     RingdownOutcome,
+    RunSummary,
     SpectrogramData,
     SymmetryData,
 )
@@ -169,7 +171,7 @@ def stage_estimate(scene: Scene, n_dofs: int, n_stops: int = 4, method: str | No
         sp = scene.spectrogram
         rows = int(min(sp.fmax_hz, spec.sample_rate_hz / 2) * sp.window_s) + 2  # bins up to Nyquist
         frames = MAX_FRAMES * rows * 8 + 4 * BATCH_FLOATS * 8  # kept frames; one FFT batch and its copies
-    disk = ringdown_disk_bytes(n_dofs, spec.duration_s, spec.sample_rate_hz)
+    disk = ringdown_disk_bytes(n_dofs, spec.duration_s, spec.sample_rate_hz, forced=bool(scene.loads), n_stops=n_stops)
     if scene.symmetry is not None:
         disk += 8 * N * len({method, *scene.symmetry.methods})
     return {"memory": int(MATPLOTLIB_BYTES + streams + read + frames), "disk": int(disk)}
@@ -221,7 +223,7 @@ def backbone_curves(model, system: GapSystem | None = None, n_modes: int = 3
     from reduced.periodic import nnm2
     from reduced.periodic.backbones import hb_backbones
 
-    system = model.system() if system is None else system
+    system = (model.system() if system is None else system).with_friction(None)  # the conservative NNMs
     curves = {f"{name}, HB H=1": c
               for name, c in hb_backbones(system, 1, modes=gap_moving_modes(system, "open", n_modes)).items()}
     if isinstance(model, DiscreteParams) and model.m1 == model.m3:
@@ -255,7 +257,51 @@ def compute(scene: Scene, progress: bool, workdir, method: str | None = None) ->
         reference = compare_with_exact(scene, res, P, progress)
     spectrogram = spectrogram_of(scene, res, P, system) if scene.spectrogram is not None else None
     symmetry = symmetry_runs(scene, res, P, workdir, progress) if scene.symmetry is not None else None
-    return RingdownOutcome(scene, method, system, P, res, scene_loads(scene, P), reference, spectrogram, symmetry)
+    return RingdownOutcome(scene, method, system, P, res, scene_loads(scene, P), reference, spectrogram, symmetry,
+                           run_summary(res, P, scene.model.point_names))
+
+
+def run_summary(res: RingdownFile, P: np.ndarray, point_names: tuple[str, ...]) -> RunSummary:
+    """The run in engineering numbers (:class:`RunSummary`), in one pass over ``ringdown.npz``.
+
+    Parameters
+    ----------
+    res : RingdownFile
+        The run (its ``stop_force`` and ``a`` members are read).
+    P : (points, n) ndarray of float
+        The points as rows of the DOFs.
+    point_names : tuple of str
+        Their names.
+
+    Returns
+    -------
+    RunSummary
+        Impacts, peak force and last contact of each stop (a stop closed at the first sample counts
+        one impact, as the hammer stage counts them); peak |displacement| and |acceleration| of
+        each point.
+    """
+    system = res.system
+    m, fs = system.m, res.sample_rate_hz
+    impacts, peak_f = np.zeros(m, dtype=np.int64), np.zeros(m)
+    last = np.full(m, -1, dtype=np.int64)
+    peak_x, peak_a = np.zeros(P.shape[0]), np.zeros(P.shape[0])
+    closed_prev = np.zeros(m, dtype=bool)
+    for c in res.chunks(fields=("x",)):
+        k = len(c)
+        if not k:
+            continue
+        closed = system.penetration(c.x) > 0.0
+        impacts += np.count_nonzero(closed & ~np.vstack([closed_prev[None, :], closed[:-1]]), axis=0)
+        closed_prev = closed[-1]
+        for j in np.flatnonzero(closed.any(axis=0)):
+            last[j] = c.start + int(np.flatnonzero(closed[:, j])[-1])
+        peak_f = np.maximum(peak_f, res.read("stop_force", c.start, c.start + k).max(axis=0, initial=0.0))
+        peak_x = np.maximum(peak_x, np.abs(c.x @ P.T).max(axis=0))
+        peak_a = np.maximum(peak_a, np.abs(res.read("a", c.start, c.start + k) @ P.T).max(axis=0))
+    return RunSummary(tuple(system.stop_names), tuple(int(i) for i in impacts), tuple(float(f) for f in peak_f),
+                      tuple(float(j / fs) if j >= 0 else math.nan for j in last), tuple(point_names),
+                      tuple(float(v) for v in peak_x), tuple(float(v) for v in peak_a),
+                      float((res.n_samples - 1) / fs))
 
 
 def write(result: RingdownOutcome, writer: StageWriter) -> None:
@@ -554,8 +600,10 @@ def _seeded_run(scene: Scene, res, P: np.ndarray, omega: float, k: int, pieces: 
 
 # -- the registry's contract (bearingshaft.registry) -------------------------------------------
 DESCRIPTION = """Integrate the scene's model from its initial state (with its [[load]] forces, if any) by the
-exact, explicit or DOP853 integrator, streamed to disk. Writes ringdown.npz (time, states,
-energies) and ringdown.png; with [spectrogram] spectrogram.png (NNM backbones overlaid); with
+exact, explicit or DOP853 integrator, streamed to disk, and count its impacts, peak tip forces,
+peak displacements and accelerations and when the gaps stay open (the summary line and
+provenance.json). Writes ringdown.npz (time, states, energies, the force in each stop and the
+accelerations) and ringdown.png; with [spectrogram] spectrogram.png (NNM backbones overlaid); with
 [symmetry] symmetry.csv, symmetry_seeds.csv and symmetry.png; for a reduced model run by a method
 other than exact, its comparison with the exact integrator: reference.csv and lyapunov.csv."""
 

@@ -54,16 +54,77 @@ def write(result: RingdownOutcome, writer: StageWriter) -> None:
          "energy_balance_error": res.energy_balance_error, "n_samples": res.n_samples,
          "ringdown_npz_bytes": writer.path("ringdown.npz").stat().st_size, **res.stats}
     )
-    count = res.stats.get("n_steps", res.stats.get("n_events"))
-    print(f"[{scene.name}] {method}: {count} {'steps' if 'n_steps' in res.stats else 'events'}, "
+    print(f"[{scene.name}] {method}: {integrator_work(method, res.stats)}; "
           f"{res.n_samples} samples of {spec.duration_s:g} s, energy-balance error {res.energy_balance_error:.2g}"
           + (f" (with the work of the loads, {forced['work_of_loads_J_max']:.4g} J)" if forced else ""), flush=True)
+    if result.summary is not None:
+        writer.stats["summary"] = result.summary.stats()
+        print(f"[{scene.name}] {summary_line(result.summary)}", flush=True)
     if result.reference is not None:
         write_reference(scene, res, result.reference, writer)
     if result.spectrogram is not None:
         write_spectrogram(scene, method, res.sample_rate_hz, result.spectrogram, env, writer)
     if result.symmetry is not None:
         write_symmetry(scene, res.n_samples, result.symmetry, writer)
+
+
+def integrator_work(method: str, stats: dict) -> str:
+    """What the integrator did, in words that say what its counts count.
+
+    Parameters
+    ----------
+    method : str
+        "exact", "explicit" or "dop853".
+    stats : dict
+        Its statistics (``n_events``, ``n_steps``, ``dt``).
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> integrator_work("exact", {"n_events": 12864, "n_steps": 12865})
+    '12864 contact switches, each found and crossed exactly (closed form between them)'
+    >>> integrator_work("explicit", {"n_steps": 400000, "dt": 5e-06})
+    '400000 time steps of 5e-06 s'
+    >>> integrator_work("dop853", {"n_steps": 9000, "n_events": 12})
+    '9000 accepted steps, restarted at 12 contact switches'
+    >>> integrator_work("dop853", {"n_steps": 9000, "n_events": 0})
+    '9000 accepted steps (adaptive, stepping over the contact switches)'
+    """
+    if method == "exact":
+        return f"{stats.get('n_events', 0)} contact switches, each found and crossed exactly (closed form between them)"
+    if method == "explicit":
+        return f"{stats.get('n_steps', 0)} time steps of {stats.get('dt', float('nan')):.3g} s"
+    if stats.get("n_events"):
+        return f"{stats.get('n_steps', 0)} accepted steps, restarted at {stats['n_events']} contact switches"
+    return f"{stats.get('n_steps', 0)} accepted steps (adaptive, stepping over the contact switches)"
+
+
+def summary_line(s) -> str:
+    """The run in engineering numbers, one line (:class:`~bearingshaft.stages.ringdown_results.RunSummary`).
+
+    Parameters
+    ----------
+    s : RunSummary
+        The run's summary.
+
+    Returns
+    -------
+    str
+        Impacts (per stop), peak tip force, when the gaps stay open, peak |x| and |a| of each point.
+    """
+    if s.impacts_total == 0:
+        contact = "no impact (the gaps never close)"
+    else:
+        per = ", ".join(f"{name} {n}" for name, n in zip(s.stop_names, s.impacts, strict=True))
+        late = " (still closing at the end of the run)" if s.still_closing else ""
+        contact = (f"{s.impacts_total} impacts ({per}), peak tip force {s.peak_tip_force_N:.4g} N, "
+                   f"gaps open after {s.gaps_open_after_s:.4g} s{late}")
+    peaks = ", ".join(f"{p} {x:.3g} m, {a:.3g} m/s^2" for p, x, a in
+                      zip(s.point_names, s.peak_displacement_m, s.peak_acceleration_m_s2, strict=True))
+    return f"{contact}; peak |x|, |a|: {peaks}"
 
 
 def write_spectrogram(scene: Scene, method: str, sample_rate_hz: float, data: SpectrogramData, env: dict,

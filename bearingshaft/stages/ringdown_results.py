@@ -164,6 +164,76 @@ class SymmetryData:
     restarted_t_break: float | None  # s, seed 0 again on another restart grid
 
 
+LATE_FRACTION = 1 / 8  # a stop still closing in the last eighth of the run: the gaps may not stay open
+
+
+@dataclass(frozen=True, eq=False)
+class RunSummary:
+    """The run in engineering numbers, as the hammer stage gives them (``ringdown.run_summary``).
+
+    Counted on the samples: an impact is a stop found closed at a sample after an open one (or at
+    the first sample), so a contact shorter than a sample interval can be missed, and peaks are
+    sampled peaks (at most the true ones).
+
+    Attributes
+    ----------
+    stop_names : tuple of str
+        The stops (two per tip: ``x1+`` above, ``x1-`` below).
+    impacts : tuple of int
+        Impacts at each stop.
+    peak_stop_force_N : tuple of float
+        N, the largest sampled force in each stop.
+    last_contact_s : tuple of float
+        s, the last sample at which each stop is closed (NaN: never).
+    point_names : tuple of str
+        The points (x1, x2, x3).
+    peak_displacement_m : tuple of float
+        m, the largest |displacement| of each point.
+    peak_acceleration_m_s2 : tuple of float
+        m/s^2, the largest |acceleration| of each point (from ``ringdown.npz``'s ``a``).
+    duration_s : float
+        s, the run.
+    """
+
+    stop_names: tuple[str, ...]
+    impacts: tuple[int, ...]
+    peak_stop_force_N: tuple[float, ...]
+    last_contact_s: tuple[float, ...]
+    point_names: tuple[str, ...]
+    peak_displacement_m: tuple[float, ...]
+    peak_acceleration_m_s2: tuple[float, ...]
+    duration_s: float
+
+    @property
+    def impacts_total(self) -> int:
+        return int(sum(self.impacts))
+
+    @property
+    def peak_tip_force_N(self) -> float:
+        """N, the largest sampled force in any stop (0 if none closes)."""
+        return float(max(self.peak_stop_force_N, default=0.0))
+
+    @property
+    def gaps_open_after_s(self) -> float:
+        """s, the last sample at which any stop is closed: the gaps stay open after it (0: never closed)."""
+        last = [t for t in self.last_contact_s if not math.isnan(t)]
+        return float(max(last)) if last else 0.0
+
+    @property
+    def still_closing(self) -> bool:
+        """A stop closes in the last ``LATE_FRACTION`` of the run: the gaps may close again after it."""
+        return self.gaps_open_after_s > (1.0 - LATE_FRACTION) * self.duration_s
+
+    def stats(self) -> dict:
+        """The numbers for ``provenance.json``: per stop and per point, and the totals."""
+        return {"impacts_total": self.impacts_total, "peak_tip_force_N": self.peak_tip_force_N,
+                "gaps_open_after_s": self.gaps_open_after_s, "still_closing_at_end": self.still_closing,
+                "impacts": dict(zip(self.stop_names, self.impacts, strict=True)),
+                "peak_stop_force_N": dict(zip(self.stop_names, self.peak_stop_force_N, strict=True)),
+                "peak_displacement_m": dict(zip(self.point_names, self.peak_displacement_m, strict=True)),
+                "peak_acceleration_m_s2": dict(zip(self.point_names, self.peak_acceleration_m_s2, strict=True))}
+
+
 @dataclass(frozen=True, eq=False)
 class RingdownOutcome:
     """What the ringdown stage computed: the run streamed into ``ringdown.npz`` and its analyses.
@@ -188,6 +258,8 @@ class RingdownOutcome:
         With [spectrogram].
     symmetry : SymmetryData or None
         With [symmetry].
+    summary : RunSummary or None
+        The run in engineering numbers.
     """
 
     scene: Scene
@@ -199,3 +271,4 @@ class RingdownOutcome:
     reference: ReferenceComparison | None  # a reduced model not run by the exact method
     spectrogram: SpectrogramData | None  # [spectrogram]
     symmetry: SymmetryData | None  # [symmetry]
+    summary: RunSummary | None = None  # impacts, peak tip forces, peak displacements and accelerations

@@ -44,7 +44,7 @@ from reduced.transient.spectrogram import spectrogram
 __all__ = ["DESCRIPTION", "VerifyResult", "compute", "estimate", "write"]
 
 N_COMPARE = 3  # coupled modes compared per contact state (the three-mass model has three)
-UNITS = {"k_s": "N/m", "kappa": "N m/rad", "k_g": "N/m", "L": "m", "g": "m", "m1": "kg", "m2": "kg", "m3": "kg",
+UNITS = {"k_s": "N/m", "kappa": "N m/rad", "k_g": "N/m", "L": "m", "gap": "m", "m1": "kg", "m2": "kg", "m3": "kg",
          "c": "N s/m"}
 SPECTROGRAM_OVERLAP = 0.9
 PERTURBATION = 1e-12  # relative change of the initial state that probes the ringdowns' sensitivity
@@ -189,7 +189,7 @@ def compute(scene: Scene, progress: bool, workdir) -> VerifyResult:
     comps = compare_all(rom, fe, spec, full_gap_modes(fe, spec, Psi=rom.Psi))
     centres = np.asarray(rom.info["contact_centres_m"], float)
     L = 0.5 * float(np.linalg.norm(centres[1] - centres[0]))
-    ident, residuals = identify_discrete(rom.M, rom.K, L, k_g=spec.k_g, g=spec.gap, c=spec.c_points)
+    ident, residuals = identify_discrete(rom.M, rom.K, L, k_g=spec.k_g, gap=spec.gap, c=spec.c_points)
     table1 = DiscreteParams()
     id_rows = [{"parameter": k, "unit": UNITS[k], "table1": getattr(table1, k), "identified": getattr(ident, k),
                 "relative_difference": _rel(getattr(ident, k), getattr(table1, k))} for k in UNITS]

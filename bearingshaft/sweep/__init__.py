@@ -11,7 +11,7 @@ A sweep runs one scene over a design of parameter values. The values come from a
     x = ""                             # plot against this metric column instead of the varied key
     overlay = ""                       # "nnm_stability": NNM 1 and 3 Floquet stability beside the plot
     [sweep.vary]
-    "model.g" = "1e-4:1e-3:9:log"      # LO:HI:N (linear), LO:HI:N:log; random design: LO:HI[:log]
+    "model.gap" = "1e-4:1e-3:9:log"      # LO:HI:N (linear), LO:HI:N:log; random design: LO:HI[:log]
     "model.k_g" = [1e7, 1e8, 1e9]      # or a list (CLI: 1e7,1e8,1e9)
     "initial.v0_m_s[1]" = [1.0, 2.0]   # an element of a list key
     "load[0].peak_N" = [100.0, 500.0]  # a key of the first [[load]]

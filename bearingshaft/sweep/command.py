@@ -69,7 +69,7 @@ def spec_from_args(scene: Scene, args) -> tuple[SweepSpec, str]:
         source = "--vary"
     elif scene.sweep is None:
         raise SweepError(f"{scene.origin or scene.name}: the scene has no [sweep] table; give --vary KEY=VALUES "
-                         "(e.g. --vary model.g=1e-4:1e-3:9:log)")
+                         "(e.g. --vary model.gap=1e-4:1e-3:9:log)")
     samples = _positive_int(args.samples, "--samples")
     seed = _positive_int(args.seed, "--seed", allow_zero=True)
     spec = dataclasses.replace(base, vary=vary, design=args.design or base.design,

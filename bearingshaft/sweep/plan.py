@@ -24,6 +24,7 @@ from bearingshaft.budget import HEADROOM, available_bytes, check_budget, free_di
 from bearingshaft.digits import human
 from bearingshaft.registry import stages_of
 from bearingshaft.scenes import Scene, parse_scene
+from bearingshaft.scenes.convert import absolute_paths
 from bearingshaft.scenes.sweep import KEY_PATTERN, MAX_CASES, SweepError, SweepSpec
 
 ID_DIGITS = 12  # hex digits of a case id: 48 bits, a collision among 1e5 cases has odds ~1e-5
@@ -139,8 +140,8 @@ def case_id(values) -> str:
 
     Examples
     --------
-    >>> case_id((("model.g", 1e-4),)), case_id((("model.g", 0.0001),)) == case_id((("model.g", 1e-4),))
-    ('c8ce40a978bb', True)
+    >>> case_id((("model.gap", 1e-4),)), case_id((("model.gap", 0.0001),)) == case_id((("model.gap", 1e-4),))
+    ('5a2bdd9199f0', True)
     """
     blob = json.dumps([[k, v] for k, v in values], sort_keys=False, separators=(",", ":"))
     return hashlib.sha256(blob.encode()).hexdigest()[:ID_DIGITS]
@@ -160,8 +161,8 @@ def show_values(values) -> str:
 
     Examples
     --------
-    >>> show_values((("model.g", 0.0001), ("ringdown.method", "exact")))
-    "model.g = 0.0001, ringdown.method = 'exact'"
+    >>> show_values((("model.gap", 0.0001), ("ringdown.method", "exact")))
+    "model.gap = 0.0001, ringdown.method = 'exact'"
     """
     return ", ".join(f"{k} = {v!r}" for k, v in values)
 
@@ -263,7 +264,8 @@ def _reduction_key(model) -> str:
     from reduced.models.rom import RomSpec
 
     d = RomSpec()
-    spec = dataclasses.replace(model, k_g=d.k_g, gap=d.gap, c_points=d.c_points, alpha=d.alpha)
+    spec = dataclasses.replace(model, k_g=d.k_g, gap=d.gap, c_points=d.c_points, alpha=d.alpha,
+                               modal_damping=d.modal_damping)
     return hashlib.sha256(repr(spec).encode()).hexdigest()[:ID_DIGITS]
 
 
@@ -317,7 +319,7 @@ def build_plan(scene: Scene, spec: SweepSpec, source: str, out: Path | None = No
     if not case_stages(scene):
         raise SweepError(f"{scene.origin or scene.name}: the scene has no stage to run in each case "
                          f"(its stages: {', '.join(stages_of(scene)) or 'none'})")
-    data = tomllib.loads(scene.source)
+    data = absolute_paths(tomllib.loads(scene.source), scene.folder or None)  # the cases are read elsewhere
     data.pop("sweep", None)
     data.pop("name", None)
     keys = [v.key for v in spec.vary]

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bearingshaft.progress import bar as progress_bar
 from bearingshaft.scenes import Scene, SweepError, parse_scene
 from bearingshaft.sweep.metrics import case_metrics, sweep_overlay
 from bearingshaft.sweep.plan import Case, SweepPlan
@@ -259,11 +260,9 @@ def _collect(client, plan: SweepPlan, futures: dict, previous: dict, progress: b
     """{case id: row} as the tasks finish, a bar of cases done and failed; on an interruption the
     tasks left are cancelled and the rows done are kept."""
     from distributed import as_completed
-    from tqdm import tqdm
-
     rows: dict[str, dict] = {}
-    bar = tqdm(total=len(plan.cases), desc=f"{plan.scene.name}: sweep", unit="case", disable=not progress,
-               bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}<{remaining}{postfix}]")
+    bar = progress_bar(total=len(plan.cases), desc=f"{plan.scene.name}: sweep", unit="case", enabled=progress,
+                       bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}<{remaining}{postfix}]")
     failed = 0
     try:
         for fut in as_completed(futures):

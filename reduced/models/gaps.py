@@ -16,16 +16,95 @@ one *tip*: (o = +g, side = +1) and (o = -g, side = -1). Stops of one tip exclude
 other, so a system with T two-sided tips has 3**T linear contact states.
 
 The energy is ``E = 1/2 v^T M v + 1/2 x^T K x + sum_j 1/2 k_j max(0, side_j (s_j - o_j))^2``.
+
+**Friction** (optional, :class:`Friction`): a stop may carry sliders (Jenkins elements), each with a
+tangential relative coordinate ``t_k = Bt_k x``, a tangential penalty stiffness ``kt_k`` and a Coulomb
+coefficient ``mu_k``; its normal force is that of its stop, ``N_j = k_j max(0, side_j (s_j - o_j))``.
+The slider position ``w_k`` is a state of its own, and the tangential force on the structure is
+``Bt^T f_t`` with, by the state of the slider,
+
+    stick (stop closed, |f| < mu N):  f_k = kt_k (t_k - w_k),     w_k' = 0,
+    slip +/- (stop closed, |f| = mu N): f_k = +-mu_k N_j,         w_k = t_k -+ mu_k N_j / kt_k (w_k' >< 0),
+    open (stop open):                  f_k = 0,                   w_k = t_k (the slider follows, unloaded).
+
+Every one of these is linear in (x, v, w) because N_j is, so the motion stays piecewise linear. The
+energy adds ``sum_k 1/2 kt_k (t_k - w_k)^2`` (the tangential springs; zero on an open stop), and the
+friction dissipates ``int f_k w_k' dt = int mu_k N_j |w_k'| dt >= 0``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from itertools import product
 
 import numpy as np
 
 MAX_STOPS = 16  # 2**16 contact states is the most the exact integrator tabulates
+
+
+@dataclass(frozen=True, eq=False)
+class Friction:
+    """Coulomb friction with a tangential penalty stiffness at the tips of a :class:`GapSystem`.
+
+    Slider k acts along the tangential relative coordinate ``t_k = Bt[k] @ x`` at tip ``tip[k]``; the
+    normal force of whichever stop of that tip is closed, N = k_j max(0, side_j (B_j x - o_j)), bounds
+    its force: |f_k| <= mu_k N (the module docstring gives the states). One slider serves both stops
+    of a two-sided tip: they are never closed together, and a slider starts unloaded (w = t) each
+    time a stop of its tip closes. Two sliders on one tip (along and across the beam) are two
+    independent Coulomb laws (a square friction cone), which keeps every state linear.
+
+    Attributes
+    ----------
+    Bt : (p, n) array
+        Rows mapping x to the tangential relative coordinates t = Bt x [m].
+    tip : (p,) int array
+        The tip each slider acts at (a value of :attr:`GapSystem.tip`).
+    k_t : (p,) array
+        N/m, tangential penalty stiffness of each slider, > 0.
+    mu : (p,) array
+        Coulomb coefficient of each slider, >= 0.
+    names : tuple of str
+        One name a slider.
+    """
+
+    Bt: np.ndarray
+    tip: np.ndarray
+    k_t: np.ndarray
+    mu: np.ndarray
+    names: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        Bt = np.atleast_2d(np.asarray(self.Bt, float))
+        p = Bt.shape[0]
+        object.__setattr__(self, "Bt", Bt)
+        object.__setattr__(self, "tip", np.asarray(self.tip, np.int64).reshape(-1))
+        for name in ("k_t", "mu"):
+            object.__setattr__(self, name, np.broadcast_to(np.asarray(getattr(self, name), float), (p,)).copy())
+        if self.tip.shape != (p,):
+            raise ValueError(f"tip must have shape ({p},), got {self.tip.shape}")
+        if len(self.names) != p:
+            raise ValueError(f"names must hold {p} names, got {len(self.names)}")
+        for name in ("Bt", "k_t", "mu"):
+            if not np.all(np.isfinite(getattr(self, name))):
+                raise ValueError(f"friction {name} has non-finite entries")
+        if np.any(self.k_t <= 0.0):
+            raise ValueError(f"friction k_t must be > 0 N/m, got {self.k_t!r}")
+        if np.any(self.mu < 0.0):
+            raise ValueError(f"friction mu must be >= 0, got {self.mu!r}")
+
+    @property
+    def p(self) -> int:
+        """Number of sliders."""
+        return self.Bt.shape[0]
+
+    def force(self, x: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """N, tangential force of each slider kt (Bt x - w) for x (..., n), w (..., p)."""
+        return self.k_t * (np.asarray(x) @ self.Bt.T - np.asarray(w))
+
+    def energy(self, x: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """J, energy of the tangential springs, sum_k 1/2 kt_k (t_k - w_k)^2, for x (..., n), w (..., p)."""
+        d = np.asarray(x) @ self.Bt.T - np.asarray(w)
+        return 0.5 * (d * d) @ self.k_t
 
 
 @dataclass(frozen=True, eq=False)
@@ -47,6 +126,8 @@ class GapSystem:
     tip : (m,) int array
         Stops with the same tip number exclude each other (one clearance).
     dof_names, stop_names : tuples of str
+    friction : Friction or None
+        Sliders at the stops (None: frictionless, the stops push normal to their rows only).
     """
 
     M: np.ndarray
@@ -59,6 +140,7 @@ class GapSystem:
     tip: np.ndarray
     dof_names: tuple[str, ...]
     stop_names: tuple[str, ...]
+    friction: Friction | None = None
 
     def __post_init__(self) -> None:
         n = self.M.shape[0]
@@ -87,6 +169,14 @@ class GapSystem:
             raise ValueError("side must be +1 or -1")
         if np.any(np.linalg.eigvalsh(self.M) <= 0):
             raise ValueError("M must be positive definite")
+        fr = self.friction
+        if fr is not None:
+            if not isinstance(fr, Friction):
+                raise ValueError(f"friction must be a Friction or None, got {type(fr).__name__}")
+            if fr.Bt.shape[1] != n:
+                raise ValueError(f"friction Bt must be (p, {n}), got {fr.Bt.shape}")
+            if not np.all(np.isin(fr.tip, self.tip)):
+                raise ValueError(f"friction tips must be tips of the stops {np.unique(self.tip)!r}, got {fr.tip!r}")
 
     # -- sizes -------------------------------------------------------------------------
     @property
@@ -100,6 +190,17 @@ class GapSystem:
     @property
     def undamped(self) -> bool:
         return not np.any(self.C)
+
+    @property
+    def p(self) -> int:
+        """Number of friction sliders (0 without friction)."""
+        return 0 if self.friction is None else self.friction.p
+
+    def with_friction(self, friction: Friction | None) -> GapSystem:
+        """The same system with ``friction`` at its tips (None: frictionless; ``self`` when that is no change)."""
+        if friction is None and self.friction is None:
+            return self
+        return replace(self, friction=friction)
 
     # -- forces and energy -------------------------------------------------------------
     def penetration(self, x: np.ndarray) -> np.ndarray:
@@ -116,14 +217,19 @@ class GapSystem:
         """N, force in each stop (m,) for x of shape (..., n); >= 0 is compression."""
         return self.k * np.maximum(self.penetration(x), 0.0)
 
-    def energy(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """J, total mechanical energy for x, v of shape (..., n)."""
+    def energy(self, x: np.ndarray, v: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
+        """J, total mechanical energy for x, v of shape (..., n); with friction and the slider positions
+        w (..., p), the tangential springs' energy is added (an open stop's slider follows t, so its
+        spring holds none)."""
         x = np.asarray(x)
         v = np.asarray(v)
         kin = 0.5 * np.sum((v @ self.M) * v, axis=-1)  # a BLAS product: einsum's three-operand loop is ~50x slower
         lin = 0.5 * np.sum((x @ self.K) * x, axis=-1)
         pen = np.maximum(self.penetration(x), 0.0)
-        return kin + lin + 0.5 * (pen**2) @ self.k
+        E = kin + lin + 0.5 * (pen**2) @ self.k
+        if w is not None and self.p:
+            E = E + self.friction.energy(x, w)
+        return E
 
     # -- linear contact states ---------------------------------------------------------
     def contact_state(self, x: np.ndarray, v: np.ndarray, atol: float = 0.0) -> np.ndarray:
@@ -185,8 +291,11 @@ class GapSystem:
         """
         keep = np.ones(self.m, bool)
         K = self.K.copy()
+        rubbing = set() if self.friction is None else set(self.friction.tip.tolist())
         for t in np.unique(self.tip):
             j = np.flatnonzero(self.tip == t)
+            if t in rubbing:
+                continue  # a tip with friction is not a linear spring
             if (len(j) == 2 and np.all(self.offset[j] == 0.0) and self.k[j[0]] == self.k[j[1]]
                     and np.array_equal(self.B[j[0]], self.B[j[1]]) and self.side[j].sum() == 0.0):
                 K += self.k[j[0]] * np.outer(self.B[j[0]], self.B[j[0]])
@@ -196,16 +305,21 @@ class GapSystem:
         return GapSystem(
             M=self.M, C=self.C, K=K, B=self.B[keep], k=self.k[keep], offset=self.offset[keep],
             side=self.side[keep], tip=self.tip[keep], dof_names=self.dof_names,
-            stop_names=tuple(n for n, k in zip(self.stop_names, keep, strict=True) if k),
+            stop_names=tuple(n for n, k in zip(self.stop_names, keep, strict=True) if k), friction=self.friction,
         )
 
     def closed_stiffness(self) -> np.ndarray:
-        """N/m, stiffness with one stop of every tip closed (the stiffest contact state)."""
+        """N/m, stiffness with one stop of every tip closed (the stiffest contact state); with friction,
+        that stop's sliders sticking (their tangential springs kt Bt^T Bt added)."""
         Ks = self.K.copy()
         for t in np.unique(self.tip):
             j = np.flatnonzero(self.tip == t)
             jmax = j[np.argmax(self.k[j])]
             Ks += self.k[jmax] * np.outer(self.B[jmax], self.B[jmax])
+            if self.friction is not None:
+                fr = self.friction
+                for q in np.flatnonzero(fr.tip == t):
+                    Ks += fr.k_t[q] * np.outer(fr.Bt[q], fr.Bt[q])
         return Ks
 
     def omega_max(self) -> float:
@@ -259,3 +373,43 @@ def two_sided_stops(
         "tip": np.repeat(np.arange(T), 2),
         "stop_names": tuple(f"{nm}{s}" for nm in names for s in ("+", "-")),
     }
+
+
+def tip_friction(rows_t, k_t, mu, names: tuple[str, ...], tips=None) -> Friction:
+    """Sliders at tips: along each tangential row of each tip.
+
+    Parameters
+    ----------
+    rows_t : (T, n) or (T, d, n) array_like of float
+        Tangential relative coordinate(s) of each tip, t = rows_t[i] @ x (m); d directions a tip
+        (along the beam, across it) are d independent sliders.
+    k_t : float or (T,) array_like of float
+        N/m, tangential stiffness of each tip's sliders (broadcast), > 0.
+    mu : float or (T,) array_like of float
+        Coulomb coefficient of each tip (broadcast), >= 0.
+    names : tuple of str
+        T * d slider names, tip-major.
+    tips : (T,) array_like of int, optional
+        The tip numbers (default 0 .. T - 1, those of :func:`two_sided_stops`).
+
+    Returns
+    -------
+    Friction
+        T d sliders.
+
+    Raises
+    ------
+    ValueError
+        Names of the wrong count, or a bad k_t or mu (:class:`Friction`).
+    """
+    R = np.asarray(rows_t, float)
+    if R.ndim == 2:
+        R = R[:, None, :]
+    T, d, n = R.shape
+    if len(names) != T * d:
+        raise ValueError(f"names must hold {T * d} names (tips x directions), got {len(names)}")
+    tips = np.arange(T) if tips is None else np.asarray(tips, np.int64)
+    k_t = np.broadcast_to(np.asarray(k_t, float), (T,))
+    mu = np.broadcast_to(np.asarray(mu, float), (T,))
+    return Friction(Bt=R.reshape(T * d, n), tip=np.repeat(tips, d), k_t=np.repeat(k_t, d), mu=np.repeat(mu, d),
+                    names=tuple(names))

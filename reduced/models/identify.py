@@ -35,7 +35,7 @@ import numpy as np
 from reduced.models.discrete import DiscreteParams
 
 
-def identify_discrete(M: np.ndarray, K: np.ndarray, L: float, *, k_g: float, g: float, c: float
+def identify_discrete(M: np.ndarray, K: np.ndarray, L: float, *, k_g: float, gap: float, c: float
                       ) -> tuple[DiscreteParams, dict[str, float]]:
     """Three-mass parameters and residuals from a Craig-Bampton model on q = [x1, x3, eta_1, ...].
 
@@ -45,7 +45,7 @@ def identify_discrete(M: np.ndarray, K: np.ndarray, L: float, *, k_g: float, g: 
         first and the fixed-interface modes after them (only the first mode is used: keeping
         one mode of a Craig-Bampton model is the sub-block on [x1, x3, eta_1])
     L : m, half-length between the tips (the discrete model's L)
-    k_g, g, c : N/m, m, N s/m, copied into the result
+    k_g, gap, c : N/m, m, N s/m, copied into the result
 
     Returns
     -------
@@ -72,7 +72,7 @@ def identify_discrete(M: np.ndarray, K: np.ndarray, L: float, *, k_g: float, g: 
     m2 = (abs(Mbq[0]) + abs(Mbq[1])) ** 2 / Mqq
     a = m2 * omega2 / 4.0
     params = DiscreteParams(
-        k_s=float(np.trace(Kbb) / 4.0), kappa=float(a * L**2), k_g=float(k_g), L=float(L), g=float(g),
+        k_s=float(np.trace(Kbb) / 4.0), kappa=float(a * L**2), k_g=float(k_g), L=float(L), gap=float(gap),
         m1=float(Mbb[0, 0] - m2 / 4.0), m2=float(m2), m3=float(Mbb[1, 1] - m2 / 4.0), c=float(c))
     residuals = {
         "M_bb01": float((Mbb[0, 1] - m2 / 4.0) / (m2 / 4.0)),

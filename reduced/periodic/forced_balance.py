@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from reduced import _checks as _check
 from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
 from reduced.periodic.exact_hb import _moments, contact_intervals, series_extrema
@@ -85,7 +86,7 @@ class ForcedBalance:
     Nab: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        s = self.system
+        s = _check.frictionless(self.system, "harmonic balance")
         rows, row_of = [], []
         for j in range(s.m):
             for r, u in enumerate(rows):

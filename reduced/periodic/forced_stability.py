@@ -133,10 +133,15 @@ def forced_hill(fb: ForcedBalance, z: np.ndarray, omega: float) -> np.ndarray:
     Full system, all 2H+1 harmonics (perturbations may break the orbit's half-wave symmetry):
     (J2 lam^2 + J1 lam + J0) p = 0 with J0 = A(Omega) + dF/dX, J1 = 2 Omega kron(Nab, M) + kron(I, C),
     J2 = kron(I, M) (:meth:`reduced.periodic.hb.HarmonicBalance.hill_matrices`), solved as a
-    standard eigenproblem of size 2n(2H+1). Each exponent recurs shifted by i k Omega; the 2n in
-    the first zone |Im lam| <= Omega / 2 are kept, mu = exp(2 pi lam / Omega). A real negative
-    multiplier has its exponent on the zone's edge with both copies in it: of eigenvalues on
-    the edge (within 1e-6 Omega) those with Im lam < 0 are ranked last so each counts once.
+    standard eigenproblem of size 2n(2H+1). Each exponent recurs shifted by i k Omega, its
+    eigenvector's harmonics shifted by k; the 2n kept are those whose eigenvectors are centred on
+    the constant harmonic (Lazarus & Thomas 2010): with the perturbation's complex harmonics
+    c_k (k = -H..H, from the cos/sin blocks: c_{+-k} = (p_ck -+ i p_sk) / 2), the centroid
+    kappa = sum k |c_k|^2 / sum |c_k|^2 nearest 0. Unlike the first zone |Im lam| <= Omega / 2, this
+    keeps the exponent of a mode far above H Omega (which has no copy in that zone: a lightly damped
+    731 Hz mode at 10 Hz and H = 15). A real negative multiplier has its exponent on the zone's edge
+    with both copies at |kappa| = 1/2: of eigenvalues on the edge (within 1e-6 Omega) those with
+    Im lam < 0 are ranked last so each counts once. mu = exp(2 pi lam / Omega).
 
     Parameters
     ----------
@@ -160,13 +165,37 @@ def forced_hill(fb: ForcedBalance, z: np.ndarray, omega: float) -> np.ndarray:
     J0 = np.kron(I, Minv) @ J0  # J2^-1 J0
     size = h * n
     A = np.block([[np.zeros((size, size)), np.eye(size)], [-J0, -J1]])
-    lam = np.linalg.eigvals(A)
-    half = 0.5 * omega
-    edge = np.abs(np.abs(lam.imag) - half) <= 1e-6 * omega
-    key = np.where(edge & (lam.imag < 0.0), np.inf, np.abs(lam.imag))
+    lam, vec = np.linalg.eig(A)
+    kappa = _harmonic_centroid(vec[:size], fb.H, n)
+    edge = np.abs(np.abs(lam.imag) - 0.5 * omega) <= 1e-6 * omega
+    key = np.abs(kappa) + np.where(edge & (lam.imag < 0.0), 1.0, 0.0)  # one copy of an edge pair
     cand = lam[np.argsort(key, kind="stable")][: 2 * n]
     mu = np.exp(cand * (2.0 * np.pi / omega))
     return mu[np.argsort(-np.abs(mu), kind="stable")]
+
+
+def _harmonic_centroid(P: np.ndarray, H: int, n: int) -> np.ndarray:
+    """(m,) kappa = sum_k k |c_k|^2 / sum_k |c_k|^2 of each column of P (the (2H+1) n cos/sin coefficients
+    of a perturbation, harmonic-major: [p_0, p_c1, p_s1, ...], n each), c_{+-k} = (p_ck -+ i p_sk) / 2.
+
+    Examples
+    --------
+    >>> P = np.array([[0.0], [1.0], [-1j]])  # cos t - i sin t = e^{-i t}: all on k = -1
+    >>> _harmonic_centroid(P, 1, 1).round(12).tolist()
+    [-1.0]
+    """
+    m = P.shape[1]
+    B = P.reshape(2 * H + 1, n, m)
+    w_pos = np.zeros((H + 1, m))
+    w_neg = np.zeros((H + 1, m))
+    w_pos[0] = np.sum(np.abs(B[0]) ** 2, axis=0)
+    for k in range(1, H + 1):
+        c, sn = B[2 * k - 1], B[2 * k]
+        w_pos[k] = np.sum(np.abs(0.5 * (c - 1j * sn)) ** 2, axis=0)
+        w_neg[k] = np.sum(np.abs(0.5 * (c + 1j * sn)) ** 2, axis=0)
+    k = np.arange(H + 1)[:, None]
+    total = np.maximum(w_pos.sum(axis=0) + w_neg[1:].sum(axis=0), 1e-300)
+    return (k * w_pos).sum(axis=0) / total - (k * w_neg).sum(axis=0) / total
 
 
 def classify_crossing(mu: np.ndarray, tol: float) -> str:

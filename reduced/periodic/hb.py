@@ -236,7 +236,8 @@ class HarmonicBalance:
 
     @classmethod
     def for_system(cls, system: GapSystem, H: int, N: int | None = None, damped: bool = False):
-        """HB of a gap system (conservative unless ``damped``)."""
+        """HB of a gap system (conservative unless ``damped``; refused with friction)."""
+        _check.frictionless(system, "harmonic balance")
         H = _check.integer("H", H, lo=0)
         return cls(
             system.M, system.K, GapForce(system), H, N or default_samples(H), system.C if damped else None

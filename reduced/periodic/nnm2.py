@@ -65,8 +65,8 @@ def amplitude_from_energy(p: DiscreteParams, energy_J: np.ndarray) -> np.ndarray
     E = np.asarray(energy_J, dtype=float)
     below = np.sqrt(E / (2.0 * p.k_s))
     kt = 2.0 * p.k_s + p.k_g
-    disc = kt * E - 2.0 * p.k_s * p.k_g * p.g**2
-    above = (p.k_g * p.g + np.sqrt(np.maximum(disc, 0.0))) / kt
+    disc = kt * E - 2.0 * p.k_s * p.k_g * p.gap**2
+    above = (p.k_g * p.gap + np.sqrt(np.maximum(disc, 0.0))) / kt
     return np.where(E <= p.grazing_energy_nnm2, below, above)
 
 
@@ -86,7 +86,7 @@ def energy_from_amplitude(p: DiscreteParams, x0: np.ndarray) -> np.ndarray:
         J, the shape of ``x0``.
     """
     x0 = np.abs(np.asarray(x0, dtype=float))
-    return 2.0 * p.k_s * x0**2 + p.k_g * np.maximum(x0 - p.g, 0.0) ** 2
+    return 2.0 * p.k_s * x0**2 + p.k_g * np.maximum(x0 - p.gap, 0.0) ** 2
 
 
 def period_from_amplitude(p: DiscreteParams, x0: np.ndarray, *, paper: bool = False) -> np.ndarray:
@@ -118,16 +118,16 @@ def period_from_amplitude(p: DiscreteParams, x0: np.ndarray, *, paper: bool = Fa
     K = p.k_g / (2.0 * p.k_s)
     wc = w0 * np.sqrt(1.0 + K)
     T_open = 2.0 * np.pi / w0
-    if p.g == 0.0:
+    if p.gap == 0.0:
         return np.where(x0 > 0.0, 2.0 * np.pi / wc, T_open)
     with np.errstate(divide="ignore", invalid="ignore"):
-        R = np.maximum(x0 / p.g * (1.0 + K) - K, 1.0)
+        R = np.maximum(x0 / p.gap * (1.0 + K) - K, 1.0)
         Tg = 4.0 / wc * np.arccos(1.0 / R)
         if paper:
             Ts = 4.0 / w0 * np.arctan2(np.sqrt(1.0 + K), R)
         else:
             Ts = 4.0 / w0 * np.arctan2(np.sqrt(1.0 + K), np.sqrt(R * R - 1.0))
-    return np.where(x0 > p.g, Tg + Ts, T_open)
+    return np.where(x0 > p.gap, Tg + Ts, T_open)
 
 
 def frequency_from_energy(p: DiscreteParams, energy_J: np.ndarray, *, paper: bool = False) -> np.ndarray:
@@ -210,7 +210,7 @@ def period_by_integration(p: DiscreteParams, x0: float, rtol: float = 1e-13) -> 
         turn = lambda t, y: y[n]  # noqa: E731  x1' = 0
         turn.terminal, turn.direction = True, (-1.0 if passed_minimum else 1.0)
         events.append(turn)
-        sol = solve_ivp(rhs, (t0, t_end), z, method="DOP853", rtol=rtol, atol=rtol * p.g,
+        sol = solve_ivp(rhs, (t0, t_end), z, method="DOP853", rtol=rtol, atol=rtol * p.gap,
                         events=events, max_step=max_step)
         if sol.status != 1:
             raise RuntimeError(f"no period found by t = {t_end:.4g} s ({sol.message})")

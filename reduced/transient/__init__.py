@@ -13,6 +13,9 @@ report the loads' work int v^T f_ext dt (``external``) beside the dissipated wor
   :mod:`~reduced.transient.exact_tables`, its numba kernels in ``_modal`` and ``_exact_kernels``);
 - :mod:`~reduced.transient.explicit`: central difference in a numba kernel;
 - :mod:`~reduced.transient.dop853`: SciPy's DOP853, the independent reference;
+- :mod:`~reduced.transient.friction`: the three methods for a system with friction at its tips (the exact
+  one on the stick/slip states' closed forms, :mod:`~reduced.transient.friction_tables`, its kernels in
+  ``_friction_kernels``; central difference with a return mapping; DOP853 restarted at every state change);
 - :mod:`~reduced.transient.flow`: the exact flow map and its Jacobian (for shooting);
 - :mod:`~reduced.transient.result`: :class:`RingdownResult` (in memory), :class:`RingdownStream`
   (chunks as they are computed) and the sample grid;

@@ -39,22 +39,47 @@ MOMENT_TOP = 130  # start of the downward moment recursion: damps its start by p
 @nb.njit(cache=True)
 def _work_setup(X, C, lam, n, G, Gz, az):
     """Per segment: G[i, k] = a_i^T C a_k (v = sum_i a_i e^{lam_i t}, a_i = X[n:, i]), and for
-    the primitive of e^{(lam_i + lam_k) t}: Gz = G / (lam_i + lam_k), az = |lam_i + lam_k|."""
+    the primitive of e^{(lam_i + lam_k) t}: Gz = G / (lam_i + lam_k), az = |lam_i + lam_k|.
+
+    Only the terms whose velocity part is not zero enter (a slow mode, summed as a polynomial, has
+    none): their a_i are copied into contiguous rows first, so the sums run over contiguous memory;
+    each sum adds the same products in the same order as over all terms, the others are 0."""
     N = lam.shape[0]
-    CX = np.zeros((n, N), np.complex128)
-    for a in range(n):
-        for b in range(n):
-            if C[a, b] != 0.0:
-                for k in range(N):
-                    CX[a, k] += C[a, b] * X[n + b, k]
+    cols = np.empty(N, np.int64)
+    m = 0
+    for k in range(N):
+        for r in range(n):
+            if X[n + r, k] != 0.0:
+                cols[m] = k
+                m += 1
+                break
+    Xv = np.empty((m, n), np.complex128)
+    for j in range(m):
+        for a in range(n):
+            Xv[j, a] = X[n + a, cols[j]]
+    CX = np.empty((m, n), np.complex128)  # CX[j, a] = (C a_cols[j])_a
+    for j in range(m):
+        for a in range(n):
+            acc = 0.0 + 0.0j
+            for b in range(n):
+                if C[a, b] != 0.0:
+                    acc += C[a, b] * Xv[j, b]
+            CX[j, a] = acc
     for i in range(N):
         for k in range(i, N):
-            acc = 0.0 + 0.0j
-            for a in range(n):
-                acc += X[n + a, i] * CX[a, k]
-            G[i, k] = acc
+            G[i, k] = 0.0
             z = lam[i] + lam[k]
             az[i, k] = abs(z)
+            Gz[i, k] = 0.0
+    for ji in range(m):
+        i = cols[ji]
+        for jk in range(ji, m):
+            k = cols[jk]
+            acc = 0.0 + 0.0j
+            for a in range(n):
+                acc += Xv[ji, a] * CX[jk, a]
+            G[i, k] = acc
+            z = lam[i] + lam[k]
             Gz[i, k] = acc / z if z != 0.0 else 0.0
 
 

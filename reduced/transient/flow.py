@@ -221,6 +221,7 @@ class Flow:
 
     def __init__(self, system: GapSystem, table: StateTable | None = None, loads=None) -> None:
         _check.gap_system(system)
+        _check.frictionless(system, "the flow map (shooting)")
         if table is not None and not isinstance(table, StateTable):
             raise _check.InvalidArgument(f"table must be None or a StateTable, got {type(table).__name__}")
         self.loads = _check.loads(loads, system.n)

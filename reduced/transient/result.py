@@ -22,7 +22,7 @@ import numpy as np
 
 from reduced._checks import integer, number
 from reduced.models.gaps import GapSystem
-from reduced.transient.store import HISTORIES, OPTIONAL, Chunk, NpzStreamWriter, RingdownFile
+from reduced.transient.store import DERIVED, HISTORIES, OPTIONAL, Chunk, NpzStreamWriter, RingdownFile
 
 TIMING_STATS = ("wall_s",)  # wall-clock stats: provenance only, never written into a science file
 
@@ -59,6 +59,10 @@ class RingdownResult:
     external : (N,) J, work done by the loads, W_ext(t) = int_0^t v^T f_ext dt (read-only
         zeros for a free run)
     loads : the :class:`~reduced.models.loads.Loads` of a forced run, None for a free one
+    w : (N, p) m, the friction sliders' positions (None without friction)
+    friction : (N,) J, the part of ``dissipated`` done by friction (None without friction)
+    events : the event log of an exact run with friction (:class:`reduced.transient.friction.FrictionEvents`),
+        or None
     """
 
     system: GapSystem
@@ -71,6 +75,9 @@ class RingdownResult:
     stats: dict = field(default_factory=dict)
     external: np.ndarray | None = None
     loads: object = None
+    w: np.ndarray | None = None
+    friction: np.ndarray | None = None
+    events: object = None
 
     def __post_init__(self) -> None:
         if self.external is None:
@@ -78,13 +85,17 @@ class RingdownResult:
 
     @property
     def energy(self) -> np.ndarray:
-        """J, mechanical energy at each sample."""
-        return self.system.energy(self.x, self.v)
+        """J, mechanical energy at each sample (with the tangential springs' with friction)."""
+        return self.system.energy(self.x, self.v) if self.w is None else self.system.energy(self.x, self.v, self.w)
 
     @property
     def energy0(self) -> float:
         """J, energy of the first sample."""
-        return float(self.system.energy(self.x[0], self.v[0])) if self.t.size else 0.0
+        if not self.t.size:
+            return 0.0
+        if self.w is None:
+            return float(self.system.energy(self.x[0], self.v[0]))
+        return float(self.system.energy(self.x[0], self.v[0], self.w[0]))
 
     @property
     def energy_balance_error(self) -> float:
@@ -113,15 +124,17 @@ class RingdownResult:
         for i in range(start, stop, chunk_samples):
             j = min(i + chunk_samples, stop)
             yield Chunk(i, self.t[i:j], self.x[i:j], self.v[i:j], self.dissipated[i:j], self.system,
-                        external=self.external[i:j])
+                        external=self.external[i:j], w=None if self.w is None else self.w[i:j],
+                        friction=None if self.friction is None else self.friction[i:j])
 
     def save(self, path: str | Path) -> None:
         """Write t, x, v, energy, dissipated, the tolerance and the stats to an .npz file
         (the format of :mod:`reduced.transient.store`; wall-clock stats are left out)."""
         n, N = self.system.n, self.n_samples
         forced = self.loads is not None
-        with NpzStreamWriter(path, _history_shapes(N, n, forced)) as w:
-            summary = _Summary(forced=forced)
+        p = 0 if self.w is None else self.w.shape[1]
+        with NpzStreamWriter(path, _history_shapes(N, n, forced, self.system.m, p)) as w:
+            summary = _Summary(forced=forced, loads=self.loads)
             for c in self.chunks():
                 _write_chunk(w, c, summary)
             w.close(_small_members(self.system, self.method, self.tolerance, summary, self.sample_rate_hz,
@@ -137,7 +150,8 @@ class RingdownStream:
     integrating, not in the consumer) are set when the last chunk has been produced.
     The chunking never changes the samples: each integrator carries its full state from
     one chunk to the next (see their docstrings). ``blocks`` yields (start, x, v, W) for a free
-    run and (start, x, v, W, W_ext) for a forced one (``loads`` given).
+    run and (start, x, v, W, W_ext) for a forced one (``loads`` given); a run with friction yields
+    (start, x, v, W, W_ext, w, W_friction) (W_ext zeros when free), W all the dissipated work.
 
     Parameters
     ----------
@@ -159,6 +173,8 @@ class RingdownStream:
         The integrator's statistics (completed as the run ends).
     loads : Loads, optional
         The loads of a forced run.
+    events : callable, optional
+        ``events() -> log``: the integrator's event log once the run is over (friction, exact), or None.
 
     Attributes
     ----------
@@ -172,7 +188,8 @@ class RingdownStream:
 
     def __init__(self, system: GapSystem, method: str, n_samples: int, sample_rate_hz: float, chunk_samples: int,
                  blocks: Iterator[tuple[np.ndarray, ...]],
-                 tolerance: Callable[[float], float], stats: dict, loads=None) -> None:
+                 tolerance: Callable[[float], float], stats: dict, loads=None,
+                 events: Callable[[], object] | None = None) -> None:
         self.system = system
         self.method = method
         self.n_samples = n_samples
@@ -186,6 +203,12 @@ class RingdownStream:
         self._used = False
         self.max_abs_x = 0.0
         self.loads = loads
+        self._events = events
+
+    @property
+    def events(self):
+        """The integrator's event log (friction, exact) once the run is over, else None."""
+        return self._events() if self._events is not None and self.finished else None
 
     def __iter__(self) -> Iterator[Chunk]:
         if self._used:
@@ -198,7 +221,8 @@ class RingdownStream:
             if x.size:
                 self.max_abs_x = max(self.max_abs_x, float(np.max(np.abs(x))))
             t = np.arange(start, start + x.shape[0]) / self.sample_rate_hz
-            yield Chunk(start, t, x, v, W, self.system, external=ext[0] if ext else zeros_view(x.shape[0]))
+            yield Chunk(start, t, x, v, W, self.system, external=ext[0] if ext else zeros_view(x.shape[0]),
+                        w=ext[1] if len(ext) > 1 else None, friction=ext[2] if len(ext) > 2 else None)
             t0 = time.perf_counter()
         wall += time.perf_counter() - t0
         self.tolerance = float(self._tolerance(self.max_abs_x))
@@ -216,29 +240,36 @@ class RingdownStream:
         n, N = self.system.n, self.n_samples
         forced = self.loads is not None
         t = np.arange(N) / self.sample_rate_hz
-        x = v = W = Wext = None
+        x = v = W = Wext = w = Wf = None
         for c in self:
             if c.start == 0 and len(c) == N:  # one chunk: keep its arrays, no copy
                 x, v, W = c.x, c.v, c.dissipated
                 Wext = c.external if forced else None
+                w, Wf = c.w, c.friction
                 continue
             if x is None:
                 x, v, W = np.empty((N, n)), np.empty((N, n)), np.empty(N)
                 Wext = np.empty(N) if forced else None
+                if c.w is not None:
+                    w, Wf = np.empty((N, c.w.shape[1])), np.empty(N)
             x[c.start : c.start + len(c)] = c.x
             v[c.start : c.start + len(c)] = c.v
             W[c.start : c.start + len(c)] = c.dissipated
             if forced:
                 Wext[c.start : c.start + len(c)] = c.external
+            if w is not None:
+                w[c.start : c.start + len(c)] = c.w
+                Wf[c.start : c.start + len(c)] = c.friction
         return RingdownResult(system=self.system, t=t, x=x, v=v, dissipated=W, method=self.method,
-                              tolerance=self.tolerance, stats=self.stats, external=Wext, loads=self.loads)
+                              tolerance=self.tolerance, stats=self.stats, external=Wext, loads=self.loads, w=w,
+                              friction=Wf, events=self.events)
 
     def save(self, path: str | Path) -> RingdownFile:
         """Write the run into an .npz as it is computed; the file, read lazily."""
         n, N = self.system.n, self.n_samples
         forced = self.loads is not None
-        summary = _Summary(forced=forced)
-        with NpzStreamWriter(path, _history_shapes(N, n, forced)) as w:
+        summary = _Summary(forced=forced, loads=self.loads)
+        with NpzStreamWriter(path, _history_shapes(N, n, forced, self.system.m, self.system.p)) as w:
             for c in self:
                 _write_chunk(w, c, summary)
             w.close(_small_members(self.system, self.method, self.tolerance, summary, self.sample_rate_hz,
@@ -276,19 +307,61 @@ def balance_error(E: np.ndarray, W: np.ndarray, Wext: np.ndarray, forced: bool) 
     return float(np.max(np.abs(E[0] - E - W + Wext)) / scale)
 
 
-def _history_shapes(N: int, n: int, forced: bool = False) -> dict:
-    shapes = {"t": (N,), "x": (N, n), "v": (N, n), "energy": (N,), "dissipated": (N,), "external": (N,)}
-    return {k: (shapes[k], np.float64) for k in HISTORIES if forced or k not in OPTIONAL}
+def _history_shapes(N: int, n: int, forced: bool = False, m: int = 0, p: int = 0) -> dict:
+    shapes = {"t": (N,), "x": (N, n), "v": (N, n), "energy": (N,), "dissipated": (N,), "external": (N,),
+              "stop_force": (N, m), "a": (N, n)}
+    out = {k: (shapes[k], np.float64) for k in (*HISTORIES, *DERIVED) if forced or k not in OPTIONAL}
+    if p:  # friction: the sliders' positions and the friction work
+        out.update({"w": ((N, p), np.float64), "friction": ((N,), np.float64)})
+    return out
 
 
 @dataclass
 class _Summary:
-    """Running energy-balance error while chunks are written (see :func:`balance_error`)."""
+    """Running energy-balance error while chunks are written (see :func:`balance_error`), and the
+    loads the accelerations need."""
 
     forced: bool = False
     E0: float | None = None
     balance: float = 0.0
     scale: float = 0.0
+    loads: object = None
+
+
+def accelerations(system: GapSystem, t: np.ndarray, x: np.ndarray, v: np.ndarray, loads=None,
+                  w: np.ndarray | None = None) -> np.ndarray:
+    """m/s^2 (or the coordinates' units / s^2), the accelerations the equation of motion gives at samples:
+    a = M^-1 (f_ext(t) - C v - K x - B^T f(B x) - Bt^T k_t (Bt x - w)).
+
+    The friction term: a slider's force is k_t (t - w) in every state (sticking: the spring; slipping: the
+    spring held on the cone, = +-mu N; open: w = t, 0).
+
+    Parameters
+    ----------
+    system : GapSystem
+        The system run.
+    t : (k,) ndarray of float
+        s, sample times (for the loads).
+    x, v : (k, n) ndarray of float
+        m and m/s at those times.
+    loads : Loads, optional
+        The loads of a forced run.
+    w : (k, p) ndarray of float, optional
+        m, the friction sliders' positions of a run with friction.
+
+    Returns
+    -------
+    (k, n) ndarray of float
+    """
+    rhs = -(v @ system.C + x @ system.K + system.contact_force(x))  # C, K symmetric: v @ C = (C v)^T
+    if w is not None and system.friction is not None:
+        fr = system.friction
+        rhs -= ((x @ fr.Bt.T - w) * fr.k_t) @ fr.Bt
+    if loads is not None:
+        rhs += loads.force(t)
+    # times M^-1 by a product, row by row as the energies are: the same bits whatever the chunking (a
+    # multi-right-hand-side solve blocks its columns by their number)
+    return rhs @ np.linalg.inv(system.M)  # M symmetric: (M^-1 r)^T = r^T M^-1
 
 
 def _write_chunk(w: NpzStreamWriter, c: Chunk, s: _Summary) -> None:
@@ -307,12 +380,19 @@ def _write_chunk(w: NpzStreamWriter, c: Chunk, s: _Summary) -> None:
     w.append("dissipated", c.dissipated)
     if s.forced:
         w.append("external", c.external)
+    w.append("stop_force", np.ascontiguousarray(c.system.stop_force(c.x)) if c.system is not None
+             else np.zeros((len(c), 0)))
+    w.append("a", accelerations(c.system, c.t, c.x, c.v, s.loads, c.w))
+    if c.w is not None:
+        w.append("w", c.w)
+        w.append("friction", c.friction)
 
 
 def _small_members(system: GapSystem, method: str, tolerance: float, s: _Summary, sample_rate_hz: float,
                    stats: dict) -> dict:
     balance = 0.0 if not s.scale else s.balance / s.scale
-    return {"dof_names": np.array(system.dof_names), "method": method, "tolerance": tolerance,
+    return {"dof_names": np.array(system.dof_names), "stop_names": np.array(system.stop_names, dtype=str),
+            "method": method, "tolerance": tolerance,
             "energy_balance_error": balance, "sample_rate_hz": sample_rate_hz,
             **{f"stat_{k}": v for k, v in stats.items() if np.isscalar(v) and k not in TIMING_STATS}}
 

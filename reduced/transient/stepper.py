@@ -27,6 +27,8 @@ from reduced import _checks as _check
 from reduced.models.gaps import GapSystem
 from reduced.transient.result import RingdownStream, sample_count
 
+FRICTION_STEPPERS: dict[str, type] = {}  # method -> its Stepper for systems with friction (reduced.transient.friction)
+
 
 class Buffer:
     """Samples j0 .. j0 + k - 1 of a run of N at fs Hz, in the arrays of a stepper's layout.
@@ -87,6 +89,7 @@ class Stepper(ABC):
     """
 
     method: str = ""
+    friction: bool = False  # the method runs systems with friction (reduced.transient.friction)
 
     def __init__(self, system: GapSystem, n_samples: int, sample_rate_hz: float, loads, report: bool) -> None:
         self.system = system
@@ -145,6 +148,12 @@ def run(stepper_class: type[Stepper], system: GapSystem, x0, v0, duration_s: flo
     options, ``progress``, ``chunk_samples``.
     """
     n, x0, v0, duration_s, sample_rate_hz = _check.run_args(system, x0, v0, duration_s, sample_rate_hz)
+    if system.friction is not None and not stepper_class.friction:
+        if stepper_class.method not in FRICTION_STEPPERS:
+            raise _check.InvalidArgument(
+                f"the system has friction, which the {stepper_class.method!r} method of this module does not "
+                "treat: run it with reduced.transient.integrate.ringdown (or import reduced.transient.friction)")
+        stepper_class = FRICTION_STEPPERS[stepper_class.method]
     loads = _check.loads(loads, n)
     options = options.checked(system)
     _check.callback("progress", progress)
@@ -169,7 +178,7 @@ def stream(stepper: Stepper, chunk_samples: int, progress: Callable[[float], Non
     """
     return RingdownStream(stepper.system, stepper.method, stepper.n_samples, stepper.sample_rate_hz, chunk_samples,
                           _blocks(stepper, chunk_samples, progress), stepper.tolerance, stepper.stats,
-                          loads=stepper.loads)
+                          loads=stepper.loads, events=lambda: getattr(stepper, "events", None))
 
 
 def _blocks(stepper: Stepper, chunk_samples: int, progress) -> Iterator[tuple]:

@@ -9,7 +9,11 @@ independent of the run length:
 - the five histories ``t`` (N,), ``x`` (N, n), ``v`` (N, n), ``energy`` (N,) and
   ``dissipated`` (N,), and for a forced run (``loads``) a sixth, ``external`` (N,) (the work
   of the loads, int v^T f_ext dt; a file without it, a free run or an older file, reads it
-  as zeros), are zip64 members *stored* (not deflated): their sizes are known
+  as zeros), then what follows from each sample's state: ``stop_force`` (N, m), the force in
+  each stop (N, >= 0 in compression, the stops' order of the system: for the tips, the tip load
+  cells' contact force) and ``a`` (N, n), the accelerations M^-1 (f_ext - C v - K x - B^T f)
+  (m/s^2 on displacement coordinates; files written before issue 24 lack both), are zip64
+  members *stored* (not deflated): their sizes are known
   from N before the run starts, so each member's region is laid out up front and every
   chunk of samples is written at its place in all regions as it arrives (a CRC-32
   per member is carried along and patched into the headers at the end);
@@ -45,6 +49,8 @@ from reduced._checks import InvalidArgument, integer, show
 
 HISTORIES = ("t", "x", "v", "energy", "dissipated", "external")  # the per-sample members, in file order
 OPTIONAL = ("external",)  # histories a file may lack (free runs, older files): read as zeros
+DERIVED = ("stop_force", "a")  # per-sample members computed from the state as it is written (older files lack them)
+FRICTION_HISTORIES = ("w", "friction")  # a run with friction: slider positions (N, p), friction work (N,)
 READ_CHUNK_SAMPLES = 1 << 16  # samples a chunk when a run is read back (about 4.7 MB for 3 DOFs)
 DOS_TIME, DOS_DATE = 0, (0 << 9) | (1 << 5) | 1  # 1980-01-01 00:00:00: no wall clock in the file
 ZIP64_VERSION = 45  # "version needed to extract" for zip64 (APPNOTE 4.4.3)
@@ -272,6 +278,10 @@ class Chunk:
         J (a property; given as ``_energy``, or computed once by ``system``).
     external : (k,) ndarray of float or None
         J, the work of the loads int_0^t v^T f_ext dt (zeros for a free run; None when not read).
+    w : (k, p) ndarray of float or None
+        m, the friction sliders' positions (None: no friction, or not read).
+    friction : (k,) ndarray of float or None
+        J, the part of ``dissipated`` done by friction (None: no friction, or not read).
     """
 
     start: int
@@ -282,11 +292,14 @@ class Chunk:
     system: object = None
     _energy: np.ndarray | None = None
     external: np.ndarray | None = None
+    w: np.ndarray | None = None
+    friction: np.ndarray | None = None
 
     @property
     def energy(self) -> np.ndarray:
         if self._energy is None:
-            self._energy = self.system.energy(self.x, self.v)
+            self._energy = (self.system.energy(self.x, self.v) if self.w is None else
+                            self.system.energy(self.x, self.v, self.w))
         return self._energy
 
     def __len__(self) -> int:
@@ -343,7 +356,7 @@ class RingdownFile:
             raise InvalidArgument(f"path {show(str(path))} is not a ringdown file: no {', '.join(missing)}")
         self.system = system
         with np.load(self.path, allow_pickle=False) as z:
-            small = {k: z[k] for k in z.files if k not in HISTORIES}
+            small = {k: z[k] for k in z.files if k not in (*HISTORIES, *DERIVED, *FRICTION_HISTORIES)}
         self.method = str(small.get("method", ""))
         self.tolerance = float(small.get("tolerance", np.nan))
         self.energy_balance_error = float(small.get("energy_balance_error", np.nan))
@@ -363,6 +376,8 @@ class RingdownFile:
         if name in OPTIONAL and name not in self._arrays:
             stop = self.n_samples if stop is None else min(stop, self.n_samples)
             return np.zeros(max(0, stop - max(0, min(start, stop))))
+        if name in DERIVED and name not in self._arrays:
+            raise InvalidArgument(f"{self.path.name} has no {name} (written before they were stored); run it again")
         a = self._arrays[name]
         stop = a.shape[0] if stop is None else min(stop, a.shape[0])
         start = max(0, min(start, stop))
@@ -388,6 +403,8 @@ class RingdownFile:
     def _memmap(self, name: str) -> np.ndarray:
         if name in OPTIONAL and name not in self._arrays:
             return np.broadcast_to(np.float64(0.0), (self.n_samples,))
+        if name in DERIVED and name not in self._arrays:
+            raise InvalidArgument(f"{self.path.name} has no {name} (written before they were stored); run it again")
         a = self._arrays[name]
         if not a.stored:
             raise InvalidArgument(f"{self.path.name}: member {name} is compressed; read it with chunks()")
@@ -397,10 +414,16 @@ class RingdownFile:
 
     t = property(lambda self: self._memmap("t"), doc="s, (N,) memory-mapped")
     x = property(lambda self: self._memmap("x"), doc="m, (N, n) memory-mapped")
+    stop_force = property(lambda self: self._memmap("stop_force"), doc="N, (N, m) memory-mapped: force in each stop")
+    a = property(lambda self: self._memmap("a"), doc="m/s^2, (N, n) memory-mapped: accelerations")
     v = property(lambda self: self._memmap("v"), doc="m/s, (N, n) memory-mapped")
     energy = property(lambda self: self._memmap("energy"), doc="J, (N,) memory-mapped")
     dissipated = property(lambda self: self._memmap("dissipated"), doc="J, (N,) memory-mapped")
     external = property(lambda self: self._memmap("external"), doc="J, (N,) memory-mapped (zeros: a free run)")
+    w = property(lambda self: self._memmap("w") if "w" in self._arrays else None,
+                 doc="m, (N, p) memory-mapped slider positions (None: no friction)")
+    friction = property(lambda self: self._memmap("friction") if "friction" in self._arrays else None,
+                        doc="J, (N,) memory-mapped friction work (None: no friction)")
 
     @property
     def forced(self) -> bool:
@@ -408,19 +431,24 @@ class RingdownFile:
         return "external" in self._arrays
 
     def chunks(self, chunk_samples: int | None = None, start: int = 0, stop: int | None = None,
-               fields: tuple[str, ...] = HISTORIES) -> Iterator[Chunk]:
+               fields: tuple[str, ...] = HISTORIES + FRICTION_HISTORIES) -> Iterator[Chunk]:
         """Consecutive :class:`Chunk` of at most ``chunk_samples`` (default ``READ_CHUNK_SAMPLES``)
-        samples from ``start`` to ``stop``; only the histories in ``fields`` are read (the others are None)."""
+        samples from ``start`` to ``stop``; only the histories in ``fields`` are read (the others are None,
+        as are the friction histories of a run without friction)."""
         chunk_samples = integer("chunk_samples", READ_CHUNK_SAMPLES if chunk_samples is None else chunk_samples)
+        allowed = HISTORIES + FRICTION_HISTORIES
         for name in fields:
-            if name not in HISTORIES:
-                raise InvalidArgument(f"fields must name histories among {', '.join(HISTORIES)}, got {show(name)}")
+            if name not in allowed:
+                raise InvalidArgument(f"fields must name histories among {', '.join(allowed)}, got {show(name)}")
         stop = self.n_samples if stop is None else min(stop, self.n_samples)
         for i in range(start, stop, chunk_samples):
             j = min(i + chunk_samples, stop)
             a = {k: self.read(k, i, j) if k in fields else None for k in HISTORIES}
+            for k in FRICTION_HISTORIES:
+                a[k] = self.read(k, i, j) if k in fields and k in self._arrays else None
             t = a["t"] if a["t"] is not None else np.arange(i, j) / self.sample_rate_hz
-            yield Chunk(i, t, a["x"], a["v"], a["dissipated"], self.system, a["energy"], a["external"])
+            yield Chunk(i, t, a["x"], a["v"], a["dissipated"], self.system, a["energy"], a["external"], a["w"],
+                        a["friction"])
 
     @property
     def energy0(self) -> float:

@@ -1,0 +1,799 @@
+"""Private numba kernels of the exact integrator with friction (:mod:`reduced.transient.friction`).
+
+The state is y = [x; v; w] (the sliders' positions w), the friction states are those of
+:mod:`reduced.transient.friction_tables`, and every event is the crossing of a linear function of y.
+A free segment is the kept-term closed form of :mod:`reduced.transient._modal`,
+
+    y(tau) = y_p + Re sum_{i<K} U[:, i] w_i e^{lam_i tau},   w = Uinv (y(0) - y_p),
+
+with the sliders' zero eigenvalues among the terms (constants), and its first event is found by the
+same march (:func:`reduced.transient._modal._march`), run on the event functions
+q_e = E0_e + Re sum_i EU_ei w_i e^{lam_i tau} instead of the stops': its steps skip no root of any.
+The dissipated work is :func:`reduced.transient._modal._work` on two quadratic forms, the viscous
+v^T C v and the friction power's quadratic part, plus the friction power's linear part, LF . dx.
+Forced segments: :func:`_friction_forced_kernel`, on the forced closed form of
+:mod:`reduced.transient._exact_kernels` extended to the augmented state.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from reduced.transient._exact_kernels import (
+    POLY_DEG,
+    SLOW_LT,
+    _add_poly,
+    _exponentials,
+    _ext_setup,
+    _ext_work,
+    _first_root_forced,
+    _moments,
+    _piece_at,
+    _work_exp,
+)
+from reduced.transient._modal import (
+    BUFFER_FULL,
+    EPS,
+    NOISE_FACTOR,
+    QTOL_REL,
+    _eval,
+    _march,
+    _stop_scratch,
+    _term_scratch,
+    _terms_m1,
+    _work,
+    _work_near,
+)
+
+STUCK_PER_EVENT = 8  # zero-length segments allowed in a row, per event slot, before the run is refused
+
+
+@nb.njit(cache=True)
+def _ev_start(s, K, y, Uinv, aUinv, yp, EU, aEU, E0, Escale, eact, lam, alam, floor, w, werr, coef, lc, l2c, a0,
+              const, qtol, dnoise, live, dy, ay):
+    """Segment start in friction state s: w = Uinv (y - y_p) and its round-off werr, then per active event e
+    q_e = const_e + Re sum_i coef_ei e^{lam_i tau} (as :func:`reduced.transient._modal._start` for the stops),
+    its round-off band qtol_e (with the cancellation in a . y_p + c, eps Escale_e) and q_e' noise dnoise_e.
+    An event whose motion is below ``floor`` (m) is not live. Returns the number of live events."""
+    N = y.shape[0]
+    E = E0.shape[1]
+    for r in range(N):
+        dy[r] = y[r] - yp[s, r]
+        ay[r] = abs(y[r]) + abs(yp[s, r])
+    for i in range(K):
+        acc = 0.0 + 0.0j
+        err = 0.0
+        for r in range(N):
+            acc += Uinv[s, i, r] * dy[r]
+            err += aUinv[s, i, r] * ay[r]
+        w[i] = acc
+        werr[i] = EPS * err
+    n_live = 0
+    for e in range(E):
+        if not eact[s, e]:
+            live[e] = False
+            continue
+        cj = E0[s, e]
+        osc = 0.0
+        qn = 0.0
+        dn = 0.0
+        for i in range(K):
+            c = EU[s, e, i] * w[i]
+            coef[e, i] = c
+            lc[e, i] = lam[s, i] * c
+            l2c[e, i] = lam[s, i] * lc[e, i]
+            a = math.sqrt(c.real * c.real + c.imag * c.imag)
+            a0[e, i] = a
+            osc += a
+            qn += aEU[s, e, i] * werr[i]
+            dn += aEU[s, e, i] * alam[s, i] * werr[i]
+        const[e] = cj
+        qtol[e] = QTOL_REL * (abs(cj) + osc) + NOISE_FACTOR * (qn + EPS * Escale[s, e])
+        dnoise[e] = NOISE_FACTOR * dn
+        live[e] = not (osc < floor and abs(cj) < floor)
+        if live[e]:
+            n_live += 1
+    return n_live
+
+
+@nb.njit(cache=True, inline="always")
+def _seg_work(s, K, w, em, am1, tau, n, y0, yt, damped, slipping, wv, wf, LF, gr, gi):
+    """(viscous, friction) work of the segment over [0, tau] (y0: its start, yt: its state at tau)."""
+    Wm, Hd, ip, ii, ik, ikind, icoef, iz = wv
+    Fm, Fd, fp, fi, fk, fkind, fcoef, fz = wf
+    dW = 0.0
+    if damped:
+        dW = _work(s, K, w, em, am1, tau, Wm, Hd, gr, gi)
+        if ip[s + 1] > ip[s]:
+            dW += _work_near(s, w, tau, ip, ii, ik, ikind, icoef, iz)
+    dWf = 0.0
+    if slipping:
+        dWf = _work(s, K, w, em, am1, tau, Fm, Fd, gr, gi)
+        if fp[s + 1] > fp[s]:
+            dWf += _work_near(s, w, tau, fp, fi, fk, fkind, fcoef, fz)
+        for r in range(n):
+            dWf += LF[s, r] * (yt[r] - y0[r])
+    return dW, dWf
+
+
+@nb.njit(cache=True, inline="always")
+def _switch(s, e, y, n, succ, reset, fric):
+    """(state after event e of state s, friction work of the switch), y's sliders updated in place.
+
+    A closing stop starts its tip's sliders unloaded (w = t). A stick -> slip event puts the slider on the
+    cone, w = t -+ mu N / kt: the march locates the event to within its step floor, and the slip state
+    would keep the small excess |kt (t - w)| - mu N for good (it moves w with t -+ mu N / kt), so that the
+    first stick after it would leave the cone at once. Either way the tangential spring's energy released,
+    1/2 kt ((t - w_old)^2 - (t - w_new)^2), is friction work (a round-off amount), so the balance stays exact.
+    """
+    Bt, slider_tip, stop_tip, ekind, stop_of, B, kstop, offset, side, mu, kt = fric
+    p = Bt.shape[0]
+    m = B.shape[0]
+    s_new = succ[s, e]
+    dWf = 0.0
+    for k in range(p):
+        if reset[s, e]:
+            if slider_tip[k] != stop_tip[e]:
+                continue
+        elif not ((ekind[s, e] == 1 or ekind[s, e] == 2) and e - m == 2 * k + (ekind[s, e] - 1)):
+            continue
+        t = 0.0
+        for r in range(n):
+            t += Bt[k, r] * y[r]
+        w_old = y[2 * n + k]
+        if reset[s, e]:
+            w_new = t
+        else:
+            j = stop_of[s_new, k]
+            sx = 0.0
+            for r in range(n):
+                sx += B[j, r] * y[r]
+            N = kstop[j] * side[j] * (sx - offset[j])
+            sigma = 1.0 if ekind[s, e] == 1 else -1.0
+            w_new = t - sigma * mu[k] * N / kt[k]
+        dWf += 0.5 * kt[k] * ((t - w_old) * (t - w_old) - (t - w_new) * (t - w_new))
+        y[2 * n + k] = w_new
+    return s_new, dWf
+
+
+@nb.njit(cache=True, inline="always")
+def _log(n_log, t, e, s, y, log_t, log_e, log_s, log_y):
+    """Record an event (time, slot, new state, state y) while the log has room; returns the count."""
+    if n_log < log_t.shape[0]:
+        log_t[n_log] = t
+        log_e[n_log] = e
+        log_s[n_log] = s
+        for r in range(y.shape[0]):
+            log_y[n_log, r] = y[r]
+    return n_log + 1
+
+
+@nb.njit(cache=True)
+def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bounds, c, t_samples, i_samp, t_after,
+                          out_y, out_W, out_Wf, W, Wf, hmin, floor, max_events, n_stuck, log_t, log_e, log_s, log_y,
+                          n_log):
+    """March events from t through the pieces ending at bounds[c], bounds[c + 1], ... (no loads), filling the
+    sample buffer ``t_samples`` from i_samp (:func:`reduced.transient._modal._free_kernel` with friction).
+
+    (y, s, t, W, Wf) is the state at the start of a segment and is advanced segment by segment: y the
+    augmented state, s the friction state, W the viscous and Wf the friction work. ``out_W`` receives
+    W + Wf (all the dissipated work), ``out_Wf`` Wf. When the buffer fills inside a segment that still has
+    samples before its end, the kernel returns BUFFER_FULL without advancing it (the samples do not
+    depend on the buffer size). Events are logged (time, slot, new state, y) while the log has room.
+    ``fric`` holds the sliders' data for the switch (:func:`_switch`). A segment no longer than the march's
+    floor counts as one without progress (``n_stuck``). Returns (t, W, Wf, s, i_samp, n_events, n_iter,
+    status, n_stuck, c, n_log).
+    """
+    nK, lam, alam, UT, Uinv, aUinv, yp = modal
+    EU, aEU, E0, Escale, eact, succ, reset, has_slip, LF = events
+    N = y.shape[0]
+    E = E0.shape[1]
+    Kmax = lam.shape[1]
+    ns = t_samples.shape[0]
+    w, werr, e, ea, em, am1, gr, gi = _term_scratch(Kmax)
+    coef, lc, l2c, a0, const, qtol, dnoise, live, hprev, hnext, P = _stop_scratch(E, Kmax)
+    ytmp = np.empty(N)
+    dy = np.empty(N)
+    ay = np.empty(N)
+    n_events = 0
+    n_iter = 0
+    status = 0
+    t_end = bounds[c]
+    while True:
+        K = nK[s]
+        slipping = has_slip[s]
+        n_live = _ev_start(s, K, y, Uinv, aUinv, yp, EU, aEU, E0, Escale, eact, lam, alam, floor, w, werr, coef, lc,
+                           l2c, a0, const, qtol, dnoise, live, dy, ay)
+        tau_ev, e_ev, it = _march(s, K, lam, alam, const, coef, lc, l2c, a0, qtol, dnoise, live, n_live, t_end - t,
+                                  hmin, e, ea, hprev, hnext, P)
+        if e_ev == -2:
+            status = -3
+            break
+        t_next = t_end if e_ev < 0 else t + tau_ev
+        while i_samp < ns and t_samples[i_samp] <= t_next:
+            tau = max(t_samples[i_samp] - t, 0.0)
+            _terms_m1(lam[s], K, tau, e, em, am1)
+            _eval(s, K, UT, yp, w, e, ytmp)
+            dW, dWf = _seg_work(s, K, w, em, am1, tau, n, y, ytmp, damped, slipping, wv, wf, LF, gr, gi)
+            out_W[i_samp] = (W + dW) + (Wf + dWf)
+            out_Wf[i_samp] = Wf + dWf
+            for r in range(N):
+                out_y[i_samp, r] = ytmp[r]
+            i_samp += 1
+        if i_samp == ns and t_after <= t_next:
+            status = BUFFER_FULL
+            break
+        n_iter += it
+        _terms_m1(lam[s], K, tau_ev, e, em, am1)
+        _eval(s, K, UT, yp, w, e, ytmp)
+        dW, dWf = _seg_work(s, K, w, em, am1, tau_ev, n, y, ytmp, damped, slipping, wv, wf, LF, gr, gi)
+        W += dW
+        Wf += dWf
+        for r in range(N):
+            y[r] = ytmp[r]
+        n_stuck = n_stuck + 1 if tau_ev <= hmin else 0
+        if n_stuck > STUCK_PER_EVENT * E:
+            status = -4
+            break
+        t = t_next
+        if e_ev < 0:
+            c += 1
+            n_stuck = 0
+            if c == bounds.shape[0]:
+                break
+            t_end = bounds[c]
+            continue
+        s, dWf = _switch(s, e_ev, y, n, succ, reset, fric)
+        Wf += dWf
+        n_log = _log(n_log, t, e_ev, s, y, log_t, log_e, log_s, log_y)
+        n_events += 1
+        if n_events >= max_events:
+            status = -1
+            break
+    return t, W, Wf, s, i_samp, n_events, n_iter, status, n_stuck, c, n_log
+
+
+@nb.njit(cache=True)
+def _aug_segment(s, sigma, ip, tau_lim, y, yp_s, lam_s, V, Vinv, fz, fY, fU, pF, pp0, pp1, X, z, P, Fs, phi, gam,
+                 werr, ypart):
+    """:func:`reduced.transient._exact_kernels._forced_segment` on the augmented state (N = len(y) rows,
+    the sliders' zero eigenvalues among the modes: slow, their Taylor series a constant, since the loads
+    have no component on them). Fills X, z, P, Fs, phi, werr; returns whether there is a polynomial part."""
+    N = y.shape[0]
+    L = fz.shape[0]
+    M1 = P.shape[0]
+    poly = False
+    deg = -1
+    for l in range(L):
+        F = pF[ip, l]
+        if F != 0.0 and sigma != 0.0:
+            F = F * np.exp(1j * fz[l] * sigma)
+        for k in range(M1):
+            phi[l, k] = 0.0
+        phi[l, 0] = pp0[ip, l] + pp1[ip, l] * sigma
+        phi[l, 1] = pp1[ip, l]
+        if F != 0.0 and fz[l] * tau_lim < SLOW_LT:
+            c = F
+            for k in range(M1):
+                phi[l, k] += c.real
+                c = c * (1j * fz[l]) / (k + 1)
+            F = 0.0 + 0.0j
+        Fs[l] = F
+        for k in range(M1):
+            if phi[l, k] != 0.0:
+                poly = True
+                deg = max(deg, k)
+    for r in range(N):
+        ypart[r] = 0.0
+    col = N
+    for l in range(L):
+        for r in range(N):
+            Y = fY[s, r, l] * Fs[l]
+            X[r, col] = 0.5 * Y
+            X[r, col + 1] = 0.5 * np.conj(Y)
+            ypart[r] += Y.real
+        z[col] = 1j * fz[l]
+        z[col + 1] = -1j * fz[l]
+        col += 2
+    for m in range(M1):
+        for r in range(N):
+            P[m, r] = 0.0
+    for i in range(N):
+        lam = lam_s[i]
+        z[i] = lam
+        wi = 0.0 + 0.0j
+        err = 0.0
+        for r in range(N):
+            wi += Vinv[i, r] * (y[r] - yp_s[r] - ypart[r])
+            err += abs(Vinv[i, r]) * (abs(y[r]) + abs(yp_s[r]) + abs(ypart[r]))
+        werr[i] = EPS * err
+        if not poly:
+            for r in range(N):
+                X[r, i] = V[r, i] * wi
+            continue
+        for k in range(deg + 1):
+            g = 0.0 + 0.0j
+            for l in range(L):
+                g += fU[s, i, l] * phi[l, k]
+            gam[k] = g
+        if abs(lam) * tau_lim < SLOW_LT:
+            h = wi
+            for r in range(N):
+                X[r, i] = 0.0
+                P[0, r] += (V[r, i] * h).real
+            for m in range(1, M1):
+                h = lam * h
+                if m - 1 <= deg:
+                    h += gam[m - 1]
+                h = h / m
+                for r in range(N):
+                    P[m, r] += (V[r, i] * h).real
+        else:
+            c = -gam[deg] / lam
+            for r in range(N):
+                P[deg, r] += (V[r, i] * c).real
+            for k in range(deg - 1, -1, -1):
+                c = ((k + 1) * c - gam[k]) / lam
+                for r in range(N):
+                    P[k, r] += (V[r, i] * c).real
+            for r in range(N):
+                X[r, i] = V[r, i] * (wi - c)
+    return poly
+
+
+@nb.njit(cache=True)
+def _quad_setup(X, D, z, G, Gz, az, DX):
+    """For int y_h^T D y_h with y_h = Re sum_k X[:, k] e^{z_k t}: G[i, k] = X_i^T D X_k (i <= k),
+    Gz = G / (z_i + z_k), az = |z_i + z_k| (:func:`reduced.transient._exact_kernels._work_exp` reads them)."""
+    N = X.shape[0]
+    Kt = X.shape[1]
+    for a in range(N):
+        for k in range(Kt):
+            acc = 0.0 + 0.0j
+            for b in range(N):
+                if D[a, b] != 0.0:
+                    acc += D[a, b] * X[b, k]
+            DX[a, k] = acc
+    for i in range(Kt):
+        for k in range(i, Kt):
+            acc = 0.0 + 0.0j
+            for a in range(N):
+                acc += X[a, i] * DX[a, k]
+            G[i, k] = acc
+            zz = z[i] + z[k]
+            az[i, k] = abs(zz)
+            Gz[i, k] = acc / zz if zz != 0.0 else 0.0
+
+
+@nb.njit(cache=True)
+def _quad_poly_setup(DX, P, D, ACp, Cpp):
+    """ACp[k, m] = X_k^T D p_m, Cpp[m, m'] = p_m^T D p_m' (p_m = P[m]) for the polynomial part of the form."""
+    N = P.shape[1]
+    M1 = P.shape[0]
+    for k in range(DX.shape[1]):
+        for m in range(M1):
+            acc = 0.0 + 0.0j
+            for a in range(N):
+                acc += DX[a, k] * P[m, a]
+            ACp[k, m] = acc
+    for m in range(M1):
+        for m2 in range(M1):
+            acc2 = 0.0
+            for a in range(N):
+                for b in range(N):
+                    if D[a, b] != 0.0:
+                        acc2 += P[m, a] * D[a, b] * P[m2, b]
+            Cpp[m, m2] = acc2
+
+
+@nb.njit(cache=True)
+def _quad_poly_work(ACp, Cpp, MOM, tau):
+    """int (2 y_E^T D y_P + y_P^T D y_P) dt over [0, tau] from the moments MOM[k, m] = int t^m e^{z_k t} dt."""
+    acc = 0.0 + 0.0j
+    for k in range(ACp.shape[0]):
+        for m in range(ACp.shape[1]):
+            if ACp[k, m] != 0.0:
+                acc += ACp[k, m] * MOM[k, m]
+    W = 2.0 * acc.real
+    M1 = Cpp.shape[0]
+    for m in range(M1):
+        for m2 in range(M1):
+            if Cpp[m, m2] != 0.0:
+                W += Cpp[m, m2] * tau ** (m + m2 + 1) / (m + m2 + 1)
+    return W
+
+
+@nb.njit(cache=True)
+def _aug_arrays(N, L):
+    """Scratch of a forced segment on the augmented state: X (N, Kt), z, coef (Kt,), werr, ytmp, ypart (N,),
+    P (POLY_DEG + 1, N), Qp, Fs (L,), phi (L, POLY_DEG + 1), gam; Kt = N + 2L."""
+    Kt = N + 2 * L
+    M1 = POLY_DEG + 1
+    return (np.empty((N, Kt), np.complex128), np.zeros(Kt, np.complex128), np.empty(Kt, np.complex128),
+            np.empty(N), np.empty(N), np.zeros(N), np.zeros((M1, N)), np.zeros(M1), np.zeros(L, np.complex128),
+            np.zeros((L, M1)), np.zeros(M1, np.complex128))
+
+
+@nb.njit(cache=True)
+def _aug_work_arrays(N, L):
+    """Scratch of the work integrals (:func:`reduced.transient._exact_kernels._work_arrays`, Kt = N + 2L), and
+    the friction form's G, Gz, az, DX, ACp, Cpp."""
+    Kt = N + 2 * L
+    M1 = POLY_DEG + 1
+    return (np.zeros((Kt, Kt), np.complex128), np.zeros((Kt, Kt), np.complex128), np.zeros((Kt, Kt)),
+            np.empty(Kt, np.complex128), np.zeros((Kt, M1), np.complex128), np.zeros((M1, M1)), np.zeros((M1, L)),
+            np.zeros((Kt, M1), np.complex128), np.zeros((Kt, L), np.complex128), np.zeros((Kt, L), np.complex128),
+            np.zeros((Kt, L), np.complex128), np.empty(L, np.complex128),
+            np.zeros((Kt, Kt), np.complex128), np.zeros((Kt, Kt), np.complex128), np.zeros((Kt, Kt)),
+            np.zeros((N, Kt), np.complex128), np.zeros((Kt, M1), np.complex128), np.zeros((M1, M1)))
+
+
+@nb.njit(cache=True)
+def _aug_work_setup(X, C, z, n, G, Gz, az):
+    """The viscous form's G, Gz, az (v^T C v, the velocity rows n .. 2n - 1 of X)."""
+    Kt = X.shape[1]
+    CX = np.zeros((n, Kt), np.complex128)
+    for a in range(n):
+        for b in range(n):
+            if C[a, b] != 0.0:
+                for k in range(Kt):
+                    CX[a, k] += C[a, b] * X[n + b, k]
+    for i in range(Kt):
+        for k in range(i, Kt):
+            acc = 0.0 + 0.0j
+            for a in range(n):
+                acc += X[n + a, i] * CX[a, k]
+            G[i, k] = acc
+            zz = z[i] + z[k]
+            az[i, k] = abs(zz)
+            Gz[i, k] = acc / zz if zz != 0.0 else 0.0
+
+
+@nb.njit(cache=True)
+def _aug_state(tau, yp_s, X, z, P, poly, damped, G, Gz, az, ACp, Cpp, Pb, beta, rp, rm, phi, Fs, fz, MOM, e, eiw,
+               ytmp, C, n):
+    """The augmented segment's state at tau into ytmp, and (dW viscous, dE loads) over [0, tau]
+    (:func:`reduced.transient._exact_kernels._segment_state` with the moments always filled when there is a
+    polynomial part: the friction work reads them)."""
+    N = ytmp.shape[0]
+    _exponentials(z, tau, e)
+    for r in range(N):
+        acc = 0.0
+        for i in range(z.shape[0]):
+            acc += (X[r, i] * e[i]).real
+        ytmp[r] = yp_s[r] + acc
+    Wp = 0.0
+    Ep = 0.0
+    if poly:
+        _add_poly(P, tau, N, ytmp)
+        for k in range(z.shape[0]):
+            _moments(z[k], tau, MOM[k])
+        Wp, Ep = _aug_poly_work(ACp, Cpp, Pb, beta, phi, Fs, z, tau, MOM, damped, N)
+    dE = _ext_work(beta, z, e, fz, Fs, tau, eiw, rp, rm) + Ep
+    dW = (_work_exp(G, Gz, az, z, tau, e) if damped else 0.0) + Wp
+    return dW, dE
+
+
+@nb.njit(cache=True)
+def _aug_poly_work(ACp, Cpp, Pb, beta, phi, Fs, z, tau, MOM, damped_, N):
+    """:func:`reduced.transient._exact_kernels._poly_work` with the moments MOM already filled."""
+    K = z.shape[0]
+    M1 = Cpp.shape[0]
+    L = Pb.shape[1]
+    W = 0.0
+    if damped_:
+        W = _quad_poly_work(ACp, Cpp, MOM, tau)
+    acc = 0.0 + 0.0j
+    for l in range(L):
+        for k in range(K):
+            if beta[k, l] != 0.0:
+                inner = 0.0 + 0.0j
+                for j in range(M1):
+                    if phi[l, j] != 0.0:
+                        inner += phi[l, j] * MOM[k, j]
+                acc += beta[k, l] * inner
+        if Fs[l] != 0.0:
+            inner = 0.0 + 0.0j
+            for m in range(M1):
+                inner += Pb[m, l] * MOM[N + 2 * l, m]
+            acc += Fs[l] * inner
+    E = acc.real
+    for l in range(L):
+        for m in range(M1):
+            if Pb[m, l] != 0.0:
+                for j in range(M1):
+                    if phi[l, j] != 0.0:
+                        E += Pb[m, l] * phi[l, j] * tau ** (m + j + 1) / (m + j + 1)
+    return W, E
+
+
+@nb.njit(cache=True)
+def _aug_viscous_poly_setup(X, P, C, fb, n, damped_, ACp, Cpp, Pb):
+    """ACp[k, m] = a_k^T C p_m, Cpp = p_m^T C p_m' (velocity parts), Pb[m, l] = p_m^T b_l
+    (:func:`reduced.transient._exact_kernels._poly_setup`)."""
+    M1 = P.shape[0]
+    for m in range(M1):
+        for l in range(fb.shape[0]):
+            acc = 0.0
+            for r in range(n):
+                acc += P[m, n + r] * fb[l, r]
+            Pb[m, l] = acc
+    if not damped_:
+        return
+    Cp = np.empty(n)
+    for m in range(M1):
+        for a in range(n):
+            ca = 0.0
+            for b in range(n):
+                ca += C[a, b] * P[m, n + b]
+            Cp[a] = ca
+        for k in range(X.shape[1]):
+            acc = 0.0 + 0.0j
+            for a in range(n):
+                acc += X[n + a, k] * Cp[a]
+            ACp[k, m] = acc
+        for m2 in range(M1):
+            acc2 = 0.0
+            for a in range(n):
+                acc2 += P[m2, n + a] * Cp[a]
+            Cpp[m2, m] = acc2
+
+
+@nb.njit(cache=True)
+def _aug_next_event(erow, ec, eact, s, yp_s, V_s, X, z, werr, poly, P, Qp, coef, tau_max, hmin, floor):
+    """The first event of a forced segment in state s (each active event's march,
+    :func:`reduced.transient._exact_kernels._first_root_forced`): (tau, e, n_iter, status)."""
+    N = X.shape[0]
+    E = ec.shape[1]
+    tau_ev = tau_max
+    e_ev = -1
+    n_iter = 0
+    for e in range(E):
+        if not eact[s, e]:
+            continue
+        const = ec[s, e]
+        scale = abs(ec[s, e])
+        for r in range(N):
+            const += erow[s, e, r] * yp_s[r]
+            scale += abs(erow[s, e, r]) * abs(yp_s[r])
+        for i in range(X.shape[1]):
+            acc = 0.0 + 0.0j
+            for r in range(N):
+                acc += erow[s, e, r] * X[r, i]
+            coef[i] = acc
+        qnoise = EPS * scale
+        dnoise = 0.0
+        for i in range(N):
+            pv = 0.0 + 0.0j
+            for r in range(N):
+                pv += erow[s, e, r] * V_s[r, i]
+            qnoise += abs(pv) * werr[i]
+            dnoise += abs(pv) * abs(z[i]) * werr[i]
+        if poly:
+            for m in range(P.shape[0]):
+                acc2 = 0.0
+                for r in range(N):
+                    acc2 += erow[s, e, r] * P[m, r]
+                Qp[m] = acc2
+        tj, it = _first_root_forced(const, coef, z, Qp, poly, tau_ev, hmin, qnoise, dnoise, floor)
+        n_iter += it
+        if tj < 0.0:
+            return tau_ev, e_ev, n_iter, -3
+        if tj < tau_ev:
+            tau_ev = tj
+            e_ev = e
+    return tau_ev, e_ev, n_iter, 0
+
+
+@nb.njit(cache=True)
+def _friction_forced_kernel(lam, V, Vinv, yp, erow, ec, eact, succ, reset, Df, LF, has_slip, C, damped, n, fric,
+                            y, s, t, t_end, t_samples, i_samp, t_after, out_y, out_W, out_Wf, W, Wf, hmin, floor,
+                            max_events, n_stuck, fz, fY, fU, fb, pstarts, pF, pp0, pp1, out_E, E, log_t, log_e, log_s,
+                            log_y, n_log):
+    """March events from t to t_end under the loads (:func:`reduced.transient._exact_kernels._forced_kernel` on
+    the augmented state y = [x; v; w] and its friction states): the forced closed form of each segment, its
+    first event among the state's (gap, stick -> slip, slip -> stick), the viscous, friction and loads' work
+    in closed form (the friction power's quadratic part by its form Df[s] with the moments of the polynomial
+    part, its linear part LF[s] . dx). Returns (t, W, Wf, E, s, i_samp, n_events, n_iter, status, n_stuck,
+    n_log); the buffer logic is that of the free kernel.
+
+    Long because it is the forced kernel's loop with the friction work and the event switch inlined, so
+    that its arithmetic per segment reads in one place."""
+    N = y.shape[0]
+    L = fb.shape[0]
+    E_slots = ec.shape[1]
+    ns = t_samples.shape[0]
+    X, z, coef, werr, ytmp, ypart, P, Qp, Fs, phi, gam = _aug_arrays(N, L)
+    (G, Gz, az, e, ACp, Cpp, Pb, MOM, beta, rp, rm, eiw, Gf, Gzf, azf, DX, ACf, Cpf) = _aug_work_arrays(N, L)
+    ip = max(np.searchsorted(pstarts, t, side="right") - 1, 0)
+    n_events = 0
+    n_iter = 0
+    status = 0
+    while True:
+        slipping = has_slip[s]
+        ip, t_lim = _piece_at(pstarts, ip, t, t_end)
+        poly = _aug_segment(s, t - pstarts[ip], ip, t_lim - t, y, yp[s], lam[s], V[s], Vinv[s], fz, fY, fU, pF, pp0,
+                            pp1, X, z, P, Fs, phi, gam, werr, ypart)
+        if damped:
+            _aug_work_setup(X, C, z, n, G, Gz, az)
+        _ext_setup(X, z, fb, fz, n, beta, rp, rm)
+        if poly:
+            _aug_viscous_poly_setup(X, P, C, fb, n, damped, ACp, Cpp, Pb)
+        if slipping:
+            _quad_setup(X, Df[s], z, Gf, Gzf, azf, DX)
+            if poly:
+                _quad_poly_setup(DX, P, Df[s], ACf, Cpf)
+        tau_ev, e_ev, seg_iter, status = _aug_next_event(erow, ec, eact, s, yp[s], V[s], X, z, werr, poly, P, Qp,
+                                                         coef, t_lim - t, hmin, floor)
+        if status != 0:
+            break
+        t_next = t_lim if e_ev < 0 else t + tau_ev
+        while i_samp < ns and t_samples[i_samp] <= t_next:
+            tau = max(t_samples[i_samp] - t, 0.0)
+            dW, dE = _aug_state(tau, yp[s], X, z, P, poly, damped, G, Gz, az, ACp, Cpp, Pb, beta, rp, rm, phi, Fs,
+                                fz, MOM, e, eiw, ytmp, C, n)
+            dWf = 0.0
+            if slipping:
+                dWf = _work_exp(Gf, Gzf, azf, z, tau, e) + (_quad_poly_work(ACf, Cpf, MOM, tau) if poly else 0.0)
+                for r in range(n):
+                    dWf += LF[s, r] * (ytmp[r] - y[r])
+            out_E[i_samp] = E + dE
+            out_W[i_samp] = (W + dW) + (Wf + dWf)
+            out_Wf[i_samp] = Wf + dWf
+            for r in range(N):
+                out_y[i_samp, r] = ytmp[r]
+            i_samp += 1
+        if i_samp == ns and t_after <= t_next:
+            status = BUFFER_FULL
+            break
+        n_iter += seg_iter
+        dW, dE = _aug_state(tau_ev, yp[s], X, z, P, poly, damped, G, Gz, az, ACp, Cpp, Pb, beta, rp, rm, phi, Fs, fz,
+                            MOM, e, eiw, ytmp, C, n)
+        if slipping:
+            Wf += _work_exp(Gf, Gzf, azf, z, tau_ev, e) + (_quad_poly_work(ACf, Cpf, MOM, tau_ev) if poly else 0.0)
+            for r in range(n):
+                Wf += LF[s, r] * (ytmp[r] - y[r])
+        E += dE
+        W += dW
+        for r in range(N):
+            y[r] = ytmp[r]
+        n_stuck = n_stuck + 1 if tau_ev <= hmin else 0
+        if n_stuck > STUCK_PER_EVENT * E_slots:
+            status = -4
+            break
+        t = t_next
+        if e_ev < 0:
+            if t_lim < t_end:
+                continue
+            break
+        s, dWf = _switch(s, e_ev, y, n, succ, reset, fric)
+        Wf += dWf
+        n_log = _log(n_log, t, e_ev, s, y, log_t, log_e, log_s, log_y)
+        n_events += 1
+        if n_events >= max_events:
+            status = -1
+            break
+    return t, W, Wf, E, s, i_samp, n_events, n_iter, status, n_stuck, n_log
+
+
+# -- central difference with friction (reduced.transient.friction.FrictionExplicitStepper) ---------------------
+@nb.njit(cache=True, inline="always")
+def _return_map(x, f, side, stop_tip, slider_tip, Bt, mu, kt, w, ft, Wf):
+    """The sliders' forces ft and positions w at x by the return mapping (:func:`_cd_friction_kernel`), f the
+    stops' forces; returns Wf plus the step's friction work (trapezoidal on f w')."""
+    n = x.shape[0]
+    for q in range(Bt.shape[0]):
+        N = 0.0
+        for j in range(f.shape[0]):
+            if stop_tip[j] == slider_tip[q] and f[j] != 0.0:
+                N = side[j] * f[j]
+        t = 0.0
+        for c in range(n):
+            t += Bt[q, c] * x[c]
+        ftr = kt[q] * (t - w[q])
+        cap = mu[q] * N
+        f_old = ft[q]
+        if abs(ftr) <= cap:
+            ft[q] = ftr
+        else:
+            ft[q] = cap if ftr > 0.0 else -cap
+            w_new = t - ft[q] / kt[q]
+            Wf += 0.5 * (f_old + ft[q]) * (w_new - w[q])
+            w[q] = w_new
+    return Wf
+
+
+@nb.njit(cache=True)
+def _cd_friction_kernel(AT, dtGKT, dtGBT, LT, B, offset, side, k, dtGBtT, Bt, slider_tip, stop_tip, mu, kt, x, vh, w,
+                        ft, dt, n_steps, every, out_x, out_v, out_W, out_w, out_Wf, W, pw_old, Wf, i0, dtGbT, b, P,
+                        out_E, E, pe_old):
+    """Advance n_steps of :func:`reduced.transient.explicit._cd_kernel` with the sliders' forces Bt^T f_t in the
+    velocity update, f_t by the return mapping at x_{n+1} (w = w_n on entry, w_{n+1} on exit):
+
+        N = k_j max(0, side_j (B_j x_{n+1} - o_j))   (the closed stop j of the slider's tip; 0 if open),
+        f_trial = kt (Bt x_{n+1} - w_n),
+        f = f_trial, w_{n+1} = w_n                      if |f_trial| <= mu N (stick),
+        f = sign(f_trial) mu N, w_{n+1} = t - f / kt    otherwise (slip; an open tip: f = 0, w = t).
+
+    The friction work of a step is the trapezoidal rule on f w': (f_n + f_{n+1}) / 2 (w_{n+1} - w_n), second
+    order through a smooth slip (``ft`` holds f_n on entry, f_{n+1} on exit). The return mapping itself takes
+    kt (w_{n+1} - w_n)^2 / 2 more out of the tangential spring a slipping step (it is backward Euler on the
+    slider), which the energy balance shows as the scheme's error. Stores x, the mean velocity, W + Wf, the
+    sliders and Wf every ``every`` steps. Returns (W, pw_old, Wf, i, E, pe_old)."""
+    n = x.shape[0]
+    m = B.shape[0]
+    p = Bt.shape[0]
+    r = LT.shape[0]
+    nl = b.shape[0]
+    f = np.empty(m)
+    acc = np.empty(n)
+    v_int = np.empty(n)
+    io = i0
+    left = every
+    for step in range(1, n_steps + 1):
+        for i in range(n):
+            x[i] += dt * vh[i]
+        for j in range(m):
+            s = -offset[j]
+            for c in range(n):
+                s += B[j, c] * x[c]
+            f[j] = k[j] * s if side[j] * s > 0.0 else 0.0
+        Wf = _return_map(x, f, side, stop_tip, slider_tip, Bt, mu, kt, w, ft, Wf)
+        for i in range(n):
+            acc[i] = 0.0
+        for c in range(n):
+            vc = vh[c]
+            xc = x[c]
+            for i in range(n):
+                acc[i] += AT[c, i] * vc - dtGKT[c, i] * xc
+        for j in range(m):
+            fj = f[j]
+            if fj != 0.0:
+                for i in range(n):
+                    acc[i] -= dtGBT[j, i] * fj
+        for q in range(p):
+            fq = ft[q]
+            if fq != 0.0:
+                for i in range(n):
+                    acc[i] -= dtGBtT[q, i] * fq
+        for q in range(nl):
+            pq = P[step - 1, q]
+            for i in range(n):
+                acc[i] += dtGbT[q, i] * pq
+        for i in range(n):
+            v_int[i] = 0.5 * (vh[i] + acc[i])
+            vh[i] = acc[i]
+        pw_new = 0.0
+        for q in range(r):
+            s = 0.0
+            for i in range(n):
+                s += LT[q, i] * v_int[i]
+            pw_new += s * s
+        W += 0.5 * dt * (pw_old + pw_new)
+        pw_old = pw_new
+        if nl:
+            pe_new = 0.0
+            for q in range(nl):
+                s = 0.0
+                for i in range(n):
+                    s += b[q, i] * v_int[i]
+                pe_new += s * P[step - 1, q]
+            E += 0.5 * dt * (pe_old + pe_new)
+            pe_old = pe_new
+        left -= 1
+        if left == 0:
+            left = every
+            for i in range(n):
+                out_x[io, i] = x[i]
+                out_v[io, i] = v_int[i]
+            for q in range(p):
+                out_w[io, q] = w[q]
+            out_W[io] = W + Wf
+            out_Wf[io] = Wf
+            if nl:
+                out_E[io] = E
+            io += 1
+    return W, pw_old, Wf, io, E, pe_old

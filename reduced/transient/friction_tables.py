@@ -1,0 +1,576 @@
+"""The exact integrator's tables with friction: every contact and stick/slip state of the augmented flow.
+
+With sliders (:class:`reduced.models.gaps.Friction`) the state is y = [x (n); v (n); w (p)], the slider
+positions w a state of their own, and in each *friction state* (which stops are closed; each slider of
+a closed tip sticking, slipping + or slipping -; a slider of an open tip following its coordinate) the
+motion is linear, y' = A_s y + b_s:
+
+    x' = v,
+    M v' = -K_s x - C v + G_s w + F_s,
+    w_k' = R_k v,
+
+    K_s = K + sum_closed k_j B_j^T B_j + sum_stick kt_k Bt_k^T Bt_k + sum_slip sigma_k mu_k k_j side_j Bt_k^T B_j,
+    F_s = sum_closed k_j o_j B_j^T + sum_slip sigma_k mu_k k_j side_j o_j Bt_k^T,
+    G_s = [kt_k Bt_k^T] on the sticking sliders' columns (0 elsewhere),
+    R_k = Bt_k - sigma_k (mu_k k_j / kt_k) side_j B_j (slipping), Bt_k (open tip), 0 (sticking),
+
+j the closed stop of slider k's tip and sigma_k = +-1 its slip direction. K_s is not symmetric in a
+slip state (the friction force follows the normal one), and its eigenvalues may leave the imaginary
+axis (friction-induced flutter): such a state is refused, as an unstable one is without friction.
+
+**The closed form.** A_s has the p zero eigenvalues of the sliders and the 2n of the structure,
+A_z = [[0, I], [-M^-1 K_s, -M^-1 C]], and is diagonalizable when A_z is (K_s regular):
+
+    structure:  A_z z = lam z                  ->  [z; R z_v / lam]   (R z_v: the sliders' rates)
+    slider k:   sticking                       ->  [K_s^-1 kt_k Bt_k^T; 0; e_k]   (w_k shifts the static state)
+                slipping or following          ->  [0; 0; e_k]        (w_k' does not depend on w)
+
+so y(tau) = y_p + V diag(e^{lam tau}) V^-1 (y(0) - y_p) with y_p = [K_s^-1 F_s; 0; 0], as without
+friction; the zero eigenvalues are set exactly (their terms are constants), the structure's come
+from the real modes of (K_s, M) when the state is symmetric and undamped (lam = +-i omega exactly,
+the energy conserved to round-off), else from LAPACK.
+
+**Events** (a fixed list of m + 2p slots, each active in some states), every one the crossing of a
+linear function q = a^T y + c, signed so that q <= 0 until it fires, and scaled to metres (the
+march's floor and round-off bands are in metres):
+
+    slot j < m        gap: q = +-side_j (B_j x - o_j), as without friction; a closing sets the
+                      sliders of the tip to stick, unloaded (w_k = t_k), an opening to follow;
+    slot m + 2k       stick -> slip +: q = ((t_k - w_k) kt_k - mu_k N_j) / kt_k;
+                      slip + -> stick: q = -w_k' / omega_ref (the slip velocity passes zero);
+    slot m + 2k + 1   stick -> slip -: q = (-(t_k - w_k) kt_k - mu_k N_j) / kt_k;
+                      slip - -> stick: q = +w_k' / omega_ref.
+
+A slip velocity that touches zero and turns back (q' <= 0 at q = 0: the stick force would leave the
+cone at once) is a graze, passed without a change, by the march's own rule. Sticking at closure,
+or after a slip, with the force leaving the cone at once is the slip event at that instant.
+
+**Work.** The dissipated power is y^T D y (+ a linear term): viscous, v^T C v; friction, f_k w_k' =
+sigma_k mu_k k_j pen_j (R_k v) over the slipping sliders, pen_j = side_j B_j (x - x_p) + pen_j(y_p).
+Its quadratic part x_h^T Q v_h (Q = sum sigma mu k side B_j^T R_k) is the form D_f = 1/2 [[0, Q],
+[Q^T, 0]] integrated as the viscous one (:func:`reduced.transient.exact_tables.modal_table`), and its
+linear part sum sigma mu k pen_j(y_p) R_k v integrates to L_s^T (x(tau) - x(0)) exactly.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import eigh, solve
+
+from reduced._blas import single_thread_blas
+from reduced.models.gaps import GapSystem
+from reduced.transient.exact_tables import MAX_COND, RESONANCE_REL, ZNEAR, ExactIntegratorError
+
+FOLLOW, STICK, SLIP_UP, SLIP_DOWN = 0, 0, 1, -1  # slider codes (follow: its tip open; stick: closed)
+KIND_GAP, KIND_STICK_UP, KIND_STICK_DOWN, KIND_SLIP_END = 0, 1, 2, 3  # event kinds, for the log
+
+
+@dataclass(frozen=True, eq=False)
+class FrictionStates:
+    """Every friction state a motion can reach.
+
+    Attributes
+    ----------
+    closed : (S, m) ndarray of bool
+        The closed stops of each state (at most one a tip).
+    slip : (S, p) ndarray of int8
+        Each slider's code: 0 stick (its tip closed) or follow (open), +1 slip +, -1 slip -.
+    stop_of : (S, p) ndarray of int
+        The closed stop of each slider's tip, -1 when the tip is open.
+    """
+
+    closed: np.ndarray
+    slip: np.ndarray
+    stop_of: np.ndarray
+
+    @property
+    def S(self) -> int:
+        return self.closed.shape[0]
+
+    def index(self, closed: np.ndarray, slip: np.ndarray) -> int:
+        """The state with these closed stops and slider codes (KeyError if infeasible)."""
+        key = (np.asarray(closed, bool).tobytes(), np.asarray(slip, np.int8).tobytes())
+        return self._lookup()[key]
+
+    def _lookup(self) -> dict:
+        d = self.__dict__.get("_index")
+        if d is None:
+            d = {(c.tobytes(), s.tobytes()): i for i, (c, s) in enumerate(zip(self.closed, self.slip, strict=True))}
+            object.__setattr__(self, "_index", d)
+        return d
+
+    def describe(self, system: GapSystem, s: int) -> str:
+        """'x1+ closed, u1 slip+' and the like."""
+        parts = [f"{system.stop_names[j]} closed" for j in np.flatnonzero(self.closed[s])]
+        names = ("stick", "slip+", "slip-")
+        for k in range(self.slip.shape[1]):
+            if self.stop_of[s, k] >= 0:
+                parts.append(f"{system.friction.names[k]} {names[self.slip[s, k]]}")
+        return ", ".join(parts) if parts else "all stops open"
+
+
+def friction_states(system: GapSystem) -> FrictionStates:
+    """Every feasible friction state of ``system``: each contact state (:meth:`GapSystem.feasible_states`)
+    with each slider of a closed tip sticking, slipping + or slipping - (3^(sliders engaged) states each).
+
+    Parameters
+    ----------
+    system : GapSystem
+        A system with friction.
+
+    Returns
+    -------
+    FrictionStates
+    """
+    fr = system.friction
+    closed_list, slip_list, stop_list = [], [], []
+    for closed in system.feasible_states():
+        stop_of = np.full(fr.p, -1, np.int64)
+        for k in range(fr.p):
+            j = np.flatnonzero(closed & (system.tip == fr.tip[k]))
+            if j.size:
+                stop_of[k] = j[0]
+        engaged = np.flatnonzero(stop_of >= 0)
+        for code in np.ndindex(*(3,) * engaged.size):
+            slip = np.zeros(fr.p, np.int8)
+            slip[engaged] = np.array([(STICK, SLIP_UP, SLIP_DOWN)[c] for c in code], np.int8)
+            closed_list.append(closed.copy())
+            slip_list.append(slip)
+            stop_list.append(stop_of)
+    return FrictionStates(np.array(closed_list), np.array(slip_list), np.array(stop_list))
+
+
+@dataclass(frozen=True, eq=False)
+class FrictionTable:
+    """Closed form, events and work of every friction state (module docstring), indexed as
+    :class:`FrictionStates`.
+
+    Attributes
+    ----------
+    states : FrictionStates
+    lam : (S, N) ndarray of complex
+        1/s, eigenvalues of A_s (N = 2n + p; the last p are the sliders' zeros).
+    V, Vinv : (S, N, N) ndarray of complex
+        Eigenvectors and their inverse.
+    yp : (S, N) ndarray of float
+        Equilibrium [K_s^-1 F_s; 0; 0].
+    cond : (S,) ndarray of float
+        Condition number of V.
+    Ks : (S, n, n) ndarray of float
+        N/m, the state's stiffness (static deflections under loads).
+    R : (S, p, n) ndarray of float
+        Rows of the sliders' rates on v.
+    erow : (S, E, N) ndarray of float
+        Event rows a (scaled to metres), E = m + 2p.
+    ec : (S, E) ndarray of float
+        m, their constants c.
+    eact : (S, E) ndarray of bool
+        Which events watch in each state.
+    succ : (S, E) ndarray of int
+        The state after each event.
+    reset : (S, E) ndarray of bool
+        The event closes a stop: the sliders of its tip start unloaded (w = t).
+    ekind : (E,) ... per state: (S, E) ndarray of int
+        KIND_GAP, KIND_STICK_UP, KIND_STICK_DOWN or KIND_SLIP_END.
+    Df : (S, N, N) ndarray of float
+        The friction power's quadratic form (zero in states without slip).
+    LF : (S, n) ndarray of float
+        The friction power's linear part: W_lin = LF[s] . (x(tau) - x(0)).
+    omega_ref : float
+        rad/s, the scale of the slip-end events' rows (q = w' / omega_ref).
+    """
+
+    states: FrictionStates
+    lam: np.ndarray
+    V: np.ndarray
+    Vinv: np.ndarray
+    yp: np.ndarray
+    cond: np.ndarray
+    Ks: np.ndarray
+    R: np.ndarray
+    erow: np.ndarray
+    ec: np.ndarray
+    eact: np.ndarray
+    succ: np.ndarray
+    reset: np.ndarray
+    ekind: np.ndarray
+    Df: np.ndarray
+    LF: np.ndarray
+    omega_ref: float
+
+
+def _state_parts(system: GapSystem, closed: np.ndarray, slip: np.ndarray, stop_of: np.ndarray) -> tuple:
+    """(K_s, F_s, G_s (n, p), R (p, n), Q (n, n), sigma mu k side (p,) of the slipping sliders) of one state."""
+    fr = system.friction
+    n, p = system.n, fr.p
+    Ks = system.K.copy()
+    Fs = np.zeros(n)
+    for j in np.flatnonzero(closed):
+        Ks += system.k[j] * np.outer(system.B[j], system.B[j])
+        Fs += system.k[j] * system.offset[j] * system.B[j]
+    G = np.zeros((n, p))
+    R = np.zeros((p, n))
+    Q = np.zeros((n, n))
+    smks = np.zeros(p)
+    for k in range(p):
+        b, j = fr.Bt[k], stop_of[k]
+        if j < 0:
+            R[k] = b  # an open tip's slider follows its coordinate
+        elif slip[k] == STICK:
+            Ks += fr.k_t[k] * np.outer(b, b)
+            G[:, k] = fr.k_t[k] * b
+        else:
+            a = slip[k] * fr.mu[k] * system.k[j] * system.side[j]  # f_k = a (B_j x - o_j)
+            Ks += a * np.outer(b, system.B[j])
+            Fs += a * system.offset[j] * b
+            R[k] = b - (a / fr.k_t[k]) * system.B[j]
+            Q += a * np.outer(system.B[j], R[k])
+            smks[k] = a
+    return Ks, Fs, G, R, Q, smks
+
+
+def _structure(system: GapSystem, Ks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lam, V_z) of A_z = [[0, I], [-M^-1 K_s, -M^-1 C]]: the real modes when K_s is symmetric and the
+    system undamped, else LAPACK's eigenpairs; refuses zero-frequency, unstable or defective states."""
+    n = system.n
+    if system.undamped and np.array_equal(Ks, Ks.T):
+        w2, phi = eigh(Ks, system.M)
+        if w2[0] <= 1e-12 * w2[-1]:
+            raise ExactIntegratorError("a friction state has a zero-frequency mode (stiffness singular); "
+                                       "use method 'explicit'")
+        w = np.sqrt(w2)
+        return np.concatenate([1j * w, -1j * w]), np.block([[phi, phi], [1j * w * phi, -1j * w * phi]]).astype(complex)
+    Minv = np.linalg.inv(system.M)
+    A = np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ Ks, -Minv @ system.C]])
+    lam, V = np.linalg.eig(A)
+    if np.min(np.abs(lam)) <= 1e-9 * np.max(np.abs(lam)):
+        raise ExactIntegratorError("a friction state has a zero-frequency mode (stiffness singular); "
+                                   "use method 'explicit'")
+    if np.max(lam.real) > 1e-9 * np.max(np.abs(lam)):
+        raise ExactIntegratorError(
+            "a friction state is unstable (Re lambda > 0: friction-induced flutter of the slip state's "
+            "nonsymmetric stiffness); the exact closed form needs every state to decay or oscillate")
+    return lam, V
+
+
+def _event_rows(system: GapSystem, st: FrictionStates, s: int, R: np.ndarray, omega_ref: float) -> tuple:
+    """(rows (E, N), constants (E,), active (E,), successor states (E,), reset (E,), kinds (E,)) of state s."""
+    fr = system.friction
+    n, m, p = system.n, system.m, fr.p
+    N, E = 2 * n + p, m + 2 * p
+    closed, slip, stop_of = st.closed[s], st.slip[s], st.stop_of[s]
+    rows = np.zeros((E, N))
+    c = np.zeros(E)
+    act = np.zeros(E, bool)
+    succ = np.full(E, -1, np.int64)
+    reset = np.zeros(E, bool)
+    kind = np.zeros(E, np.int64)
+    for j in range(m):
+        sgn = -1.0 if closed[j] else 1.0
+        rows[j, :n] = sgn * system.side[j] * system.B[j]
+        c[j] = -sgn * system.side[j] * system.offset[j]
+        act[j] = True
+        new = closed.copy()
+        if closed[j]:
+            new[j] = False
+        else:
+            new[system.tip == system.tip[j]] = False
+            new[j] = True
+            reset[j] = True
+        new_slip = slip.copy()
+        new_slip[fr.tip == system.tip[j]] = STICK  # stick (closing) or follow (opening): both 0
+        succ[j] = st.index(new, new_slip)
+    for k in range(p):
+        j = stop_of[k]
+        if j < 0:
+            continue
+        up, down = m + 2 * k, m + 2 * k + 1
+        muk = fr.mu[k] * system.k[j] * system.side[j]  # mu N_j = muk (B_j x - o_j)
+        if slip[k] == STICK:
+            for e, sign, code, kd in ((up, 1.0, SLIP_UP, KIND_STICK_UP), (down, -1.0, SLIP_DOWN, KIND_STICK_DOWN)):
+                rows[e, :n] = (sign * fr.k_t[k] * fr.Bt[k] - muk * system.B[j]) / fr.k_t[k]
+                rows[e, 2 * n + k] = -sign
+                c[e] = muk * system.offset[j] / fr.k_t[k]
+                act[e] = True
+                new_slip = slip.copy()
+                new_slip[k] = code
+                succ[e] = st.index(closed, new_slip)
+                kind[e] = kd
+        else:
+            e = up if slip[k] == SLIP_UP else down
+            rows[e, n:2 * n] = -slip[k] * R[k] / omega_ref
+            act[e] = True
+            new_slip = slip.copy()
+            new_slip[k] = STICK
+            succ[e] = st.index(closed, new_slip)
+            kind[e] = KIND_SLIP_END
+    return rows, c, act, succ, reset, kind
+
+
+def friction_table(system: GapSystem, omega_ref: float) -> FrictionTable:
+    """Decompose every friction state of ``system`` (module docstring).
+
+    Parameters
+    ----------
+    system : GapSystem
+        A system with friction.
+    omega_ref : float
+        rad/s, scale of the slip-end events (the system's top frequency): q = w' / omega_ref in metres.
+
+    Returns
+    -------
+    FrictionTable
+
+    Raises
+    ------
+    ExactIntegratorError
+        A state with a zero-frequency mode, an unstable (flutter) or nearly defective one
+        (cond(V) > ``MAX_COND``).
+    """
+    fr = system.friction
+    n, m, p = system.n, system.m, fr.p
+    N, E = 2 * n + p, m + 2 * p
+    st = friction_states(system)
+    S = st.S
+    lam = np.zeros((S, N), complex)
+    V = np.zeros((S, N, N), complex)
+    Vinv = np.zeros((S, N, N), complex)
+    yp = np.zeros((S, N))
+    cond = np.ones(S)
+    Ks_all = np.zeros((S, n, n))
+    R_all = np.zeros((S, p, n))
+    erow, ec = np.zeros((S, E, N)), np.zeros((S, E))
+    eact, reset = np.zeros((S, E), bool), np.zeros((S, E), bool)
+    succ, ekind = np.zeros((S, E), np.int64), np.zeros((S, E), np.int64)
+    Df, LF = np.zeros((S, N, N)), np.zeros((S, n))
+    cache: dict[bytes, tuple] = {}
+    with single_thread_blas():
+        for s in range(S):
+            Ks, Fs, G, R, Q, smks = _state_parts(system, st.closed[s], st.slip[s], st.stop_of[s])
+            Ks_all[s], R_all[s] = Ks, R
+            xp = np.linalg.solve(Ks, Fs) if np.any(Fs) else np.zeros(n)
+            yp[s, :n] = xp
+            key = Ks.tobytes() + R.tobytes() + G.tobytes()
+            if key not in cache:
+                lz, Vz = _structure(system, Ks)
+                Vs = np.zeros((N, N), complex)
+                Vs[:2 * n, :2 * n] = Vz
+                Vs[2 * n:, :2 * n] = (R @ Vz[n:, :]) / lz
+                for k in range(p):
+                    Vs[2 * n + k, 2 * n + k] = 1.0
+                    if np.any(G[:, k]):
+                        Vs[:n, 2 * n + k] = np.linalg.solve(Ks, G[:, k])
+                sv = np.linalg.svd(Vs, compute_uv=False)
+                cs = sv[0] / sv[-1]
+                if not np.isfinite(cs) or cs > MAX_COND:
+                    raise ExactIntegratorError(
+                        f"friction state ({st.describe(system, s)}) is nearly defective (eigenvector condition "
+                        f"{cs:.1e}); use method 'explicit'")
+                cache[key] = (np.concatenate([lz, np.zeros(p)]), Vs, np.linalg.inv(Vs), cs)
+            lam[s], V[s], Vinv[s], cond[s] = cache[key]
+            rows, c, act, sc, rs, kd = _event_rows(system, st, s, R, omega_ref)
+            erow[s], ec[s], eact[s], succ[s], reset[s], ekind[s] = rows, c, act, sc, rs, kd
+            Df[s, :n, n:2 * n] = 0.5 * Q
+            Df[s, n:2 * n, :n] = 0.5 * Q.T
+            for k in np.flatnonzero(smks):  # f_k = a (B_j x - o_j), its static part times R_k v
+                j = st.stop_of[s, k]
+                LF[s] += smks[k] * (system.B[j] @ xp - system.offset[j]) * R[k]
+    return FrictionTable(st, lam, V, Vinv, yp, cond, Ks_all, R_all, erow, ec, eact, succ, reset, ekind, Df, LF,
+                         float(omega_ref))
+
+
+def _kept(lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(kept indices, kappa): one eigenvalue of each exact conjugate pair (Im > 0, kappa 2) and every real
+    one (kappa 1), sorted by |lam| (the march bounds the last, fastest terms by their amplitude); all with
+    kappa 1 when the spectrum does not pair up exactly."""
+    up = np.flatnonzero(lam.imag > 0.0)
+    real = np.flatnonzero(lam.imag == 0.0)
+    down = np.flatnonzero(lam.imag < 0.0)
+    paired = up.size == down.size and all(np.any(lam[down] == np.conj(lam[i])) for i in up)
+    if not paired:
+        keep, kappa = np.arange(lam.size), np.ones(lam.size)
+    else:
+        keep = np.concatenate([up, real])
+        kappa = np.concatenate([np.full(up.size, 2.0), np.ones(real.size)])
+    order = np.argsort(np.abs(lam[keep]), kind="stable")
+    return keep[order], kappa[order]
+
+
+def work_tables(lk: np.ndarray, Uk: np.ndarray, kappa: np.ndarray, D: np.ndarray) -> tuple:
+    """The work integral int_0^tau y_h^T D_s y_h dt of every state in the kept-term form of
+    :func:`reduced.transient.exact_tables.modal_table` (there D = [[0, 0], [0, C]]), for any symmetric D_s.
+
+    Parameters
+    ----------
+    lk : (S, K) ndarray of complex
+        Kept eigenvalues per state (0 for padding).
+    Uk : (S, N, K) ndarray of complex
+        Kept eigenvectors times kappa.
+    kappa : (S, K) ndarray of float
+        2 (a pair), 1 (real) or 0 (padding).
+    D : (N, N) or (S, N, N) ndarray of float
+        The symmetric quadratic form of the power.
+
+    Returns
+    -------
+    tuple
+        (Wm (S, 4, K, K), Hd (S, 2, K), pointer, i, k, kind, coefficient, z) as
+        :func:`reduced.transient._modal._work` and :func:`reduced.transient._modal._work_near` read them.
+    """
+    S, _, Kmax = Uk.shape
+    D = np.broadcast_to(D, (S,) + D.shape[-2:])
+    DU = np.matmul(D, Uk)
+    G = 0.5 * np.matmul(Uk.transpose(0, 2, 1), DU)
+    H = 0.5 * np.matmul(Uk.transpose(0, 2, 1), np.conj(DU))
+    zG = lk[:, :, None] + lk[:, None, :]
+    zH = lk[:, :, None] + np.conj(lk)[:, None, :]
+    scale = ZNEAR * (np.abs(lk)[:, :, None] + np.abs(lk)[:, None, :])
+    real = (kappa != 0.0)[:, :, None] & (kappa != 0.0)[:, None, :]
+    offdiag = ~np.eye(Kmax, dtype=bool)
+    regG = (np.abs(zG) >= scale) & (zG != 0.0)
+    regH = (np.abs(zH) >= scale) & (zH != 0.0) & offdiag
+    with np.errstate(divide="ignore", invalid="ignore"):
+        Gz = np.where(regG & real, G / zG, 0.0)
+        Hz = np.where(regH & real, H / zH, 0.0)
+    upper = np.triu(np.ones((Kmax, Kmax), bool))
+    irrG = np.nonzero(~regG & upper & real & (G != 0.0))
+    irrH = np.nonzero(~regH & upper & offdiag & real & (H != 0.0))
+    irr_s: list[list] = [[] for _ in range(S)]
+    for s, i, k in zip(*irrG, strict=True):
+        irr_s[s].append((i, k, 0, G[s, i, k] * (2.0 if k > i else 1.0), zG[s, i, k]))
+    for s, i, k in zip(*irrH, strict=True):
+        irr_s[s].append((i, k, 1, 2.0 * H[s, i, k], zH[s, i, k]))
+    A, B, C, Dm = Gz.real, Gz.imag, Hz.real, Hz.imag
+    Wm = np.ascontiguousarray(np.stack([A + C, Dm - B, B + Dm, A - C], axis=1).transpose(0, 1, 3, 2))
+    ip = np.zeros(S + 1, np.int64)
+    irr: list = []
+    for s in range(S):
+        irr.extend(irr_s[s])
+        ip[s + 1] = len(irr)
+    hd, zd = np.diagonal(H, axis1=1, axis2=2).real, 2.0 * lk.real
+    with np.errstate(divide="ignore", invalid="ignore"):
+        Hd = np.ascontiguousarray(np.stack([np.where(zd != 0.0, hd / zd, 0.0), np.where(zd != 0.0, 0.0, hd)], axis=1))
+    return (Wm, Hd, ip, np.array([r[0] for r in irr], np.int64), np.array([r[1] for r in irr], np.int64),
+            np.array([r[2] for r in irr], np.int64), np.array([r[3] for r in irr], complex),
+            np.array([r[4] for r in irr], complex))
+
+
+def friction_modal_table(system: GapSystem, ft: FrictionTable) -> tuple:
+    """The free segments' tables of :mod:`reduced.transient._friction_kernels`: the kept-term closed form,
+    the events projected on the terms, the viscous and friction work.
+
+    Parameters
+    ----------
+    system : GapSystem
+        The system (with friction).
+    ft : FrictionTable
+        Its states.
+
+    Returns
+    -------
+    tuple
+        (modal, events, viscous work, friction work): modal = (nK, lam, |lam|, U^T (S, 2, K, N) as Re/Im,
+        Uinv (S, K, N), |Uinv|, y_p); events = (EU (S, E, K), |EU|, E0 (S, E), Escale (S, E), active, successor,
+        reset, has_slip (S,), LF); the work tuples as :func:`work_tables`.
+    """
+    S, N = ft.lam.shape
+    kept = [_kept(ft.lam[s]) for s in range(S)]
+    Kmax = max(k.size for k, _ in kept)
+    keep = np.zeros((S, Kmax), np.int64)
+    kappa = np.zeros((S, Kmax))
+    nK = np.array([k.size for k, _ in kept], np.int64)
+    for s, (k, kp) in enumerate(kept):
+        keep[s, :k.size], kappa[s, :k.size] = k, kp
+    pad = kappa != 0.0
+    lk = np.take_along_axis(ft.lam, keep, axis=1) * pad
+    Uk = np.take_along_axis(ft.V, keep[:, None, :], axis=2) * kappa[:, None, :]
+    Uinvk = np.take_along_axis(ft.Vinv, keep[:, :, None], axis=1) * pad[:, :, None]
+    UT = np.ascontiguousarray(np.stack([Uk.real, Uk.imag], axis=1).transpose(0, 1, 3, 2))
+    n = system.n
+    Dv = np.zeros((N, N))
+    Dv[n:2 * n, n:2 * n] = system.C
+    EU = np.ascontiguousarray(np.matmul(ft.erow, Uk))
+    E0 = np.ascontiguousarray(np.einsum("sen,sn->se", ft.erow, ft.yp) + ft.ec)
+    Escale = np.ascontiguousarray(np.einsum("sen,sn->se", np.abs(ft.erow), np.abs(ft.yp)) + np.abs(ft.ec))
+    has_slip = np.any(ft.states.slip != 0, axis=1)
+    modal = (nK, np.ascontiguousarray(lk), np.abs(lk), UT, np.ascontiguousarray(Uinvk), np.abs(Uinvk),
+             np.ascontiguousarray(ft.yp))
+    events = (EU, np.abs(EU), E0, Escale, np.ascontiguousarray(ft.eact), np.ascontiguousarray(ft.succ),
+              np.ascontiguousarray(ft.reset), has_slip, np.ascontiguousarray(ft.LF))
+    return modal, events, work_tables(lk, Uk, kappa, Dv), work_tables(lk, Uk, kappa, ft.Df)
+
+
+@dataclass(frozen=True, eq=False)
+class FrictionForcedTable:
+    """Per-state data of the loads on the augmented flow (as :class:`reduced.transient.exact_tables.ForcedTable`).
+
+    Attributes
+    ----------
+    omega : (L,) ndarray of float
+        rad/s, each load's harmonic frequency (0: none).
+    Y : (S, N, L) ndarray of complex
+        (i omega_l I - A_s)^-1 [0; M^-1 b_l; 0]: the harmonic particular solutions.
+    U : (S, N, L) ndarray of complex
+        Modal loads V^-1 [0; M^-1 b_l; 0] (zero on the sliders' zero eigenvalues).
+    Sb : (S, n, L) ndarray of float
+        K_s^-1 b_l, static deflections (m/N): scales of the round-off.
+    b : (L, n) ndarray of float
+        Load directions.
+    """
+
+    omega: np.ndarray
+    Y: np.ndarray
+    U: np.ndarray
+    Sb: np.ndarray
+    b: np.ndarray
+
+
+def friction_forced_table(system: GapSystem, ft: FrictionTable, loads) -> FrictionForcedTable:
+    """Per-state particular solutions of ``loads`` on the augmented flow; refuses an undamped resonance.
+
+    Parameters
+    ----------
+    system : GapSystem
+        The system (with friction).
+    ft : FrictionTable
+        Its states.
+    loads : Loads
+        The loads.
+
+    Returns
+    -------
+    FrictionForcedTable
+
+    Raises
+    ------
+    ExactIntegratorError
+        A load at an undamped resonance of a state (within ``RESONANCE_REL``).
+    """
+    n, p = system.n, system.p
+    N = 2 * n + p
+    b = np.ascontiguousarray(loads.b, dtype=float)
+    omega = loads.omegas()
+    S, L = ft.lam.shape[0], b.shape[0]
+    Minv_b = np.linalg.solve(system.M, b.T)
+    g = np.zeros((N, L))
+    g[n:2 * n] = Minv_b
+    Y = np.zeros((S, N, L), complex)
+    U = np.zeros((S, N, L), complex)
+    Sb = np.zeros((S, n, L))
+    for s in range(S):
+        lam = ft.lam[s, :2 * n]
+        U[s] = ft.Vinv[s] @ g
+        Sb[s] = solve(ft.Ks[s], b.T)
+        for l in range(L):
+            if omega[l] > 0.0:
+                i = int(np.argmin(np.abs(1j * omega[l] - lam)))
+                if abs(1j * omega[l] - lam[i]) <= RESONANCE_REL * omega[l]:
+                    raise ExactIntegratorError(
+                        f"load {l + 1} ({loads.points[l]}) at {omega[l] / (2 * math.pi):.6g} Hz is at an undamped "
+                        f"resonance of friction state ({ft.states.describe(system, s)}); use method 'explicit'")
+                # (i w - A)^-1 g = V diag(1 / (i w - lam)) V^-1 g
+                Y[s, :, l] = ft.V[s] @ (U[s, :, l] / (1j * omega[l] - ft.lam[s]))
+    return FrictionForcedTable(omega, Y, U, Sb, b)
