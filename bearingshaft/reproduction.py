@@ -298,8 +298,8 @@ class Reproduction:
         parts that no part rule covers.
     lyapunov : tuple of str
         Files of the scene's folder (written by this stage or an earlier one) whose
-        ``exponent_per_s`` column holds the largest Lyapunov exponent of the run's motion: the
-        horizon of its chaotic quantities.
+        ``exponent_per_s`` column (or the column named after a colon: ``"response_map.csv:lyapunov_per_s"``)
+        holds the largest Lyapunov exponent of the run's motion: the horizon of its chaotic quantities.
     """
 
     rules: tuple[Rule, ...] = ()
@@ -381,22 +381,25 @@ def horizon(folder: Path, names: tuple[str, ...]) -> Horizon:
     folder : Path
         The run's results folder of the scene.
     names : tuple of str
-        Files to read (the first that exists and has the column); rows whose ``chaotic`` column is
-        ``False`` (a separation that did not grow exponentially) are left out unless all are.
+        Files to read (the first that exists and has the column), each ``NAME`` (the column
+        ``exponent_per_s``) or ``NAME:COLUMN``; rows whose ``chaotic`` column is ``False`` (a
+        separation that did not grow exponentially) are left out unless all are.
 
     Returns
     -------
     Horizon
         NaN exponent when none is found.
     """
-    for name in names:
+    for entry in names:
+        name, _, column = entry.partition(":")
+        column = column or "exponent_per_s"
         try:
             with open(folder / name, newline="") as fh:
-                rows = [r for r in csv.DictReader(fh) if r.get("exponent_per_s")]
+                rows = [r for r in csv.DictReader(fh) if r.get(column)]
         except OSError:
             continue
         chaotic_rows = [r for r in rows if r.get("chaotic", "True") == "True"] or rows  # fits of a chaotic separation
-        values = [v for v in (_float(r["exponent_per_s"]) for r in chaotic_rows) if math.isfinite(v)]
+        values = [v for v in (_float(r[column]) for r in chaotic_rows) if math.isfinite(v)]
         if values:
             return Horizon(max(values), name)
     return Horizon()
@@ -536,7 +539,10 @@ def _compare_csv(f: _File, ref: Path, run: Path, whole: Rule) -> None:
 
     if len(a) != len(b):
         rules = {rule_of(c, r) for c in header for r in a[1:]} or {whole}
-        if any(r.kind in JUDGED for r in rules):
+        if whole.kind in (CHAOTIC, SENSITIVE):  # the file's rows themselves are declared not reproducible
+            f.add(CHAOTIC_DIFF if whole.kind == CHAOTIC else SENSITIVE_DIFF, "rows", str(len(a) - 1),
+                  str(len(b) - 1), f.note(whole))
+        elif any(r.kind in JUDGED for r in rules):
             f.add(DIFFERS, "rows", str(len(a) - 1), str(len(b) - 1), "the number of rows differs")
         else:
             rule = next(r for r in (*parts, whole) if r in rules)

@@ -235,3 +235,71 @@ def test_a_run_leaves_git_status_clean(tmp_path):
     assert (clone / "runs" / "tiny" / "work_precision.csv").is_file() and (clone / "runs" / "reproduction.md").is_file()
     status = subprocess.run(["git", "status", "--porcelain"], cwd=clone, capture_output=True, text=True, check=True)
     assert status.stdout == "", status.stdout
+
+
+def _map_row(freq: str, regime: str, x1: str, lam: str, settled: str = "true", after: str = "false") -> list[str]:
+    cells = {"level": "1.0", "direction": "up", "freq_hz": freq, "regime": regime,
+             "period_k": "1" if regime == "periodic" else "0", "lyapunov_per_s": lam, "x1_min_m": x1,
+             "x1_mean_m": x1, "x1_max_m": x1, "asymmetry": "0", "jump": "false", "lyapunov_tol_per_s": "0.5",
+             "max_abs_mu": "0.9" if regime == "periodic" else "", "settled": settled, "contact": "true",
+             "broadband": "0.001", "n_periods": "64", "after_chaos": after}
+    from bearingshaft.stages.frc_map_files import MAP_FIELDS
+    assert list(cells) == MAP_FIELDS  # the rows below are the file's columns in the file's order
+    return list(cells.values())
+
+
+def test_response_map_chaotic_rows_and_the_sweep_after_them(tmp_path):
+    """The frc stage's response map: a chaotic frequency is chaotic (horizon from the run's own largest exponent in
+    response_map.csv), what follows it in the sweep is sensitive, what precedes it must reproduce."""
+    from bearingshaft.stages.frc_map_files import MAP_FIELDS
+
+    spec = stage("frc").reproduction
+    ref_rows = [MAP_FIELDS, _map_row("20.0", "periodic", "1.234567891e-04", "-3.2"),
+                _map_row("20.1", "chaotic", "2.0e-04", "41.7"),
+                _map_row("20.2", "periodic", "1.5e-04", "-2.9", after="true")]
+    run_rows = [MAP_FIELDS, _map_row("20.0", "periodic", "1.234567894e-04", "-3.2"),  # 2e-9 relative: within 1e-6
+                _map_row("20.1", "chaotic", "2.2e-04", "38.5"),
+                _map_row("20.2", "subharmonic", "1.9e-04", "-1.1", after="true")]
+    ref = _folder(tmp_path / "ref", {"frc": {"response_map.csv": ref_rows}})
+    run = _folder(tmp_path / "run", {"frc": {"response_map.csv": run_rows}})
+    rows = compare_scene("s", run, ref, {"frc": spec}, ("frc",))
+    assert not reproduction.failed(rows), reproduction.summary(rows)
+    def quantities(kind: str) -> set[str]:
+        return {r.quantity.split(" [")[0].split(":")[0] for r in rows if r.status == kind}
+
+    assert quantities(WITHIN) == {"x1_min_m", "x1_mean_m", "x1_max_m"}  # the first frequency's, to 1e-6
+    assert quantities(CHAOTIC_DIFF) == {"x1_min_m", "x1_mean_m", "x1_max_m", "lyapunov_per_s"}
+    assert {"regime", "period_k", "max_abs_mu"} <= quantities(reproduction.SENSITIVE_DIFF)
+    chaos = next(r for r in rows if r.status == CHAOTIC_DIFF)
+    t_h = math.log(HORIZON_TOL / DELTA0) / 38.5  # the run's largest exponent, not the reference's 41.7
+    assert f"not comparable past t = {t_h:.3g} s" in chaos.note, chaos.note
+    # before the chaos the regime is deterministic: another one is a failure
+    run_rows[1] = _map_row("20.0", "subharmonic", "1.234567891e-04", "-3.2")
+    _write_csv(run / "response_map.csv", run_rows)
+    bad = reproduction.failed(compare_scene("s", run, ref, {"frc": spec}, ("frc",)))
+    assert {r.quantity.split(" [")[0] for r in bad} == {"regime", "period_k", "max_abs_mu"}
+    # a frequency more or less (the grid follows the HB curve's contact band): sensitive, not a failure
+    _write_csv(run / "response_map.csv", [*ref_rows, _map_row("20.3", "periodic", "1e-04", "-3.0", after="true")])
+    rows = compare_scene("s", run, ref, {"frc": spec}, ("frc",))
+    assert not reproduction.failed(rows)
+    assert [r.status for r in rows if r.file == "response_map.csv"] == [reproduction.SENSITIVE_DIFF]
+
+
+def test_response_map_marks_what_follows_chaos():
+    """frc_map_files writes after_chaos: true from the frequency after the first chaotic, quasi-periodic or
+    unsettled one of a sweep, in sweep order."""
+    from types import SimpleNamespace as N
+
+    import numpy as np
+
+    from bearingshaft.stages.frc_map_files import _sweep_rows
+
+    def point(regime, settled=True):
+        return N(peak=np.ones((4, 3)), regime=regime, period_k=1, lyapunov_per_s=-1.0, asymmetry=0.0,
+                 lyapunov_tol=0.1, max_abs_mu=0.5, settled=settled, contact=True, broadband=0.0, n_periods=64)
+
+    regimes = [("periodic", True), ("periodic", False), ("periodic", True), ("chaotic", True), ("periodic", True)]
+    rm = N(freq_hz=np.arange(5.0), points=[point(r, s) for r, s in regimes], jump=[False, False, True, False, True])
+    rows, jumps = _sweep_rows(1.0, "up", rm, 0)
+    assert [r["after_chaos"] for r in rows] == ["false", "false", "true", "true", "true"]
+    assert [j["after_chaos"] for j in jumps] == ["true", "true"]
