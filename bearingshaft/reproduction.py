@@ -777,9 +777,9 @@ def write_report(rows: list[Row], folder: Path, reference: Path) -> Path:
             w.writerow([r.scene, r.stage, r.file, r.status, r.quantity, r.reference, r.run, r.note])
     bad = failed(rows)
     lines = ["# Reproduction report", "",
-             f"The run in `{folder}` against the reference `{reference}` (the committed results), stage by stage "
-             "(rules: `bearingshaft/reproduction.py` and each stage's `REPRODUCTION`). Deterministic numbers are "
-             "compared to the digits they are written with; quantities of chaotic motion are reported with the "
+             f"The run in `{folder}` against the reference `{reference}` (by default the committed results/), stage "
+             "by stage (rules: `bearingshaft/reproduction.py` and each stage's `REPRODUCTION`). Deterministic numbers "
+             "are compared to the digits they are written with; quantities of chaotic motion are reported with the "
              "run's predictability horizon; figures are checked to exist; run records (provenance, timings) are "
              "not compared. Every cell is in `reproduction.csv`.", "",
              f"**{'FAILED' if bad else 'Passed'}**: " + ", ".join(f"{n} {s}" for s, n in sorted(_counts(rows).items())),
