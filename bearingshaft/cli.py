@@ -75,10 +75,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="every stage of the named scenes (all built-in scenes if none)",
                        description="Run every stage of the named scenes (all built-in scenes if none is named), every "
                        "scene validated first. Writes each stage's files, as its subcommand would, into the results "
-                       "folder <out>/<scene>/ (default runs/, which git ignores; --update-reference: results/); prints "
-                       "a summary line per stage and a total (stages, wall time, peak memory), then compares every "
-                       "stage's files with the reference results/<scene>/ and writes the reproduction report "
-                       "<out>/reproduction.md and .csv (exit 1 if a deterministic number did not reproduce).")
+                       "folder <out>/<scene>/ (default runs/, which git ignores; --update-reference: results/) and "
+                       "prints a summary line per stage; then compares every stage's files with the reference "
+                       "results/<scene>/, writes the reproduction report <out>/reproduction.md and .csv and prints "
+                       "its summary (exit 1 if a deterministic number did not reproduce); a total line last (stages, "
+                       "wall time, peak memory).")
     p.add_argument("scenes", nargs="*", metavar="SCENE", help="scene names or TOML files")
     p.add_argument("--out", metavar="DIR", help="parent folder of the results (default: runs/); the reproduction "
                    "report goes there too")
@@ -250,8 +251,10 @@ def main(argv: list[str] | None = None) -> int:
             t_run = time.perf_counter()
             for scene, out in runs:
                 pipeline.run_scene(scene, out, progress=progress)
-            print(run_total(sum(len(stages_of(s)) for s, _ in runs), len(runs), time.perf_counter() - t_run))
-            return _reproduction(args, runs)
+            wall_s = time.perf_counter() - t_run
+            code = _reproduction(args, runs)
+            print(run_total(sum(len(stages_of(s)) for s, _ in runs), len(runs), wall_s))  # the last line
+            return code
         test = getattr(args, "test_file", None)
         if test is not None and args.out is None:  # a comparison never mixes with the scene's own files
             args.out = str(default_parent(args.update_reference) / load_scene(args.scene).name
