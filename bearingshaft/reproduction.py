@@ -598,6 +598,8 @@ def _compare_text(f: _File, ref: Path, run: Path, whole: Rule) -> None:
         for k in range(n):
             x = a[i1 + k] if i1 + k < i2 else ""
             y = b[j1 + k] if j1 + k < j2 else ""
+            if x == y:  # blank lines paired inside a block that differs
+                continue
             rules = [rule_of(s) for s in (x, y) if s]
             rule = next((r for r in rules if r.kind in JUDGED), rules[0])  # a judged line on either side decides
             _judge(f, rule, f"line {i1 + k + 1}", x, y)

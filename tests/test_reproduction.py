@@ -303,3 +303,13 @@ def test_response_map_marks_what_follows_chaos():
     rows, jumps = _sweep_rows(1.0, "up", rm, 0)
     assert [r["after_chaos"] for r in rows] == ["false", "false", "true", "true", "true"]
     assert [j["after_chaos"] for j in jumps] == ["true", "true"]
+
+
+def test_lines_added_with_a_blank_line(tmp_path):
+    """A table added to a text file (a scene's new [frf], after a blank line): the added lines differ, the blank
+    one is no quantity."""
+    ref = _folder(tmp_path / "ref", {"x": {"a.md": "[ringdown]\nduration_s = 2\n"}})
+    run = _folder(tmp_path / "run", {"x": {"a.md": "[ringdown]\nduration_s = 2\n\n[frf]\nblows = 5\n"}})
+    rows = compare_scene("s", run, ref, {"x": Reproduction()}, ("x",))
+    assert [(r.quantity, r.status, r.run) for r in rows if r.file == "a.md"] == [
+        ("line 4", DIFFERS, "[frf]"), ("line 5", DIFFERS, "blows = 5")]
