@@ -52,6 +52,14 @@ def _add_common(p: argparse.ArgumentParser, scene_required: bool = True) -> None
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
 
 
+def _workers(text: str) -> int:
+    """``--workers``: a whole number >= 1 (argparse turns the ValueError into a usage error)."""
+    n = int(text)
+    if n < 1:
+        raise ValueError(text)
+    return n
+
+
 def _add_update_reference(p: argparse.ArgumentParser) -> None:
     p.add_argument("--update-reference", action="store_true",
                    help="write into results/<scene>/, the committed reference, instead of runs/<scene>/ "
@@ -79,7 +87,9 @@ def build_parser() -> argparse.ArgumentParser:
                        "prints a summary line per stage; then compares every stage's files with the reference "
                        "results/<scene>/, writes the reproduction report <out>/reproduction.md and .csv and prints "
                        "its summary (exit 1 if a deterministic number did not reproduce); a total line last (stages, "
-                       "wall time, peak memory).")
+                       "wall time, peak memory). Several scenes run side by side on Dask (a local cluster of one "
+                       "worker per core, as many as the memory estimates allow, or --scheduler), the longest first; "
+                       "a scene's stages run in order.")
     p.add_argument("scenes", nargs="*", metavar="SCENE", help="scene names or TOML files")
     p.add_argument("--out", metavar="DIR", help="parent folder of the results (default: runs/); the reproduction "
                    "report goes there too")
@@ -87,6 +97,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reference", metavar="DIR", help="parent folder of the reference results (default: ./results/, "
                    "else the checkout's results/)")
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
+    p.add_argument("--workers", metavar="N", type=_workers, help="worker processes of the local cluster (default: "
+                   "one per core, fewer if the memory estimates say so; 1: one scene after the other in this process)")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="run on this Dask scheduler (tcp://host:8786) instead")
     p = sub.add_parser("check", help="validate scenes, their memory estimates and --out without running",
                        description="Validate scenes (all built-in scenes if none is named): every key, the memory "
                        "each stage would need against the memory available, every case of a [sweep], and that "
@@ -248,12 +261,21 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "run":
             names = args.scenes or builtin_names()
             runs = [_validated(n, args.out, True, args.update_reference) for n in names]  # all before any runs
+            n_stages = sum(len(stages_of(s)) for s, _ in runs)
+            if len(runs) > 1 and (args.workers != 1 or args.scheduler):
+                from bearingshaft.jobs import run_job
+
+                given = [(n, s, o) for n, (s, o) in zip(names, runs, strict=True)]
+                job = run_job(given, stages_of, workers=args.workers, scheduler=args.scheduler, progress=progress)
+                code = _reproduction(args, runs)
+                print(run_total(n_stages, len(runs), job.wall_s, job.peak_bytes, job.workers))  # the last line
+                return EXIT_FAILED if job.failed else code
             t_run = time.perf_counter()
             for scene, out in runs:
                 pipeline.run_scene(scene, out, progress=progress)
             wall_s = time.perf_counter() - t_run
             code = _reproduction(args, runs)
-            print(run_total(sum(len(stages_of(s)) for s, _ in runs), len(runs), wall_s))  # the last line
+            print(run_total(n_stages, len(runs), wall_s))  # the last line
             return code
         test = getattr(args, "test_file", None)
         if test is not None and args.out is None:  # a comparison never mixes with the scene's own files

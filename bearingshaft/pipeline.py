@@ -11,6 +11,9 @@ from bearingshaft.output import check_out_dir, staged_output
 from bearingshaft.registry import BY_NAME, stages_of
 from bearingshaft.scenes import Scene
 
+MESH_STAGES = ("modal", "verify")  # stages that mesh the 3-D model: gmsh needs the main thread (signals)
+MAIN_THREAD_ERROR = "signal only works in main thread"
+
 
 class StageUnavailable(Exception):
     """The scene does not ask for this stage."""
@@ -79,3 +82,48 @@ def run_scene(scene: Scene, out_dir: str | Path, progress: bool = True) -> None:
     """
     for stage in stages_of(scene):
         run_stage(scene, stage, out_dir, progress=progress)
+
+
+def run_stage_anywhere(scene: Scene, stage: str, out_dir: str | Path, scene_arg: str) -> None:
+    """:func:`run_stage` without progress, from any thread: in a worker thread (a Dask task) a stage
+    that meshes cannot start gmsh, which installs a signal handler; such a stage (``MESH_STAGES``, or
+    one that finds it must build a reduced model) runs as ``python -m bearingshaft.cli STAGE --scene
+    SCENE_ARG --out OUT_DIR --no-progress`` in a child process instead, whose line is printed here.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+    stage : str
+        The stage's name.
+    out_dir : str or Path
+        The results folder.
+    scene_arg : str
+        How a child process finds the scene: a built-in name or a TOML file path.
+
+    Returns
+    -------
+    None
+
+    Raises
+    ------
+    RuntimeError
+        The child process failed: its last line of error output.
+    """
+    import subprocess
+    import sys
+    import threading
+
+    if threading.current_thread() is threading.main_thread() or stage not in MESH_STAGES:
+        try:
+            run_stage(scene, stage, out_dir, progress=False)
+            return
+        except ValueError as exc:
+            if MAIN_THREAD_ERROR not in str(exc):
+                raise
+    proc = subprocess.run([sys.executable, "-m", "bearingshaft.cli", stage, "--scene", scene_arg, "--out",
+                           str(out_dir), "--no-progress"], capture_output=True, text=True)
+    if proc.returncode != 0:
+        lines = [line for line in proc.stderr.splitlines() if line.strip()]
+        raise RuntimeError(lines[-1] if lines else f"{stage} stage: exit code {proc.returncode}")
+    print(proc.stdout, end="", flush=True)

@@ -180,8 +180,8 @@ def peak_memory_bytes() -> int:
     return int(rss if sys.platform == "darwin" else rss * 1024)
 
 
-def run_total(n_stages: int, n_scenes: int, wall_s: float) -> str:
-    """The line that ends ``bearingshaft run``: stages, scenes, wall time and the process's peak memory.
+def run_total(n_stages: int, n_scenes: int, wall_s: float, peak_bytes: int | None = None, workers: str = "") -> str:
+    """The line that ends ``bearingshaft run``: stages, scenes, wall time and the peak memory.
 
     Parameters
     ----------
@@ -189,6 +189,10 @@ def run_total(n_stages: int, n_scenes: int, wall_s: float) -> str:
         Stages run, and the scenes they belong to.
     wall_s : float
         s, from the first stage's start to the last one's end.
+    peak_bytes : int, optional
+        The job's peak memory when it ran on Dask workers (the sum of the workers' peaks); None: this process's.
+    workers : str
+        Where the stages ran (``LocalCluster(2)``), with ``peak_bytes``.
 
     Returns
     -------
@@ -202,5 +206,7 @@ def run_total(n_stages: int, n_scenes: int, wall_s: float) -> str:
     from bearingshaft.digits import human
 
     minutes = f" ({wall_s / 60:.1f} min)" if wall_s >= 60 else ""
+    where = f"{workers}, the sum of the workers' peaks" if peak_bytes is not None else "this process"
+    peak = peak_memory_bytes() if peak_bytes is None else peak_bytes
     return (f"run: {n_stages} stage{'s' * (n_stages != 1)} of {n_scenes} scene{'s' * (n_scenes != 1)} in "
-            f"{wall_s:.0f} s{minutes}, peak memory {human(peak_memory_bytes())} (this process)")
+            f"{wall_s:.0f} s{minutes}, peak memory {human(peak)} ({where})")

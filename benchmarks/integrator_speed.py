@@ -11,7 +11,9 @@ machine may be shared), in one process:
    fixed-interface modes; a 20 N, 1 ms blow at 10 ms that closes no gap; the marginal cost of a
    sample = (t(0.22 s) - t(0.02 s)) / 4000) beside one numpy N x K complex matrix-vector product
    (what a sample must at least cost);
-2. the central-difference integrator on the same 2 s ringdowns (steps per second);
+2. the central-difference integrator on the same 2 s ringdowns (steps per second), and on rom-impulse
+   in the open-gap modal coordinates (issue 28) against the physical-coordinate kernel, alternating
+   (``--modal-explicit-only`` measures just that row and replaces it in the tables);
 3. the exact integrator against DOP853 restarted at every crossing (``integrate_dop853(...,
    events=True)``, the independent reference) at equal error: on the 0.2 s window the error is the
    max-norm error of x against the exact run (relative to max |x|); on the 2 s window no
@@ -184,6 +186,107 @@ def exact_rows(base: dict, repeats: int, commit: str) -> tuple[list[dict], list[
                               "met": steps / t["median_s"] >= rate})
             print(heads[-1], flush=True)
     return heads, details
+
+
+def _chain_kernel():
+    """A numba loop of R rounds of one dependent 12-term dot product and a 12-term update: the latency of
+    one such link, the pattern a step repeats (a sum over the coordinates feeding the next update)."""
+    import numba as nb
+
+    @nb.njit(fastmath={"reassoc", "contract"})
+    def chain(z, u, R):
+        for _ in range(R):
+            s = 0.0
+            for i in range(12):
+                s += u[i] * z[i]
+            for i in range(12):
+                z[i] = z[i] - 1e-9 * s * u[i]
+        return z[0]
+
+    return chain
+
+
+def roofline(n: int, p: int, nu: int, steps_per_cpu_s: float) -> dict:
+    """Flops and L1 bytes a step of the modal kernel (no contact, no loads; counted from its loops) against
+    the core's measured multiply-add peak (dgemm) and the latency of one dependent sum-and-update link, both
+    in CPU time (the machine is shared)."""
+    chain = _chain_kernel()
+    A, B = np.random.default_rng(0).standard_normal((2, 256, 256))
+    z, u = np.ones(12), np.full(12, 0.1)
+    chain(z, u, 10)
+    t = []
+    for _ in range(5):  # the core's multiply-add peak: one-thread BLAS dgemm (the caller holds BLAS to one thread)
+        c0 = time.process_time()
+        for _ in range(20):
+            A @ B
+        t.append(time.process_time() - c0)
+    peak = 20 * 2.0 * 256**3 / min(t)  # flop/s
+    R = 2_000_000
+    t = []
+    for _ in range(5):
+        c0 = time.process_time()
+        chain(z, u, R)
+        t.append(time.process_time() - c0)
+    link = min(t) / R  # s
+    flops = n * (9 + 2 * nu + 4 * p) + 6 * p * p + 6 * p + 5
+    words = n * (12 + nu + 2 * p) + 3 * p * p + 2 * p  # doubles read or written a step, all in L1
+    return {"flops_per_step": flops, "bytes_per_step": 8 * words, "peak_flops_per_s": peak,
+            "attained_flops_per_s": flops * steps_per_cpu_s, "fraction_of_peak": flops * steps_per_cpu_s / peak,
+            "link_latency_s": link, "links_per_step": 1.0 / (steps_per_cpu_s * link),
+            "l1_bytes_per_s": 8 * words * steps_per_cpu_s, "steps_per_cpu_s": steps_per_cpu_s}
+
+
+def modal_explicit_rows(repeats: int) -> tuple[list[dict], list[dict]]:
+    """The central difference in the open-gap modal coordinates (``coordinates="modal"``, issue 28) on the
+    2 s rom-impulse ringdown against today's physical-coordinate kernel, alternating in the same process;
+    their difference over the first 0.2 s (round-off, not yet amplified by the chaotic motion)."""
+    system, x0, v0 = scene_model("rom-impulse")
+    rate = 3e7
+    runs = {}
+    load0 = os.getloadavg()[0]
+    for c in ("physical", "modal"):  # warm-up (compilation, the modal split of the model)
+        integrate_explicit(system, x0, v0, LONG_S, FS, step_basis="contact", coordinates=c)
+    walls = {"physical": [], "modal": []}
+    cpus = {"physical": [], "modal": []}
+    for _ in range(repeats):
+        for c in ("physical", "modal"):
+            c0, t0 = time.process_time(), time.perf_counter()
+            runs[c] = integrate_explicit(system, x0, v0, LONG_S, FS, step_basis="contact", coordinates=c)
+            walls[c].append(time.perf_counter() - t0)
+            cpus[c].append(time.process_time() - c0)
+    ph, mo = runs["physical"], runs["modal"]
+    steps = mo.stats["n_steps"]
+    med = {c: float(np.median(walls[c])) for c in walls}
+    cpu = {c: float(np.median(cpus[c])) for c in cpus}
+    best = {c: float(np.min(walls[c])) for c in walls}
+    details = [{"scene": "rom-impulse", "method": "explicit", "code": f"ours, {c} coordinates", "median_s": med[c],
+                "min_s": best[c], "max_s": float(np.max(walls[c])), "cpu_median_s": cpu[c], "repeats": repeats,
+                "n_steps": steps, "energy_balance_error": runs[c].energy_balance_error} for c in ("physical", "modal")]
+    head = {"what": f"explicit (central difference) ringdown in the open-gap modal coordinates, rom-impulse, "
+                    f"{LONG_S:g} s: {steps} steps, {steps / med['modal']:.3g} steps/s (CPU time: "
+                    f"{steps / cpu['modal']:.3g}; fastest run {steps / best['modal']:.3g})",
+            "ours_s": med["modal"], "baseline": "explicit in physical coordinates (today's default kernel), same "
+                                                "process, alternating",
+            "baseline_s": med["physical"], "ratio": med["physical"] / med["modal"],
+            "error": f"first {WINDOW_S:g} s differs from the physical kernel by {head_diff(mo, ph, FS):.2g} of max |x| "
+                     f"(round-off; the runs part later as the motion is chaotic); energy balance "
+                     f"{mo.energy_balance_error:.3g} (physical {ph.energy_balance_error:.3g}); machine load "
+                     f"(1 min) {load0:.1f} before, {os.getloadavg()[0]:.1f} after, on {os.cpu_count()} cores",
+            "target": f">= {rate:.0e} steps/s (<= {steps / rate:.3g} s)", "met": steps / med["modal"] >= rate}
+    form = mo.stats.get("coordinates")
+    rl = roofline(system.n, 3, 2, steps / cpu["modal"])
+    details.append({"scene": "rom-impulse", "method": "explicit", "code": f"roofline of the {form} kernel", **rl})
+    if not head["met"]:
+        head["error"] += (f"; roofline (CPU time, same process): {rl['flops_per_step']} flop and "
+                          f"{rl['bytes_per_step']} B (L1) a step, {rl['fraction_of_peak']:.0%} of the measured "
+                          f"{rl['peak_flops_per_s']:.3g} flop/s one-core dgemm peak and "
+                          f"{rl['l1_bytes_per_s'] / 1e9:.3g} GB/s from L1: neither bound; a step takes "
+                          f"{rl['links_per_step']:.2g} x the latency of one "
+                          f"dependent 12-term sum feeding a 12-term update ({rl['link_latency_s'] * 1e9:.3g} ns "
+                          f"measured), and its sums over the coordinates (tip rows, U^T y, the new velocity) "
+                          f"each wait for the last: latency-bound")
+    print(head, flush=True)
+    return [head], details
 
 
 def hammer_rows(base: dict, modes: list[int], repeats: int, commit: str) -> tuple[list[dict], list[dict]]:
@@ -392,6 +495,8 @@ def main(argv=None) -> int:
     ap.add_argument("--no-dop853-2s", action="store_true", help="skip the 2 s DOP853 window (minutes a run)")
     ap.add_argument("--out", default="results/performance")
     ap.add_argument("--figure-only", action="store_true", help="redraw integrator_speed.png from the CSV files")
+    ap.add_argument("--modal-explicit-only", action="store_true",
+                    help="measure only the modal-coordinate explicit row and replace it in integrator_headline.csv")
     args = ap.parse_args(argv)
     if args.repeats < 3:
         ap.error("--repeats must be >= 3")
@@ -401,6 +506,8 @@ def main(argv=None) -> int:
         return 0
     out.mkdir(parents=True, exist_ok=True)
     info = machine_rows()
+    if args.modal_explicit_only:
+        return modal_explicit_only(out, args.repeats, info)
     base = load_baseline(args.baseline_commit)
     with single_thread_blas():
         heads, details, scans = run_all(base, args)
@@ -417,8 +524,48 @@ def main(argv=None) -> int:
     return 0
 
 
+def modal_explicit_only(out: Path, repeats: int, info: list[dict]) -> int:
+    """Measure the modal-coordinate explicit row alone; replace it (and its detail rows) in the tables of
+    ``out``, after the rom-impulse explicit row when it is new; the machine file gets this run's keys
+    prefixed ``modal_explicit_``."""
+    with single_thread_blas():
+        heads, details = modal_explicit_rows(repeats)
+    info.append({"key": "load_1min_end", "value": os.getloadavg()[0]})
+    fmt = [{k: (f"{v:.4g}" if isinstance(v, float) else v) for k, v in r.items()} for r in heads]
+    tag = "explicit (central difference) ringdown in the open-gap modal coordinates"
+    old = read_rows(out / "integrator_headline.csv")
+    kept = [r for r in old if not r["what"].startswith(tag)]
+    rom = "explicit (central difference) ringdown, rom"
+    at = next((i + 1 for i, r in enumerate(kept) if r["what"].startswith(rom)), len(kept))
+    fields = ["what", "ours_s", "baseline", "baseline_s", "ratio", "error", "target", "met"]
+    write_rows(out / "integrator_headline.csv", kept[:at] + fmt + kept[at:], fields)
+    old_d = [r for r in read_rows(out / "integrator_details.csv") if "coordinates" not in r.get("code", "")]
+    dfields = list(old_d[0]) if old_d else []
+    dfields += sorted({k for r in details for k in r} - set(dfields))
+    write_rows(out / "integrator_details.csv", old_d + [{k: r.get(k, "") for k in dfields} for r in details], dfields,
+               float_format=".5g")
+    m_old = [r for r in read_rows(out / "integrator_machine.csv") if not r["key"].startswith("modal_explicit_")]
+    write_rows(out / "integrator_machine.csv", m_old + [{"key": f"modal_explicit_{r['key']}", "value": r["value"]}
+                                                        for r in info])
+    print(f"updated {out}/integrator_{{headline,details,machine}}.csv")
+    return 0
+
+
+def read_rows(path: Path) -> list[dict]:
+    """The rows of a CSV file ([] when it does not exist)."""
+    import csv
+
+    if not path.exists():
+        return []
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
 def run_all(base: dict, args) -> tuple[list[dict], list[dict], list[dict]]:
     heads, details = exact_rows(base, args.repeats, args.baseline_commit)
+    h, d = modal_explicit_rows(args.repeats)
+    heads += h
+    details += d
     h, d = hammer_rows(base, args.hammer_modes, args.repeats, args.baseline_commit)
     heads += h
     details += d

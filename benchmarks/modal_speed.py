@@ -43,6 +43,8 @@ from geometry.build import build_mesh  # noqa: E402
 
 TARGET_S = 15.0  # s, issue 14: the 112,629-DOF case, mesh to modes
 TARGET_RESIDUAL = 1e-8  # issue 14: every mode's relative residual
+TARGET_RATIO = 10.0  # issue 28: baseline time / ours, the 112,629-DOF case
+TARGET_FLOOR = 10.0  # issue 28: every mode's residual within this factor of its round-off floor
 BASELINE = "scikit-fem asm + scipy eigsh shift-invert (SuperLU, ARPACK)"
 
 
@@ -112,8 +114,8 @@ def main(argv=None) -> int:
             "what": f"FE modal, {n:,} DOFs, {args.n_modes} modes: mesh + assembly + eigensolution",
             "ours_s": med["ours"]["total_s"], "baseline": BASELINE, "baseline_s": med["baseline"]["total_s"],
             "ratio": ratio, "error": float(res_o.max()),
-            "target": f"<= {TARGET_S:g} s" if n > 100_000 else "",
-            "met": (med["ours"]["total_s"] <= TARGET_S) if n > 100_000 else ""})
+            "target": f">= {TARGET_RATIO:g}x the baseline and <= {TARGET_S:g} s" if n > 100_000 else "",
+            "met": (ratio >= TARGET_RATIO and med["ours"]["total_s"] <= TARGET_S) if n > 100_000 else ""})
         headline.append({
             "what": f"FE modal, {n:,} DOFs, {args.n_modes} modes: CPU seconds of assembly + eigensolution "
                     f"(load-independent; ours on {'/'.join(str(r['threads']) for r in runs['ours'])} thread(s), "
@@ -127,9 +129,9 @@ def main(argv=None) -> int:
             "ours_s": med["ours"]["eigensolution_s"], "baseline": BASELINE + ", eigensolution only",
             "baseline_s": med["baseline"]["eigensolution_s"],
             "ratio": med["baseline"]["eigensolution_s"] / med["ours"]["eigensolution_s"], "error": float(res_o.max()),
-            "target": f"every mode <= {TARGET_RESIDUAL:g} ({n_meet}/{args.n_modes} meet it; all within "
-                      f"{float((res_o / floor_o).max()):.2g} x their floor)",
-            "met": n_meet == args.n_modes})
+            "target": f"every mode within {TARGET_FLOOR:g} x its round-off floor (all within "
+                      f"{float((res_o / floor_o).max()):.2g} x; {n_meet}/{args.n_modes} also <= {TARGET_RESIDUAL:g})",
+            "met": bool(float((res_o / floor_o).max()) <= TARGET_FLOOR)})
         write_rows(out / "modal_residuals.csv", modes_rows, float_format=".6g")
         write_rows(out / "modal_headline.csv", headline, float_format=".4g")
     machine = machine_rows()

@@ -39,6 +39,8 @@ SOURCES = (
      "largest residual over its round-off floor, over all sizes and modes"),
     ("fep_headline.csv", "fep_machine.csv", "frequency-energy study (NNMs by HB and shooting)",
      "python benchmarks/fep_speed.py --repeats 3", ""),
+    ("job_headline.csv", "job_machine.csv", "the main job and the test suite, whole",
+     "PYTHONPATH=. python benchmarks/job_times.py", ""),
 )
 # what limits each target not met, from the profiles (a row matches by the start of its ``what``)
 LIMITS = (
@@ -51,8 +53,19 @@ LIMITS = (
      "result), a chain of dependent adds through memory; the kernel time is all of the run (cProfile), the "
      "matvec 9 ns and the dissipated-work sum 14 ns of the 63 ns a step. Keeping four rows' sums in scalars "
      "(same bits) was slower, 77-78 ms against 63-65 ms for 1e6 steps, as the column loop is already "
-     "vectorised; a modal form with a low-rank damping update would cut the flops by about 2.4x but change "
-     "the bits (untried)"),
+     "vectorised. The same scheme in the open-gap modal coordinates (the next row, opt-in as it changes the "
+     "bits) runs about 2x faster"),
+    ("explicit (central difference) ringdown in the open-gap modal coordinates",
+     "measured on a machine loaded 12-20 on 2 cores (wall times several times the CPU times; the physical "
+     "kernel took 115-120 ns of CPU a step beside it, against 63 ns unloaded in the row above, measured "
+     "before the reduced beam had modal damping on every mode), so the steps/s in CPU time and the ratio to "
+     "the physical kernel in the same process (1.7-1.9x) are the figures to read; the unloaded rate was "
+     "not measured. The roofline in "
+     "the accuracy column: the step uses 12 % of the core's multiply-add peak and a fraction of its L1 "
+     "bandwidth; it is latency-bound, its sums over the coordinates (the tip rows, U^T y, the new velocity) "
+     "each waiting for the last. Two restructurings that take every sum at the step's start (one link "
+     "of latency a step instead of about four) were slower under this load (more flops on a shared core), "
+     "and were not kept"),
     ("exact vs DOP853 restarted at every crossing",
      "the exact run costs 1.7 us a contact event with its output samples (12,780 events and 40,000 samples "
      "in 21.6 ms on the 2 s window), within the 1-2 us the issue names as the limit of that work, and the "
@@ -60,9 +73,12 @@ LIMITS = (
      "the 0.2 s window), and its relative speed moves with the machine (below): these rows met 1000x at "
      "1e-8 on the earlier machine and miss it here"),
     ("FE modal, 112,629 DOFs, 16 modes: mesh",
-     "of the 19.4 s, the mesh takes 1.0 s, assembly 1.4-2.7 s, the PARDISO Cholesky 5.7-7.7 s and the block "
-     "Krylov iteration 8.4-10.3 s (68 solves with the factor; modal_speed.csv). A second shift near 850 Hz "
-     "would cut the solves but costs a second factorization (untried)"),
+     "measured at load 12-21 on 2 cores (2026-11-26; wall times 4-10x the CPU times, PARDISO on one thread): "
+     "7.4x in CPU seconds (15.2 s against 112 s), 5.7x in wall time. Of ours, in CPU: the PARDISO "
+     "factorization (two-level, 0.6 + 4.5-4.9 s one thread unloaded), assembly 1-2 s and 68 solves with the "
+     "factor in the block Krylov iteration, the rest. 10x needs <= 11 CPU s here, the factor's forward and "
+     "back solves being the part left to cut (fewer solves: a shift inside the wanted band needs an "
+     "indefinite LDL^T; untried)"),
     ("FE modal, 112,629 DOFs: relative residual",
      "the twelve soft-spring modes (0.4-34 Hz) stop at 1-3x their round-off floor eps |||K| |phi||| / ||K phi||, "
      "above 1e-8 in double precision; the elastic modes reach 4-8e-10"),

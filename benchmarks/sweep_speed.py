@@ -56,7 +56,7 @@ from bearingshaft.sweep import (  # noqa: E402
     run_case,
     run_sweep,
 )
-from bearingshaft.sweep.run import _warm_up  # noqa: E402
+from bearingshaft.sweep.run import warm_up  # noqa: E402
 
 CASE_SCENE = """
 description = "sweep_speed: the impulse ringdown of discrete-impulse, 0.5 s"
@@ -129,7 +129,7 @@ def throughput(n_cases: int, repeats: int, tmp: Path) -> list[dict]:
     (the loop and the 1-worker cluster alternating); the best of the repeats (the least disturbed
     by other processes on a shared machine) is reported."""
     plan = _plan(CASE_SCENE, "speed", f"model.gap=1e-4:1e-3:{n_cases}:log")
-    _warm_up()
+    warm_up()
     run_case(plan.cases[0], str(tmp / "warm"))  # the loop's own warm-up (figures, fonts)
     loop, dask = [], {1: [], 2: []}
     startup = {}
@@ -138,7 +138,7 @@ def throughput(n_cases: int, repeats: int, tmp: Path) -> list[dict]:
         for workers in (1, 2):
             t0 = time.perf_counter()
             clients[workers], _ = stack.enter_context(dask_client(workers=workers))
-            clients[workers].run(_warm_up)
+            clients[workers].run(warm_up)
             startup[workers] = time.perf_counter() - t0
         for r in range(repeats):
             t0 = time.perf_counter()
@@ -173,7 +173,7 @@ def task_floor(n: int) -> list[dict]:
 
     rows = []
     with dask_client(workers=1) as (client, _):
-        client.run(_warm_up)
+        client.run(warm_up)
         for wait in WAITS_S:
             k = max(4, min(n, int(round(8 / wait))))  # ~8 s of work a size
             t0 = time.perf_counter()
@@ -202,7 +202,7 @@ def shared_input(n_cases: int, tmp: Path) -> list[dict]:
     plan = _plan(ROM_SCENE, "speed-rom", f"model.k_g=1e7:1e8:{n_cases}:log")
     rows = []
     with dask_client(workers=2) as (client, _):
-        client.run(_warm_up)
+        client.run(warm_up)
         t0 = time.perf_counter()
         futs = [client.submit(_rebuild_case, c, str(tmp / "rebuild"), pure=False) for c in plan.cases]
         out = [f.result() for f in as_completed(futs)]

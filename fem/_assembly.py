@@ -114,3 +114,86 @@ def scatter_pair(ed: np.ndarray, shape: np.ndarray, Ke: np.ndarray, Me: np.ndarr
     kdata, mdata = _fill(ed, shape, np.ascontiguousarray(Ke, dtype=np.float64),
                          np.ascontiguousarray(Me, dtype=np.float64), ptr, elem, loc, indptr, indices)
     return indptr, indices, kdata, mdata
+
+
+@njit(cache=True)
+def _merge_upper(r, ap, ai, ax, bp, bi, bx, s, out_i, out_x, write):
+    """Row r of the upper triangle (columns >= r) of A + s B, both rows sorted: the merged
+    columns and values written from position 0 of out_i / out_x when ``write``; their count."""
+    i, ie = ap[r], ap[r + 1]
+    j, je = bp[r], bp[r + 1]
+    while i < ie and ai[i] < r:
+        i += 1
+    while j < je and bi[j] < r:
+        j += 1
+    k = 0
+    while i < ie or j < je:
+        if j >= je or (i < ie and ai[i] < bi[j]):
+            if write:
+                out_i[k] = ai[i]
+                out_x[k] = ax[i]
+            i += 1
+        elif i >= ie or bi[j] < ai[i]:
+            if write:
+                out_i[k] = bi[j]
+                out_x[k] = s * bx[j]
+            j += 1
+        else:
+            if write:
+                out_i[k] = ai[i]
+                out_x[k] = ax[i] + s * bx[j]
+            i += 1
+            j += 1
+        k += 1
+    return k
+
+
+@njit(cache=True, parallel=True)
+def _upper_sum(ap, ai, ax, bp, bi, bx, s, n):
+    counts = np.zeros(n + 1, np.int64)
+    dummy_i = np.empty(0, np.int32)
+    dummy_x = np.empty(0)
+    for r in prange(n):
+        counts[r + 1] = _merge_upper(r, ap, ai, ax, bp, bi, bx, s, dummy_i, dummy_x, False)
+    indptr = np.cumsum(counts)
+    indices = np.empty(indptr[-1], np.int32)
+    data = np.empty(indptr[-1])
+    for r in prange(n):
+        lo = indptr[r]
+        _merge_upper(r, ap, ai, ax, bp, bi, bx, s, indices[lo:], data[lo:], True)
+    return indptr.astype(np.int32), indices, data
+
+
+def upper_sum(A, B, s: float):
+    """(indptr, indices, data) of the upper triangle (diagonal included) of A + s B in CSR with
+    sorted columns, int32 indices (the layout PARDISO reads), from two CSR matrices of one order.
+
+    Parameters
+    ----------
+    A, B : (n, n) scipy.sparse matrix
+        Converted to CSR with sorted indices (and summed duplicates) if they are not.
+    s : float
+        The factor of B.
+
+    Returns
+    -------
+    indptr : (n + 1,) ndarray of int32
+    indices : (nnz,) ndarray of int32
+        Sorted within each row, each >= its row.
+    data : (nnz,) ndarray of float
+        A_ij + s B_ij, summed in that order (an entry in one matrix only: A_ij or s B_ij).
+    """
+    import scipy.sparse as sp
+
+    mats = []
+    for X in (A, B):
+        X = sp.csr_matrix(X)
+        if not X.has_canonical_format:
+            X = X.copy()
+            X.sum_duplicates()
+        mats.append(X)
+    A, B = mats
+    n = A.shape[0]
+    return _upper_sum(A.indptr.astype(np.int64, copy=False), A.indices.astype(np.int32, copy=False),
+                      A.data.astype(np.float64, copy=False), B.indptr.astype(np.int64, copy=False),
+                      B.indices.astype(np.int32, copy=False), B.data.astype(np.float64, copy=False), float(s), n)

@@ -32,6 +32,7 @@ import scipy.sparse as sp
 from scipy.linalg import eigh as dense_eigh
 from scipy.sparse.linalg import LinearOperator, eigsh, splu
 
+from fem._assembly import upper_sum
 from fem._pardiso import PardisoCholesky, blas_threads, fixed_threads
 from fem._pardiso import has_pardiso as _has_pardiso
 
@@ -45,6 +46,9 @@ GUARD = 0  # Krylov: Ritz vectors expanded beyond the unconverged wanted modes (
 # 0 needs the fewest solves, 67 against 100 with 4 and 168 with 16; the Krylov basis keeps the rest)
 MAX_BLOCKS = 8  # Krylov: basis of at most MAX_BLOCKS blocks before a thick restart
 MAX_STEPS = 60  # Krylov: block solves before giving up (a mode left unconverged is reported)
+START_EXTRA = 8  # Krylov: the first block is the wanted modes and this many more
+ORTHO_TOL = 1e-12  # Krylov: M-orthonormality asked of the basis
+NEAR = 3.0  # Krylov: a mode's round-off floor is computed once its residual is within NEAR x its bound
 
 
 @dataclass(frozen=True, eq=False)
@@ -120,12 +124,12 @@ def _fix_signs(phi: np.ndarray) -> np.ndarray:
     return phi * np.where(w @ phi < 0.0, -1.0, 1.0)
 
 
-def _factorize(A: sp.csr_matrix, solver: str, n_threads: int | None = None):
-    """(solve, stats) for A = K - sigma M."""
+def _factorize(A: sp.csr_matrix, solver: str, n_threads: int | None = None, upper: bool = False):
+    """(solve, stats) for A = K - sigma M (for PARDISO ``upper``: A is its upper triangle, canonical)."""
     if solver == "superlu":
         return splu(A.tocsc()).solve, {}
     if solver == "pardiso":
-        f = PardisoFactor(A, n_threads=n_threads)
+        f = PardisoFactor(A, n_threads=n_threads, upper=upper)
         return f.solve, dict(f.stats)
     raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
 
@@ -178,74 +182,124 @@ def _svqb(W, MW, drop: float = 1e-12):
 
 
 def _extend(V, MV, W, M):
-    """(W, M W) with W M-orthonormal and M-orthogonal to the M-orthonormal V: block
-    Gram-Schmidt and SVQB, repeated until both hold to 1e-12 (twice is the rule, Kahan-Parlett).
+    """(W, M W) with W M-orthonormal and M-orthogonal to the M-orthonormal V (``MV`` = M V).
 
-    M W is recomputed from W after every pass, never updated alongside it: a column of W that
-    lay mostly in span V (the modes already converged) keeps a remnant ~1e-10 of its length,
-    and updating W and M W separately would leave them inconsistent by eps/1e-10.
+    Block Gram-Schmidt against V twice (Kahan-Parlett: twice is enough; it needs M V, not M W),
+    then one product M W and SVQB on the block. M W is computed from W after the projections,
+    never updated alongside them: a column of W that lay mostly in span V (a mode already
+    converged) keeps a remnant ~1e-10 of its length, and updating W and M W separately would
+    leave them inconsistent by eps/1e-10. SVQB mixes the block's own columns only, so (W T, M W T)
+    stay consistent to round-off times the condition of T; when the check W^T M W = I, V^T M W = 0
+    (to ``ORTHO_TOL``) fails, the passes repeat with M W recomputed (at most three more).
     """
-    for _ in range(4):
-        if V.shape[1]:
-            W = W - V @ (MV.T @ W)
-        W, _ = _svqb(W, M @ W)
-        MW = M @ W
+    for _pass in range(4):
+        for _ in range(2):
+            if V.shape[1]:
+                W = W - V @ (MV.T @ W)
+        W, MW = _svqb(W, M @ W)
         off = np.abs(MV.T @ W).max() if V.shape[1] else 0.0
-        if off < 1e-12 and np.abs(W.T @ MW - np.eye(W.shape[1])).max() < 1e-12:
+        if off < ORTHO_TOL and np.abs(W.T @ MW - np.eye(W.shape[1])).max() < ORTHO_TOL:
             break
     return W, MW
 
 
-def _block_krylov(K, M, solve, n_modes: int, sigma: float, tol: float, seed: int, max_steps: int = MAX_STEPS):
+def _block_krylov(K, M, solve, n_modes: int, sigma: float, tol: float, seed: int, max_steps: int = MAX_STEPS,
+                  info: dict | None = None):
     """Block shift-invert Krylov with Rayleigh-Ritz on (K, M) and a residual test per mode.
 
     The basis V (M-orthonormal) grows by (K - sigma M)^-1 M Y, Y the Ritz vectors of the
     wanted modes not yet converged plus GUARD more; span{y, OP M y} = span{y, OP r} for a
     Ritz pair (y, theta) with residual r, so each step is an exact shift-invert correction of
-    every unconverged mode, and the converged ones stay in the basis (locked implicitly). The
-    Ritz pairs come from V^T K V c = theta V^T M V c, so the inexact solves of the ill-conditioned
-    K - sigma M (condition ~1e10) only slow the convergence, never bias a converged pair.
+    every unconverged mode, and the converged ones stay in the basis (locked implicitly). It
+    starts from a random block of the wanted modes and START_EXTRA more. The Ritz pairs come
+    from V^T K V c = theta V^T M V c, so the inexact solves of the ill-conditioned K - sigma M
+    (condition ~1e10) only slow the convergence, never bias a converged pair.
+
+    K V and M V are kept beside V (one product each per new block), so the projected matrices
+    grow by a block a step and the Ritz vectors' K y and M y are dense products; a mode whose
+    residual so estimated passes its bound is checked with K y itself before it counts.
     Mode i is converged when ||K y - theta M y|| <= max(tol ||K y||, ROUNDOFF_FACTOR eps ||
-    |K| |y| ||). Past MAX_BLOCKS blocks the basis restarts from its wanted and guard Ritz
-    vectors. Returns (theta, Y, n_op, n_steps, converged).
+    |K| |y| ||) (the floor is computed only for modes near it). Past MAX_BLOCKS blocks the
+    basis restarts from its wanted and guard Ritz vectors. Returns (theta, Y, n_op, n_steps,
+    converged); ``info``, if given, receives each returned mode's relative residual and floor
+    (``residuals``, ``floors``: as :func:`residual_test`).
     """
     n = K.shape[0]
     m = n_modes
-    absK = _abs(K)
+    absK = None
     eps = np.finfo(float).eps
-    p = min(n, m + max(GUARD, 8))  # the first block: the wanted modes and 8 more
+    p = min(n, m + START_EXTRA)
+    cap = min(n, MAX_BLOCKS * p + p)
+    V = np.empty((n, cap), order="F")
+    MV = np.empty((n, cap), order="F")
+    KV = np.empty((n, cap), order="F")
+    Kr = np.zeros((cap, cap))
+    Mr = np.zeros((cap, cap))
     W = np.random.default_rng(seed).standard_normal((n, p))
-    V = np.empty((n, 0))
-    MV = np.empty((n, 0))
-    Kr = np.empty((0, 0))
-    n_op, step = 0, 0
+    n_op, step, k = 0, 0, 0
     conv = np.zeros(m, bool)
+    res = np.full(m, np.inf)
+    fabs = np.full(m, np.inf)  # eps || |K| |y| || of each mode, refreshed when it comes near its bound
+    locked = np.zeros(m, bool)
     while True:
-        # -- extend the basis by W, M-orthogonal to V (two passes of block Gram-Schmidt)
-        W, MW = _extend(V, MV, W, M)
+        # -- extend the basis by W, M-orthogonal to V
+        W, MW = _extend(V[:, :k], MV[:, :k], W, M)
         KW = K @ W
-        Kr = np.block([[Kr, V.T @ KW], [KW.T @ V, W.T @ KW]])
-        V = np.hstack([V, W])
-        MV = np.hstack([MV, MW])
-        del KW
-        # -- Rayleigh-Ritz on (K, M); V^T M V = I to round-off, kept exact in the small problem
-        Mr = V.T @ MV
-        Kr = (Kr + Kr.T) / 2
-        theta, Q = dense_eigh(Kr, (Mr + Mr.T) / 2)
-        k = min(len(theta), m + GUARD)
-        Y, MY = V @ Q[:, :k], MV @ Q[:, :k]
-        KY = K @ Y[:, :m]
+        b = W.shape[1]
+        V[:, k:k + b], MV[:, k:k + b], KV[:, k:k + b] = W, MW, KW
+        Kr[:k, k:k + b] = V[:, :k].T @ KW
+        Kr[k:k + b, :k] = Kr[:k, k:k + b].T
+        Kr[k:k + b, k:k + b] = (W.T @ KW + KW.T @ W) / 2
+        Mr[:k, k:k + b] = V[:, :k].T @ MW
+        Mr[k:k + b, :k] = Mr[:k, k:k + b].T
+        Mr[k:k + b, k:k + b] = (W.T @ MW + MW.T @ W) / 2
+        k += b
+        del W, MW, KW
+        # -- Rayleigh-Ritz on (K, M)
+        theta, Q = dense_eigh(Kr[:k, :k], Mr[:k, :k])
+        kk = min(k, m + GUARD)
+        Y, MY = V[:, :k] @ Q[:, :kk], MV[:, :k] @ Q[:, :kk]
+        KY = KV[:, :k] @ Q[:, :m]
         r = np.linalg.norm(KY - MY[:, :m] * theta[:m], axis=0)
-        bound = np.maximum(tol * np.linalg.norm(KY, axis=0),
-                           ROUNDOFF_FACTOR * eps * np.linalg.norm(absK @ np.abs(Y[:, :m]), axis=0))
-        conv = r <= bound
-        if conv.all() or step >= max_steps or V.shape[1] >= n:
+        ky = np.linalg.norm(KY, axis=0)
+        del KY
+        # -- floors of the modes near their bound (all of them at the first step)
+        near = r <= NEAR * np.maximum(tol * ky, ROUNDOFF_FACTOR * fabs)
+        if near.any():
+            absK = _abs(K) if absK is None else absK
+            idx = np.flatnonzero(near)
+            fabs[idx] = eps * np.linalg.norm(absK @ np.abs(Y[:, idx]), axis=0)
+        # -- a mode whose estimate passes is checked with K y itself; passed, it is locked (its Ritz
+        # vector no longer moves), and every mode is checked again before returning
+        cand = ~locked & (r <= np.maximum(tol * ky, ROUNDOFF_FACTOR * fabs))
+        last = step >= max_steps or k >= n
+        final = (locked | cand).all() or last
+        if final:  # every mode, with its floor from its present Ritz vector
+            cand = np.ones(m, bool)
+            absK = _abs(K) if absK is None else absK
+            fabs = eps * np.linalg.norm(absK @ np.abs(Y[:, :m]), axis=0)
+        if cand.any():
+            idx = np.flatnonzero(cand)
+            KYd = K @ Y[:, idx]
+            rd = np.linalg.norm(KYd - MY[:, idx] * theta[idx], axis=0)
+            kyd = np.maximum(np.linalg.norm(KYd, axis=0), 1e-300)
+            del KYd
+            locked[idx] = rd <= np.maximum(tol * kyd, ROUNDOFF_FACTOR * fabs[idx])
+            res[idx], ky[idx] = rd / kyd, kyd
+        conv = locked.copy()
+        if conv.all() or last:
+            if info is not None:
+                info.update(residuals=res, floors=fabs / np.maximum(ky, 1e-300))
             return theta[:m], Y[:, :m], n_op, step, conv
         # -- next block: the unconverged wanted modes and the guard vectors
-        if V.shape[1] + p > MAX_BLOCKS * p:  # thick restart from the Ritz vectors
-            V, MV = Y, MY
-            Kr = np.diag(theta[:k])
-        sel = np.concatenate([np.flatnonzero(~conv), np.arange(m, k)])
+        sel = np.concatenate([np.flatnonzero(~conv), np.arange(m, kk)])
+        if k + len(sel) > cap - p:  # thick restart from the Ritz vectors
+            V[:, :kk], MV[:, :kk], KV[:, :kk] = Y, MY, KV[:, :k] @ Q[:, :kk]
+            Kr[:] = 0.0
+            Mr[:] = 0.0
+            Kr[:kk, :kk] = np.diag(theta[:kk])
+            Mr[:kk, :kk] = np.eye(kk)
+            k = kk
         W = solve(MY[:, sel])
         n_op += len(sel)
         step += 1
@@ -332,17 +386,23 @@ def _modal_analysis(K, M, n_modes, shift_hz, solver, method, tol, max_iter, seed
     n = K.shape[0]
     sigma = -(2 * np.pi * shift_hz) ** 2
     t0 = time.perf_counter()
-    A = (K - sigma * M).tocsr()
-    solve, stats = _factorize(A, solver, n_threads)
+    if solver == "pardiso":  # the upper triangle of K - sigma M in one pass (fem._assembly.upper_sum)
+        indptr, indices, data = upper_sum(K, M, -sigma)
+        A = sp.csr_matrix((data, indices, indptr), shape=K.shape)
+        solve, stats = _factorize(A, solver, n_threads, upper=True)
+    else:
+        A = (K - sigma * M).tocsr()
+        solve, stats = _factorize(A, solver, n_threads)
     del A
     t1 = time.perf_counter()
-    conv = None
+    conv, info = None, None
     # the eigensolvers' dense work is tall-skinny products: one OpenBLAS thread, so that it
     # does not fight PARDISO's threads for the cores (fem._pardiso)
     with blas_threads(1) if solver == "pardiso" else contextlib.nullcontext():
         if method == "krylov":
+            info = {}
             lam, phi, n_op, n_iter, conv = _block_krylov(K, M, solve, n_modes, sigma,
-                                                        KRYLOV_TOL if tol is None else tol, seed)
+                                                        KRYLOV_TOL if tol is None else tol, seed, info=info)
         elif method == "subspace":
             lam, phi, n_op, n_iter = _subspace(K, M, solve, n_modes, sigma, 1e-4 if tol is None else tol,
                                                max_iter, seed)
@@ -360,11 +420,12 @@ def _modal_analysis(K, M, n_modes, shift_hz, solver, method, tol, max_iter, seed
     t2 = time.perf_counter()
     order = np.argsort(lam)
     lam, phi = lam[order], phi[:, order]
-    if conv is not None:
-        conv = conv[order]
     mnorm = np.sqrt(np.einsum("ij,ij->j", phi, M @ phi))
     phi = _fix_signs(phi / mnorm)
-    res, floors = residual_test(K, M, lam, phi)
+    if conv is not None:  # the Krylov solver's own final test, on these vectors (both ratios scale-free)
+        conv, res, floors = conv[order], info["residuals"][order], info["floors"][order]
+    else:
+        res, floors = residual_test(K, M, lam, phi)
     elastic = lam > (2 * np.pi * shift_hz) ** 2
     freq = np.sqrt(np.clip(lam, 0.0, None)) / (2 * np.pi)
     return ModalResult(freq_hz=freq, phi=phi, omega2=lam, solver=f"{solver}/{method}", shift_hz=shift_hz,

@@ -391,9 +391,10 @@ def test_a_stage_that_needs_the_main_thread_runs_in_a_child_process(tmp_path, mo
     """gmsh (the modal, reduce and verify stages) cannot start in a Dask worker's task thread; such a
     stage runs as ``python -m bearingshaft.cli STAGE`` in a child process. Exercised here on a cheap
     stage declared as meshing: the folder it leaves is the single run's, for the case's scene."""
+    import bearingshaft.pipeline as pipeline
     import bearingshaft.sweep.run as sweep
 
-    monkeypatch.setattr(sweep, "MESH_STAGES", ("ringdown",))
+    monkeypatch.setattr(pipeline, "MESH_STAGES", ("ringdown",))
     plan = plan_of(LINEAR.replace("duration_s = 4.0", "duration_s = 0.1"), "model.k_s=9000")
     case = plan.cases[0]
     scene = parse_scene(case.text, case.name, case.origin)

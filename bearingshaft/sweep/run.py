@@ -32,13 +32,11 @@ from bearingshaft.sweep.plan import Case, SweepPlan
 from bearingshaft.sweep.tables import SweepResult, write_results
 from reduced._checks import one_line
 
-MESH_STAGES = ("modal", "verify")  # stages that mesh the 3-D model: gmsh needs the main thread (signals)
-MAIN_THREAD_ERROR = "signal only works in main thread"
 _INSTALLED: set = set()  # reductions this worker process has put into its reduced-model cache
 
 
 # -- one case, on a worker ------------------------------------------------------------------
-def _warm_up() -> None:
+def warm_up() -> None:
     """Import the stages and load numba's compiled kernels in a worker before its first case, so
     that a case's run time is the case's (the sweep's wall time still counts this, once per worker)."""
     import bearingshaft.pipeline  # noqa: F401
@@ -50,7 +48,8 @@ def _warm_up() -> None:
     ringdown(DiscreteParams().system(), np.zeros(3), np.array([0.0, 0.0, 1.0]), 1e-3, 1e4, "exact")
 
 
-def _worker_name() -> str:
+def worker_name() -> str:
+    """The address of the Dask worker running the caller, else ``local:<pid>``."""
     try:
         from distributed import get_worker
 
@@ -86,32 +85,16 @@ def _missing_stages(folder: Path, case: Case) -> tuple[str, ...]:
 
 
 def _run_stage(scene: Scene, case: Case, stage: str, folder: Path) -> None:
-    """One stage of a case, as a single run. A Dask worker runs tasks in a thread, where gmsh cannot
-    start (it installs a signal handler); a stage that meshes (MESH_STAGES, or one that finds it must
-    build a reduced model) then runs as ``python -m bearingshaft.cli STAGE`` in a child process."""
-    import threading
-
-    from bearingshaft.pipeline import run_stage
-
-    if threading.current_thread() is threading.main_thread() or stage not in MESH_STAGES:
-        try:
-            run_stage(scene, stage, folder, progress=False)
-            return
-        except ValueError as exc:
-            if MAIN_THREAD_ERROR not in str(exc):
-                raise
-    import subprocess
-    import sys
+    """One stage of a case, as a single run (:func:`bearingshaft.pipeline.run_stage_anywhere`; a
+    stage that meshes runs in a child process that reads the case from a temporary file)."""
     import tempfile
+
+    from bearingshaft.pipeline import run_stage_anywhere
 
     with tempfile.TemporaryDirectory(prefix="bearingshaft-case-") as tmp:
         path = Path(tmp) / f"{case.name}.toml"
         path.write_text(case.text, encoding="utf-8")
-        proc = subprocess.run([sys.executable, "-m", "bearingshaft.cli", stage, "--scene", str(path), "--out",
-                               str(folder), "--no-progress"], capture_output=True, text=True)
-    if proc.returncode != 0:
-        lines = [line for line in proc.stderr.splitlines() if line.strip()]
-        raise RuntimeError(lines[-1] if lines else f"{stage} stage: exit code {proc.returncode}")
+        run_stage_anywhere(scene, stage, folder, str(path))
 
 
 def run_case(case: Case, out_root: str, rom=None) -> dict:
@@ -147,7 +130,7 @@ def run_case(case: Case, out_root: str, rom=None) -> dict:
         row.update(status="ok", resumed=resumed, message="")
     except Exception as exc:  # a failed case is a row of the table, not the end of the sweep
         row.update(status="failed", resumed=False, message=one_line(exc))
-    row.update(run_time_s=time.perf_counter() - t0, worker=_worker_name())
+    row.update(run_time_s=time.perf_counter() - t0, worker=worker_name())
     return row
 
 
@@ -238,7 +221,7 @@ def _remove_dead_scratch(out: Path, cases) -> None:
 def _submit(client, plan: SweepPlan, out: Path, progress: bool) -> dict:
     """{future: case}: the workers warmed up, each shared reduced model built here and scattered
     to every worker once, one task per case."""
-    client.run(_warm_up)
+    client.run(warm_up)
     roms = {}
     for key, spec in plan.shared.items():  # built once here, shipped to each worker once
         print(f"[{plan.scene.name}] sweep: reduced model built once for the sweep ({spec.n_modes} modes)",

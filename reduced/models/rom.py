@@ -503,6 +503,22 @@ def _cache_path(spec: RomSpec, inputs: str | None = None) -> Path:
     return cache_dir() / f"rom-{_cache_key(spec, inputs)}.npz"
 
 
+def cache_key(spec: RomSpec) -> str:
+    """The key of the cache entry that holds the reduction of ``spec``.
+
+    Parameters
+    ----------
+    spec : RomSpec
+        The reduced model's specification.
+
+    Returns
+    -------
+    str
+        20 hex digits; two specs that differ only in contact or damping share one entry.
+    """
+    return _cache_key(spec)
+
+
 def store_in_cache(rom: ReducedModel, spec: RomSpec) -> None:
     """Keep ``rom`` where :func:`cached_rom` looks for ``spec``, with its manifest (a read-only
     cache is skipped: the model is then rebuilt when next needed).
@@ -555,5 +571,5 @@ def cached_rom(spec: RomSpec, progress: bool = False) -> ReducedModel:
     return rom
 
 
-__all__ = ["RomSpec", "ReducedModel", "build_rom", "cached_rom", "damping_matrix", "modal_ratios", "store_in_cache",
-           "MODAL_DAMPING", "POINTS", "ROM_LAYOUTS"]
+__all__ = ["RomSpec", "ReducedModel", "build_rom", "cache_key", "cached_rom", "damping_matrix", "modal_ratios",
+           "store_in_cache", "MODAL_DAMPING", "POINTS", "ROM_LAYOUTS"]

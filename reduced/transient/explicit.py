@@ -39,7 +39,7 @@ from scipy.linalg import eigh
 from reduced import _checks as _check
 from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
-from reduced.transient import _cd
+from reduced.transient import _cd, _cd_modal
 from reduced.transient import stepper as _stepper
 from reduced.transient.result import RingdownResult, RingdownStream
 
@@ -275,6 +275,9 @@ def _damping_factor(C: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(U[:, keep] * np.sqrt(lam[keep]))
 
 
+COORDINATES = ("physical", "modal")  # ExplicitOptions.coordinates
+
+
 @dataclass(frozen=True, slots=True)
 class ExplicitOptions:
     """Options of the central-difference integrator (see :func:`integrate_explicit`).
@@ -285,12 +288,17 @@ class ExplicitOptions:
     omega_dt : rad, the step as omega_ref dt when ``dt`` is None, in (0, 2 SWITCHING_SAFETY]
     step_basis : omega_ref, "top" (omega_max) or "contact" (:func:`contact_omega`)
     chunks : progress is reported this many times a run
+    coordinates : "physical" (the kernel of n x n products, the reference) or "modal" (the same scheme in the
+        open-gap modes, :mod:`reduced.transient._cd_modal`: equal to round-off, not bit for bit; a system
+        with friction, of at most ``_cd.SMALL_N`` DOFs or whose modal damping is no diagonal plus low rank
+        runs the physical kernel, ``stats["coordinates"]`` says which ran)
     """
 
     dt: float | None = None
     omega_dt: float = DEFAULT_OMEGA_DT
     step_basis: str = "top"
     chunks: int = PIECES
+    coordinates: str = "physical"
 
     def checked(self, system: GapSystem) -> ExplicitOptions:
         """These options validated (ValueError naming the first bad one)."""
@@ -298,7 +306,8 @@ class ExplicitOptions:
         omega_dt = _checked_omega_dt(self.omega_dt)
         chunks = _check.integer("chunks", self.chunks)
         dt = None if self.dt is None else _check.positive("dt", self.dt, "s")
-        return ExplicitOptions(dt, omega_dt, step_basis, chunks)
+        coordinates = _check.choice("coordinates", self.coordinates, COORDINATES)
+        return ExplicitOptions(dt, omega_dt, step_basis, chunks, coordinates)
 
 
 class ExplicitStepper(_stepper.Stepper):
@@ -350,8 +359,13 @@ class ExplicitStepper(_stepper.Stepper):
                            "dt_stable": limit})
         if self.forced:
             self.stats["n_loads"] = loads.n_loads
+        self.modal = None  # the open-gap modal form (reduced.transient._cd_modal) when it runs
+        if getattr(options, "coordinates", "physical") == "modal" and not self.friction and self.n > _cd.SMALL_N:
+            self.modal = _cd_modal.modal_form(system.M, system.K, system.C, system.B,
+                                              loads.b if self.forced else np.zeros((0, self.n)), dt)
         self._matrices()
         self._first_state(x0, v0)
+        self.stats["coordinates"] = "physical" if self.modal is None else "modal"
         # samples between progress reports (without them a buffer is filled in one kernel call)
         self.per_piece = max(1, (N - 1) // options.chunks) if report else max(1, N - 1)
         self.done = 0  # samples filled after the first
@@ -392,7 +406,11 @@ class ExplicitStepper(_stepper.Stepper):
         b = np.ascontiguousarray(self.loads.b) if self.forced else np.zeros((0, n))
         dtGbT = np.ascontiguousarray((dt * (G @ b.T)).T)
         self.small = n <= _cd.SMALL_N  # state in registers (reduced.transient._cd), zero-padded to SMALL_N DOFs
-        if self.small:
+        if self.modal is not None:
+            self.kernel = _cd_modal.cd_modal
+            self.mats = self.modal["mats"]
+            self.dtGbT, self.b = None, self.modal["bm"]  # the kernel's a (set by _first_state) and the loads' rows
+        elif self.small:
             S = _cd.SMALL_N
             self.kernel = _cd._cd_small
             self.mats = (_cd.pad(AT, S, S), _cd.pad(dtGKT, S, S), _cd.pad(dtGBT, None, S), _cd.pad(L, S, None),
@@ -416,6 +434,9 @@ class ExplicitStepper(_stepper.Stepper):
         vh = v + 0.5 * dt * a0
         S = _cd.SMALL_N
         self.x, self.vh = (_cd.pad(x, S, None), _cd.pad(vh, S, None)) if self.small else (x, vh)
+        if self.modal is not None:  # z, zd and a = U^T zd of the modal kernel (carried in the dtGbT slot)
+            self.x, self.vh = self.modal["PhiTM"] @ x, self.modal["PhiTM"] @ vh
+            self.dtGbT = self.modal["a_of"] @ self.vh
         self.W, self.pw = 0.0, float(np.sum((v @ self.L) ** 2))
         self.E, self.pe = 0.0, (float(v @ f0) if self.forced else 0.0)
 
@@ -447,10 +468,14 @@ class ExplicitStepper(_stepper.Stepper):
             steps = self.done * self.every + np.arange(1, nout * self.every + 1)  # global step numbers
             P = np.ascontiguousarray(self.loads.values(steps * self.dt))
         sy = self.system
+        lo = buf.filled
         self.W, self.pw, buf.filled, self.E, self.pe = call_numba_kernel(
             self.kernel, *self.mats, sy.offset, sy.side, sy.k, self.x, self.vh, self.dt, nout * self.every,
             self.every, out_x, out_v, out_W, self.W, self.pw, buf.filled, self.dtGbT, self.b, P, out_E, self.E,
             self.pe)
+        if self.modal is not None:  # the samples of this call from modal to physical coordinates
+            for out in (out_x, out_v):
+                _cd_modal.to_physical(self.modal["Phi"], out, lo, buf.filled)
         self.done += nout
         if not np.all(np.isfinite(self.x)):
             raise FloatingPointError(
@@ -483,6 +508,7 @@ def stream_explicit(
     chunks: int = PIECES,
     chunk_samples: int | None = None,
     progress=None,
+    coordinates: str = "physical",
 ) -> RingdownStream:
     """Central-difference response, free or forced, chunk by chunk.
 
@@ -492,7 +518,7 @@ def stream_explicit(
 
     Parameters
     ----------
-    system, x0, v0, duration_s, sample_rate_hz, dt, omega_dt, step_basis, loads, chunks, progress : as
+    system, x0, v0, duration_s, sample_rate_hz, dt, omega_dt, step_basis, loads, chunks, progress, coordinates : as
         :func:`integrate_explicit`
     chunk_samples : samples a chunk (default: the whole run in one)
 
@@ -501,7 +527,8 @@ def stream_explicit(
     RingdownStream : the run, computed as it is read
     """
     return _stepper.run(ExplicitStepper, system, x0, v0, duration_s, sample_rate_hz,
-                        ExplicitOptions(dt, omega_dt, step_basis, chunks), loads, progress, chunk_samples)
+                        ExplicitOptions(dt, omega_dt, step_basis, chunks, coordinates), loads, progress,
+                        chunk_samples)
 
 
 def integrate_explicit(
@@ -517,6 +544,7 @@ def integrate_explicit(
     loads=None,
     chunks: int = PIECES,
     progress=None,
+    coordinates: str = "physical",
 ) -> RingdownResult:
     """Central-difference response of ``system`` from (x0, v0), free or under ``loads``.
 
@@ -551,10 +579,12 @@ def integrate_explicit(
     loads : None or a :class:`~reduced.models.loads.Loads` (above)
     chunks : progress reports a run
     progress : None or a callable taking the fraction done
+    coordinates : "physical" (default) or "modal": :class:`ExplicitOptions`
 
     Returns
     -------
-    RingdownResult : the run, with the statistics (n_steps, dt, omega_max, omega_dt, omega_ref, dt_stable)
+    RingdownResult : the run, with the statistics (n_steps, dt, omega_max, omega_dt, omega_ref, dt_stable,
+        coordinates)
 
     Raises
     ------
@@ -562,4 +592,5 @@ def integrate_explicit(
         A step beyond the stability margin, or more than ``MAX_STEPS`` steps.
     """
     return stream_explicit(system, x0, v0, duration_s, sample_rate_hz, dt=dt, omega_dt=omega_dt,
-                           step_basis=step_basis, loads=loads, chunks=chunks, progress=progress).collect()
+                           step_basis=step_basis, loads=loads, chunks=chunks, progress=progress,
+                           coordinates=coordinates).collect()

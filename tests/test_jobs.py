@@ -1,0 +1,99 @@
+"""``bearingshaft run`` on Dask (issue 28): the graph of a job, its order, and files identical to a
+run of one scene after the other."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from bearingshaft import jobs
+from bearingshaft.cli import main
+from bearingshaft.jobs import StageRun, StageTask, job_tasks, priorities, run_task
+from bearingshaft.registry import stages_of
+from bearingshaft.scenes import load_scene
+
+SHORT = """
+description = "short impulse {n}"
+[model]
+kind = "discrete"
+[initial]
+x0_m = [0.0, 0.0, 0.0]
+v0_m_s = [0.0, 0.0, {v}]
+[ringdown]
+duration_s = 0.05
+sample_rate_hz = 20000.0
+[nnm]
+n_energy = 20
+"""
+
+
+def _runs(names):
+    return [(n, load_scene(n), Path("/tmp/unused") / n) for n in names]
+
+
+def test_scenes_sharing_a_reduced_model_wait_for_the_first_to_build_it():
+    """rom-frc and rom-fep share one cache entry (only contact and damping differ): rom-fep's first
+    stage waits for rom-frc's reduce, which alone carries the build's cost; a discrete scene and the
+    scene with a reduction of its own (rom-assembly) wait for nothing."""
+    tasks = {t.key: t for t in job_tasks(_runs(["rom-frc", "rom-fep", "discrete-hammer", "rom-assembly"]),
+                                         stages_of)}
+    assert list(tasks) == ["rom-frc/reduce", "rom-frc/frc", "rom-fep/reduce", "rom-fep/nnm",
+                           "discrete-hammer/ringdown", "rom-assembly/reduce", "rom-assembly/ringdown"]
+    assert tasks["rom-frc/frc"].after == ("rom-frc/reduce",)
+    assert tasks["rom-fep/reduce"].after == ("rom-frc/reduce",)
+    assert tasks["rom-fep/nnm"].after == ("rom-fep/reduce",)
+    assert tasks["discrete-hammer/ringdown"].after == () and tasks["rom-assembly/reduce"].after == ()
+    build = jobs.BUILD_SECONDS
+    assert tasks["rom-frc/reduce"].seconds == jobs.STAGE_SECONDS["reduce"] + build
+    assert tasks["rom-fep/reduce"].seconds == jobs.STAGE_SECONDS["reduce"]
+    assert tasks["rom-assembly/reduce"].seconds == jobs.STAGE_SECONDS["reduce"] + build
+
+
+def test_the_builder_of_a_shared_model_comes_first():
+    """Bottom levels: the shared reduce's priority is its own cost plus the longest chain after it
+    (rom-fep's nnm or rom-frc's frc), above every task of an independent short chain."""
+    tasks = job_tasks(_runs(["rom-frc", "rom-fep", "discrete-hammer"]), stages_of)
+    level = priorities(tasks)
+    s = jobs.STAGE_SECONDS
+    longest_after = max(s["frc"], s["reduce"] + s["nnm"])
+    assert level["rom-frc/reduce"] == pytest.approx(s["reduce"] + jobs.BUILD_SECONDS + longest_after)
+    assert level["rom-frc/reduce"] > level["discrete-hammer/ringdown"] == s["ringdown"]
+
+
+def test_a_stage_after_a_failed_one_is_skipped_and_a_failure_is_one_line(tmp_path):
+    """run_task never raises: a stage whose predecessor failed is not run; a stage that fails
+    (a scene file gone since it was validated) reports the reason in one line."""
+    t = StageTask("x/ringdown", str(tmp_path / "gone.toml"), "x", "ringdown", tmp_path / "out")
+    r = run_task(t, StageRun("x/reduce", 1.0, "", "boom"))
+    assert r.skipped and r.error == "not run: x/reduce failed" and not (tmp_path / "out").exists()
+    r = run_task(t)
+    assert not r.skipped and "gone.toml" in r.error and "\n" not in r.error
+    assert not (tmp_path / "out").exists()
+
+
+def test_run_on_two_workers_writes_the_files_of_a_run_in_order(tmp_path, capsys):
+    """Two scenes on a LocalCluster of two workers, then one after the other in this process: every
+    file but provenance.json (it holds finishing times) is the same, byte for byte, and the job ends
+    with its total line naming the cluster."""
+    scenes = []
+    for n, v in ((1, 200.0), (2, 150.0)):
+        path = tmp_path / f"short{n}.toml"
+        path.write_text(SHORT.format(n=n, v=v))
+        scenes.append(str(path))
+    par, seq = tmp_path / "par", tmp_path / "seq"
+    assert main(["run", *scenes, "--out", str(par), "--no-progress", "--workers", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "run: 4 stages of 2 scenes" in out and "LocalCluster(2)" in out
+    assert out.count("] ringdown: ") == 2 and out.count("] nnm: ") == 2
+    assert main(["run", *scenes, "--out", str(seq), "--no-progress", "--workers", "1"]) == 0
+    files = sorted(p.relative_to(seq) for p in seq.rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(par) for p in par.rglob("*") if p.is_file())
+    assert len(files) >= 2 * 6
+    for f in files:
+        if f.name == "provenance.json":
+            a, b = (json.loads((root / f).read_text()) for root in (par, seq))
+            assert set(a["stages"]) == set(b["stages"]) == {"ringdown", "nnm"}
+        else:
+            assert (par / f).read_bytes() == (seq / f).read_bytes(), f
