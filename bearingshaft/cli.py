@@ -141,6 +141,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", metavar="N", help="worker processes of the local cluster (default: one per core)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run on this Dask scheduler (tcp://host:8786) instead")
     # -- end issue 13 --
+    from bearingshaft.identify.command import add_parser as add_identify  # issue 26: fit the model to a test
+
+    add_identify(sub)
     return parser
 
 
@@ -257,6 +260,10 @@ def main(argv: list[str] | None = None) -> int:
             from bearingshaft.sweep import sweep_command
 
             return sweep_command(args, load_scene)
+        if args.command == "identify":  # issue 26
+            from bearingshaft.identify.command import identify_command
+
+            return identify_command(args, load_scene)
         progress = not args.no_progress
         if args.command == "run":
             names = args.scenes or builtin_names()

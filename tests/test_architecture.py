@@ -32,7 +32,7 @@ APP_FLOORS = (
     ("bearingshaft.stages",),
     ("bearingshaft.registry",),
     ("bearingshaft.budget", "bearingshaft.pipeline"),
-    ("bearingshaft.sweep", "bearingshaft.jobs"),
+    ("bearingshaft.sweep", "bearingshaft.jobs", "bearingshaft.identify"),
     ("bearingshaft.cli", "bearingshaft.__main__"),
 )
 SOLVERS = ("reduced.transient.integrate", "reduced.transient.exact", "reduced.transient.explicit",

@@ -52,7 +52,14 @@ from bearingshaft.progress import bar as progress_bar
 from bearingshaft.reproduction import Reproduction, chaotic, exact, record, roundoff
 from bearingshaft.scenes import HammerSpec, Scene, SceneError
 from bearingshaft.stages import hammer_compare, hammer_linear
-from bearingshaft.stages.hammer_results import ChannelBackbone, Comparison, LinearCheck, Record, VirtualTest
+from bearingshaft.stages.hammer_results import (
+    ChannelBackbone,
+    Comparison,
+    FrictionComparison,
+    LinearCheck,
+    Record,
+    VirtualTest,
+)
 from bearingshaft.systems import solver_options
 from fem.rig import TIP_CELLS
 from reduced.models.loads import HalfSine, Tabulated
@@ -68,6 +75,7 @@ LYAPUNOV_SEEDS = 3  # exact runs of the nominal blow displaced by LYAPUNOV_DELTA
 LYAPUNOV_DELTA = 1e-9  # relative (energy norm) size of the displacement, as the ringdown stage's reference check
 LYAPUNOV_SATURATION = 1e-3  # the separation has saturated at this fraction of the state's norm
 LYAPUNOV_WINDOW_S = 0.01  # s, windows over which the separation is maximized (a few periods of the 1737 Hz mode)
+DECAY_FLOOR = 1e-2  # a motion has decayed when its modal energy stays below this share of its peak
 
 
 # -- the run ------------------------------------------------------------------------------
@@ -129,11 +137,13 @@ def run_record(rig: VirtualRig, signal, scene: Scene, level_N: float, duration_s
     res = ringdown(rig.system, np.zeros(n), np.zeros(n), fine_duration, acq.fine_rate_hz, rd.method,
                    loads=rig.loads(signal), **solver_options(rd))
     keep = slice(0, q * (n_out - 1) + 1, q)
-    fine = rig.channel_data(res.x, res.v, signal(res.t))
+    fine = rig.channel_data(res.x, res.v, signal(res.t), res.w)
     data = np.vstack([acq.acquire(fine[:-1], n_out), fine[-1:, keep]])  # the hammer: the applied force itself
     stats = {**res.stats, "acquisition": acq.describe(), "oversample": q}
+    fr = rig.system.friction is not None
     return Record(level_N, res.t[keep], data, res.x[keep], res.v[keep], res.energy[keep], res.dissipated[keep],
-                  res.external[keep], stats, float(res.energy_balance_error))
+                  res.external[keep], stats, float(res.energy_balance_error), res.w[keep] if fr else None,
+                  res.friction[keep] if fr else None)
 
 
 def default_location(rom) -> tuple[float, float, float]:
@@ -502,7 +512,9 @@ def _virtual_test(scene: Scene, rom, rig: VirtualRig, lm, labels: dict, stats: d
     for level in bar:
         records[level] = run_record(rig, blow(spec, level), scene, level)
     nominal = records[spec.peak_N]
-    lyapunov = record_lyapunov(rig, blow(spec, spec.peak_N), scene, nominal)
+    # with friction the sliders' states are not in the record, so a displaced run could not start 1e-9 from it:
+    # no exponent (the report then says no horizon was measured)
+    lyapunov = record_lyapunov(rig, blow(spec, spec.peak_N), scene, nominal) if rig.system.friction is None else []
     curves = backbones(rig, spec.backbone_modes, float(np.max(nominal.energy)))
     summary = {level: level_summary(rig, rec, lm, labels) for level, rec in records.items()}
     linear = _linear_check(scene, rom, rig, progress) if spec.linear_check else None
@@ -514,8 +526,15 @@ def _virtual_test(scene: Scene, rom, rig: VirtualRig, lm, labels: dict, stats: d
                   "wall_s": {str(k): r.stats.get("wall_s") for k, r in records.items()}})
     line = _summary_line(scene, rig, nominal, summary[spec.peak_N], linear)
     stats["lyapunov_exponent_per_s"] = [e.exponent_per_s for e in lyapunov]
+    friction = None
+    if rig.system.friction is not None:
+        friction = friction_comparison(scene, rom, rig, nominal, lm, labels, summary[spec.peak_N])
+        stats["friction"] = {"mu": friction.mu, "k_t": friction.k_t, "friction_work_J": friction.friction_work_J,
+                             "impacts": list(friction.impacts), "frictionless_wall_s":
+                                 friction.frictionless.stats.get("wall_s")}
     return VirtualTest(scene=scene, rig=rig, labels=labels, records=records, summary=summary, backbones=curves,
-                       linear=linear, end_share_s=END_SHARE_S, stats=stats, lines=(line,), lyapunov=tuple(lyapunov))
+                       linear=linear, end_share_s=END_SHARE_S, stats=stats, lines=(line,), friction=friction,
+                       lyapunov=tuple(lyapunov))
 
 
 def record_lyapunov(rig: VirtualRig, signal, scene: Scene, rec: Record, seeds: int = LYAPUNOV_SEEDS) -> list:
@@ -565,6 +584,84 @@ def record_lyapunov(rig: VirtualRig, signal, scene: Scene, rec: Record, seeds: i
             run.close()
         out.append(acc.result())
     return out
+
+
+def motion_decay(rig: VirtualRig, rec: Record, lm, labels: dict, after_s: float) -> dict:
+    """How each pseudo-rigid motion's energy decays in a record: its open-gap mode's energy
+    E_r = (eta_r'^2 + omega_r^2 eta_r^2) / 2, eta_r = phi_r^T M q (mass-normalised modes).
+
+    Parameters
+    ----------
+    rig : the rig that made ``rec``
+    rec : a record
+    lm : the rig's open-gap modes (:func:`reduced.models.modes.linear_modes`)
+    labels : {label: (mode index, freq_hz, score)} (:func:`pseudo_rigid`)
+    after_s : s, the blow's end: the peak is taken after it
+
+    Returns
+    -------
+    dict {label: {"peak_J", "end_J" (mean over the last ``END_SHARE_S``), "t_1pct_s" (the time after which it
+    stays below ``DECAY_FLOOR`` of its peak; NaN if it does not by the record's end), "energy_J" (the record's
+    E_r, for the figure)}}
+    """
+    M = rig.system.M
+    after = rec.t >= after_s
+    end = rec.t >= rec.t[-1] - END_SHARE_S
+    out = {}
+    for label, (i, _, _) in labels.items():
+        mphi = M @ lm.phi[:, i]
+        E = 0.5 * ((rec.v @ mphi) ** 2 + (lm.omega[i] * (rec.x @ mphi)) ** 2)
+        peak = float(E[after].max())
+        above = np.flatnonzero(E > DECAY_FLOOR * peak)
+        t_low = float(rec.t[above[-1] + 1]) if above.size and above[-1] + 1 < rec.t.size else math.nan
+        out[label] = {"peak_J": peak, "end_J": float(E[end].mean()), "t_1pct_s": t_low, "energy_J": E}
+    return out
+
+
+def _band_power(rig: VirtualRig, rec: Record, channel: str, after_s: float, split_hz: float) -> tuple[float, float]:
+    """(power below split_hz, above) of one channel after the blow (periodogram sums)."""
+    x = rec.data[list(rig.names).index(channel), rec.t >= after_s]
+    spec = np.abs(np.fft.rfft(x - x.mean())) ** 2
+    f = np.fft.rfftfreq(x.size, float(rec.t[1] - rec.t[0]))
+    return float(spec[f < split_hz].sum()), float(spec[f >= split_hz].sum())
+
+
+def friction_comparison(scene: Scene, rom, rig: VirtualRig, rec: Record, lm, labels: dict,
+                        summary: dict) -> FrictionComparison:
+    """The nominal blow again without friction (mu = 0 on the same reduction and rig), beside ``rec``: how
+    fast the pseudo-rigid motions decay, the friction work per impact, how the spectrogram's channel changes.
+
+    Parameters
+    ----------
+    scene : the scene (its model with mu > 0)
+    rom : its reduced model (with the tangential coordinates)
+    rig : the rig with friction
+    rec : the nominal blow's record with friction
+    lm, labels : the rig's open-gap modes and pseudo-rigid labels (the same without friction: same M, K)
+    summary : ``rec``'s :func:`level_summary`
+
+    Returns
+    -------
+    FrictionComparison
+    """
+    spec = scene.hammer
+    plain = virtual_rig(rom.with_contact(replace(scene.model, mu=0.0)), rig.location, rig.direction,
+                        rig.seismic_mass_kg)
+    other = run_record(plain, blow(spec, spec.peak_N), scene, spec.peak_N)
+    other_summary = level_summary(plain, other, lm, labels)
+    after = spec.start_s + spec.duration_s
+    with_f, without = motion_decay(rig, rec, lm, labels, after), motion_decay(plain, other, lm, labels, after)
+    decay = {k: {"freq_hz": labels[k][1], "with": with_f[k], "without": without[k]} for k in labels}
+    channel = scene.spectrogram.dof if scene.spectrogram is not None else "beam_s3:z"
+    pw, pwo = _band_power(rig, rec, channel, after, LABEL_MAX_HZ), _band_power(plain, other, channel, after,
+                                                                              LABEL_MAX_HZ)
+    bands = {f"below {LABEL_MAX_HZ:g} Hz": (pw[0], pwo[0]), f"above {LABEL_MAX_HZ:g} Hz": (pw[1], pwo[1])}
+    fr = rig.system.friction
+    return FrictionComparison(mu=float(fr.mu.max()), k_t=float(fr.k_t.max()), directions=rom.friction_directions,
+                              frictionless=other, decay=decay,
+                              impacts=(int(summary["impacts_total"]), int(other_summary["impacts_total"])),
+                              friction_work_J=float(rec.friction[-1]), hammer_work_J=float(rec.external[-1]),
+                              spectrum_change=bands)
 
 
 def _linear_check(scene: Scene, rom, rig: VirtualRig, progress: bool) -> LinearCheck:
@@ -630,7 +727,10 @@ Lyapunov exponent), the pointwise errors up to it, and past it what survives cha
 ridges, RMS envelope, impacts, the open-gap time, backbones of the free decay over the model's
 NNM backbones); --window START:END and --measures LIST choose what. Writes test_errors.csv,
 test_measures.csv, test_horizon.csv, test_compare.md, test_compare.png, test_spectrogram.png,
-test_horizon.png, test_measures.png, test_backbone.png and model.uff (the model's channels, UFF 58)."""
+test_horizon.png, test_measures.png, test_backbone.png and model.uff (the model's channels, UFF 58).
+With friction at the tips ([model] mu > 0), the nominal blow is run again with mu = 0 on the same reduction:
+friction.csv and friction.png (how the longitudinal, lateral and yaw motions decay, the spectrogram with and
+without) and a section of hammer.md (friction work per impact)."""
 
 
 def estimate(scene: Scene) -> list[Estimate]:
@@ -674,4 +774,9 @@ REPRODUCTION = Reproduction(lyapunov=("lyapunov.csv",), rules=(
             why=f"impacts, peak tip forces, when the gaps stay open and where the energy ends {IMPACTING}"),
     exact("lyapunov.csv", "seed", "delta", "saturation", "window_s"),
     chaotic("lyapunov.csv", why="Lyapunov exponents fitted to the separation of chaotic records 1e-9 apart"),
+    # with friction at the tips (friction.csv, hammer.md's friction section): both records impact
+    chaotic("friction.csv", "peak_J_*", "end_J_*", "t_1pct_s_*", why=f"energies and decay times {IMPACTING}"),
+    chaotic("hammer.md", r"^The nominal blow again with mu = 0", r"^\| [a-z]+ \| [0-9.]+ \| [0-9.e+-]+ / ",
+            r"^The spectrogram's channel after the blow",
+            why=f"impacts, friction work, energies and decay times with and without friction {IMPACTING}"),
 ))

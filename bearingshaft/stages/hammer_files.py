@@ -87,6 +87,9 @@ def write_virtual_test(result: VirtualTest, writer: StageWriter) -> None:
         linear_check_figure(writer.path("linear_check.png"), result.linear)
     if result.lyapunov:
         lyapunov_csv(writer.path("lyapunov.csv"), result.lyapunov)
+    if result.friction is not None:
+        friction_csv(writer.path("friction.csv"), result.friction)
+        _save(draw_friction(rig, nominal, result.friction, scene, result.labels), writer.path("friction.png"))
     write_markdown(writer.path("hammer.md"), result)
 
 
@@ -139,6 +142,113 @@ def balance_text(error: float) -> str:
     ('1e-10', '1e-08')
     """
     return f"{roundoff_bound(error):g}"
+
+
+
+
+DECAY_SHOWN = ("longitudinal", "lateral", "yaw")  # the motions friction at the tips acts on (friction.png)
+
+
+def friction_csv(path: Path, fc) -> None:
+    """``friction.csv``: per pseudo-rigid motion, its modal energy's peak, end and 1 % time with friction and
+    without (:class:`bearingshaft.stages.hammer_results.FrictionComparison`).
+
+    Parameters
+    ----------
+    path : the CSV written
+    fc : the comparison
+    """
+    rows = ["motion,freq_hz,peak_J_friction,peak_J_frictionless,end_J_friction,end_J_frictionless,"
+            "t_1pct_s_friction,t_1pct_s_frictionless"]
+    for label, d in sorted(fc.decay.items(), key=lambda kv: kv[1]["freq_hz"]):
+        a, b = d["with"], d["without"]
+        rows.append(f"{label},{d['freq_hz']:.6g},{a['peak_J']:.6g},{b['peak_J']:.6g},{a['end_J']:.6g},"
+                    f"{b['end_J']:.6g},{a['t_1pct_s']:.4g},{b['t_1pct_s']:.4g}")
+    path.write_text("\n".join(rows) + "\n", encoding="utf-8")
+
+
+def draw_friction(rig: VirtualRig, rec: Record, fc, scene: Scene, labels: dict):
+    """``friction.png``: the spectrogram's channel in the pseudo-rigid band with friction and without (one
+    colour scale), and the modal energy of the longitudinal, lateral and yaw motions against time, both runs.
+
+    Parameters
+    ----------
+    rig : the rig with friction
+    rec : the nominal blow with friction
+    fc : the comparison (its frictionless record and the motions' energies)
+    scene : the scene ([spectrogram])
+    labels : the pseudo-rigid modes
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    name = spectrogram_channel(scene)
+    channel = list(rig.names).index(name)
+    fzoom = zoom_band_hz(labels)
+    window = min(ZOOM_WINDOW_S, 0.25 * (rec.t[-1] - rec.t[0]))
+    fig, axes = plt.subplots(3, 1, figsize=(10, 10), constrained_layout=True)
+    top = max(float(_spectrogram_db(r, channel, window, 0.9, fzoom)[2].max()) for r in (rec, fc.frictionless))
+    for ax, r, what in ((axes[0], rec, f"with friction (mu = {fc.mu:g})"), (axes[1], fc.frictionless,
+                                                                           "without friction (mu = 0)")):
+        mesh = _spectro(ax, r, channel, scene, fzoom, top=top, window_s=window)
+        _pseudo_rigid_lines(ax, labels, fzoom)
+        ax.set_ylabel("frequency [Hz]")
+        ax.set_title(f"{name}, {rec.level_N:g} N blow, {what}: 0-{fzoom:g} Hz (Hann {window:g} s)", fontsize=10)
+        fig.colorbar(mesh, ax=ax, label="PSD [dB]", pad=0.01)
+    ax = axes[2]
+    colors = ("tab:blue", "tab:orange", "tab:green")
+    for c, label in zip(colors, DECAY_SHOWN, strict=True):
+        if label not in fc.decay:
+            continue
+        d = fc.decay[label]
+        ax.semilogy(rec.t, np.maximum(d["with"]["energy_J"], 1e-300), color=c, lw=1.0,
+                    label=f"{label} ({d['freq_hz']:.3g} Hz), friction")
+        ax.semilogy(fc.frictionless.t, np.maximum(d["without"]["energy_J"], 1e-300), color=c, lw=1.0, ls="--",
+                    label=f"{label}, no friction")
+    peak = max((max(d["with"]["peak_J"], d["without"]["peak_J"]) for k, d in fc.decay.items() if k in DECAY_SHOWN),
+               default=1.0)
+    ax.set_ylim(peak * 1e-8, peak * 3)
+    ax.set_xlim(rec.t[0], rec.t[-1])
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("modal energy [J]")
+    ax.set_title("energy of the open-gap longitudinal, lateral and yaw modes", fontsize=10)
+    ax.legend(fontsize=8, ncol=3)
+    return fig
+
+
+def friction_text(fc, end_share_s: float) -> list[str]:
+    """The section of hammer.md on friction at the tips.
+
+    Parameters
+    ----------
+    fc : FrictionComparison
+        The nominal blow with friction and without.
+    end_share_s : float
+        s, the energy "at the end" is the mean over the record's last end_share_s.
+
+    Returns
+    -------
+    list of str
+        The section's lines.
+    """
+    fpi = fc.friction_per_impact_J
+    lines = ["", f"## Friction at the tips (friction.csv, friction.png): mu = {fc.mu:g}, k_t = {fc.k_t:.4g} N/m, "
+             f"{' and '.join(fc.directions)}", "",
+             f"The nominal blow again with mu = 0 on the same reduction (the same tangential coordinates; only the "
+             f"sliders differ): impacts {fc.impacts[0]} with friction, {fc.impacts[1]} without. Friction work "
+             f"{fc.friction_work_J:.4g} J, {100 * fc.friction_work_J / fc.hammer_work_J:.3g} % of the hammer's "
+             f"{fc.hammer_work_J:.4g} J; {fpi:.3g} J per impact.", "",
+             f"| motion | [Hz] | peak energy, friction / none [J] | last {end_share_s:g} s, friction / none [J] | "
+             "below 1 % of its peak after, friction / none [s] |", "|---|---|---|---|---|"]
+    for label, d in sorted(fc.decay.items(), key=lambda kv: kv[1]["freq_hz"]):
+        a, b = d["with"], d["without"]
+        lines.append(f"| {label} | {d['freq_hz']:.4g} | {a['peak_J']:.3g} / {b['peak_J']:.3g} | "
+                     f"{a['end_J']:.3g} / {b['end_J']:.3g} | {a['t_1pct_s']:.3g} / {b['t_1pct_s']:.3g} |")
+    bands = "; ".join(f"{band}: {w / wo:.3g} of the frictionless power" if wo > 0 else f"{band}: no power"
+                      for band, (w, wo) in fc.spectrum_change.items())
+    lines += ["", f"The spectrogram's channel after the blow (summed periodogram): {bands}."]
+    return lines
 
 
 def write_record(writer: StageWriter, rig: VirtualRig, rec: Record, scene: Scene) -> None:
@@ -666,7 +776,8 @@ def write_markdown(path: Path, result: VirtualTest) -> None:
     spec = scene.hammer
     s = summary[spec.peak_N]
     lines = [f"# Virtual hammer test: {scene.name}", "",
-             f"Reduced apparatus: {rig.system.n} coordinates (x1, x3 and {rig.system.n - 2} fixed-interface modes), "
+             f"Reduced apparatus: {rig.system.n} coordinates (x1, x3{_n_tangential(rig)} and "
+             f"{rig.system.n - 2 - _n_tangential(rig, False)} fixed-interface modes), "
              f"{len(rig.channels)} channels. Blow: "
              f"{'measured history ' + Path(spec.force_file).name if spec.force_file else 'half-sine'}"
              f" of {spec.duration_s * 1e3:g} ms at {where(rig.location)} along "
@@ -694,7 +805,17 @@ def write_markdown(path: Path, result: VirtualTest) -> None:
                   + ", ".join(result.backbones) + "."]
     if result.linear is not None:
         lines += ["", "## Linear check (linear_check.csv, linear_check.png)", "", result.linear.text]
+    if result.friction is not None:
+        lines += friction_text(result.friction, result.end_share_s)
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def _n_tangential(rig: VirtualRig, text: bool = True):
+    """The tangential coordinates of the rig's model (friction at the tips): their count, or as words."""
+    n = sum(":" in name for name in rig.system.dof_names)
+    if not text:
+        return n
+    return f", {n} tangential coordinates of the tips' faces" if n else ""
 
 
 def _level_text(s: dict, end_share_s: float) -> list[str]:
