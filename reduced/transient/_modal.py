@@ -26,6 +26,13 @@ the march. Near a crossing the step tends to the Newton step; the crossing is ta
 within its round-off band (the decision rules of the single-stop march), or at the root of the
 Taylor quadratic once the cubic remainder Q3 x^3 is within that band (:func:`_march`).
 
+**Growing terms** (Re lam_i > 0: a slip state of a system with friction may flutter,
+:mod:`reduced.transient.friction_tables`): |c_ji e^{lam_i tau}| grows, so e^{Re(lam_i) tau_a} bounds it only
+at tau_a. A state with such terms is solved in segments no longer than H = ln 2 / max Re(lam) (the
+caller restarts the closed form there), and each growing term enters every bound above with its size at
+H, |c_ji| e^{Re(lam_i) H} <= 2 |c_ji| (``gm``), which bounds it anywhere on [0, H]: the bounds hold on the
+whole segment again, and a stop whose amplitude bound stays below its band cannot cross within the segment.
+
 The dissipated work over [0, tau] is closed-form (v = Re sum_i a_i e^{lam_i t}, a_i = U_v[:, i] w_i):
 
     int_0^tau v^T C v dt = 1/2 Re sum_{i,k} [ G_ik I(lam_i + lam_k) + H_ik I(lam_i + conj(lam_k)) ],
@@ -417,9 +424,10 @@ def _refine_smallest(m, live, hnext, P, tau, best, hmin):
 
 @nb.njit(cache=True, inline="always")
 def _march(s, K, lam, alam, const, coef, lc, l2c, a0, qtol, dnoise, live, n_live, tau_limit, hmin, e, ea, hprev,
-           hnext, P):
+           hnext, P, gm):
     """First crossing of any live stop in [0, tau_limit): (tau, j, n_iter), j = -1 if none, j = -2 if the
-    march did not end (module docstring).
+    march did not end (module docstring). ``gm`` (K,): each term's bound factor, e^{Re(lam_i) H} for a growing
+    term (> 1; tau_limit <= H then), 1 for the others.
 
     At tau, per live stop (:func:`_stop_sums`): the crossing is at tau when q > qtol and q' >= -dtol, at
     tau - q / q' when |q| <= qtol and q' > dtol (the decisions of
@@ -449,6 +457,9 @@ def _march(s, K, lam, alam, const, coef, lc, l2c, a0, qtol, dnoise, live, n_live
                 ea[i] = 1.0
         else:
             _terms_at(lam, s, K, tau, e, ea)
+        for i in range(K):
+            if gm[i] > 1.0:  # a growing term: its size at the segment's end bounds it on all of it
+                ea[i] = gm[i]
         for j in range(m):
             if not live[j]:
                 continue
@@ -539,7 +550,7 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
                      W, hmin, floor, max_events, n_stuck, out_E, E, seg_s, seg_tau, _term_scratch(Kmax),
                      _stop_scratch(offset.shape[0], Kmax), np.empty(N), np.empty(N), np.empty(N), fs,
                      (np.zeros(S, np.bool_), np.empty((S, Kmax), np.complex128), np.empty((S, Kmax), np.complex128),
-                      np.empty((S, Kmax))))
+                      np.empty((S, Kmax))), np.ones(Kmax))
 
 
 @nb.njit(cache=True, inline="always")
@@ -583,9 +594,11 @@ def _sample_terms(lam, s, K, tau, e, em, am1, j, fs, t, stepped, steps):
 
 @nb.njit(cache=True, _nrt=False)
 def _free_run(tb, offset, side, tip, damped, y, active, t, bounds, c, t_samples, i_samp, t_after, out_y, out_W,
-              W, hmin, floor, max_events, n_stuck, out_E, E, seg_s, seg_tau, terms, stops, ytmp, dy, ay, fs, steps):
+              W, hmin, floor, max_events, n_stuck, out_E, E, seg_s, seg_tau, terms, stops, ytmp, dy, ay, fs, steps,
+              ones):
     """:func:`_free_kernel`'s march, on its scratch (``terms``: :func:`_term_scratch`, ``stops``:
-    :func:`_stop_scratch`, ytmp, dy, ay (2n,)). Compiled without numba's reference counting (``_nrt=False``:
+    :func:`_stop_scratch`, ytmp, dy, ay (2n,); ``ones`` (Kmax,) the march's bound factors: no growing terms, the
+    states decay or oscillate). Compiled without numba's reference counting (``_nrt=False``:
     it allocates nothing): every array passed to an inlined helper would otherwise cost two atomic
     reference counts per call, a fifth of the march's time on a small system."""
     (nK, lam, alam, UT, Uinv, aUinv, yp, BU, aBU, Byp, Wm, Hd, ip, ii, ik, ikind, icoef, iz) = tb
@@ -611,7 +624,7 @@ def _free_run(tb, offset, side, tip, damped, y, active, t, bounds, c, t_samples,
         n_live = _start(s, K, y, Uinv, aUinv, yp, BU, aBU, Byp, lam, alam, offset, side, active, floor, w, werr,
                         coef, lc, l2c, a0, const, qtol, dnoise, live, dy, ay)
         tau_ev, j_ev, it = _march(s, K, lam, alam, const, coef, lc, l2c, a0, qtol, dnoise, live, n_live, t_end - t,
-                                  hmin, e, ea, hprev, hnext, P)
+                                  hmin, e, ea, hprev, hnext, P, ones)
         if j_ev == -2:
             status = -3
             break
