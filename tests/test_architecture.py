@@ -28,7 +28,7 @@ APP_FLOORS = (
     ("bearingshaft.digits", "bearingshaft.progress", "bearingshaft.output", "bearingshaft.estimates",
      "bearingshaft.systems", "bearingshaft.plots", "bearingshaft.render", "bearingshaft.correlate",
      "bearingshaft.gap_modes", "bearingshaft.envelopes", "bearingshaft.measures",
-     "bearingshaft.measured"),
+     "bearingshaft.measured", "bearingshaft.reproduction"),
     ("bearingshaft.stages",),
     ("bearingshaft.registry",),
     ("bearingshaft.budget", "bearingshaft.pipeline"),

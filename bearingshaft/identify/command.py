@@ -6,7 +6,7 @@ and ``--window``, the results folder, the test file (:func:`bearingshaft.measure
 truncated file, NaN samples, channels sampled differently, no hammer channel, units that do not
 match, two records for one channel) and its channels against the model's; a refusal is one line
 with exit code 2 and nothing written. The files are written whole or not at all
-(:func:`bearingshaft.output.staged_output`), into ``results/<scene>/identify-<test file>/`` by default.
+(:func:`bearingshaft.output.staged_output`), into ``runs/<scene>/identify-<test file>/`` by default (git ignores runs/).
 """
 
 from __future__ import annotations
@@ -47,11 +47,11 @@ def add_parser(sub) -> None:
                        "Writes "
                        "identified.csv (parameter, unit, initial, value, ci_low, ci_high), correlation.csv, "
                        "weights.csv, misfit_history.csv, identify.md, identified_overlay.png and misfit_history.png "
-                       "into results/<scene>/identify-<test file>/ (or --out).")
+                       "into runs/<scene>/identify-<test file>/ (or --out).")
     p.add_argument("--scene", required=True, metavar="NAME_OR_TOML", help="built-in scene name or scene TOML file")
     p.add_argument("--test", required=True, dest="test_file", metavar="FILE.uff",
                    help="the measured test (UFF 58 time histories, its hammer channel drives the model)")
-    p.add_argument("--out", metavar="DIR", help="results folder (default: results/<scene>/identify-<test file>/)")
+    p.add_argument("--out", metavar="DIR", help="results folder (default: runs/<scene>/identify-<test file>/)")
     p.add_argument("--no-progress", action="store_true", help="print no line per pass")
     p.add_argument("--window", metavar="START:END", help="s, the part of the test fitted (default [identify] "
                    "window_s, else the record)")
@@ -127,7 +127,7 @@ def identify_command(args, load_scene) -> int:
     test_file = args.test_file
     if not Path(test_file).is_file():
         raise SceneError(f"--test: no such file {test_file!r}")
-    out = Path(args.out) if args.out else Path("results") / scene.name / f"identify-{Path(test_file).stem}"
+    out = Path(args.out) if args.out else Path("runs") / scene.name / f"identify-{Path(test_file).stem}"
     check_out_dir(out)
     test = measured.read_test(scene, test_file)
     window = _window(scene, args.window, test, test_file)

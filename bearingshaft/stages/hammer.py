@@ -19,6 +19,9 @@ found with a guarantee, :mod:`reduced.transient.exact`).
 - ``levels.csv``, ``levels.png``: the level sweep, one spectrogram per blow level;
 - ``hammer.md``: what happens, in numbers (peak tip forces, impacts, when the gaps stay
   open, which modes carry the energy at the end, energy balance);
+- ``lyapunov.csv``: the nominal record's largest Lyapunov exponent, from exact runs displaced by
+  1e-9 (:func:`record_lyapunov`): how long its chaotic numbers are comparable between two machines
+  (the reproduction report's horizon, :mod:`bearingshaft.reproduction`);
 - with ``[hammer] linear_check``: ``linear_check.csv`` and ``linear_check.png``, the
   open-gap response against the full 3-D model's modal superposition
   (:mod:`bearingshaft.stages.hammer_linear`);
@@ -46,6 +49,7 @@ from bearingshaft import measured
 from bearingshaft.estimates import COPIES, FLOAT, MATPLOTLIB_BYTES, Estimate, n_dofs
 from bearingshaft.output import StageWriter
 from bearingshaft.progress import bar as progress_bar
+from bearingshaft.reproduction import Reproduction, chaotic, exact, record, roundoff
 from bearingshaft.scenes import HammerSpec, Scene, SceneError
 from bearingshaft.stages import hammer_compare, hammer_linear
 from bearingshaft.stages.hammer_results import (
@@ -64,6 +68,13 @@ from reduced.models.rig import VirtualRig, virtual_rig
 LABEL_MAX_HZ = 100.0  # Hz, the pseudo-rigid modes are searched below this (Table 2: 10.9 to 33.7 Hz)
 END_SHARE_S = 0.1  # s, the energy "at the end" is the mean over the record's last 0.1 s
 OPEN_GAP_M = 1.0  # m, the linear check's gap: too large to close
+LYAPUNOV_SEEDS = 3  # exact runs of the nominal blow displaced by LYAPUNOV_DELTA after it: the record's largest Lyapunov
+# exponent (lyapunov.csv), from which the reproduction report computes how long its chaotic numbers are comparable;
+# as many as the ringdown stage's reference check (hammer-test: 300-380 /s, about 3.5 s a run, each stopped once the
+# separation saturates, ~0.05 s into the record)
+LYAPUNOV_DELTA = 1e-9  # relative (energy norm) size of the displacement, as the ringdown stage's reference check
+LYAPUNOV_SATURATION = 1e-3  # the separation has saturated at this fraction of the state's norm
+LYAPUNOV_WINDOW_S = 0.01  # s, windows over which the separation is maximized (a few periods of the 1737 Hz mode)
 DECAY_FLOOR = 1e-2  # a motion has decayed when its modal energy stays below this share of its peak
 
 
@@ -501,6 +512,9 @@ def _virtual_test(scene: Scene, rom, rig: VirtualRig, lm, labels: dict, stats: d
     for level in bar:
         records[level] = run_record(rig, blow(spec, level), scene, level)
     nominal = records[spec.peak_N]
+    # with friction the sliders' states are not in the record, so a displaced run could not start 1e-9 from it:
+    # no exponent (the report then says no horizon was measured)
+    lyapunov = record_lyapunov(rig, blow(spec, spec.peak_N), scene, nominal) if rig.system.friction is None else []
     curves = backbones(rig, spec.backbone_modes, float(np.max(nominal.energy)))
     summary = {level: level_summary(rig, rec, lm, labels) for level, rec in records.items()}
     linear = _linear_check(scene, rom, rig, progress) if spec.linear_check else None
@@ -511,6 +525,7 @@ def _virtual_test(scene: Scene, rom, rig: VirtualRig, lm, labels: dict, stats: d
     stats.update({"levels": {str(k): v for k, v in summary.items()},
                   "wall_s": {str(k): r.stats.get("wall_s") for k, r in records.items()}})
     line = _summary_line(scene, rig, nominal, summary[spec.peak_N], linear)
+    stats["lyapunov_exponent_per_s"] = [e.exponent_per_s for e in lyapunov]
     friction = None
     if rig.system.friction is not None:
         friction = friction_comparison(scene, rom, rig, nominal, lm, labels, summary[spec.peak_N])
@@ -518,7 +533,57 @@ def _virtual_test(scene: Scene, rom, rig: VirtualRig, lm, labels: dict, stats: d
                              "impacts": list(friction.impacts), "frictionless_wall_s":
                                  friction.frictionless.stats.get("wall_s")}
     return VirtualTest(scene=scene, rig=rig, labels=labels, records=records, summary=summary, backbones=curves,
-                       linear=linear, end_share_s=END_SHARE_S, stats=stats, lines=(line,), friction=friction)
+                       linear=linear, end_share_s=END_SHARE_S, stats=stats, lines=(line,), friction=friction,
+                       lyapunov=tuple(lyapunov))
+
+
+def record_lyapunov(rig: VirtualRig, signal, scene: Scene, rec: Record, seeds: int = LYAPUNOV_SEEDS) -> list:
+    """The largest Lyapunov exponent of a record's motion after the blow, from exact runs started
+    ``LYAPUNOV_DELTA`` away.
+
+    Once the hammer has let go (the first sample at or after the force's end, ``signal.end_s``) the
+    rig moves freely: each displaced run starts there, LYAPUNOV_DELTA (relative, energy norm) from the
+    record's state, and is run without force on the record's samples by the same integrator; the
+    separation of its state from the record's is fitted
+    (:class:`reduced.transient.compare.LyapunovAccumulator`). (From the start, at rest, the separation
+    would be measured against a state of zero norm.)
+
+    Parameters
+    ----------
+    rig : the virtual rig
+    signal : the hammer's force p(t), N (its ``end_s``: when it lets go)
+    scene : the scene ([ringdown]: integrator and options)
+    rec : the record (its exact states at its samples)
+    seeds : displaced runs (directions 0 .. seeds - 1)
+
+    Returns
+    -------
+    list of LyapunovEstimate, one per seed (none when the force lasts the whole record)
+    """
+    from reduced.transient.compare import LyapunovAccumulator, aligned, displaced_state
+    from reduced.transient.integrate import ringdown_stream
+    from reduced.transient.store import Chunk
+
+    system, rd = rig.system, scene.ringdown
+    fs = 1.0 / float(rec.t[1] - rec.t[0])
+    k0 = int(np.searchsorted(rec.t, float(signal.end_s) - 0.5 / fs))
+    if k0 >= len(rec.t) - 2 or not (np.any(rec.x[k0]) or np.any(rec.v[k0])):
+        return []
+    n = len(rec.t) - k0
+    after = [Chunk(0, rec.t[k0:] - rec.t[k0], rec.x[k0:], rec.v[k0:], rec.dissipated[k0:], system)]
+    out = []
+    for k in range(seeds):
+        x, v = displaced_state(system, rec.x[k0], rec.v[k0], LYAPUNOV_DELTA, k)
+        run = ringdown_stream(system, x, v, (n - 1) / fs, fs, rd.method, **solver_options(rd))
+        acc = LyapunovAccumulator(system, n, fs, LYAPUNOV_DELTA, LYAPUNOV_SATURATION, LYAPUNOV_WINDOW_S)
+        try:
+            for a, b in aligned(after, run):
+                if not acc.feed(a, b):
+                    break
+        finally:
+            run.close()
+        out.append(acc.result())
+    return out
 
 
 def motion_decay(rig: VirtualRig, rec: Record, lm, labels: dict, after_s: float) -> dict:
@@ -653,7 +718,8 @@ def write(result: VirtualTest | Comparison, writer: StageWriter) -> None:
 DESCRIPTION = """Strike the reduced apparatus with the scene's blow at every level and record every rig channel
 as a test's DAQ would (six triaxial beam accelerometers, four triaxial tube sensors, four tip
 load cells, the hammer). Writes hammer.npz, hammer.uff (UFF 58), channels.csv, fig10.png,
-fig11.png, levels.csv, levels.png, hammer.md and, with [hammer] linear_check, linear_check.csv
+fig11.png, levels.csv, levels.png, hammer.md, lyapunov.csv (the record's largest Lyapunov
+exponent) and, with [hammer] linear_check, linear_check.csv
 and linear_check.png. With --test FILE.uff, instead, a measured test drives the model by its
 hammer channel (through a force window) at the test's sampling and every channel is compared:
 where chaos starts (the predictability horizon, from two exact runs of the model and its largest
@@ -694,3 +760,23 @@ def estimate(scene: Scene) -> list[Estimate]:
 __all__ = ["compute", "write", "estimate", "DESCRIPTION", "run_record", "blow", "Record", "pseudo_rigid",
            "coupled_subsystem", "default_location", "impacts", "modal_energy_end", "backbones", "level_summary",
            "channel_backbones"]
+
+
+# -- the reproduction report (bearingshaft.reproduction): how these files compare with the reference -----
+IMPACTING = "of the impacting record, a chaotic motion"
+REPRODUCTION = Reproduction(lyapunov=("lyapunov.csv",), rules=(
+    record("hammer.uff", "not committed (.gitignore): the channels of hammer.npz"),
+    roundoff("levels.csv", "energy_balance_error"),
+    chaotic("levels.csv", "impacts*", "peak_contact_*", "gaps_open_after_s", "end_*",
+            why=f"impacts, peak tip forces, when the gaps stay open and where the energy ends {IMPACTING}"),
+    chaotic("hammer.md", r"^- (Impacts|Peak contact forces|The gaps stay open|Peak load-cell|Energy in the last|Chaos)",
+            r"^\| [0-9.]+ \| [0-9]+ \| ",
+            why=f"impacts, peak tip forces, when the gaps stay open and where the energy ends {IMPACTING}"),
+    exact("lyapunov.csv", "seed", "delta", "saturation", "window_s"),
+    chaotic("lyapunov.csv", why="Lyapunov exponents fitted to the separation of chaotic records 1e-9 apart"),
+    # with friction at the tips (friction.csv, hammer.md's friction section): both records impact
+    chaotic("friction.csv", "peak_J_*", "end_J_*", "t_1pct_s_*", why=f"energies and decay times {IMPACTING}"),
+    chaotic("hammer.md", r"^The nominal blow again with mu = 0", r"^\| [a-z]+ \| [0-9.]+ \| [0-9.e+-]+ / ",
+            r"^The spectrogram's channel after the blow",
+            why=f"impacts, friction work, energies and decay times with and without friction {IMPACTING}"),
+))

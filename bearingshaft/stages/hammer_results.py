@@ -150,6 +150,9 @@ class VirtualTest:
         For provenance.json.
     lines : tuple of str
         The stage's summary lines.
+    lyapunov : tuple of LyapunovEstimate
+        The nominal record's largest Lyapunov exponent, one estimate per displaced run
+        (:func:`bearingshaft.stages.hammer.record_lyapunov`).
     friction : FrictionComparison or None
         With friction at the tips (mu > 0), the nominal blow beside the frictionless one.
     """
@@ -164,6 +167,7 @@ class VirtualTest:
     end_share_s: float  # s, the energy "at the end" is the mean over the record's last end_share_s
     stats: dict  # for provenance.json
     lines: tuple[str, ...]  # the stage's summary lines
+    lyapunov: tuple = ()  # LyapunovEstimate per displaced run of the nominal blow
     friction: FrictionComparison | None = None  # the nominal blow with friction and without (mu > 0)
 
     @property

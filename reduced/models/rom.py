@@ -483,6 +483,13 @@ def build_rom(spec: RomSpec, fe=None, progress: bool = False) -> tuple[ReducedMo
         As :func:`reduced.models.craig_bampton.craig_bampton` (too few coupled modes) or
         :func:`fem.contact.mirror_map` (a mesh not symmetric in y, when planar).
     """
+    from fem._pardiso import fixed_threads
+
+    with fixed_threads():  # OpenBLAS on a fixed thread count: the same matrices whatever the machine's cores
+        return _build_rom(spec, fe, progress)
+
+
+def _build_rom(spec: RomSpec, fe, progress: bool) -> tuple[ReducedModel, object]:
     from fem.contact import contact_pairs, contact_rows, mirror_map, point_rows, tangential_rows
     from fem.model import build_system
     from reduced.models.craig_bampton import cb_check, craig_bampton
