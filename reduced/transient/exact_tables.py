@@ -505,7 +505,19 @@ def run_tables(system: GapSystem) -> dict:
 def cached_forced_table(tables: dict, loads) -> ForcedTable:
     """:func:`forced_table` of the run system of ``tables`` (:func:`run_tables`) under ``loads``, kept per
     system for the last TABLE_CACHE_SIZE load sets (identified by their directions and frequencies:
-    the table does not depend on the amplitudes or the time histories)."""
+    the table does not depend on the amplitudes or the time histories).
+
+    Parameters
+    ----------
+    tables : dict
+        The run's tables, from :func:`run_tables`.
+    loads : object
+        The loads (``b``, their rows, and ``omegas()``, their frequencies).
+
+    Returns
+    -------
+    ForcedTable
+    """
     b = np.ascontiguousarray(loads.b, dtype=float)
     key = _fingerprint(b, np.asarray(loads.omegas(), dtype=float))
 
