@@ -42,6 +42,7 @@ import numpy as np
 from bearingshaft.estimates import FLOAT, HILL_COPIES, Estimate, n_dofs
 from bearingshaft.output import StageWriter
 from bearingshaft.progress import bar as progress_bar
+from bearingshaft.reproduction import Reproduction, chaotic, exact, sensitive, within
 from bearingshaft.scenes import Scene
 from bearingshaft.stages.frc_map import compute_maps
 from bearingshaft.stages.frc_results import ConvergedCurve, ConvergenceRun, FRCResult, PointCheck
@@ -720,3 +721,44 @@ def write(result, writer) -> None:
     from bearingshaft.stages import frc_files
 
     frc_files.write(result, writer)
+
+
+# -- the reproduction report (bearingshaft.reproduction): how these files compare with the reference -----
+CONTINUATION = ("the points of an HB continuation through folds: its step path is set by the last bits of each Newton "
+                "solve, which another CPU changes")
+MAP_CHAOS = "the stepped sine's response at a chaotic or quasi-periodic frequency"
+MAP_AFTER = ("the stepped sine after a chaotic, quasi-periodic or unsettled frequency: it arrives with a state "
+             "round-off set, so which attractor it settles on and its transient are too")
+MAP_AMPLITUDE = ("amplitudes of a settled response, written to 10 digits: a reduced model's matrices move by ~1e-8 "
+                 "between machines, which a resonance magnifies")
+MAP_GRID = ("the response map's fine grid spans the contact band of the HB curve, whose points are set by its step "
+            "path (" + CONTINUATION + ")")
+REPRODUCTION = Reproduction(rules=(
+    sensitive("frc.csv", why=CONTINUATION),
+    sensitive("frc_harmonics.csv", why=CONTINUATION),
+    sensitive("frc_bifurcations.csv", why=CONTINUATION + " (the folds and bifurcations found between its points)"),
+    sensitive("frc_stability.csv", why=CONTINUATION + " (stability at those points)"),
+    sensitive("frc_convergence.csv", why=CONTINUATION + " (points, reach, folds and errors at the points)"),
+    sensitive("stepped_sine.csv", why="the stepped sine at the HB curve's points, compared with HB there: "
+              + CONTINUATION),
+    # each peak is the parabola through the continuation's points around the largest amplitude: it moves with them
+    within("frc_backbone.csv", "peak_freq_hz", "peak_amplitude_m", rtol=1e-4,
+           why="peaks refined from the continuation's points, which round-off moves (6e-6 between two machines)"),
+    within("frc_backbone.csv", "log_distance", atol=1e-5,
+           why="distances from the backbone below 1e-5 are the peak's location error"),
+    # the response map (frc_map_files): the fine grid covers the contact band the HB curve found (so a continuation
+    # that lands elsewhere may add or drop a frequency: the rows are sensitive); at a chaotic, quasi-periodic or
+    # unsettled frequency everything is chaotic, and after one the sweep arrives with a state round-off set (which
+    # attractor it settles on): sensitive; before, the stepped sine is deterministic: its regimes, periods, exponents
+    # and counts exact, its amplitudes to 1e-6 (a reduced model's matrices move by ~1e-8 between machines, which a
+    # resonance magnifies)
+    chaotic("response_map.csv", "*", rows=r"^(?:[^,]*,){3}(?:chaotic|quasi_periodic),", why=MAP_CHAOS),
+    chaotic("response_map.csv", "*", rows=r"^(?:[^,]*,){13}false,", why="an unsettled frequency of the stepped sine "
+            "(no return after the longest run: transient chaos)"),
+    chaotic("response_map_jumps.csv", "*", rows=r"^(?:[^,]*,){4,5}(?:chaotic|quasi_periodic),", why=MAP_CHAOS),
+    sensitive("response_map*.csv", "*", rows=r",true$", why=MAP_AFTER),
+    within("response_map.csv", "x1_*", "max_abs_mu", rtol=1e-6, why=MAP_AMPLITUDE),
+    within("response_map_jumps.csv", "x1_*", rtol=1e-6, why=MAP_AMPLITUDE),
+    exact("response_map*.csv", "*"),
+    sensitive("response_map*.csv", why=MAP_GRID),
+), lyapunov=("response_map.csv:lyapunov_per_s",))
