@@ -471,7 +471,8 @@ class FRCSpec:
     family_steps : int
         Points of a switched family at most.
     switching_max_s : float
-        s per level after which no new family is started.
+        s of wall time per level after which no new family is started; 0 (the default): no such limit, so the
+        families found do not depend on the machine or its load.
     shooting_steps : int
         Points of the main exact family at most.
     map_step_hz : float
@@ -503,8 +504,7 @@ class FRCSpec:
     stepped_sine_tol: float = 1e-6  # settled when the predicted distance to the periodic orbit is below this
     stepped_sine_max_s: float = 10.0  # s, simulated time per frequency at most before "not settled"
     backbone_scales: tuple[float, ...] = (1.0, 0.1, 0.01)  # damping and load scaled together (backbone check)
-    # the response map (issue 25): a stepped sine classified by the exact flow and its Lyapunov exponent
-    map_step_hz: float = 0.1  # Hz, step over the contact band (0: no map)
+    map_step_hz: float = 0.1  # Hz, step of the response map (stepped sine by the exact flow), contact band (0: no map)
     map_coarse_points: int = 24  # log-spaced frequencies over the band outside the contact band
     map_periods: int = 128  # forcing periods recorded at each frequency
     curve: str = "auto"  # the drawn curve: "hb", "shooting" (exact flow) or "auto" (HB where converged in H)
@@ -512,7 +512,7 @@ class FRCSpec:
     branch_switching: bool = True  # follow the families born at pitchforks and period doublings
     max_families: int = 12  # families switched onto per level at most
     family_steps: int = 3000  # points of a switched family at most
-    switching_max_s: float = 300.0  # s, wall time per level after which no new family is started
+    switching_max_s: float = 0.0  # s, wall time per level after which no new family is started (0: none, reproducible)
     shooting_steps: int = 30000  # points of the main exact family at most
 
     def __post_init__(self) -> None:
@@ -535,7 +535,7 @@ class FRCSpec:
         each(self, "backbone_scales", lambda v: 0 < v <= 1, "in (0, 1] (damping and load scaled down together)")
         check(self.curve in FRC_CURVES, f"curve must be one of {', '.join(FRC_CURVES)}, got {self.curve!r}")
         tolerance(self, "hb_converged_tol")
-        positive(self, "switching_max_s")
+        check(self.switching_max_s >= 0, f"switching_max_s must be >= 0 s, got {self.switching_max_s!r}")
         for key in ("max_families", "family_steps", "shooting_steps"):
             check(getattr(self, key) >= (0 if key == "max_families" else 1),
                   f"{key} must be >= {0 if key == 'max_families' else 1}, got {getattr(self, key)!r}")

@@ -259,7 +259,7 @@ def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: 
     S = spec.shooting_segments + spec.shooting_segments % 2
     opts = ExactFRCOptions(segments=S, branch_switching=spec.branch_switching, max_families=spec.max_families,
                            family_steps=spec.family_steps, max_steps=spec.shooting_steps,
-                           deadline_s=spec.switching_max_s)
+                           deadline_s=spec.switching_max_s or math.inf)
     try:
         if ok:  # the HB orbits at f_min, then at points spread over the curve (where HB is far from exact)
             idx = np.concatenate([[0], _evenly(len(br.freq_hz), START_GUESSES)[1:]])
