@@ -10,6 +10,11 @@ results folder without running anything), ``sweep`` (a scene over a design of pa
 ``scenes`` (``--show NAME`` prints one) and ``keys`` (every table and key of a scene).
 Bad input gives a one-line message and exit code 2, before any work starts; nothing
 half-written is left behind. Every command ends with a summary naming the results folder.
+
+Results go to ``runs/<scene>/`` (a folder the repository ignores); the committed ``results/<scene>/``
+folders are the reference, written only with ``--update-reference``. ``run`` ends with the
+reproduction report (:mod:`bearingshaft.reproduction`): ``runs/reproduction.md`` and ``.csv``, and
+exit code 1 if a deterministic number did not reproduce the reference.
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ import time
 from pathlib import Path
 
 from bearingshaft import __version__
-from bearingshaft.budget import available_bytes, check_budget, estimates
+from bearingshaft.budget import available_bytes, check_budget, job_bytes, job_peaks
 from bearingshaft.digits import human
 from bearingshaft.output import check_out_dir
 from bearingshaft.progress import run_total
@@ -31,6 +36,8 @@ from reduced._checks import one_line
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
+RUNS = Path("runs")  # where results go by default (.gitignore'd)
+REFERENCE = Path("results")  # the committed reference, written only with --update-reference
 
 
 class UserError(Exception):
@@ -40,7 +47,8 @@ class UserError(Exception):
 def _add_common(p: argparse.ArgumentParser, scene_required: bool = True) -> None:
     p.add_argument("--scene", required=scene_required, metavar="NAME_OR_TOML",
                    help="built-in scene name or path to a scene TOML file")
-    p.add_argument("--out", metavar="DIR", help="results folder (default: results/<scene>/)")
+    p.add_argument("--out", metavar="DIR", help="results folder (default: runs/<scene>/)")
+    _add_update_reference(p)
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
 
 
@@ -50,6 +58,12 @@ def _workers(text: str) -> int:
     if n < 1:
         raise ValueError(text)
     return n
+
+
+def _add_update_reference(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--update-reference", action="store_true",
+                   help="write into results/<scene>/, the committed reference, instead of runs/<scene>/ "
+                   "(review the change with git diff before committing it)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -69,12 +83,19 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="every stage of the named scenes (all built-in scenes if none)",
                        description="Run every stage of the named scenes (all built-in scenes if none is named), every "
                        "scene validated first. Writes each stage's files, as its subcommand would, into the results "
-                       "folder <out>/<scene>/; prints a summary line per stage and a total (stages, wall time, peak "
-                       "memory). Several scenes run side by side on Dask (a local cluster of one worker per core, "
-                       "as many as the memory estimates allow, or --scheduler), the longest first; a scene's stages "
-                       "run in order.")
+                       "folder <out>/<scene>/ (default runs/, which git ignores; --update-reference: results/) and "
+                       "prints a summary line per stage; then compares every stage's files with the reference "
+                       "results/<scene>/, writes the reproduction report <out>/reproduction.md and .csv and prints "
+                       "its summary (exit 1 if a deterministic number did not reproduce); a total line last (stages, "
+                       "wall time, peak memory). Several scenes run side by side on Dask (a local cluster of one "
+                       "worker per core, as many as the memory estimates allow, or --scheduler), the longest first; "
+                       "a scene's stages run in order.")
     p.add_argument("scenes", nargs="*", metavar="SCENE", help="scene names or TOML files")
-    p.add_argument("--out", metavar="DIR", help="parent folder of the results (default: results/)")
+    p.add_argument("--out", metavar="DIR", help="parent folder of the results (default: runs/); the reproduction "
+                   "report goes there too")
+    _add_update_reference(p)
+    p.add_argument("--reference", metavar="DIR", help="parent folder of the reference results (default: ./results/, "
+                   "else the checkout's results/)")
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
     p.add_argument("--workers", metavar="N", type=_workers, help="worker processes of the local cluster (default: "
                    "one per core, fewer if the memory estimates say so; 1: one scene after the other in this process)")
@@ -85,7 +106,7 @@ def build_parser() -> argparse.ArgumentParser:
                        "the results folder can be written. Runs nothing and writes nothing; a line per scene.")
     p.add_argument("scenes", nargs="*", metavar="SCENE", help="scene names or TOML files (all built-in if none)")
     p.add_argument("--scene", dest="scene_opt", metavar="NAME_OR_TOML", help="one scene (as for the stages)")
-    p.add_argument("--out", metavar="DIR", help="results folder to check (default: results/<scene>/)")
+    p.add_argument("--out", metavar="DIR", help="results folder to check (default: runs/<scene>/)")
     p = sub.add_parser("scenes", help="list the built-in scenes, or print one (--show NAME)",
                        description="List the built-in scenes with their stages and descriptions, or print one "
                        "scene's TOML (--show NAME) to start a scene of your own from. Writes nothing.")
@@ -102,10 +123,12 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Run a scene over a design of parameter values ([sweep] or --vary) on Dask, every "
                        "case validated first. Writes a folder per case, sweep.parquet and sweep.csv (a row per "
                        "case: its values, metrics and status), sweep.png, sweep_provenance.json and "
-                       "sweep_scene.toml into results/<scene>/sweep/ (or --out); finished cases are resumed.")
+                       "sweep_scene.toml into runs/<scene>/sweep/ (--update-reference: results/, or --out); "
+                       "finished cases are resumed.")
     p.add_argument("--scene", required=True, metavar="NAME_OR_TOML", help="built-in scene name or scene TOML file")
     p.add_argument("--out", metavar="DIR", help="folder of the case folders and tables (default: "
-                   "results/<scene>/sweep/)")
+                   "runs/<scene>/sweep/)")
+    _add_update_reference(p)
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     p.add_argument("--vary", action="append", metavar="KEY=VALUES",
                    help="a varied scene key and its values, repeatable: model.gap=1e-4:1e-3:9:log (N values, log or "
@@ -118,19 +141,48 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", metavar="N", help="worker processes of the local cluster (default: one per core)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run on this Dask scheduler (tcp://host:8786) instead")
     # -- end issue 13 --
+    from bearingshaft.identify.command import add_parser as add_identify  # issue 26: fit the model to a test
+
+    add_identify(sub)
     return parser
 
 
-def _out_dir(arg: str | None, scene_name: str, parent: bool = False) -> Path:
+def default_parent(update_reference: bool = False) -> Path:
+    """The parent of the results folders: ``runs/``, or ``results/`` (the reference) with ``--update-reference``.
+
+    Parameters
+    ----------
+    update_reference : bool
+        Write the committed reference.
+
+    Returns
+    -------
+    Path
+    """
+    return REFERENCE if update_reference else RUNS
+
+
+def reference_root() -> Path:
+    """The reference the report reads: ``./results`` (where ``--update-reference`` writes), else the
+    ``results/`` of the checkout this package runs from."""
+    if REFERENCE.is_dir():
+        return REFERENCE
+    here = Path(__file__).resolve().parent.parent / "results"
+    return here if here.is_dir() else REFERENCE
+
+
+def _out_dir(arg: str | None, scene_name: str, parent: bool = False, update_reference: bool = False) -> Path:
     if arg is None:
-        return Path("results") / scene_name
+        return default_parent(update_reference) / scene_name
+    if update_reference:
+        raise UserError("--update-reference writes results/<scene>/: give it or --out, not both")
     return Path(arg) / scene_name if parent else Path(arg)
 
 
-def _validated(name: str, out_arg: str | None, parent: bool) -> tuple[Scene, Path]:
+def _validated(name: str, out_arg: str | None, parent: bool, update_reference: bool = False) -> tuple[Scene, Path]:
     """A scene, its memory estimates and its results folder checked, before any work."""
     scene = load_scene(name)
-    out = _out_dir(out_arg, scene.name, parent)
+    out = _out_dir(out_arg, scene.name, parent, update_reference)
     check_out_dir(out)
     check_budget(scene, out)
     return scene, out
@@ -139,16 +191,41 @@ def _validated(name: str, out_arg: str | None, parent: bool) -> tuple[Scene, Pat
 def _check(args) -> int:
     names = ([args.scene_opt] if args.scene_opt else []) + args.scenes or builtin_names()
     single = len(names) == 1 and args.scene_opt is not None
+    scenes = []
     for name in names:
         scene, out = _validated(name, args.out, parent=not single)
-        ests = estimates(scene)
-        peak = f"peak memory about {human(max(e.bytes for e in ests))}" if ests else "3-D model: memory not estimated"
+        scenes.append(scene)
+        peaks = job_peaks([scene])
+        each = ", ".join(f"{p.stage} {human(p.bytes)}" + (" (builds the 3-D model)" if p.builds_model else "")
+                         for p in peaks)
+        peak = f"peak memory about {human(job_bytes(peaks))} ({each})" if peaks else "no stage"
         cases = _check_sweep(scene, out / "sweep") if scene.sweep is not None and scene.sweep.vary else None
         print(f"{scene.name}: valid; stages {', '.join(stages_of(scene)) or 'none'}; {peak} "
               f"of {human(available_bytes())} available; results in {out}")
         if cases:
             print(cases)
+    if len(scenes) > 1:
+        print(job_line(scenes))
     return 0
+
+
+def job_line(scenes: list[Scene]) -> str:
+    """The whole job's estimate: its stages in one process, as ``bearingshaft run`` runs them.
+
+    Parameters
+    ----------
+    scenes : list of Scene
+        In the order they run.
+
+    Returns
+    -------
+    str
+        One line: stages, scenes, the job's peak (:func:`bearingshaft.budget.job_bytes`) and the largest stage's.
+    """
+    peaks = job_peaks(scenes)
+    return (f"job: {len(peaks)} stages of {len(scenes)} scenes in one process: peak memory about "
+            f"{human(job_bytes(peaks))} (largest stage {human(max((p.bytes for p in peaks), default=0))}, with what "
+            f"the stages before it leave resident; bearingshaft.budget.job_bytes)")
 
 
 def _check_sweep(scene: Scene, out: Path) -> str:
@@ -208,27 +285,37 @@ def main(argv: list[str] | None = None) -> int:
             from bearingshaft.sweep import sweep_command
 
             return sweep_command(args, load_scene)
+        if args.command == "identify":  # issue 26
+            from bearingshaft.identify.command import identify_command
+
+            return identify_command(args, load_scene)
         progress = not args.no_progress
         if args.command == "run":
             names = args.scenes or builtin_names()
-            runs = [_validated(n, args.out, parent=True) for n in names]  # validate all before running any
+            runs = [_validated(n, args.out, True, args.update_reference) for n in names]  # all before any runs
             n_stages = sum(len(stages_of(s)) for s, _ in runs)
             if len(runs) > 1 and (args.workers != 1 or args.scheduler):
                 from bearingshaft.jobs import run_job
 
                 given = [(n, s, o) for n, (s, o) in zip(names, runs, strict=True)]
                 job = run_job(given, stages_of, workers=args.workers, scheduler=args.scheduler, progress=progress)
-                print(run_total(n_stages, len(runs), job.wall_s, job.peak_bytes, job.workers))
-                return EXIT_FAILED if job.failed else 0
+                code = _reproduction(args, runs)
+                print(run_total(n_stages, len(runs), job.wall_s, job.peak_bytes, job.workers))  # the last line
+                return EXIT_FAILED if job.failed else code
+            print(job_line([s for s, _ in runs]), flush=True)  # in this one process
             t_run = time.perf_counter()
             for scene, out in runs:
                 pipeline.run_scene(scene, out, progress=progress)
-            print(run_total(n_stages, len(runs), time.perf_counter() - t_run))
-            return 0
+            wall_s = time.perf_counter() - t_run
+            code = _reproduction(args, runs)
+            print(run_total(n_stages, len(runs), wall_s))  # the last line
+            return code
         test = getattr(args, "test_file", None)
         if test is not None and args.out is None:  # a comparison never mixes with the scene's own files
-            args.out = str(Path("results") / load_scene(args.scene).name / f"test-{Path(test).stem}")
-        scene, out = _validated(args.scene, args.out, parent=False)
+            args.out = str(default_parent(args.update_reference) / load_scene(args.scene).name
+                           / f"test-{Path(test).stem}")
+            args.update_reference = False
+        scene, out = _validated(args.scene, args.out, False, args.update_reference)
         if test is not None and not Path(test).is_file():
             raise UserError(f"--test: no such file {test!r}")
         options = {o.name: getattr(args, o.name) for o in BY_NAME[args.command].options
@@ -252,6 +339,24 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+
+
+def _reproduction(args, runs: list[tuple[Scene, Path]]) -> int:
+    """The reproduction report of ``run`` (none when it rewrote the reference); the exit code."""
+    from bearingshaft import reproduction
+
+    if args.update_reference:
+        print(f"reference updated: {', '.join(str(out) for _, out in runs)} (review with git diff)", flush=True)
+        return 0
+    reference = Path(args.reference) if args.reference else reference_root()
+    specs = {s.name: s.reproduction for s in STAGES}
+    rows = []
+    for scene, out in runs:
+        rows += reproduction.compare_scene(scene.name, out, reference / scene.name, specs, stages_of(scene))
+    parent = Path(args.out) if args.out else default_parent()
+    path = reproduction.write_report(rows, parent, reference)
+    print(reproduction.summary(rows, path), flush=True)
+    return EXIT_FAILED if reproduction.failed(rows) else 0
 
 
 if __name__ == "__main__":

@@ -47,12 +47,12 @@ def full_gap_modes(fe, spec, n_modes: int = N_FULL_MODES, Psi: np.ndarray | None
 
 
 def expand(rom: ReducedModel, q: np.ndarray) -> np.ndarray:
-    """Full displacements u = Psi q_b + Phi eta of reduced coordinates q = [x1, x3, eta].
+    """Full displacements u = Psi q_b + Phi eta of reduced coordinates q = [x1, x3, (tangential,) eta].
 
     Parameters
     ----------
     rom : ReducedModel
-        The reduced model (its Psi (N, 2) and Phi (N, n - 2)).
+        The reduced model (its Psi (N, nb) and Phi (N, n - nb), nb = 2 or, with friction, more).
     q : (n, ...) array
         Reduced coordinates, one column per state or mode.
 
@@ -61,7 +61,7 @@ def expand(rom: ReducedModel, q: np.ndarray) -> np.ndarray:
     (N, ...) array
         The displacements of the full model's DOFs.
     """
-    return rom.Psi @ q[:2] + rom.Phi @ q[2:]
+    return rom.Psi @ q[:rom.nb] + rom.Phi @ q[rom.nb:]
 
 
 @dataclass(frozen=True, eq=False)

@@ -31,6 +31,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from bearingshaft.reproduction import Reproduction
 from bearingshaft.scenes import Scene
 from bearingshaft.stages import frc, frf, hammer, modal, nnm, reduce, ringdown, study, verify
 
@@ -84,6 +85,8 @@ class Stage:
         What the subcommand does and writes (``bearingshaft NAME --help``).
     options : tuple of Option
         Its command-line options.
+    reproduction : Reproduction
+        How its files compare with the committed reference (:mod:`bearingshaft.reproduction`).
     """
 
     name: str
@@ -95,51 +98,61 @@ class Stage:
     help: str  # one line in `bearingshaft --help`
     description: str  # what the subcommand does and writes (`bearingshaft NAME --help`)
     options: tuple[Option, ...] = field(default=())
+    reproduction: Reproduction = field(default=Reproduction())  # how its files compare with the reference
 
 
 STAGES: tuple[Stage, ...] = (
     Stage("modal", "[modal]", lambda s: s.modal is not None, modal.compute, modal.write, modal.estimate,
           help="build the mesh and run the modal analysis of a 3-D scene",
-          description=modal.DESCRIPTION),
+          description=modal.DESCRIPTION,
+          reproduction=modal.REPRODUCTION),
     Stage("reduce", '[model] kind = "rom"', lambda s: s.model_kind == "rom", reduce.compute, reduce.write,
           reduce.estimate, help="reduce the 3-D model to its tips (Craig-Bampton): rom.npz, cb_check.csv",
-          description=reduce.DESCRIPTION),
+          description=reduce.DESCRIPTION,
+          reproduction=reduce.REPRODUCTION),
     Stage("ringdown", "[ringdown]", lambda s: s.ringdown is not None and s.hammer is None,  # [hammer] records its own
           ringdown.compute, ringdown.write, ringdown.estimate,
           help="free (or forced) response from the scene's initial state",
           description=ringdown.DESCRIPTION,
           options=(Option("--method", "method", "integrator (default: the scene's, else exact)",
-                          choices=("exact", "explicit", "dop853")),)),
+                          choices=("exact", "explicit", "dop853")),),
+          reproduction=ringdown.REPRODUCTION),
     Stage("hammer", "[hammer]", lambda s: s.hammer is not None, hammer.compute, hammer.write, hammer.estimate,
           help="virtual hammer test of the apparatus, every rig channel (UFF 58 out); --test FILE.uff compares a "
                "measured test",
           description=hammer.DESCRIPTION,
           options=(Option("--test", "test_file", "a measured test (UFF 58 time histories): the model is run at its "
                           "sampling, driven by its hammer channel, and compared channel for channel (default results "
-                          "folder: results/<scene>/test-<file name>/)", metavar="FILE.uff"),
+                          "folder: runs/<scene>/test-<file name>/)", metavar="FILE.uff"),
                    Option("--window", "window", "with --test: the compared window in seconds (default [hammer] "
                           "compare_window_s, else the record)", metavar="START:END"),
                    Option("--measures", "measures", "with --test: the measures, comma separated, among time, ridges, "
-                          "envelope, impacts, open, backbone (default all)", metavar="LIST"))),
+                          "envelope, impacts, open, backbone (default all)", metavar="LIST")),
+          reproduction=hammer.REPRODUCTION),
     Stage("frf", "[frf]", lambda s: s.frf is not None, frf.compute, frf.write, frf.estimate,
           help="FRFs (H1, H2, coherence) and modal parameters (pLSCF, LSFD, MAC) of a hammer test; --test FILE.uff "
                "for a measured one",
           description=frf.DESCRIPTION,
           options=(Option("--test", "test_file", "a measured test (UFF 58 time histories of repeated blows: each force "
                           "record opens a blow) instead of the virtual one (default results folder: "
-                          "results/<scene>/test-<file name>/)", metavar="FILE.uff"),)),
+                          "runs/<scene>/test-<file name>/)", metavar="FILE.uff"),),
+          reproduction=frf.REPRODUCTION),
     Stage("nnm", "[nnm]", lambda s: s.nnm is not None or s.fep is not None, nnm.compute, nnm.write,
           nnm.estimate, help="frequency-energy relations of the nonlinear normal modes",
-          description=nnm.DESCRIPTION),
+          description=nnm.DESCRIPTION,
+          reproduction=nnm.REPRODUCTION),
     Stage("study", "[work_precision], [stiff_cases] or [rom_convergence]",
           lambda s: s.work_precision is not None or s.stiff_cases is not None or s.rom_convergence is not None,
           study.compute, study.write, study.estimate, help="error against run time, stiff and extreme cases",
-          description=study.DESCRIPTION),
+          description=study.DESCRIPTION,
+          reproduction=study.REPRODUCTION),
     Stage("verify", "[verify]", lambda s: s.verify is not None, verify.compute, verify.write, verify.estimate,
-          help="verify the reduced model against the discrete model", description=verify.DESCRIPTION),
+          help="verify the reduced model against the discrete model", description=verify.DESCRIPTION,
+          reproduction=verify.REPRODUCTION),
     Stage("frc", "[frc]", lambda s: s.frc is not None, frc.compute, frc.write, frc.estimate,
           help="forced-response curves by harmonic balance, stepped sine and stability",
-          description=frc.DESCRIPTION),
+          description=frc.DESCRIPTION,
+          reproduction=frc.REPRODUCTION),
 )
 
 BY_NAME: dict[str, Stage] = {s.name: s for s in STAGES}

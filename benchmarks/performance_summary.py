@@ -67,11 +67,20 @@ LIMITS = (
      "of latency a step instead of about four) were slower under this load (more flops on a shared core), "
      "and were not kept"),
     ("exact vs DOP853 restarted at every crossing",
-     "the exact run costs 1.7 us a contact event with its output samples (12,780 events and 40,000 samples "
-     "in 21.6 ms on the 2 s window), within the 1-2 us the issue names as the limit of that work, and the "
-     "same at any error; DOP853 at the loosest rtol that reaches the error asked is cheap (1e-10 for 1e-6 on "
-     "the 0.2 s window), and its relative speed moves with the machine (below): these rows met 1000x at "
-     "1e-8 on the earlier machine and miss it here"),
+     "the exact run's kernel (perf, issue 28) spends about a quarter of its time in libm (sincos, exp, expm1 of "
+     "the terms e^{lam tau} at each march step) and most of the rest in the march's chains of dependent sqrt "
+     "and divisions (the safe steps); its set-up (eigen-decompositions and modal tables, ~1 ms at load 1) is "
+     "kept across runs of one system, so a first run is slower (the row's second figure); DOP853 at the "
+     "loosest rtol that reaches the error asked is cheap (1e-10 for 1e-6 on the 0.2 s window), and its "
+     "relative speed moves with the machine and its load (below)"),
+    ("exact ringdown, discrete-impulse",
+     "the machine's load (integrator_machine.csv: 10-16 on 2 cores during the issue-28 runs, when the 3-DOF "
+     "explicit kernel, 6.4e7 steps/s at load ~1, ran at 1e7); in alternating same-process runs the free "
+     "kernel is 1.6x the one before issue 28 (13.6 against 21.8 ms CPU on the 2 s window, "
+     "reduced/transient/_modal.py)"),
+    ("exact, hammer-test model",
+     "the machine's load (integrator_machine.csv: 10-16 on 2 cores during the issue-28 runs; this row was met "
+     "at load ~1 with the same per-sample code)"),
     ("FE modal, 112,629 DOFs, 16 modes: mesh",
      "measured at load 12-21 on 2 cores (2026-11-26; wall times 4-10x the CPU times, PARDISO on one thread): "
      "7.4x in CPU seconds (15.2 s against 112 s), 5.7x in wall time. Of ours, in CPU: the PARDISO "

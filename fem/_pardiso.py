@@ -6,7 +6,11 @@ On a shared 2-core machine two thread pools fighting for the cores cost more tha
 arithmetic: MKL's OpenMP threads and numpy's/scipy's OpenBLAS threads both spin-wait, and a
 112629 x 32 Gram product that takes 0.012 s on one thread took 6 s beside a PARDISO solve.
 :func:`blas_threads` pins OpenBLAS to one thread while the eigensolver runs (its dense work
-is tall-skinny and memory-bound), and PARDISO gets the cores that are free (:func:`free_cores`).
+is tall-skinny and memory-bound), and PARDISO runs on a fixed number of threads
+(:func:`solver_threads`: one, unless ``BEARINGSHAFT_THREADS`` says otherwise), so that a run
+gives the same bits whatever the machine's load and core count (1 and 2 threads round
+differently); :func:`fixed_threads` holds OpenBLAS to the same count around the model builds
+(modal analysis, Craig-Bampton reduction) whose bits depend on it.
 """
 
 from __future__ import annotations
@@ -66,6 +70,21 @@ def has_pardiso() -> bool:
     except (ImportError, OSError):
         return False
     return True
+
+
+DEFAULT_THREADS = 1  # PARDISO's and the model builds' OpenBLAS threads unless BEARINGSHAFT_THREADS is set: a count
+# that followed the machine's load (PARDISO) or its cores (OpenBLAS) made the results depend on them (assembly-modal:
+# the bungee modes' frequencies moved by 3e-4 between 1 and 2 PARDISO threads; the reduced apparatus's matrices by
+# 2e-10 of their largest entry between 1 and 2 OpenBLAS threads, which a chaotic hammer record magnifies); one thread
+# gives the same bits on every run: at load 6-7 on this 2-core machine it was 2-2.5x faster than two, on a quiet one
+# the 112,629-DOF modal analysis 6 % faster (results/fixed-threads/, results/performance/modal_speed.csv)
+
+
+def solver_threads() -> int:
+    """Threads of PARDISO and of the model builds' BLAS: ``BEARINGSHAFT_THREADS`` if set, else
+    :data:`DEFAULT_THREADS` (fixed, so that a run does not depend on the machine's load or cores)."""
+    env = os.environ.get("BEARINGSHAFT_THREADS")
+    return max(1, int(env)) if env else DEFAULT_THREADS
 
 
 def free_cores() -> int:
@@ -154,7 +173,7 @@ class PardisoCholesky:
     A : (n, n) sparse matrix
         Symmetric positive definite; only its upper triangle is read (duplicates summed).
     n_threads : int, optional
-        MKL threads (default: :func:`free_cores`).
+        MKL threads (default: :func:`solver_threads`, fixed: the same bits whatever the load).
     iparm : dict of int to int, optional
         PARDISO control entries (zero-based index: value) that override ``IPARM``.
     upper : bool
@@ -184,7 +203,7 @@ class PardisoCholesky:
         import time
 
         self._lib = libmkl()
-        self.n_threads = free_cores() if n_threads is None else int(n_threads)
+        self.n_threads = solver_threads() if n_threads is None else int(n_threads)
         if upper:  # already the upper triangle, canonical CSR (fem._assembly.upper_sum)
             U = sp.csr_matrix(A)
         else:
@@ -248,3 +267,16 @@ class PardisoCholesky:
     def __del__(self) -> None:
         with contextlib.suppress(Exception):
             self.free()
+
+
+@contextlib.contextmanager
+def fixed_threads():
+    """OpenBLAS held to :func:`solver_threads` inside the block: a model build (factorizations,
+    ARPACK, dense products) then gives the same bits whatever the machine's core count.
+
+    Yields
+    ------
+    None
+    """
+    with blas_threads(solver_threads()):
+        yield

@@ -19,6 +19,20 @@ one scalar gap per tip results. The tip acts as a two-sided clearance on s_i wit
 applied to the structure as r_i f_i (u' = K u + sum_i r_i f_i(r_i . u) in the equation of
 motion). The *tied* (closed-gap) linearization is K + k_g sum_i r_i r_i^T: one tip of each
 pair closed, the stiffest linear state, whose modes sit beside the open-gap ones.
+
+**Tangential coordinates** (friction, :func:`tangential_rows`): where a tip touches, the beam may
+slide along (x, *axial*) and across (y, *lateral*) the tip's face. The upper tip touches the top
+patch and the lower tip the bottom one, and the two faces slide differently (a pitch of the beam
+end moves its top face along x by -h/2 theta_y and its bottom face by +h/2 theta_y), so each stop has
+its own tangential coordinates, built as the gap's: the mean displacement along x (or y) of that
+face's patch nodes, a distributing row that adds no stiffness, less that of the tip's seat on the tube
+in the ``assembly`` layout (the tip assembly, short and stiff, moves with its seat, as for the gap):
+
+    t = mean ux(beam patch, top) - mean ux(tube seat, top)       (stop x1+, axial),
+
+and likewise for the bottom face (x1-), across (uy), and at x3. Tied *and sticking* (every tip's
+upper stop closed, its sliders stuck), the linearization adds their tangential springs,
+K + k_g sum_i r_i r_i^T + k_t sum_{upper} t t^T (:func:`tied_stiffness` with ``sliders``).
 """
 
 from __future__ import annotations
@@ -29,6 +43,8 @@ import numpy as np
 import scipy.sparse as sp
 
 TIPS = (("x1", "left"), ("x3", "right"))  # gap coordinate name, beam end
+STOP_FACES = (("+", "top"), ("-", "bottom"))  # the upper stop touches the beam's top face, the lower its bottom
+TANGENTIAL = {"axial": 0, "lateral": 1}  # a tangential direction and its displacement component (x, y)
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,11 +92,12 @@ class ContactPair:
         return self.k_g * (np.maximum(s - self.gap, 0.0) + np.minimum(s + self.gap, 0.0))
 
 
-def _mean_uz_row(fe, names: list[str]) -> np.ndarray:
-    """(n_dofs,) row averaging uz over the nodes of the named sets (each node once)."""
+def _mean_uz_row(fe, names: list[str], component: int = 2) -> np.ndarray:
+    """(n_dofs,) row averaging uz (or the displacement ``component``) over the nodes of the named sets
+    (each node once)."""
     nodes = np.unique(np.concatenate([fe.mesh.node_sets[n] for n in names]))
     row = np.zeros(fe.n_dofs)
-    row[fe.solid.nodal_dofs[2, nodes]] = 1.0 / len(nodes)
+    row[fe.solid.nodal_dofs[component, nodes]] = 1.0 / len(nodes)
     return row
 
 
@@ -123,6 +140,68 @@ def contact_pairs(fe, gap: float | None = None, k_g: float | None = None) -> lis
     return pairs
 
 
+@dataclass(frozen=True, eq=False)
+class TangentialRow:
+    """One tangential relative coordinate of a contact face: t = row . u (see the module docstring).
+
+    Attributes
+    ----------
+    name : str
+        ``<stop>:<direction>``, e.g. ``x1+:axial`` (the top face at the left tip, along the beam).
+    tip : str
+        The gap coordinate it belongs to, ``x1`` or ``x3``.
+    stop : str
+        ``x1+`` / ``x3+`` (upper tip, the beam's top face) or ``x1-`` / ``x3-`` (lower tip, bottom face).
+    direction : {'axial', 'lateral'}
+        Along the beam (x) or across it (y).
+    row : (n_dofs,) ndarray of float
+        Distributing row: mean displacement of the face's patch along the direction, less the seat's in the
+        'assembly' layout (m per m).
+    """
+
+    name: str  # <stop>:<direction>
+    tip: str  # x1 | x3
+    stop: str  # x1+ | x1- | x3+ | x3-
+    direction: str  # axial | lateral
+    row: np.ndarray  # (n_dofs,) t = row @ u [m]
+
+
+def tangential_rows(fe, directions: tuple[str, ...] = ("axial",)) -> list[TangentialRow]:
+    """The tangential coordinates of every contact face: per tip (x1, x3), per stop (upper: the top face,
+    lower: the bottom one), per direction (module docstring).
+
+    Parameters
+    ----------
+    fe : FESystem
+        An assembled model of layout 'beam-grounded' or 'assembly'.
+    directions : tuple of {'axial', 'lateral'}
+        Along the beam (x), across it (y), or both.
+
+    Returns
+    -------
+    list of TangentialRow
+        Tip-major, then the stop (upper, lower), then the direction, in the order given.
+
+    Raises
+    ------
+    ValueError
+        Layout 'beam-free', or an unknown or repeated direction.
+    """
+    if fe.model.layout == "beam-free":
+        raise ValueError("layout 'beam-free' has no impact tips (use 'beam-grounded' or 'assembly')")
+    if not directions or len(set(directions)) != len(directions) or any(d not in TANGENTIAL for d in directions):
+        raise ValueError(f"directions must be distinct values of {tuple(TANGENTIAL)}, got {directions!r}")
+    out = []
+    for name, end in TIPS:
+        for sign, face in STOP_FACES:
+            for d in directions:
+                row = _mean_uz_row(fe, [f"beam_contact_{end}_{face}"], TANGENTIAL[d])
+                if fe.model.layout == "assembly":
+                    row = row - _mean_uz_row(fe, [f"tube_seat_{end}_{face}"], TANGENTIAL[d])
+                out.append(TangentialRow(f"{name}{sign}:{d}", name, f"{name}{sign}", d, row))
+    return out
+
+
 def contact_rows(pairs: list[ContactPair]) -> np.ndarray:
     """(n_tips, n_dofs) the gap coordinates' rows, s = R u.
 
@@ -139,8 +218,11 @@ def contact_rows(pairs: list[ContactPair]) -> np.ndarray:
     return np.vstack([p.row for p in pairs])
 
 
-def tied_stiffness(K: sp.spmatrix, pairs: list[ContactPair]) -> sp.csr_matrix:
-    """N/m, closed-gap linearization K + sum_i k_g r_i r_i^T (sparse: rows touch patch DOFs only).
+def tied_stiffness(K: sp.spmatrix, pairs: list[ContactPair], sliders: list[TangentialRow] = (),
+                   k_t: float = 0.0) -> sp.csr_matrix:
+    """N/m, closed-gap linearization K + sum_i k_g r_i r_i^T (sparse: rows touch patch DOFs only); with
+    ``sliders``, the tangential springs of the upper stops' faces sticking added, k_t sum t t^T (the tied
+    state closes the upper stop of each tip, as :meth:`reduced.models.gaps.GapSystem.closed_stiffness`).
 
     Parameters
     ----------
@@ -148,16 +230,24 @@ def tied_stiffness(K: sp.spmatrix, pairs: list[ContactPair]) -> sp.csr_matrix:
         N/m, the open-gap stiffness.
     pairs : list of ContactPair
         The tips tied, each with its own k_g and row r_i.
+    sliders : list of TangentialRow
+        Tangential coordinates (:func:`tangential_rows`); those of the upper stops stick.
+    k_t : float
+        N/m, their tangential stiffness.
 
     Returns
     -------
     (n_dofs, n_dofs) scipy.sparse.csr_matrix
-        N/m, K + sum_i k_g,i r_i r_i^T (a copy: K is not changed).
+        N/m, K + sum_i k_g,i r_i r_i^T (+ k_t sum t t^T over the upper stops' rows) (a copy: K is not changed).
     """
     out = sp.csr_matrix(K, copy=True)
     for p in pairs:
         r = sp.csr_matrix(p.row)
         out = out + p.k_g * (r.T @ r)
+    for t in sliders:
+        if t.stop.endswith("+"):
+            r = sp.csr_matrix(t.row)
+            out = out + k_t * (r.T @ r)
     return out.tocsr()
 
 
@@ -190,8 +280,10 @@ class GapModes:
 
 
 def gap_modes(fe, pairs: list[ContactPair], state: str, n_modes: int = 20, Psi: np.ndarray | None = None,
-              tip_tol: float = 1e-5, mass_tol: float = 1e-6) -> GapModes:
-    """Lowest ``n_modes`` modes with the tips open (K) or tied (K + k_g sum r r^T).
+              tip_tol: float = 1e-5, mass_tol: float = 1e-6, sliders: list[TangentialRow] = (),
+              k_t: float = 0.0) -> GapModes:
+    """Lowest ``n_modes`` modes with the tips open (K) or tied (K + k_g sum r r^T; with ``sliders``, tied and
+    sticking, :func:`tied_stiffness`).
 
     Lanczos shift-invert (ARPACK to round-off: an eigenvalue carries ~eps ||K|| absolute, so
     ~1e-9 relative above 100 Hz but a few 1e-5 for the assembly's bungee modes near 0.4 Hz) so
@@ -222,6 +314,10 @@ def gap_modes(fe, pairs: list[ContactPair], state: str, n_modes: int = 20, Psi: 
         Relative tip-motion threshold of a coupled mode, against the largest |R phi| of the set.
     mass_tol : float
         Relative mass-coupling threshold, against sqrt(max diag Psi^T M Psi).
+    sliders : list of TangentialRow
+        Tangential coordinates whose upper-stop faces stick in the closed state (friction).
+    k_t : float
+        N/m, their tangential stiffness.
 
     Returns
     -------
@@ -237,7 +333,7 @@ def gap_modes(fe, pairs: list[ContactPair], state: str, n_modes: int = 20, Psi: 
 
     if state not in ("open", "closed"):
         raise ValueError(f"state must be 'open' or 'closed', got {state!r}")
-    K = fe.K if state == "open" else tied_stiffness(fe.K, pairs)
+    K = fe.K if state == "open" else tied_stiffness(fe.K, pairs, sliders, k_t)
     res = modal_analysis(K, fe.M, n_modes=n_modes, shift_hz=0.1, method="lanczos", solver="superlu")
     R = contact_rows(pairs)
     tip = R @ res.phi
@@ -327,4 +423,4 @@ def mirror_map(fe, tol: float = 1e-8, axis: int = 1) -> tuple[np.ndarray, np.nda
 
 
 __all__ = ["ContactPair", "GapModes", "gap_modes", "contact_pairs", "contact_rows", "tied_stiffness", "point_rows",
-           "mirror_map", "TIPS"]
+           "mirror_map", "TIPS", "TangentialRow", "tangential_rows", "TANGENTIAL", "STOP_FACES"]

@@ -33,7 +33,7 @@ from scipy.linalg import eigh as dense_eigh
 from scipy.sparse.linalg import LinearOperator, eigsh, splu
 
 from fem._assembly import upper_sum
-from fem._pardiso import PardisoCholesky, blas_threads
+from fem._pardiso import PardisoCholesky, blas_threads, fixed_threads
 from fem._pardiso import has_pardiso as _has_pardiso
 
 SOLVERS = ("pardiso", "superlu")
@@ -362,7 +362,7 @@ def modal_analysis(K: sp.spmatrix, M: sp.spmatrix, n_modes: int = 20, shift_hz: 
         are always made). lanczos: not used (ARPACK to machine precision).
     max_iter : most subspace iterations (method 'subspace' only).
     seed : seed of the random start block (krylov, subspace) or start vector (lanczos).
-    n_threads : PARDISO threads (default: the cores free now, :func:`fem._pardiso.free_cores`).
+    n_threads : PARDISO threads (default: :func:`fem._pardiso.solver_threads`, one unless BEARINGSHAFT_THREADS is set).
 
     Returns
     -------
@@ -374,6 +374,11 @@ def modal_analysis(K: sp.spmatrix, M: sp.spmatrix, n_modes: int = 20, shift_hz: 
     ValueError
         An unknown ``method``.
     """
+    with fixed_threads():  # the same bits whatever the machine's cores (fem._pardiso.DEFAULT_THREADS)
+        return _modal_analysis(K, M, n_modes, shift_hz, solver, method, tol, max_iter, seed, n_threads)
+
+
+def _modal_analysis(K, M, n_modes, shift_hz, solver, method, tol, max_iter, seed, n_threads) -> ModalResult:
     if solver == "pardiso" and not has_pardiso():
         solver = "superlu"
     if method not in METHODS:

@@ -28,11 +28,11 @@ APP_FLOORS = (
     ("bearingshaft.digits", "bearingshaft.progress", "bearingshaft.output", "bearingshaft.estimates",
      "bearingshaft.systems", "bearingshaft.plots", "bearingshaft.render", "bearingshaft.correlate",
      "bearingshaft.gap_modes", "bearingshaft.envelopes", "bearingshaft.measures",
-     "bearingshaft.measured"),
+     "bearingshaft.measured", "bearingshaft.reproduction"),
     ("bearingshaft.stages",),
     ("bearingshaft.registry",),
     ("bearingshaft.budget", "bearingshaft.pipeline"),
-    ("bearingshaft.sweep", "bearingshaft.jobs"),
+    ("bearingshaft.sweep", "bearingshaft.jobs", "bearingshaft.identify"),
     ("bearingshaft.cli", "bearingshaft.__main__"),
 )
 SOLVERS = ("reduced.transient.integrate", "reduced.transient.exact", "reduced.transient.explicit",

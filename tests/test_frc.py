@@ -341,10 +341,15 @@ def test_frc_stage_writes_its_files_and_reruns_byte_for_byte(tmp_path, monkeypat
     assert list(rows[0])[:8] == ["level", "method", "harmonics", "freq_hz", "point", "amplitude_m", "stable",
                                  "bifurcation"]
     methods = {r["method"] for r in rows}
-    assert methods == {"hb", "stepped_sine_up", "stepped_sine_down"}
+    # at 1 N a stop closes and HB moves with H: the drawn curve is the exact flow's (shooting)
+    assert methods == {"hb", "shooting", "stepped_sine_up", "stepped_sine_down"}
     assert {r["point"] for r in rows} == {"x1", "x2", "x3"}
     assert {r["stable"] for r in rows} <= {"true", "false"}
-    assert {r["bifurcation"] for r in rows} <= {"", "fold", "branch_point", "period_doubling", "neimark_sacker"}
+    hb_kinds = {"", "fold", "branch_point", "period_doubling", "neimark_sacker"}
+    assert {r["bifurcation"] for r in rows if r["method"] != "shooting"} <= hb_kinds
+    # the exact families tell the symmetry a branch point breaks (reduced.periodic.exact_frc)
+    assert {r["bifurcation"] for r in rows if r["method"] == "shooting"} <= hb_kinds | {
+        "pitchfork_mirror", "pitchfork_half_wave", "pitchfork_mirror_half_wave"}
     # the settled stepped-sine points sit on the stable HB branches
     sweep = list(csv.DictReader(open(outs[0] / "stepped_sine.csv")))
     ss = [r for r in sweep if r["rel_err_hb"] and r["response"] == "periodic"]
@@ -365,6 +370,17 @@ def test_frc_stage_writes_its_files_and_reruns_byte_for_byte(tmp_path, monkeypat
         assert float(r["asymmetry"]) > 0.05 and r["response"] != "periodic" and r["rel_err_hb"] == "", r
     compared = [r for r in sweep if r["rel_err_hb"]]
     assert all(max(float(r["amplitude_x1_m"]), float(r["amplitude_x3_m"])) < g for r in compared)
+    # the drawn curve: the exact families from f_min, and HB beside them only where no stop closes (there
+    # the response is linear: HB is the closed-form receptance to Newton's tolerance). Here the main
+    # family retraces its path at 20.26 Hz and HB at H = 3 stays in contact up to 40 Hz: 20.26-40 Hz is
+    # not drawn (frc.md says so)
+    drawn = [r for r in rows if r["drawn"] == "true" and r["point"] == "x1"]
+    assert min(float(r["freq_hz"]) for r in drawn) <= 10.0 * (1 + 1e-9)
+    s3 = P.system()
+    for r in (r for r in drawn if r["method"] == "hb"):
+        w = 2 * np.pi * float(r["freq_hz"])
+        lin = abs(np.linalg.solve(s3.K - w**2 * s3.M + 1j * w * s3.C, B2)[0])
+        assert float(r["amplitude_m"]) < g and abs(float(r["amplitude_m"]) / lin - 1.0) < 1e-8, r
     hb_x1 = [float(r["amplitude_m"]) for r in rows if r["method"] == "hb" and r["point"] == "x1"]
     shot = [r for r in csv.DictReader(open(outs[0] / "frc_stability.csv")) if r["shooting_stable"]]
     shot_contact = [r for r in shot if hb_x1[int(r["index"])] > g]

@@ -262,6 +262,18 @@ def test_stage_writes_every_file(stage_run):
     rows = (res / "levels.csv").read_text().splitlines()
     assert rows[1].startswith("20.0,0,")  # the 20 N blow never closes a gap
     assert int(rows[2].split(",")[1]) > 0  # the 500 N blow does
+    # the nominal record's largest Lyapunov exponent, one row per displaced run: the reproduction report's horizon
+    import csv as _csv
+
+    from bearingshaft.reproduction import horizon
+    from bearingshaft.stages.hammer import LYAPUNOV_SEEDS
+
+    with open(res / "lyapunov.csv", newline="") as fh:
+        lyap = list(_csv.DictReader(fh))
+    assert len(lyap) == LYAPUNOV_SEEDS and all(r["delta"] == "1e-09" for r in lyap)
+    assert horizon(res, ("lyapunov.csv",)).exponent_per_s == max(
+        float(r["exponent_per_s"]) for r in lyap if r["chaotic"] == "True" or not any(
+            q["chaotic"] == "True" for q in lyap))
 
 
 def test_uff_round_trip_reproduces_every_channel(stage_run):

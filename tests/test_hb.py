@@ -175,6 +175,26 @@ def test_newton_raises_named_error():
         newton(lambda y: (np.array([y[0] ** 2 + 1.0]), np.array([[2 * y[0]]])), np.array([0.3]), max_iter=15)
 
 
+def test_newton_keeps_the_residual_of_the_step_it_takes():
+    # an uphill "Jacobian" (the sign of f' flipped): no trial dy, dy/2, ..., dy/32 lowers |R|, so
+    # the iteration takes the last one, dy/32, and the next iteration must start from the residual
+    # and Jacobian of exactly that point (the bug: it moved by dy/64 and kept dy/32's R and J)
+    seen = []
+
+    def fun(y):
+        seen.append(float(y[0]))
+        return np.array([y[0] ** 2 + 1.0]), np.array([[-2.0 * y[0]]])
+
+    with pytest.raises(NewtonError):
+        newton(fun, np.array([0.3]), max_iter=2)
+    y0 = 0.3
+    dy = (y0**2 + 1.0) / (2.0 * y0)  # -R / J with J = -2 y
+    assert seen[1:7] == pytest.approx([y0 + dy / 2**k for k in range(6)], rel=1e-15)
+    y1 = y0 + dy / 32.0  # where the first iteration ended
+    dy1 = (y1**2 + 1.0) / (2.0 * y1)  # the second step, from y1's own R and J
+    assert seen[7] == pytest.approx(y1 + dy1, rel=1e-15)
+
+
 def test_linear_system_returns_linear_modes_at_every_energy():
     # no stop can ever close (gap 1 m): every NNM is its linear mode, at any energy
     s0 = SYS

@@ -73,7 +73,7 @@ def first_crossing_both_ways(system: GapSystem, y: np.ndarray, active: np.ndarra
                            floor, w, werr, coef, lc, l2c, a0, const, qtol, dnoise, live, np.empty(N), np.empty(N))
     tau_new, j_new, _ = _modal._march(s, K, lam, alam, const, coef, lc, l2c, a0, qtol, dnoise, live, n_live,
                                       tau_limit, hmin, np.empty(Kmax, complex), np.empty(Kmax), hprev, hnext,
-                                      np.empty((m, 11)))
+                                      np.empty((m, _modal.MARCH_COLS)), np.ones(Kmax))
     X, werr2 = np.empty((N, N), complex), np.empty(N)
     exk._modal_start(table.V[s], table.Vinv[s], y, table.yp[s], X, werr2)
     tau_old, j_old = tau_limit, -1

@@ -92,7 +92,9 @@ def test_run_on_two_workers_writes_the_files_of_a_run_in_order(tmp_path, capsys)
     assert files == sorted(p.relative_to(par) for p in par.rglob("*") if p.is_file())
     assert len(files) >= 2 * 6
     for f in files:
-        if f.name == "provenance.json":
+        if f.name == "reproduction.md":  # the reproduction report names the run's folder
+            assert (par / f).read_text().replace(str(par), str(seq)) == (seq / f).read_text()
+        elif f.name == "provenance.json":
             a, b = (json.loads((root / f).read_text()) for root in (par, seq))
             assert set(a["stages"]) == set(b["stages"]) == {"ringdown", "nnm"}
         else:

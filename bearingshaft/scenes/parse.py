@@ -59,6 +59,8 @@ def parse_scene(text: str, default_name: str, origin: str, base: str | Path | No
     dof_names = _check_points(sections, kind, model, origin, "load" in data)
     if "frf" in sections and "hammer" not in sections:  # the FRFs of the rig's hammer test
         raise SceneError(f"{origin} [frf]: needs a [hammer] table (the rig, its channels and record)")
+    if "identify" in sections and "hammer" not in sections:  # fitted to a hammer test on the rig
+        raise SceneError(f"{origin} [identify]: needs a [hammer] table (the rig, its channels and record)")
     loads, signals = _read_loads(data, sections, dof_names, origin, base)
     if "fep" in sections and "nnm" not in sections:
         raise SceneError(f"{origin}: [fep] needs an [nnm] table (its energy range and grid)")

@@ -11,6 +11,7 @@ from bearingshaft.scenes.tables import (
     FRCSpec,
     FRFSpec,
     HammerSpec,
+    IdentifySpec,
     InitialSpec,
     ModalSpec,
     NNMSpec,
@@ -54,6 +55,8 @@ class Scene:
         Likewise.
     frf : FRFSpec or None
         [frf], FRFs and modal parameters of a hammer test (needs [hammer]).
+    identify : IdentifySpec or None
+        [identify], the parameters ``bearingshaft identify`` fits to a measured test (needs [hammer]).
     sweep : SweepSpec or None
         [sweep], run by ``bearingshaft sweep``.
     folder : str
@@ -82,6 +85,7 @@ class Scene:
     frc: FRCSpec | None = None
     hammer: HammerSpec | None = None
     frf: FRFSpec | None = None  # [frf]: FRFs and modal parameters of a hammer test (issue 26)
+    identify: IdentifySpec | None = None  # [identify]: fitted to a test by `bearingshaft identify` (issue 26)
     sweep: SweepSpec | None = None  # [sweep]: run by `bearingshaft sweep`
     folder: str = field(default="", repr=False)  # the folder its file paths are relative to (issue 24)
 

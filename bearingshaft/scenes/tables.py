@@ -418,6 +418,9 @@ class VerifySpec:
         positive(self, "duration_s", "sample_rate_hz", "energy_max_J", "window_s", "fmax_hz")
 
 
+FRC_CURVES = ("auto", "hb", "shooting")  # [frc] curve: how the drawn curve of each level is computed
+
+
 @dataclass(frozen=True, slots=True)
 class FRCSpec:
     """Forced-response curves by HB under a harmonic load at one point, verified by a stepped
@@ -455,6 +458,23 @@ class FRCSpec:
         s, simulated time per frequency at most before "not settled".
     backbone_scales : tuple of float
         Damping and load scaled together (backbone check), in (0, 1].
+    curve : {'auto', 'hb', 'shooting'}
+        The drawn curve of each level: HB at ``harmonics``, the orbits of the exact flow continued
+        by multiple shooting, or (auto) HB where its amplitudes no longer move with H (within
+        ``hb_converged_tol`` of the next lower H of ``convergence_harmonics``), else shooting.
+    hb_converged_tol : float
+        Relative change of the amplitudes below which HB counts as converged, in (0, 1).
+    branch_switching : bool
+        Follow the families born at the exact curve's pitchforks and period doublings.
+    max_families : int
+        Families switched onto per level at most.
+    family_steps : int
+        Points of a switched family at most.
+    switching_max_s : float
+        s of wall time per level after which no new family is started; 0 (the default): no such limit, so the
+        families found do not depend on the machine or its load.
+    shooting_steps : int
+        Points of the main exact family at most.
     map_step_hz : float
         Hz, the response map's step over the contact band (issue 25; 0: no map).
     map_coarse_points : int
@@ -484,10 +504,16 @@ class FRCSpec:
     stepped_sine_tol: float = 1e-6  # settled when the predicted distance to the periodic orbit is below this
     stepped_sine_max_s: float = 10.0  # s, simulated time per frequency at most before "not settled"
     backbone_scales: tuple[float, ...] = (1.0, 0.1, 0.01)  # damping and load scaled together (backbone check)
-    # the response map (issue 25): a stepped sine classified by the exact flow and its Lyapunov exponent
-    map_step_hz: float = 0.1  # Hz, step over the contact band (0: no map)
+    map_step_hz: float = 0.1  # Hz, step of the response map (stepped sine by the exact flow), contact band (0: no map)
     map_coarse_points: int = 24  # log-spaced frequencies over the band outside the contact band
     map_periods: int = 128  # forcing periods recorded at each frequency
+    curve: str = "auto"  # the drawn curve: "hb", "shooting" (exact flow) or "auto" (HB where converged in H)
+    hb_converged_tol: float = 1e-4  # HB converged: amplitudes within this of the next lower H's
+    branch_switching: bool = True  # follow the families born at pitchforks and period doublings
+    max_families: int = 12  # families switched onto per level at most
+    family_steps: int = 3000  # points of a switched family at most
+    switching_max_s: float = 0.0  # s, wall time per level after which no new family is started (0: none, reproducible)
+    shooting_steps: int = 30000  # points of the main exact family at most
 
     def __post_init__(self) -> None:
         each(self, "levels_N", lambda v: v > 0, "> 0 N")
@@ -507,6 +533,12 @@ class FRCSpec:
         check(self.stepped_sine_points >= 0, f"stepped_sine_points must be >= 0, got {self.stepped_sine_points!r}")
         tolerance(self, "stepped_sine_tol")
         each(self, "backbone_scales", lambda v: 0 < v <= 1, "in (0, 1] (damping and load scaled down together)")
+        check(self.curve in FRC_CURVES, f"curve must be one of {', '.join(FRC_CURVES)}, got {self.curve!r}")
+        tolerance(self, "hb_converged_tol")
+        check(self.switching_max_s >= 0, f"switching_max_s must be >= 0 s, got {self.switching_max_s!r}")
+        for key in ("max_families", "family_steps", "shooting_steps"):
+            check(getattr(self, key) >= (0 if key == "max_families" else 1),
+                  f"{key} must be >= {0 if key == 'max_families' else 1}, got {getattr(self, key)!r}")
         check(self.map_step_hz >= 0, f"map_step_hz must be >= 0 Hz, got {self.map_step_hz!r}")
         check(self.map_coarse_points >= 0, f"map_coarse_points must be >= 0, got {self.map_coarse_points!r}")
         check(self.map_periods >= 32, f"map_periods must be >= 32, got {self.map_periods!r}")
@@ -687,6 +719,96 @@ class FRFSpec:
         check(self.fe_modes >= 12, f"fe_modes must be >= 12 (6 rigid + 6 pseudo-rigid), got {self.fe_modes!r}")
 
 
+IDENTIFY_MEASURES = ("time", "envelope", "decay", "ridges", "impacts", "open", "first")  # residual blocks of [identify]
+
+
+@dataclass(frozen=True, slots=True)
+class IdentifySpec:
+    """The uncertain parameters of the model fitted to a measured hammer test (issue 26) ->
+    ``bearingshaft identify --scene S --test FILE.uff`` (:mod:`bearingshaft.identify`).
+
+    Parameters
+    ----------
+    parameters : tuple of str
+        The [model] keys fitted, as ``model.KEY`` (contact and damping keys: the reduction is kept).
+    lower, upper : tuple of float
+        Their bounds, one per parameter in its unit (default: the scene's value / 4 and x 4; a ``lin``
+        parameter whose value is 0 needs its bounds).
+    scales : tuple of str
+        ``log`` (the fit varies ln p: a positive parameter over decades) or ``lin`` (p / (upper - lower):
+        one that may be 0), one per parameter (default: log for a positive value, lin for 0).
+    measures : tuple of str
+        The residual blocks (``IDENTIFY_MEASURES``): ``first`` (each load cell's first impact: its time and
+        peak), ``time`` (pointwise, up to the predictability horizon),
+        ``envelope`` (log RMS envelope), ``decay`` (its shape after the last impact: the damping),
+        ``ridges``, ``impacts``, ``open``.
+    window_s : tuple of float
+        s, (start, end) of the test fitted (default: the whole record).
+    envelope_window_s : float
+        s, the RMS envelope's windows.
+    step : float
+        The finite-difference step of the Jacobian in the scaled parameters (log: 0.01 is 1 %).
+    max_iterations : int
+        Least-squares iterations per pass at most.
+    passes : int
+        Fits in turn, each with the horizon and the weights of the previous one's optimum.
+    scan : int
+        Where the fit starts: each parameter in turn over this many evenly spaced (scaled) values across
+        its bounds, the others at the best so far, the cheapest kept (0: at the scene's values).
+    n_modes : int
+        Fixed-interface modes kept in the fit, the lowest (0: all of the reduced model's).
+    confidence : float
+        The intervals' confidence level, in (0, 1).
+
+    Raises
+    ------
+    ValueError
+        A value outside its range, lists of different lengths, a key named twice.
+    """
+
+    parameters: tuple[str, ...] = ("model.gap", "model.k_g", "model.modal_damping[0]")  # [model] keys fitted
+    lower: tuple[float, ...] = ()  # each parameter's unit: lower bounds (default: the scene's value / 4)
+    upper: tuple[float, ...] = ()  # upper bounds (default: the scene's value x 4)
+    scales: tuple[str, ...] = ()  # log | lin, per parameter (default: log, lin for a value of 0)
+    measures: tuple[str, ...] = ("first", "envelope", "impacts")  # residual blocks: first, time, envelope, decay,
+    # ridges, impacts, open
+    window_s: tuple[float, ...] = ()  # s, (start, end) of the test fitted (default: the whole record)
+    envelope_window_s: float = 0.05  # s, windows of the RMS envelope
+    step: float = 0.01  # finite-difference step of the Jacobian, in the scaled parameters (log: 1 %)
+    max_iterations: int = 15  # least-squares iterations per pass at most
+    passes: int = 2  # fits in turn, each with the horizon and weights at the last one's optimum
+    scan: int = 12  # the start: each parameter over this many values across its bounds in turn (0: the scene's)
+    n_modes: int = 0  # fixed-interface modes kept in the fit, the lowest (0: all)
+    confidence: float = 0.95  # the intervals' confidence level
+
+    def __post_init__(self) -> None:
+        n = len(self.parameters)
+        check(n >= 1, "parameters must name at least one [model] key")
+        each(self, "parameters", lambda k: isinstance(k, str) and k.startswith("model.") and len(k) > 6,
+             "a [model] key written model.KEY")
+        check(len(set(self.parameters)) == n, f"parameters: a key named twice in {list(self.parameters)}")
+        for name in ("lower", "upper", "scales"):
+            v = getattr(self, name)
+            check(not v or len(v) == n, f"{name} must have one value per parameter ({n}), got {len(v)}")
+        each(self, "scales", lambda s: s in ("log", "lin"), "log or lin")
+        if self.lower and self.upper:
+            for i, (lo, hi) in enumerate(zip(self.lower, self.upper, strict=True)):
+                check(lo < hi, f"lower[{i}] = {lo!r} must be below upper[{i}] = {hi!r}")
+        check(len(self.measures) >= 1, "measures must name at least one residual block")
+        each(self, "measures", lambda m: m in IDENTIFY_MEASURES, f"one of {', '.join(IDENTIFY_MEASURES)}")
+        check(len(set(self.measures)) == len(self.measures), "measures: a block named twice")
+        if self.window_s:
+            w = self.window_s
+            check(len(w) == 2 and 0 <= w[0] < w[1], f"window_s must be (start, end), 0 <= start < end, got {w!r}")
+        positive(self, "envelope_window_s")
+        check(0 < self.step <= 0.5, f"step must lie in (0, 0.5], got {self.step!r}")
+        check(self.max_iterations >= 1, f"max_iterations must be >= 1, got {self.max_iterations!r}")
+        check(1 <= self.passes <= 5, f"passes must lie in [1, 5], got {self.passes!r}")
+        check(self.scan == 0 or self.scan >= 3, f"scan must be 0 or >= 3, got {self.scan!r}")
+        check(self.n_modes >= 0, f"n_modes must be >= 0, got {self.n_modes!r}")
+        check(0 < self.confidence < 1, f"confidence must lie in (0, 1), got {self.confidence!r}")
+
+
 SECTIONS: dict[str, type] = {
     "modal": ModalSpec,
     "initial": InitialSpec,
@@ -702,4 +824,5 @@ SECTIONS: dict[str, type] = {
     "frc": FRCSpec,
     "hammer": HammerSpec,
     "frf": FRFSpec,
+    "identify": IdentifySpec,
 }

@@ -21,6 +21,8 @@ stop forces projected exactly, H = ``harmonics``) is continued in frequency over
 - the backbone check: with damping and load scaled down together (``backbone_scales``) the
   peak of each curve (H = 1) approaches the NNM backbone computed as the nnm stage does
   (:func:`reduced.periodic.backbones.nnm_branch`, H = 1, AFT with 4096 samples);
+- the drawn curve of each level (:func:`converged_curve`): HB where it no longer moves with H, else
+  the exact flow's families by shooting (:mod:`reduced.periodic.exact_frc`);
 - the response map (:mod:`bearingshaft.stages.frc_map`): a dense stepped sine up and down, each
   frequency classified by the exact flow and its Lyapunov exponent.
 
@@ -40,9 +42,10 @@ import numpy as np
 from bearingshaft.estimates import FLOAT, HILL_COPIES, Estimate, n_dofs
 from bearingshaft.output import StageWriter
 from bearingshaft.progress import bar as progress_bar
+from bearingshaft.reproduction import Reproduction, chaotic, exact, sensitive, within
 from bearingshaft.scenes import Scene
 from bearingshaft.stages.frc_map import compute_maps
-from bearingshaft.stages.frc_results import ConvergenceRun, FRCResult, PointCheck
+from bearingshaft.stages.frc_results import ConvergedCurve, ConvergenceRun, FRCResult, PointCheck
 from bearingshaft.systems import model_system
 from reduced._blas import single_thread_blas
 from reduced.models.gaps import GapSystem
@@ -50,9 +53,12 @@ from reduced.models.loads import Harmonic, Loads
 from reduced.models.modes import linear_modes
 from reduced.periodic.backbones import NNM_STEPS, nnm_branch
 from reduced.periodic.continuation import ContinuationError
+from reduced.periodic.exact_frc import ExactFRCOptions, exact_frc, hb_start
+from reduced.periodic.exact_hb import default_root_samples
+from reduced.periodic.forced_balance import ForcedBalance, ForcedResidual
 from reduced.periodic.forced_stability import HILL_TOL, ShootingError, floquet_by_shooting, forced_hill, hb_states
 from reduced.periodic.frc import FRC_STEPS, FRCBranch, _synthesis, frc, max_abs_over_period, solution_at_frequency
-from reduced.periodic.hb import NewtonError, _derivative_matrix
+from reduced.periodic.hb import NewtonError, _derivative_matrix, newton
 from reduced.periodic.stepped_sine import SteppedSine, stepped_sine
 from reduced.transient.flow import Flow
 from reduced.transient.integrate import ringdown
@@ -63,6 +69,11 @@ BACKBONE_SAMPLES = 4096  # AFT samples of the H = 1 backbone (its AFT error near
 BACKBONE_ENERGY_FACTOR = 4.0  # backbones run to this many times the energy of the most energetic peak drawn
 BACKBONE_DS = 0.01  # continuation step of the backbones (log10 amplitude): polyline error ~1e-7 at the peaks
 ORBIT_SAMPLES = 2048  # samples of one period of an exact orbit for its amplitude
+HB_CHECK_POINTS = 200  # points of an HB curve compared with the next lower H at most
+START_GUESSES = 12  # HB orbits tried as guesses of the first exact orbit (f_min first)
+RESONANCE_SPAN = 6.0  # a lightly damped mode's band: f_r (1 +- RESONANCE_SPAN zeta_r), its peak and flanks
+RESONANCE_POINTS = 8  # an HB curve with fewer points in that band has stepped over the peak: refined there
+RESONANCE_PEAK = 1.5  # ... where the linear response at f_r is this many times that at the band's edges
 
 
 def compute(scene: Scene, progress: bool, workdir=None) -> FRCResult:
@@ -91,13 +102,18 @@ def _compute(scene: Scene, progress: bool) -> FRCResult:
     load_col = names.index(spec.point)
     b = rows[load_col]
     levels = list(spec.levels_N)
-    n_tasks = 3 * len(levels) + len(spec.convergence_harmonics) + len(levels) * len(spec.backbone_scales) + 1
+    n_tasks = 4 * len(levels) + len(spec.convergence_harmonics) + len(levels) * len(spec.backbone_scales) + 1
     n_tasks += len(levels) if spec.map_step_hz > 0 else 0  # the response map (frc_map)
     bar = progress_bar(total=n_tasks, desc=f"{scene.name}: forced response", enabled=progress, unit="task")
     curves = {}
     for P in levels:
         bar.set_postfix_str(f"HB {P:g} N, H={spec.harmonics}")
         curves[P] = _curve(system, b, P, spec, spec.harmonics, rows, names, hill_points=0)
+        bar.update()
+    converged = {}
+    for P in levels:
+        bar.set_postfix_str(f"converged curve {P:g} N")
+        converged[P] = converged_curve(system, b, P, spec, curves[P], rows, names)
         bar.update()
     checks = {}
     for P in levels:
@@ -115,13 +131,15 @@ def _compute(scene: Scene, progress: bool) -> FRCResult:
     maps = compute_maps(system, b, rows, names, spec, curves, bar)
     bar.close()
     return FRCResult(scene.name, spec, names, load_col, curves, {P: _events(br, load_col) for P, br in curves.items()},
-                     checks, sweeps, sweep_hb, convergence, *backbone, response_maps=maps)
+                     checks, sweeps, sweep_hb, convergence, *backbone, converged=converged, response_maps=maps)
 
 
-def _curve(system, b, P, spec, H, rows, names, **kw):
-    """One FRC with the scene's settings; a start that fails is reported, not raised."""
+def _curve(system, b, P, spec, H, rows, names, f_band=None, **kw):
+    """One FRC with the scene's settings (over ``f_band`` = (Hz, Hz) instead of the scene's band if
+    given); a start that fails is reported, not raised."""
+    f0, f1 = f_band or (spec.freq_min_hz, spec.freq_max_hz)
     try:
-        return frc(system, b, P, spec.freq_min_hz, spec.freq_max_hz, H,
+        return frc(system, b, P, f0, f1, H,
                    harmonics="odd" if spec.odd_harmonics else "all", point_rows=rows, point_names=names,
                    continuation=FRC_STEPS.replace(max_steps=spec.max_steps), **kw)
     except ContinuationError as exc:
@@ -137,6 +155,202 @@ def _evenly(k: int, count: int) -> np.ndarray:
     if count <= 0 or k == 0:
         return np.zeros(0, int)
     return np.unique(np.round(np.linspace(0, k - 1, min(count, k))).astype(int))
+
+
+# -- the converged curve of each level --------------------------------------------------------------
+def check_harmonics(spec) -> int:
+    """H of the balance the HB curve is compared with: the largest of ``convergence_harmonics`` below
+    ``harmonics`` (odd with odd_harmonics), else the next lower H of the set (0 if H = 1).
+
+    >>> from bearingshaft.scenes.tables import FRCSpec
+    >>> check_harmonics(FRCSpec()), check_harmonics(FRCSpec(harmonics=3, convergence_harmonics=(3, 5)))
+    (9, 1)
+    """
+    H, step = spec.harmonics, 2 if spec.odd_harmonics else 1
+    lower = [h for h in spec.convergence_harmonics if h < H and (h % 2 == 1 or not spec.odd_harmonics)]
+    return max(lower) if lower else max(H - step, 0)
+
+
+def hb_change(br: FRCBranch, H_check: int, max_points: int = HB_CHECK_POINTS) -> float:
+    """Largest relative change from the HB curve ``br`` to the balance with ``H_check`` harmonics at
+    the same frequencies, of the amplitudes (every output point) and, where a stop closes, of its
+    penetration max|B_j x| - |o_j| (relative to the larger of the two; the contact itself, which
+    the amplitude hides: a penetration 20 % off changes a 1.01 g amplitude by 0.2 %). Newton at each
+    frequency (at most ``max_points`` of the curve's points, evenly spread) from the curve's own
+    coefficients cut to H_check; inf where Newton does not converge.
+
+    Parameters
+    ----------
+    br : the HB curve
+    H_check : harmonics of the comparison (>= 1)
+    max_points : points compared at most
+
+    Returns
+    -------
+    float
+        The largest change over the points.
+    """
+    fb0 = br.balance
+    s = fb0.system
+    fb = ForcedBalance(s, fb0.b, fb0.amplitude_N, fb0.phase_deg, H_check, default_root_samples(H_check), fb0.odd)
+    res = ForcedResidual(fb, br.x_ref, float(br.omega.max()))
+    n = res.size
+    gap = np.abs(s.offset)
+    worst = 0.0
+    for i in _evenly(len(br.freq_hz), max_points):
+        q = fb0.full_q(br.z[i])[: 2 * H_check + 1]
+        lw = math.log(br.omega[i] / res.omega_ref)
+
+        def fun(v, lw=lw):
+            R, J = res(np.append(v, lw))
+            return R, J[:, :n]
+
+        try:
+            v = newton(fun, q[fb.keep].ravel() / br.x_ref, tol=1e-12, max_iter=30).y
+        except NewtonError:
+            return math.inf
+        X = fb.response(v * br.x_ref, float(br.omega[i]))
+        amp = max_abs_over_period(X, br.point_rows)
+        worst = max(worst, float(np.max(np.abs(amp / br.amplitude_m[i] - 1.0))))
+        pen = max_abs_over_period(X, s.B) - gap
+        pen0 = max_abs_over_period(br.X[i], s.B) - gap
+        both = np.maximum(pen, pen0)
+        closed = both > 0.0
+        if np.any(closed):
+            worst = max(worst, float(np.max(np.abs(pen - pen0)[closed] / both[closed])))
+    return worst
+
+
+def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: np.ndarray, names: tuple
+                    ) -> ConvergedCurve:
+    """The drawn curve of level P (``[frc] curve``): HB at ``harmonics`` where its amplitudes move by no
+    more than ``hb_converged_tol`` from the next lower H (:func:`check_harmonics`), else the families
+    of exact periodic orbits continued by multiple shooting from the HB orbit at f_min
+    (:func:`reduced.periodic.exact_frc.exact_frc`, with branch switching as the table says). If
+    shooting fails, HB is drawn and the reason says it is not converged.
+
+    Parameters
+    ----------
+    system, b, P : the gap system, the load direction (n,) and its amplitude (N)
+    spec : the [frc] table
+    br : the HB curve of the level (or the ContinuationError of one that could not start)
+    rows, names : the output points
+
+    Returns
+    -------
+    ConvergedCurve
+    """
+    t0 = time.perf_counter()
+    ok = not isinstance(br, Exception)
+    contact = bool(np.any(_in_contact(system, br))) if ok else True
+    Hc = check_harmonics(spec)
+    change = hb_change(br, Hc) if ok and Hc >= 1 else math.nan
+    method = spec.curve
+    if method == "auto":
+        method = "hb" if ok and change <= spec.hb_converged_tol else "shooting"
+    if method == "hb":
+        why = (f"HB at H = {spec.harmonics}: its amplitudes{' and penetrations' if contact else ''} move by at most "
+               f"{change:.2g} (relative) from H = {Hc} ({'a stop closes' if contact else 'no stop closes'} along it)")
+        refined, notes = resonance_refinements(system, b, P, spec, br, rows, names) if ok else ((), [])
+        if notes:
+            why += "; " + "; ".join(notes)
+        return ConvergedCurve(P, "hb", why, spec.harmonics, Hc, change, contact, None, "", time.perf_counter() - t0,
+                              refined)
+    S = spec.shooting_segments + spec.shooting_segments % 2
+    opts = ExactFRCOptions(segments=S, branch_switching=spec.branch_switching, max_families=spec.max_families,
+                           family_steps=spec.family_steps, max_steps=spec.shooting_steps,
+                           deadline_s=spec.switching_max_s or math.inf)
+    try:
+        if ok:  # the HB orbits at f_min, then at points spread over the curve (where HB is far from exact)
+            idx = np.concatenate([[0], _evenly(len(br.freq_hz), START_GUESSES)[1:]])
+            start = [(float(br.freq_hz[i]), hb_states(br.X[i], float(br.omega[i]), S)) for i in idx
+                     if spec.freq_min_hz <= br.freq_hz[i] <= spec.freq_max_hz]
+            x_ref = br.x_ref
+        else:
+            start = hb_start(system, b, P, spec.freq_min_hz, S)
+            x_ref = float(np.max(np.abs(start[:, : system.n])))
+        ex = exact_frc(system, b, P, spec.freq_min_hz, spec.freq_max_hz, start, point_rows=rows, point_names=names,
+                       x_ref=x_ref, options=opts)
+    except (ShootingError, ContinuationError, NewtonError, RuntimeError) as exc:
+        err = " ".join(str(exc).split())[:200]
+        why = f"shooting failed ({err}): the HB curve at H = {spec.harmonics} is drawn and is NOT converged"
+        return ConvergedCurve(P, "hb", why, spec.harmonics, Hc, change, contact, None, err, time.perf_counter() - t0)
+    why = (f"exact flow, by shooting: HB at H = {spec.harmonics} moves by {change:.2g} (relative, amplitudes"
+           f"{' and penetrations' if contact else ''}) from H = {Hc}"
+           + (" (a stop closes along it: HB in contact needs H ~ 255, tests/test_frc_contact.py)" if contact else ""))
+    if spec.curve == "shooting":
+        why = "exact flow, by shooting ([frc] curve = \"shooting\")"
+    fill, refined = np.zeros(0, bool), ()
+    lo, hi = float(ex.main.freq_hz.min()), float(ex.main.freq_hz.max())
+    if ok and (lo > spec.freq_min_hz * (1 + 1e-9) or hi < spec.freq_max_hz * (1 - 1e-9)):
+        # the main family ends inside the band (it retraced its path or left it): outside its range the
+        # HB points whose orbits close no stop are linear, HB exact to round-off there: drawn instead
+        outside = (br.freq_hz < lo) | (br.freq_hz > hi)
+        fill = outside & ~_in_contact(system, br)
+        refined, notes = resonance_refinements(system, b, P, spec, br, rows, names)
+        refined = tuple(r for r in refined if (r.freq_hz.max() < lo or r.freq_hz.min() > hi)
+                        and not np.any(_in_contact(system, r)))
+        why += (f"; the main exact family covers {lo:.5g}-{hi:.5g} Hz only: outside it the {int(fill.sum())} HB "
+                f"points whose orbits close no stop (linear: exact) are drawn, {int(np.sum(outside & ~fill))} "
+                "in contact are not")
+        if refined:
+            why += "; " + "; ".join(n for n in notes if "drawn from" in n)
+    return ConvergedCurve(P, "shooting", why, spec.harmonics, Hc, change, contact, ex, "", time.perf_counter() - t0,
+                          refined, fill)
+
+
+def resonance_refinements(system: GapSystem, b: np.ndarray, P: float, spec, br: FRCBranch, rows: np.ndarray,
+                          names: tuple) -> tuple[tuple, list[str]]:
+    """HB curves over the bands of the lightly damped linear modes that ``br`` steps over.
+
+    The continuation's unknowns are scaled by the largest response over the band (x_ref), so the
+    peak of a mode far above it (the 700 Hz bending mode of the three-mass model, zeta = 5.4e-4:
+    a half-power band of 0.76 Hz, a peak 1/40 of the 18 Hz one's) bends the scaled curve too little
+    for the step control to see it: the curve steps over the peak. For each open-gap mode of
+    frequency f_r and damping ratio zeta_r in the band with fewer than ``RESONANCE_POINTS`` points
+    of ``br`` in f_r (1 +- ``RESONANCE_SPAN`` zeta_r) whose linear response at the output points
+    peaks there (``RESONANCE_PEAK`` times the band's edges: a mode the load excites), the same HB
+    curve is continued over that band alone (its own x_ref: the peak is then its largest response),
+    with its stability.
+
+    Parameters
+    ----------
+    system, b, P : the gap system, the load direction (n,) and its amplitude (N)
+    spec : the [frc] table
+    br : the HB curve of the level
+    rows, names : the output points
+
+    Returns
+    -------
+    tuple
+        (the FRCBranch of each refined band, in increasing frequency; a note per band).
+    """
+    n = system.n
+    A = np.block([[np.zeros((n, n)), np.eye(n)], [-np.linalg.solve(system.M, system.K),
+                                                   -np.linalg.solve(system.M, system.C)]])
+    lam = np.linalg.eigvals(A)
+    lam = lam[lam.imag > 0]
+    out, notes = [], []
+    for lm in sorted(lam, key=lambda v: v.imag):
+        f_r, zeta = abs(lm) / (2 * np.pi), -lm.real / abs(lm)
+        lo, hi = f_r * (1 - RESONANCE_SPAN * zeta), f_r * (1 + RESONANCE_SPAN * zeta)
+        if not (0 < zeta < 1 / (2 * RESONANCE_SPAN)) or lo < spec.freq_min_hz or hi > spec.freq_max_hz:
+            continue
+        inside = int(np.sum((br.freq_hz >= lo) & (br.freq_hz <= hi)))
+        lin = [float(np.max(np.abs(rows @ np.linalg.solve(system.K - w**2 * system.M + 1j * w * system.C, b))))
+               for w in 2 * np.pi * np.array([lo, f_r, hi])]
+        if inside >= RESONANCE_POINTS or lin[1] < RESONANCE_PEAK * max(lin[0], lin[2]):
+            continue  # resolved, or the load does not excite the mode at the output points (no peak)
+        sub = _curve(system, b, P, spec, spec.harmonics, rows, names, hill_points=0, f_band=(lo, hi))
+        if isinstance(sub, Exception):
+            notes.append(f"the mode at {f_r:.5g} Hz (zeta {zeta:.2g}) stepped over ({inside} points) and its "
+                         f"band could not be continued: {' '.join(str(sub).split())[:120]}")
+            continue
+        out.append(sub)
+        notes.append(f"the mode at {f_r:.5g} Hz (zeta {zeta:.2g}) was stepped over ({inside} points in "
+                     f"{lo:.5g}-{hi:.5g} Hz): that band is drawn from its own HB curve ({len(sub.freq_hz)} points, "
+                     f"peak {np.max(sub.amplitude_m):.4g} m)")
+    return tuple(out), notes
 
 
 # -- Hill and shooting at selected points ---------------------------------------------------------
@@ -432,8 +646,12 @@ def _log_distance(f: float, A: float, curve, col: int) -> float:
 # -- the registry's contract (bearingshaft.registry) -------------------------------------------
 DESCRIPTION = """Forced-response curves under P cos(2 pi f t) at one point, by harmonic balance continued
 through folds, with stability (monodromy, Hill, shooting), bifurcations, a stepped sine up and
-down by the exact integrator, the error against H and run time, and the backbone check.
-Writes frc.csv, frc.png, frc_receptance.png (the response per newton, m/N), frc_harmonics.csv,
+down by the exact integrator, the error against H and run time, and the backbone check. The drawn
+curve of each level is converged ([frc] curve): HB where its amplitudes no longer move with H (with
+the lightly damped resonances it stepped over refined), else the families of periodic orbits of the
+exact flow by multiple shooting, with their stability and branch switching; frc.md says which and
+why, frc_families.csv lists the families. Writes frc.csv, frc.md, frc_families.csv, frc.png,
+frc_receptance.png (the response per newton, m/N), frc_harmonics.csv,
 frc_bifurcations.csv, frc_stability.csv,
 stepped_sine.csv, frc_convergence.csv, frc_convergence_timing.csv and .png, frc_backbone.csv
 and frc_backbone.png; the response map (each frequency of a dense stepped sine periodic, subharmonic,
@@ -481,8 +699,8 @@ def estimate(scene: Scene) -> list[Estimate]:
                      "[frc] harmonics or convergence_harmonics")]
 
 
-__all__ = ["DESCRIPTION", "FRCResult", "compute", "estimate", "frc_stage", "orbit_amplitude", "shooting_error",
-           "write"]
+__all__ = ["DESCRIPTION", "FRCResult", "check_harmonics", "compute", "converged_curve", "estimate", "frc_stage",
+           "hb_change", "orbit_amplitude", "shooting_error", "write"]
 
 
 def write(result, writer) -> None:
@@ -503,3 +721,44 @@ def write(result, writer) -> None:
     from bearingshaft.stages import frc_files
 
     frc_files.write(result, writer)
+
+
+# -- the reproduction report (bearingshaft.reproduction): how these files compare with the reference -----
+CONTINUATION = ("the points of an HB continuation through folds: its step path is set by the last bits of each Newton "
+                "solve, which another CPU changes")
+MAP_CHAOS = "the stepped sine's response at a chaotic or quasi-periodic frequency"
+MAP_AFTER = ("the stepped sine after a chaotic, quasi-periodic or unsettled frequency: it arrives with a state "
+             "round-off set, so which attractor it settles on and its transient are too")
+MAP_AMPLITUDE = ("amplitudes of a settled response, written to 10 digits: a reduced model's matrices move by ~1e-8 "
+                 "between machines, which a resonance magnifies")
+MAP_GRID = ("the response map's fine grid spans the contact band of the HB curve, whose points are set by its step "
+            "path (" + CONTINUATION + ")")
+REPRODUCTION = Reproduction(rules=(
+    sensitive("frc.csv", why=CONTINUATION),
+    sensitive("frc_harmonics.csv", why=CONTINUATION),
+    sensitive("frc_bifurcations.csv", why=CONTINUATION + " (the folds and bifurcations found between its points)"),
+    sensitive("frc_stability.csv", why=CONTINUATION + " (stability at those points)"),
+    sensitive("frc_convergence.csv", why=CONTINUATION + " (points, reach, folds and errors at the points)"),
+    sensitive("stepped_sine.csv", why="the stepped sine at the HB curve's points, compared with HB there: "
+              + CONTINUATION),
+    # each peak is the parabola through the continuation's points around the largest amplitude: it moves with them
+    within("frc_backbone.csv", "peak_freq_hz", "peak_amplitude_m", rtol=1e-4,
+           why="peaks refined from the continuation's points, which round-off moves (6e-6 between two machines)"),
+    within("frc_backbone.csv", "log_distance", atol=1e-5,
+           why="distances from the backbone below 1e-5 are the peak's location error"),
+    # the response map (frc_map_files): the fine grid covers the contact band the HB curve found (so a continuation
+    # that lands elsewhere may add or drop a frequency: the rows are sensitive); at a chaotic, quasi-periodic or
+    # unsettled frequency everything is chaotic, and after one the sweep arrives with a state round-off set (which
+    # attractor it settles on): sensitive; before, the stepped sine is deterministic: its regimes, periods, exponents
+    # and counts exact, its amplitudes to 1e-6 (a reduced model's matrices move by ~1e-8 between machines, which a
+    # resonance magnifies)
+    chaotic("response_map.csv", "*", rows=r"^(?:[^,]*,){3}(?:chaotic|quasi_periodic),", why=MAP_CHAOS),
+    chaotic("response_map.csv", "*", rows=r"^(?:[^,]*,){13}false,", why="an unsettled frequency of the stepped sine "
+            "(no return after the longest run: transient chaos)"),
+    chaotic("response_map_jumps.csv", "*", rows=r"^(?:[^,]*,){4,5}(?:chaotic|quasi_periodic),", why=MAP_CHAOS),
+    sensitive("response_map*.csv", "*", rows=r",true$", why=MAP_AFTER),
+    within("response_map.csv", "x1_*", "max_abs_mu", rtol=1e-6, why=MAP_AMPLITUDE),
+    within("response_map_jumps.csv", "x1_*", rtol=1e-6, why=MAP_AMPLITUDE),
+    exact("response_map*.csv", "*"),
+    sensitive("response_map*.csv", why=MAP_GRID),
+), lyapunov=("response_map.csv:lyapunov_per_s",))

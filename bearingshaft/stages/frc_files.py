@@ -15,6 +15,8 @@ runs here.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from bearingshaft.digits import sig
@@ -29,7 +31,13 @@ CONVERGENCE_FIELDS = ["level", "harmonics", "status", "n_points", "f_reached_hz"
                       "lowest_fold_hz", "n_vs_stepped_sine", "max_rel_err_vs_stepped_sine", "n_vs_shooting",
                       "n_shooting_failed", "max_rel_err_vs_shooting", "median_rel_err_vs_shooting"]
 BIFURCATION_FIELDS = ["level", "harmonics", "kind", "index", "freq_hz", "amplitude_m", "max_abs_mu_before",
-                      "max_abs_mu_after"]
+                      "max_abs_mu_after", "method", "family", "family_kind", "located_hz", "critical_mu", "grazing",
+                      "child_family", "note"]
+FRC_FIELDS = ["level", "method", "harmonics", "freq_hz", "point", "amplitude_m", "stable", "bifurcation", "response",
+              "segment", "drawn", "family", "family_kind", "period_k", "receptance_m_per_N"]
+FAMILY_FIELDS = ["level", "family", "kind", "period_k", "parent_family", "parent_index", "born_at", "n_points",
+                 "freq_min_hz", "freq_max_hz", "stable_points", "max_amplitude_m", "max_abs_mu", "n_bifurcations",
+                 "status", "notes"]
 BACKBONE_FIELDS = ["level", "scale", "load_N", "nnm", "peak_freq_hz", "peak_amplitude_m", "log_distance", "note"]
 
 
@@ -62,6 +70,8 @@ def write(result: FRCResult, writer: StageWriter) -> None:
     write_rows(writer.path("frc_backbone.csv"), _backbone_rows(result), fields=BACKBONE_FIELDS)
     frc_map_files.write(result, writer, stats)  # response_map.csv, response_map_jumps.csv, response_map.png
     writer.stats["frc"] = stats
+    writer.path("frc.md").write_text(frc_markdown(result), encoding="utf-8")
+    stats["converged"] = _converged_stats(result)
     _plot_frc(writer.path("frc.png"), result)
     _plot_receptance(writer.path("frc_receptance.png"), result)
     _plot_backbone(writer.path("frc_backbone.png"), result.backbone_curves, result.backbones, names, result.load_col,
@@ -129,9 +139,9 @@ def _stepped_sine_rows(result: FRCResult, stats: dict) -> list[dict]:
 
 
 def _curve_files(result: FRCResult, writer: StageWriter, stats: dict) -> None:
-    """frc.csv, frc_harmonics.csv, frc_bifurcations.csv, frc_stability.csv; the stability counts
-    per level into ``stats["stability"]``."""
-    rows_csv, harm_rows, bif_rows, stab_rows = [], [], [], []
+    """frc.csv, frc_harmonics.csv, frc_bifurcations.csv, frc_stability.csv, frc_families.csv; the
+    stability counts per level into ``stats["stability"]``."""
+    rows_csv, harm_rows, bif_rows, stab_rows, fam_rows = [], [], [], [], []
     for P in result.spec.levels_N:
         br = result.curves[P]
         if not isinstance(br, Exception):
@@ -156,8 +166,15 @@ def _curve_files(result: FRCResult, writer: StageWriter, stats: dict) -> None:
                                      "freq_hz": sig(float(f), DIGITS), "point": nm,
                                      "amplitude_m": sig(float(ss.amplitude_m[j, c]), DIGITS),
                                      "stable": _bool(ss.response[j] != "not_settled"), "bifurcation": "",
-                                     "response": ss.response[j], "segment": ""})
-    write_rows(writer.path("frc.csv"), rows_csv)
+                                     "response": ss.response[j], "segment": "",
+                                     "receptance_m_per_N": sig(float(ss.amplitude_m[j, c]) / P, DIGITS)})
+        cc = result.converged.get(P)
+        if cc is not None and cc.exact is not None:
+            rows_csv += _exact_rows(result, P, cc.exact)
+            bif_rows += _exact_bifurcation_rows(result, P, cc.exact)
+            fam_rows += _family_rows(P, cc.exact)
+    write_rows(writer.path("frc.csv"), rows_csv, fields=FRC_FIELDS)
+    write_rows(writer.path("frc_families.csv"), fam_rows, fields=FAMILY_FIELDS)
     write_rows(writer.path("frc_harmonics.csv"), harm_rows)
     write_rows(writer.path("frc_bifurcations.csv"), bif_rows, fields=BIFURCATION_FIELDS)
     write_rows(writer.path("frc_stability.csv"), stab_rows)
@@ -166,11 +183,39 @@ def _curve_files(result: FRCResult, writer: StageWriter, stats: dict) -> None:
 def _curve_rows(result: FRCResult, P: float, br) -> list[dict]:
     """frc.csv rows of one HB curve: each point at each output point."""
     H = result.spec.harmonics
-    labels = br.bifurcation_labels()
-    return [{"level": P, "method": "hb", "harmonics": H, "freq_hz": sig(br.freq_hz[i], DIGITS), "point": nm,
-             "amplitude_m": sig(float(br.amplitude_m[i, c]), DIGITS), "stable": _bool(br.stable[i]),
-             "bifurcation": labels[i], "response": "", "segment": int(br.segment[i])}
-            for i in range(len(br.freq_hz)) for c, nm in enumerate(result.names)]
+    cc = result.converged.get(P)
+    refined = cc.refined if cc is not None else ()
+    fill = cc.hb_fill if cc is not None else np.zeros(0, bool)
+    bands = [(sub.freq_hz.min(), sub.freq_hz.max()) for sub in refined]
+    out = []
+    for k, curve in enumerate((br, *refined)):
+        labels = curve.bifurcation_labels()
+        for i in range(len(curve.freq_hz)):
+            f = curve.freq_hz[i]
+            # drawn: HB's level, or beside the exact families (hb_fill); a refined band's own curve there
+            drawn = cc is None or k > 0 or (cc.method == "hb" or (fill.size and fill[i])) \
+                and not any(lo <= f <= hi for lo, hi in bands)
+            out += [{"level": P, "method": "hb", "harmonics": H, "freq_hz": sig(f, DIGITS), "point": nm,
+                     "amplitude_m": sig(float(curve.amplitude_m[i, c]), DIGITS), "stable": _bool(curve.stable[i]),
+                     "bifurcation": labels[i], "response": "", "segment": int(curve.segment[i]) + 1000 * k,
+                     "drawn": _bool(drawn), "family": 0, "family_kind": "main" if k == 0 else "main_refined",
+                     "period_k": 1, "receptance_m_per_N": sig(float(curve.amplitude_m[i, c]) / P, DIGITS)}
+                    for c, nm in enumerate(result.names)]
+    return out
+
+
+def _exact_rows(result: FRCResult, P: float, ex) -> list[dict]:
+    """frc.csv rows of the exact families of one level (method "shooting"): each point at each output point."""
+    out = []
+    for k, fam in enumerate(ex.families):
+        labels = fam.bifurcation_labels()
+        out += [{"level": P, "method": "shooting", "harmonics": "", "freq_hz": sig(fam.freq_hz[i], DIGITS), "point": nm,
+                 "amplitude_m": sig(float(fam.amplitude_m[i, c]), DIGITS), "stable": _bool(fam.stable[i]),
+                 "bifurcation": labels[i], "response": "", "segment": int(fam.segment[i]), "drawn": "true",
+                 "family": k, "family_kind": fam.kind, "period_k": fam.periods,
+                 "receptance_m_per_N": sig(float(fam.amplitude_m[i, c]) / P, DIGITS)}
+                for i in range(len(fam.freq_hz)) for c, nm in enumerate(result.names)]
+    return out
 
 
 def _harmonic_rows(result: FRCResult, P: float, br) -> list[dict]:
@@ -188,7 +233,47 @@ def _bifurcation_rows(result: FRCResult, P: float, br) -> list[dict]:
     return [{"level": P, "harmonics": H, "kind": kind, "index": int(i), "freq_hz": sig(br.freq_hz[i], DIGITS),
              "amplitude_m": sig(float(br.amplitude_m[i, col]), DIGITS),
              "max_abs_mu_before": sig(float(np.abs(br.multipliers[i - 1, 0])), 6),
-             "max_abs_mu_after": sig(float(np.abs(br.multipliers[i, 0])), 6)} for i, kind in br.bifurcations]
+             "max_abs_mu_after": sig(float(np.abs(br.multipliers[i, 0])), 6), "method": "hb", "family": 0,
+             "family_kind": "main"} for i, kind in br.bifurcations]
+
+
+def _exact_bifurcation_rows(result: FRCResult, P: float, ex) -> list[dict]:
+    """frc_bifurcations.csv rows of the exact families: every crossing, with where it was located, its
+    critical multiplier and the family switched onto (or why not)."""
+    col = result.load_col
+    sw = {(r["family"], r["index"], r["kind"]): r for r in ex.switches}
+    rows = []
+    for k, fam in enumerate(ex.families):
+        for i, kind in fam.bifurcations:
+            r = sw.get((k, i, kind), {})
+            crit = r.get("critical")
+            rows.append({"level": P, "harmonics": "", "kind": kind, "index": int(i),
+                         "freq_hz": sig(fam.freq_hz[i], DIGITS),
+                         "amplitude_m": sig(float(fam.amplitude_m[i, col]), DIGITS),
+                         "max_abs_mu_before": sig(float(np.abs(fam.multipliers[i - 1, 0])), 6),
+                         "max_abs_mu_after": sig(float(np.abs(fam.multipliers[i, 0])), 6), "method": "shooting",
+                         "family": k, "family_kind": fam.kind,
+                         "located_hz": sig(r["located_hz"], DIGITS) if "located_hz" in r else "",
+                         "critical_mu": sig(float(crit.real), 6) if crit is not None else "",
+                         "grazing": _bool(r["grazing"]) if "grazing" in r else "",
+                         "child_family": r["child"] if r.get("child", -1) >= 0 else "", "note": r.get("note", "")})
+    return rows
+
+
+def _family_rows(P: float, ex) -> list[dict]:
+    """frc_families.csv: one row per exact family of a level."""
+    rows = []
+    for k, fam in enumerate(ex.families):
+        pf, pi, born = fam.parent if fam.parent is not None else ("", "", "")
+        rows.append({"level": P, "family": k, "kind": fam.kind, "period_k": fam.periods, "parent_family": pf,
+                     "parent_index": pi, "born_at": born, "n_points": len(fam.freq_hz),
+                     "freq_min_hz": sig(float(fam.freq_hz.min()), DIGITS),
+                     "freq_max_hz": sig(float(fam.freq_hz.max()), DIGITS), "stable_points": int(np.sum(fam.stable)),
+                     "max_amplitude_m": sig(float(np.max(fam.amplitude_m)), DIGITS),
+                     "max_abs_mu": sig(float(np.max(np.abs(fam.multipliers[:, 0]))), 6),
+                     "n_bifurcations": len(fam.bifurcations), "status": fam.status,
+                     "notes": "; ".join(fam.notes)})
+    return rows
 
 
 def _stability_row(result: FRCResult, P: float, br, r: PointCheck) -> dict:
@@ -246,6 +331,14 @@ def _timing_rows(result: FRCResult) -> list[dict]:
         if not isinstance(br, Exception):
             rows.append({"level": P, "what": f"hb curve H={H} with monodromy stability", "harmonics": H,
                          "points": len(br.freq_hz), "wall_s": round(br.wall_s, 4)})
+        cc = result.converged.get(P)
+        if cc is not None:  # the drawn curve: the comparison in H, the refined bands or the exact families
+            rows.append({"level": P, "what": f"drawn curve ({cc.method})", "harmonics": "",
+                         "points": 0 if cc.exact is None else sum(len(f.freq_hz) for f in cc.exact.families),
+                         "wall_s": round(cc.wall_s, 4)})
+            for k, f in enumerate(cc.exact.families if cc.exact is not None else ()):
+                rows.append({"level": P, "what": f"exact family {k} ({f.kind})", "harmonics": "",
+                             "points": len(f.freq_hz), "wall_s": round(f.wall_s, 4)})
     return rows
 
 
@@ -265,6 +358,145 @@ def _backbone_rows(result: FRCResult) -> list[dict]:
                         "log_distance": sig(dist, ERR_DIGITS), "note": ""})
             rows.append(row)
     return rows
+
+
+# -- the drawn curve of each level -----------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class DrawnCurve:
+    """The exact families of one level as one curve to draw (each family's pieces kept apart): the
+    fields :func:`_plot_frc` reads of an HB curve."""
+
+    freq_hz: np.ndarray
+    amplitude_m: np.ndarray
+    stable: np.ndarray
+    segment: np.ndarray
+    label: str
+
+    def pieces(self) -> list[np.ndarray]:
+        return [np.flatnonzero(self.segment == k) for k in np.unique(self.segment)]
+
+
+def _spliced(br, refined: tuple) -> DrawnCurve:
+    """The HB curve ``br`` with each refined band's curve put in place of its points there (each
+    refined curve joined to the piece of ``br`` that steps over its band).
+
+    >>> from types import SimpleNamespace as NS
+    >>> br = NS(freq_hz=np.array([1.0, 2.0, 4.0]), amplitude_m=np.ones((3, 1)), stable=np.ones(3, bool),
+    ...         segment=np.zeros(3, int), H=3)
+    >>> sub = NS(freq_hz=np.array([2.5, 3.0, 3.5]), amplitude_m=2 * np.ones((3, 1)), stable=np.ones(3, bool))
+    >>> _spliced(br, (sub,)).freq_hz.tolist()
+    [1.0, 2.0, 2.5, 3.0, 3.5, 4.0]
+    """
+    f, a, st, seg = br.freq_hz, br.amplitude_m, br.stable, br.segment
+    H = getattr(br, "H", None)
+    for sub in refined:
+        lo, hi = sub.freq_hz.min(), sub.freq_hz.max()
+        keep = (f < lo) | (f > hi)
+        f, a, st, seg = f[keep], a[keep], st[keep], seg[keep]
+        j = next((i for i in range(len(f) - 1) if seg[i] == seg[i + 1] and min(f[i], f[i + 1]) < lo
+                  and max(f[i], f[i + 1]) > hi), None)
+        order = np.argsort(sub.freq_hz)
+        if j is None:  # no piece steps over it: a piece of its own
+            f, a = np.concatenate([f, sub.freq_hz]), np.concatenate([a, sub.amplitude_m])
+            st, seg = np.concatenate([st, sub.stable]), np.concatenate([seg, np.full(len(sub.freq_hz), seg.max() + 1)])
+            continue
+        if f[j] > f[j + 1]:
+            order = order[::-1]
+        f = np.concatenate([f[: j + 1], sub.freq_hz[order], f[j + 1:]])
+        a = np.concatenate([a[: j + 1], sub.amplitude_m[order], a[j + 1:]])
+        st = np.concatenate([st[: j + 1], sub.stable[order], st[j + 1:]])
+        seg = np.concatenate([seg[: j + 1], np.full(len(order), seg[j]), seg[j + 1:]])
+    return DrawnCurve(f, a, st, seg, f"HB H={H}, {len(refined)} resonance{'s' * (len(refined) != 1)} refined")
+
+
+def drawn_curves(result: FRCResult) -> dict:
+    """P -> the drawn curve of each level: the HB curve (with its refined resonances spliced in), or
+    its exact families (:class:`DrawnCurve`)."""
+    out = {}
+    for P, br in result.curves.items():
+        cc = result.converged.get(P)
+        if cc is None or cc.exact is None:
+            out[P] = _spliced(br, cc.refined) if cc is not None and cc.refined and not isinstance(br, Exception) \
+                else br
+            continue
+        fams = cc.exact.families
+        seg = np.concatenate([1000 * k + f.segment for k, f in enumerate(fams)])
+        label = f"exact flow ({len(fams)} famil{'y' if len(fams) == 1 else 'ies'})"
+        parts = [(np.concatenate([f.freq_hz for f in fams]), np.concatenate([f.amplitude_m for f in fams]),
+                  np.concatenate([f.stable for f in fams]), seg)]
+        fill = cc.hb_fill
+        if fill.size and fill.any():  # HB beside the families, where no stop closes (frc.converged_curve)
+            idx = np.flatnonzero(fill)
+            pieces = np.concatenate([[0], np.cumsum(np.diff(idx) > 1)])  # a new piece at each gap
+            hb = _spliced(DrawnCurve(br.freq_hz[idx], br.amplitude_m[idx], br.stable[idx], pieces, ""), cc.refined)
+            parts.append((hb.freq_hz, hb.amplitude_m, hb.stable, hb.segment + 1000 * (len(fams) + 1)))
+            label += ", HB where no stop closes"
+        out[P] = DrawnCurve(*(np.concatenate([p[j] for p in parts]) for j in range(4)), label)
+    return out
+
+
+def _label(br) -> str:
+    """The legend of a drawn curve."""
+    return getattr(br, "label", None) or f"HB H={br.H}"
+
+
+def _converged_stats(result: FRCResult) -> dict:
+    """Per level: what is drawn and why, and the exact families' sizes and times."""
+    out = {}
+    for P, cc in result.converged.items():
+        d = {"method": cc.method, "reason": cc.reason, "hb_change": None if not np.isfinite(cc.hb_change)
+             else sig(cc.hb_change, 3), "wall_s": round(cc.wall_s, 3)}
+        if cc.exact is not None:
+            d["families"] = [{"kind": f.kind, "points": len(f.freq_hz), "status": f.status,
+                              "wall_s": round(f.wall_s, 3)} for f in cc.exact.families]
+            d["switches_followed"] = sum(r["child"] >= 0 for r in cc.exact.switches)
+            d["switches_not_followed"] = sum(r["child"] < 0 for r in cc.exact.switches)
+        out[f"{P:g} N"] = d
+    return out
+
+
+def frc_markdown(result: FRCResult) -> str:
+    """frc.md: per level, which curve is drawn and why, its families, bifurcations and branch switches."""
+    spec = result.spec
+    lines = [f"# Forced response: {result.scene_name}", "",
+             f"Load P cos(2 pi f t) at {spec.point}, {spec.freq_min_hz:g}-{spec.freq_max_hz:g} Hz. The drawn curve "
+             f"of each level (`[frc] curve = \"{spec.curve}\"`) is HB at H = {spec.harmonics} where its amplitudes "
+             f"move by at most {spec.hb_converged_tol:g} from the next lower H, else the periodic orbits of the exact "
+             "flow continued by multiple shooting (no harmonics), with their Floquet multipliers (frc.csv: `drawn`, "
+             "`method`, `family`).", ""]
+    for P in spec.levels_N:
+        cc = result.converged.get(P)
+        if cc is None:
+            continue
+        lines += [f"## {P:g} N: {'exact flow (shooting)' if cc.method == 'shooting' else f'HB, H = {cc.hb_H}'}", "",
+                  cc.reason + ".", ""]
+        ex = cc.exact
+        if ex is None:
+            continue
+        lines += ["| family | kind | period | born at | points | f [Hz] | stable points | max amplitude [m] | "
+                  "max abs mu | ended |", "|---|---|---|---|---|---|---|---|---|---|"]
+        for k, f in enumerate(ex.families):
+            born = "f_min" if f.parent is None else f"{f.parent[2]} of family {f.parent[0]} at " \
+                f"{ex.families[f.parent[0]].freq_hz[f.parent[1]]:.5g} Hz"
+            lines.append(f"| {k} | {f.kind} | {f.periods} T | {born} | {len(f.freq_hz)} | {f.freq_hz.min():.5g}-"
+                         f"{f.freq_hz.max():.5g} | {int(np.sum(f.stable))} | {np.max(f.amplitude_m):.4g} | "
+                         f"{np.max(np.abs(f.multipliers[:, 0])):.3g} | {f.status} |")
+        kinds = {}
+        for f in ex.families:
+            for _, kd in f.bifurcations:
+                kinds[kd] = kinds.get(kd, 0) + 1
+        followed = [r for r in ex.switches if r["child"] >= 0]
+        skipped = [r for r in ex.switches if r["child"] < 0]
+        lines += ["", "Bifurcations: " + (", ".join(f"{n} {kd}" for kd, n in sorted(kinds.items())) or "none") + ".",
+                  f"Branch points (pitchforks, period doublings) met: {len(ex.switches)}; switched onto a new family: "
+                  f"{len(followed)}; not followed: {len(skipped)}"
+                  + (" (" + "; ".join(sorted({r['note'].split(':')[0] for r in skipped if r['note']})) + ")"
+                     if skipped else "") + ". Each is a row of frc_bifurcations.csv.",
+                  "Run times: frc_convergence_timing.csv.", ""]
+        for note in [n for f in ex.families for n in f.notes][:10]:
+            lines.append(f"- {note}")
+        lines.append("")
+    return "\n".join(lines)
 
 
 # -- the figures -------------------------------------------------------------------------------------
@@ -296,13 +528,15 @@ def _level_colours(levels) -> dict:
 
 
 def _draw_curves(ax, result: FRCResult, c: int, colours: dict, per_newton: bool, backbones: bool) -> None:
-    """One output point's curves on ``ax``: per level its colour; HB stable solid, unstable dashed;
-    stepped sine up/down as triangles, open where it settled, filled where it did not; backbones
-    dotted black. ``per_newton``: every amplitude divided by its level (receptance, m/N), the
-    levels drawn from the highest, widest, to the lowest, narrowest: where they coincide each shows."""
-    levels = sorted(result.curves, reverse=per_newton)
+    """One output point's curves on ``ax``: per level its colour and its drawn curve (HB or the exact
+    families, :func:`drawn_curves`), stable solid, unstable dashed; stepped sine up/down as triangles,
+    open where it settled, filled where it did not; backbones dotted black. ``per_newton``: every
+    amplitude divided by its level (receptance, m/N), the levels drawn from the highest, widest, to
+    the lowest, narrowest: where they coincide each shows."""
+    drawn = drawn_curves(result)
+    levels = sorted(drawn, reverse=per_newton)
     for rank, P in enumerate(levels):
-        br = result.curves[P]
+        br = drawn[P]
         col, scale = colours[P], (1.0 / P if per_newton else 1.0)
         lw = 1.2 + 1.4 * (len(levels) - 1 - rank) if per_newton else 1.2
         if not isinstance(br, Exception):
@@ -330,10 +564,15 @@ def _legend_handles(result: FRCResult, colours: dict, backbones: bool) -> list:
     """The legend: a colour per level, then a line or marker per kind of curve (black)."""
     from matplotlib.lines import Line2D
 
-    H = next((br.H for br in result.curves.values() if not isinstance(br, Exception)), result.spec.harmonics)
-    out = [Line2D([], [], color=colours[P], lw=3, label=f"P = {P:g} N") for P in sorted(result.curves)]
-    out += [Line2D([], [], color="k", lw=1.2, label=f"harmonic balance (H = {H}), stable"),
-            Line2D([], [], color="k", lw=0.9, ls="--", label="harmonic balance, unstable")]
+    drawn = drawn_curves(result)
+    bad = {P for P, cc in result.converged.items() if cc.error}  # shooting failed: HB drawn, not converged
+    out = [Line2D([], [], color=colours[P], lw=3, label=f"P = {P:g} N: {_label(drawn[P])}"
+                  + (" (NOT converged)" if P in bad else "")) for P in sorted(drawn)
+           if not isinstance(drawn[P], Exception)]
+    out += [Line2D([], [], color=colours[P], lw=3, label=f"P = {P:g} N (no curve)") for P in sorted(drawn)
+            if isinstance(drawn[P], Exception)]
+    out += [Line2D([], [], color="k", lw=1.2, label="periodic orbit, stable"),
+            Line2D([], [], color="k", lw=0.9, ls="--", label="periodic orbit, unstable")]
     if any(result.sweeps.get(P) for P in result.curves):
         out += [Line2D([], [], color="k", marker="^", mfc="none", ls="none", ms=6, label="stepped sine up, settled"),
                 Line2D([], [], color="k", marker="v", mfc="none", ls="none", ms=6, label="stepped sine down, settled"),
@@ -363,7 +602,7 @@ def draw_frc(result: FRCResult):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    curves, names, spec, events = result.curves, result.names, result.spec, result.events
+    curves, names, spec, events = drawn_curves(result), result.names, result.spec, result.events
     p = len(names)
     colours = _level_colours(curves)
     fig, axs = plt.subplots(2, p, figsize=(4.6 * p + 3.2, 8.6), squeeze=False, constrained_layout=True)
@@ -419,7 +658,7 @@ def draw_receptance(result: FRCResult):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    curves, names, spec = result.curves, result.names, result.spec
+    curves, names, spec = drawn_curves(result), result.names, result.spec
     p = len(names)
     colours = _level_colours(curves)
     fig, axs = plt.subplots(1, p, figsize=(4.6 * p + 3.2, 4.6), squeeze=False, constrained_layout=True)
@@ -515,4 +754,4 @@ def _plot_convergence(path, conv_rows, timing_rows, Pc) -> None:
     plt.close(fig)
 
 
-__all__ = ["ConvergenceRun", "FRCResult", "PointCheck", "write"]
+__all__ = ["ConvergenceRun", "DrawnCurve", "FRCResult", "PointCheck", "drawn_curves", "frc_markdown", "write"]

@@ -6,8 +6,11 @@ periodic), the largest Lyapunov exponent (1/s: log max |mu| / (p T) of the orbit
 the tangent's time average otherwise) with the tolerance it was judged against, the statistics of
 the per-period max |x1| over the recorded periods (min, mean, max: the envelope a test measures),
 the asymmetry max |x1 - x3| / max(|x1|, |x3|), whether the sweep jumped on arriving there, and the
-diagnostics (max |mu|, settled, contact, broadband, periods run). ``response_map_jumps.csv``: the
-jumps, each with the regimes and mean amplitudes on both sides. ``response_map.png``: per level, the
+diagnostics (max |mu|, settled, contact, broadband, periods run), and ``after_chaos``: whether an earlier
+frequency of the sweep was chaotic, quasi-periodic or unsettled (the sweep then arrives with a state
+round-off sets: the reproduction report does not require what follows to reproduce).
+``response_map_jumps.csv``: the jumps, each with the regimes and mean amplitudes on both sides (and
+``after_chaos``). ``response_map.png``: per level, the
 brute-force bifurcation diagram (Poincare samples of x1 against frequency, up and down) under the
 HB curve (stable solid, unstable dashed) with the shooting orbits and the measured envelope.
 ``response_map_spectra.png``: the order spectrum of x1 at every frequency of each sweep (response
@@ -29,9 +32,10 @@ DIGITS = 10  # significant digits of frequencies and amplitudes
 EXP_DIGITS = 4  # exponents, tolerances, ratios
 MAP_FIELDS = ["level", "direction", "freq_hz", "regime", "period_k", "lyapunov_per_s", "x1_min_m", "x1_mean_m",
               "x1_max_m", "asymmetry", "jump", "lyapunov_tol_per_s", "max_abs_mu", "settled", "contact", "broadband",
-              "n_periods"]
+              "n_periods", "after_chaos"]
 JUMP_FIELDS = ["level", "direction", "from_hz", "freq_hz", "from_regime", "to_regime", "x1_mean_before_m",
-               "x1_mean_after_m"]
+               "x1_mean_after_m", "after_chaos"]
+UNPREDICTABLE = ("chaotic", "quasi_periodic")  # regimes after which a sweep's state is set by round-off
 REGIME_COLORS = {"periodic": "C0", "subharmonic": "C2", "quasi_periodic": "C4", "chaotic": "C3"}
 
 
@@ -73,6 +77,7 @@ def _bool(v) -> str:
 def _sweep_rows(P: float, direction: str, rm, col: int) -> tuple[list[dict], list[dict]]:
     """(response_map.csv rows, response_map_jumps.csv rows) of one sweep."""
     rows, jumps = [], []
+    after = False  # an earlier frequency of this sweep was chaotic, quasi-periodic or unsettled
     for k, (f, pt) in enumerate(zip(rm.freq_hz, rm.points, strict=True)):
         pk = pt.peak[:, col]
         rows.append({"level": P, "direction": direction, "freq_hz": sig(f, DIGITS), "regime": pt.regime,
@@ -82,13 +87,15 @@ def _sweep_rows(P: float, direction: str, rm, col: int) -> tuple[list[dict], lis
                      "jump": _bool(rm.jump[k]), "lyapunov_tol_per_s": sig(pt.lyapunov_tol, EXP_DIGITS),
                      "max_abs_mu": "" if not np.isfinite(pt.max_abs_mu) else sig(pt.max_abs_mu, DIGITS),
                      "settled": _bool(pt.settled), "contact": _bool(pt.contact),
-                     "broadband": sig(pt.broadband, EXP_DIGITS), "n_periods": pt.n_periods})
+                     "broadband": sig(pt.broadband, EXP_DIGITS), "n_periods": pt.n_periods,
+                     "after_chaos": _bool(after)})
         if rm.jump[k]:
             before = rm.points[k - 1]
             jumps.append({"level": P, "direction": direction, "from_hz": sig(rm.freq_hz[k - 1], DIGITS),
                           "freq_hz": sig(f, DIGITS), "from_regime": _label(before), "to_regime": _label(pt),
                           "x1_mean_before_m": sig(before.peak[:, col].mean(), DIGITS),
-                          "x1_mean_after_m": sig(pk.mean(), DIGITS)})
+                          "x1_mean_after_m": sig(pk.mean(), DIGITS), "after_chaos": _bool(after)})
+        after = after or pt.regime in UNPREDICTABLE or not pt.settled
     return rows, jumps
 
 

@@ -83,6 +83,54 @@ class ConvergenceRun:
 
 
 @dataclass(frozen=True, eq=False)
+class ConvergedCurve:
+    """The drawn curve of one level (``[frc] curve``): HB where its amplitudes no longer move with H,
+    else the families of orbits of the exact flow continued by shooting (no H).
+
+    Attributes
+    ----------
+    level : float
+        N, the load amplitude.
+    method : {'hb', 'shooting'}
+        What is drawn.
+    reason : str
+        Why, in words with the numbers (frc.md).
+    hb_H, check_H : int
+        H of the HB curve and of the balance it was compared with (0: no comparison).
+    hb_change : float
+        Largest relative change of the amplitudes (every output point) between check_H and hb_H over
+        the HB curve's points (inf where HB at check_H was not found; nan: not compared).
+    contact : bool
+        A stop closes somewhere along the HB curve.
+    exact : ExactFRC or None
+        The families (:class:`reduced.periodic.exact_frc.ExactFRC`) where shot.
+    error : str
+        Why shooting failed (then HB is drawn, marked as not converged).
+    wall_s : float
+        s, the comparison and the shooting.
+    refined : tuple
+        HB curves (FRCBranch) over the bands of lightly damped modes the HB curve stepped over
+        (:func:`bearingshaft.stages.frc.resonance_refinements`), drawn there instead of it.
+    hb_fill : ndarray
+        (k,) bool over the HB curve's points: drawn beside the exact families (outside the main
+        family's range, where the orbit closes no stop); empty where HB is drawn or not needed.
+    """
+
+    level: float
+    method: str  # "hb" | "shooting"
+    reason: str
+    hb_H: int
+    check_H: int
+    hb_change: float
+    contact: bool
+    exact: object  # ExactFRC or None
+    error: str = ""
+    wall_s: float = 0.0
+    refined: tuple = ()  # FRCBranch over the bands of modes the HB curve stepped over
+    hb_fill: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # HB points drawn beside the families
+
+
+@dataclass(frozen=True, eq=False)
 class MapLevel:
     """The response map at one load level (:mod:`bearingshaft.stages.frc_map`).
 
@@ -144,6 +192,8 @@ class FRCResult:
         (P, scale) -> (Hz, m), the peak of the backbone curve at the load point.
     nearest : dict
         (P, scale) -> (mode, log distance) of the nearest backbone to that peak.
+    converged : dict
+        P -> ConvergedCurve, the drawn curve of each level.
     response_maps : dict
         P -> MapLevel, the response map (empty when ``[frc] map_step_hz = 0``).
     """
@@ -162,4 +212,5 @@ class FRCResult:
     backbones: dict  # linear mode -> (freq_hz (k,), amplitudes (k, p)) of its NNM backbone
     peaks: dict  # (P, scale) -> (Hz, m) the peak of the backbone curve at the load point
     nearest: dict  # (P, scale) -> (mode, log distance) of the nearest backbone to that peak
+    converged: dict = field(default_factory=dict)  # P -> ConvergedCurve, the drawn curve of each level
     response_maps: dict = field(default_factory=dict)  # P -> MapLevel (bearingshaft.stages.frc_map)

@@ -19,6 +19,9 @@ found with a guarantee, :mod:`reduced.transient.exact`).
 - ``levels.csv``, ``levels.png``: the level sweep, one spectrogram per blow level;
 - ``hammer.md``: what happens, in numbers (peak tip forces, impacts, when the gaps stay
   open, which modes carry the energy at the end, energy balance);
+- ``lyapunov.csv``: the nominal record's largest Lyapunov exponent, from exact runs displaced by
+  1e-9 (:func:`record_lyapunov`): how long its chaotic numbers are comparable between two machines
+  (the reproduction report's horizon, :mod:`bearingshaft.reproduction`);
 - with ``[hammer] linear_check``: ``linear_check.csv`` and ``linear_check.png``, the
   open-gap response against the full 3-D model's modal superposition
   (:mod:`bearingshaft.stages.hammer_linear`);
@@ -46,9 +49,17 @@ from bearingshaft import measured
 from bearingshaft.estimates import COPIES, FLOAT, MATPLOTLIB_BYTES, Estimate, n_dofs
 from bearingshaft.output import StageWriter
 from bearingshaft.progress import bar as progress_bar
+from bearingshaft.reproduction import Reproduction, chaotic, exact, record, roundoff
 from bearingshaft.scenes import HammerSpec, Scene, SceneError
 from bearingshaft.stages import hammer_compare, hammer_linear
-from bearingshaft.stages.hammer_results import ChannelBackbone, Comparison, LinearCheck, Record, VirtualTest
+from bearingshaft.stages.hammer_results import (
+    ChannelBackbone,
+    Comparison,
+    FrictionComparison,
+    LinearCheck,
+    Record,
+    VirtualTest,
+)
 from bearingshaft.systems import solver_options
 from fem.rig import TIP_CELLS
 from reduced.models.loads import HalfSine, Tabulated
@@ -57,6 +68,14 @@ from reduced.models.rig import VirtualRig, virtual_rig
 LABEL_MAX_HZ = 100.0  # Hz, the pseudo-rigid modes are searched below this (Table 2: 10.9 to 33.7 Hz)
 END_SHARE_S = 0.1  # s, the energy "at the end" is the mean over the record's last 0.1 s
 OPEN_GAP_M = 1.0  # m, the linear check's gap: too large to close
+LYAPUNOV_SEEDS = 3  # exact runs of the nominal blow displaced by LYAPUNOV_DELTA after it: the record's largest Lyapunov
+# exponent (lyapunov.csv), from which the reproduction report computes how long its chaotic numbers are comparable;
+# as many as the ringdown stage's reference check (hammer-test: 300-380 /s, about 3.5 s a run, each stopped once the
+# separation saturates, ~0.05 s into the record)
+LYAPUNOV_DELTA = 1e-9  # relative (energy norm) size of the displacement, as the ringdown stage's reference check
+LYAPUNOV_SATURATION = 1e-3  # the separation has saturated at this fraction of the state's norm
+LYAPUNOV_WINDOW_S = 0.01  # s, windows over which the separation is maximized (a few periods of the 1737 Hz mode)
+DECAY_FLOOR = 1e-2  # a motion has decayed when its modal energy stays below this share of its peak
 
 
 # -- the run ------------------------------------------------------------------------------
@@ -118,11 +137,13 @@ def run_record(rig: VirtualRig, signal, scene: Scene, level_N: float, duration_s
     res = ringdown(rig.system, np.zeros(n), np.zeros(n), fine_duration, acq.fine_rate_hz, rd.method,
                    loads=rig.loads(signal), **solver_options(rd))
     keep = slice(0, q * (n_out - 1) + 1, q)
-    fine = rig.channel_data(res.x, res.v, signal(res.t))
+    fine = rig.channel_data(res.x, res.v, signal(res.t), res.w)
     data = np.vstack([acq.acquire(fine[:-1], n_out), fine[-1:, keep]])  # the hammer: the applied force itself
     stats = {**res.stats, "acquisition": acq.describe(), "oversample": q}
+    fr = rig.system.friction is not None
     return Record(level_N, res.t[keep], data, res.x[keep], res.v[keep], res.energy[keep], res.dissipated[keep],
-                  res.external[keep], stats, float(res.energy_balance_error))
+                  res.external[keep], stats, float(res.energy_balance_error), res.w[keep] if fr else None,
+                  res.friction[keep] if fr else None)
 
 
 def default_location(rom) -> tuple[float, float, float]:
@@ -491,6 +512,9 @@ def _virtual_test(scene: Scene, rom, rig: VirtualRig, lm, labels: dict, stats: d
     for level in bar:
         records[level] = run_record(rig, blow(spec, level), scene, level)
     nominal = records[spec.peak_N]
+    # with friction the sliders' states are not in the record, so a displaced run could not start 1e-9 from it:
+    # no exponent (the report then says no horizon was measured)
+    lyapunov = record_lyapunov(rig, blow(spec, spec.peak_N), scene, nominal) if rig.system.friction is None else []
     curves = backbones(rig, spec.backbone_modes, float(np.max(nominal.energy)))
     summary = {level: level_summary(rig, rec, lm, labels) for level, rec in records.items()}
     linear = _linear_check(scene, rom, rig, progress) if spec.linear_check else None
@@ -501,8 +525,143 @@ def _virtual_test(scene: Scene, rom, rig: VirtualRig, lm, labels: dict, stats: d
     stats.update({"levels": {str(k): v for k, v in summary.items()},
                   "wall_s": {str(k): r.stats.get("wall_s") for k, r in records.items()}})
     line = _summary_line(scene, rig, nominal, summary[spec.peak_N], linear)
+    stats["lyapunov_exponent_per_s"] = [e.exponent_per_s for e in lyapunov]
+    friction = None
+    if rig.system.friction is not None:
+        friction = friction_comparison(scene, rom, rig, nominal, lm, labels, summary[spec.peak_N])
+        stats["friction"] = {"mu": friction.mu, "k_t": friction.k_t, "friction_work_J": friction.friction_work_J,
+                             "impacts": list(friction.impacts), "frictionless_wall_s":
+                                 friction.frictionless.stats.get("wall_s")}
     return VirtualTest(scene=scene, rig=rig, labels=labels, records=records, summary=summary, backbones=curves,
-                       linear=linear, end_share_s=END_SHARE_S, stats=stats, lines=(line,))
+                       linear=linear, end_share_s=END_SHARE_S, stats=stats, lines=(line,), friction=friction,
+                       lyapunov=tuple(lyapunov))
+
+
+def record_lyapunov(rig: VirtualRig, signal, scene: Scene, rec: Record, seeds: int = LYAPUNOV_SEEDS) -> list:
+    """The largest Lyapunov exponent of a record's motion after the blow, from exact runs started
+    ``LYAPUNOV_DELTA`` away.
+
+    Once the hammer has let go (the first sample at or after the force's end, ``signal.end_s``) the
+    rig moves freely: each displaced run starts there, LYAPUNOV_DELTA (relative, energy norm) from the
+    record's state, and is run without force on the record's samples by the same integrator; the
+    separation of its state from the record's is fitted
+    (:class:`reduced.transient.compare.LyapunovAccumulator`). (From the start, at rest, the separation
+    would be measured against a state of zero norm.)
+
+    Parameters
+    ----------
+    rig : the virtual rig
+    signal : the hammer's force p(t), N (its ``end_s``: when it lets go)
+    scene : the scene ([ringdown]: integrator and options)
+    rec : the record (its exact states at its samples)
+    seeds : displaced runs (directions 0 .. seeds - 1)
+
+    Returns
+    -------
+    list of LyapunovEstimate, one per seed (none when the force lasts the whole record)
+    """
+    from reduced.transient.compare import LyapunovAccumulator, aligned, displaced_state
+    from reduced.transient.integrate import ringdown_stream
+    from reduced.transient.store import Chunk
+
+    system, rd = rig.system, scene.ringdown
+    fs = 1.0 / float(rec.t[1] - rec.t[0])
+    k0 = int(np.searchsorted(rec.t, float(signal.end_s) - 0.5 / fs))
+    if k0 >= len(rec.t) - 2 or not (np.any(rec.x[k0]) or np.any(rec.v[k0])):
+        return []
+    n = len(rec.t) - k0
+    after = [Chunk(0, rec.t[k0:] - rec.t[k0], rec.x[k0:], rec.v[k0:], rec.dissipated[k0:], system)]
+    out = []
+    for k in range(seeds):
+        x, v = displaced_state(system, rec.x[k0], rec.v[k0], LYAPUNOV_DELTA, k)
+        run = ringdown_stream(system, x, v, (n - 1) / fs, fs, rd.method, **solver_options(rd))
+        acc = LyapunovAccumulator(system, n, fs, LYAPUNOV_DELTA, LYAPUNOV_SATURATION, LYAPUNOV_WINDOW_S)
+        try:
+            for a, b in aligned(after, run):
+                if not acc.feed(a, b):
+                    break
+        finally:
+            run.close()
+        out.append(acc.result())
+    return out
+
+
+def motion_decay(rig: VirtualRig, rec: Record, lm, labels: dict, after_s: float) -> dict:
+    """How each pseudo-rigid motion's energy decays in a record: its open-gap mode's energy
+    E_r = (eta_r'^2 + omega_r^2 eta_r^2) / 2, eta_r = phi_r^T M q (mass-normalised modes).
+
+    Parameters
+    ----------
+    rig : the rig that made ``rec``
+    rec : a record
+    lm : the rig's open-gap modes (:func:`reduced.models.modes.linear_modes`)
+    labels : {label: (mode index, freq_hz, score)} (:func:`pseudo_rigid`)
+    after_s : s, the blow's end: the peak is taken after it
+
+    Returns
+    -------
+    dict {label: {"peak_J", "end_J" (mean over the last ``END_SHARE_S``), "t_1pct_s" (the time after which it
+    stays below ``DECAY_FLOOR`` of its peak; NaN if it does not by the record's end), "energy_J" (the record's
+    E_r, for the figure)}}
+    """
+    M = rig.system.M
+    after = rec.t >= after_s
+    end = rec.t >= rec.t[-1] - END_SHARE_S
+    out = {}
+    for label, (i, _, _) in labels.items():
+        mphi = M @ lm.phi[:, i]
+        E = 0.5 * ((rec.v @ mphi) ** 2 + (lm.omega[i] * (rec.x @ mphi)) ** 2)
+        peak = float(E[after].max())
+        above = np.flatnonzero(E > DECAY_FLOOR * peak)
+        t_low = float(rec.t[above[-1] + 1]) if above.size and above[-1] + 1 < rec.t.size else math.nan
+        out[label] = {"peak_J": peak, "end_J": float(E[end].mean()), "t_1pct_s": t_low, "energy_J": E}
+    return out
+
+
+def _band_power(rig: VirtualRig, rec: Record, channel: str, after_s: float, split_hz: float) -> tuple[float, float]:
+    """(power below split_hz, above) of one channel after the blow (periodogram sums)."""
+    x = rec.data[list(rig.names).index(channel), rec.t >= after_s]
+    spec = np.abs(np.fft.rfft(x - x.mean())) ** 2
+    f = np.fft.rfftfreq(x.size, float(rec.t[1] - rec.t[0]))
+    return float(spec[f < split_hz].sum()), float(spec[f >= split_hz].sum())
+
+
+def friction_comparison(scene: Scene, rom, rig: VirtualRig, rec: Record, lm, labels: dict,
+                        summary: dict) -> FrictionComparison:
+    """The nominal blow again without friction (mu = 0 on the same reduction and rig), beside ``rec``: how
+    fast the pseudo-rigid motions decay, the friction work per impact, how the spectrogram's channel changes.
+
+    Parameters
+    ----------
+    scene : the scene (its model with mu > 0)
+    rom : its reduced model (with the tangential coordinates)
+    rig : the rig with friction
+    rec : the nominal blow's record with friction
+    lm, labels : the rig's open-gap modes and pseudo-rigid labels (the same without friction: same M, K)
+    summary : ``rec``'s :func:`level_summary`
+
+    Returns
+    -------
+    FrictionComparison
+    """
+    spec = scene.hammer
+    plain = virtual_rig(rom.with_contact(replace(scene.model, mu=0.0)), rig.location, rig.direction,
+                        rig.seismic_mass_kg)
+    other = run_record(plain, blow(spec, spec.peak_N), scene, spec.peak_N)
+    other_summary = level_summary(plain, other, lm, labels)
+    after = spec.start_s + spec.duration_s
+    with_f, without = motion_decay(rig, rec, lm, labels, after), motion_decay(plain, other, lm, labels, after)
+    decay = {k: {"freq_hz": labels[k][1], "with": with_f[k], "without": without[k]} for k in labels}
+    channel = scene.spectrogram.dof if scene.spectrogram is not None else "beam_s3:z"
+    pw, pwo = _band_power(rig, rec, channel, after, LABEL_MAX_HZ), _band_power(plain, other, channel, after,
+                                                                              LABEL_MAX_HZ)
+    bands = {f"below {LABEL_MAX_HZ:g} Hz": (pw[0], pwo[0]), f"above {LABEL_MAX_HZ:g} Hz": (pw[1], pwo[1])}
+    fr = rig.system.friction
+    return FrictionComparison(mu=float(fr.mu.max()), k_t=float(fr.k_t.max()), directions=rom.friction_directions,
+                              frictionless=other, decay=decay,
+                              impacts=(int(summary["impacts_total"]), int(other_summary["impacts_total"])),
+                              friction_work_J=float(rec.friction[-1]), hammer_work_J=float(rec.external[-1]),
+                              spectrum_change=bands)
 
 
 def _linear_check(scene: Scene, rom, rig: VirtualRig, progress: bool) -> LinearCheck:
@@ -559,7 +718,8 @@ def write(result: VirtualTest | Comparison, writer: StageWriter) -> None:
 DESCRIPTION = """Strike the reduced apparatus with the scene's blow at every level and record every rig channel
 as a test's DAQ would (six triaxial beam accelerometers, four triaxial tube sensors, four tip
 load cells, the hammer). Writes hammer.npz, hammer.uff (UFF 58), channels.csv, fig10.png,
-fig11.png, levels.csv, levels.png, hammer.md and, with [hammer] linear_check, linear_check.csv
+fig11.png, levels.csv, levels.png, hammer.md, lyapunov.csv (the record's largest Lyapunov
+exponent) and, with [hammer] linear_check, linear_check.csv
 and linear_check.png. With --test FILE.uff, instead, a measured test drives the model by its
 hammer channel (through a force window) at the test's sampling and every channel is compared:
 where chaos starts (the predictability horizon, from two exact runs of the model and its largest
@@ -567,7 +727,10 @@ Lyapunov exponent), the pointwise errors up to it, and past it what survives cha
 ridges, RMS envelope, impacts, the open-gap time, backbones of the free decay over the model's
 NNM backbones); --window START:END and --measures LIST choose what. Writes test_errors.csv,
 test_measures.csv, test_horizon.csv, test_compare.md, test_compare.png, test_spectrogram.png,
-test_horizon.png, test_measures.png, test_backbone.png and model.uff (the model's channels, UFF 58)."""
+test_horizon.png, test_measures.png, test_backbone.png and model.uff (the model's channels, UFF 58).
+With friction at the tips ([model] mu > 0), the nominal blow is run again with mu = 0 on the same reduction:
+friction.csv and friction.png (how the longitudinal, lateral and yaw motions decay, the spectrogram with and
+without) and a section of hammer.md (friction work per impact)."""
 
 
 def estimate(scene: Scene) -> list[Estimate]:
@@ -589,6 +752,14 @@ def estimate(scene: Scene) -> list[Estimate]:
     levels = len({*h.levels_N, h.peak_N}) + int(h.linear_check)
     per = (2 * n + len(channel_names()) + 4) * FLOAT
     exact = 3 * 2**4 * (2 * n) ** 2 * 16  # the exact integrator's state table (4 stops)
+    m = scene.model
+    if getattr(m, "mu", 0.0) > 0:  # with friction, tables for every friction state (reduced.models.rom: 7 or 19 a
+        d = 2 if m.friction_directions == "axial+lateral" else 1  # tip, two tips; 2 sliders a tip and direction)
+        states = (1 + 2 * 3**d) ** 2
+        N = 2 * (n + 2 * 2 * d) + 2 * 2 * d  # [x; v; w]: the tangential coordinates join x, the sliders add w
+        # V, V^-1 (complex), the friction power's form and the state's stiffness, in the friction table, its modal
+        # table and the forced one: three of like size (hammer-friction: 3553 MiB measured, 361 states)
+        exact += 3 * states * ((2 * 16 + 8) * N**2 + 8 * n**2)
     return [Estimate("hammer", int(MATPLOTLIB_BYTES + COPIES * samples * per + levels * samples * per + exact),
                      f"{levels} records of {samples:.3g} samples x {n} DOFs",
                      "[ringdown] duration_s or sample_rate_hz, or [hammer] levels_N")]
@@ -597,3 +768,23 @@ def estimate(scene: Scene) -> list[Estimate]:
 __all__ = ["compute", "write", "estimate", "DESCRIPTION", "run_record", "blow", "Record", "pseudo_rigid",
            "coupled_subsystem", "default_location", "impacts", "modal_energy_end", "backbones", "level_summary",
            "channel_backbones"]
+
+
+# -- the reproduction report (bearingshaft.reproduction): how these files compare with the reference -----
+IMPACTING = "of the impacting record, a chaotic motion"
+REPRODUCTION = Reproduction(lyapunov=("lyapunov.csv",), rules=(
+    record("hammer.uff", "not committed (.gitignore): the channels of hammer.npz"),
+    roundoff("levels.csv", "energy_balance_error"),
+    chaotic("levels.csv", "impacts*", "peak_contact_*", "gaps_open_after_s", "end_*",
+            why=f"impacts, peak tip forces, when the gaps stay open and where the energy ends {IMPACTING}"),
+    chaotic("hammer.md", r"^- (Impacts|Peak contact forces|The gaps stay open|Peak load-cell|Energy in the last|Chaos)",
+            r"^\| [0-9.]+ \| [0-9]+ \| ",
+            why=f"impacts, peak tip forces, when the gaps stay open and where the energy ends {IMPACTING}"),
+    exact("lyapunov.csv", "seed", "delta", "saturation", "window_s"),
+    chaotic("lyapunov.csv", why="Lyapunov exponents fitted to the separation of chaotic records 1e-9 apart"),
+    # with friction at the tips (friction.csv, hammer.md's friction section): both records impact
+    chaotic("friction.csv", "peak_J_*", "end_J_*", "t_1pct_s_*", why=f"energies and decay times {IMPACTING}"),
+    chaotic("hammer.md", r"^The nominal blow again with mu = 0", r"^\| [a-z]+ \| [0-9.]+ \| [0-9.e+-]+ / ",
+            r"^The spectrogram's channel after the blow",
+            why=f"impacts, friction work, energies and decay times with and without friction {IMPACTING}"),
+))

@@ -20,10 +20,11 @@ import numpy as np  # noqa: E402
 
 from bearingshaft import correlate  # noqa: E402
 from bearingshaft.correlate import ChannelError, ChannelPair  # noqa: E402
-from bearingshaft.digits import sig  # noqa: E402
+from bearingshaft.digits import roundoff_bound, sig, text, to_resolution  # noqa: E402
 from bearingshaft.measures import MEASURE_FIELDS  # noqa: E402
 from bearingshaft.output import StageWriter, write_rows  # noqa: E402
 from bearingshaft.plots import Envelope, wrap_title  # noqa: E402
+from bearingshaft.reproduction import DELTA0, HORIZON_TOL  # noqa: E402
 from bearingshaft.scenes import Scene  # noqa: E402
 from bearingshaft.stages.hammer_results import Comparison, LinearCheck, Record, VirtualTest, histories  # noqa: E402
 from fem.rig import TIP_CELLS  # noqa: E402
@@ -34,6 +35,9 @@ from reduced.transient.spectrogram import MAX_FRAMES, curve_in_time, spectrogram
 
 DIGITS = 6  # significant digits of the science files
 EVENT_DIGITS = 4  # quantities set by where a crossing lands (peak forces, times of contact)
+LINEAR_RESOLUTION = 1e-6  # linear check: a relative RMS error below this is written 0; the reduced model's matrices
+# themselves move by ~1e-8 with the BLAS's rounding (another CPU), and such errors (axes near zero by symmetry) moved
+# by 40 % between two machines
 SPECTRO_DB = 80.0  # dB shown below each spectrogram's peak
 FIG10_SPAN_S = 0.1  # s, Fig. 10's window after the blow's start (then on to the end of a contact in progress)
 FIG10_MARGIN_S = 0.002  # s, open gaps shown after the last contact in Fig. 10's window
@@ -81,7 +85,170 @@ def write_virtual_test(result: VirtualTest, writer: StageWriter) -> None:
     if result.linear is not None:
         linear_check_csv(writer.path("linear_check.csv"), result.linear)
         linear_check_figure(writer.path("linear_check.png"), result.linear)
+    if result.lyapunov:
+        lyapunov_csv(writer.path("lyapunov.csv"), result.lyapunov)
+    if result.friction is not None:
+        friction_csv(writer.path("friction.csv"), result.friction)
+        _save(draw_friction(rig, nominal, result.friction, scene, result.labels), writer.path("friction.png"))
     write_markdown(writer.path("hammer.md"), result)
+
+
+def _chaos_text(estimates) -> list[str]:
+    """The line of hammer.md that says how long the record's chaotic numbers are comparable (empty without
+    an exponent)."""
+    lam = max((e.exponent_per_s for e in estimates if e.chaotic and math.isfinite(e.exponent_per_s)), default=math.nan)
+    if not math.isfinite(lam) or lam <= 0:
+        return []
+    t_h = math.log(HORIZON_TOL / DELTA0) / lam  # the reproduction report's horizon
+    return [f"- Chaos: after the blow the motion separates from a run started 1e-9 away at up to {lam:.3g} /s "
+            f"(the largest Lyapunov exponent, lyapunov.csv), so round-off alone grows to 1e-4 of the state in "
+            f"{t_h:.2g} s: the impacts, peak forces, when the gaps stay open and the energy at the end differ from "
+            "one machine to another, and the reproduction report compares them as chaotic."]
+
+
+def lyapunov_csv(path: Path, estimates) -> None:
+    """``lyapunov.csv``: the nominal record's largest Lyapunov exponent, one row per displaced run (the
+    columns of the ringdown stage's ``lyapunov.csv``); the reproduction report reads its horizon here.
+
+    Parameters
+    ----------
+    path : the CSV written
+    estimates : LyapunovEstimate per displaced run (:func:`bearingshaft.stages.hammer.record_lyapunov`)
+    """
+    write_rows(path, [
+        {"seed": k, "delta": text(e.delta), "saturation": text(e.saturation), "window_s": text(e.window_s),
+         "exponent_per_s": text(e.exponent_per_s), "lyapunov_time_s": text(e.lyapunov_time_s),
+         "onset_s": text(e.onset_s), "saturation_s": text(e.saturation_s), "fit_start_s": text(e.fit_start_s),
+         "fit_end_s": text(e.fit_end_s), "ln_growth_fitted": text(e.ln_growth), "residual": text(e.residual, 2),
+         "chaotic": e.chaotic} for k, e in enumerate(estimates)])
+
+
+def balance_text(error: float) -> str:
+    """The exact integrator's energy-balance error as written: round-off, so the power of ten that bounds it
+    (:func:`bearingshaft.digits.roundoff_bound`; its digits change from one CPU to another).
+
+    Parameters
+    ----------
+    error : float
+        Relative energy-balance error.
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> balance_text(9.6e-12), balance_text(3.4e-9)
+    ('1e-10', '1e-08')
+    """
+    return f"{roundoff_bound(error):g}"
+
+
+
+
+DECAY_SHOWN = ("longitudinal", "lateral", "yaw")  # the motions friction at the tips acts on (friction.png)
+
+
+def friction_csv(path: Path, fc) -> None:
+    """``friction.csv``: per pseudo-rigid motion, its modal energy's peak, end and 1 % time with friction and
+    without (:class:`bearingshaft.stages.hammer_results.FrictionComparison`).
+
+    Parameters
+    ----------
+    path : the CSV written
+    fc : the comparison
+    """
+    rows = ["motion,freq_hz,peak_J_friction,peak_J_frictionless,end_J_friction,end_J_frictionless,"
+            "t_1pct_s_friction,t_1pct_s_frictionless"]
+    for label, d in sorted(fc.decay.items(), key=lambda kv: kv[1]["freq_hz"]):
+        a, b = d["with"], d["without"]
+        rows.append(f"{label},{d['freq_hz']:.6g},{a['peak_J']:.6g},{b['peak_J']:.6g},{a['end_J']:.6g},"
+                    f"{b['end_J']:.6g},{a['t_1pct_s']:.4g},{b['t_1pct_s']:.4g}")
+    path.write_text("\n".join(rows) + "\n", encoding="utf-8")
+
+
+def draw_friction(rig: VirtualRig, rec: Record, fc, scene: Scene, labels: dict):
+    """``friction.png``: the spectrogram's channel in the pseudo-rigid band with friction and without (one
+    colour scale), and the modal energy of the longitudinal, lateral and yaw motions against time, both runs.
+
+    Parameters
+    ----------
+    rig : the rig with friction
+    rec : the nominal blow with friction
+    fc : the comparison (its frictionless record and the motions' energies)
+    scene : the scene ([spectrogram])
+    labels : the pseudo-rigid modes
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    name = spectrogram_channel(scene)
+    channel = list(rig.names).index(name)
+    fzoom = zoom_band_hz(labels)
+    window = min(ZOOM_WINDOW_S, 0.25 * (rec.t[-1] - rec.t[0]))
+    fig, axes = plt.subplots(3, 1, figsize=(10, 10), constrained_layout=True)
+    top = max(float(_spectrogram_db(r, channel, window, 0.9, fzoom)[2].max()) for r in (rec, fc.frictionless))
+    for ax, r, what in ((axes[0], rec, f"with friction (mu = {fc.mu:g})"), (axes[1], fc.frictionless,
+                                                                           "without friction (mu = 0)")):
+        mesh = _spectro(ax, r, channel, scene, fzoom, top=top, window_s=window)
+        _pseudo_rigid_lines(ax, labels, fzoom)
+        ax.set_ylabel("frequency [Hz]")
+        ax.set_title(f"{name}, {rec.level_N:g} N blow, {what}: 0-{fzoom:g} Hz (Hann {window:g} s)", fontsize=10)
+        fig.colorbar(mesh, ax=ax, label="PSD [dB]", pad=0.01)
+    ax = axes[2]
+    colors = ("tab:blue", "tab:orange", "tab:green")
+    for c, label in zip(colors, DECAY_SHOWN, strict=True):
+        if label not in fc.decay:
+            continue
+        d = fc.decay[label]
+        ax.semilogy(rec.t, np.maximum(d["with"]["energy_J"], 1e-300), color=c, lw=1.0,
+                    label=f"{label} ({d['freq_hz']:.3g} Hz), friction")
+        ax.semilogy(fc.frictionless.t, np.maximum(d["without"]["energy_J"], 1e-300), color=c, lw=1.0, ls="--",
+                    label=f"{label}, no friction")
+    peak = max((max(d["with"]["peak_J"], d["without"]["peak_J"]) for k, d in fc.decay.items() if k in DECAY_SHOWN),
+               default=1.0)
+    ax.set_ylim(peak * 1e-8, peak * 3)
+    ax.set_xlim(rec.t[0], rec.t[-1])
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("modal energy [J]")
+    ax.set_title("energy of the open-gap longitudinal, lateral and yaw modes", fontsize=10)
+    ax.legend(fontsize=8, ncol=3)
+    return fig
+
+
+def friction_text(fc, end_share_s: float) -> list[str]:
+    """The section of hammer.md on friction at the tips.
+
+    Parameters
+    ----------
+    fc : FrictionComparison
+        The nominal blow with friction and without.
+    end_share_s : float
+        s, the energy "at the end" is the mean over the record's last end_share_s.
+
+    Returns
+    -------
+    list of str
+        The section's lines.
+    """
+    fpi = fc.friction_per_impact_J
+    lines = ["", f"## Friction at the tips (friction.csv, friction.png): mu = {fc.mu:g}, k_t = {fc.k_t:.4g} N/m, "
+             f"{' and '.join(fc.directions)}", "",
+             f"The nominal blow again with mu = 0 on the same reduction (the same tangential coordinates; only the "
+             f"sliders differ): impacts {fc.impacts[0]} with friction, {fc.impacts[1]} without. Friction work "
+             f"{fc.friction_work_J:.4g} J, {100 * fc.friction_work_J / fc.hammer_work_J:.3g} % of the hammer's "
+             f"{fc.hammer_work_J:.4g} J; {fpi:.3g} J per impact.", "",
+             f"| motion | [Hz] | peak energy, friction / none [J] | last {end_share_s:g} s, friction / none [J] | "
+             "below 1 % of its peak after, friction / none [s] |", "|---|---|---|---|---|"]
+    for label, d in sorted(fc.decay.items(), key=lambda kv: kv[1]["freq_hz"]):
+        a, b = d["with"], d["without"]
+        lines.append(f"| {label} | {d['freq_hz']:.4g} | {a['peak_J']:.3g} / {b['peak_J']:.3g} | "
+                     f"{a['end_J']:.3g} / {b['end_J']:.3g} | {a['t_1pct_s']:.3g} / {b['t_1pct_s']:.3g} |")
+    bands = "; ".join(f"{band}: {w / wo:.3g} of the frictionless power" if wo > 0 else f"{band}: no power"
+                      for band, (w, wo) in fc.spectrum_change.items())
+    lines += ["", f"The spectrogram's channel after the blow (summed periodogram): {bands}."]
+    return lines
 
 
 def write_record(writer: StageWriter, rig: VirtualRig, rec: Record, scene: Scene) -> None:
@@ -396,8 +563,8 @@ def _backbones_in_time(ax, rec: Record, curves: dict, blow_end_s: float, gaps_op
         (line,) = ax.plot(rec.t[upto], fe, color=colors[i % 4], lw=1.4, label=f"{label}, f(E(t)) while the gaps close",
                           gid="backbone")
         handles.append(line)
-    for text in hidden:
-        handles.append(plt.Line2D([], [], color="none", label=text))
+    for name in hidden:
+        handles.append(plt.Line2D([], [], color="none", label=name))
     return handles
 
 
@@ -447,7 +614,7 @@ def levels_csv(path: Path, summary: dict) -> None:
                      "end_mode_hz": sig(s["end_modes"][0]["freq_hz"], DIGITS), "end_mode": s["end_modes"][0]["label"],
                      "end_mode_share_of_beam": sig(s["end_modes"][0]["share"], 3),
                      "hammer_work_J": sig(s["hammer_work_J"], DIGITS),
-                     "energy_balance_error": f"{s['energy_balance_error']:.1e}"})
+                     "energy_balance_error": balance_text(s["energy_balance_error"])})
     write_rows(path, rows)
 
 
@@ -549,11 +716,15 @@ def linear_check_csv(path: Path, linear: LinearCheck) -> None:
     linear : the linear check
     """
     e = linear.errors
+
+    def cell(v: float) -> str:  # below LINEAR_RESOLUTION: 0, the reduced model is not reproducible to less
+        return text(to_resolution(float(v), LINEAR_RESOLUTION, 3), 3)
+
     write_rows(path, [{"channel": c, "near_zero": bool(linear.near_zero[i]),
-                       "rms_rel_error": f"{e[('band', '50ms')][i]:.3g}",
-                       "rms_rel_error_record": f"{e[('band', 'record')][i]:.3g}",
-                       "rms_rel_error_raw": f"{e[('raw', '50ms')][i]:.3g}",
-                       "rms_rel_error_raw_record": f"{e[('raw', 'record')][i]:.3g}"}
+                       "rms_rel_error": cell(e[('band', '50ms')][i]),
+                       "rms_rel_error_record": cell(e[('band', 'record')][i]),
+                       "rms_rel_error_raw": cell(e[('raw', '50ms')][i]),
+                       "rms_rel_error_raw_record": cell(e[('raw', 'record')][i])}
                       for i, c in enumerate(linear.names)])
 
 
@@ -605,7 +776,8 @@ def write_markdown(path: Path, result: VirtualTest) -> None:
     spec = scene.hammer
     s = summary[spec.peak_N]
     lines = [f"# Virtual hammer test: {scene.name}", "",
-             f"Reduced apparatus: {rig.system.n} coordinates (x1, x3 and {rig.system.n - 2} fixed-interface modes), "
+             f"Reduced apparatus: {rig.system.n} coordinates (x1, x3{_n_tangential(rig)} and "
+             f"{rig.system.n - 2 - _n_tangential(rig, False)} fixed-interface modes), "
              f"{len(rig.channels)} channels. Blow: "
              f"{'measured history ' + Path(spec.force_file).name if spec.force_file else 'half-sine'}"
              f" of {spec.duration_s * 1e3:g} ms at {where(rig.location)} along "
@@ -619,6 +791,7 @@ def write_markdown(path: Path, result: VirtualTest) -> None:
         lines.append(f"| {label} | {f:.4g} | {TABLE2_TEST_HZ[TABLE2_ORDER.index(label)]:.4g} | {sc:.3f} |")
     lines += ["", f"## The nominal blow, {spec.peak_N:g} N", ""]
     lines += _level_text(s, result.end_share_s)
+    lines += _chaos_text(result.lyapunov)
     lines += ["", "## Level sweep (levels.csv, levels.png)", "",
               "| level [N] | impacts | peak tip force [N] | gaps open after [s] | on the bungees at the end | "
               "the rest mostly in |", "|---|---|---|---|---|---|"]
@@ -632,7 +805,17 @@ def write_markdown(path: Path, result: VirtualTest) -> None:
                   + ", ".join(result.backbones) + "."]
     if result.linear is not None:
         lines += ["", "## Linear check (linear_check.csv, linear_check.png)", "", result.linear.text]
+    if result.friction is not None:
+        lines += friction_text(result.friction, result.end_share_s)
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def _n_tangential(rig: VirtualRig, text: bool = True):
+    """The tangential coordinates of the rig's model (friction at the tips): their count, or as words."""
+    n = sum(":" in name for name in rig.system.dof_names)
+    if not text:
+        return n
+    return f", {n} tangential coordinates of the tips' faces" if n else ""
 
 
 def _level_text(s: dict, end_share_s: float) -> list[str]:
@@ -656,7 +839,8 @@ def _level_text(s: dict, end_share_s: float) -> list[str]:
                  f"(the beam on its springs and the elastic modes) is carried by: {ends}.")
     lines.append(f"- Work of the hammer: {s['hammer_work_J']:.6g} J by the integrator, "
                  f"{s['hammer_work_trapezoid_J']:.6g} J from the hammer channel times the struck point's velocity "
-                 f"(trapezoid on the samples); energy balance error {s['energy_balance_error']:.1e}.")
+                 f"(trapezoid on the samples); energy balance error below {balance_text(s['energy_balance_error'])} "
+                 "(round-off: written as the power of ten that bounds it).")
     return lines
 
 

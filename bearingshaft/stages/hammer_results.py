@@ -8,6 +8,7 @@ both import it (neither imports the other's module).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -44,6 +45,10 @@ class Record:
         The integrator's statistics.
     balance_error : float
         Relative energy-balance error of the run.
+    w : (N, p) ndarray of float or None
+        m, the sliders' positions (friction at the tips; None without).
+    friction : (N,) ndarray of float or None
+        J, the friction work (part of ``dissipated``; None without friction).
     """
 
     level_N: float  # N, the blow's peak
@@ -56,6 +61,8 @@ class Record:
     external: np.ndarray  # (N,) J, work of the hammer
     stats: dict
     balance_error: float
+    w: np.ndarray | None = None  # (N, p) m, the sliders' positions (friction at the tips)
+    friction: np.ndarray | None = None  # (N,) J, the friction work (part of dissipated)
 
 
 @dataclass(frozen=True, eq=False)
@@ -143,6 +150,11 @@ class VirtualTest:
         For provenance.json.
     lines : tuple of str
         The stage's summary lines.
+    lyapunov : tuple of LyapunovEstimate
+        The nominal record's largest Lyapunov exponent, one estimate per displaced run
+        (:func:`bearingshaft.stages.hammer.record_lyapunov`).
+    friction : FrictionComparison or None
+        With friction at the tips (mu > 0), the nominal blow beside the frictionless one.
     """
 
     scene: Scene
@@ -155,11 +167,59 @@ class VirtualTest:
     end_share_s: float  # s, the energy "at the end" is the mean over the record's last end_share_s
     stats: dict  # for provenance.json
     lines: tuple[str, ...]  # the stage's summary lines
+    lyapunov: tuple = ()  # LyapunovEstimate per displaced run of the nominal blow
+    friction: FrictionComparison | None = None  # the nominal blow with friction and without (mu > 0)
 
     @property
     def nominal(self) -> Record:
         """The record of the nominal blow, ``[hammer] peak_N``."""
         return self.records[self.scene.hammer.peak_N]
+
+
+@dataclass(frozen=True, eq=False)
+class FrictionComparison:
+    """The nominal blow with friction at the tips and without it (mu = 0 on the same reduction, the same
+    tangential coordinates: only the sliders differ), :func:`bearingshaft.stages.hammer.friction_comparison`.
+
+    Attributes
+    ----------
+    mu : float
+        The scene's Coulomb coefficient.
+    k_t : float
+        N/m, the sliders' tangential stiffness.
+    directions : tuple of str
+        Where the faces rub (``axial``, ``lateral``).
+    frictionless : Record
+        The nominal blow without friction.
+    decay : dict
+        {label: {"freq_hz", "with": {...}, "without": {...}}} per pseudo-rigid motion, each side's modal energy
+        ``peak_J`` (after the blow), ``end_J`` (mean over the last ``end_share_s``), ``t_1pct_s`` (when it falls
+        for good below 1 % of its peak; NaN if it does not) (:func:`bearingshaft.stages.hammer.motion_decay`).
+    impacts : (int, int)
+        Impacts with friction and without.
+    friction_work_J : float
+        J, the friction work of the record with friction.
+    hammer_work_J : float
+        J, the hammer's work (the same blow on both).
+    spectrum_change : dict
+        {band label: (power with, power without)} of the spectrogram's channel, summed over the record after the
+        blow, per band (``pseudo-rigid`` below 100 Hz, ``structural`` above).
+    """
+
+    mu: float
+    k_t: float
+    directions: tuple[str, ...]
+    frictionless: Record
+    decay: dict  # {label: {"freq_hz", "with": {...}, "without": {...}}}
+    impacts: tuple[int, int]  # with friction, without
+    friction_work_J: float
+    hammer_work_J: float
+    spectrum_change: dict  # {band: (power with, power without)}
+
+    @property
+    def friction_per_impact_J(self) -> float:
+        """J, the friction work per impact of the record with friction (NaN without impacts)."""
+        return self.friction_work_J / self.impacts[0] if self.impacts[0] else math.nan
 
 
 @dataclass(frozen=True, eq=False)

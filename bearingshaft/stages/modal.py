@@ -35,6 +35,7 @@ import numpy as np
 from bearingshaft.digits import human
 from bearingshaft.estimates import Estimate
 from bearingshaft.progress import bar as progress_bar
+from bearingshaft.reproduction import Reproduction
 from bearingshaft.scenes import Scene
 from bearingshaft.stages.modal_results import Correlation, ModalStageResult
 
@@ -234,3 +235,11 @@ def write(result, writer) -> None:
     from bearingshaft.stages import modal_files
 
     modal_files.write(result, writer)
+
+
+# -- the reproduction report (bearingshaft.reproduction): how these files compare with the reference -----
+REPRODUCTION = Reproduction(rules=(
+    # every number is deterministic and written to the digits that reproduce: frequencies to the digits their
+    # eigen-residual resolves (modal_files.resolved_digits), MAC and scores to 4 decimals, fe_shapes.uff rounded to
+    # 5 digits of each mode's peak (modal_files.rounded_shapes); modes.vtu (ParaView) and the figures exist
+))

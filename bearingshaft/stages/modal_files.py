@@ -22,12 +22,16 @@ FREQ_DIGITS = 6  # significant digits of a frequency: the eigensolver's are good
 PCT_DECIMALS = 3  # decimals of an error in percent (1e-5 relative, 10x the 6th digit's rounding)
 RIGID_FLOOR = 1e-2  # a mode below RIGID_FLOOR x shift_hz is a rigid-body mode, written 0 Hz: its
 # eigenvalue is the solver's noise, ~1e-5 sigma (fem.modal), i.e. f ~ 3e-3 shift_hz
+SHAPE_DIGITS = 5  # fe_shapes.uff: each mode's components rounded to 5 decimal digits of its largest one; the
+# pseudo-rigid modes lie close together and their shapes mix at ~1e-6 of the peak from one CPU (or thread count) to
+# another, so components written in full (1e-7 where zero by symmetry) changed sign between machines
 FREE_BEAM_FIELDS = ["mode", "description", "freq_hz", "theory", "theory_hz", "error_pct", "euler_bernoulli_hz",
                     "euler_bernoulli_error_pct"]
 
 
-def freq_text(f: float, shift_hz: float) -> str:
-    """A frequency as written: 0 for a rigid-body mode, else :data:`FREQ_DIGITS` significant digits.
+def freq_text(f: float, shift_hz: float, residual: float | None = None) -> str:
+    """A frequency as written: 0 for a rigid-body mode, else :data:`FREQ_DIGITS` significant digits, fewer
+    for a mode whose eigen-residual says its frequency is not resolved to them (:func:`resolved_digits`).
 
     Parameters
     ----------
@@ -35,6 +39,8 @@ def freq_text(f: float, shift_hz: float) -> str:
         Hz, the frequency.
     shift_hz : float
         Hz, the modal analysis's shift: below ``RIGID_FLOOR`` x shift_hz a mode is rigid.
+    residual : float, optional
+        The mode's relative residual ||K phi - w^2 M phi|| / ||K phi|| (None: not known).
 
     Returns
     -------
@@ -42,10 +48,64 @@ def freq_text(f: float, shift_hz: float) -> str:
 
     Examples
     --------
-    >>> freq_text(1.2e-4, 1.0), freq_text(17.97912345, 1.0)
-    ('0', '17.9791')
+    >>> freq_text(1.2e-4, 1.0), freq_text(17.97912345, 1.0), freq_text(0.39904123, 0.1, residual=2.7e-3)
+    ('0', '17.9791', '0.399')
     """
-    return "0" if f < RIGID_FLOOR * shift_hz else f"{f:.{FREQ_DIGITS}g}"
+    if f < RIGID_FLOOR * shift_hz:
+        return "0"
+    return f"{f:.{resolved_digits(residual)}g}"
+
+
+def resolved_digits(residual: float | None) -> int:
+    """Significant digits of a frequency whose mode has relative residual ``residual``: the eigenvalue (and
+    so the frequency) is known to about the residual, 1 + floor(-log10 residual) digits, at most
+    :data:`FREQ_DIGITS`. The assembly's bungee modes (0.4-2.4 Hz) stop at their round-off floor, residuals
+    6e-5 to 3e-3 (results/performance/modal_residuals.csv): between two machines, and between 1 and 2
+    PARDISO threads, their sixth digit moved by up to 5.6e-4 relative.
+
+    Parameters
+    ----------
+    residual : float or None
+        The relative residual (None or non-finite: :data:`FREQ_DIGITS`).
+
+    Returns
+    -------
+    int
+
+    Examples
+    --------
+    >>> resolved_digits(2.65e-3), resolved_digits(5.8e-5), resolved_digits(1.9e-6), resolved_digits(None)
+    (3, 5, 6, 6)
+    """
+    if residual is None or not math.isfinite(residual) or residual <= 0:
+        return FREQ_DIGITS
+    return int(min(FREQ_DIGITS, max(2, 1 + math.floor(-math.log10(residual)))))
+
+
+def rounded_shapes(shapes: np.ndarray) -> np.ndarray:
+    """Mode shapes rounded to :data:`SHAPE_DIGITS` decimal digits of each mode's largest component.
+
+    Parameters
+    ----------
+    shapes : (n, m) ndarray of float
+        One mode per column.
+
+    Returns
+    -------
+    (n, m) ndarray of float
+        Rounded (a column of zeros stays zero; no negative zeros).
+
+    Examples
+    --------
+    >>> rounded_shapes(np.array([[0.578638], [-6.4e-07], [1.20484e-04]])).ravel().tolist()
+    [0.57864, 0.0, 0.00012]
+    """
+    out = np.zeros_like(shapes, dtype=float)
+    for k in range(shapes.shape[1]):
+        peak = float(np.max(np.abs(shapes[:, k])))
+        if peak > 0:
+            out[:, k] = np.round(shapes[:, k], SHAPE_DIGITS - 1 - math.floor(math.log10(peak))) + 0.0
+    return out
 
 
 def pct_text(v: float) -> str:
@@ -106,7 +166,8 @@ def write(result: ModalStageResult, writer: StageWriter) -> None:
     rows = []  # every computed mode with its label scores
     for i, f in enumerate(modes.freq_hz):
         sc = analysis.labels.score[i] if analysis.labels is not None else np.zeros(6)
-        rows.append([i + 1, freq_text(float(f), spec.shift_hz), *[f"{abs(v):.4f}" for v in sc]])
+        res = float(modes.residuals[i]) if modes.residuals is not None else None
+        rows.append([i + 1, freq_text(float(f), spec.shift_hz, res), *[f"{abs(v):.4f}" for v in sc]])
     _write_csv(writer.path("modes.csv"), ["mode", "freq_hz", *[f"score_{c}" for c in COMPONENT_LABELS]], rows)
     lines = [f"[{scene.name}] {len(modes.freq_hz)} modes of {system.n_dofs} DOFs ({model.layout}, {model.element}, "
              f"element size {model.element_size:g} m)"]
@@ -185,7 +246,8 @@ def _mac_files(result: ModalStageResult, writer: StageWriter) -> str:
 
     corr, names = result.correlation, result.names
     write_uff55(writer.path("fe_shapes.uff"), np.arange(1, len(corr.sensors) + 1),
-                result.analysis.modes.freq_hz[result.chosen], corr.fe_shapes, name=result.scene.model.layout)
+                result.analysis.modes.freq_hz[result.chosen], rounded_shapes(corr.fe_shapes),
+                name=result.scene.model.layout)
     note = corr.note
     writer.stats["mac"] = note
     fig, axes = plt.subplots(1, 2, figsize=(13, 5.2), gridspec_kw={"wspace": 0.5})

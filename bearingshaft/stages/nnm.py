@@ -16,6 +16,7 @@ import numpy as np
 from bearingshaft.estimates import COPIES, FLOAT, JACOBIAN_COPIES, Estimate, n_dofs
 from bearingshaft.output import StageWriter
 from bearingshaft.progress import bar as progress_bar
+from bearingshaft.reproduction import Reproduction, exact, sensitive, within
 from bearingshaft.scenes import Scene
 from bearingshaft.stages.nnm_fep import compute_fep
 from bearingshaft.stages.nnm_results import NNM2Exact, NNMResult
@@ -155,3 +156,19 @@ def write(result, writer) -> None:
     from bearingshaft.stages import nnm_files
 
     nnm_files.write(result, writer)
+
+
+# -- the reproduction report (bearingshaft.reproduction): how these files compare with the reference -----
+CONTINUATION = ("the points of an HB continuation: its step path (accepted and rejected steps, the tongues it meets) "
+                "is set by the last bits of each Newton solve, which another CPU changes")
+REPRODUCTION = Reproduction(rules=(
+    # a reduced model's matrices are reproducible across machines to ~1e-8 (the BLAS's rounding in the reduction);
+    # its linear modes are written to 10 digits (the 3-DOF model's are exact to them)
+    within("linear_modes.csv", rtol=1e-7, atol=1e-7,
+           why="linear modes of a reduced model, reproducible to ~1e-8 (its matrices)"),
+    sensitive("fep.csv", why=CONTINUATION),
+    sensitive("stability.csv", why=CONTINUATION + " (stability at those points)"),
+    sensitive("tongues.csv", why=CONTINUATION + " (where it meets the tongues)"),
+    sensitive("hb_convergence.csv", why=CONTINUATION + " (its points, reach and the errors at them)"),
+    exact("fep.md", why="the stage's conclusions, written to the digits that reproduce"),
+))

@@ -15,6 +15,7 @@ from datetime import UTC, datetime
 import numpy as np
 
 from bearingshaft import __version__
+from bearingshaft.digits import roundoff_bound
 from bearingshaft.gap_modes import MAC_PAIR
 from bearingshaft.output import StageWriter, git_commit, write_rows
 from bearingshaft.stages.reduce_results import ReduceResult  # noqa: F401  (re-exported)
@@ -54,7 +55,10 @@ def gap_rows_text(rows: list[dict]) -> list[dict]:
 
 
 def check_rows_text(checks: list[dict]) -> list[dict]:
-    """The rows of ``cb_check.csv``: residuals to 3 significant digits.
+    """The rows of ``cb_check.csv``: a passed check's residual is round-off (the identities hold exactly in
+    exact arithmetic), so it is written as the power of ten that bounds it
+    (:func:`bearingshaft.digits.roundoff_bound`: its digits, and even its sign, change from one CPU to
+    another); a failed one to 3 significant digits.
 
     Parameters
     ----------
@@ -68,10 +72,14 @@ def check_rows_text(checks: list[dict]) -> list[dict]:
 
     Examples
     --------
-    >>> check_rows_text([{"check": "M symmetric", "value": 1.234567e-16, "tolerance": 1e-12, "passed": True}])
-    [{'check': 'M symmetric', 'value': '1.23e-16', 'tolerance': '1e-12', 'passed': True}]
+    >>> check_rows_text([{"check": "M symmetric", "value": 1.234567e-16, "tolerance": 1e-9, "passed": True},
+    ...                  {"check": "K", "value": 2.345e-3, "tolerance": 1e-9, "passed": False}])
+    ... # doctest: +NORMALIZE_WHITESPACE
+    [{'check': 'M symmetric', 'value': '1e-10', 'tolerance': '1e-09', 'passed': True},
+     {'check': 'K', 'value': '0.00234', 'tolerance': '1e-09', 'passed': False}]
     """
-    return [{**c, "value": f"{c['value']:.3g}", "tolerance": f"{c['tolerance']:g}"} for c in checks]
+    return [{**c, "value": f"{roundoff_bound(abs(c['value'])):g}" if c["passed"] else f"{c['value']:.3g}",
+             "tolerance": f"{c['tolerance']:g}"} for c in checks]
 
 
 def _mode_files(result: ReduceResult, writer: StageWriter) -> str:

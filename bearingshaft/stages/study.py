@@ -41,6 +41,7 @@ import numpy as np
 from bearingshaft.estimates import Estimate, history_bytes, n_dofs
 from bearingshaft.gap_modes import full_gap_modes
 from bearingshaft.progress import CaseBar, ProgressBar
+from bearingshaft.reproduction import Reproduction, chaotic, roundoff, within
 from bearingshaft.scenes import Scene
 from bearingshaft.stages.study_results import CONVERGENCE_BUDGET_S, StudyResult, step_basis
 from reduced._blas import single_thread_blas
@@ -198,3 +199,22 @@ def write(result, writer) -> None:
     from bearingshaft.stages import study_files
 
     study_files.write(result, writer)
+
+
+# -- the reproduction report (bearingshaft.reproduction): how these files compare with the reference -----
+STIFF = ("event counts, largest penetration and the explicit scheme's energy error of 0.2-10 s impacting runs, "
+         "chaotic (each case has its own parameters; no Lyapunov exponent is measured per case)")
+DOP853 = ("DOP853 without events steps over the contact switches: its error depends on where its steps fall, which "
+          "round-off moves (another CPU: up to 3x)")
+REDUCED = "a reduced model against the full one: their frequencies are reproducible across machines to ~1e-8"
+REPRODUCTION = Reproduction(rules=(
+    within("work_precision.csv", "error", "n_steps", factor=3.0, rows=r"^dop853,", why=DOP853),
+    roundoff("work_precision.csv", "error", rows=r"^exact,"),
+    roundoff("*stiff_cases.csv", "energy_balance_error", rows=r",exact,"),
+    chaotic("*stiff_cases.csv", "energy_balance_error", "n_steps", "n_events", "max_penetration_m", why=STIFF),
+    within("rom_convergence.csv", atol=1e-8, rtol=1e-8, why=REDUCED),
+    within("study.md", r"^\| dop853 \|", factor=3.0, why=DOP853),
+    roundoff("study.md", r"^\| exact \| < "),
+    chaotic("study.md", r"^\| explicit \| [0-9.e+-]+ \| \(", r"^\| (exact|explicit) \| [0-9.]+ \| ok \|", why=STIFF),
+    within("study.md", r"^\| [0-9]+ \| [0-9]+ \| ", atol=1e-8, rtol=1e-8, why=REDUCED),
+))

@@ -28,6 +28,7 @@ import numpy as np
 from bearingshaft.estimates import Estimate, history_bytes, n_dofs
 from bearingshaft.gap_modes import GapModeComparison, compare_all, full_gap_modes
 from bearingshaft.progress import ProgressBar
+from bearingshaft.reproduction import Reproduction, roundoff, sensitive, within
 from bearingshaft.scenes import Scene, VerifySpec, load_scene
 from bearingshaft.stages.verify_results import MODELS, STARTS, VerifyResult
 from reduced.models.discrete import DiscreteParams
@@ -250,3 +251,14 @@ def write(result, writer) -> None:
     from bearingshaft.stages import verify_files
 
     verify_files.write(result, writer)
+
+
+# -- the reproduction report (bearingshaft.reproduction): how these files compare with the reference -----
+REPRODUCTION = Reproduction(rules=(
+    roundoff("residuals.csv", "value", rows=r"^(K_bb_diag|M_bq|K_bq|M_qq),"),
+    roundoff("verify.md", r"^\| (K_bb_diag|M_bq|K_bq|M_qq) \| < "),
+    # relative differences of a reduced model's frequencies from the full model's: both reproducible to ~1e-8
+    within("verify.csv", "*_rel", atol=1e-8, why="differences of frequencies reproducible to ~1e-8"),
+    sensitive("nnm_backbones.csv", why="the points of the HB continuations of the backbones: their step path is set "
+              "by the last bits of each Newton solve"),
+))

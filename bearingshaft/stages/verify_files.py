@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from bearingshaft.digits import cells
+from bearingshaft.digits import cells, roundoff_bound
 from bearingshaft.gap_modes import GapModeComparison, left_out_summary
 from bearingshaft.output import StageWriter, write_rows
 from bearingshaft.plots import plt
@@ -23,6 +23,41 @@ from reduced.transient.spectrogram import curve_in_time
 LABELS = {"full": "full 3-D", "reduced": "reduced (CB)", "identified": "identified 3-mass", "table1": "Table 1"}
 COLORS = {"full": "k", "reduced": "C0", "identified": "C2", "table1": "C3"}
 DB_RANGE = 80.0  # dB shown below each spectrogram's peak
+# residuals that vanish by the model's mirror symmetry (x1 and x3 mirror each other) or by the Craig-Bampton form
+# (K_bq, mass-normalized M_qq): what is computed is round-off, whose digits change from one CPU to another (K_bb_diag
+# 4.8e-9 on one machine, 3.3e-9 on another), so below ROUNDOFF_MAX it is written as the power of ten that bounds it
+ROUNDOFF_RESIDUALS = ("K_bb_diag", "M_bq", "K_bq", "M_qq")
+ROUNDOFF_MAX = 1e-6  # above this such a residual is real (an asymmetric model) and written to 4 digits
+
+
+def residual_text(name: str, value: float, spec: str = ".4g", below: str = "") -> str:
+    """A residual of the identification as written: the power-of-ten bound of a round-off one, else ``spec``.
+
+    Parameters
+    ----------
+    name : str
+        Its key (``reduced.models.identify.RESIDUAL_MEANING``).
+    value : float
+        Its value.
+    spec : str
+        Format of a residual that is not round-off.
+    below : str
+        Put before a bound (Markdown: ``"< "``; a CSV cell stays a number).
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> residual_text("M_qq", -6.661e-16), residual_text("K_bb_diag", 4.789e-9, below="< ")
+    ('1e-10', '< 1e-08')
+    >>> residual_text("M_bb01", 0.03282)
+    '0.03282'
+    """
+    if name in ROUNDOFF_RESIDUALS and abs(value) < ROUNDOFF_MAX:
+        return f"{below}{roundoff_bound(abs(value)):g}"
+    return format(value, spec)
 
 
 def _figure(path, title: str, freq_rows: list[dict], backbones: dict, runs: dict, spectra: dict,
@@ -124,7 +159,7 @@ def _identification(f: dict, id_rows: list[dict], residuals: dict) -> str:
                    [[r["parameter"], r["unit"], f"{r['table1']:.6g}", f"{r['identified']:.6g}",
                      f"{100 * r['relative_difference']:+.2f} %"] for r in id_rows])
     res = _table(["residual", "value", "meaning"],
-                 [[k, f"{v:+.3e}", RESIDUAL_MEANING[k]] for k, v in residuals.items()])
+                 [[k, residual_text(k, v, "+.3e", "< "), RESIDUAL_MEANING[k]] for k, v in residuals.items()])
     return f"""## Identified three-mass parameters
 
 From the reduced matrices (`reduced/models/identify.py`): k_s = trace(K_bb)/4, m2 = (|M_bq[0]| + |M_bq[1]|)^2,
@@ -287,8 +322,8 @@ def write(result: VerifyResult, writer: StageWriter) -> None:
     """
     r, scene = result, result.scene
     write_rows(writer.path("identified.csv"), cells(r.id_rows, {"relative_difference": ".4g"}))
-    write_rows(writer.path("residuals.csv"), cells([{"residual": k, "value": v, "meaning": RESIDUAL_MEANING[k]}
-                                                      for k, v in r.residuals.items()], {}, ".4g"))
+    write_rows(writer.path("residuals.csv"), [{"residual": k, "value": residual_text(k, v),
+                                               "meaning": RESIDUAL_MEANING[k]} for k, v in r.residuals.items()])
     write_rows(writer.path("verify.csv"), cells(r.freq_rows, {"reduced_mac": ".6f", **{f"{k}_rel": ".4g"
                                                                                        for k in MODELS}}))
     write_rows(writer.path("nnm_backbones.csv"),

@@ -32,7 +32,8 @@ the order of its modules:
   one single-threaded worker process per core (``--workers N`` to limit), started and closed
   by the sweep, or the scheduler at ``--scheduler ADDRESS``. Each case runs the scene's stages
   through :func:`bearingshaft.pipeline.run_stage`, the code of a single run, into
-  ``<out>/<case-id>/`` (default ``results/<scene>/sweep/``). A rerun skips cases whose folder
+  ``<out>/<case-id>/`` (default ``runs/<scene>/sweep/``; ``--update-reference``: the committed
+  ``results/<scene>/sweep/``). A rerun skips cases whose folder
   is complete (every stage in its ``provenance.json``, written last by
   :mod:`bearingshaft.output`, and its ``scene.toml`` equal to the case's); a failing case (a
   solver error, a value refused by a stage, a worker lost more often than Dask's

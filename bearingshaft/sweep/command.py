@@ -95,7 +95,11 @@ def sweep_command(args, load_scene) -> int:
     workers = _positive_int(args.workers, "--workers")
     if workers is not None and args.scheduler:
         raise SweepError("--workers sizes the local cluster; with --scheduler the cluster's own workers run")
-    out = Path(args.out) if args.out else Path("results") / scene.name / "sweep"
+    update_reference = getattr(args, "update_reference", False)
+    if update_reference and args.out:
+        raise SweepError("--update-reference writes results/<scene>/sweep/: give it or --out, not both")
+    # runs/<scene>/sweep/ by default; the committed results/<scene>/sweep/ tables are the reference
+    out = Path(args.out) if args.out else Path("results" if update_reference else "runs") / scene.name / "sweep"
     check_out_dir(out)
     plan = build_plan(scene, spec, source, out, None if args.scheduler else workers or local_cores())
     progress = not args.no_progress

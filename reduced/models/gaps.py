@@ -48,10 +48,13 @@ class Friction:
 
     Slider k acts along the tangential relative coordinate ``t_k = Bt[k] @ x`` at tip ``tip[k]``; the
     normal force of whichever stop of that tip is closed, N = k_j max(0, side_j (B_j x - o_j)), bounds
-    its force: |f_k| <= mu_k N (the module docstring gives the states). One slider serves both stops
-    of a two-sided tip: they are never closed together, and a slider starts unloaded (w = t) each
-    time a stop of its tip closes. Two sliders on one tip (along and across the beam) are two
-    independent Coulomb laws (a square friction cone), which keeps every state linear.
+    its force: |f_k| <= mu_k N (the module docstring gives the states). A slider serves both stops
+    of a two-sided tip (they are never closed together) unless ``stop`` ties it to one of them: the
+    3-D model's upper and lower tips touch two different faces of the beam, whose tangential motions
+    differ (the beam's pitch moves its top and bottom faces apart along its axis), so each stop has
+    sliders of its own there, engaged only while that stop is closed. A slider starts unloaded
+    (w = t) each time a stop that engages it closes. Two sliders on one contact (along and across the
+    beam) are two independent Coulomb laws (a square friction cone), which keeps every state linear.
 
     Attributes
     ----------
@@ -65,6 +68,9 @@ class Friction:
         Coulomb coefficient of each slider, >= 0.
     names : tuple of str
         One name a slider.
+    stop : (p,) int array or None
+        The stop (row of :attr:`GapSystem.B`) that engages each slider, -1 for either stop of its tip
+        (None: -1 for every slider).
     """
 
     Bt: np.ndarray
@@ -72,6 +78,7 @@ class Friction:
     k_t: np.ndarray
     mu: np.ndarray
     names: tuple[str, ...]
+    stop: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         Bt = np.atleast_2d(np.asarray(self.Bt, float))
@@ -82,6 +89,10 @@ class Friction:
             object.__setattr__(self, name, np.broadcast_to(np.asarray(getattr(self, name), float), (p,)).copy())
         if self.tip.shape != (p,):
             raise ValueError(f"tip must have shape ({p},), got {self.tip.shape}")
+        stop = np.full(p, -1, np.int64) if self.stop is None else np.asarray(self.stop, np.int64).reshape(-1)
+        if stop.shape != (p,):
+            raise ValueError(f"stop must have shape ({p},), got {stop.shape}")
+        object.__setattr__(self, "stop", stop)
         if len(self.names) != p:
             raise ValueError(f"names must hold {p} names, got {len(self.names)}")
         for name in ("Bt", "k_t", "mu"):
@@ -96,6 +107,17 @@ class Friction:
     def p(self) -> int:
         """Number of sliders."""
         return self.Bt.shape[0]
+
+    def engages(self, tip: np.ndarray) -> np.ndarray:
+        """(p, m) bool: stop j engages slider k (stops of tip numbers ``tip`` (m,)): j is of the slider's tip and
+        is its stop, or the slider serves either stop of its tip."""
+        j = np.arange(len(tip))
+        return (np.asarray(tip)[None, :] == self.tip[:, None]) & ((self.stop[:, None] < 0) | (self.stop[:, None] == j))
+
+    def engaged_by(self, tip: np.ndarray, closed: np.ndarray) -> np.ndarray:
+        """(p,) int: the closed stop that engages each slider, -1 where none does (``closed`` (m,) bool)."""
+        eng = self.engages(tip) & np.asarray(closed, bool)[None, :]
+        return np.where(eng.any(axis=1), np.argmax(eng, axis=1), -1)
 
     def force(self, x: np.ndarray, w: np.ndarray) -> np.ndarray:
         """N, tangential force of each slider kt (Bt x - w) for x (..., n), w (..., p)."""
@@ -177,6 +199,9 @@ class GapSystem:
                 raise ValueError(f"friction Bt must be (p, {n}), got {fr.Bt.shape}")
             if not np.all(np.isin(fr.tip, self.tip)):
                 raise ValueError(f"friction tips must be tips of the stops {np.unique(self.tip)!r}, got {fr.tip!r}")
+            tied = fr.stop >= 0
+            if np.any(fr.stop >= m) or np.any(self.tip[fr.stop[tied]] != fr.tip[tied]):
+                raise ValueError(f"friction stops must be stops of the sliders' tips, got {fr.stop!r}")
 
     # -- sizes -------------------------------------------------------------------------
     @property
@@ -302,23 +327,29 @@ class GapSystem:
                 keep[j] = False
         if keep.all():
             return self
+        friction = self.friction
+        if friction is not None and np.any(friction.stop >= 0):  # the stops kept are numbered anew
+            new = np.cumsum(keep) - 1
+            friction = replace(friction, stop=np.where(friction.stop >= 0, new[friction.stop], -1))
         return GapSystem(
             M=self.M, C=self.C, K=K, B=self.B[keep], k=self.k[keep], offset=self.offset[keep],
             side=self.side[keep], tip=self.tip[keep], dof_names=self.dof_names,
-            stop_names=tuple(n for n, k in zip(self.stop_names, keep, strict=True) if k), friction=self.friction,
+            stop_names=tuple(n for n, k in zip(self.stop_names, keep, strict=True) if k), friction=friction,
         )
 
     def closed_stiffness(self) -> np.ndarray:
-        """N/m, stiffness with one stop of every tip closed (the stiffest contact state); with friction,
-        that stop's sliders sticking (their tangential springs kt Bt^T Bt added)."""
+        """N/m, stiffness with one stop of every tip closed (the stiffest contact state; of equal stops, the
+        first, the upper one); with friction, the sliders that stop engages sticking (their tangential springs
+        kt Bt^T Bt added)."""
         Ks = self.K.copy()
+        eng = None if self.friction is None else self.friction.engages(self.tip)
         for t in np.unique(self.tip):
             j = np.flatnonzero(self.tip == t)
             jmax = j[np.argmax(self.k[j])]
             Ks += self.k[jmax] * np.outer(self.B[jmax], self.B[jmax])
-            if self.friction is not None:
+            if eng is not None:
                 fr = self.friction
-                for q in np.flatnonzero(fr.tip == t):
+                for q in np.flatnonzero(eng[:, jmax]):
                     Ks += fr.k_t[q] * np.outer(fr.Bt[q], fr.Bt[q])
         return Ks
 
@@ -375,7 +406,7 @@ def two_sided_stops(
     }
 
 
-def tip_friction(rows_t, k_t, mu, names: tuple[str, ...], tips=None) -> Friction:
+def tip_friction(rows_t, k_t, mu, names: tuple[str, ...], tips=None, stops=None) -> Friction:
     """Sliders at tips: along each tangential row of each tip.
 
     Parameters
@@ -391,6 +422,9 @@ def tip_friction(rows_t, k_t, mu, names: tuple[str, ...], tips=None) -> Friction
         T * d slider names, tip-major.
     tips : (T,) array_like of int, optional
         The tip numbers (default 0 .. T - 1, those of :func:`two_sided_stops`).
+    stops : (T,) array_like of int, optional
+        The stop that engages each row's sliders (a row of B), -1 for either stop of its tip (the default);
+        a stop's sliders, of its tip, are then rows of their own (give the tip twice, once a stop).
 
     Returns
     -------
@@ -411,5 +445,6 @@ def tip_friction(rows_t, k_t, mu, names: tuple[str, ...], tips=None) -> Friction
     tips = np.arange(T) if tips is None else np.asarray(tips, np.int64)
     k_t = np.broadcast_to(np.asarray(k_t, float), (T,))
     mu = np.broadcast_to(np.asarray(mu, float), (T,))
+    stops = np.full(T, -1, np.int64) if stops is None else np.asarray(stops, np.int64)
     return Friction(Bt=R.reshape(T * d, n), tip=np.repeat(tips, d), k_t=np.repeat(k_t, d), mu=np.repeat(mu, d),
-                    names=tuple(names))
+                    names=tuple(names), stop=np.repeat(stops, d))

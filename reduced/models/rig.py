@@ -8,8 +8,9 @@ with its rig outputs and mesh) with a hammer blow of unit force along ``directio
 
 and the channels of :mod:`fem.rig`, synthesised from the state (q, q') at each sample:
 
-- accelerometers: a = R q'' with q'' = M^-1 (b p - C q' - K q - B^T f(B q)), exact given
-  the state (no differencing);
+- accelerometers: a = R q'' with q'' = M^-1 (b p - C q' - K q - B^T f(B q) - Bt^T f_t), exact
+  given the state (no differencing; f_t = k_t (Bt q - w) the sliders' forces when the tips have
+  friction, w their positions);
 - tip load cells: the stop's compression f_c >= 0 (upper stop of a gap: the top tip, lower
   stop: the bottom one) minus the seismic mass's inertia along the cell, F = f_c - m_a a_z
   (top), f_c + m_a a_z (bottom), a_z the seat's vertical acceleration;
@@ -105,13 +106,18 @@ class VirtualRig:
         """The blow as a load on the model: f_ext = b p(t)."""
         return Loads(self.b[None, :], (signal,), ("hammer",))
 
-    def channel_data(self, x: np.ndarray, v: np.ndarray, p: np.ndarray) -> np.ndarray:
-        """(n_channels, N) every channel at N samples of the state x, v (N, n) under hammer force p (N,)."""
+    def channel_data(self, x: np.ndarray, v: np.ndarray, p: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
+        """(n_channels, N) every channel at N samples of the state x, v (N, n) under hammer force p (N,); with
+        friction, the sliders' positions w (N, p) give their forces (the tips' tangential forces on the beam)."""
         s = self.system
         x, v, p = np.atleast_2d(x), np.atleast_2d(v), np.atleast_1d(p)
         W = np.linalg.solve(s.M, np.vstack([self.acc_rows, self.seat_rows]).T).T  # rows of R M^-1 (M symmetric)
         a = (np.outer(W @ self.b, p) - (W @ s.C) @ v.T - (W @ s.K) @ x.T  # R q'' for every row, (rows, N)
              - W @ s.contact_force(x).T)
+        if s.friction is not None:
+            if w is None:
+                raise ValueError("a rig with friction needs the sliders' positions w for its channels")
+            a -= (W @ s.friction.Bt.T) @ s.friction.force(x, np.atleast_2d(w)).T
         acc, seat = a[: len(self.acc_rows)], a[len(self.acc_rows):]
         stop = s.stop_force(x).T  # (4, N) compression of x1+, x1-, x3+, x3-: the tips in TIP_CELLS order
         sign = np.array([1.0 if c.endswith("top") else -1.0 for c in TIP_CELLS])[:, None]

@@ -24,6 +24,17 @@ round ratio that makes every elastic mode decay faster than the dashpot-damped h
 (2.4 1/s: at 731 Hz zeta omega = 4.6 1/s), so a stepped sine settles as fast as on the discrete
 model, while it changes the dashpots' 1.8-2.1 % on the two pseudo-rigid modes by 5-6 %.
 
+**Friction** (``mu`` > 0): the tangential coordinates of the contact faces (:func:`fem.contact.tangential_rows`:
+per stop, since the upper tip rubs on the beam's top face and the lower one on its bottom face; along the
+beam, and across it with ``friction_directions = "axial+lateral"``) join x1, x3 as Craig-Bampton boundary
+coordinates, q = [x1, x3, t_1 .. t_r, eta_1 .. eta_n], so that the constraint modes carry the static
+response to a tangential force exactly (a sticking tip is a stiff tangential spring k_t there). Each is a
+slider of the :class:`reduced.models.gaps.Friction` of the reduced system, engaged by its own stop, with
+the normal force k_g (penetration) of that stop: 4 sliders (axial) or 8 (both directions), 7 or 19
+friction states a tip. With ``mu`` = 0 there are no tangential coordinates: the reduction is the
+frictionless one, bit for bit. A model reduced with them can be run without friction (``mu`` = 0 in
+:meth:`ReducedModel.with_contact`): the same basis, the frictionless system, the fairest comparison.
+
 The matrices, the DOF map (the interface rows and point rows on the full DOFs, the
 constraint and fixed-interface modes for expansion) and provenance go to ``rom.npz``
 (:meth:`ReducedModel.save`), so a ringdown never rebuilds the 3-D model: a built model is
@@ -47,11 +58,14 @@ from pathlib import Path
 import numpy as np
 
 from reduced.cache import atomic_write, load_entry, write_entry
-from reduced.models.gaps import GapSystem, two_sided_stops
+from reduced.models.discrete import MINDLIN_RATIO
+from reduced.models.gaps import Friction, GapSystem, two_sided_stops
 
 ROM_LAYOUTS = ("beam-grounded", "assembly")
 POINTS = ("x1", "x2", "x3")  # the discrete model's three points: left tip, mid-span, right tip
 RIGID_TOL = 1e-6  # relative error allowed on the in-plane rigid mass and inertia (see cb_check)
+FRICTION_DIRECTIONS = ("axial", "lateral", "axial+lateral")  # where the tips rub: along the beam, across, both
+STOPS = ("x1+", "x1-", "x3+", "x3-")  # the reduced system's stops (two_sided_stops of x1, x3)
 MODAL_DAMPING = 1e-3  # damping ratio added to every mode by default (module docstring: why this value)
 
 
@@ -87,6 +101,12 @@ class RomSpec:
     rom_file : str
         Load this rom.npz (in a scene: a path from the scene file's folder) instead of building; k_g, gap and
         damping still apply. '' to build or use the cache.
+    mu : float
+        Coulomb coefficient at the tips, >= 0; 0: no friction (and no tangential coordinates).
+    k_t : float or None
+        N/m, tangential stiffness of each contact face's slider, > 0; None: ``MINDLIN_RATIO`` k_g.
+    friction_directions : {'axial', 'lateral', 'axial+lateral'}
+        Where the tips rub (with mu > 0): along the beam, across it, or both ('lateral' needs planar = false).
 
     Raises
     ------
@@ -108,6 +128,10 @@ class RomSpec:
     element: str = "hex20"  # hex8 | hex20 | hex27
     rom_file: str = ""  # load this rom.npz instead of building (in a scene: a path from the scene file's
     # folder); k_g, gap and damping still apply
+    mu: float = 0.0  # Coulomb coefficient at the tips (0: no friction, no tangential coordinates)
+    k_t: float | None = None  # N/m, tangential stiffness of each contact face; None: Mindlin's 2 (1 - nu) /
+    # (2 - nu) k_g = 0.82 k_g (an elastic contact of like materials, nu = 0.3: steel on steel)
+    friction_directions: str = "axial"  # axial (along the beam) | lateral (across it) | axial+lateral
 
     def __post_init__(self) -> None:
         if self.layout not in ROM_LAYOUTS:
@@ -133,6 +157,30 @@ class RomSpec:
             raise ValueError(f"modal_damping must be a non-empty tuple of ratios in [0, 1), got {md!r}")
         if self.rom_file and not Path(self.rom_file).is_file():
             raise ValueError(f"rom_file: no such file {self.rom_file!r}")
+        if isinstance(self.mu, bool) or not isinstance(self.mu, (int, float)) or not math.isfinite(self.mu):
+            raise ValueError(f"mu must be a finite number, got {self.mu!r}")
+        if self.mu < 0:
+            raise ValueError(f"mu must be >= 0, got {self.mu!r}")
+        if self.k_t is not None and (isinstance(self.k_t, bool) or not isinstance(self.k_t, (int, float))
+                                     or not math.isfinite(self.k_t) or not self.k_t > 0):
+            raise ValueError(f"k_t must be a finite number > 0 (or not given), got {self.k_t!r}")
+        if self.friction_directions not in FRICTION_DIRECTIONS:
+            raise ValueError(f"friction_directions must be one of {', '.join(FRICTION_DIRECTIONS)}, "
+                             f"got {self.friction_directions!r}")
+        if self.mu > 0 and self.planar and "lateral" in self.friction_directions:
+            raise ValueError("friction_directions with 'lateral' drives the beam out of its plane: it needs "
+                             "planar = false")
+
+    @property
+    def tangential_directions(self) -> tuple[str, ...]:
+        """The tangential directions of the reduction's interface: () without friction (mu = 0)."""
+        return tuple(self.friction_directions.split("+")) if self.mu > 0 else ()
+
+    @property
+    def tangential_stiffness(self) -> float:
+        """N/m, k_t, or ``MINDLIN_RATIO`` k_g when not given (Mindlin: the tangential stiffness of an
+        elastic contact of like materials is 2 (1 - nu) / (2 - nu) times its normal one)."""
+        return MINDLIN_RATIO * self.k_g if self.k_t is None else float(self.k_t)
 
     # -- the interface a scene uses --------------------------------------------------------
     @property
@@ -165,30 +213,30 @@ class RomSpec:
 
 @dataclass(frozen=True, eq=False)
 class ReducedModel:
-    """Reduced matrices on q = [x1, x3, eta_1..n] with the map back to the 3-D model.
+    """Reduced matrices on q = [x1, x3, (t_1..r,) eta_1..n] with the map back to the 3-D model.
 
     Attributes
     ----------
     M, K, C : (n, n) ndarray of float
-        Reduced mass, stiffness and damping on q = [x1, x3, eta_1..n] (kg, N/m, N s/m on the
-        gap coordinates).
+        Reduced mass, stiffness and damping on q = [x1, x3, t_1..r, eta_1..n] (kg, N/m, N s/m on the
+        gap and tangential coordinates).
     P : (3, n) ndarray of float
         Rows of the points x1, x2, x3 in q.
-    omega_fixed : (n - 2,) ndarray of float
+    omega_fixed : (n - nb,) ndarray of float
         rad/s, fixed-interface frequencies.
     k_g : float
         N/m, tip contact stiffness.
     gap : float
         m, tip clearance.
     dof_names : tuple of str
-        ``x1``, ``x3``, ``eta1`` ...
+        ``x1``, ``x3``, the tangential coordinates (``x1+:axial`` ...), ``eta1`` ...
     checks : list of dict
         :func:`reduced.models.craig_bampton.cb_check` rows.
     info : dict
         Provenance: spec, sizes, timings, source hash.
-    Psi : (N, 2) ndarray of float or None
+    Psi : (N, nb) ndarray of float or None
         Constraint modes, for expansion to the 3-D mesh.
-    Phi : (N, n - 2) ndarray of float or None
+    Phi : (N, n - nb) ndarray of float or None
         Fixed-interface modes.
     dof_map : dict of str to ndarray
         Interface and point rows on the full DOFs: ``{interface,points}_{row,dof,weight}`` (row r
@@ -200,6 +248,12 @@ class ReducedModel:
     mesh : dict
         ``points``, ``hexes``, ``cell_part``, ``beam_part``, ``element``: a point load anywhere on
         the beam without meshing again (:meth:`point_load`).
+    tangential : tuple of str
+        The tangential boundary coordinates, q[2 : 2 + r] (``<stop>:<direction>``; empty without friction).
+    mu : float
+        Coulomb coefficient at the tips (0: the system has no friction).
+    k_t : float
+        N/m, tangential stiffness of each slider.
     """
 
     M: np.ndarray  # (n, n) kg
@@ -220,32 +274,65 @@ class ReducedModel:
     output_rows: np.ndarray | None = None  # (len(output_names), n): each output is row @ q
     mesh: dict = field(default_factory=dict)  # points, hexes, cell_part, beam_part, element: a point
     # load anywhere on the beam without meshing again (point_load)
+    tangential: tuple[str, ...] = ()  # the tangential boundary coordinates q[2 : 2 + r] (<stop>:<direction>)
+    mu: float = 0.0  # Coulomb coefficient at the tips (0: no friction)
+    k_t: float = 0.0  # N/m, tangential stiffness of each slider
 
     @property
     def n(self) -> int:
         return self.M.shape[0]
 
     @property
+    def nb(self) -> int:
+        """Boundary coordinates: x1, x3 and the tangential ones."""
+        return 2 + len(self.tangential)
+
+    @property
     def n_modes(self) -> int:
-        return self.n - 2
+        return self.n - self.nb
+
+    @property
+    def friction_directions(self) -> tuple[str, ...]:
+        """The directions of the tangential coordinates, in order ((): none)."""
+        return tuple(dict.fromkeys(name.split(":")[1] for name in self.tangential))
+
+    def friction(self) -> Friction | None:
+        """The sliders at the tips (None when mu = 0): one a tangential coordinate, engaged by its stop."""
+        if self.mu <= 0.0 or not self.tangential:
+            return None
+        r = len(self.tangential)
+        Bt = np.zeros((r, self.n))
+        Bt[np.arange(r), 2 + np.arange(r)] = 1.0
+        stop = np.array([STOPS.index(name.split(":")[0]) for name in self.tangential])
+        return Friction(Bt=Bt, tip=stop // 2, k_t=self.k_t, mu=self.mu, names=self.tangential, stop=stop)
 
     def system(self) -> GapSystem:
-        """The reduced model with its two tip clearances, |x1| <= g and |x3| <= g."""
+        """The reduced model with its two tip clearances, |x1| <= g and |x3| <= g, and friction at them
+        when mu > 0 (:meth:`friction`)."""
         rows = np.zeros((2, self.n))
         rows[0, 0] = rows[1, 1] = 1.0
         stops = two_sided_stops(rows, self.k_g, self.gap, ("x1", "x3"))
-        return GapSystem(M=self.M, C=self.C, K=self.K, dof_names=self.dof_names, **stops)
+        return GapSystem(M=self.M, C=self.C, K=self.K, dof_names=self.dof_names, **stops, friction=self.friction())
 
     @property
     def point_rows(self) -> np.ndarray:
         return self.P
 
     def with_contact(self, spec: RomSpec) -> ReducedModel:
-        """The same reduction with the contact and damping of ``spec`` (no rebuild)."""
+        """The same reduction with the contact, friction and damping of ``spec`` (no rebuild).
+
+        Raises ValueError when ``spec`` asks for friction in directions this reduction has no tangential
+        coordinates for (it was reduced without them: build it again with mu > 0).
+        """
+        if spec.mu > 0 and set(spec.tangential_directions) != set(self.friction_directions):
+            have = "+".join(self.friction_directions) or "none"
+            raise ValueError(f"friction_directions = {spec.friction_directions!r} needs tangential coordinates this "
+                             f"reduced model was built without (it has: {have}); reduce it again with that mu > 0")
         info = {**self.info, "spec": {**self.info.get("spec", {}), "k_g": spec.k_g, "gap": spec.gap,
                                       "c_points": spec.c_points, "alpha": spec.alpha,
-                                      "modal_damping": list(spec.modal_damping)}}
-        return replace(self, C=damping_matrix(self.M, self.K, self.P, spec), k_g=spec.k_g, gap=spec.gap, info=info)
+                                      "modal_damping": list(spec.modal_damping), "mu": spec.mu, "k_t": spec.k_t}}
+        return replace(self, C=damping_matrix(self.M, self.K, self.P, spec), k_g=spec.k_g, gap=spec.gap, info=info,
+                       mu=float(spec.mu), k_t=spec.tangential_stiffness)
 
     def output(self, name: str) -> np.ndarray:
         """(n,) the reduced row of a rig output (see ``output_names``): its value is row @ q."""
@@ -280,6 +367,8 @@ class ReducedModel:
             arrays["output_rows"] = self.output_rows
         for key, val in self.mesh.items():
             arrays[f"mesh_{key}"] = np.asarray(val)
+        if self.tangential:
+            arrays.update(tangential=np.array(self.tangential), mu=self.mu, k_t=self.k_t)
         np.savez_compressed(f, **arrays)
 
     def save(self, path: str | Path) -> None:
@@ -303,7 +392,9 @@ class ReducedModel:
                            dof_map={k[4:]: z[k] for k in z.files if k.startswith("map_")},
                            output_names=tuple(str(s) for s in z["output_names"]) if "output_names" in z else (),
                            output_rows=z["output_rows"] if "output_rows" in z else None,
-                           mesh={k[5:]: z[k] for k in z.files if k.startswith("mesh_")})
+                           mesh={k[5:]: z[k] for k in z.files if k.startswith("mesh_")},
+                           tangential=tuple(str(s) for s in z["tangential"]) if "tangential" in z else (),
+                           mu=float(z["mu"]) if "mu" in z else 0.0, k_t=float(z["k_t"]) if "k_t" in z else 0.0)
         except Exception as exc:  # BadZipFile, zlib.error, EOFError, KeyError, ...: all mean a bad file
             name = getattr(path, "name", path)
             reason = " ".join(f"{type(exc).__name__}: {exc}".split())
@@ -382,7 +473,7 @@ def build_rom(spec: RomSpec, fe=None, progress: bool = False) -> tuple[ReducedMo
     -------
     rom : ReducedModel
         With C = :func:`damping_matrix`, the Craig-Bampton checks, DOF map, rig outputs and
-        mesh.
+        mesh; with mu > 0, the tangential coordinates of the contact faces in its boundary and its friction.
     fe : FESystem
         The 3-D model it was reduced from.
 
@@ -392,7 +483,14 @@ def build_rom(spec: RomSpec, fe=None, progress: bool = False) -> tuple[ReducedMo
         As :func:`reduced.models.craig_bampton.craig_bampton` (too few coupled modes) or
         :func:`fem.contact.mirror_map` (a mesh not symmetric in y, when planar).
     """
-    from fem.contact import contact_pairs, contact_rows, mirror_map, point_rows
+    from fem._pardiso import fixed_threads
+
+    with fixed_threads():  # OpenBLAS on a fixed thread count: the same matrices whatever the machine's cores
+        return _build_rom(spec, fe, progress)
+
+
+def _build_rom(spec: RomSpec, fe, progress: bool) -> tuple[ReducedModel, object]:
+    from fem.contact import contact_pairs, contact_rows, mirror_map, point_rows, tangential_rows
     from fem.model import build_system
     from reduced.models.craig_bampton import cb_check, craig_bampton
 
@@ -403,7 +501,9 @@ def build_rom(spec: RomSpec, fe=None, progress: bool = False) -> tuple[ReducedMo
         fe = build_system(spec.fe_model())
     t_fe = time.perf_counter() - t0
     pairs = contact_pairs(fe, gap=spec.gap, k_g=spec.k_g)
-    T = contact_rows(pairs)
+    tangential = tangential_rows(fe, spec.tangential_directions) if spec.tangential_directions else []
+    T = np.vstack([contact_rows(pairs), *(t.row for t in tangential)])
+    boundary = ("x1", "x3", *(t.name for t in tangential))
     symmetric = None
     if spec.planar:  # the tips act in the plane y = 0: only modes symmetric in y can couple
         perm, sign = mirror_map(fe)
@@ -412,7 +512,7 @@ def build_rom(spec: RomSpec, fe=None, progress: bool = False) -> tuple[ReducedMo
             return np.einsum("ij,ij->j", Phi, fe.M @ (sign[:, None] * Phi[perm])) > 0.5
 
     cb = craig_bampton(fe.K, fe.M, T, n_modes=spec.n_modes, cutoff_hz=spec.cutoff_hz or None,
-                       boundary_names=("x1", "x3"), coupled_only=spec.planar, mode_filter=symmetric)
+                       boundary_names=boundary, coupled_only=spec.planar, mode_filter=symmetric)
     prow = point_rows(fe)
     rows = np.vstack([prow[p] for p in POINTS])
     P = cb.reduce_rows(rows)
@@ -423,7 +523,7 @@ def build_rom(spec: RomSpec, fe=None, progress: bool = False) -> tuple[ReducedMo
     info = {
         "spec": asdict(spec),
         "n_full_dofs": int(fe.n_dofs),
-        "n_boundary": 2,
+        "n_boundary": len(boundary),
         "n_modes": int(cb.nq),
         "contact_centres_m": [list(p.centre) for p in pairs],
         "timing_s": {"fe": t_fe, "craig_bampton": cb.stats["wall_s"], "total": time.perf_counter() - t0},
@@ -432,12 +532,13 @@ def build_rom(spec: RomSpec, fe=None, progress: bool = False) -> tuple[ReducedMo
     }
     dof_map = {f"interface_{k}": v for k, v in _sparse_rows(T).items()} | {
         f"points_{k}": v for k, v in _sparse_rows(rows).items()}
-    names = ("x1", "x3", *(f"eta{i + 1}" for i in range(cb.nq)))
+    names = (*boundary, *(f"eta{i + 1}" for i in range(cb.nq)))
     out_names, out_rows = _rig_outputs(fe, cb)
     mesh = {"points": fe.mesh.points, "hexes": fe.mesh.hexes, "cell_part": fe.mesh.cell_part,
             "beam_part": fe.mesh.part_names.index("beam"), "element": fe.solid.element}
     rom = ReducedModel(cb.M, cb.K, C, P, cb.omega_fixed, spec.k_g, spec.gap, names, checks,
-                       info, cb.Psi, cb.Phi, dof_map, out_names, out_rows, mesh)
+                       info, cb.Psi, cb.Phi, dof_map, out_names, out_rows, mesh, boundary[2:], float(spec.mu),
+                       spec.tangential_stiffness if tangential else 0.0)
     return rom, fe
 
 
@@ -475,9 +576,14 @@ def cache_dir() -> Path:
 
 
 def _cache_inputs(spec: RomSpec) -> dict:
-    """What a cached reduction depends on: the spec without contact, damping and rom_file."""
-    return {f.name: getattr(spec, f.name) for f in fields(spec)
-            if f.name not in ("k_g", "gap", "c_points", "alpha", "modal_damping", "rom_file")}
+    """What a cached reduction depends on: the spec without contact, friction, damping and rom_file, and the
+    tangential coordinates of its interface when it has them (friction on)."""
+    inputs = {f.name: getattr(spec, f.name) for f in fields(spec)
+              if f.name not in ("k_g", "gap", "c_points", "alpha", "modal_damping", "rom_file", "mu", "k_t",
+                                "friction_directions")}
+    if spec.tangential_directions:
+        inputs["tangential"] = list(spec.tangential_directions)
+    return inputs
 
 
 def _inputs_hash(spec: RomSpec) -> str:
@@ -540,8 +646,9 @@ def cached_rom(spec: RomSpec, progress: bool = False) -> ReducedModel:
 
     An entry whose manifest is missing, names other inputs or another checksum, or whose
     file cannot be read, is reported in one line, removed and rebuilt (:mod:`reduced.cache`).
-    The contact (k_g, gap) and damping do not enter the reduction (the interface is the
-    gap coordinate itself), so they are applied after loading.
+    The contact (k_g, gap), friction (mu, k_t) and damping do not enter the reduction (the
+    interface is the gap coordinate itself, and the tangential ones with friction), so they are
+    applied after loading.
 
     Parameters
     ----------
@@ -565,4 +672,4 @@ def cached_rom(spec: RomSpec, progress: bool = False) -> ReducedModel:
 
 
 __all__ = ["RomSpec", "ReducedModel", "build_rom", "cache_key", "cached_rom", "damping_matrix", "modal_ratios",
-           "store_in_cache", "MODAL_DAMPING", "POINTS", "ROM_LAYOUTS"]
+           "store_in_cache", "MODAL_DAMPING", "POINTS", "ROM_LAYOUTS", "FRICTION_DIRECTIONS", "STOPS"]

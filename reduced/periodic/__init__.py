@@ -14,6 +14,8 @@
   forced exact flow) and bifurcations;
 - :mod:`~reduced.periodic.stepped_sine`: the reference of the forced-response curves, a stepped
   sine by the exact flow.
+- :mod:`~reduced.periodic.friction_aft`: friction (Jenkins elements) in the forced balance by AFT, its
+  forced-response curves with Hill's stability.
 
 Every continued curve takes one set of step options,
 :class:`~reduced.periodic.continuation.ContinuationOptions`; every shooting failure is one

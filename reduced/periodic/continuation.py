@@ -202,6 +202,7 @@ def continue_branch(
     callback=None,
     reject=None,
     progress=None,
+    corner_coords=None,
     **steps,
 ) -> Branch:
     """Continue the solution curve of ``fun`` from ``y0`` (see the module docstring).
@@ -220,6 +221,10 @@ def continue_branch(
     reject : (y_old, y_new) -> bool; a true answer rejects the step (halved), e.g. a
         jump in a physical quantity that the tangent angle does not see
     progress : callable(y) after every accepted point
+    corner_coords : None, or (y, t) -> coordinates a corner step may fix, in the order tried
+        (default: the monitored ones). On a curve with corners where it also turns back in
+        ``param`` (a grazing contact at a fold of a forced response), the coordinates of the
+        largest tangent components are the ones that still move past the corner.
     **steps : fields of :class:`ContinuationOptions` replacing those of ``options``
         (``ds=0.1, max_steps=200``)
 
@@ -246,7 +251,8 @@ def continue_branch(
         max_steps = 0
     ds = opt.ds
     for _ in range(max_steps):
-        res, tn, ds, rejected, corner = _advance(fun, y, t, ds, opt, reject, watch, param)
+        res, tn, ds, rejected, corner = _advance(fun, y, t, ds, opt, reject,
+                                                 watch if corner_coords is None else tuple(corner_coords(y, t)), param)
         n_rej += rejected
         if res is None:
             status = "min_step"

@@ -54,6 +54,7 @@ from reduced import _checks as _check
 from reduced.models.gaps import GapSystem
 
 SAMPLES_PER_COEFFICIENT = 32  # AFT samples per Fourier coefficient (gap forces need >> 2)
+NEWTON_HALVINGS = 6  # trial steps of a Newton iteration: dy, dy/2, ..., dy/32
 
 
 class NewtonError(RuntimeError):
@@ -566,9 +567,10 @@ def newton(
 ) -> NewtonResult:
     """Solve fun(y) = 0, ``fun(y) -> (R, dR/dy)`` square, by Newton's method.
 
-    Each step is halved (up to 6 times) while it does not lower ||R||_2: with a gap force
-    the AFT residual is piecewise smooth, and a full step from one side of a kink can
-    overshoot into a cycle. Converged when ``||dy||_inf <= tol (1 + ||y||_inf)`` with a
+    Each step is halved (dy, dy/2, ..., dy/32) while it does not lower ||R||_2: with a gap
+    force the AFT residual is piecewise smooth, and a full step from one side of a kink can
+    overshoot into a cycle. If none lowers it, the last trial (dy/32) is taken, with its own
+    residual and Jacobian. Converged when ``||dy||_inf <= tol (1 + ||y||_inf)`` with a
     small residual, or ``||R||_inf`` is at the round-off level of the first residual.
     Raises :class:`NewtonError` after ``max_iter`` iterations, on a singular Jacobian,
     a non-finite residual, or a step longer than ``max_step``.
@@ -618,10 +620,10 @@ def newton(
             raise NewtonError(f"Newton step {step:.3g} exceeds {max_step:.3g} at iteration {it}")
         r2 = float(R @ R)
         lam = 1.0
-        for _ in range(6):
+        for k in range(NEWTON_HALVINGS):
             Rn, Jn = fun(y + lam * dy)
-            if np.all(np.isfinite(Rn)) and float(Rn @ Rn) < r2:
-                break
+            if (np.all(np.isfinite(Rn)) and float(Rn @ Rn) < r2) or k == NEWTON_HALVINGS - 1:
+                break  # the last trial is taken even if it did not lower ||R||: (R, J) are its own
             lam *= 0.5
         y = y + lam * dy
         R, J = Rn, Jn

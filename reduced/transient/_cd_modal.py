@@ -48,6 +48,18 @@ def diagonal_plus_low_rank(Cm: np.ndarray, max_rank: int) -> tuple[np.ndarray, n
     The low-rank part's diagonal is found by alternating projections (principal-axis factoring): fill
     the diagonal of the off-diagonal part with that of its best rank-p PSD approximation, repeat; a rank
     whose error stops falling (not halved in 300 sweeps) is given up.
+
+    Parameters
+    ----------
+    Cm : (n, n) ndarray
+        A symmetric matrix (the damping in modal coordinates).
+    max_rank : int
+        The largest rank of U tried.
+
+    Returns
+    -------
+    tuple of ndarray or None
+        ``(d, U)``, d (n,) and U (n, p); None when no rank up to ``max_rank`` reaches round-off.
     """
     n = Cm.shape[0]
     scale = float(np.abs(Cm).max(initial=0.0))
@@ -80,6 +92,19 @@ def modal_form(M: np.ndarray, K: np.ndarray, C: np.ndarray, B: np.ndarray, b: np
     """The arrays of :func:`cd_modal` for M, K, C, the stops' rows B (m, n), the loads' rows b (n_loads, n)
     and the step dt (s); None when Phi^T C Phi is no diagonal plus a rank <= ``max_rank`` (default n // 3,
     beyond which the form saves little) to round-off.
+
+    Parameters
+    ----------
+    M, K, C : (n, n) ndarray
+        Mass, stiffness and damping.
+    B : (m, n) ndarray
+        The stops' rows.
+    b : (n_loads, n) ndarray
+        The loads' rows.
+    dt : float
+        s, the step.
+    max_rank : int, optional
+        The largest rank of the damping's low-rank part (default n // 3).
 
     Returns
     -------
@@ -131,6 +156,31 @@ def cd_modal(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, offse
     Every loop over the n coordinates is an elementwise update or a dot product, compiled with
     reassociation (SIMD sums): a fixed order for a given build, so the samples do not depend on how a
     run is cut into calls, but not the physical kernel's order (its results are matched to round-off).
+
+    Parameters
+    ----------
+    dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap : ndarray or float
+        The step's arrays, ``modal_form(...)["mats"]`` (named above).
+    offset, side, k : ndarray
+        The stops: gap offsets, sides and stiffnesses.
+    z, zd, a : ndarray
+        The state, changed in place.
+    dt : float
+        s, the step.
+    n_steps, every : int
+        Steps to take, and a sample every ``every`` steps.
+    out_x, out_v, out_W : ndarray
+        Sample buffers: modal coordinates, mean velocities, dissipated work.
+    W, pw_old : float
+        The dissipated work so far and the last step's dissipated power.
+    i0 : int
+        The first sample row to fill.
+    bm, P : ndarray
+        The loads in modal coordinates and their values at each step's end.
+    out_E : ndarray
+        Sample buffer of the loads' work.
+    E, pe_old : float
+        The loads' work so far and the last step's power.
 
     Long because it is one numba step loop: a helper called per step costs a call and its arrays' loads
     in the 30-60 ns a step takes (two restructurings that hoisted the sums were slower, measured).
@@ -226,6 +276,20 @@ def cd_modal(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, offse
 
 
 def to_physical(Phi: np.ndarray, out: np.ndarray, lo: int, hi: int) -> None:
-    """Rows lo .. hi - 1 of ``out`` (samples of modal coordinates) replaced by Phi times them, in place."""
+    """Rows lo .. hi - 1 of ``out`` (samples of modal coordinates) replaced by Phi times them, in place.
+
+    Parameters
+    ----------
+    Phi : (n, n) ndarray
+        The modes.
+    out : (n_samples, n) ndarray
+        The samples, changed in place.
+    lo, hi : int
+        The rows to convert.
+
+    Returns
+    -------
+    None
+    """
     if hi > lo:
         out[lo:hi] = out[lo:hi] @ Phi.T

@@ -16,6 +16,8 @@ march on the full 2n-term series) are the reference the modal march is tested ag
 
 from __future__ import annotations
 
+import math
+
 import numba as nb
 import numpy as np
 
@@ -293,15 +295,18 @@ def _forced_segment(s, sigma, ip, tau_lim, y, yp_s, lam_s, V, Vinv, fz, fY, fU, 
 
 
 @nb.njit(cache=True)
-def _first_root_forced(const, coef, lam, Qp, poly, tau_limit, hmin, qnoise, dnoise, floor):
+def _first_root_forced(const, coef, lam, Qp, poly, tau_limit, hmin, qnoise, dnoise, floor, grow):
     """:func:`_first_root` for q = const + Re sum coef e^{lam tau} + sum_m Qp[m] tau^m (a forced
     segment): |q''| <= sum |coef| |lam|^2 e^{Re(lam) tau_a} + sum_m m (m - 1) |Qp[m]| tau_limit^(m - 2)
-    on [tau_a, tau_limit], so the same march never steps over a root."""
+    on [tau_a, tau_limit], so the same march never steps over a root. With ``grow`` (a state of a system
+    with friction, whose terms may grow: Re lam > 0), a growing term enters the bound with its size at
+    tau_limit, |coef| e^{Re(lam) tau_limit}, its largest on [tau_a, tau_limit] (the caller keeps that
+    growth small, :func:`reduced.transient._friction_kernels._friction_forced_kernel`)."""
     N = lam.shape[0]
     M = Qp.shape[0] - 1
     osc = 0.0
     for i in range(N):
-        osc += abs(coef[i])
+        osc += abs(coef[i]) * (math.exp(lam[i].real * tau_limit) if grow and lam[i].real > 0.0 else 1.0)
     Q2p = 0.0
     pmax = 0.0
     if poly:
@@ -319,6 +324,11 @@ def _first_root_forced(const, coef, lam, Qp, poly, tau_limit, hmin, qnoise, dnoi
     for it in range(MAX_MARCH_ITER):
         pscale = 0.0
         q, d, dscale, Q2 = _series_at(coef, lam, tau, const, 0.0, 0.0, Q2p)
+        if grow:
+            for i in range(N):
+                if lam[i].real > 0.0:  # its size at tau_limit, not at tau, bounds it ahead
+                    Q2 += abs(coef[i]) * (math.exp(lam[i].real * tau_limit) - math.exp(lam[i].real * tau)) * abs(
+                        lam[i]) ** 2
         if poly:
             pv = Qp[M]
             pd = M * Qp[M]
@@ -654,7 +664,7 @@ def _next_crossing(B, offset, side, active, yp_s, V_s, X, z, werr, poly, P, Qp, 
                 dnoise += abs(pv) * abs(z[i]) * werr[i]  # z[i] = lambda_i for the modes i < 2n
         if poly:
             _stop_poly(B, j, sgn, P, Qp)
-        tj, it = _first_root_forced(const, coef, z, Qp, poly, tau_ev, hmin, qnoise, dnoise, floor)
+        tj, it = _first_root_forced(const, coef, z, Qp, poly, tau_ev, hmin, qnoise, dnoise, floor, False)
         n_iter += it
         if tj < 0.0:
             return tau_ev, j_ev, n_iter, -3

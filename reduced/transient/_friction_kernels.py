@@ -53,11 +53,12 @@ STUCK_PER_EVENT = 8  # zero-length segments allowed in a row, per event slot, be
 
 @nb.njit(cache=True)
 def _ev_start(s, K, y, Uinv, aUinv, yp, EU, aEU, E0, Escale, eact, lam, alam, floor, w, werr, coef, lc, l2c, a0,
-              const, qtol, dnoise, live, dy, ay):
+              const, qtol, dnoise, live, dy, ay, gm):
     """Segment start in friction state s: w = Uinv (y - y_p) and its round-off werr, then per active event e
     q_e = const_e + Re sum_i coef_ei e^{lam_i tau} (as :func:`reduced.transient._modal._start` for the stops),
     its round-off band qtol_e (with the cancellation in a . y_p + c, eps Escale_e) and q_e' noise dnoise_e.
-    An event whose motion is below ``floor`` (m) is not live. Returns the number of live events."""
+    An event whose motion is below ``floor`` (m) over the whole segment (a growing term at its largest,
+    ``gm`` times its start) is not live. Returns the number of live events."""
     N = y.shape[0]
     E = E0.shape[1]
     for r in range(N):
@@ -87,7 +88,7 @@ def _ev_start(s, K, y, Uinv, aUinv, yp, EU, aEU, E0, Escale, eact, lam, alam, fl
             l2c[e, i] = lam[s, i] * lc[e, i]
             a = math.sqrt(c.real * c.real + c.imag * c.imag)
             a0[e, i] = a
-            osc += a
+            osc += a * gm[i]
             qn += aEU[s, e, i] * werr[i]
             dn += aEU[s, e, i] * alam[s, i] * werr[i]
         const[e] = cj
@@ -123,21 +124,21 @@ def _seg_work(s, K, w, em, am1, tau, n, y0, yt, damped, slipping, wv, wf, LF, gr
 def _switch(s, e, y, n, succ, reset, fric):
     """(state after event e of state s, friction work of the switch), y's sliders updated in place.
 
-    A closing stop starts its tip's sliders unloaded (w = t). A stick -> slip event puts the slider on the
+    A closing stop starts the sliders it engages unloaded (w = t). A stick -> slip event puts the slider on the
     cone, w = t -+ mu N / kt: the march locates the event to within its step floor, and the slip state
     would keep the small excess |kt (t - w)| - mu N for good (it moves w with t -+ mu N / kt), so that the
     first stick after it would leave the cone at once. Either way the tangential spring's energy released,
     1/2 kt ((t - w_old)^2 - (t - w_new)^2), is friction work (a round-off amount), so the balance stays exact.
     """
-    Bt, slider_tip, stop_tip, ekind, stop_of, B, kstop, offset, side, mu, kt = fric
+    Bt, slider_tip, stop_tip, slider_stop, ekind, stop_of, B, kstop, offset, side, mu, kt = fric
     p = Bt.shape[0]
     m = B.shape[0]
     s_new = succ[s, e]
     dWf = 0.0
     for k in range(p):
         if reset[s, e]:
-            if slider_tip[k] != stop_tip[e]:
-                continue
+            if slider_tip[k] != stop_tip[e] or (slider_stop[k] >= 0 and slider_stop[k] != e):
+                continue  # not engaged by the stop that closes (slot e < m is stop e)
         elif not ((ekind[s, e] == 1 or ekind[s, e] == 2) and e - m == 2 * k + (ekind[s, e] - 1)):
             continue
         t = 0.0
@@ -184,10 +185,15 @@ def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bound
     samples before its end, the kernel returns BUFFER_FULL without advancing it (the samples do not
     depend on the buffer size). Events are logged (time, slot, new state, y) while the log has room.
     ``fric`` holds the sliders' data for the switch (:func:`_switch`). A segment no longer than the march's
-    floor counts as one without progress (``n_stuck``). Returns (t, W, Wf, s, i_samp, n_events, n_iter,
-    status, n_stuck, c, n_log).
+    floor counts as one without progress (``n_stuck``). A state with growing terms (flutter) is solved in
+    segments of at most hseg[s] = ln 2 / max Re(lam), the closed form restarted at their ends, and its growing
+    terms bounded by their size there, gmul[s] (:func:`reduced.transient._modal._march`). Returns (t, W, Wf,
+    s, i_samp, n_events, n_iter, status, n_stuck, c, n_log).
+
+    Long because it is the free kernel's loop with the friction work, the event switch and the hold of a
+    slider slot that fired twice in a row inlined, so that its arithmetic per segment reads in one place.
     """
-    nK, lam, alam, UT, Uinv, aUinv, yp = modal
+    nK, lam, alam, UT, Uinv, aUinv, yp, gmul, hseg = modal
     EU, aEU, E0, Escale, eact, succ, reset, has_slip, LF = events
     N = y.shape[0]
     E = E0.shape[1]
@@ -202,17 +208,31 @@ def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bound
     n_iter = 0
     status = 0
     t_end = bounds[c]
+    m = fric[6].shape[0]  # the stops: slots e >= m are the sliders'
+    e_prev = -1  # the slot of the last event
+    hold = -1  # a slider slot that may not fire within its round-off band in this segment (see below)
     while True:
         K = nK[s]
         slipping = has_slip[s]
         n_live = _ev_start(s, K, y, Uinv, aUinv, yp, EU, aEU, E0, Escale, eact, lam, alam, floor, w, werr, coef, lc,
-                           l2c, a0, const, qtol, dnoise, live, dy, ay)
-        tau_ev, e_ev, it = _march(s, K, lam, alam, const, coef, lc, l2c, a0, qtol, dnoise, live, n_live, t_end - t,
-                                  hmin, e, ea, hprev, hnext, P)
+                           l2c, a0, const, qtol, dnoise, live, dy, ay, gmul[s])
+        if hold >= 0 and live[hold]:
+            # a slider's slot fired twice in a row (a slip end, then at once the stick -> slip the same way, or
+            # back): at a grazing slip end (w' and w'' both near 0) the two bands of one decision disagree and
+            # the pair would repeat without end. The slot fires again only once it is past its band, q > 2 qtol:
+            # a round-off delay of a decision the flow then makes consistently (no energy is lost: the switch
+            # books the spring's change as friction work)
+            const[hold] -= 2.0 * qtol[hold]
+        tau_lim = t_end - t
+        capped = hseg[s] < tau_lim  # a growing state's segment ends where its terms have doubled at most
+        if capped:
+            tau_lim = hseg[s]
+        tau_ev, e_ev, it = _march(s, K, lam, alam, const, coef, lc, l2c, a0, qtol, dnoise, live, n_live, tau_lim,
+                                  hmin, e, ea, hprev, hnext, P, gmul[s])
         if e_ev == -2:
             status = -3
             break
-        t_next = t_end if e_ev < 0 else t + tau_ev
+        t_next = (t + tau_lim if capped else t_end) if e_ev < 0 else t + tau_ev
         while i_samp < ns and t_samples[i_samp] <= t_next:
             tau = max(t_samples[i_samp] - t, 0.0)
             _terms_m1(lam[s], K, tau, e, em, am1)
@@ -239,6 +259,9 @@ def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bound
             status = -4
             break
         t = t_next
+        if e_ev < 0 and capped:
+            n_stuck = 0
+            continue  # the closed form restarts in the same state
         if e_ev < 0:
             c += 1
             n_stuck = 0
@@ -248,6 +271,8 @@ def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bound
             continue
         s, dWf = _switch(s, e_ev, y, n, succ, reset, fric)
         Wf += dWf
+        hold = e_ev if (e_ev == e_prev and e_ev >= m) else -1
+        e_prev = e_ev
         n_log = _log(n_log, t, e_ev, s, y, log_t, log_e, log_s, log_y)
         n_events += 1
         if n_events >= max_events:
@@ -578,7 +603,7 @@ def _aug_next_event(erow, ec, eact, s, yp_s, V_s, X, z, werr, poly, P, Qp, coef,
                 for r in range(N):
                     acc2 += erow[s, e, r] * P[m, r]
                 Qp[m] = acc2
-        tj, it = _first_root_forced(const, coef, z, Qp, poly, tau_ev, hmin, qnoise, dnoise, floor)
+        tj, it = _first_root_forced(const, coef, z, Qp, poly, tau_ev, hmin, qnoise, dnoise, floor, True)
         n_iter += it
         if tj < 0.0:
             return tau_ev, e_ev, n_iter, -3
@@ -589,7 +614,7 @@ def _aug_next_event(erow, ec, eact, s, yp_s, V_s, X, z, werr, poly, P, Qp, coef,
 
 
 @nb.njit(cache=True)
-def _friction_forced_kernel(lam, V, Vinv, yp, erow, ec, eact, succ, reset, Df, LF, has_slip, C, damped, n, fric,
+def _friction_forced_kernel(lam, V, Vinv, yp, erow, ec, eact, succ, reset, Df, LF, has_slip, hseg, C, damped, n, fric,
                             y, s, t, t_end, t_samples, i_samp, t_after, out_y, out_W, out_Wf, W, Wf, hmin, floor,
                             max_events, n_stuck, fz, fY, fU, fb, pstarts, pF, pp0, pp1, out_E, E, log_t, log_e, log_s,
                             log_y, n_log):
@@ -597,8 +622,9 @@ def _friction_forced_kernel(lam, V, Vinv, yp, erow, ec, eact, succ, reset, Df, L
     the augmented state y = [x; v; w] and its friction states): the forced closed form of each segment, its
     first event among the state's (gap, stick -> slip, slip -> stick), the viscous, friction and loads' work
     in closed form (the friction power's quadratic part by its form Df[s] with the moments of the polynomial
-    part, its linear part LF[s] . dx). Returns (t, W, Wf, E, s, i_samp, n_events, n_iter, status, n_stuck,
-    n_log); the buffer logic is that of the free kernel.
+    part, its linear part LF[s] . dx). A growing state's segment ends at hseg[s] at most (the free kernel's
+    rule) and its march bounds the growing terms by their size there. Returns (t, W, Wf, E, s, i_samp,
+    n_events, n_iter, status, n_stuck, n_log); the buffer logic is that of the free kernel.
 
     Long because it is the forced kernel's loop with the friction work and the event switch inlined, so
     that its arithmetic per segment reads in one place."""
@@ -615,6 +641,7 @@ def _friction_forced_kernel(lam, V, Vinv, yp, erow, ec, eact, succ, reset, Df, L
     while True:
         slipping = has_slip[s]
         ip, t_lim = _piece_at(pstarts, ip, t, t_end)
+        t_lim = min(t_lim, t + hseg[s])  # a growing state: at most a doubling of its terms a segment
         poly = _aug_segment(s, t - pstarts[ip], ip, t_lim - t, y, yp[s], lam[s], V[s], Vinv[s], fz, fY, fU, pF, pp0,
                             pp1, X, z, P, Fs, phi, gam, werr, ypart)
         if damped:
@@ -681,14 +708,14 @@ def _friction_forced_kernel(lam, V, Vinv, yp, erow, ec, eact, succ, reset, Df, L
 
 # -- central difference with friction (reduced.transient.friction.FrictionExplicitStepper) ---------------------
 @nb.njit(cache=True, inline="always")
-def _return_map(x, f, side, stop_tip, slider_tip, Bt, mu, kt, w, ft, Wf):
+def _return_map(x, f, side, stop_tip, slider_tip, slider_stop, Bt, mu, kt, w, ft, Wf):
     """The sliders' forces ft and positions w at x by the return mapping (:func:`_cd_friction_kernel`), f the
     stops' forces; returns Wf plus the step's friction work (trapezoidal on f w')."""
     n = x.shape[0]
     for q in range(Bt.shape[0]):
         N = 0.0
         for j in range(f.shape[0]):
-            if stop_tip[j] == slider_tip[q] and f[j] != 0.0:
+            if stop_tip[j] == slider_tip[q] and (slider_stop[q] < 0 or slider_stop[q] == j) and f[j] != 0.0:
                 N = side[j] * f[j]
         t = 0.0
         for c in range(n):
@@ -707,13 +734,13 @@ def _return_map(x, f, side, stop_tip, slider_tip, Bt, mu, kt, w, ft, Wf):
 
 
 @nb.njit(cache=True)
-def _cd_friction_kernel(AT, dtGKT, dtGBT, LT, B, offset, side, k, dtGBtT, Bt, slider_tip, stop_tip, mu, kt, x, vh, w,
-                        ft, dt, n_steps, every, out_x, out_v, out_W, out_w, out_Wf, W, pw_old, Wf, i0, dtGbT, b, P,
-                        out_E, E, pe_old):
+def _cd_friction_kernel(AT, dtGKT, dtGBT, LT, B, offset, side, k, dtGBtT, Bt, slider_tip, stop_tip, slider_stop, mu,
+                        kt, x, vh, w, ft, dt, n_steps, every, out_x, out_v, out_W, out_w, out_Wf, W, pw_old, Wf, i0,
+                        dtGbT, b, P, out_E, E, pe_old):
     """Advance n_steps of :func:`reduced.transient.explicit._cd_kernel` with the sliders' forces Bt^T f_t in the
     velocity update, f_t by the return mapping at x_{n+1} (w = w_n on entry, w_{n+1} on exit):
 
-        N = k_j max(0, side_j (B_j x_{n+1} - o_j))   (the closed stop j of the slider's tip; 0 if open),
+        N = k_j max(0, side_j (B_j x_{n+1} - o_j))   (the closed stop j that engages the slider; 0 if none),
         f_trial = kt (Bt x_{n+1} - w_n),
         f = f_trial, w_{n+1} = w_n                      if |f_trial| <= mu N (stick),
         f = sign(f_trial) mu N, w_{n+1} = t - f / kt    otherwise (slip; an open tip: f = 0, w = t).
@@ -741,7 +768,7 @@ def _cd_friction_kernel(AT, dtGKT, dtGBT, LT, B, offset, side, k, dtGBtT, Bt, sl
             for c in range(n):
                 s += B[j, c] * x[c]
             f[j] = k[j] * s if side[j] * s > 0.0 else 0.0
-        Wf = _return_map(x, f, side, stop_tip, slider_tip, Bt, mu, kt, w, ft, Wf)
+        Wf = _return_map(x, f, side, stop_tip, slider_tip, slider_stop, Bt, mu, kt, w, ft, Wf)
         for i in range(n):
             acc[i] = 0.0
         for c in range(n):

@@ -26,6 +26,13 @@ the march. Near a crossing the step tends to the Newton step; the crossing is ta
 within its round-off band (the decision rules of the single-stop march), or at the root of the
 Taylor quadratic once the cubic remainder Q3 x^3 is within that band (:func:`_march`).
 
+**Growing terms** (Re lam_i > 0: a slip state of a system with friction may flutter,
+:mod:`reduced.transient.friction_tables`): |c_ji e^{lam_i tau}| grows, so e^{Re(lam_i) tau_a} bounds it only
+at tau_a. A state with such terms is solved in segments no longer than H = ln 2 / max Re(lam) (the
+caller restarts the closed form there), and each growing term enters every bound above with its size at
+H, |c_ji| e^{Re(lam_i) H} <= 2 |c_ji| (``gm``), which bounds it anywhere on [0, H]: the bounds hold on the
+whole segment again, and a stop whose amplitude bound stays below its band cannot cross within the segment.
+
 The dissipated work over [0, tau] is closed-form (v = Re sum_i a_i e^{lam_i t}, a_i = U_v[:, i] w_i):
 
     int_0^tau v^T C v dt = 1/2 Re sum_{i,k} [ G_ik I(lam_i + lam_k) + H_ik I(lam_i + conj(lam_k)) ],
@@ -51,9 +58,12 @@ NOISE_FACTOR = 4.0  # margin on the propagated round-off of q and q'
 MAX_MARCH_ITER = 10_000_000  # per segment (per stop and segment in the forced march): a hang guard, never reached
 FAST_LT = 2.0  # |lam| h beyond which a term's amplitude bounds it better than its Taylor bound
 CUBIC_REACH = 4.0  # the cubic bound is tried first on [0, CUBIC_REACH x the quadratic bound's step] ...
-CUBIC_ITER = 3  # ... and on intervals moved this many times toward its step
+CUBIC_ITER = 1  # ... and on intervals moved this many times toward its step (more moves save march steps
+#   but cost more than they save on the scenes' systems: issue 28)
 TAYLOR_ZT = 0.5  # |z tau| below which int_0^tau t^r e^{z t} dt is summed as a series ...
 TAYLOR_TERMS = 17  # ... of this many terms (0.5^18 / 18! ~ 6e-22: exact to round-off)
+SAMPLE_ANCHOR = 32  # output samples: e^{lam tau} worked out afresh at least every this many, stepped between
+MARCH_COLS = 13  # columns of the march's per-stop scratch P (:func:`_quadratic_step`)
 BUFFER_FULL = 1  # kernel status (free and forced): the sample buffer is full inside the present segment
 
 
@@ -104,6 +114,17 @@ def _terms(lam, K, tau, e, ea):
         ea[i] = a
 
 
+@nb.njit(cache=True, inline="always")
+def _terms_at(lam, s, K, tau, e, ea):
+    """:func:`_terms` of state s, lam the (S, K) table (no view of a row: a view costs two atomic
+    reference counts in a loop)."""
+    for i in range(K):
+        a = math.exp(lam[s, i].real * tau)
+        b = lam[s, i].imag * tau
+        e[i] = complex(a * math.cos(b), a * math.sin(b))
+        ea[i] = a
+
+
 @nb.njit(cache=True)
 def _phi_int(z, tau):
     """I(z) = int_0^tau e^{z t} dt = tau (1 + z tau / 2 + (z tau)^2 / 6 + ...): a series for
@@ -124,6 +145,23 @@ def _terms_m1(lam, K, tau, e, em, am1):
     for i in range(K):
         a = lam[i].real * tau
         b = 0.5 * lam[i].imag * tau
+        sh = math.sin(b)
+        ch = math.cos(b)
+        cb = 1.0 - 2.0 * sh * sh
+        sb = 2.0 * sh * ch
+        x = math.expm1(a)
+        ea = 1.0 + x
+        e[i] = complex(ea * cb, ea * sb)
+        em[i] = complex(x * cb - 2.0 * sh * sh, ea * sb)
+        am1[i] = x
+
+
+@nb.njit(cache=True, inline="always")
+def _terms_m1_at(lam, s, K, tau, e, em, am1):
+    """:func:`_terms_m1` of state s, lam the (S, K) table (as :func:`_terms_at`)."""
+    for i in range(K):
+        a = lam[s, i].real * tau
+        b = 0.5 * lam[s, i].imag * tau
         sh = math.sin(b)
         ch = math.cos(b)
         cb = 1.0 - 2.0 * sh * sh
@@ -192,7 +230,7 @@ def _eval(s, K, UT, yp, w, e, out):
             out[r] += UT[s, 0, i, r] * ur - UT[s, 1, i, r] * ui
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _start(s, K, y, Uinv, aUinv, yp, BU, aBU, Byp, lam, alam, offset, side, active, floor, w, werr, coef, lc,
            l2c, a0, const, qtol, dnoise, live, dy, ay):
     """Segment start in state s: w = Uinv (y - y_p) and werr (its round-off, EPS sum |Uinv| (|y| + |y_p|)),
@@ -257,7 +295,12 @@ def _cubic_step(q, d, Q2, d2, Q3):
     quadratic bound's step, or min(H, step with the curvature d2 + Q3 H / 3) (the cubic term is at
     most Q3 H / 3 h^2 / 2 on [0, H]), H moved ``CUBIC_ITER`` times toward that step (each move
     gives a larger safe step)."""
-    h = _step(q, d, Q2)
+    return _cubic_from(_step(q, d, Q2), q, d, d2, Q3)
+
+
+@nb.njit(cache=True)
+def _cubic_from(h, q, d, d2, Q3):
+    """:func:`_cubic_step` from h, the quadratic bound's step _step(q, d, Q2) (worked out already)."""
     if h == np.inf:
         return h
     H = CUBIC_REACH * h
@@ -341,8 +384,11 @@ def _quadratic_step(j, q, d, d2, Q2, Q3, split, slack, d_s, d2_s, q2_s, q3_s, P)
     """Stop j's safe step from its quadratic bounds (with the fast terms by their amplitude when
     ``split``), its sums kept in P[j] for the cubic bounds (:func:`_refine_smallest`)."""
     h = _step(q, d, Q2)
+    P[j, 11] = h
     if split and q + slack < 0.0:
-        h = max(h, _step(q + slack, d_s, q2_s))
+        hs = _step(q + slack, d_s, q2_s)
+        P[j, 12] = hs
+        h = max(h, hs)
     P[j, 0] = q
     P[j, 1] = d
     P[j, 2] = d2
@@ -369,18 +415,19 @@ def _refine_smallest(m, live, hnext, P, tau, best, hmin):
                 jm = j
         if jm < 0 or P[jm, 10] != 0.0 or tau + max(hm, hmin) >= best:
             return
-        h = max(hm, _cubic_step(P[jm, 0], P[jm, 1], P[jm, 3], P[jm, 2], P[jm, 4]))
+        h = max(hm, _cubic_from(P[jm, 11], P[jm, 0], P[jm, 1], P[jm, 2], P[jm, 4]))
         if P[jm, 5] < 0.0:
-            h = max(h, _cubic_step(P[jm, 5], P[jm, 6], P[jm, 8], P[jm, 7], P[jm, 9]))
+            h = max(h, _cubic_from(P[jm, 12], P[jm, 5], P[jm, 6], P[jm, 7], P[jm, 9]))
         hnext[jm] = h
         P[jm, 10] = 1.0
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _march(s, K, lam, alam, const, coef, lc, l2c, a0, qtol, dnoise, live, n_live, tau_limit, hmin, e, ea, hprev,
-           hnext, P):
+           hnext, P, gm):
     """First crossing of any live stop in [0, tau_limit): (tau, j, n_iter), j = -1 if none, j = -2 if the
-    march did not end (module docstring).
+    march did not end (module docstring). ``gm`` (K,): each term's bound factor, e^{Re(lam_i) H} for a growing
+    term (> 1; tau_limit <= H then), 1 for the others.
 
     At tau, per live stop (:func:`_stop_sums`): the crossing is at tau when q > qtol and q' >= -dtol, at
     tau - q / q' when |q| <= qtol and q' > dtol (the decisions of
@@ -409,7 +456,10 @@ def _march(s, K, lam, alam, const, coef, lc, l2c, a0, qtol, dnoise, live, n_live
                 e[i] = 1.0
                 ea[i] = 1.0
         else:
-            _terms(lam[s], K, tau, e, ea)
+            _terms_at(lam, s, K, tau, e, ea)
+        for i in range(K):
+            if gm[i] > 1.0:  # a growing term: its size at the segment's end bounds it on all of it
+                ea[i] = gm[i]
         for j in range(m):
             if not live[j]:
                 continue
@@ -464,15 +514,15 @@ def _term_scratch(K):
 @nb.njit(cache=True)
 def _stop_scratch(m, K):
     """Per-stop scratch of the march (m stops, K terms): coef, lc, l2c (m, K) complex, a0 (m, K), const,
-    qtol, dnoise (m,), live (m,) bool, hprev, hnext (m,), P (m, 11) (:func:`_march`)."""
+    qtol, dnoise (m,), live (m,) bool, hprev, hnext (m,), P (m, MARCH_COLS) (:func:`_march`)."""
     return (np.empty((m, K), np.complex128), np.empty((m, K), np.complex128), np.empty((m, K), np.complex128),
             np.empty((m, K)), np.empty(m), np.empty(m), np.empty(m), np.empty(m, np.bool_), np.empty(m),
-            np.empty(m), np.empty((m, 11)))
+            np.empty(m), np.empty((m, MARCH_COLS)))
 
 
 @nb.njit(cache=True)
 def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_samples, i_samp, t_after, out_y, out_W,
-                 W, hmin, floor, max_events, n_stuck, out_E, E, seg_s, seg_tau):
+                 W, hmin, floor, max_events, n_stuck, out_E, E, seg_s, seg_tau, fs=0.0):
     """March events from t through the pieces ending at bounds[c], bounds[c + 1], ... (no loads), filling
     the sample buffer ``t_samples`` from i_samp.
 
@@ -485,19 +535,79 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
     ``seg_s`` is not empty, segment k's contact state and length go to seg_s[k], seg_tau[k] (for the
     flow's Jacobian, :func:`flow_jacobian`; a segment ends at an event or a bound, so with one bound
     there are n_events + 1, and max_events must leave room for them).
+    With ``fs`` > 0 the samples are t_j = j / fs (as the stepper's buffers hold them), and the terms
+    e^{lam tau} of consecutive samples of a segment are stepped, e^{lam (tau + 1/fs)} = e^{lam tau} e^{lam / fs}
+    (and e - 1, e^{Re(lam) tau} - 1 likewise, accurate however short tau is), instead of worked out afresh: a
+    sample then costs a few products instead of K exponentials. A sample is an anchor, worked out afresh, when
+    j is a multiple of SAMPLE_ANCHOR or the one before it is not in the segment (so the steps never add up
+    more than SAMPLE_ANCHOR roundings); a buffer that starts between anchors steps from the last anchor up to
+    its first sample, so the samples are the same bits whatever the buffers are.
     Returns (t, W, i_samp, n_events, n_iter, status, n_stuck, c): c the piece reached.
     """
+    N = y.shape[0]
+    S, Kmax = tb[1].shape
+    return _free_run(tb, offset, side, tip, damped, y, active, t, bounds, c, t_samples, i_samp, t_after, out_y, out_W,
+                     W, hmin, floor, max_events, n_stuck, out_E, E, seg_s, seg_tau, _term_scratch(Kmax),
+                     _stop_scratch(offset.shape[0], Kmax), np.empty(N), np.empty(N), np.empty(N), fs,
+                     (np.zeros(S, np.bool_), np.empty((S, Kmax), np.complex128), np.empty((S, Kmax), np.complex128),
+                      np.empty((S, Kmax))), np.ones(Kmax))
+
+
+@nb.njit(cache=True, inline="always")
+def _anchor(j, fs, t):
+    """Whether sample j (at j / fs) of a segment starting at t is worked out afresh (:func:`_free_kernel`)."""
+    return j % SAMPLE_ANCHOR == 0 or (j - 1) / fs <= t
+
+
+@nb.njit(cache=True, inline="always")
+def _sample_terms(lam, s, K, tau, e, em, am1, j, fs, t, stepped, steps):
+    """e, em = e - 1, am1 (:func:`_terms_m1_at`) at sample j (tau = j / fs - t, not below 0) of the segment
+    starting at t: afresh at an anchor (:func:`_anchor`); else one step from sample j - 1 when ``stepped``
+    (its terms are in e, em, am1), or from the last anchor. ``steps`` = (have, E, Em, Ah): per state,
+    e^{lam / fs}, its - 1 and expm1(Re(lam) / fs), worked out on first use. Returns True (the terms are
+    those of sample j)."""
+    if fs <= 0.0 or _anchor(j, fs, t):
+        _terms_m1_at(lam, s, K, tau, e, em, am1)
+        return True
+    have, Es, Ems, Ahs = steps
+    if not have[s]:
+        _terms_m1_at(lam, s, K, 1.0 / fs, e, em, am1)
+        for i in range(K):
+            Es[s, i] = e[i]
+            Ems[s, i] = em[i]
+            Ahs[s, i] = am1[i]
+        have[s] = True
+        stepped = False
+    j0 = j - 1
+    if not stepped:  # from the last anchor
+        while not _anchor(j0, fs, t):
+            j0 -= 1
+        _terms_m1_at(lam, s, K, max(j0 / fs - t, 0.0), e, em, am1)
+    for _ in range(j0, j):
+        for i in range(K):
+            a = Ahs[s, i]
+            e[i] = e[i] * Es[s, i]
+            em[i] = em[i] * Es[s, i] + Ems[s, i]
+            am1[i] = am1[i] + a + am1[i] * a
+    return True
+
+
+@nb.njit(cache=True, _nrt=False)
+def _free_run(tb, offset, side, tip, damped, y, active, t, bounds, c, t_samples, i_samp, t_after, out_y, out_W,
+              W, hmin, floor, max_events, n_stuck, out_E, E, seg_s, seg_tau, terms, stops, ytmp, dy, ay, fs, steps,
+              ones):
+    """:func:`_free_kernel`'s march, on its scratch (``terms``: :func:`_term_scratch`, ``stops``:
+    :func:`_stop_scratch`, ytmp, dy, ay (2n,); ``ones`` (Kmax,) the march's bound factors: no growing terms, the
+    states decay or oscillate). Compiled without numba's reference counting (``_nrt=False``:
+    it allocates nothing): every array passed to an inlined helper would otherwise cost two atomic
+    reference counts per call, a fifth of the march's time on a small system."""
     (nK, lam, alam, UT, Uinv, aUinv, yp, BU, aBU, Byp, Wm, Hd, ip, ii, ik, ikind, icoef, iz) = tb
     N = y.shape[0]
     m = offset.shape[0]
-    Kmax = lam.shape[1]
     ns = t_samples.shape[0]
     has_E = out_E.shape[0] > 0
-    w, werr, e, ea, em, am1, gr, gi = _term_scratch(Kmax)
-    coef, lc, l2c, a0, const, qtol, dnoise, live, hprev, hnext, P = _stop_scratch(m, Kmax)
-    ytmp = np.empty(N)
-    dy = np.empty(N)
-    ay = np.empty(N)
+    w, werr, e, ea, em, am1, gr, gi = terms
+    coef, lc, l2c, a0, const, qtol, dnoise, live, hprev, hnext, P = stops
     n_events = 0
     n_iter = 0
     status = 0
@@ -514,14 +624,16 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
         n_live = _start(s, K, y, Uinv, aUinv, yp, BU, aBU, Byp, lam, alam, offset, side, active, floor, w, werr,
                         coef, lc, l2c, a0, const, qtol, dnoise, live, dy, ay)
         tau_ev, j_ev, it = _march(s, K, lam, alam, const, coef, lc, l2c, a0, qtol, dnoise, live, n_live, t_end - t,
-                                  hmin, e, ea, hprev, hnext, P)
+                                  hmin, e, ea, hprev, hnext, P, ones)
         if j_ev == -2:
             status = -3
             break
         t_next = t_end if j_ev < 0 else t + tau_ev
+        stepped = False  # e, em, am1 hold the terms of the sample before
         while i_samp < ns and t_samples[i_samp] <= t_next:
             tau = max(t_samples[i_samp] - t, 0.0)
-            _terms_m1(lam[s], K, tau, e, em, am1)
+            j = round(t_samples[i_samp] * fs) if fs > 0.0 else 0
+            stepped = _sample_terms(lam, s, K, tau, e, em, am1, j, fs, t, stepped, steps)
             _eval(s, K, UT, yp, w, e, ytmp)
             out_W[i_samp] = W + ((_work(s, K, w, em, am1, tau, Wm, Hd, gr, gi)
                                   + (_work_near(s, w, tau, ip, ii, ik, ikind, icoef, iz) if near else 0.0))
@@ -535,7 +647,7 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
             status = BUFFER_FULL  # the segment is searched again with the next buffer: count it then
             break
         n_iter += it
-        _terms_m1(lam[s], K, tau_ev, e, em, am1)
+        _terms_m1_at(lam, s, K, tau_ev, e, em, am1)
         _eval(s, K, UT, yp, w, e, ytmp)
         if damped:
             W += _work(s, K, w, em, am1, tau_ev, Wm, Hd, gr, gi)

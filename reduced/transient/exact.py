@@ -75,7 +75,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from reduced import _checks as _check
-from reduced._blas import single_thread_blas
 from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
 from reduced.transient import stepper as _stepper
@@ -101,9 +100,11 @@ from reduced.transient.exact_tables import (  # noqa: F401 (re-exported: the tab
     ExactIntegratorError,
     ForcedTable,
     StateTable,
+    cached_forced_table,
     forced_arrays,
     forced_table,
     modal_table,
+    run_tables,
     state_table,
 )
 from reduced.transient.result import RingdownResult, RingdownStream
@@ -193,12 +194,12 @@ class ExactStepper(_stepper.Stepper):
                  sample_rate_hz: float, options: ExactOptions, loads, report: bool) -> None:
         super().__init__(system, n_samples, sample_rate_hz, loads, report)
         self.options = options
-        self.run_system = run = system.fold_zero_gap_tips()
-        with single_thread_blas():  # small dense problems: see state_table
-            self.table = table = state_table(run)
-            self.ft = forced_table(run, table, loads) if self.forced else None
-            omega_max = run.omega_max()
-            self.mt = modal_table(run, table)
+        tables = run_tables(system)  # kept for the last few systems run (their contents the key)
+        self.run_system = run = tables["run"]
+        self.table = table = tables["table"]
+        self.ft = cached_forced_table(tables, loads) if self.forced else None
+        omega_max = tables["omega_max"]
+        self.mt = tables["modal"]
         self.hmin = HMIN_PERIODS / omega_max
         self.y = np.concatenate([x0, v0])
         self.active = run.penetration(self.y[:self.n]) > 0.0
@@ -259,7 +260,9 @@ class ExactStepper(_stepper.Stepper):
 
     def block(self, buf: _stepper.Buffer) -> tuple[np.ndarray, ...]:
         out_y, out_W, out_E = buf.arrays
-        if not np.all(np.isfinite(out_y)):
+        # one pass without a temporary: a non-finite sample makes the sum non-finite (the full test
+        # only then, for a sum that overflowed)
+        if not np.isfinite(np.add.reduce(out_y, axis=None)) and not np.all(np.isfinite(out_y)):
             raise ExactIntegratorError("non-finite state: the contact states are ill-conditioned")
         n = self.n
         if self.forced:
@@ -301,7 +304,7 @@ class ExactStepper(_stepper.Stepper):
             self.t, self.W, buf.filled, ne, ni, status, self.n_stuck, self.c = call_numba_kernel(_free_kernel,
                 self.mt, run.offset, run.side, run.tip, self.damped, self.y, self.active, self.t, bounds, self.c,
                 buf.t, buf.filled, buf.t_after, out_y, out_W, self.W, self.hmin, self.floor, left, self.n_stuck,
-                out_E, self.E, NO_SEGMENTS, NO_TAU)
+                out_E, self.E, NO_SEGMENTS, NO_TAU, float(self.sample_rate_hz))
         else:
             self.t, self.W, self.E, buf.filled, ne, ni, status, self.n_stuck = call_numba_kernel(_forced_kernel,
                 tb.lam, tb.V, tb.Vinv, tb.yp, tb.valid, run.B, run.offset, run.side, run.tip, run.C, self.damped,

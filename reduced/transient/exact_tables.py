@@ -5,14 +5,20 @@
 - :func:`modal_table`: the same in conjugate-pair modal form with the stops' rows and the
   dissipated work's quadratic forms, for the free segments (:mod:`reduced.transient._modal`);
 - :func:`forced_table` (:class:`ForcedTable`): the loads' particular solutions per state, and
-  :func:`forced_arrays`, the kernels' arguments of the loads' pieces.
+  :func:`forced_arrays`, the kernels' arguments of the loads' pieces;
+- :func:`run_tables` and :func:`cached_forced_table`: the same kept for the last few systems (and
+  loads) run, keyed by their contents, so repeated runs of one system (the hammer levels, the
+  stepped sine, repeats) work them out once.
 
 The formulas are those of :mod:`reduced.transient.exact` (its module docstring).
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -404,3 +410,125 @@ def forced_arrays(ft: ForcedTable, pieces) -> tuple:
     return (ft.omega, ft.Y, ft.U, ft.b, np.ascontiguousarray(pieces.starts), np.ascontiguousarray(pieces.F),
             np.ascontiguousarray(pieces.p0), np.ascontiguousarray(pieces.p1))
 
+
+
+TABLE_CACHE_SIZE = 4  # systems (and, per system, loads) whose tables are kept by run_tables / cached_forced_table
+TABLE_CACHE_ENTRY_BYTES = 128 * 2**20  # tables larger than this are not kept (memory: at most 4 x this is held)
+_TABLES: OrderedDict = OrderedDict()  # fingerprint -> {"run", "table", "modal", "omega_max", "forced": OrderedDict}
+_TABLES_LOCK = threading.Lock()
+
+
+def _fingerprint(*arrays: np.ndarray) -> bytes:
+    """A digest of the arrays' dtypes, shapes and bytes: equal digests, equal contents (to a
+    collision of BLAKE2b-160)."""
+    h = hashlib.blake2b(digest_size=20)
+    for a in arrays:
+        a = np.ascontiguousarray(a)
+        h.update(f"{a.dtype.str}{a.shape};".encode())
+        h.update(a.data)
+    return h.digest()
+
+
+def _system_key(system: GapSystem) -> bytes:
+    names = np.frombuffer("\0".join((*system.dof_names, "|", *system.stop_names)).encode(), np.uint8)
+    return _fingerprint(system.M, system.C, system.K, system.B, system.k, system.offset, system.side, system.tip,
+                        names)
+
+
+def _nbytes(value) -> int:
+    """Bytes of the arrays in a table (a dict, tuple or dataclass of arrays, nested)."""
+    if isinstance(value, np.ndarray):
+        return value.nbytes
+    if isinstance(value, dict):
+        return sum(_nbytes(v) for v in value.values())
+    if isinstance(value, (tuple, list)):
+        return sum(_nbytes(v) for v in value)
+    if isinstance(value, (StateTable, ForcedTable)):
+        return sum(_nbytes(v) for v in vars(value).values())
+    return 0
+
+
+def _kept(cache: OrderedDict, key, make):
+    """cache[key], made by ``make()`` when absent; the least recently used entry beyond
+    TABLE_CACHE_SIZE is dropped, and a value larger than TABLE_CACHE_ENTRY_BYTES is not kept."""
+    with _TABLES_LOCK:
+        if key in cache:
+            cache.move_to_end(key)
+            return cache[key]
+    value = make()  # outside the lock: the tables of a large system take seconds
+    if _nbytes(value) > TABLE_CACHE_ENTRY_BYTES:
+        return value
+    with _TABLES_LOCK:
+        cache[key] = value
+        cache.move_to_end(key)
+        while len(cache) > TABLE_CACHE_SIZE:
+            cache.popitem(last=False)
+    return value
+
+
+def run_tables(system: GapSystem) -> dict:
+    """The free segments' tables of ``system`` (no friction), kept for the last TABLE_CACHE_SIZE systems.
+
+    The system is identified by its contents (M, C, K, B, k, offset, side, tip and the names): a system built again,
+    or changed in place, is looked up by what it holds. The tables are shared between runs: read them,
+    never write them.
+
+    Parameters
+    ----------
+    system : GapSystem
+        The system (without friction).
+
+    Returns
+    -------
+    dict
+        ``run`` (:meth:`GapSystem.fold_zero_gap_tips`, the system the integrator runs), ``table``
+        (:func:`state_table` of it), ``modal`` (:func:`modal_table`), ``omega_max`` (rad/s) and
+        ``key`` (the fingerprint, for :func:`cached_forced_table`).
+
+    Raises
+    ------
+    ExactIntegratorError
+        As :func:`state_table` (a refused system is not kept).
+    """
+    key = _system_key(system)
+
+    def make() -> dict:
+        run = system.fold_zero_gap_tips()
+        with single_thread_blas():
+            table = state_table(run)
+            return {"run": run, "table": table, "modal": modal_table(run, table), "omega_max": run.omega_max(),
+                    "key": key, "forced": OrderedDict()}
+
+    return _kept(_TABLES, key, make)
+
+
+def cached_forced_table(tables: dict, loads) -> ForcedTable:
+    """:func:`forced_table` of the run system of ``tables`` (:func:`run_tables`) under ``loads``, kept per
+    system for the last TABLE_CACHE_SIZE load sets (identified by their directions and frequencies:
+    the table does not depend on the amplitudes or the time histories).
+
+    Parameters
+    ----------
+    tables : dict
+        The run's tables, from :func:`run_tables`.
+    loads : object
+        The loads (``b``, their rows, and ``omegas()``, their frequencies).
+
+    Returns
+    -------
+    ForcedTable
+    """
+    b = np.ascontiguousarray(loads.b, dtype=float)
+    key = _fingerprint(b, np.asarray(loads.omegas(), dtype=float))
+
+    def make() -> ForcedTable:
+        with single_thread_blas():
+            return forced_table(tables["run"], tables["table"], loads)
+
+    return _kept(tables["forced"], key, make)
+
+
+def clear_table_cache() -> None:
+    """Forget every kept table (:func:`run_tables`): the next run of each system works them out again."""
+    with _TABLES_LOCK:
+        _TABLES.clear()

@@ -23,7 +23,11 @@ start unloaded, w(0) = Bt x(0), unless ``w0`` is given.
 
 from __future__ import annotations
 
+import hashlib
 import math
+import threading
+import time
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -67,6 +71,58 @@ from reduced.transient.friction_tables import (
 from reduced.transient.result import RingdownResult, RingdownStream, zeros_view
 
 EVENT_KINDS = {KIND_GAP: "gap", KIND_STICK_UP: "slip+", KIND_STICK_DOWN: "slip-", KIND_SLIP_END: "stick"}
+TABLES_KEPT = 1  # systems whose friction tables are kept for the next run (each holds S (2n + p)^2 complex x 4)
+_TABLES: OrderedDict = OrderedDict()  # digest of a system -> (FrictionTable, its modal table)
+_TABLES_LOCK = threading.Lock()
+
+
+def _digest(system: GapSystem, omega_ref: float) -> str:
+    """sha256 of everything the friction tables of ``system`` depend on."""
+    h = hashlib.sha256()
+    fr = system.friction
+    for a in (system.M, system.C, system.K, system.B, system.k, system.offset, system.side, system.tip, fr.Bt, fr.tip,
+              fr.k_t, fr.mu, fr.stop, np.array([omega_ref])):
+        a = np.ascontiguousarray(a)
+        h.update(str((a.dtype, a.shape)).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def clear_tables() -> None:
+    """Forget the kept friction tables (:func:`friction_tables`)."""
+    with _TABLES_LOCK:
+        _TABLES.clear()
+
+
+def friction_tables(system: GapSystem, omega_ref: float) -> tuple[tuple[FrictionTable, tuple], bool]:
+    """((table, modal table), reused) of ``system``: built (:func:`reduced.transient.friction_tables.friction_table`,
+    :func:`~reduced.transient.friction_tables.friction_modal_table`) or, for the same system as a recent run (the
+    hammer test's levels: the same rig under blows of other sizes), reused. The last ``TABLES_KEPT`` systems'
+    tables are kept, keyed by the sha256 of their matrices and friction; they are read only, never changed.
+
+    Parameters
+    ----------
+    system : GapSystem
+        With friction.
+    omega_ref : float
+        rad/s, the slip-end events' scale (:func:`~reduced.transient.friction_tables.friction_table`).
+
+    Returns
+    -------
+    ((FrictionTable, tuple), bool)
+    """
+    key = _digest(system, omega_ref)
+    with _TABLES_LOCK:
+        if key in _TABLES:
+            _TABLES.move_to_end(key)
+            return _TABLES[key], True
+    table = friction_table(system, omega_ref)
+    entry = (table, friction_modal_table(system, table))
+    with _TABLES_LOCK:
+        _TABLES[key] = entry
+        while len(_TABLES) > TABLES_KEPT:
+            _TABLES.popitem(last=False)
+    return entry, False
 
 
 @dataclass(frozen=True, slots=True)
@@ -136,8 +192,9 @@ def _unloaded(system: GapSystem, x0: np.ndarray, w0) -> np.ndarray:
     w = np.array(w0, float)
     closed, slip = _initial_states(system, x0, w)
     t = fr.Bt @ x0
+    stop_of = fr.engaged_by(system.tip, closed)
     for q in np.flatnonzero(slip):
-        j = np.flatnonzero(closed & (system.tip == fr.tip[q]))[0]
+        j = stop_of[q]
         w[q] = t[q] - slip[q] * fr.mu[q] * system.k[j] * system.penetration(x0)[j] / fr.k_t[q]
     return w
 
@@ -195,8 +252,9 @@ class FrictionExactStepper(_stepper.Stepper):
         self.p = fr.p
         with single_thread_blas():
             omega_max = system.omega_max()
-            self.table = table = friction_table(system, omega_max)
-            self.mt = friction_modal_table(system, table)
+            t0 = time.perf_counter()
+            (self.table, self.mt), cached = friction_tables(system, omega_max)
+            table = self.table
             self.ft = friction_forced_table(system, table, loads) if self.forced else None
         self.hmin = HMIN_PERIODS / omega_max
         w0 = _unloaded(system, x0, options.w0)
@@ -204,14 +262,16 @@ class FrictionExactStepper(_stepper.Stepper):
         self.s = self.s0 = initial_friction_state(system, table, x0, w0)
         stop_tip = np.concatenate([system.tip, np.full(2 * fr.p, -1)]).astype(np.int64)  # the tip of each event slot
         c = np.ascontiguousarray
-        self.fric = (c(fr.Bt), c(fr.tip), stop_tip, c(table.ekind), c(table.states.stop_of), c(system.B), c(system.k),
-                     c(system.offset), c(system.side), c(fr.mu), c(fr.k_t))
+        self.fric = (c(fr.Bt), c(fr.tip), stop_tip, c(fr.stop), c(table.ekind), c(table.states.stop_of), c(system.B),
+                     c(system.k), c(system.offset), c(system.side), c(fr.mu), c(fr.k_t))
         self.floor, self.load_scale = self._scales(omega_max)
         t_end = max(duration_s, (n_samples - 1) / sample_rate_hz)
         self.n_pieces = n_pieces = max(options.chunks, math.ceil(t_end / MAX_PIECE_S))
         self.breakpoints = loads.breakpoints(t_end) if self.forced else np.zeros(0)
         self.stats.update({"n_events": 0, "n_steps": 1, "n_march": 0, "n_states": int(table.states.S),
-                           "cond_V": float(np.max(table.cond)), "n_pieces": n_pieces, "n_sliders": fr.p})
+                           "cond_V": float(np.max(table.cond)), "n_pieces": n_pieces, "n_sliders": fr.p,
+                           "table_s": time.perf_counter() - t0, "tables_reused": cached,
+                           "max_growth_per_s": float(max(np.max(table.lam.real), 0.0))})
         if self.forced:
             self.stats.update(n_loads=loads.n_loads, n_breakpoints=int(self.breakpoints.size))
         self.offset_max = float(np.max(np.abs(system.offset), initial=0.0))
@@ -325,7 +385,8 @@ class FrictionExactStepper(_stepper.Stepper):
             (self.t, self.W, self.Wf, self.E, self.s, buf.filled, ne, ni, status,
              self.n_stuck, self.n_log) = call_numba_kernel(
                 _friction_forced_kernel, tb.lam, tb.V, tb.Vinv, tb.yp, tb.erow, tb.ec, tb.eact, tb.succ, tb.reset,
-                tb.Df, tb.LF, events[7], self.run_system.C, self.damped, self.n, self.fric, self.y, self.s, self.t, t_b,
+                tb.Df, tb.LF, events[7], modal[8], self.run_system.C, self.damped, self.n, self.fric, self.y, self.s,
+                self.t, t_b,
                 buf.t, buf.filled, buf.t_after, out_y, out_W, out_Wf, self.W, self.Wf, self.hmin, self.floor, left,
                 self.n_stuck, *self.fargs, out_E, self.E, *self.log, self.n_log)
         self.n_events += ne
@@ -463,8 +524,8 @@ class FrictionExplicitStepper(ExplicitStepper):
         self.small = False
         self.kernel = _cd_friction_kernel
         self.mats = (c(A.T), c((dt * (G @ K)).T), c((dt * (G @ system.B.T)).T), c(L.T), c(system.B), system.offset,
-                     system.side, system.k, c((dt * (G @ fr.Bt.T)).T), c(fr.Bt), c(fr.tip), c(system.tip), fr.mu,
-                     fr.k_t)
+                     system.side, system.k, c((dt * (G @ fr.Bt.T)).T), c(fr.Bt), c(fr.tip), c(system.tip), c(fr.stop),
+                     fr.mu, fr.k_t)
         self.dtGbT, self.b = c((dt * (G @ b.T)).T), b
 
     def _first_state(self, x0: np.ndarray, v0: np.ndarray) -> None:
@@ -474,8 +535,9 @@ class FrictionExplicitStepper(ExplicitStepper):
         self.x0, self.v0 = x0.copy(), v0.copy()
         N = np.zeros(fr.p)
         f = system.stop_force(x0)
+        eng = fr.engages(system.tip)
         for q in range(fr.p):
-            N[q] = f[system.tip == fr.tip[q]].max(initial=0.0)
+            N[q] = f[eng[q]].max(initial=0.0)
         ft = np.clip(fr.force(x0, self.w0), -fr.mu * N, fr.mu * N)
         rhs0 = -(system.K @ x) - system.contact_force(x) - fr.Bt.T @ ft - system.C @ v
         if self.forced:
@@ -545,7 +607,7 @@ def _physics(system: GapSystem, closed: np.ndarray, slip: np.ndarray):
     g(x, v, w)) ...], each firing when g rises through zero."""
     fr = system.friction
     B, k, o, side, tip = system.B, system.k, system.offset, system.side, system.tip
-    stop_of = np.array([(np.flatnonzero(closed & (tip == fr.tip[q])).tolist() or [-1])[0] for q in range(fr.p)])
+    stop_of = fr.engaged_by(tip, closed)
 
     def forces(x, v, w):
         fc = np.zeros(system.n)
@@ -583,14 +645,14 @@ def _physics(system: GapSystem, closed: np.ndarray, slip: np.ndarray):
 
 
 def _reference_switch(system: GapSystem, closed, slip, what, x, v, w) -> tuple:
-    """The friction state after event ``what`` at (x, v, w), from the physics: a closing starts its tip's
-    sliders unloaded (w = t) and sticking unless the spring force leaves the cone at once (its rate
+    """The friction state after event ``what`` at (x, v, w), from the physics: a closing starts the
+    sliders it engages unloaded (w = t) and sticking unless the spring force leaves the cone at once (its rate
     +-kt t' - mu N' > 0 with w' = 0), then slipping that way."""
     fr = system.friction
     closed, slip, w = closed.copy(), slip.copy(), w.copy()
     if what[0] == "gap":
         j = what[1]
-        mine = fr.tip == system.tip[j]
+        mine = fr.engages(system.tip)[:, j]
         if closed[j]:
             closed[j] = False
             slip[mine] = 0
@@ -605,7 +667,7 @@ def _reference_switch(system: GapSystem, closed, slip, what, x, v, w) -> tuple:
     elif what[0] == "slip":  # on the cone (the event is located to the integrator's tolerance)
         q = what[1]
         slip[q] = what[2]
-        j = np.flatnonzero(closed & (system.tip == fr.tip[q]))[0]
+        j = fr.engaged_by(system.tip, closed)[q]
         w[q] = fr.Bt[q] @ x - what[2] * fr.mu[q] * system.k[j] * system.side[j] * (system.B[j] @ x
                                                                                   - system.offset[j]) / fr.k_t[q]
     else:
@@ -642,9 +704,10 @@ def _initial_states(system: GapSystem, x0: np.ndarray, w0: np.ndarray) -> tuple[
             closed[j[np.argmax(pen[j])]] = True
     slip = np.zeros(fr.p, np.int8)
     f0 = fr.force(x0, w0)
+    stop_of = fr.engaged_by(system.tip, closed)
     for q in range(fr.p):
-        j = np.flatnonzero(closed & (system.tip == fr.tip[q]))
-        if j.size and abs(f0[q]) > fr.mu[q] * system.k[j[0]] * pen[j[0]]:
+        j = stop_of[q]
+        if j >= 0 and abs(f0[q]) > fr.mu[q] * system.k[j] * pen[j]:
             slip[q] = 1 if f0[q] > 0 else -1
     return closed, slip
 

@@ -14,9 +14,12 @@ motion is linear, y' = A_s y + b_s:
     G_s = [kt_k Bt_k^T] on the sticking sliders' columns (0 elsewhere),
     R_k = Bt_k - sigma_k (mu_k k_j / kt_k) side_j B_j (slipping), Bt_k (open tip), 0 (sticking),
 
-j the closed stop of slider k's tip and sigma_k = +-1 its slip direction. K_s is not symmetric in a
+j the closed stop that engages slider k and sigma_k = +-1 its slip direction. K_s is not symmetric in a
 slip state (the friction force follows the normal one), and its eigenvalues may leave the imaginary
-axis (friction-induced flutter): such a state is refused, as an unstable one is without friction.
+axis (friction-induced flutter, Re lam > 0: on the 3-D apparatus the beam's pitch couples the normal and
+tangential motion at a tip, and 15 of its 49 axial friction states grow, by up to 0.16 /s at 8.5 kHz with
+mu = 0.3 and Mindlin's k_t). The closed form holds for them as for any state; the march bounds their growing
+terms over segments of at most ``GROWTH_SEGMENT`` / max Re lam (:mod:`reduced.transient._modal`).
 
 **The closed form.** A_s has the p zero eigenvalues of the sliders and the 2n of the structure,
 A_z = [[0, I], [-M^-1 K_s, -M^-1 C]], and is diagonalizable when A_z is (K_s regular):
@@ -35,7 +38,7 @@ linear function q = a^T y + c, signed so that q <= 0 until it fires, and scaled 
 march's floor and round-off bands are in metres):
 
     slot j < m        gap: q = +-side_j (B_j x - o_j), as without friction; a closing sets the
-                      sliders of the tip to stick, unloaded (w_k = t_k), an opening to follow;
+                      sliders it engages to stick, unloaded (w_k = t_k), an opening to follow;
     slot m + 2k       stick -> slip +: q = ((t_k - w_k) kt_k - mu_k N_j) / kt_k;
                       slip + -> stick: q = -w_k' / omega_ref (the slip velocity passes zero);
     slot m + 2k + 1   stick -> slip -: q = (-(t_k - w_k) kt_k - mu_k N_j) / kt_k;
@@ -63,6 +66,8 @@ from scipy.linalg import eigh, solve
 from reduced._blas import single_thread_blas
 from reduced.models.gaps import GapSystem
 from reduced.transient.exact_tables import MAX_COND, RESONANCE_REL, ZNEAR, ExactIntegratorError
+
+GROWTH_SEGMENT = math.log(2.0)  # a growing state's closed form restarts once its fastest term has doubled
 
 FOLLOW, STICK, SLIP_UP, SLIP_DOWN = 0, 0, 1, -1  # slider codes (follow: its tip open; stick: closed)
 KIND_GAP, KIND_STICK_UP, KIND_STICK_DOWN, KIND_SLIP_END = 0, 1, 2, 3  # event kinds, for the log
@@ -114,7 +119,8 @@ class FrictionStates:
 
 def friction_states(system: GapSystem) -> FrictionStates:
     """Every feasible friction state of ``system``: each contact state (:meth:`GapSystem.feasible_states`)
-    with each slider of a closed tip sticking, slipping + or slipping - (3^(sliders engaged) states each).
+    with each slider a closed stop engages sticking, slipping + or slipping - (3^(sliders engaged) states each;
+    the others follow their coordinates).
 
     Parameters
     ----------
@@ -128,11 +134,7 @@ def friction_states(system: GapSystem) -> FrictionStates:
     fr = system.friction
     closed_list, slip_list, stop_list = [], [], []
     for closed in system.feasible_states():
-        stop_of = np.full(fr.p, -1, np.int64)
-        for k in range(fr.p):
-            j = np.flatnonzero(closed & (system.tip == fr.tip[k]))
-            if j.size:
-                stop_of[k] = j[0]
+        stop_of = fr.engaged_by(system.tip, closed).astype(np.int64)
         engaged = np.flatnonzero(stop_of >= 0)
         for code in np.ndindex(*(3,) * engaged.size):
             slip = np.zeros(fr.p, np.int8)
@@ -234,7 +236,8 @@ def _state_parts(system: GapSystem, closed: np.ndarray, slip: np.ndarray, stop_o
 
 def _structure(system: GapSystem, Ks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(lam, V_z) of A_z = [[0, I], [-M^-1 K_s, -M^-1 C]]: the real modes when K_s is symmetric and the
-    system undamped, else LAPACK's eigenpairs; refuses zero-frequency, unstable or defective states."""
+    system undamped, else LAPACK's eigenpairs (flutter, Re lam > 0, included); refuses zero-frequency
+    states (defective ones: :func:`friction_table`)."""
     n = system.n
     if system.undamped and np.array_equal(Ks, Ks.T):
         w2, phi = eigh(Ks, system.M)
@@ -249,10 +252,6 @@ def _structure(system: GapSystem, Ks: np.ndarray) -> tuple[np.ndarray, np.ndarra
     if np.min(np.abs(lam)) <= 1e-9 * np.max(np.abs(lam)):
         raise ExactIntegratorError("a friction state has a zero-frequency mode (stiffness singular); "
                                    "use method 'explicit'")
-    if np.max(lam.real) > 1e-9 * np.max(np.abs(lam)):
-        raise ExactIntegratorError(
-            "a friction state is unstable (Re lambda > 0: friction-induced flutter of the slip state's "
-            "nonsymmetric stiffness); the exact closed form needs every state to decay or oscillate")
     return lam, V
 
 
@@ -281,7 +280,7 @@ def _event_rows(system: GapSystem, st: FrictionStates, s: int, R: np.ndarray, om
             new[j] = True
             reset[j] = True
         new_slip = slip.copy()
-        new_slip[fr.tip == system.tip[j]] = STICK  # stick (closing) or follow (opening): both 0
+        new_slip[fr.tip == system.tip[j]] = STICK  # stick (engaged by the closing) or follow: both 0
         succ[j] = st.index(new, new_slip)
     for k in range(p):
         j = stop_of[k]
@@ -327,8 +326,7 @@ def friction_table(system: GapSystem, omega_ref: float) -> FrictionTable:
     Raises
     ------
     ExactIntegratorError
-        A state with a zero-frequency mode, an unstable (flutter) or nearly defective one
-        (cond(V) > ``MAX_COND``).
+        A state with a zero-frequency mode or a nearly defective one (cond(V) > ``MAX_COND``).
     """
     fr = system.friction
     n, m, p = system.n, system.m, fr.p
@@ -473,8 +471,10 @@ def friction_modal_table(system: GapSystem, ft: FrictionTable) -> tuple:
     -------
     tuple
         (modal, events, viscous work, friction work): modal = (nK, lam, |lam|, U^T (S, 2, K, N) as Re/Im,
-        Uinv (S, K, N), |Uinv|, y_p); events = (EU (S, E, K), |EU|, E0 (S, E), Escale (S, E), active, successor,
-        reset, has_slip (S,), LF); the work tuples as :func:`work_tables`.
+        Uinv (S, K, N), |Uinv|, y_p, gmul (S, K), hseg (S,)); events = (EU (S, E, K), |EU|, E0 (S, E),
+        Escale (S, E), active, successor, reset, has_slip (S,), LF); the work tuples as :func:`work_tables`.
+        hseg[s] is the longest segment of state s, ``GROWTH_SEGMENT`` / max Re lam (inf when no term grows),
+        and gmul[s, i] = e^{Re(lam_i) hseg[s]} (<= 2) a growing term's factor over it, 1 for the others.
     """
     S, N = ft.lam.shape
     kept = [_kept(ft.lam[s]) for s in range(S)]
@@ -496,11 +496,38 @@ def friction_modal_table(system: GapSystem, ft: FrictionTable) -> tuple:
     E0 = np.ascontiguousarray(np.einsum("sen,sn->se", ft.erow, ft.yp) + ft.ec)
     Escale = np.ascontiguousarray(np.einsum("sen,sn->se", np.abs(ft.erow), np.abs(ft.yp)) + np.abs(ft.ec))
     has_slip = np.any(ft.states.slip != 0, axis=1)
+    hseg, gmul = growth_segments(lk)
     modal = (nK, np.ascontiguousarray(lk), np.abs(lk), UT, np.ascontiguousarray(Uinvk), np.abs(Uinvk),
-             np.ascontiguousarray(ft.yp))
+             np.ascontiguousarray(ft.yp), gmul, hseg)
     events = (EU, np.abs(EU), E0, Escale, np.ascontiguousarray(ft.eact), np.ascontiguousarray(ft.succ),
               np.ascontiguousarray(ft.reset), has_slip, np.ascontiguousarray(ft.LF))
     return modal, events, work_tables(lk, Uk, kappa, Dv), work_tables(lk, Uk, kappa, ft.Df)
+
+
+def growth_segments(lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(hseg (S,), gmul (S, K)) of the states' eigenvalues ``lam`` (S, K): the longest segment of each state,
+    ``GROWTH_SEGMENT`` / max Re lam (inf when no term grows), and each term's growth factor over it,
+    e^{Re(lam_i) hseg} (<= 2) for a growing term, 1 for the others (:func:`reduced.transient._modal._march`).
+
+    Parameters
+    ----------
+    lam : (S, K) ndarray of complex
+        1/s, each state's eigenvalues (0 for padding).
+
+    Returns
+    -------
+    hseg : (S,) ndarray of float
+        s.
+    gmul : (S, K) ndarray of float
+        >= 1.
+    """
+    g = np.max(np.maximum(lam.real, 0.0), axis=1)
+    with np.errstate(divide="ignore"):
+        hseg = np.where(g > 0.0, GROWTH_SEGMENT / g, np.inf)
+    gmul = np.ones(lam.shape)
+    grow = lam.real > 0.0
+    gmul[grow] = np.exp(lam.real[grow] * np.broadcast_to(hseg[:, None], lam.shape)[grow])
+    return np.ascontiguousarray(hseg), gmul
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,0 +1,476 @@
+"""The fit: weighted least squares on the residual blocks, passes, the intervals from the Jacobian.
+
+The fit (:func:`identify`) minimises
+
+    S(theta) = sum_b w_b^2 |r_b(theta)|^2
+
+over the scaled parameters theta within their bounds (:mod:`bearingshaft.identify.parameters`) by
+SciPy's trust-region reflective least squares (``scipy.optimize.least_squares``, ``method="trf"``),
+with r_b the residual blocks and w_b their weights (:mod:`bearingshaft.identify.residuals`). A
+pass fixes the target (floors, the predictability horizon and the spans at its starting point,
+:func:`bearingshaft.identify.problem.define_target`) and the weights (the blocks' RMS and effective
+sizes there); the next pass starts from the last optimum with the target and weights taken there,
+so the pointwise block grows to the horizon of the fitted model and each block is weighted by the
+misfit that is left (a first guess's horizon can end at the blow: the pointwise block then
+covers at least MIN_TIME_SPAN_S past it).
+
+The least squares find the nearest minimum, and a pointwise misfit has one wherever the model's first
+impacts fall a period early or late. So the fit starts where a scan puts it (``[identify] scan``
+points, 0: none): each parameter in turn over evenly spaced scaled values across its bounds, the
+others at the best found so far, with the target and weights at the scene's values; the cheapest
+point starts the first pass (a few dozen runs, in parallel batches of ``scan``).
+
+The Jacobian is by finite differences of ``step`` in theta (forward, backward at an upper
+bound), run with the point itself: a trial point and its p neighbours are one batch of p + 1 model
+runs in parallel (:class:`SerialEvaluator` here, :class:`bearingshaft.identify.run.DaskEvaluator`
+on Dask); a step the trust region rejects wastes its p neighbours, which accepted steps repay in
+time. At the optimum the Jacobian J is taken again by central differences (2p runs), and
+
+    C = s^2 (J^T J)^-1,   s^2 = S(theta*) / (N_eff - p),   N_eff = sum_b n_eff,b,
+
+is the covariance of theta* (weighted residuals: J^T J is the information matrix when the weighted
+residuals are independent with unit variance, which the weights make them on average). The
+100 (1 - a) % interval of parameter i is theta*_i -+ t_{1-a/2, N_eff - p} sqrt(C_ii) in theta, mapped to
+the parameter (a log-scaled one's interval is p* exp(-+ ...): asymmetric in p). The correlations
+are C_ij / sqrt(C_ii C_jj). Two parameters cannot be told apart when |corr| >= CORRELATION_LIMIT;
+J^T J is near-singular when the condition number of its correlation form (J scaled to unit
+columns) passes CONDITION_LIMIT, and the eigenvector of its smallest eigenvalue names the
+combination the test does not fix.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from bearingshaft.identify.problem import Evaluation, Problem, channels_at, define_target, evaluate, horizon_text
+from bearingshaft.identify.residuals import BlockWeight, block_weights, stacked
+
+CORRELATION_LIMIT = 0.95  # |corr| at or above which two parameters are reported as not told apart
+CONDITION_LIMIT = 1e6  # condition number of the scaled J^T J above which it is reported as near-singular
+XTOL = 1e-3  # stop when a step changes theta by less than this (relative): 0.1 %, far below any interval
+FTOL = 1e-4  # ... or the cost by less than this share
+
+
+class SerialEvaluator:
+    """Model runs in this process, one after another (the interface the fit uses).
+
+    Parameters
+    ----------
+    problem : Problem
+    """
+
+    workers = 1
+    where = "this process"
+
+    def __init__(self, problem: Problem) -> None:
+        self.problem = problem
+
+    def put(self, target):
+        """The target as the runs take it (here: itself)."""
+        return target
+
+    def map(self, target, thetas) -> list[Evaluation]:
+        """The evaluations at ``thetas``, in order."""
+        return [evaluate(self.problem, target, th) for th in thetas]
+
+    def records(self, thetas) -> list:
+        """(t, data) of the compared channels at ``thetas`` (:func:`bearingshaft.identify.problem.channels_at`)."""
+        return [channels_at(self.problem, th) for th in thetas]
+
+
+@dataclass(frozen=True, eq=False)
+class Pass:
+    """One least-squares pass.
+
+    Attributes
+    ----------
+    start : (p,) ndarray of float
+        theta where it started (its target and weights were taken there).
+    end : (p,) ndarray of float
+        Its optimum.
+    weights : dict
+        {block: BlockWeight} at ``start``.
+    span : str
+        The pointwise block's span, in words.
+    horizon_s : float
+        s, the horizon at ``start`` (inf: none).
+    status : str
+        SciPy's message.
+    n_iterations : int
+        Trial points (function evaluations of least_squares).
+    cost_start, cost_end : float
+        S at start and end (with this pass's weights).
+    """
+
+    start: np.ndarray
+    end: np.ndarray
+    weights: dict
+    span: str
+    horizon_s: float
+    status: str
+    n_iterations: int
+    cost_start: float
+    cost_end: float
+
+
+@dataclass(frozen=True, eq=False)
+class Fit:
+    """What :func:`identify` found.
+
+    Attributes
+    ----------
+    problem : Problem
+    theta : (p,) ndarray of float
+        The optimum, scaled.
+    values : dict
+        {key: value} there.
+    ci : dict
+        {key: (low, high)} the intervals, in the parameters' units.
+    covariance : (p, p) ndarray of float
+        C, in theta.
+    correlation : (p, p) ndarray of float
+    jacobian : (N, p) ndarray of float
+        J of the weighted residuals at the optimum (central differences).
+    sigma_theta : (p,) ndarray of float
+        sqrt(C_ii).
+    s2 : float
+        The residual variance S / (N_eff - p).
+    n_eff : float
+        N_eff.
+    dof : float
+        N_eff - p.
+    t_quantile : float
+        t_{1-a/2, dof}.
+    condition : float
+        Condition number of the scaled J^T J.
+    weakest : (p,) ndarray of float
+        Eigenvector of its smallest eigenvalue (scaled parameters).
+    notes : list of str
+        The identifiability notes.
+    weights : dict
+        {block: BlockWeight} at the optimum.
+    passes : list of Pass
+    history : list of dict
+        Every model run: ``pass``, ``kind`` (point, fd, final), ``run``, the values, ``cost`` and each
+        block's mean square (NaN for the finite-difference neighbours' cost), ``wall_s``.
+    target : Target
+        The last pass's target.
+    stats : dict
+        ``n_runs``, ``wall_s``, ``workers``, ``where``, CPU seconds of the runs.
+    """
+
+    problem: Problem
+    theta: np.ndarray
+    values: dict
+    ci: dict
+    covariance: np.ndarray
+    correlation: np.ndarray
+    jacobian: np.ndarray
+    sigma_theta: np.ndarray
+    s2: float
+    n_eff: float
+    dof: float
+    t_quantile: float
+    condition: float
+    weakest: np.ndarray
+    notes: list
+    weights: dict
+    passes: list
+    history: list
+    target: object
+    stats: dict = field(default_factory=dict)
+
+
+class _Runs:
+    """The model runs of one pass: a trial point and its finite-difference neighbours in one batch, cached."""
+
+    def __init__(self, evaluator, handle, problem: Problem, weights: dict, step: float, bounds, pass_no: int,
+                 history: list) -> None:
+        self.evaluator, self.handle, self.problem, self.weights = evaluator, handle, problem, weights
+        self.step, self.lo, self.hi = step, bounds[0], bounds[1]
+        self.pass_no, self.history = pass_no, history
+        self.cache: dict[bytes, Evaluation] = {}
+
+    def neighbours(self, theta: np.ndarray, sign: float = 1.0) -> list[np.ndarray]:
+        out = []
+        for j in range(theta.size):
+            h = sign * self.step
+            if not self.lo[j] <= theta[j] + h <= self.hi[j]:
+                h = -h
+            t = theta.copy()
+            t[j] += h
+            out.append(t)
+        return out
+
+    def run(self, thetas: list[np.ndarray], kinds: list[str]) -> list[Evaluation]:
+        todo = [(t, k) for t, k in zip(thetas, kinds, strict=True) if t.tobytes() not in self.cache]
+        if todo:
+            evs = self.evaluator.map(self.handle, [t for t, _ in todo])
+            for (t, kind), ev in zip(todo, evs, strict=True):
+                self.cache[t.tobytes()] = ev
+                self._log(ev, kind)
+        return [self.cache[t.tobytes()] for t in thetas]
+
+    def _log(self, ev: Evaluation, kind: str) -> None:
+        r = stacked(ev.blocks, self.weights)
+        row = {"pass": self.pass_no, "kind": kind, "run": len(self.history) + 1,
+               **self.problem.values(ev.theta), "cost": float(r @ r) if self.weights else math.nan,
+               **{f"ms_{m}": float(np.mean(ev.blocks[m] ** 2)) if ev.blocks[m].size else math.nan
+                  for m in ev.blocks}, "wall_s": ev.stats["wall_s"], "cpu_s": ev.stats["cpu_s"]}
+        self.history.append(row)
+
+    def residuals(self, theta: np.ndarray) -> np.ndarray:
+        theta = np.asarray(theta, float).copy()
+        ev = self.run([theta, *self.neighbours(theta)], ["point"] + ["fd"] * theta.size)[0]
+        return stacked(ev.blocks, self.weights)
+
+    def jacobian(self, theta: np.ndarray, central: bool = False) -> np.ndarray:
+        theta = np.asarray(theta, float).copy()
+        plus = self.neighbours(theta)
+        if central:  # the other side of each step; at a bound (both steps would be one point) theta itself
+            minus = [m if not np.array_equal(m, q) else theta.copy()
+                     for m, q in zip(self.neighbours(theta, -1.0), plus, strict=True)]
+            evs = self.run([*plus, *minus], ["final"] * (2 * theta.size))
+            cols = [(stacked(a.blocks, self.weights) - stacked(b.blocks, self.weights)) / (pa[j] - mb[j])
+                    for j, (a, b, pa, mb) in enumerate(zip(evs[:theta.size], evs[theta.size:], plus, minus,
+                                                           strict=True))]
+        else:
+            r0 = stacked(self.run([theta], ["point"])[0].blocks, self.weights)
+            evs = self.run(plus, ["fd"] * theta.size)
+            cols = [(stacked(e.blocks, self.weights) - r0) / (t[j] - theta[j])
+                    for j, (e, t) in enumerate(zip(evs, plus, strict=True))]
+        return np.column_stack(cols)
+
+
+def _weights_at(runs_at, theta) -> dict[str, BlockWeight]:
+    ev = runs_at([np.asarray(theta, float)])[0]
+    return block_weights(ev.blocks)
+
+
+def _target(problem: Problem, theta):
+    spec, sp = problem.scene.identify, problem.scene.spectrogram
+    return define_target(problem, theta, spec.measures, envelope_window_s=spec.envelope_window_s,
+                         frame_s=sp.window_s if sp else 0.05, fmax_hz=sp.fmax_hz if sp else None)[0]
+
+
+def _scan(problem: Problem, evaluator, theta: np.ndarray, bounds, history: list, say) -> np.ndarray:
+    """The least squares' start: each parameter in turn over ``[identify] scan`` points across its bounds, the
+    others at the best so far, the target and weights at ``theta`` (module docstring)."""
+    spec = problem.scene.identify
+    target = _target(problem, theta)
+    handle = evaluator.put(target)
+    probe = _Runs(evaluator, handle, problem, {}, spec.step, bounds, 0, history)
+    weights = block_weights(probe.run([np.asarray(theta, float)], ["scan"])[0].blocks)
+    # the pointwise block is left out of the scan: a model a period early or late misfits it more than one that
+    # never closes a gap, while the envelopes see the impacts' energy whatever their phase
+    weights = {m: (w if m != "time" else replace(w, weight=0.0)) for m, w in weights.items()}
+    if not any(w.weight > 0 for w in weights.values()):
+        return np.asarray(theta, float)
+    runs = _Runs(evaluator, handle, problem, weights, spec.step, bounds, 0, history)
+    runs.cache.update(probe.cache)
+    best = np.asarray(theta, float).copy()
+    for j, par in enumerate(problem.parameters):
+        trial = []
+        for v in np.linspace(bounds[0][j], bounds[1][j], spec.scan):
+            t = best.copy()
+            t[j] = v
+            trial.append(t)
+        evs = runs.run([best, *trial], ["scan"] * (len(trial) + 1))
+        costs = [float(np.sum(stacked(e.blocks, weights) ** 2)) for e in evs]
+        best = [best, *trial][int(np.argmin(costs))].copy()
+        say(f"scan of {par.key}: {par.value(best[j]):.4g} (cost {min(costs):.4g})")
+    return best
+
+
+def identify(problem: Problem, evaluator=None, progress=None) -> Fit:
+    """Fit ``problem``'s parameters to its test (module docstring).
+
+    Long because the passes, the batches of runs and the final covariance share one history and
+    one set of counters; each piece is a few lines.
+
+    Parameters
+    ----------
+    problem : Problem
+    evaluator : SerialEvaluator or DaskEvaluator, optional
+        Where the model runs (default: here, one after another).
+    progress : callable, optional
+        ``progress(text)``: one line per pass and per trial point.
+
+    Returns
+    -------
+    Fit
+    """
+    from scipy.optimize import least_squares
+
+    spec = problem.scene.identify
+    evaluator = evaluator or SerialEvaluator(problem)
+    say = progress or (lambda text: None)
+    t_start = time.perf_counter()
+    bounds = (np.array([p.theta_bounds[0] for p in problem.parameters]),
+              np.array([p.theta_bounds[1] for p in problem.parameters]))
+    theta = problem.theta0.copy()
+    history: list[dict] = []
+    passes: list[Pass] = []
+    runs = None
+    target = None
+    if spec.scan:
+        theta = _scan(problem, evaluator, theta, bounds, history, say)
+    for k in range(spec.passes):
+        target = _target(problem, theta)
+        handle = evaluator.put(target)
+        probe = _Runs(evaluator, handle, problem, {}, spec.step, bounds, k + 1, history)
+        weights = block_weights(probe.run([np.asarray(theta, float)], ["point"])[0].blocks)
+        runs = _Runs(evaluator, handle, problem, weights, spec.step, bounds, k + 1, history)
+        runs.cache.update(probe.cache)
+        r0 = runs.residuals(theta)
+        say(f"pass {k + 1}: {horizon_text(target)}; cost {float(r0 @ r0):.4g} at the start")
+        start = theta.copy()
+        res = least_squares(runs.residuals, theta, jac=runs.jacobian, bounds=bounds, method="trf",
+                            x_scale=1.0, xtol=XTOL, ftol=FTOL, max_nfev=spec.max_iterations)
+        theta = np.clip(res.x, *bounds)
+        hz = target.horizon.horizon_s if target.horizon is not None else math.inf
+        passes.append(Pass(start, theta.copy(), weights, horizon_text(target), hz, res.message, int(res.nfev),
+                           float(r0 @ r0), float(2.0 * res.cost)))
+        say(f"pass {k + 1}: {res.nfev} trial points, cost {2.0 * res.cost:.4g}: "
+            + ", ".join(f"{key} = {v:.4g}" for key, v in problem.values(theta).items()))
+        if k > 0 and np.max(np.abs(theta - start)) < XTOL:
+            break
+    # the covariance at the optimum, with the weights (and target) taken there
+    weights = _weights_at(lambda ths: runs.run(ths, ["point"]), theta)
+    runs.weights = weights
+    r = stacked(runs.run([theta], ["point"])[0].blocks, weights)
+    J = runs.jacobian(theta, central=True)
+    p = theta.size
+    n_eff = float(sum(w.n_eff for w in weights.values()))
+    norms = np.linalg.norm(J, axis=0)
+    seen = norms > 0  # a parameter the residuals do not see has no information: an unbounded interval
+    cov = np.full((p, p), math.nan)
+    cov_seen, s2, dof, tq = covariance(J[:, seen], r, n_eff, spec.confidence)
+    cov[np.ix_(seen, seen)] = cov_seen
+    sig = np.where(seen, np.sqrt(np.maximum(np.diag(cov), 0.0)), math.inf)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(sig, sig)
+    ci = {}
+    for i, par in enumerate(problem.parameters):
+        lo, hi = par.value(theta[i] - tq * sig[i]), par.value(theta[i] + tq * sig[i])
+        ci[par.key] = (min(lo, hi), max(lo, hi))
+    Js = J / np.where(norms > 0, norms, 1.0)
+    ev, vec = np.linalg.eigh(Js.T @ Js)
+    cond = float(ev[-1] / ev[0]) if ev[0] > 0 else math.inf
+    notes = identifiability_notes(problem, corr, cond, vec[:, 0], ci, norms)
+    stats = {"n_runs": len(history), "wall_s": time.perf_counter() - t_start, "workers": evaluator.workers,
+             "where": evaluator.where, "cpu_s_runs": float(sum(h["cpu_s"] for h in history)),
+             "passes": len(passes)}
+    return Fit(problem, theta, problem.values(theta), ci, cov, corr, J, sig, s2, n_eff, dof, tq, cond, vec[:, 0],
+               notes, weights, passes, history, target, stats)
+
+
+def covariance(J: np.ndarray, r: np.ndarray, n_eff: float, confidence: float) -> tuple[np.ndarray, float, float,
+                                                                                       float]:
+    """C = s^2 (J^T J)^+ of the scaled parameters, s^2 = |r|^2 / (N_eff - p), and the t quantile (module docstring).
+
+    Parameters
+    ----------
+    J : (N, p) ndarray of float
+        Jacobian of the weighted residuals at the optimum.
+    r : (N,) ndarray of float
+        The weighted residuals there.
+    n_eff : float
+        Their effective number of independent values.
+    confidence : float
+        In (0, 1).
+
+    Returns
+    -------
+    (C, s2, dof, t): dof = N_eff - p (at least 1), t = t_{(1 + confidence)/2, dof}.
+    """
+    from scipy.stats import t as student_t
+
+    p = J.shape[1]
+    dof = max(n_eff - p, 1.0)
+    s2 = float(r @ r) / dof
+    cov = s2 * np.linalg.pinv(J.T @ J)
+    return cov, s2, dof, float(student_t.ppf(0.5 + 0.5 * confidence, dof))
+
+
+def interval_half_widths(J: np.ndarray, r: np.ndarray, n_eff: float, confidence: float) -> np.ndarray:
+    """t sqrt(C_ii): the intervals' half widths in the scaled parameters (:func:`covariance`).
+
+    Parameters
+    ----------
+    J : (N, p) ndarray of float
+        Jacobian of the weighted residuals.
+    r : (N,) ndarray of float
+        The weighted residuals.
+    n_eff : float
+        Their effective number.
+    confidence : float
+        In (0, 1).
+    """
+    cov, _, _, tq = covariance(J, r, n_eff, confidence)
+    return tq * np.sqrt(np.maximum(np.diag(cov), 0.0))
+
+
+def identifiability_notes(problem: Problem, corr: np.ndarray, cond: float, weakest: np.ndarray, ci: dict,
+                          norms: np.ndarray) -> list[str]:
+    """The identifiability notes: pairs that cannot be told apart, a near-singular J^T J, a parameter
+    the residuals do not see, an interval that reaches a bound.
+
+    Parameters
+    ----------
+    problem : Problem
+    corr : (p, p) ndarray of float
+    cond : float
+        Condition number of the scaled J^T J.
+    weakest : (p,) ndarray of float
+        Its eigenvector of the smallest eigenvalue.
+    ci : dict
+        {key: (low, high)}.
+    norms : (p,) ndarray of float
+        Column norms of J.
+
+    Returns
+    -------
+    list of str (empty: every parameter identified)
+
+    Examples
+    --------
+    >>> from bearingshaft.identify.parameters import Parameter
+    >>> from types import SimpleNamespace
+    >>> ps = (Parameter("model.gap", "m", 1e-4, 1e-5, 1e-3, "log"), Parameter("model.k_g", "N/m", 1e7, 1e6, 1e8, "log"))
+    >>> prob = SimpleNamespace(parameters=ps)
+    >>> notes = identifiability_notes(prob, np.array([[1, -0.99], [-0.99, 1]]), 3e3, np.array([0.7, 0.7]),
+    ...                               {"model.gap": (9e-5, 1.1e-4), "model.k_g": (9e6, 1.1e7)}, np.ones(2))
+    >>> notes[0].startswith("model.gap and model.k_g cannot be told apart")
+    True
+    """
+    notes = []
+    ps = problem.parameters
+    p = len(ps)
+    for i in range(p):
+        if norms[i] == 0:
+            notes.append(f"{ps[i].key}: the residuals do not change with it (zero Jacobian column): not identified")
+    for i in range(p):
+        for j in range(i + 1, p):
+            c = corr[i, j]
+            if math.isfinite(c) and abs(c) >= CORRELATION_LIMIT:
+                notes.append(f"{ps[i].key} and {ps[j].key} cannot be told apart: correlation {c:+.3f} "
+                             f"(|corr| >= {CORRELATION_LIMIT}): the test fixes a combination of them, not each")
+    if cond > CONDITION_LIMIT:
+        combo = " ".join(f"{w:+.2f} {par.key}" for w, par in zip(weakest, ps, strict=True) if abs(w) > 0.1)
+        notes.append(f"J^T J is near-singular (condition number {cond:.3g} > {CONDITION_LIMIT:g} with its columns "
+                     f"scaled): the combination {combo} (scaled parameters) is not fixed by the test")
+    for par in ps:
+        lo, hi = ci[par.key]
+        if lo <= par.lower or hi >= par.upper:
+            notes.append(f"{par.key}: its interval [{lo:.4g}, {hi:.4g}] reaches a bound [{par.lower:.4g}, "
+                         f"{par.upper:.4g}]: the test hardly constrains it")
+    return notes
+
+
+__all__ = ["identify", "covariance", "interval_half_widths", "Fit", "Pass", "SerialEvaluator", "identifiability_notes",
+           "CORRELATION_LIMIT", "CONDITION_LIMIT"]

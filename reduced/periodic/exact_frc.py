@@ -1,0 +1,1111 @@
+"""Forced-response curves on the exact flow: families of periodic orbits continued in frequency by
+multiple shooting, with their stability, bifurcations and branch switching (no harmonics).
+
+A family is a curve R(Y) = 0 of :class:`reduced.periodic.forced_shooting.ShootingResidual`
+(node states and ln Omega), continued by :func:`reduced.periodic.continuation.continue_branch`.
+In contact the curve of the three-mass model is piecewise smooth: each time a contact grazes
+(a stop starts or stops touching within a period, the 700 Hz bending mode ringing between
+impacts brings a tip back to the stop) the number of contact events per period changes and
+the curve's curvature is unbounded there (the stop force grows like the 3/2 power of the
+excess amplitude), and the superharmonic resonances of the bending mode (700 Hz / k for odd
+k) make narrow tongues whose sheets lie close together. Three rules keep the path on its own
+sheet:
+
+- a step that changes the number of contact events per period is refused (and halved) while it
+  is longer than ``grazing_ds`` (a grazing is crossed in a short step);
+- a step whose secant leaves the new tangent by more than ``max_angle_deg`` is refused (it
+  landed on a neighbouring sheet);
+- the step may fall to ``ds_min`` = 1e-9 (the hairpins of the tongues' folds have radii of
+  1e-5 in the scaled unknowns), and a corner step fixes the coordinates of the largest tangent
+  components (:func:`reduced.periodic.continuation.continue_branch`'s ``corner_coords``).
+
+**Stability** of each point: the Floquet multipliers, eigenvalues of the monodromy (the product
+of the segments' monodromies, exact for the exact orbit). **Symmetry.** The three-mass model
+driven at x2 is invariant under the mirror x1 <-> x3 (a signed permutation R of the DOFs:
+R M R^T = M, R K R^T = K, R C R^T = C, R b = b, stops onto stops) and, with symmetric
+clearances, under the half-wave shift (t -> t + T/2, x -> -x). The monodromy of an orbit with
+both symmetries is Phi = G^2 with G = -Phi(T/2) (the half-period map, negated), and Phi and G
+commute with R: on the mirror-symmetric (+) and antisymmetric (-) subspaces of the state,
+
+    real eigenvalue of G through +1 on (+)       fold (where the curve turns), else branch point
+    real eigenvalue of G through -1 on (+)       pitchfork breaking the half-wave symmetry
+                                                 (orbits x1 = x3 with even harmonics)
+    real eigenvalue of G through +1 on (-)       pitchfork breaking the mirror symmetry
+                                                 (asymmetric orbits x1 != x3, half-wave symmetric)
+    real eigenvalue of G through -1 on (-)       pitchfork breaking both (x1(t + T/2) = -x3(t))
+    real eigenvalue of Phi through -1            period doubling
+    a complex pair leaving the unit circle       Neimark-Sacker
+
+each detected by the sign of det(G - I), det(G + I), det(Phi + I) on each subspace between
+consecutive points (without a symmetry the same tests run on Phi and the whole space).
+
+**Branch switching** at a pitchfork or a period doubling: the crossing is located by bisection
+along the curve, the critical eigenvector e of the block is propagated through the segments
+(the nodes' perturbation dY, over two load periods for a period doubling: dY(T) = -e), and the
+new family's first point solves R(Y) = 0 with e . (Y - Y_bp) = h: the hyperplane misses the
+parent family entirely (the parent has no component along a symmetry-breaking e), so Newton
+cannot fall back onto it. The new family is continued until it leaves the band or rejoins the
+parent (its symmetry-breaking part falls back to zero, at another branch point), with its own
+stability; its mirror image (x1 <-> x3) is a family too and is not computed again.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from reduced import _checks as _check
+from reduced._blas import single_thread_blas
+from reduced.models.gaps import GapSystem
+from reduced.periodic.continuation import ContinuationError, ContinuationOptions, continue_branch, tangent
+from reduced.periodic.forced_shooting import SEGMENTS, ForcedFlow, ShootingResidual, shoot_at
+from reduced.periodic.forced_stability import STABILITY_TOL, classify_crossing
+from reduced.periodic.hb import NewtonError, newton
+from reduced.periodic.shooting import ShootingError
+
+SYMMETRY_TOL = 1e-7  # relative: an orbit whose symmetry-breaking part is below this has the symmetry
+REAL_TOL = 1e-6  # relative imaginary part below which an eigenvalue is real
+CORRECTOR_TOL = 1e-8  # last Newton step of a corrector, relative (the point is then within ~1e-16 of the curve)
+RETRACE_DIST, RETRACE_ARC, RETRACE_BATCH = 0.03, 1.0, 500  # _Retrace: distance, arclength, tree rebuilds
+CLOSE_STEPS, CLOSE_DIST = 20, 1e-3  # a family back within CLOSE_DIST of its first point after CLOSE_STEPS is closed
+LOAD_STEPS = 400  # continuation steps in the load of the first orbit at most
+START_HARMONICS = 15  # harmonics of the balance that guesses the first orbit
+BISECTIONS = 12  # bisections locating a crossing between two points (the bracket shrinks 4096 times)
+SWITCH_H = (1e-3, 3e-4, 3e-3)  # offsets tried along the critical eigenvector (scaled unknowns), in order
+FAMILY_KINDS = ("main", "asymmetric", "half_wave_broken", "asymmetric_half_wave", "period_2")
+SWITCHED = {"pitchfork_mirror": "asymmetric", "pitchfork_half_wave": "half_wave_broken",
+            "pitchfork_mirror_half_wave": "asymmetric_half_wave", "period_doubling": "period_2"}
+
+
+@dataclass(frozen=True, slots=True)
+class ExactFRCOptions:
+    """How the exact families are continued and switched (module docstring).
+
+    Parameters
+    ----------
+    segments : int
+        Nodes per load period (2 per period are added to a period-2 family's). Even (the
+        half-wave test splits the period at a node).
+    ds, ds_max, ds_min : float
+        First, largest and smallest continuation step in the scaled unknowns.
+    max_angle_deg : float
+        deg, largest turn of the tangent over a step, and of a step's secant from the new tangent.
+    grazing_ds : float
+        Longest step allowed to change the number of contact events per period.
+    max_iter : int
+        Newton iterations of a corrector.
+    max_steps : int
+        Points of the main family at most.
+    branch_switching : bool
+        Follow the families born at pitchforks and period doublings.
+    max_families : int
+        Families switched onto at most (besides the main one).
+    family_steps : int
+        Points of a switched family at most.
+    depth : int
+        Generations of switching (1: families off the main curve only).
+    deadline_s : float
+        s of wall time after which no new family is started (the main one always runs).
+    velocity_scale : {'fastest', 'omega'}
+        Unit of the nodes' velocities in the continuation's unknowns (times x_ref): the angular
+        frequency of the fastest mode with every stop open ('fastest'), or the load's (Omega).
+        With Omega the ringing of a fast mode between impacts, whose phase at the nodes spins
+        as Omega changes, dominates a step's length (its velocity is Omega_mode / Omega times its
+        displacement): the curve takes several times more points for the same resolution.
+    """
+
+    segments: int = SEGMENTS
+    ds: float = 0.02
+    ds_max: float = 0.1
+    ds_min: float = 1e-9
+    max_angle_deg: float = 15.0
+    grazing_ds: float = 2e-2
+    max_iter: int = 8
+    max_steps: int = 30000
+    branch_switching: bool = True
+    max_families: int = 30
+    family_steps: int = 4000
+    depth: int = 1
+    deadline_s: float = math.inf
+    velocity_scale: str = "fastest"
+
+    def __post_init__(self) -> None:
+        _check.integer("segments", self.segments, lo=2)
+        if self.segments % 2:
+            raise _check.InvalidArgument(f"segments must be even, got {self.segments}")
+        for key in ("ds", "ds_max", "ds_min", "max_angle_deg", "grazing_ds"):
+            _check.positive(key, getattr(self, key))
+        if not self.deadline_s > 0.0:
+            raise _check.InvalidArgument(f"deadline_s must be > 0 s, got {self.deadline_s!r}")
+        for key in ("max_iter", "max_steps", "family_steps"):
+            _check.integer(key, getattr(self, key))
+        _check.integer("max_families", self.max_families, lo=0)
+        _check.integer("depth", self.depth, lo=0)
+        _check.flag("branch_switching", self.branch_switching)
+        _check.choice("velocity_scale", self.velocity_scale, ("fastest", "omega"))
+
+    def continuation(self, max_steps: int) -> ContinuationOptions:
+        # tol bounds the last Newton step: the error after it is ~ its square (quadratic convergence)
+        return ContinuationOptions(ds=self.ds, ds_max=self.ds_max, ds_min=self.ds_min, max_steps=max_steps,
+                                   max_iter=self.max_iter, max_angle_deg=self.max_angle_deg, tol=CORRECTOR_TOL)
+
+
+# -- symmetries ----------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class Symmetry:
+    """The symmetries of a forced gap system: ``mirror`` (n, n) a signed permutation R of the DOFs
+    leaving it invariant (None: none), ``half_wave`` whether x -> -x with t -> t + T/2 does."""
+
+    mirror: np.ndarray | None
+    half_wave: bool
+
+    def state_mirror(self) -> np.ndarray | None:
+        """(2n, 2n) R on [x; v]."""
+        return None if self.mirror is None else np.kron(np.eye(2), self.mirror)
+
+
+def _stops(system: GapSystem, B: np.ndarray, offset: np.ndarray, side: np.ndarray) -> set:
+    return {(tuple(np.round(B[j], 12)), round(float(offset[j]), 15), float(side[j]), float(system.k[j]))
+            for j in range(system.m)}
+
+
+def find_symmetry(system: GapSystem, b: np.ndarray, mirror: np.ndarray | None = None) -> Symmetry:
+    """The symmetries of ``system`` under a load along b: the mirror ``mirror`` (default: the
+    reversal of the DOFs, x1 <-> x3 of the three-mass model) if it leaves M, K, C, b and the
+    stops invariant, and the half-wave symmetry if the stops are (every stop has its opposite).
+
+    Parameters
+    ----------
+    system : the gap system
+    b : (n,) force direction
+    mirror : (n, n) a candidate signed permutation of the DOFs (default: the reversal)
+
+    Returns
+    -------
+    Symmetry
+    """
+    n = system.n
+    R = np.eye(n)[::-1] if mirror is None else np.asarray(mirror, float)
+    ok = not np.allclose(R, np.eye(n))
+    for A in (system.M, system.K, system.C):
+        ok = ok and np.allclose(R @ A @ R.T, A, rtol=1e-12, atol=1e-12 * np.max(np.abs(A), initial=0.0))
+    ok = ok and np.allclose(R @ b, b, rtol=1e-12, atol=1e-12 * np.max(np.abs(b)))
+    stops = _stops(system, system.B, system.offset, system.side)
+    ok = ok and _stops(system, system.B @ R.T, system.offset, system.side) == stops
+    half = _stops(system, system.B, -system.offset, -system.side) == stops
+    return Symmetry(R if ok else None, bool(half))
+
+
+# -- the families ---------------------------------------------------------------------------------
+@dataclass(eq=False)
+class OrbitFamily:
+    """One family of periodic orbits of the forced exact flow, in continuation order.
+
+    Attributes
+    ----------
+    kind : str
+        One of :data:`FAMILY_KINDS`: the main curve (from the bottom of the band), or the
+        family born at a pitchfork or period doubling.
+    periods : int
+        The orbits' period in load periods.
+    freq_hz, omega : (k,) ndarray of float
+        Hz and rad/s, the load frequency of each point.
+    nodes : (k, S, 2n) ndarray of float
+        The orbit's states at the nodes t_j = j p T / S (m, m/s).
+    amplitude_m : (k, p) ndarray of float
+        m, max |r . x| over the orbit at each output point (exact: closed form, extremes refined).
+    multipliers : (k, 2n) ndarray of complex
+        Floquet multipliers over the orbit's period, by decreasing modulus.
+    stable : (k,) ndarray of bool
+        Every |mu| <= 1 + STABILITY_TOL.
+    events : (k,) ndarray of int
+        Contact events per orbit period (a stop closing or opening).
+    asymmetry : (k,) ndarray of float
+        max |x - R x| / max |x| over the nodes (0 on mirror-symmetric orbits).
+    half_wave : (k,) ndarray of float
+        max |x(t + T/2) + x(t)| / max |x| over the nodes (0 on half-wave symmetric orbits; nan
+        for period-2 orbits).
+    bifurcations : list of (int, str)
+        (first point past the crossing, kind).
+    folds : list of int
+        Points where the curve turned in frequency.
+    segment : (k,) ndarray of int
+        The continued piece of each point.
+    parent : tuple or None
+        (family index, point index, kind) of the branch point it was switched from.
+    status : str
+        How the continuation ended, per piece, joined by '+'; "rejoined" when it met its parent again.
+    notes : list of str
+    wall_s : float
+    """
+
+    kind: str
+    periods: int
+    freq_hz: np.ndarray
+    omega: np.ndarray
+    nodes: np.ndarray
+    amplitude_m: np.ndarray
+    multipliers: np.ndarray
+    stable: np.ndarray
+    events: np.ndarray
+    asymmetry: np.ndarray
+    half_wave: np.ndarray
+    bifurcations: list
+    folds: list
+    segment: np.ndarray
+    parent: tuple | None = None
+    status: str = ""
+    notes: list = field(default_factory=list)
+    wall_s: float = 0.0
+    Y: np.ndarray | None = field(default=None, repr=False)  # (k, 2nS + 1) the scaled points
+    signs: np.ndarray | None = field(default=None, repr=False)  # (k, c) test-function signs
+
+    @property
+    def max_multiplier(self) -> np.ndarray:
+        return np.abs(self.multipliers[:, 0])
+
+    def bifurcation_labels(self) -> list[str]:
+        """Per point: '' or the kind of the bifurcation found just before it."""
+        labels = [""] * len(self.freq_hz)
+        for i, kind in self.bifurcations:
+            labels[i] = kind
+        return labels
+
+    def pieces(self) -> list[np.ndarray]:
+        return [np.flatnonzero(self.segment == k) for k in np.unique(self.segment)]
+
+
+@dataclass(eq=False)
+class ExactFRC:
+    """The families of forced periodic orbits of one load level on the exact flow.
+
+    Attributes
+    ----------
+    amplitude_N : float
+        N, P.
+    point_names : tuple of str
+    point_rows : (p, n) ndarray of float
+    families : list of OrbitFamily
+        The main curve first, then the switched families in the order found.
+    switches : list of dict
+        Per branch point met: family, index, freq_hz, kind, and the family switched onto
+        (``child``, -1 if none) or why not (``note``).
+    symmetry : Symmetry
+    options : ExactFRCOptions
+    x_ref : float
+        m.
+    wall_s : float
+    notes : list of str
+    """
+
+    amplitude_N: float
+    point_names: tuple
+    point_rows: np.ndarray
+    families: list
+    switches: list
+    symmetry: Symmetry
+    options: ExactFRCOptions
+    x_ref: float
+    wall_s: float
+    notes: list = field(default_factory=list)
+
+    @property
+    def main(self) -> OrbitFamily:
+        return self.families[0]
+
+
+# -- point data: multipliers, symmetry tests, peaks -------------------------------------------------
+def _real_signs(lam: np.ndarray, c: float) -> float:
+    """sign of det(A - c I) from A's eigenvalues: complex pairs count |lam - c|^2 > 0."""
+    real = np.abs(lam.imag) <= REAL_TOL * np.maximum(np.abs(lam), 1e-300)
+    return float(np.prod(np.sign(lam.real[real] - c)))
+
+
+@dataclass(frozen=True, eq=False)
+class _Analyser:
+    """Multipliers, test functions and symmetry measures of the points of a family (module
+    docstring): the channels are (block, map, c) with block '+', '-' or 'all', map 'G' (the
+    half-period map) or 'Phi', c = +1 or -1."""
+
+    res: ShootingResidual
+    symmetry: Symmetry
+    mirror_sym: bool
+    half_sym: bool
+    rows: np.ndarray
+
+    @functools.cached_property
+    def blocks(self) -> list:
+        Rs = self.symmetry.state_mirror()
+        if not self.mirror_sym or Rs is None:
+            return [("all", np.eye(Rs.shape[0] if Rs is not None else 2 * self.res.n))]
+        w, Q = np.linalg.eigh(Rs)
+        return [("+", Q[:, w > 0]), ("-", Q[:, w < 0])]
+
+    @functools.cached_property
+    def channels(self) -> list[tuple[str, str, float]]:
+        out = []
+        for name, _ in self.blocks:
+            if self.half_sym:
+                out += [(name, "G", 1.0), (name, "G", -1.0)]
+            else:
+                out += [(name, "Phi", 1.0)]
+            out += [(name, "Phi", -1.0)]
+        return out
+
+    def maps(self, Js: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """(Phi, G or None) from the segments' monodromies (S, 2n, 2n)."""
+        Phi = np.eye(Js.shape[1])
+        G = None
+        for k, Jk in enumerate(Js):
+            Phi = Jk @ Phi
+            if self.half_sym and k == Js.shape[0] // 2 - 1:
+                G = -Phi
+        return Phi, G
+
+    def signs(self, Js: np.ndarray) -> np.ndarray:
+        Phi, G = self.maps(Js)
+        out = []
+        for _, Q in self.blocks:
+            lamP = np.linalg.eigvals(Q.T @ Phi @ Q)
+            if self.half_sym:
+                lamG = np.linalg.eigvals(Q.T @ G @ Q)
+                out += [_real_signs(lamG, 1.0), _real_signs(lamG, -1.0)]
+            else:
+                out += [_real_signs(lamP, 1.0)]
+            out += [_real_signs(lamP, -1.0)]
+        return np.array(out)
+
+    def measures(self, nodes: np.ndarray) -> tuple[float, float]:
+        """(mirror asymmetry, half-wave asymmetry) of the orbit through the nodes (S, 2n), relative."""
+        scale = max(float(np.max(np.abs(nodes[:, : self.res.n]))), 1e-300)
+        sc = np.concatenate([np.ones(self.res.n), np.full(self.res.n, 1.0 / max(self._omega_scale(nodes), 1e-300))])
+        Rs = self.symmetry.state_mirror()
+        a = np.nan if Rs is None else float(np.max(np.abs((nodes - nodes @ Rs.T) * sc))) / scale
+        S = nodes.shape[0]
+        hw = np.nan
+        if self.res.periods == 1 and S % 2 == 0:
+            hw = float(np.max(np.abs((nodes[S // 2:] + nodes[: S // 2]) * sc))) / scale
+        return a, hw
+
+    def _omega_scale(self, nodes: np.ndarray) -> float:
+        """rad/s: velocity / displacement scale of the orbit."""
+        return float(np.max(np.abs(nodes[:, self.res.n:]))) / max(float(np.max(np.abs(nodes[:, : self.res.n]))),
+                                                                  1e-300)
+
+    def point(self, Y: np.ndarray) -> tuple:
+        """(multipliers, test signs, events, asymmetry, half-wave asymmetry, amplitude (p,)) at Y
+        (its residual is memoised: the corrector has just evaluated it)."""
+        res = self.res
+        res(Y)
+        Js = res.last_segment_monodromies(Y)
+        Phi, _ = self.maps(Js)
+        mu = np.linalg.eigvals(Phi)
+        mu = mu[np.argsort(-np.abs(mu), kind="stable")]
+        pmax, pmin = res.peaks(Y, self.rows)
+        a, hw = self.measures(res.nodes(Y)[0])
+        return mu, self.signs(Js), res.events(Y), a, hw, np.maximum(pmax, -pmin)
+
+
+# -- continuation of one family -------------------------------------------------------------------
+class _Budget:
+    """The wall-clock deadline of new families."""
+
+    def __init__(self, deadline_s: float) -> None:
+        self.t0 = time.perf_counter()
+        self.deadline_s = deadline_s
+
+    @property
+    def spent(self) -> float:
+        return time.perf_counter() - self.t0
+
+    def left(self) -> bool:
+        return self.spent < self.deadline_s
+
+
+class _Retrace:
+    """Whether a family has come back onto its own path, going the same way (it is cycling around a
+    closed loop, or a step jumped back onto a stretch already traced): a point within
+    ``RETRACE_DIST`` of an earlier point more than ``RETRACE_ARC`` of arclength behind, with
+    tangents within 25 degrees. Candidates come from a k-d tree of a few fixed random projections
+    of the points (rebuilt every RETRACE_BATCH points; the newer ones are checked directly)."""
+
+    def __init__(self, dim: int) -> None:
+        rng = np.random.default_rng(0)
+        self.Pm = rng.standard_normal((dim, 6)) / math.sqrt(dim)
+        self.Y = np.empty((1024, dim))
+        self.T = np.empty((1024, dim))
+        self.s = np.empty(1024)
+        self.k = 0
+        self.tree, self.n_tree = None, 0
+
+    def add(self, y: np.ndarray, t: np.ndarray) -> bool:
+        """Record the point y with its tangent t; True if it retraces the path (see the class)."""
+        from scipy.spatial import cKDTree
+
+        k = self.k
+        s = self.s[k - 1] + float(np.linalg.norm(y - self.Y[k - 1])) if k else 0.0
+        cand = np.arange(self.n_tree, k)
+        if self.tree is not None:
+            cand = np.concatenate([cand, np.array(self.tree.query_ball_point(y @ self.Pm, RETRACE_DIST), int)])
+        cand = cand[s - self.s[cand] > RETRACE_ARC]
+        hit = bool(cand.size) and bool(np.any((np.linalg.norm(self.Y[cand] - y, axis=1) < RETRACE_DIST)
+                                              & (self.T[cand] @ t > 0.9)))
+        if k == self.Y.shape[0]:
+            self.Y, self.T = np.vstack([self.Y, np.empty_like(self.Y)]), np.vstack([self.T, np.empty_like(self.T)])
+            self.s = np.concatenate([self.s, np.empty_like(self.s)])
+        self.Y[k], self.T[k], self.s[k] = y, t, s
+        self.k = k + 1
+        if self.k - self.n_tree >= RETRACE_BATCH:
+            self.tree, self.n_tree = cKDTree(self.Y[: self.k] @ self.Pm), self.k
+        return hit
+
+
+def _follow(res: ShootingResidual, y0: np.ndarray, param: int, direction: float, opts: ExactFRCOptions,
+            max_steps: int, band: tuple[float, float], analyser: _Analyser, stop_extra=None, progress=None):
+    """Continue a family from y0 (a solution): the points and their data, piece by piece (a piece
+    that ends on the smallest step is taken up again by a step in frequency, both ways, from its
+    last point). Returns (Y (k, .), data (list per point), folds, segment (k,), statuses, notes)."""
+    i_w = res.size
+    lo, hi = band
+    cos_max = math.cos(math.radians(opts.max_angle_deg))
+
+    retrace = _Retrace(res.size + 1)
+    last = {}
+
+    def stop(y):
+        t = last.get("t") if last.get("y") is not None and np.array_equal(last["y"], y) else None
+        if t is None:
+            t = tangent(res(y)[1])
+        if retrace.add(y, t):
+            last["retraced"] = True
+            return True
+        return (not lo - 1e-12 <= y[i_w] <= hi + 1e-12) or (stop_extra is not None and stop_extra(y))
+
+    def reject(yo, yn):
+        d = yn - yo
+        dn = float(np.linalg.norm(d))
+        if dn == 0.0:
+            return False
+        t = tangent(res(yn)[1], d / dn)
+        last["y"], last["t"] = yn, t
+        return abs(float(t @ d)) < cos_max * dn  # landed on a neighbouring sheet
+
+    def corner_coords(y, t):
+        return [int(c) for c in np.argsort(-np.abs(t))[:3]]
+
+    def prog(y):
+        res.guard = (y, res.events(y), opts.grazing_ds)  # a grazing is crossed in a short step
+        if progress is not None:
+            progress(y)
+
+    Ys, data, folds, seg, statuses, notes = [], [], [], [], [], []
+    total = 0
+    y_start, p_start, d_start = y0, param, direction
+    k = 0
+    while total < max_steps:
+        res.guard = (y_start, res.events(y_start), opts.grazing_ds)
+        try:
+            br = continue_branch(res, y_start, param=p_start, direction=d_start,
+                                 options=opts.continuation(max_steps - total), stop=stop, monitor=(i_w,),
+                                 callback=analyser.point, reject=reject, progress=prog, corner_coords=corner_coords)
+        finally:
+            res.guard = None
+        if last.pop("retraced", False):
+            br.status = "retraced"
+            notes.append(f"came back onto its own path at {res.omega(br.y[-1]) / (2 * math.pi):.6g} Hz (a closed "
+                         "loop, or a step that jumped back onto a stretch already traced): stopped there")
+        Ys.append(br.y)
+        data += br.data
+        folds += [i + total for i, c in br.folds if c == i_w]
+        seg.append(np.full(len(br.y), k))
+        statuses.append(br.status)
+        total += len(br.y)
+        if br.status != "min_step" or not lo - 1e-12 <= br.y[-1][i_w] <= hi + 1e-12:
+            break
+        restart = _restart(res, br.y[-1], br.tangent[-1], br.y[max(len(br.y) - 5, 0)])
+        if restart is None:
+            notes.append(f"ended at {res.omega(br.y[-1]) / (2 * math.pi):.6g} Hz: the step fell below "
+                         f"{opts.ds_min:g} and no frequency step continued it")
+            break
+        y_start, p_start, d_start = restart
+        notes.append(f"piece {k} ended at {res.omega(br.y[-1]) / (2 * math.pi):.6g} Hz (step below {opts.ds_min:g});"
+                     f" piece {k + 1} from {res.omega(y_start) / (2 * math.pi):.6g} Hz")
+        k += 1
+    return np.concatenate(Ys), data, folds, np.concatenate(seg), statuses, notes
+
+
+def _restart(res: ShootingResidual, y: np.ndarray, t: np.ndarray, y_back: np.ndarray):
+    """(y, param, direction) of a new piece: the orbit at a frequency a little past y's (both ways,
+    growing steps), by Newton from y's nodes with y and a point behind it deflated (so it does not
+    return onto the piece just traced); None if none is found."""
+    i_w = res.size
+    nodes, w = res.nodes(y)
+    sgn = 1.0 if t[i_w] >= 0.0 else -1.0
+    for dl in (1e-6, 1e-5, 1e-4, 1e-3):
+        for s in (sgn, -sgn):
+            try:
+                yn = shoot_at(res, nodes, w * math.exp(s * dl), known=[y, y_back])
+            except ShootingError:
+                continue
+            if np.linalg.norm(yn - y) > 1e-8:
+                return yn, i_w, s
+    return None
+
+
+def _family(kind: str, periods: int, res: ShootingResidual, Y, data, folds, seg, statuses, notes, parent, wall,
+            analyser: _Analyser) -> OrbitFamily:
+    """An :class:`OrbitFamily` from the continued points and their data."""
+    mu = np.array([d[0] for d in data])
+    signs = np.array([d[1] for d in data])
+    events = np.array([d[2] for d in data], int)
+    asym = np.array([d[3] for d in data])
+    hw = np.array([d[4] for d in data])
+    amp = np.array([d[5] for d in data])
+    omega = res.omega_ref * np.exp(Y[:, res.size])
+    nodes = np.array([res.nodes(y)[0] for y in Y])
+    stable = np.max(np.abs(mu), axis=1) <= 1.0 + STABILITY_TOL
+    bif = _bifurcations(analyser, mu, signs, folds, seg)
+    return OrbitFamily(kind, periods, omega / (2 * math.pi), omega, nodes, amp, mu, stable, events, asym, hw, bif,
+                       sorted(set(folds)), seg, parent, "+".join(statuses), notes, wall, Y, signs)
+
+
+def _bifurcations(analyser: _Analyser, mu: np.ndarray, signs: np.ndarray, folds: list, seg: np.ndarray
+                  ) -> list[tuple[int, str]]:
+    """[(first point past the crossing, kind)] from the test functions' sign changes (module
+    docstring); a complex pair leaving the unit circle with no real crossing is Neimark-Sacker."""
+    out = []
+    chans = analyser.channels
+    n_out = np.sum(np.abs(mu) > 1.0 + STABILITY_TOL, axis=1)
+    fold_set = set(folds)
+    for i in range(1, len(mu)):
+        if seg[i] != seg[i - 1]:
+            continue
+        found = False
+        for c, (block, mp, sign) in enumerate(chans):
+            if signs[i, c] == signs[i - 1, c]:
+                continue
+            found = True
+            out.append((i, _kind(block, mp, sign, analyser.mirror_sym, bool(fold_set & {i - 1, i, i + 1}))))
+        if not found and n_out[i] != n_out[i - 1]:
+            j = i if n_out[i] > n_out[i - 1] else i - 1
+            if classify_crossing(mu[j], STABILITY_TOL) == "neimark_sacker":
+                out.append((i, "neimark_sacker"))
+    return out
+
+
+def _kind(block: str, mp: str, sign: float, mirror_sym: bool, at_fold: bool) -> str:
+    """The bifurcation of a crossing in channel (block, map, sign) (module docstring's table)."""
+    if mp == "Phi" and sign < 0:
+        return "period_doubling"
+    breaks_mirror = mirror_sym and block == "-"
+    breaks_half = mp == "G" and sign < 0
+    if breaks_mirror and breaks_half:
+        return "pitchfork_mirror_half_wave"
+    if breaks_mirror:
+        return "pitchfork_mirror"
+    if breaks_half:
+        return "pitchfork_half_wave"
+    return "fold" if at_fold else "branch_point"
+
+
+# -- branch switching -------------------------------------------------------------------------------
+def _locate(res: ShootingResidual, analyser: _Analyser, ya: np.ndarray, yb: np.ndarray, channel: int):
+    """The point between two consecutive points ya, yb of a family where the test function of
+    ``channel`` changes sign, by bisection (each trial point corrected onto the curve on the
+    hyperplane normal to the chord; a trial whose corrector fails is moved a tenth of the bracket
+    towards its middle); (y, segment monodromies) of the end of the final bracket."""
+    d = yb - ya
+    t = d / float(np.linalg.norm(d))
+    sa = analyser.signs(_monodromies(res, ya))[channel]
+    lo, hi = 0.0, 1.0
+    best = (ya, _monodromies(res, ya))
+    for _ in range(BISECTIONS):
+        y = None
+        for shift in (0.0, 0.1, -0.1):
+            th = 0.5 * (lo + hi) + shift * (hi - lo)
+            yp = ya + th * d
+
+            def corr(z, yp=yp):
+                R, J = res(z)
+                return np.concatenate([R, [t @ (z - yp)]]), np.vstack([J, t])
+
+            try:
+                y = newton(corr, yp, tol=1e-11, max_iter=20).y
+                break
+            except NewtonError:
+                continue
+        if y is None:
+            break
+        Js = _monodromies(res, y)
+        if analyser.signs(Js)[channel] == sa:
+            lo = th
+        else:
+            hi = th
+        best = (y, Js)
+    return best
+
+
+def _critical_multiplier(analyser: _Analyser, Js: np.ndarray, channel: int) -> complex:
+    """The eigenvalue of the channel's map and block nearest its sign (+1 or -1)."""
+    block, mp, sign = analyser.channels[channel]
+    Q = dict(analyser.blocks)[block]
+    Phi, G = analyser.maps(Js)
+    lam = np.linalg.eigvals(Q.T @ (G if mp == "G" else Phi) @ Q)
+    return complex(lam[int(np.argmin(np.abs(lam - sign)))])
+
+
+def _monodromies(res: ShootingResidual, y: np.ndarray) -> np.ndarray:
+    res(y)
+    return res.last_segment_monodromies(y)
+
+
+def _critical_vector(analyser: _Analyser, Js: np.ndarray, channel: int) -> np.ndarray:
+    """(2n,) the real eigenvector of the channel's map and block whose eigenvalue is nearest its
+    sign (+1 or -1), in the full state space."""
+    block, mp, sign = analyser.channels[channel]
+    Q = dict(analyser.blocks)[block]
+    Phi, G = analyser.maps(Js)
+    A = Q.T @ (G if mp == "G" else Phi) @ Q
+    lam, V = np.linalg.eig(A)
+    i = int(np.argmin(np.abs(lam - sign)))
+    e = Q @ V[:, i].real
+    return e / np.linalg.norm(e)
+
+
+def _switch(parent_res: ShootingResidual, analyser: _Analyser, y_bp: np.ndarray, Js: np.ndarray, channel: int,
+            kind: str, opts: ExactFRCOptions):
+    """The first point of the family born at a crossing: (residual of the family, Y, the
+    perturbation direction (scaled), its h), or None."""
+    e = _critical_vector(analyser, Js, channel)
+    nodes, w = parent_res.nodes(y_bp)
+    S = parent_res.segments
+    if kind == "period_doubling":
+        res = ShootingResidual(parent_res.flow, 2 * S, 2, parent_res.x_ref, parent_res.omega_ref, parent_res.omega_v)
+        nodes = np.concatenate([nodes, nodes])
+        seq = list(Js) * 2
+    else:
+        res = ShootingResidual(parent_res.flow, S, 1, parent_res.x_ref, parent_res.omega_ref, parent_res.omega_v)
+        seq = list(Js)
+    dY = [e]
+    for Jk in seq[:-1]:
+        dY.append(Jk @ dY[-1])
+    dY = np.array(dY)
+    y_bp_new = res.point(nodes, w)
+    d = res.point(nodes + dY, w) - y_bp_new  # the perturbation in scaled unknowns (Omega fixed)
+    d[res.size] = 0.0
+    # the symmetry the new family keeps, exactly (the crossing is located only to a bracket, where
+    # the critical eigenvalue is not exactly +-1): Newton then stays in that invariant subspace
+    block, mp, sign = analyser.channels[channel]
+    Dn = d[: res.size].reshape(res.segments, 2 * res.n)
+    Rs = analyser.symmetry.state_mirror()
+    h2 = res.segments // 2
+    if kind == "pitchfork_mirror" and analyser.half_sym:
+        H = 0.5 * (Dn[:h2] - Dn[h2:])
+        Dn[:] = np.concatenate([H, -H])
+    elif kind == "pitchfork_half_wave" and analyser.mirror_sym:
+        Dn[:] = 0.5 * (Dn + Dn @ Rs.T)
+    elif kind == "pitchfork_mirror_half_wave":
+        H = 0.5 * (Dn[:h2] - Dn[h2:] @ Rs.T)
+        Dn[:] = np.concatenate([H, -H @ Rs.T])
+    d /= np.linalg.norm(d)
+    for h in SWITCH_H:
+        target = y_bp_new + h * d
+
+        def fun(z, target=target):
+            R, J = res(z)
+            return np.concatenate([R, [d @ (z - target)]]), np.vstack([J, d])
+
+        try:
+            y = newton(fun, target, tol=1e-11, max_iter=30).y
+        except NewtonError:
+            continue
+        return res, y, d, h
+    return None
+
+
+def _breaking(res: ShootingResidual, kind: str, sym: Symmetry):
+    """Y -> the symmetry-breaking part of the scaled nodes of a family born at a ``kind`` crossing
+    (zero on the parent family), flattened: the mirror-antisymmetric part, the half-wave-symmetric
+    part, both, or the difference between the two load periods of a period-2 orbit."""
+    S, N = res.segments, 2 * res.n
+    Rs = sym.state_mirror()
+
+    def part(y):
+        Yn = y[: res.size].reshape(S, N)
+        if kind == "pitchfork_mirror":
+            return 0.5 * (Yn - Yn @ Rs.T).ravel()
+        if kind == "pitchfork_half_wave":
+            return 0.5 * (Yn[S // 2:] + Yn[: S // 2]).ravel()
+        if kind == "pitchfork_mirror_half_wave":
+            return np.concatenate([0.5 * (Yn - Yn @ Rs.T).ravel(), 0.5 * (Yn[S // 2:] + Yn[: S // 2]).ravel()])
+        return 0.5 * (Yn[S // 2:] - Yn[: S // 2]).ravel()  # period doubling: S = 2 S_parent
+
+    return part
+
+
+class _Watch:
+    """The stop of a switched family: it rejoined its parent (its symmetry-breaking part, having
+    doubled, fell below a quarter of its start, or reversed between two points: the family passed
+    through the parent at another branch point) or closed on itself (back within CLOSE_DIST of its
+    first point after CLOSE_STEPS points)."""
+
+    def __init__(self, part, y0: np.ndarray) -> None:
+        self.part = part
+        self.y0 = y0
+        self.prev = part(y0)
+        self.b0 = float(np.linalg.norm(self.prev))
+        self.peak = self.b0
+        self.steps = 0
+        self.reason = ""
+
+    def __call__(self, y: np.ndarray) -> bool:
+        self.steps += 1
+        p = self.part(y)
+        b = float(np.linalg.norm(p))
+        if self.peak > 2.0 * self.b0 and (b < 0.25 * self.b0 or float(p @ self.prev) < 0.0):
+            self.reason = "rejoined"
+        elif self.steps > CLOSE_STEPS and float(np.linalg.norm(y - self.y0)) < CLOSE_DIST:
+            self.reason = "closed"
+        self.peak = max(self.peak, b)
+        self.prev = p
+        return bool(self.reason)
+
+
+def hb_start(system: GapSystem, load: np.ndarray, amplitude_N: float, freq_hz: float, segments: int,
+             H: int = START_HARMONICS) -> np.ndarray:
+    """(segments, 2n) a guess of the forced orbit at ``freq_hz``: the states of its harmonic balance
+    (odd harmonics if the stops are symmetric, else all; condensed, the stop forces projected
+    exactly; :func:`reduced.periodic.frc._start`, which raises the load gradually where the
+    stops are already closed) at the nodes' phases.
+
+    Parameters
+    ----------
+    system, load, amplitude_N : the gap system, the force direction (n,) and P (N)
+    freq_hz : Hz
+    segments : nodes
+    H : harmonics
+
+    Returns
+    -------
+    ndarray
+        (segments, 2n) states [x; v] at the phases 2 pi k / segments.
+    """
+    from reduced.periodic.exact_hb import default_root_samples
+    from reduced.periodic.forced_balance import ForcedBalance, ForcedResidual
+    from reduced.periodic.forced_stability import hb_states
+    from reduced.periodic.frc import _start, default_x_ref
+
+    odd = find_symmetry(system, load).half_wave
+    fb = ForcedBalance(system, np.asarray(load, float), float(amplitude_N), 0.0, H, default_root_samples(H), odd)
+    w = 2.0 * math.pi * freq_hz
+    res = ForcedResidual(fb, default_x_ref(fb, 0.5 * freq_hz, 2.0 * freq_hz), w)
+    z, w = res.z_omega(_start(res, w))
+    return hb_states(fb.response(z, w), w, segments)
+
+
+class _LoadResidual:
+    """R of a shooting residual at its fixed frequency with the load continued instead:
+    y = [Y nodes, ln(P / P_0)] (dR/d ln P by forward differences: only the start uses it)."""
+
+    def __init__(self, res: ShootingResidual, omega: float, P0: float) -> None:
+        self.res, self.P0 = res, P0
+        self.lw = math.log(omega / res.omega_ref)
+        self.size = res.size
+
+    def _at(self, y: np.ndarray, lp: float):
+        self.res.flow.amplitude_N = self.P0 * math.exp(lp)
+        self.res.forget()
+        return self.res(np.append(y[: self.size], self.lw))
+
+    def __call__(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        h = 1e-7
+        Rp, _ = self._at(y, y[self.size] + h)
+        R, J = self._at(y, y[self.size])
+        Jy = J.copy()
+        Jy[:, self.size] = (Rp - R) / h
+        return R, Jy
+
+
+def first_orbit(res: ShootingResidual, guess: np.ndarray, omega: float) -> np.ndarray:
+    """The scaled point of the orbit at Omega: Newton from the guessed nodes, or, where that fails
+    (hard contact at the start: the HB guess of the three-mass model at 10 N, 10 Hz is too far),
+    the orbit continued in the load (pseudo-arclength in ln P, through its folds and grazings)
+    from the linear orbit at a load that closes no stop up to P.
+
+    Parameters
+    ----------
+    res : the shooting residual (its flow's load amplitude is P)
+    guess : (S, 2n) guessed nodes
+    omega : rad/s
+
+    Returns
+    -------
+    ndarray
+        The scaled point Y. Raises ShootingError if neither way finds the orbit.
+    """
+    try:
+        return shoot_at(res, guess, omega)
+    except ShootingError as exc:
+        first = exc
+    flow = res.flow
+    P = flow.amplitude_N
+    sy = flow.system
+    t0, _ = res.times(omega)
+    Y0, _ = flow.particular(omega)
+    # state 0 (no stop closed): the linear orbit per newton at the nodes
+    lin = (Y0[0, :, 0][None, :] * np.exp(1j * (omega * t0 + flow.phase))[:, None]).real
+    reach = float(np.max(np.abs(lin[:, : sy.n] @ sy.B.T) / np.maximum(np.abs(sy.offset), 1e-300)))
+    P0 = min(0.5 / max(reach, 1e-300), P)  # N: a load at which no stop closes (lin is per newton)
+    lr = _LoadResidual(res, omega, P0)
+    y0 = np.append(res.point(lin * P0, omega)[: res.size], 0.0)
+    top = math.log(P / P0)
+    try:
+        br = continue_branch(lr, y0, param=res.size, direction=1.0,
+                             options=ContinuationOptions(ds=0.05, ds_max=0.2, ds_min=1e-9, max_steps=LOAD_STEPS),
+                             stop=lambda y: y[res.size] >= top)
+        if br.status != "stop":
+            raise first
+        ya, yb = br.y[-2], br.y[-1]
+        th = (top - ya[res.size]) / (yb[res.size] - ya[res.size])
+        nodes = res.nodes(np.append(((1 - th) * ya + th * yb)[: res.size], math.log(omega / res.omega_ref)))[0]
+        flow.amplitude_N = P
+        res.forget()
+        return shoot_at(res, nodes, omega)
+    except (ContinuationError, ShootingError):
+        raise first from None
+    finally:
+        flow.amplitude_N = P
+        res.forget()
+
+
+# -- the driver -----------------------------------------------------------------------------------
+def exact_frc(system: GapSystem, load: np.ndarray, amplitude_N: float, f_min_hz: float, f_max_hz: float,
+              starts, *, point_rows: np.ndarray | None = None, point_names: tuple | None = None,
+              x_ref: float, options: ExactFRCOptions | None = None, mirror: np.ndarray | None = None,
+              progress=None) -> ExactFRC:
+    """The forced-response families of ``system`` under load (n,) x amplitude_N cos(Omega t) on its
+    exact flow over [f_min, f_max] (module docstring).
+
+    The main family is continued from the first guess of ``starts`` whose orbit is found
+    (:func:`first_orbit`), down to f_min and up to f_max; then, as the options say, the families
+    born at its pitchforks and period doublings.
+
+    Parameters
+    ----------
+    system : the gap system (damped)
+    load : (n,) force direction b
+    amplitude_N : N, P > 0
+    f_min_hz, f_max_hz : Hz, the band
+    starts : (S, 2n) a guess of the orbit at f_min at S = ``options.segments`` equally spaced phases
+        (e.g. the HB orbit's states, :func:`reduced.periodic.forced_stability.hb_states`), or a
+        sequence of (freq_hz, such a guess) tried in order; the linear orbit at f_max is tried
+        last where it closes no stop
+    point_rows, point_names : (p, n) output points (default: the DOFs)
+    x_ref : m, scale of the displacements
+    options : :class:`ExactFRCOptions`
+    mirror : (n, n) candidate mirror of the DOFs (default: their reversal), kept if the system
+        and load are invariant under it
+    progress : None or a callable taking the fraction of the band the main family has covered
+
+    Returns
+    -------
+    ExactFRC
+        The families with stability, bifurcations and the switches made. Raises
+        :class:`reduced.periodic.shooting.ShootingError` if no guess leads to an orbit.
+    """
+    _check.gap_system(system)
+    b = _check.vector("load", load, system.n)
+    P = _check.positive("amplitude_N", amplitude_N, "N")
+    f0 = _check.positive("f_min_hz", f_min_hz, "Hz")
+    f1 = _check.positive("f_max_hz", f_max_hz, "Hz")
+    if not f1 > f0:
+        raise _check.InvalidArgument(f"f_max_hz must exceed f_min_hz = {f0:g} Hz, got {f1!r}")
+    opts = options or ExactFRCOptions()
+    rows = np.eye(system.n) if point_rows is None else np.atleast_2d(np.asarray(point_rows, float))
+    names = tuple(point_names) if point_names is not None else tuple(system.dof_names)
+    x_ref = _check.positive("x_ref", x_ref, "m")
+    if isinstance(starts, np.ndarray):
+        starts = [(f0, starts)]
+    starts = [(float(f), np.atleast_2d(np.asarray(g, float))) for f, g in starts]
+    for f, g in starts:
+        if g.shape != (opts.segments, 2 * system.n) or not f0 <= f <= f1:
+            raise _check.InvalidArgument(f"a start must be a frequency in the band and ({opts.segments}, "
+                                         f"{2 * system.n}) nodes, got {f!r} Hz and {g.shape}")
+    with single_thread_blas():
+        return _exact_frc(system, b, P, f0, f1, starts, rows, names, x_ref, opts,
+                          find_symmetry(system, b, mirror), progress)
+
+
+def _main_start(res: ShootingResidual, starts: list, f1: float) -> tuple[np.ndarray, list[str]]:
+    """(the scaled point of the first orbit found from ``starts``, then the linear orbit at f1 where
+    it closes no stop; notes on the guesses that failed). Raises ShootingError if none."""
+    flow = res.flow
+    w1 = 2 * math.pi * f1
+    t0, _ = res.times(w1)
+    lin = (flow.particular(w1)[0][0, :, 0][None, :] * np.exp(1j * (w1 * t0 + flow.phase))[:, None]).real
+    lin = lin * flow.amplitude_N
+    sy = flow.system
+    cand = list(starts)
+    if np.all(np.max(np.abs(lin[:, : sy.n] @ sy.B.T), axis=0) < np.abs(sy.offset)):
+        cand.append((f1, lin))
+    notes = []
+    for k, (f, g) in enumerate(cand):
+        try:
+            return (first_orbit(res, g, 2 * math.pi * f) if k == 0 else shoot_at(res, g, 2 * math.pi * f)), notes
+        except ShootingError as exc:
+            notes.append(f"no orbit from the guess at {f:.6g} Hz ({' '.join(str(exc).split())[:80]})")
+    raise ShootingError("no periodic orbit from any guess: " + "; ".join(notes))
+
+
+def _exact_frc(system, b, P, f0, f1, starts, rows, names, x_ref, opts, sym, progress) -> ExactFRC:
+    budget = _Budget(opts.deadline_s)
+    flow = ForcedFlow(system, b, P)
+    w0, w1 = 2 * math.pi * f0, 2 * math.pi * f1
+    S = opts.segments
+    omega_v = None
+    if opts.velocity_scale == "fastest":
+        omega_v = float(np.sqrt(np.max(np.linalg.eigvals(np.linalg.solve(system.M, system.K)).real)))
+    res = ShootingResidual(flow, S, 1, x_ref, w1, omega_v)
+    band = (math.log(w0 / w1), 0.0)
+    y0, start_notes = _main_start(res, starts, f1)
+    nodes0, _ = res.nodes(y0)
+    probe = _Analyser(res, sym, False, False, rows)
+    a0, hw0 = probe.measures(nodes0)
+    an = _Analyser(res, sym, bool(sym.mirror is not None and a0 < SYMMETRY_TOL),
+                   bool(sym.half_wave and hw0 < SYMMETRY_TOL), rows)
+
+    def prog(y):
+        if progress is not None:
+            progress(min(max((y[res.size] - band[0]) / (band[1] - band[0]), 0.0), 1.0))
+
+    t0 = time.perf_counter()
+    parts = []
+    for direction in (-1.0, 1.0):  # down to f_min, then up to f_max, from the first orbit
+        if direction < 0 and y0[res.size] <= band[0] + 1e-12 or direction > 0 and y0[res.size] >= band[1] - 1e-12:
+            continue
+        parts.append((direction, _follow(res, y0, res.size, direction, opts, opts.max_steps, band, an,
+                                         progress=prog)))
+    Y, data, folds, seg, st, notes = _join(parts)
+    notes = start_notes + notes
+    families = [_family("main", 1, res, Y, data, folds, seg, st, notes, None, time.perf_counter() - t0, an)]
+    switches = []
+    if opts.branch_switching and opts.max_families > 0:
+        _switch_all(families, switches, {0: (res, an)}, opts, band, rows, sym, budget)
+    return ExactFRC(P, names, rows, families, switches, sym, opts, x_ref, budget.spent)
+
+
+def _join(parts: list) -> tuple:
+    """One family from the runs down and up from the same first point: the run down reversed (its
+    first point, shared, dropped), then the run up; indices and pieces renumbered so that the first
+    point's piece is one piece."""
+    if len(parts) == 1 and parts[0][0] > 0:
+        return parts[0][1]
+    down = dict(parts)[-1.0]
+    Yd, dd, fd, sd, std, nd = down
+    top = int(sd.max())
+    Y, data, seg = Yd[::-1], dd[::-1], top - sd[::-1]
+    folds = [len(Yd) - 1 - i for i in fd]
+    st, notes = list(std), list(nd)
+    if len(parts) == 2:
+        Yu, du, fu, su, stu, nu = parts[1][1]
+        n0 = len(Yd) - 1
+        Y = np.concatenate([Y[:-1], Yu])
+        data = data[:-1] + du
+        seg = np.concatenate([seg[:-1], su + top])
+        folds += [n0 + i for i in fu]
+        st += stu
+        notes += nu
+    return Y, data, sorted(folds), seg, st, notes
+
+
+def _switch_all(families, switches, residuals, opts, band, rows, sym, budget) -> None:
+    """Branch switching at every pitchfork and period doubling of the families, generation by
+    generation (up to ``opts.depth``), within the budget (module docstring)."""
+    queue = [(0, 1)]  # (family index, generation)
+    while queue:
+        fi, gen = queue.pop(0)
+        fam = families[fi]
+        res, an = residuals[fi]
+        covered = set()  # branch points reached by a switched family's far end
+        for i, kind in fam.bifurcations:
+            rec = {"family": fi, "index": i, "freq_hz": float(fam.freq_hz[i]), "kind": kind, "child": -1, "note": ""}
+            if kind not in SWITCHED:
+                continue
+            switches.append(rec)
+            if i in covered:
+                rec["note"] = "reached by a family switched onto before"
+                continue
+            if len(families) - 1 >= opts.max_families:
+                rec["note"] = f"not followed: max_families = {opts.max_families} reached"
+                continue
+            if not budget.left():
+                rec["note"] = f"not followed: deadline of {opts.deadline_s:g} s reached"
+                continue
+            child, info = _child(fam, res, an, i, kind, opts, band, rows, sym, fi)
+            rec.update(info)
+            if isinstance(child, str):
+                rec["note"] = child
+                continue
+            fam_new, res_new, an_new, end_index = child
+            families.append(fam_new)
+            residuals[len(families) - 1] = (res_new, an_new)
+            rec["child"] = len(families) - 1
+            if end_index is not None:
+                covered.add(end_index)
+            if gen < opts.depth:
+                queue.append((len(families) - 1, gen + 1))
+
+
+def _child(fam: OrbitFamily, res: ShootingResidual, an: _Analyser, i: int, kind: str, opts, band, rows, sym, fi):
+    """The family switched onto at the crossing before point i of ``fam``: ((family, residual,
+    analyser, index of the parent's branch point where it rejoined or None), or why not (str)),
+    and what was found at the crossing: its located frequency ``located_hz``, the ``critical``
+    multiplier there (the eigenvalue of the channel's map nearest +-1: near it at a smooth
+    crossing, not at one made within a grazing), whether a contact grazes between the two
+    points (``grazing``) and the frequency of the family's first point (``start_hz``)."""
+    chans = an.channels
+    changed = [c for c in range(len(chans)) if fam.signs[i, c] != fam.signs[i - 1, c]]
+    channel = next((c for c in changed if _kind(*chans[c], an.mirror_sym, False) == kind
+                    or kind == "period_doubling" and chans[c][1] == "Phi" and chans[c][2] < 0), None)
+    if channel is None:
+        return "no channel", {}
+    t0 = time.perf_counter()
+    y_bp, Js = _locate(res, an, fam.Y[i - 1], fam.Y[i], channel)
+    info = {"located_hz": res.omega(y_bp) / (2 * math.pi), "critical": _critical_multiplier(an, Js, channel),
+            "grazing": bool(fam.events[i] != fam.events[i - 1])}
+    sw = _switch(res, an, y_bp, Js, channel, kind, opts)
+    if sw is None:
+        return "branch switching found no orbit off the branch point", info
+    res_new, y_new, d, h = sw
+    info["start_hz"] = res_new.omega(y_new) / (2 * math.pi)
+    watch = _Watch(_breaking(res_new, kind, sym), y_new)
+    nodes, _ = res_new.nodes(y_new)
+    probe = _Analyser(res_new, sym, False, False, rows)
+    a0, hw0 = probe.measures(nodes)
+    an_new = _Analyser(res_new, sym, bool(sym.mirror is not None and a0 < SYMMETRY_TOL),
+                       bool(sym.half_wave and res_new.periods == 1 and hw0 < SYMMETRY_TOL), rows)
+    j = int(np.argmax(np.abs(d[: res_new.size])))
+    try:
+        Y, data, folds, seg, st, notes = _follow(res_new, y_new, j, 1.0 if d[j] > 0 else -1.0, opts,
+                                                 opts.family_steps, band, an_new, stop_extra=watch)
+    except (ContinuationError, ShootingError) as exc:
+        return f"continuation failed: {' '.join(str(exc).split())[:120]}", info
+    end = None
+    if watch.reason:
+        st[-1] = watch.reason
+    if watch.reason == "rejoined":
+        f_end = res_new.omega(Y[-1]) / (2 * math.pi)
+        cand = [k for k, kd in fam.bifurcations if kd == kind and k != i]
+        if cand:
+            end = min(cand, key=lambda k: abs(fam.freq_hz[k] - f_end))
+    fam_new = _family(SWITCHED[kind], res_new.periods, res_new, Y, data, folds, seg, st, notes, (fi, i, kind),
+                      time.perf_counter() - t0, an_new)
+    return (fam_new, res_new, an_new, end), info
+
+
+__all__ = ["ExactFRC", "ExactFRCOptions", "FAMILY_KINDS", "OrbitFamily", "Symmetry", "exact_frc", "find_symmetry",
+           "first_orbit", "hb_start"]
