@@ -398,15 +398,17 @@ mac_reference = "{ref}"
 
 
 @pytest.fixture(scope="module")
-def small(tmp_path_factory):
-    """A small reduced apparatus (20 fixed-interface modes) in a private cache; its scene folder."""
-    from reduced.models.rom import RomSpec, build_rom, store_in_cache
+def small(tmp_path_factory, assembly_rom20):
+    """A small reduced apparatus (20 fixed-interface modes, built once per session: conftest.py) in a private
+    cache; its scene folder."""
+    from reduced.models.rom import RomSpec, store_in_cache
 
     cache = tmp_path_factory.mktemp("cache")
     old = os.environ.get("BEARINGSHAFT_CACHE")
     os.environ["BEARINGSHAFT_CACHE"] = str(cache)
     spec = RomSpec(layout="assembly", planar=False, n_modes=N_MODES)
-    rom, _fe = build_rom(spec)
+    rom, _fe = assembly_rom20
+    assert N_MODES == 20 and rom.n_modes == N_MODES
     store_in_cache(rom, spec)
     yield tmp_path_factory.mktemp("frf")
     if old is None:

@@ -49,8 +49,9 @@ fmax_hz = 1000.0
 
 
 @pytest.fixture(scope="module")
-def built(tmp_path_factory):
-    """(rom, fe) of the small apparatus, stored in a private cache the CLI tests reuse."""
+def built(tmp_path_factory, assembly_rom20):
+    """(rom, fe) of the small apparatus (built once per session: conftest.py), stored in a private cache the
+    CLI tests reuse."""
     import os
 
     cache = tmp_path_factory.mktemp("cache")
@@ -59,7 +60,8 @@ def built(tmp_path_factory):
     from reduced.models.rom import store_in_cache
 
     spec = RomSpec(layout="assembly", planar=False, n_modes=N_MODES)
-    rom, fe = build_rom(spec)
+    rom, fe = assembly_rom20
+    assert N_MODES == 20 and rom.n_modes == N_MODES
     store_in_cache(rom, spec)
     yield rom, fe
     if old is None:

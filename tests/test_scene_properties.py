@@ -25,6 +25,7 @@ import tomli_w
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from bearingshaft import cli
 from bearingshaft.cli import main
 from bearingshaft.scenes import LOAD_KINDS, MODEL_KINDS, SECTIONS, builtin_names, model_class
 
@@ -97,6 +98,16 @@ def _table(data: dict, table: str) -> dict:
     """The table a key lives in: ``data[table]``, or the first ``[[load]]``."""
     return data["load"][0] if table == "load" else data.setdefault(table, {})
 
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_parser():
+    """``main`` builds its argparse parser (every sub-command) on each call: 80 % of a ``check`` here (issue 28,
+    profiled). ``parse_args`` does not change a parser, so every case is still parsed by the parser ``main``
+    builds, only built once for this file."""
+    parser = cli.build_parser()
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(cli, "build_parser", lambda: parser)
+        yield
 
 def _field_class(data: dict, table: str):
     if table == "load":
