@@ -369,7 +369,8 @@ def free_disk_bytes(out_dir: str | Path) -> int:
     return shutil.disk_usage(probe).free
 
 
-def check_budget(scene: Scene, out_dir: str | Path | None = None, available: int | None = None) -> list[Estimate]:
+def check_budget(scene: Scene, out_dir: str | Path | None = None, available: int | None = None,
+                 stage: str | None = None) -> list[Estimate]:
     """The scene's estimates, or :class:`SceneError` naming the key if one does not fit in
     memory (or, given ``out_dir``, on its disk).
 
@@ -381,6 +382,9 @@ def check_budget(scene: Scene, out_dir: str | Path | None = None, available: int
         The results folder, for the disk check.
     available : int, optional
         bytes of memory available (default: :func:`available_bytes`).
+    stage : str, optional
+        Only this stage will run (one subcommand): the others' process peaks are not estimated (a
+        ringdown from a ``rom_file`` never sizes the 3-D model that the scene's reduce stage would build).
 
     Returns
     -------
@@ -405,7 +409,8 @@ def check_budget(scene: Scene, out_dir: str | Path | None = None, available: int
             raise SceneError(f"{scene.origin or scene.name} {e.key}: the {e.stage} stage would hold "
                              f"{human(e.bytes)} ({e.what}), more than the {human(HEADROOM * avail)} it may use "
                              f"of {human(avail)} available; {e.advice or 'lower ' + e.key.split('] ')[1]}")
-    for p in job_peaks([scene]):  # the whole process: imports, the 3-D model if the stage builds it, the data
+    peaks = job_peaks([scene]) if stage is None else [stage_peak(scene, stage)]
+    for p in peaks:  # the whole process: imports, the 3-D model if the stage builds it, the data
         if p.bytes > HEADROOM * avail:
             own = [e for e in ests if e.stage == p.stage]
             e = max(own, key=lambda e: e.bytes) if own else None

@@ -179,12 +179,13 @@ def _out_dir(arg: str | None, scene_name: str, parent: bool = False, update_refe
     return Path(arg) / scene_name if parent else Path(arg)
 
 
-def _validated(name: str, out_arg: str | None, parent: bool, update_reference: bool = False) -> tuple[Scene, Path]:
-    """A scene, its memory estimates and its results folder checked, before any work."""
+def _validated(name: str, out_arg: str | None, parent: bool, update_reference: bool = False,
+               stage: str | None = None) -> tuple[Scene, Path]:
+    """A scene, its memory estimates (of ``stage`` alone when given) and its results folder checked, before any work."""
     scene = load_scene(name)
     out = _out_dir(out_arg, scene.name, parent, update_reference)
     check_out_dir(out)
-    check_budget(scene, out)
+    check_budget(scene, out, stage=stage if stage in stages_of(scene) else None)
     return scene, out
 
 
@@ -315,7 +316,7 @@ def main(argv: list[str] | None = None) -> int:
             args.out = str(default_parent(args.update_reference) / load_scene(args.scene).name
                            / f"test-{Path(test).stem}")
             args.update_reference = False
-        scene, out = _validated(args.scene, args.out, False, args.update_reference)
+        scene, out = _validated(args.scene, args.out, False, args.update_reference, stage=args.command)
         if test is not None and not Path(test).is_file():
             raise UserError(f"--test: no such file {test!r}")
         options = {o.name: getattr(args, o.name) for o in BY_NAME[args.command].options

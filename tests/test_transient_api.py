@@ -14,6 +14,7 @@ import pytest
 from reduced.models.discrete import DiscreteParams
 from reduced.transient import dop853 as _dop853_mod
 from reduced.transient import exact as _exact_mod
+from reduced.transient import exact_tables as _exact_tables_mod
 from reduced.transient import explicit as _explicit_mod
 from reduced.transient import flow as _flow_mod
 from reduced.transient import spectrogram as _spectrogram_mod
@@ -52,7 +53,8 @@ def no_work(monkeypatch):
     "Refused before any work" is shown by the work never starting, not by a clock (an absolute
     time bound is flaky on a loaded machine and blind to cheap work): every numba kernel of the
     three integrators and the flow runs through ``call_numba_kernel`` (patched where each module
-    imported it), the exact integrator starts with ``state_table`` (the state decompositions),
+    imported it), the exact integrator starts with ``state_table`` (the state decompositions, with the
+    kept tables forgotten),
     DOP853 with SciPy's ``DOP853`` stepper, a spectrogram with ``rfft``.
     test_tripwire_catches_the_work_of_every_integrator shows each wire fires on a valid call.
     """
@@ -67,6 +69,8 @@ def no_work(monkeypatch):
     for mod in (_exact_mod, _explicit_mod, _flow_mod):
         monkeypatch.setattr(mod, "call_numba_kernel", wire(f"{mod.__name__}.call_numba_kernel"))
     monkeypatch.setattr(_exact_mod, "state_table", wire("exact.state_table"))
+    monkeypatch.setattr(_exact_tables_mod, "state_table", wire("exact.state_table"))  # via run_tables
+    _exact_tables_mod.clear_table_cache()  # tables kept from earlier runs would let a run skip its set-up
     monkeypatch.setattr(_dop853_mod, "DOP853", wire("scipy DOP853"))
     monkeypatch.setattr(_spectrogram_mod, "rfft", wire("spectrogram rfft"))
     return calls

@@ -162,6 +162,17 @@ def check_harmonics(spec) -> int:
     """H of the balance the HB curve is compared with: the largest of ``convergence_harmonics`` below
     ``harmonics`` (odd with odd_harmonics), else the next lower H of the set (0 if H = 1).
 
+    Parameters
+    ----------
+    spec : FRCSpec
+        The ``[frc]`` table.
+
+    Returns
+    -------
+    int
+
+    Examples
+    --------
     >>> from bearingshaft.scenes.tables import FRCSpec
     >>> check_harmonics(FRCSpec()), check_harmonics(FRCSpec(harmonics=3, convergence_harmonics=(3, 5)))
     (9, 1)

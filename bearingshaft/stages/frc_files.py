@@ -364,7 +364,19 @@ def _backbone_rows(result: FRCResult) -> list[dict]:
 @dataclass(frozen=True, eq=False)
 class DrawnCurve:
     """The exact families of one level as one curve to draw (each family's pieces kept apart): the
-    fields :func:`_plot_frc` reads of an HB curve."""
+    fields :func:`_plot_frc` reads of an HB curve.
+
+    Attributes
+    ----------
+    freq_hz, amplitude_m : ndarray
+        Hz and m, the points (amplitude per point of the model, by column).
+    stable : ndarray of bool
+        Each point's stability.
+    segment : ndarray of int
+        The piece (family) each point belongs to.
+    label : str
+        How the curve was computed, for the legend.
+    """
 
     freq_hz: np.ndarray
     amplitude_m: np.ndarray
@@ -411,7 +423,17 @@ def _spliced(br, refined: tuple) -> DrawnCurve:
 
 def drawn_curves(result: FRCResult) -> dict:
     """P -> the drawn curve of each level: the HB curve (with its refined resonances spliced in), or
-    its exact families (:class:`DrawnCurve`)."""
+    its exact families (:class:`DrawnCurve`).
+
+    Parameters
+    ----------
+    result : FRCResult
+        The stage's result.
+
+    Returns
+    -------
+    dict
+    """
     out = {}
     for P, br in result.curves.items():
         cc = result.converged.get(P)
@@ -456,7 +478,17 @@ def _converged_stats(result: FRCResult) -> dict:
 
 
 def frc_markdown(result: FRCResult) -> str:
-    """frc.md: per level, which curve is drawn and why, its families, bifurcations and branch switches."""
+    """frc.md: per level, which curve is drawn and why, its families, bifurcations and branch switches.
+
+    Parameters
+    ----------
+    result : FRCResult
+        The stage's result.
+
+    Returns
+    -------
+    str
+    """
     spec = result.spec
     lines = [f"# Forced response: {result.scene_name}", "",
              f"Load P cos(2 pi f t) at {spec.point}, {spec.freq_min_hz:g}-{spec.freq_max_hz:g} Hz. The drawn curve "

@@ -158,7 +158,15 @@ class ExactFRCOptions:
 @dataclass(frozen=True, eq=False)
 class Symmetry:
     """The symmetries of a forced gap system: ``mirror`` (n, n) a signed permutation R of the DOFs
-    leaving it invariant (None: none), ``half_wave`` whether x -> -x with t -> t + T/2 does."""
+    leaving it invariant (None: none), ``half_wave`` whether x -> -x with t -> t + T/2 does.
+
+    Attributes
+    ----------
+    mirror : (n, n) ndarray or None
+        The signed permutation R (None: no mirror symmetry).
+    half_wave : bool
+        x -> -x with t -> t + T/2 leaves the system invariant.
+    """
 
     mirror: np.ndarray | None
     half_wave: bool

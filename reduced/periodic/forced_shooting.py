@@ -812,6 +812,26 @@ def shoot_at(res: ShootingResidual, nodes: np.ndarray, omega: float, *, tol: flo
     (deflation, Farrell, Birkisson & Funke 2015: R is multiplied by 1 / ||Y - Y*||^2 + 1 for each,
     so Newton cannot converge to them).
 
+    Parameters
+    ----------
+    res : ShootingResidual
+        The multiple-shooting residual.
+    nodes : (S, 2n) ndarray
+        The guessed states at the segments' starts.
+    omega : float
+        rad/s, the forcing frequency, held fixed.
+    tol : float
+        Newton's tolerance on the scaled residual.
+    max_iter : int
+        Newton steps at most.
+    known : list of ndarray, optional
+        Points Y of orbits to stay away from (deflation).
+
+    Returns
+    -------
+    ndarray
+        The scaled point Y of the orbit.
+
     Raises
     ------
     ShootingError
