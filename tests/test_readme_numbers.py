@@ -135,7 +135,8 @@ CLAIMS = [
     Claim("discrete-hammer", r"puts (?P<work>[\d.]+) J into the model, (?P<events>\d+) contact events follow in the "
           r"1 s\s+run, and the balance holds to (?P<balance>[\d.e+-]+) of the largest energy", _hammer),
     Claim("Table 2", r"Calibrated defaults put all six modes within (?P<pct>[\d.]+) % of\s+Table 2", _table2),
-    Claim("modal speed", r"(?P<dofs>[\d,]+) DOFs, 16 modes, in (?P<ours>[\d.]+) s on a (?:quiet|loaded)\s+2-core machine[^,]*, "
+    Claim("modal speed", r"(?P<dofs>[\d,]+) DOFs, 16 modes, in (?P<ours>[\d.]+) s on a (?:quiet|loaded)"
+          r"\s+2-core machine[^,]*, "
           r"(?P<ratio>[\d.]+)x faster \((?P<cpu>[\d.]+)x in CPU time\)[^(]*\((?P<base>[\d.]+) s;", _modal_speed),
     Claim("long ringdown disk", r"(?P<gb>[\d.]+) GB at 20 kHz for\s+1e4 s", _long_disk),
     Claim("sweep case disk", r"a `sweep-gap-kg` case writes\s+(?P<mb>[\d.]+) MB \(`ringdown.npz` at 5 kHz for 4 s\), "
