@@ -30,10 +30,10 @@ from pathlib import Path
 from bearingshaft.scenes import Scene, load_scene
 from reduced._checks import one_line
 
-# s, what each stage took in the main job (results/performance/main_job.csv, 2 cores): a scheduling
-# hint only, so that the longest chains start first; a wrong hint changes the order, not the files
-STAGE_SECONDS = {"modal": 8.0, "reduce": 10.0, "ringdown": 6.0, "nnm": 30.0, "study": 20.0, "verify": 9.0,
-                 "frc": 90.0, "hammer": 75.0, "frf": 20.0}
+# s, about what each stage takes in the main job (results/performance/main_job.csv, 2 cores; frc: 161 and 664 s):
+# a scheduling hint only, so that the longest chains start first; a wrong hint changes the order, not the files
+STAGE_SECONDS = {"modal": 8.0, "reduce": 10.0, "ringdown": 6.0, "nnm": 60.0, "study": 20.0, "verify": 9.0,
+                 "frc": 400.0, "hammer": 60.0, "frf": 10.0}
 BUILD_SECONDS = 40.0  # s, a reduced model built from the 3-D model, added to the stage that builds it
 
 
