@@ -59,15 +59,35 @@ def n_dofs(scene: Scene) -> int:
     Returns
     -------
     int
-        3 for the discrete model (4 with friction), n_modes + 2 for a reduced one, 0 for a 3-D model.
+        3 for the discrete model (4 with friction), n_modes + 2 for a reduced one (+ its tangential
+        coordinates with friction: 4 along the beam, 8 along and across), 0 for a 3-D model.
     """
     if scene.model_kind == "discrete":
         return 3
     if scene.model_kind == "discrete_friction":
         return 4
     if scene.model_kind == "rom":
-        return scene.model.n_modes + 2
+        return scene.model.n_modes + 2 + sliders(scene)
     return 0
+
+
+def sliders(scene: Scene) -> int:
+    """Friction sliders of the scene's reduced model: one a stop and direction (reduced.models.rom).
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+
+    Returns
+    -------
+    int
+        0 without friction, 4 along the beam, 8 along and across it.
+    """
+    m = scene.model
+    if scene.model_kind != "rom" or not getattr(m, "mu", 0.0) > 0:
+        return 0
+    return 4 * (2 if m.friction_directions == "axial+lateral" else 1)
 
 
 def history_bytes(samples: float, n: int, runs: int = 1) -> float:

@@ -102,7 +102,7 @@ def from_peaks(path: Path) -> list[dict]:
     rows = []
     with open(path, newline="") as fh:
         for r in csv.DictReader(fh):
-            if int(r["exit_code"]):
+            if int(r["exit_code"]) or not r["peak_mb"]:  # failed, or timed from a run's log (no peak of its own)
                 continue
             scene = load_scene(r["scene"])
             cached = r["stage"] == "reduce" or int(r["cache_after"]) == int(r["cache_before"])  # no entry built

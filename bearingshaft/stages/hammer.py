@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from bearingshaft import measured
-from bearingshaft.estimates import COPIES, FLOAT, MATPLOTLIB_BYTES, Estimate, n_dofs
+from bearingshaft.estimates import COPIES, FLOAT, MATPLOTLIB_BYTES, Estimate, n_dofs, sliders
 from bearingshaft.output import StageWriter
 from bearingshaft.progress import bar as progress_bar
 from bearingshaft.reproduction import Reproduction, chaotic, exact, record, roundoff
@@ -752,11 +752,10 @@ def estimate(scene: Scene) -> list[Estimate]:
     levels = len({*h.levels_N, h.peak_N}) + int(h.linear_check)
     per = (2 * n + len(channel_names()) + 4) * FLOAT
     exact = 3 * 2**4 * (2 * n) ** 2 * 16  # the exact integrator's state table (4 stops)
-    m = scene.model
-    if getattr(m, "mu", 0.0) > 0:  # with friction, tables for every friction state (reduced.models.rom: 7 or 19 a
-        d = 2 if m.friction_directions == "axial+lateral" else 1  # tip, two tips; 2 sliders a tip and direction)
-        states = (1 + 2 * 3**d) ** 2
-        N = 2 * (n + 2 * 2 * d) + 2 * 2 * d  # [x; v; w]: the tangential coordinates join x, the sliders add w
+    p = sliders(scene)
+    if p:  # with friction, tables for every friction state: 1 + 2 3^d a tip (open, or a stop closed with its d
+        states = (1 + 2 * 3 ** (p // 4)) ** 2  # sliders each sticking or slipping either way), two tips
+        N = 2 * n + p  # [x; v; w]
         # V, V^-1 (complex), the friction power's form and the state's stiffness, in the friction table, its modal
         # table and the forced one: three of like size (hammer-friction: 3553 MiB measured, 361 states)
         exact += 3 * states * ((2 * 16 + 8) * N**2 + 8 * n**2)
