@@ -74,6 +74,8 @@ START_GUESSES = 12  # HB orbits tried as guesses of the first exact orbit (f_min
 RESONANCE_SPAN = 6.0  # a lightly damped mode's band: f_r (1 +- RESONANCE_SPAN zeta_r), its peak and flanks
 RESONANCE_POINTS = 8  # an HB curve with fewer points in that band has stepped over the peak: refined there
 RESONANCE_PEAK = 1.5  # ... where the linear response at f_r is this many times that at the band's edges
+OPEN_MARGIN = 1.05  # a refinement band is in contact if its linear response passes a stop by 5 %: its HB points
+# around the peak (RESONANCE_POINTS of them within the band) then pass it too
 
 
 def compute(scene: Scene, progress: bool, workdir=None) -> FRCResult:
@@ -298,7 +300,7 @@ def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: 
         # HB points whose orbits close no stop are linear, HB exact to round-off there: drawn instead
         outside = (br.freq_hz < lo) | (br.freq_hz > hi)
         fill = outside & ~_in_contact(system, br)
-        refined, notes = resonance_refinements(system, b, P, spec, br, rows, names)
+        refined, notes = resonance_refinements(system, b, P, spec, br, rows, names, open_only=True)
         refined = tuple(r for r in refined if (r.freq_hz.max() < lo or r.freq_hz.min() > hi)
                         and not np.any(_in_contact(system, r)))
         why += (f"; the main exact family covers {lo:.5g}-{hi:.5g} Hz only: outside it the {int(fill.sum())} HB "
@@ -311,7 +313,7 @@ def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: 
 
 
 def resonance_refinements(system: GapSystem, b: np.ndarray, P: float, spec, br: FRCBranch, rows: np.ndarray,
-                          names: tuple) -> tuple[tuple, list[str]]:
+                          names: tuple, open_only: bool = False) -> tuple[tuple, list[str]]:
     """HB curves over the bands of the lightly damped linear modes that ``br`` steps over.
 
     The continuation's unknowns are scaled by the largest response over the band (x_ref), so the
@@ -330,6 +332,11 @@ def resonance_refinements(system: GapSystem, b: np.ndarray, P: float, spec, br: 
     spec : the [frc] table
     br : the HB curve of the level
     rows, names : the output points
+    open_only : only the bands where no stop closes (the caller draws no band in contact): a band
+        whose linear response closes a stop, |B_j X(Omega)| > OPEN_MARGIN |offset_j| at f_r or
+        f_r (1 +- zeta_r), is skipped without its curve. Every periodic orbit there is in contact
+        (an open one would be the linear response, which closes the stop), so the band's curve
+        has points in contact wherever it passes that frequency.
 
     Returns
     -------
@@ -352,6 +359,11 @@ def resonance_refinements(system: GapSystem, b: np.ndarray, P: float, spec, br: 
                for w in 2 * np.pi * np.array([lo, f_r, hi])]
         if inside >= RESONANCE_POINTS or lin[1] < RESONANCE_PEAK * max(lin[0], lin[2]):
             continue  # resolved, or the load does not excite the mode at the output points (no peak)
+        if open_only and any(
+                np.any(P * np.abs(system.B @ np.linalg.solve(system.K - w**2 * system.M + 1j * w * system.C, b))
+                       > OPEN_MARGIN * np.abs(system.offset))
+                for w in 2 * np.pi * f_r * np.array([1 - zeta, 1.0, 1 + zeta])):
+            continue  # the band closes a stop: its curve would be in contact, which the caller does not draw
         sub = _curve(system, b, P, spec, spec.harmonics, rows, names, hill_points=0, f_band=(lo, hi))
         if isinstance(sub, Exception):
             notes.append(f"the mode at {f_r:.5g} Hz (zeta {zeta:.2g}) stepped over ({inside} points) and its "

@@ -54,6 +54,7 @@ from reduced.transient.flow import MAX_SEGMENTS, _against_its_rate, _settle
 SEGMENTS = 8  # default nodes per load period: a node sees |mu|^(1/8) of the orbit's growth (1e4 -> 3.2)
 PEAK_SAMPLES_PER_PERIOD = 6.0  # samples of a contact state's closed form per period of its fastest mode ...
 PEAK_MAX_SAMPLES = 256  # ... but at most this many a stretch (then Newton refines each bracketed extreme)
+_FRESH = 32  # the peaks' samples step e^{lam dt} from sample to sample; every 32nd is a fresh exp (drift ~32 eps)
 D_LOG_OMEGA = 1e-6  # central-difference step of dR/d ln(Omega) (truncation ~1e-12, round-off ~1e-10)
 MAX_STRETCHES = 512  # contact-state stretches of a segment kept for the peaks (more: marched again)
 _STATUS = {-1: "too many contact events in a segment", -2: "the motion reached an infeasible contact state",
@@ -411,6 +412,11 @@ def _node_peaks(lam, V, Vinv, yp, valid, B, offset, side, Y0, h, hmin, omega, fY
     one = np.empty((1, 3))
     ya = np.empty(N)
     c = np.empty(N)
+    RV = np.empty((P, N), np.complex128)
+    c0p = np.empty(P)
+    chp = np.empty(P, np.complex128)
+    eb = np.empty(N, np.complex128)
+    step = np.empty(N, np.complex128)
     for k in range(S):
         if st_n[k] >= 0:
             n_seg = st_n[k]
@@ -442,9 +448,44 @@ def _node_peaks(lam, V, Vinv, yp, valid, B, offset, side, Y0, h, hmin, omega, fY
                 fast = max(fast, abs(lam[s, mm].imag))
             q = int(min(max(8.0, math.ceil(samples_per_rad * fast * tau)), q_max))
             Ys = fY[s, :n, 0]
+            # the output rows projected once a stretch: x_p(sigma) = c0_p + Re(ch_p e_h) + Re(sum_m RV_pm eb_m),
+            # eb_m = beta_m e^{lam_m sigma} stepped sample to sample (a fresh exp every _FRESH samples)
+            for p in range(P):
+                c0p[p] = 0.0
+                chp[p] = 0.0
+                for mm in range(N):
+                    RV[p, mm] = 0.0
+                for r in range(n):
+                    w = rows[p, r]
+                    if w == 0.0:
+                        continue
+                    c0p[p] += w * yp[s, r]
+                    chp[p] += w * Ys[r]
+                    for mm in range(N):
+                        RV[p, mm] += w * V[s, r, mm]
+            dsig = tau / q
+            for mm in range(N):
+                step[mm] = np.exp(lam[s, mm] * dsig)
+            eh_step = np.exp(1j * omega * dsig)
             for j in range(q + 1):
                 sj = tau * j / q
-                _row_series(rows, V[s, :n], Ys, yp[s, :n], beta, Fa, omega, lam[s], sj, ev)
+                if j % _FRESH == 0:
+                    e_h = Fa * np.exp(1j * omega * sj)
+                    for mm in range(N):
+                        eb[mm] = beta[mm] * np.exp(lam[s, mm] * sj)
+                else:
+                    e_h *= eh_step
+                    for mm in range(N):
+                        eb[mm] *= step[mm]
+                for p in range(P):
+                    a0 = 0.0 + 0.0j
+                    a1 = 0.0 + 0.0j
+                    for mm in range(N):
+                        t = RV[p, mm] * eb[mm]
+                        a0 += t
+                        a1 += t * lam[s, mm]
+                    ev[p, 0] = c0p[p] + (chp[p] * e_h).real + a0.real
+                    ev[p, 1] = (1j * omega * chp[p] * e_h).real + a1.real
                 for p in range(P):
                     v = ev[p, 0]
                     if v > pmax[k, p]:
