@@ -174,3 +174,56 @@ def test_nnm_stage_with_fep_on_a_reduced_model(tmp_path):
     assert "Reference: shooting on the exact flow" in md and "## Converged H" in md
     assert w.stats["hb_reference"].startswith("shooting on the exact flow")
     assert w.stats["nnm_linear_modes"] == {"NNM 1": 1, "NNM 2": 2, "NNM 3": 3}
+
+
+def _residual_reference(res, y):
+    """NNMResidual.__call__ as it was before its diagonal-block update (issue 28): the full sums."""
+    hb, wr = res.hb, res.omega_ref
+    n, nX = hb.n, hb.size
+    Psi, omega, delta, a = res.split(y)
+    KI, NM2, DM = res._operators
+    F, dF = hb.aft(a * Psi)
+    A = KI + omega**2 * NM2
+    dA = 2.0 * omega * NM2
+    R = np.empty(nX + 2)
+    J = np.zeros((nX + 2, nX + 3))
+    DMPsi, Fa = DM @ Psi, F / a
+    R[:nX] = (A @ Psi + Fa - delta * omega * DMPsi) / wr**2
+    Jx = J[:nX, :nX]
+    np.add(A, dF, out=Jx)
+    if delta != 0.0:
+        Jx -= delta * omega * DM
+    Jx /= wr**2
+    J[:nX, nX] = (dA @ Psi - delta * DMPsi) / wr
+    J[:nX, nX + 1] = -omega * DMPsi / wr
+    J[:nX, nX + 2] = np.log(10.0) * (dF @ Psi - Fa) / wr**2
+    i_s1 = 2 * n + res.ref
+    R[nX] = Psi[i_s1]
+    J[nX, i_s1] = 1.0
+    c1, s1 = Psi[n : 2 * n], Psi[2 * n : 3 * n]
+    R[nX + 1] = c1 @ hb.M @ c1 + s1 @ hb.M @ s1 - 1.0
+    J[nX + 1, n : 2 * n] = 2.0 * hb.M @ c1
+    J[nX + 1, 2 * n : 3 * n] = 2.0 * hb.M @ s1
+    return R, J
+
+
+@pytest.mark.parametrize("system_of", ["discrete", "rom"])
+def test_nnm_residual_block_update_is_bit_for_bit_the_full_sums(fm, system_of):
+    """The residual recomputes only the diagonal blocks of A(omega) and dA/domega (buffers kept between
+    calls): R and dR/dy are bit for bit (signed zeros included) those of the full sums, for either sign of
+    omega (dA's zeros take its sign) and a nonzero artificial damping, call after call on one residual."""
+    system = conservative(DiscreteParams().system()) if system_of == "discrete" else fm.system
+    rng = np.random.default_rng(11)
+    for H in (1, 3, 6):
+        hb = HarmonicBalance.for_system(system, H)
+        res = NNMResidual(hb, 2 * np.pi * 100.0, 0)
+        for k in range(8):
+            y = rng.normal(size=res.size) * 1e-2
+            w = 1.0 + rng.random()
+            y[hb.size] = -w if k in (3, 4) else w
+            y[hb.size + 1] = 0.0 if k % 2 else 1e-3 * rng.normal()
+            y[hb.size + 2] = -3.0 + 2.0 * rng.random()
+            R, J = res(y)
+            R0, J0 = _residual_reference(res, y)
+            assert np.array_equal(R.view(np.int64), R0.view(np.int64))
+            assert np.array_equal(J.view(np.int64), J0.view(np.int64))

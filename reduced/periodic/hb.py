@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import functools
 import math
+import threading
 import warnings
 from dataclasses import dataclass, field
 
@@ -395,6 +396,14 @@ class HarmonicBalance:
         return J0, J1, np.kron(I, self.M)
 
 
+def _diagonal_blocks(A: np.ndarray, n: int) -> np.ndarray:
+    """(h, n, n) view of the h diagonal n x n blocks of the C-contiguous square A (h n, h n)."""
+    h = A.shape[0] // n
+    st = A.strides
+    return np.lib.stride_tricks.as_strided(A, shape=(h, n, n), strides=(n * (st[0] + st[1]), st[0], st[1]),
+                                           writeable=A.flags.writeable)
+
+
 # -- nonlinear modes: the NLvib NMA formulation -----------------------------------------------
 @dataclass(frozen=True, eq=False)
 class NNMResidual:
@@ -458,23 +467,66 @@ class NNMResidual:
         I = np.eye(2 * hb.H + 1)
         return np.kron(I, hb.K), np.kron(hb.Nab @ hb.Nab, hb.M), np.kron(hb.Nab, hb.M)
 
+    @functools.cached_property
+    def _blocks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(kron(I, K), kron(Nab^2, M), kron(Nab^2, M) (-1.0)) on their 2H+1 diagonal n x n blocks, each
+        (2H+1, n, n): the only blocks of A(omega) and dA/domega that depend on omega (Nab^2 is diagonal)."""
+        KI, NM2, _ = self._operators
+        return _diagonal_blocks(KI, self.hb.n).copy(), _diagonal_blocks(NM2, self.hb.n).copy(), -1.0 * NM2
+
+    @functools.cached_property
+    def _scratch(self) -> threading.local:
+        """Per-thread (A, dA, sign of dA's pattern) buffers of :meth:`_linear_parts`."""
+        return threading.local()
+
+    def _linear_parts(self, omega: float) -> tuple[np.ndarray, np.ndarray]:
+        """(A, dA) = (kron(I, K) + omega^2 kron(Nab^2, M), 2 omega kron(Nab^2, M)) of a conservative HB, bit
+        for bit the full sums, with only the diagonal blocks recomputed (into buffers kept between calls).
+
+        Off the diagonal blocks both are signed zeros that do not depend on omega: kron(I, K) + omega^2
+        kron(Nab^2, M) there is 0 * K + omega^2 (0 * M), the sign of each zero fixed by the products'
+        (omega^2 >= 0), computed once with omega^2 = 1; 2 omega (0 * M) takes the sign of omega as well,
+        so dA's buffer holds the pattern of the sign of 2 omega. A non-finite omega (0 * inf is nan off
+        the blocks) takes the full sums. The blocks get the same elementwise operations as the full
+        sums; the matrix-vector products then run on the same matrices as before (the same BLAS sums).
+        """
+        KI, NM2, _ = self._operators
+        w2, s = omega**2, 2.0 * omega
+        if not (math.isfinite(w2) and math.isfinite(s)):
+            return KI + w2 * NM2, s * NM2
+        KIb, NM2b, NM2neg = self._blocks
+        buf = self._scratch
+        neg = bool(np.signbit(s))
+        if getattr(buf, "A", None) is None:
+            buf.A = KI + 1.0 * NM2
+            buf.dA = (NM2neg if neg else NM2).copy()
+            buf.neg = neg
+        elif neg != buf.neg:
+            np.copyto(buf.dA, NM2neg if neg else NM2)
+            buf.neg = neg
+        n = self.hb.n
+        Ab, dAb = _diagonal_blocks(buf.A, n), _diagonal_blocks(buf.dA, n)
+        np.multiply(NM2b, w2, out=Ab)
+        np.add(KIb, Ab, out=Ab)
+        np.multiply(NM2b, s, out=dAb)
+        return buf.A, buf.dA
+
     def __call__(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """R (size+2,) and dR/dy (size+2, size+3)."""
         hb, wr = self.hb, self.omega_ref
         n, nX = hb.n, hb.size
         Psi, omega, delta, a = self.split(y)
         if hb.C is None:
-            KI, NM2, DM = self._operators
+            _, _, DM = self._operators
             F, dF = hb.aft(a * Psi)
-            A = KI + omega**2 * NM2
-            dA = 2.0 * omega * NM2
+            A, dA = self._linear_parts(omega)
         else:
             F, dF = hb.aft(a * Psi)
             A = hb.linear_operator(omega)
             DM = np.kron(hb.Nab, hb.M)
             dA = hb._linear_operator_domega(omega)
         R = np.empty(nX + 2)
-        J = np.zeros((nX + 2, nX + 3))
+        J = np.empty((nX + 2, nX + 3))  # every entry written below (the last two rows zeroed first)
         DMPsi, Fa = DM @ Psi, F / a
         R[:nX] = (A @ Psi + Fa - delta * omega * DMPsi) / wr**2
         Jx = J[:nX, :nX]
@@ -485,6 +537,7 @@ class NNMResidual:
         J[:nX, nX] = (dA @ Psi - delta * DMPsi) / wr
         J[:nX, nX + 1] = -omega * DMPsi / wr
         J[:nX, nX + 2] = np.log(10.0) * (dF @ Psi - Fa) / wr**2
+        J[nX:] = 0.0
         # phase: the fundamental sine coefficient of DOF ref
         i_s1 = 2 * n + self.ref
         R[nX] = Psi[i_s1]

@@ -418,8 +418,35 @@ def work_tables(lk: np.ndarray, Uk: np.ndarray, kappa: np.ndarray, D: np.ndarray
         (Wm (S, 4, K, K), Hd (S, 2, K), pointer, i, k, kind, coefficient, z) as
         :func:`reduced.transient._modal._work` and :func:`reduced.transient._modal._work_near` read them.
     """
-    S, _, Kmax = Uk.shape
+    S = Uk.shape[0]
     D = np.broadcast_to(D, (S,) + D.shape[-2:])
+    Wm, Hd, irr_s = [], [], []
+    for a in range(0, S, WORK_CHUNK):  # a few states at a time: the (S, K, K) complex temporaries of every
+        # state at once (~100 MB each for the hammer-friction rig) cost more in page faults than in arithmetic;
+        # every operation is per state (a GEMM per state, elementwise sums), so the chunks change no bits
+        b = min(S, a + WORK_CHUNK)
+        w, h, irr = _work_chunk(lk[a:b], Uk[a:b], kappa[a:b], D[a:b])
+        Wm.append(w)
+        Hd.append(h)
+        irr_s.extend(irr)
+    ip = np.zeros(S + 1, np.int64)
+    irr: list = []
+    for s in range(S):
+        irr.extend(irr_s[s])
+        ip[s + 1] = len(irr)
+    return (np.ascontiguousarray(np.concatenate(Wm)), np.ascontiguousarray(np.concatenate(Hd)), ip,
+            np.array([r[0] for r in irr], np.int64), np.array([r[1] for r in irr], np.int64),
+            np.array([r[2] for r in irr], np.int64), np.array([r[3] for r in irr], complex),
+            np.array([r[4] for r in irr], complex))
+
+
+WORK_CHUNK = 16  # states a chunk of work_tables
+
+
+def _work_chunk(lk: np.ndarray, Uk: np.ndarray, kappa: np.ndarray, D: np.ndarray) -> tuple:
+    """(Wm, Hd, near-cancelling terms per state) of :func:`work_tables` for the states given (all arrays
+    cut to them)."""
+    S, _, Kmax = Uk.shape
     DU = np.matmul(D, Uk)
     G = 0.5 * np.matmul(Uk.transpose(0, 2, 1), DU)
     H = 0.5 * np.matmul(Uk.transpose(0, 2, 1), np.conj(DU))
@@ -442,18 +469,11 @@ def work_tables(lk: np.ndarray, Uk: np.ndarray, kappa: np.ndarray, D: np.ndarray
     for s, i, k in zip(*irrH, strict=True):
         irr_s[s].append((i, k, 1, 2.0 * H[s, i, k], zH[s, i, k]))
     A, B, C, Dm = Gz.real, Gz.imag, Hz.real, Hz.imag
-    Wm = np.ascontiguousarray(np.stack([A + C, Dm - B, B + Dm, A - C], axis=1).transpose(0, 1, 3, 2))
-    ip = np.zeros(S + 1, np.int64)
-    irr: list = []
-    for s in range(S):
-        irr.extend(irr_s[s])
-        ip[s + 1] = len(irr)
+    Wm = np.stack([A + C, Dm - B, B + Dm, A - C], axis=1).transpose(0, 1, 3, 2)
     hd, zd = np.diagonal(H, axis1=1, axis2=2).real, 2.0 * lk.real
     with np.errstate(divide="ignore", invalid="ignore"):
-        Hd = np.ascontiguousarray(np.stack([np.where(zd != 0.0, hd / zd, 0.0), np.where(zd != 0.0, 0.0, hd)], axis=1))
-    return (Wm, Hd, ip, np.array([r[0] for r in irr], np.int64), np.array([r[1] for r in irr], np.int64),
-            np.array([r[2] for r in irr], np.int64), np.array([r[3] for r in irr], complex),
-            np.array([r[4] for r in irr], complex))
+        Hd = np.stack([np.where(zd != 0.0, hd / zd, 0.0), np.where(zd != 0.0, 0.0, hd)], axis=1)
+    return Wm, Hd, irr_s
 
 
 def friction_modal_table(system: GapSystem, ft: FrictionTable) -> tuple:
