@@ -2,7 +2,8 @@
 frc stage's HB curve (with the monodromy of every point) and then its drawn curve
 (:func:`bearingshaft.stages.frc.converged_curve`: HB where its amplitudes no longer move with H, else
 the families of the exact flow by multiple shooting, with their Floquet multipliers and branch
-switching), against a 10 s target; each level twice: as the scene says (with branch switching) and
+switching), against a 10 s target; each level three times: as the scene says (with branch switching),
+without the period-doubled families (``period_doubling = false``: what following them costs) and
 with the main family only (``branch_switching = false``: the drawn curve with its stability, no
 families born at its branch points).
 
@@ -42,7 +43,8 @@ from bearingshaft.systems import model_system  # noqa: E402
 from reduced._blas import single_thread_blas  # noqa: E402
 
 TARGET_S = 10.0  # the target: the converged curve with stability
-WAYS = {"branch switching": {}, "main family only": {"branch_switching": False}}  # [frc] keys changed
+WAYS = {"branch switching": {}, "no period doubling": {"period_doubling": False},
+        "main family only": {"branch_switching": False}}  # [frc] keys changed
 
 
 def _load() -> float:

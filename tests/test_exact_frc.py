@@ -252,7 +252,7 @@ def test_period_doubling_family_is_the_period_2_attractor():
     pd = [r for r in out.switches if r["kind"] == "period_doubling" and r["child"] >= 0]
     assert pd and abs(pd[0]["critical"] + 1.0) < 1e-2
     fam2 = out.families[pd[0]["child"]]
-    assert fam2.kind == "period_2" and fam2.periods == 2
+    assert fam2.kind == "period_doubled" and fam2.periods == 2
     i = int(np.flatnonzero(fam2.stable)[len(np.flatnonzero(fam2.stable)) // 2])
     f = float(fam2.freq_hz[i])
     nodes = fam2.nodes[i]

@@ -470,6 +470,15 @@ class FRCSpec:
         Families switched onto per level at most.
     family_steps : int
         Points of a switched family at most.
+    period_doubling : bool
+        Follow the period-doubled (2 T) families born where a Floquet multiplier passes -1 (with
+        ``branch_switching``), on every family of the exact curve.
+    period_doubling_families : int
+        Period-doubled families per level at most (besides ``max_families``).
+    period_doubling_depth : int
+        Doublings of a cascade followed: 1 the 2 T families, 2 also the 4 T ones born on them.
+    period_doubling_steps : int
+        Points of a period-doubled family at most (each costs about twice a point of period 1).
     switching_max_s : float
         s of wall time per level after which no new family is started; 0 (the default): no such limit, so the
         families found do not depend on the machine or its load.
@@ -512,6 +521,10 @@ class FRCSpec:
     branch_switching: bool = True  # follow the families born at pitchforks and period doublings
     max_families: int = 12  # families switched onto per level at most
     family_steps: int = 3000  # points of a switched family at most
+    period_doubling: bool = True  # follow the period-doubled (2 T) families born where a multiplier passes -1
+    period_doubling_families: int = 4  # period-doubled families per level at most
+    period_doubling_depth: int = 1  # doublings of a cascade followed (1: 2 T; 2: also 4 T)
+    period_doubling_steps: int = 600  # points of a period-doubled family at most
     switching_max_s: float = 0.0  # s, wall time per level after which no new family is started (0: none, reproducible)
     shooting_steps: int = 30000  # points of the main exact family at most
 
@@ -536,7 +549,9 @@ class FRCSpec:
         check(self.curve in FRC_CURVES, f"curve must be one of {', '.join(FRC_CURVES)}, got {self.curve!r}")
         tolerance(self, "hb_converged_tol")
         check(self.switching_max_s >= 0, f"switching_max_s must be >= 0 s, got {self.switching_max_s!r}")
-        for key in ("max_families", "family_steps", "shooting_steps"):
+        for key in ("period_doubling_families", "period_doubling_depth"):
+            check(getattr(self, key) >= 0, f"{key} must be >= 0, got {getattr(self, key)!r}")
+        for key in ("max_families", "family_steps", "shooting_steps", "period_doubling_steps"):
             check(getattr(self, key) >= (0 if key == "max_families" else 1),
                   f"{key} must be >= {0 if key == 'max_families' else 1}, got {getattr(self, key)!r}")
         check(self.map_step_hz >= 0, f"map_step_hz must be >= 0 Hz, got {self.map_step_hz!r}")

@@ -272,6 +272,10 @@ def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: 
     S = spec.shooting_segments + spec.shooting_segments % 2
     opts = ExactFRCOptions(segments=S, branch_switching=spec.branch_switching, max_families=spec.max_families,
                            family_steps=spec.family_steps, max_steps=spec.shooting_steps,
+                           period_doubling=spec.period_doubling,
+                           period_doubling_families=spec.period_doubling_families,
+                           period_doubling_depth=spec.period_doubling_depth,
+                           period_doubling_steps=spec.period_doubling_steps,
                            deadline_s=spec.switching_max_s or math.inf)
     try:
         if ok:  # the HB orbits at f_min, then at points spread over the curve (where HB is far from exact)

@@ -524,11 +524,26 @@ def frc_markdown(result: FRCResult) -> str:
                   f"{len(followed)}; not followed: {len(skipped)}"
                   + (" (" + "; ".join(sorted({r['note'].split(':')[0] for r in skipped if r['note']})) + ")"
                      if skipped else "") + ". Each is a row of frc_bifurcations.csv.",
-                  "Run times: frc_convergence_timing.csv.", ""]
+                  _period_doubled_line(ex, spec), "Run times: frc_convergence_timing.csv.", ""]
         for note in [n for f in ex.families for n in f.notes][:10]:
             lines.append(f"- {note}")
         lines.append("")
     return "\n".join(lines)
+
+
+def _period_doubled_line(ex, spec) -> str:
+    """frc.md: the period-doubled families of a level and the period doublings not followed, by reason."""
+    pd = [k for k, f in enumerate(ex.families) if f.kind == "period_doubled"]
+    rest = {}
+    for r in ex.switches:
+        if r["kind"] == "period_doubling" and r["child"] < 0:
+            why = r["note"].split(" (")[0].split(" is ")[0] or "no family found"
+            rest[why] = rest.get(why, 0) + 1
+    return (f"Period-doubled families (2 T, drawn with the others; `[frc] period_doubling = "
+            f"{str(spec.period_doubling).lower()}`, at most {spec.period_doubling_families}): "
+            + (", ".join(str(k) for k in pd) if pd else "none")
+            + ("; period doublings not switched at: " + "; ".join(f"{n} {w}" for w, n in sorted(rest.items()))
+               if rest else "") + ".")
 
 
 # -- the figures -------------------------------------------------------------------------------------

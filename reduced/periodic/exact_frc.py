@@ -47,6 +47,16 @@ parent family entirely (the parent has no component along a symmetry-breaking e)
 cannot fall back onto it. The new family is continued until it leaves the band or rejoins the
 parent (its symmetry-breaking part falls back to zero, at another branch point), with its own
 stability; its mirror image (x1 <-> x3) is a family too and is not computed again.
+
+**Period-doubled families** (kind ``period_doubled``, period 2 T): at a multiplier of Phi through
+-1 on any family (in contact they appear on the half-wave-broken families, whose Phi is not a
+square), the 2 T family is shot over two load periods with 2 S nodes, started from the doubled
+parent orbit plus h times the critical eigenvector propagated over 2 T (it changes sign after T),
+and continued with the multipliers of its own 2 T monodromy, so its own doublings (to 4 T) are
+found and followed to ``period_doubling_depth``. A period-doubled family is born at both ends of
+its bubble (and on the symmetric images of its parent): a first orbit that is, at its frequency,
+the orbit of a family already found, or its image under a symmetry or a shift by T, is not followed
+again (:func:`_known`; the same test keeps the pitchfork families from being computed twice).
 """
 
 from __future__ import annotations
@@ -76,9 +86,12 @@ LOAD_STEPS = 400  # continuation steps in the load of the first orbit at most
 START_HARMONICS = 15  # harmonics of the balance that guesses the first orbit
 BISECTIONS = 12  # bisections locating a crossing between two points (the bracket shrinks 4096 times)
 SWITCH_H = (1e-3, 3e-4, 3e-3)  # offsets tried along the critical eigenvector (scaled unknowns), in order
-FAMILY_KINDS = ("main", "asymmetric", "half_wave_broken", "asymmetric_half_wave", "period_2")
+FAMILY_KINDS = ("main", "asymmetric", "half_wave_broken", "asymmetric_half_wave", "period_doubled")
 SWITCHED = {"pitchfork_mirror": "asymmetric", "pitchfork_half_wave": "half_wave_broken",
-            "pitchfork_mirror_half_wave": "asymmetric_half_wave", "period_doubling": "period_2"}
+            "pitchfork_mirror_half_wave": "asymmetric_half_wave", "period_doubling": "period_doubled"}
+PD_CRITICAL_TOL = 0.05  # |mu + 1| of the located critical multiplier beyond which a period doubling is not switched at
+REJOIN_TOL = 1e-7  # symmetry-breaking part of a switched family, relative to its point, below which it has rejoined
+SAME_ORBIT_TOL = 1e-6  # relative: two orbits shot at the same frequency closer than this (nodes) are one orbit
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,13 +114,22 @@ class ExactFRCOptions:
     max_steps : int
         Points of the main family at most.
     branch_switching : bool
-        Follow the families born at pitchforks and period doublings.
+        Follow the families born at pitchforks (and, with ``period_doubling``, at period doublings).
     max_families : int
-        Families switched onto at most (besides the main one).
+        Families switched onto at pitchforks at most (besides the main one).
     family_steps : int
         Points of a switched family at most.
     depth : int
-        Generations of switching (1: families off the main curve only).
+        Generations of switching at pitchforks (1: families off the main curve only).
+    period_doubling : bool
+        Follow the period-doubled families born where a multiplier passes -1, on every family
+        (whatever its generation), with ``branch_switching``.
+    period_doubling_families : int
+        Period-doubled families followed at most (besides ``max_families``).
+    period_doubling_depth : int
+        Doublings of a cascade followed: 1 the 2 T families only, 2 also the 4 T families born on them.
+    period_doubling_steps : int
+        Points of a period-doubled family at most (each costs about twice a period-1 point).
     deadline_s : float
         s of wall time after which no new family is started (the main one always runs).
     velocity_scale : {'fastest', 'omega'}
@@ -130,6 +152,10 @@ class ExactFRCOptions:
     max_families: int = 30
     family_steps: int = 4000
     depth: int = 1
+    period_doubling: bool = True
+    period_doubling_families: int = 4
+    period_doubling_depth: int = 1
+    period_doubling_steps: int = 600
     deadline_s: float = math.inf
     velocity_scale: str = "fastest"
 
@@ -141,11 +167,14 @@ class ExactFRCOptions:
             _check.positive(key, getattr(self, key))
         if not self.deadline_s > 0.0:
             raise _check.InvalidArgument(f"deadline_s must be > 0 s, got {self.deadline_s!r}")
-        for key in ("max_iter", "max_steps", "family_steps"):
+        for key in ("max_iter", "max_steps", "family_steps", "period_doubling_steps"):
             _check.integer(key, getattr(self, key))
         _check.integer("max_families", self.max_families, lo=0)
         _check.integer("depth", self.depth, lo=0)
+        _check.integer("period_doubling_families", self.period_doubling_families, lo=0)
+        _check.integer("period_doubling_depth", self.period_doubling_depth, lo=0)
         _check.flag("branch_switching", self.branch_switching)
+        _check.flag("period_doubling", self.period_doubling)
         _check.choice("velocity_scale", self.velocity_scale, ("fastest", "omega"))
 
     def continuation(self, max_steps: int) -> ContinuationOptions:
@@ -692,11 +721,13 @@ def _switch(parent_res: ShootingResidual, analyser: _Analyser, y_bp: np.ndarray,
     nodes, w = parent_res.nodes(y_bp)
     S = parent_res.segments
     if kind == "period_doubling":
-        res = ShootingResidual(parent_res.flow, 2 * S, 2, parent_res.x_ref, parent_res.omega_ref, parent_res.omega_v)
+        res = ShootingResidual(parent_res.flow, 2 * S, 2 * parent_res.periods, parent_res.x_ref, parent_res.omega_ref,
+                               parent_res.omega_v)
         nodes = np.concatenate([nodes, nodes])
         seq = list(Js) * 2
     else:
-        res = ShootingResidual(parent_res.flow, S, 1, parent_res.x_ref, parent_res.omega_ref, parent_res.omega_v)
+        res = ShootingResidual(parent_res.flow, S, parent_res.periods, parent_res.x_ref, parent_res.omega_ref,
+                               parent_res.omega_v)
         seq = list(Js)
     dY = [e]
     for Jk in seq[:-1]:
@@ -758,8 +789,9 @@ def _breaking(res: ShootingResidual, kind: str, sym: Symmetry):
 class _Watch:
     """The stop of a switched family: it rejoined its parent (its symmetry-breaking part, having
     doubled, fell below a quarter of its start, or reversed between two points: the family passed
-    through the parent at another branch point) or closed on itself (back within CLOSE_DIST of its
-    first point after CLOSE_STEPS points)."""
+    through the parent at another branch point; or it fell below REJOIN_TOL of the point: the
+    family runs along an orbit of the parent's symmetry, which its residual holds too) or closed on
+    itself (back within CLOSE_DIST of its first point after CLOSE_STEPS points)."""
 
     def __init__(self, part, y0: np.ndarray) -> None:
         self.part = part
@@ -774,7 +806,8 @@ class _Watch:
         self.steps += 1
         p = self.part(y)
         b = float(np.linalg.norm(p))
-        if self.peak > 2.0 * self.b0 and (b < 0.25 * self.b0 or float(p @ self.prev) < 0.0):
+        if (self.peak > 2.0 * self.b0 and (b < 0.25 * self.b0 or float(p @ self.prev) < 0.0)
+                or b < REJOIN_TOL * float(np.linalg.norm(y[:-1]))):
             self.reason = "rejoined"
         elif self.steps > CLOSE_STEPS and float(np.linalg.norm(y - self.y0)) < CLOSE_DIST:
             self.reason = "closed"
@@ -1001,7 +1034,7 @@ def _exact_frc(system, b, P, f0, f1, starts, rows, names, x_ref, opts, sym, prog
     notes = start_notes + notes
     families = [_family("main", 1, res, Y, data, folds, seg, st, notes, None, time.perf_counter() - t0, an)]
     switches = []
-    if opts.branch_switching and opts.max_families > 0:
+    if opts.branch_switching and (opts.max_families > 0 or opts.period_doubling and opts.period_doubling_families > 0):
         _switch_all(families, switches, {0: (res, an)}, opts, band, rows, sym, budget)
     return ExactFRC(P, names, rows, families, switches, sym, opts, x_ref, budget.spent)
 
@@ -1031,44 +1064,154 @@ def _join(parts: list) -> tuple:
 
 
 def _switch_all(families, switches, residuals, opts, band, rows, sym, budget) -> None:
-    """Branch switching at every pitchfork and period doubling of the families, generation by
-    generation (up to ``opts.depth``), within the budget (module docstring)."""
-    queue = [(0, 1)]  # (family index, generation)
-    while queue:
-        fi, gen = queue.pop(0)
+    """Branch switching at the pitchforks and period doublings of the families, within the budget
+    (module docstring). Pitchforks first, family by family in the order found, on families of
+    generation <= ``opts.depth`` (the main one is generation 1), up to ``opts.max_families``; then
+    (with ``opts.period_doubling``) the period doublings of every family found, the least unstable
+    parents first (the largest |mu| but the critical one's, the smaller of the two points around the
+    crossing: a 2 T family born where the other multipliers are inside the unit circle can be
+    stable), on families whose period is below 2^``period_doubling_depth`` load periods, up to
+    ``opts.period_doubling_families``, each only where the critical multiplier located is within
+    PD_CRITICAL_TOL of -1 (a multiplier that jumps past -1 at a grazing bifurcates no smooth 2 T
+    family off the eigenvector). A family whose first orbit is one of a family already found (or its
+    image under a symmetry, or shifted by a load period) is not followed again: a period-doubled
+    family is born at both ends of its bubble, and on the symmetric images of its parent."""
+    covered = set()  # (family, point) of branch points reached by a switched family's far end
+    pending = []  # (rank, record, family, point) of the period doublings, followed after the pitchforks
+
+    def attempt(rec, fi, i, kind, fam, res, an):
+        if not budget.left():
+            rec["note"] = f"not followed: deadline of {opts.deadline_s:g} s reached"
+            return None
+        child, info = _child(fam, res, an, i, kind, opts, band, rows, sym, fi, families, residuals)
+        rec.update(info)
+        if isinstance(child, str):
+            rec["note"] = child
+            return None
+        fam_new, res_new, an_new, end_index = child
+        families.append(fam_new)
+        residuals[len(families) - 1] = (res_new, an_new)
+        rec["child"] = len(families) - 1
+        if end_index is not None:
+            covered.add((fi, end_index))
+        return len(families) - 1
+
+    def scan(fi, gen):
+        """Records of the switches of family fi; its pitchforks followed now, its period doublings queued."""
         fam = families[fi]
         res, an = residuals[fi]
-        covered = set()  # branch points reached by a switched family's far end
         for i, kind in fam.bifurcations:
-            rec = {"family": fi, "index": i, "freq_hz": float(fam.freq_hz[i]), "kind": kind, "child": -1, "note": ""}
             if kind not in SWITCHED:
                 continue
+            rec = {"family": fi, "index": i, "freq_hz": float(fam.freq_hz[i]), "kind": kind, "child": -1, "note": ""}
             switches.append(rec)
-            if i in covered:
+            if kind == "period_doubling":
+                if not opts.period_doubling:
+                    rec["note"] = "not followed: period_doubling = false"
+                elif fam.periods >= 2 ** opts.period_doubling_depth:
+                    rec["note"] = f"not followed: period_doubling_depth = {opts.period_doubling_depth} reached"
+                else:
+                    pending.append((_pd_rank(fam, i), len(pending), rec, fi, i))
+                continue
+            n_pd = sum(f.kind == "period_doubled" for f in families)
+            if (fi, i) in covered:
                 rec["note"] = "reached by a family switched onto before"
-                continue
-            if len(families) - 1 >= opts.max_families:
+            elif gen > opts.depth or fam.kind == "period_doubled":
+                rec["note"] = (f"not followed: depth = {opts.depth} reached" if gen > opts.depth else
+                               "not followed: the pitchforks of a period-doubled family are not followed")
+            elif len(families) - 1 - n_pd >= opts.max_families:
                 rec["note"] = f"not followed: max_families = {opts.max_families} reached"
+            else:
+                k = attempt(rec, fi, i, kind, fam, res, an)
+                if k is not None:
+                    queue.append((k, gen + 1))
+
+    queue = [(0, 1)]  # (family index, generation)
+    gens = {}
+    while queue:
+        fi, gen = queue.pop(0)
+        gens[fi] = gen
+        scan(fi, gen)
+    while pending:
+        pending.sort(key=lambda p: p[:2])
+        _, _, rec, fi, i = pending.pop(0)
+        fam = families[fi]
+        res, an = residuals[fi]
+        if (fi, i) in covered:
+            rec["note"] = "reached by a family switched onto before"
+            continue
+        if sum(f.kind == "period_doubled" for f in families) >= opts.period_doubling_families:
+            rec["note"] = f"not followed: period_doubling_families = {opts.period_doubling_families} reached"
+            continue
+        chans = an.channels
+        c = next((c for c in range(len(chans)) if chans[c][1] == "Phi" and chans[c][2] < 0
+                  and fam.signs[i, c] != fam.signs[i - 1, c]), None)
+        if c is not None:
+            _, Js = _locate(res, an, fam.Y[i - 1], fam.Y[i], c)
+            mu_c = _critical_multiplier(an, Js, c)
+            if abs(mu_c + 1.0) > PD_CRITICAL_TOL:
+                rec.update(located_hz=float("nan"), critical=mu_c, grazing=bool(fam.events[i] != fam.events[i - 1]))
+                rec["note"] = (f"not followed: the critical multiplier located is {mu_c.real:.3g}{mu_c.imag:+.3g}j, "
+                               f"not within {PD_CRITICAL_TOL:g} of -1 (it jumps past -1 at a grazing)")
                 continue
-            if not budget.left():
-                rec["note"] = f"not followed: deadline of {opts.deadline_s:g} s reached"
-                continue
-            child, info = _child(fam, res, an, i, kind, opts, band, rows, sym, fi)
-            rec.update(info)
-            if isinstance(child, str):
-                rec["note"] = child
-                continue
-            fam_new, res_new, an_new, end_index = child
-            families.append(fam_new)
-            residuals[len(families) - 1] = (res_new, an_new)
-            rec["child"] = len(families) - 1
-            if end_index is not None:
-                covered.add(end_index)
-            if gen < opts.depth:
-                queue.append((len(families) - 1, gen + 1))
+        k = attempt(rec, fi, i, "period_doubling", fam, res, an)
+        if k is not None:
+            gens[k] = gens.get(fi, 1) + 1
+            scan(k, gens[k])
 
 
-def _child(fam: OrbitFamily, res: ShootingResidual, an: _Analyser, i: int, kind: str, opts, band, rows, sym, fi):
+def _pd_rank(fam: OrbitFamily, i: int) -> float:
+    """How unstable the parent of a period doubling before point i is, besides the critical
+    multiplier: the largest |mu| but the one nearest -1, the smaller at points i - 1 and i."""
+    out = math.inf
+    for j in (i - 1, i):
+        mu = fam.multipliers[j]
+        out = min(out, float(np.max(np.delete(np.abs(mu), int(np.argmin(np.abs(mu + 1.0)))), initial=0.0)))
+    return out
+
+
+def _images(nodes: np.ndarray, periods: int, sym: Symmetry) -> list[np.ndarray]:
+    """The node arrays (S, 2n) of the orbit through ``nodes`` (at t_k = k p T / S) and of its images
+    under the system's symmetries: shifted by whole load periods, the half-wave image (x -> -x,
+    t -> t + T/2) and the mirror's, each combination."""
+    S = nodes.shape[0]
+    out = [np.roll(nodes, -k * S // periods, axis=0) for k in range(periods)]
+    if sym.half_wave and S % (2 * periods) == 0:
+        out += [-np.roll(x, -S // (2 * periods), axis=0) for x in out]
+    Rs = sym.state_mirror()
+    if Rs is not None:
+        out += [x @ Rs.T for x in out]
+    return out
+
+
+def _known(families: list, residuals: dict, res_new: ShootingResidual, y_new: np.ndarray, sym: Symmetry):
+    """The index of a family of the same period whose orbit at y_new's frequency (Newton at that
+    frequency from its nearest points on each side) is y_new's orbit or one of its images
+    (:data:`SAME_ORBIT_TOL`), else None."""
+    nodes, w = res_new.nodes(y_new)
+    f = w / (2 * math.pi)
+    ims = _images(nodes, res_new.periods, sym)
+    scale = max(float(np.max(np.abs(nodes[:, : res_new.n]))), 1e-300)
+    sc = np.concatenate([np.ones(res_new.n), np.full(res_new.n, 1.0 / w)])
+    for k, fam in enumerate(families):
+        if fam.periods != res_new.periods or fam.nodes.shape[1] != nodes.shape[0]:
+            continue
+        res = residuals[k][0]
+        d = fam.freq_hz - f
+        cross = np.flatnonzero((d[:-1] * d[1:] <= 0) & (fam.segment[:-1] == fam.segment[1:]))
+        for i in cross:
+            j = i if abs(d[i]) <= abs(d[i + 1]) else i + 1
+            try:
+                other = res.nodes(shoot_at(res, fam.nodes[j], w))[0]
+            except ShootingError:
+                continue
+            if min(float(np.max(np.abs((x - other) * sc))) for x in ims) < SAME_ORBIT_TOL * scale:
+                return k
+    return None
+
+
+def _child(fam: OrbitFamily, res: ShootingResidual, an: _Analyser, i: int, kind: str, opts, band, rows, sym, fi,
+           families: list, residuals: dict):
     """The family switched onto at the crossing before point i of ``fam``: ((family, residual,
     analyser, index of the parent's branch point where it rejoined or None), or why not (str)),
     and what was found at the crossing: its located frequency ``located_hz``, the ``critical``
@@ -1090,6 +1233,9 @@ def _child(fam: OrbitFamily, res: ShootingResidual, an: _Analyser, i: int, kind:
         return "branch switching found no orbit off the branch point", info
     res_new, y_new, d, h = sw
     info["start_hz"] = res_new.omega(y_new) / (2 * math.pi)
+    same = _known(families, residuals, res_new, y_new, sym)
+    if same is not None:
+        return f"the family switched onto is family {same} (or an image of it under a symmetry)", info
     watch = _Watch(_breaking(res_new, kind, sym), y_new)
     nodes, _ = res_new.nodes(y_new)
     probe = _Analyser(res_new, sym, False, False, rows)
@@ -1098,8 +1244,9 @@ def _child(fam: OrbitFamily, res: ShootingResidual, an: _Analyser, i: int, kind:
                        bool(sym.half_wave and res_new.periods == 1 and hw0 < SYMMETRY_TOL), rows)
     j = int(np.argmax(np.abs(d[: res_new.size])))
     try:
+        steps = opts.period_doubling_steps if kind == "period_doubling" else opts.family_steps
         Y, data, folds, seg, st, notes = _follow(res_new, y_new, j, 1.0 if d[j] > 0 else -1.0, opts,
-                                                 opts.family_steps, band, an_new, stop_extra=watch)
+                                                 steps, band, an_new, stop_extra=watch)
     except (ContinuationError, ShootingError) as exc:
         return f"continuation failed: {' '.join(str(exc).split())[:120]}", info
     end = None
