@@ -38,7 +38,7 @@ def add_parser(sub) -> None:
     sub : argparse subparsers
     """
     p = sub.add_parser(STAGE, help="fit the scene's uncertain parameters ([identify]: gap, contact stiffness, damping) "
-                       "to a measured hammer test, on Dask; identified.csv with 95 % intervals",
+                       "to a measured hammer test, on Dask; identified.csv with 95 %% intervals",
                        description="Fit the parameters the scene's [identify] table names (by default the gap, the "
                        "contact stiffness and the modal damping) to a measured hammer test (UFF 58), by least squares "
                        "on the measures that survive chaos ([identify] measures: by default each load cell's first "
