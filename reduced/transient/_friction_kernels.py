@@ -47,6 +47,7 @@ from reduced.transient._modal import (
     _work,
     _work_near,
 )
+from reduced.transient.friction_tables import KIND_SLIP_END
 
 STUCK_PER_EVENT = 8  # zero-length segments allowed in a row, per event slot, before the run is refused
 
@@ -161,6 +162,54 @@ def _switch(s, e, y, n, succ, reset, fric):
 
 
 @nb.njit(cache=True, inline="always")
+def _first_sign(d1, d2, d3, b1, b2, b3):
+    """The sign of the first of q', q'', q''' beyond its round-off band (b1, b2, b3); 0 if none is."""
+    if abs(d1) > b1:
+        return 1 if d1 > 0.0 else -1
+    if abs(d2) > b2:
+        return 1 if d2 > 0.0 else -1
+    if abs(d3) > b3:
+        return 1 if d3 > 0.0 else -1
+    return 0
+
+
+@nb.njit(cache=True, inline="always")
+def _ev_trend(s, K, j, coef, lam, alam, a0, aEU, werr, e):
+    """Where event j of a free segment heads at tau (e = e^{lam tau}): the sign of its first derivative
+    beyond round-off (:func:`_first_sign`), the band of the k-th as the march's of q' times |lam|^(k - 1)
+    (QTOL_REL x the terms' size plus NOISE_FACTOR x sum |EU| |lam|^k werr, the modal coordinates' round-off)."""
+    d1 = 0.0
+    d2 = 0.0
+    d3 = 0.0
+    b1 = 0.0
+    b2 = 0.0
+    b3 = 0.0
+    for i in range(K):
+        c1 = lam[s, i] * coef[j, i] * e[i]
+        c2 = lam[s, i] * c1
+        d1 += c1.real
+        d2 += c2.real
+        d3 += (lam[s, i] * c2).real
+        al = alam[s, i]
+        b = (QTOL_REL * a0[j, i] * abs(e[i]) + NOISE_FACTOR * aEU[s, j, i] * werr[i]) * al
+        b1 += b
+        b2 += b * al
+        b3 += b * al * al
+    return _first_sign(d1, d2, d3, b1, b2, b3)
+
+
+@nb.njit(cache=True, inline="always")
+def _pin(j, K, const, coef, qtol):
+    """Hold event j at the start of a segment: its constant lowered so that q(0) <= -2 qtol (module docstring
+    of :mod:`reduced.transient.friction_tables`, the consistency of a slider's switch)."""
+    q0 = const[j]
+    for i in range(K):
+        q0 += coef[j, i].real
+    if q0 > -2.0 * qtol[j]:
+        const[j] -= q0 + 2.0 * qtol[j]
+
+
+@nb.njit(cache=True, inline="always")
 def _log(n_log, t, e, s, y, log_t, log_e, log_s, log_y):
     """Record an event (time, slot, new state, state y) while the log has room; returns the count."""
     if n_log < log_t.shape[0]:
@@ -190,8 +239,13 @@ def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bound
     terms bounded by their size there, gmul[s] (:func:`reduced.transient._modal._march`). Returns (t, W, Wf,
     s, i_samp, n_events, n_iter, status, n_stuck, c, n_log).
 
-    Long because it is the free kernel's loop with the friction work, the event switch and the hold of a
-    slider slot that fired twice in a row inlined, so that its arithmetic per segment reads in one place.
+    A slider that would switch back at the instant it switched is decided by the consistency of its two
+    states (the module docstring of :mod:`reduced.transient.friction_tables`): the consistent one is kept and
+    its slot pinned below its round-off band for the segment (:func:`_pin`), never toggled.
+
+    Long because it is the free kernel's loop with the friction work, the event switch, the consistency
+    decision and the hold of a slider slot that fired twice in a row inlined, so that its arithmetic per
+    segment reads in one place.
     """
     nK, lam, alam, UT, Uinv, aUinv, yp, gmul, hseg = modal
     EU, aEU, E0, Escale, eact, succ, reset, has_slip, LF = events
@@ -211,6 +265,11 @@ def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bound
     m = fric[6].shape[0]  # the stops: slots e >= m are the sliders'
     e_prev = -1  # the slot of the last event
     hold = -1  # a slider slot that may not fire within its round-off band in this segment (see below)
+    ekind = fric[4]
+    fresh = -1  # the slider slot of the event that started this segment (-1: none)
+    s_from = s  # the state before it
+    trend = 0  # a stick -> slip event's cone function: the sign of its first derivative beyond round-off
+    pin = -1  # a slider slot held at this segment's start (_pin), once its switch is found consistent
     while True:
         K = nK[s]
         slipping = has_slip[s]
@@ -223,6 +282,8 @@ def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bound
             # a round-off delay of a decision the flow then makes consistently (no energy is lost: the switch
             # books the spring's change as friction work)
             const[hold] -= 2.0 * qtol[hold]
+        if pin >= 0 and live[pin]:
+            _pin(pin, K, const, coef, qtol)
         tau_lim = t_end - t
         capped = hseg[s] < tau_lim  # a growing state's segment ends where its terms have doubled at most
         if capped:
@@ -232,6 +293,25 @@ def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bound
         if e_ev == -2:
             status = -3
             break
+        if e_ev == fresh and tau_ev <= hmin and pin < 0:
+            # the slider that has just switched would switch back at once. In exact arithmetic its slot starts
+            # at 0 in the new state, not rising: after a slip end the stick state's cone function has q = 0,
+            # q' = the slip velocity = 0 and q'' = the slip velocity's rate < 0 (the slip end's own crossing),
+            # so stick is consistent; after a stick -> slip the slip end's q = -sigma w' / omega_ref =
+            # -(cone function)' / omega_ref, so slip is consistent if the cone function rose (trend > 0). The
+            # re-expansion of y in the new state's modes errs by ~cond(V) eps, far above the march's band at
+            # its start, so the march may see the slot rising there. The consistent state is kept (or the
+            # stick restored, the slider left on the cone: a slip that would end at once is a graze of the
+            # cone) and its slot pinned below its band for this segment; never toggled.
+            n_iter += it
+            if ekind[s_from, fresh] != KIND_SLIP_END and trend <= 0:
+                s = s_from
+                n_log -= 1  # not an event: its log entry (if kept) is overwritten
+                n_events -= 1
+            pin = fresh
+            continue
+        pin = -1
+        fresh = -1
         t_next = (t + tau_lim if capped else t_end) if e_ev < 0 else t + tau_ev
         while i_samp < ns and t_samples[i_samp] <= t_next:
             tau = max(t_samples[i_samp] - t, 0.0)
@@ -248,6 +328,8 @@ def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bound
             break
         n_iter += it
         _terms_m1(lam[s], K, tau_ev, e, em, am1)
+        if e_ev >= m:
+            trend = _ev_trend(s, K, e_ev, coef, lam, alam, a0, aEU, werr, e)
         _eval(s, K, UT, yp, w, e, ytmp)
         dW, dWf = _seg_work(s, K, w, em, am1, tau_ev, n, y, ytmp, damped, slipping, wv, wf, LF, gr, gi)
         W += dW
@@ -269,10 +351,12 @@ def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bound
                 break
             t_end = bounds[c]
             continue
+        s_from = s
         s, dWf = _switch(s, e_ev, y, n, succ, reset, fric)
         Wf += dWf
         hold = e_ev if (e_ev == e_prev and e_ev >= m) else -1
         e_prev = e_ev
+        fresh = e_ev if e_ev >= m else -1
         n_log = _log(n_log, t, e_ev, s, y, log_t, log_e, log_s, log_y)
         n_events += 1
         if n_events >= max_events:
@@ -568,9 +652,10 @@ def _aug_viscous_poly_setup(X, P, C, fb, n, damped_, ACp, Cpp, Pb):
 
 
 @nb.njit(cache=True)
-def _aug_next_event(erow, ec, eact, s, yp_s, V_s, X, z, werr, poly, P, Qp, coef, tau_max, hmin, floor):
+def _aug_next_event(erow, ec, eact, s, yp_s, V_s, X, z, werr, poly, P, Qp, coef, tau_max, hmin, floor, pin):
     """The first event of a forced segment in state s (each active event's march,
-    :func:`reduced.transient._exact_kernels._first_root_forced`): (tau, e, n_iter, status)."""
+    :func:`reduced.transient._exact_kernels._first_root_forced`): (tau, e, n_iter, status). Event ``pin``
+    (-1: none) is held at the start, its constant lowered so that q(0) <= -2 qtol (:func:`_pin`)."""
     N = X.shape[0]
     E = ec.shape[1]
     tau_ev = tau_max
@@ -603,6 +688,15 @@ def _aug_next_event(erow, ec, eact, s, yp_s, V_s, X, z, werr, poly, P, Qp, coef,
                 for r in range(N):
                     acc2 += erow[s, e, r] * P[m, r]
                 Qp[m] = acc2
+        if e == pin:
+            q0 = const + (Qp[0] if poly else 0.0)
+            osc = abs(Qp[0]) if poly else 0.0
+            for i in range(X.shape[1]):
+                q0 += coef[i].real
+                osc += abs(coef[i])
+            qt = QTOL_REL * (abs(const) + osc) + NOISE_FACTOR * qnoise  # the march's band at tau = 0
+            if q0 > -2.0 * qt:
+                const -= q0 + 2.0 * qt
         tj, it = _first_root_forced(const, coef, z, Qp, poly, tau_ev, hmin, qnoise, dnoise, floor, True)
         n_iter += it
         if tj < 0.0:
@@ -611,6 +705,52 @@ def _aug_next_event(erow, ec, eact, s, yp_s, V_s, X, z, werr, poly, P, Qp, coef,
             tau_ev = tj
             e_ev = e
     return tau_ev, e_ev, n_iter, 0
+
+
+@nb.njit(cache=True)
+def _aug_trend(erow, s, j, V_s, X, z, werr, poly, P, tau):
+    """:func:`_ev_trend` for event j of a forced segment at tau: q = erow_j . (Re sum X_i e^{z_i tau} + sum_m
+    P[m] tau^m) (+ constants), its bands those of the march's q' (QTOL_REL x the terms' size, NOISE_FACTOR x
+    the modal coordinates' round-off) times |z|^(k - 1)."""
+    N = X.shape[0]
+    d1 = 0.0
+    d2 = 0.0
+    d3 = 0.0
+    b1 = 0.0
+    b2 = 0.0
+    b3 = 0.0
+    for i in range(X.shape[1]):
+        c = 0.0 + 0.0j
+        for r in range(N):
+            c += erow[s, j, r] * X[r, i]
+        c = c * np.exp(z[i] * tau)
+        c1 = z[i] * c
+        c2 = z[i] * c1
+        d1 += c1.real
+        d2 += c2.real
+        d3 += (z[i] * c2).real
+        az = abs(z[i])
+        b = QTOL_REL * abs(c) * az
+        if i < N:
+            pv = 0.0 + 0.0j
+            for r in range(N):
+                pv += erow[s, j, r] * V_s[r, i]
+            b += NOISE_FACTOR * abs(pv) * werr[i] * az
+        b1 += b
+        b2 += b * az
+        b3 += b * az * az
+    if poly:
+        M1 = P.shape[0]
+        for m in range(1, M1):
+            qm = 0.0
+            for r in range(N):
+                qm += erow[s, j, r] * P[m, r]
+            d1 += m * qm * tau ** (m - 1)
+            if m >= 2:
+                d2 += m * (m - 1) * qm * tau ** (m - 2)
+            if m >= 3:
+                d3 += m * (m - 1) * (m - 2) * qm * tau ** (m - 3)
+    return _first_sign(d1, d2, d3, b1, b2, b3)
 
 
 @nb.njit(cache=True)
@@ -638,6 +778,12 @@ def _friction_forced_kernel(lam, V, Vinv, yp, erow, ec, eact, succ, reset, Df, L
     n_events = 0
     n_iter = 0
     status = 0
+    ekind = fric[4]
+    m = fric[6].shape[0]  # the stops: slots e >= m are the sliders'
+    fresh = -1  # as in the free kernel: the slider slot of the event that started this segment
+    s_from = s
+    trend = 0
+    pin = -1
     while True:
         slipping = has_slip[s]
         ip, t_lim = _piece_at(pstarts, ip, t, t_end)
@@ -654,9 +800,20 @@ def _friction_forced_kernel(lam, V, Vinv, yp, erow, ec, eact, succ, reset, Df, L
             if poly:
                 _quad_poly_setup(DX, P, Df[s], ACf, Cpf)
         tau_ev, e_ev, seg_iter, status = _aug_next_event(erow, ec, eact, s, yp[s], V[s], X, z, werr, poly, P, Qp,
-                                                         coef, t_lim - t, hmin, floor)
+                                                         coef, t_lim - t, hmin, floor, pin)
         if status != 0:
             break
+        if e_ev == fresh and tau_ev <= hmin and pin < 0:
+            # the slider that has just switched would switch back at once: the free kernel's decision
+            n_iter += seg_iter
+            if ekind[s_from, fresh] != KIND_SLIP_END and trend <= 0:
+                s = s_from
+                n_log -= 1
+                n_events -= 1
+            pin = fresh
+            continue
+        pin = -1
+        fresh = -1
         t_next = t_lim if e_ev < 0 else t + tau_ev
         while i_samp < ns and t_samples[i_samp] <= t_next:
             tau = max(t_samples[i_samp] - t, 0.0)
@@ -677,6 +834,8 @@ def _friction_forced_kernel(lam, V, Vinv, yp, erow, ec, eact, succ, reset, Df, L
             status = BUFFER_FULL
             break
         n_iter += seg_iter
+        if e_ev >= m:
+            trend = _aug_trend(erow, s, e_ev, V[s], X, z, werr, poly, P, tau_ev)
         dW, dE = _aug_state(tau_ev, yp[s], X, z, P, poly, damped, G, Gz, az, ACp, Cpp, Pb, beta, rp, rm, phi, Fs, fz,
                             MOM, e, eiw, ytmp, C, n)
         if slipping:
@@ -696,8 +855,10 @@ def _friction_forced_kernel(lam, V, Vinv, yp, erow, ec, eact, succ, reset, Df, L
             if t_lim < t_end:
                 continue
             break
+        s_from = s
         s, dWf = _switch(s, e_ev, y, n, succ, reset, fric)
         Wf += dWf
+        fresh = e_ev if e_ev >= m else -1
         n_log = _log(n_log, t, e_ev, s, y, log_t, log_e, log_s, log_y)
         n_events += 1
         if n_events >= max_events:

@@ -48,6 +48,18 @@ A slip velocity that touches zero and turns back (q' <= 0 at q = 0: the stick fo
 cone at once) is a graze, passed without a change, by the march's own rule. Sticking at closure,
 or after a slip, with the force leaving the cone at once is the slip event at that instant.
 
+**Consistency of a slider's switch.** On the cone the two states agree on x, v and the force, so with
+g = sigma w'_slip = sigma t' - mu N' / kt the stick state's cone function c and the slip state's slip-end
+function -g / omega_ref share their derivatives: c = 0, c' = g, c'' = g' (the accelerations are equal), and
+c''' = g'' while g = 0. At a slip end (g = 0, falling) the stick force's rate kt t' equals mu N' exactly and
+c'' = g' < 0: stick is consistent. After a stick -> slip, slip is consistent when c rose, the sign of the
+first of c', c'', c''' beyond its round-off; a crossing that only grazed (c' = 0, c'' < 0) or a force past
+the cone but falling back is a stick, the slider left on the cone. The kernels
+(:mod:`reduced.transient._friction_kernels`) decide so when the new state's march would switch the slider
+back at the same instant: re-expanding y in the new state's modes errs by ~cond(V) eps (1e-11 m/s in q'
+on the reduced beam, cond 9e5, where the march's band is 3e-14), enough to see c rise at once. The
+consistent state is kept and the slot pinned below its band for that segment; a state is never toggled.
+
 **Work.** The dissipated power is y^T D y (+ a linear term): viscous, v^T C v; friction, f_k w_k' =
 sigma_k mu_k k_j pen_j (R_k v) over the slipping sliders, pen_j = side_j B_j (x - x_p) + pen_j(y_p).
 Its quadratic part x_h^T Q v_h (Q = sum sigma mu k side B_j^T R_k) is the form D_f = 1/2 [[0, Q],
