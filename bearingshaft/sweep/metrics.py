@@ -111,6 +111,9 @@ def ringdown_metrics(scene: Scene, folder: Path, stats: dict) -> dict:
       spectrogram's point (else x1) over the first, middle and last WINDOW_FRACTION of the record;
     - ``decay_time_s``: the first sample, after the energy's peak, with E <= DECAY_FRACTION x peak
       (NaN if not within the run);
+    - for a model with a friction coefficient (``model.mu``; 0 without sliders): ``friction_work_J``,
+      the work the tips' friction took over the run (closed form, the ringdown's ``friction``
+      history at its end), and ``friction_work_fraction``, that work over the initial energy;
     - with [symmetry]: the stage's seeded break time (median, min, max over its seeds),
       growth rate and runs broken, and ``energy_at_break_J``, the run's energy at that time.
 
@@ -142,6 +145,11 @@ def ringdown_metrics(scene: Scene, folder: Path, stats: dict) -> dict:
     out["gaps_open_after_s"] = (0.0 if last_closed < 0 else
                                 math.nan if last_closed >= N - w or last_closed + 1 >= N else (last_closed + 1) / fs)
     out["decay_time_s"] = k_decay / fs if k_decay >= 0 else math.nan
+    if getattr(scene.model, "mu", None) is not None:
+        w_fric = float(f.read("friction", N - 1, N)[0]) if N and f.has("friction") else 0.0
+        e0 = out["energy_J_initial"]
+        out["friction_work_J"] = w_fric
+        out["friction_work_fraction"] = w_fric / e0 if e0 > 0 else math.nan
     sym = stats.get("symmetry")
     if isinstance(sym, dict):
         out.update(_symmetry_metrics(sym, f))

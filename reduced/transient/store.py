@@ -371,6 +371,10 @@ class RingdownFile:
             self.sample_rate_hz = 1.0 / float(t01[1] - t01[0]) if t01.size > 1 else float("inf")
 
     # -- reading ---------------------------------------------------------------------------
+    def has(self, name: str) -> bool:
+        """Whether the file holds the history ``name`` (a run without sliders has no ``friction``)."""
+        return name in self._arrays
+
     def read(self, name: str, start: int = 0, stop: int | None = None) -> np.ndarray:
         """Rows start:stop of history ``name`` (a new array; zeros for an optional history the file lacks)."""
         if name in OPTIONAL and name not in self._arrays:
