@@ -134,11 +134,11 @@ def _check_tables_of_kind(sections: dict, kind: str, origin: str) -> None:
         for key in ("rom_convergence", "verify"):
             if key in sections:
                 raise SceneError(f"{origin}: [{key}] needs a reduced model (kind = \"rom\"), not {kind!r}")
-    if kind == "discrete_friction":  # harmonic balance and the studies do not treat friction yet
-        for key in ("nnm", "fep", "frc", "work_precision", "stiff_cases", "symmetry"):
+    if kind == "discrete_friction":  # the studies and the NNMs do not treat friction yet; [frc] does (HB by AFT)
+        for key in ("nnm", "fep", "work_precision", "stiff_cases", "symmetry"):
             if key in sections:
                 raise SceneError(f"{origin}: [{key}] does not treat friction; the model with friction "
-                                 "(kind = \"discrete_friction\") has [ringdown] and [spectrogram]")
+                                 "(kind = \"discrete_friction\") has [ringdown], [spectrogram] and [frc]")
 
 
 def _check_points(sections: dict, kind: str, model, origin: str, has_loads: bool) -> tuple[str, ...]:
@@ -190,13 +190,15 @@ def _read_loads(data: dict, sections: dict, dof_names, origin: str, base: str | 
 
 def _check_frc(frc, kind: str, model, dof_names, origin: str) -> None:
     """[frc] loads a point of the model, which needs damping for a forced response to settle."""
-    if frc.point not in dof_names:
-        raise SceneError(f"{origin} [frc] point: unknown point {frc.point!r}{suggest(frc.point, dof_names)} "
-                         f"(known: {', '.join(dof_names)})")
-    damping = (model.c,) if kind == "discrete" else (model.c_points, model.alpha, *model.modal_damping)
+    for key, point in (("point", frc.point), *(("also_points", p) for p in frc.also_points)):
+        if point not in dof_names:
+            raise SceneError(f"{origin} [frc] {key}: unknown point {point!r}{suggest(point, dof_names)} "
+                             f"(known: {', '.join(dof_names)})")
+    discrete = kind in ("discrete", "discrete_friction")
+    damping = (model.c,) if discrete else (model.c_points, model.alpha, *model.modal_damping)
     if not any(d > 0 for d in damping):
         raise SceneError(f"{origin} [frc]: the model has no damping ([model] "
-                         f"{'c' if kind == 'discrete' else 'c_points, alpha or modal_damping'} = 0), so no forced "
+                         f"{'c' if discrete else 'c_points, alpha or modal_damping'} = 0), so no forced "
                          "response settles and the curves have no peak; give the model damping")
 
 

@@ -4,6 +4,7 @@ with the unit first in every field's comment and the allowed values checked on c
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -430,6 +431,11 @@ class FRCSpec:
     ----------
     point : str
         Where the load P cos(2 pi f t) acts (a point name).
+    also_points : tuple of str
+        Further points the same load acts at, in phase (a slanted load: e.g. ``["u"]``, the beam's axial motion,
+        of the model with friction at the tips).
+    also_weights : tuple of float
+        The load at each of ``also_points``, a share of P (one a point; signed).
     levels_N : tuple of float
         N, load amplitudes P: one curve each.
     freq_min_hz, freq_max_hz : float
@@ -498,6 +504,8 @@ class FRCSpec:
     """
 
     point: str = "x2"  # where the load P cos(2 pi f t) acts (a point name)
+    also_points: tuple[str, ...] = ()  # further points the same load acts at, in phase (a slanted load)
+    also_weights: tuple[float, ...] = ()  # the load at each of also_points, a share of P (signed)
     levels_N: tuple[float, ...] = (0.1, 1.0, 10.0)  # N, load amplitudes P: one curve each
     freq_min_hz: float = 10.0  # Hz, each curve starts here (from rest at the lowest level)
     freq_max_hz: float = 900.0  # Hz, and ends where it leaves the band
@@ -530,6 +538,10 @@ class FRCSpec:
 
     def __post_init__(self) -> None:
         each(self, "levels_N", lambda v: v > 0, "> 0 N")
+        check(len(self.also_weights) == len(self.also_points),
+              f"also_weights needs one share per point of also_points ({len(self.also_points)}), "
+              f"got {len(self.also_weights)}")
+        each(self, "also_weights", math.isfinite, "finite")
         positive(self, "freq_min_hz", "freq_max_hz", "convergence_level_N", "stepped_sine_max_s")
         check(self.freq_max_hz > self.freq_min_hz,
                f"freq_max_hz must exceed freq_min_hz = {self.freq_min_hz!r} Hz, got {self.freq_max_hz!r}")

@@ -44,6 +44,7 @@ from bearingshaft.output import StageWriter
 from bearingshaft.progress import bar as progress_bar
 from bearingshaft.reproduction import Reproduction, chaotic, exact, sensitive, within
 from bearingshaft.scenes import Scene
+from bearingshaft.stages.frc_friction import load_vector
 from bearingshaft.stages.frc_map import compute_maps
 from bearingshaft.stages.frc_results import ConvergedCurve, ConvergenceRun, FRCResult, PointCheck
 from bearingshaft.systems import model_system
@@ -92,8 +93,12 @@ def compute(scene: Scene, progress: bool, workdir=None) -> FRCResult:
     FRCResult
         Dense algebra on one BLAS thread (the same sums whatever the machine's core count).
     """
+    from bearingshaft.stages import frc_friction
+
     with single_thread_blas(), warnings.catch_warnings():
         warnings.simplefilter("ignore")  # LinAlgWarning from LU on rejected continuation steps
+        if frc_friction.has_friction(scene):  # HB by AFT with the sliders (frc_friction: what it skips and why)
+            return frc_friction.compute(scene, progress)
         return _compute(scene, progress)
 
 
@@ -102,7 +107,7 @@ def _compute(scene: Scene, progress: bool) -> FRCResult:
     system, rows = model_system(scene.model, progress)
     names = tuple(scene.model.point_names)
     load_col = names.index(spec.point)
-    b = rows[load_col]
+    b = load_vector(spec, rows, names)  # the point's row, plus [frc] also_points (a slanted load)
     levels = list(spec.levels_N)
     n_tasks = 4 * len(levels) + len(spec.convergence_harmonics) + len(levels) * len(spec.backbone_scales) + 1
     n_tasks += len(levels) if spec.map_step_hz > 0 else 0  # the response map (frc_map)
@@ -683,7 +688,9 @@ frc_bifurcations.csv, frc_stability.csv,
 stepped_sine.csv, frc_convergence.csv, frc_convergence_timing.csv and .png, frc_backbone.csv
 and frc_backbone.png; the response map (each frequency of a dense stepped sine periodic, subharmonic,
 quasi-periodic or chaotic, with its Lyapunov exponent): response_map.csv, response_map_jumps.csv,
-response_map.png and response_map_spectra.png."""
+response_map.png and response_map_spectra.png. With friction at the tips ([model] mu > 0): HB by AFT with the
+Jenkins sliders, Hill's stability through stick-slip and a stepped sine by the exact friction integrator only
+(frc.csv, frc_friction_checks.csv, frc.png, frc.md; frc.md says what is skipped and why)."""
 
 
 def frc_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
@@ -745,8 +752,11 @@ def write(result, writer) -> None:
     -------
     None
     """
-    from bearingshaft.stages import frc_files
+    from bearingshaft.stages import frc_files, frc_friction
 
+    if isinstance(result, frc_friction.FrictionFRCResult):
+        frc_friction.write(result, writer)
+        return
     frc_files.write(result, writer)
 
 
@@ -762,6 +772,8 @@ MAP_GRID = ("the response map's fine grid spans the contact band of the HB curve
             "path (" + CONTINUATION + ")")
 REPRODUCTION = Reproduction(rules=(
     sensitive("frc.csv", why=CONTINUATION),
+    sensitive("frc_friction_checks.csv", why="the stepped sine by the exact friction integrator, compared with HB at "
+              "its frequencies: " + CONTINUATION),
     sensitive("frc_harmonics.csv", why=CONTINUATION),
     sensitive("frc_bifurcations.csv", why=CONTINUATION + " (the folds and bifurcations found between its points)"),
     sensitive("frc_stability.csv", why=CONTINUATION + " (stability at those points)"),

@@ -146,12 +146,14 @@ def balance_text(error: float) -> str:
 
 
 
-DECAY_SHOWN = ("longitudinal", "lateral", "yaw")  # the motions friction at the tips acts on (friction.png)
+DECAY_SHOWN = ("longitudinal", "lateral", "yaw", "roll")  # the motions friction at the tips acts on (friction.png)
 
 
 def friction_csv(path: Path, fc) -> None:
     """``friction.csv``: per pseudo-rigid motion, its modal energy's peak, end and 1 % time with friction and
-    without (:class:`bearingshaft.stages.hammer_results.FrictionComparison`).
+    without, the decay rate of its energy once the gaps stay open (fitted, each run; and the closed form
+    2 zeta_r omega_r of its open-gap mode), and the 1 % time extrapolated along that rate where the record ends
+    before it (:class:`bearingshaft.stages.hammer_results.FrictionComparison`).
 
     Parameters
     ----------
@@ -159,17 +161,21 @@ def friction_csv(path: Path, fc) -> None:
     fc : the comparison
     """
     rows = ["motion,freq_hz,peak_J_friction,peak_J_frictionless,end_J_friction,end_J_frictionless,"
-            "t_1pct_s_friction,t_1pct_s_frictionless"]
+            "t_1pct_s_friction,t_1pct_s_frictionless,rate_per_s_friction,rate_per_s_frictionless,rate_modal_per_s,"
+            "t_1pct_est_s_friction,t_1pct_est_s_frictionless"]
     for label, d in sorted(fc.decay.items(), key=lambda kv: kv[1]["freq_hz"]):
         a, b = d["with"], d["without"]
         rows.append(f"{label},{d['freq_hz']:.6g},{a['peak_J']:.6g},{b['peak_J']:.6g},{a['end_J']:.6g},"
-                    f"{b['end_J']:.6g},{a['t_1pct_s']:.4g},{b['t_1pct_s']:.4g}")
+                    f"{b['end_J']:.6g},{a['t_1pct_s']:.4g},{b['t_1pct_s']:.4g},{a['rate_per_s']:.4g},"
+                    f"{b['rate_per_s']:.4g},{a['rate_modal_per_s']:.4g},{a['t_1pct_est_s']:.4g},"
+                    f"{b['t_1pct_est_s']:.4g}")
     path.write_text("\n".join(rows) + "\n", encoding="utf-8")
 
 
 def draw_friction(rig: VirtualRig, rec: Record, fc, scene: Scene, labels: dict):
     """``friction.png``: the spectrogram's channel in the pseudo-rigid band with friction and without (one
-    colour scale), and the modal energy of the longitudinal, lateral and yaw motions against time, both runs.
+    colour scale), and the modal energy of the longitudinal, lateral, yaw and roll motions against time, both
+    runs.
 
     Parameters
     ----------
@@ -197,7 +203,7 @@ def draw_friction(rig: VirtualRig, rec: Record, fc, scene: Scene, labels: dict):
         ax.set_title(f"{name}, {rec.level_N:g} N blow, {what}: 0-{fzoom:g} Hz (Hann {window:g} s)", fontsize=10)
         fig.colorbar(mesh, ax=ax, label="PSD [dB]", pad=0.01)
     ax = axes[2]
-    colors = ("tab:blue", "tab:orange", "tab:green")
+    colors = ("tab:blue", "tab:orange", "tab:green", "tab:red")
     for c, label in zip(colors, DECAY_SHOWN, strict=True):
         if label not in fc.decay:
             continue
@@ -212,8 +218,8 @@ def draw_friction(rig: VirtualRig, rec: Record, fc, scene: Scene, labels: dict):
     ax.set_xlim(rec.t[0], rec.t[-1])
     ax.set_xlabel("time [s]")
     ax.set_ylabel("modal energy [J]")
-    ax.set_title("energy of the open-gap longitudinal, lateral and yaw modes", fontsize=10)
-    ax.legend(fontsize=8, ncol=3)
+    ax.set_title("energy of the open-gap longitudinal, lateral, yaw and roll modes", fontsize=10)
+    ax.legend(fontsize=8, ncol=4)
     return fig
 
 
@@ -240,11 +246,24 @@ def friction_text(fc, end_share_s: float) -> list[str]:
              f"{fc.friction_work_J:.4g} J, {100 * fc.friction_work_J / fc.hammer_work_J:.3g} % of the hammer's "
              f"{fc.hammer_work_J:.4g} J; {fpi:.3g} J per impact.", "",
              f"| motion | [Hz] | peak energy, friction / none [J] | last {end_share_s:g} s, friction / none [J] | "
-             "below 1 % of its peak after, friction / none [s] |", "|---|---|---|---|---|"]
+             "below 1 % of its peak after, friction / none [s] | decay rate once the gaps stay open, friction / "
+             "none / closed form 2 zeta omega [1/s] |", "|---|---|---|---|---|---|"]
+    extrapolated = False
     for label, d in sorted(fc.decay.items(), key=lambda kv: kv[1]["freq_hz"]):
         a, b = d["with"], d["without"]
+        t1 = []
+        for side in (a, b):
+            est = not math.isfinite(side["t_1pct_s"]) and math.isfinite(side.get("t_1pct_est_s", math.nan))
+            extrapolated |= est
+            t1.append(f"{side.get('t_1pct_est_s', side['t_1pct_s']):.3g}{'*' if est else ''}")
         lines.append(f"| {label} | {d['freq_hz']:.4g} | {a['peak_J']:.3g} / {b['peak_J']:.3g} | "
-                     f"{a['end_J']:.3g} / {b['end_J']:.3g} | {a['t_1pct_s']:.3g} / {b['t_1pct_s']:.3g} |")
+                     f"{a['end_J']:.3g} / {b['end_J']:.3g} | {t1[0]} / {t1[1]} | "
+                     f"{a.get('rate_per_s', math.nan):.3g} / {b.get('rate_per_s', math.nan):.3g} / "
+                     f"{a.get('rate_modal_per_s', math.nan):.3g} |")
+    g = fc.gaps_open_after_s
+    lines += ["", f"The gaps stay open after {g[0]:.4g} s with friction, {g[1]:.4g} s without; from then on the motion "
+              "is linear and each mode's energy decays at its modal rate (fitted over the rest of the record)."
+              + (" *: the record ends before 1 %: extrapolated along that rate." if extrapolated else "")]
     bands = "; ".join(f"{band}: {w / wo:.3g} of the frictionless power" if wo > 0 else f"{band}: no power"
                       for band, (w, wo) in fc.spectrum_change.items())
     lines += ["", f"The spectrogram's channel after the blow (summed periodogram): {bands}."]

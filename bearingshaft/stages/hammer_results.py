@@ -194,7 +194,9 @@ class FrictionComparison:
     decay : dict
         {label: {"freq_hz", "with": {...}, "without": {...}}} per pseudo-rigid motion, each side's modal energy
         ``peak_J`` (after the blow), ``end_J`` (mean over the last ``end_share_s``), ``t_1pct_s`` (when it falls
-        for good below 1 % of its peak; NaN if it does not) (:func:`bearingshaft.stages.hammer.motion_decay`).
+        for good below 1 % of its peak; NaN if it does not), ``rate_per_s`` (its energy's decay rate once the gaps
+        stay open), ``rate_modal_per_s`` (the closed form 2 zeta_r omega_r) and ``t_1pct_est_s`` (t_1pct_s, or
+        extrapolated along rate_per_s past the record's end) (:func:`bearingshaft.stages.hammer.motion_decay`).
     impacts : (int, int)
         Impacts with friction and without.
     friction_work_J : float
@@ -204,6 +206,8 @@ class FrictionComparison:
     spectrum_change : dict
         {band label: (power with, power without)} of the spectrogram's channel, summed over the record after the
         blow, per band (``pseudo-rigid`` below 100 Hz, ``structural`` above).
+    gaps_open_after_s : (float, float)
+        s, the gaps stay open after this, with friction and without.
     """
 
     mu: float
@@ -215,6 +219,7 @@ class FrictionComparison:
     friction_work_J: float
     hammer_work_J: float
     spectrum_change: dict  # {band: (power with, power without)}
+    gaps_open_after_s: tuple[float, float] = (math.nan, math.nan)  # s, with friction, without
 
     @property
     def friction_per_impact_J(self) -> float:

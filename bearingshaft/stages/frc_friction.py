@@ -1,0 +1,211 @@
+"""Stage ``frc`` on a model with friction at the tips (issue 27): HB by AFT with the Jenkins sliders.
+
+When the scene's model has friction (``[model] mu > 0``), :func:`bearingshaft.stages.frc.compute` hands the
+stage to :func:`compute` here. For each level of ``[frc] levels_N`` the load P cos(2 pi f t) at ``point``
+(plus ``also_weights`` P at each of ``also_points``: a slanted load, whose axial part the tips' friction
+resists while they touch) is continued in frequency by :func:`reduced.periodic.friction_aft.friction_frc`
+(condensed HB, the stops projected exactly, each slider by AFT, H = ``harmonics``), its stability by Hill's
+method on the consistent AFT Jacobian at every point (stick-slip included), its bifurcations from the
+multipliers. The check: a stepped sine up by the exact friction integrator
+(:func:`reduced.transient.friction.integrate_exact_friction`, stick, slip and gaps as events) at
+``stepped_sine_points`` frequencies spread over the band, each settled (the state, sliders included, carried
+from one frequency to the next) until its last period's amplitudes move by less than ``stepped_sine_tol``
+from the one before, or ``stepped_sine_max_s`` of simulated time; every settled point against the HB solution
+at its frequency on the stable piece nearest it.
+
+What the frictionless stage does and this one does not (frc.md says so too): the converged curve by multiple
+shooting, the Floquet multipliers by shooting and the response map (the shooting and the map's classifier run
+the exact flow without sliders: their states, the sliders' positions, are not in its state vector), the
+monodromy along the HB orbit (the same), the convergence study in H and the backbone check (NNMs of a system
+with friction are not conservative; and each H's curve costs a continuation with AFT).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from bearingshaft.scenes import Scene
+from bearingshaft.systems import model_system
+from reduced.models.loads import Harmonic, Loads
+from reduced.periodic.continuation import ContinuationError
+from reduced.periodic.frc import FRC_STEPS, linear_frf, solution_at_frequency
+from reduced.periodic.friction_aft import friction_frc
+from reduced.transient.friction import integrate_exact_friction
+
+SAMPLES_PER_PERIOD = 400  # of the exact run's output: the amplitude read on these (error ~ (pi / 400)^2 / 2 = 3e-5)
+SETTLE_CHUNK = 10  # periods run at a time between two settling checks
+SKIPPED = (
+    ("converged curve by shooting", "the multiple shooting runs the exact flow without sliders: the sliders' "
+     "positions are not in its state vector, so its periodic orbits are those of the frictionless system"),
+    ("Floquet multipliers by shooting and monodromy", "the same: Hill's method on the consistent AFT Jacobian "
+     "gives the stability instead"),
+    ("response map", "its classifier (periodic, subharmonic, chaotic, Lyapunov exponent) runs the exact flow "
+     "without sliders"),
+    ("convergence in H", "each H's curve is a continuation with AFT (tens of seconds a curve); the stepped "
+     "sine's error at the curve's H says how far it is"),
+    ("backbone check", "with friction the free motion is not conservative: no NNM backbone to approach"),
+)
+
+
+@dataclass(eq=False)
+class FrictionCheck:
+    """One settled frequency of the stepped sine by the exact friction integrator, against HB."""
+
+    level_N: float
+    freq_hz: float
+    exact_m: np.ndarray  # (p,) m, max |x| over the last period at each output point
+    hb_m: np.ndarray  # (p,) m, the HB solution at freq_hz (NaN where no stable piece brackets it)
+    settled_change: float  # relative change of the amplitudes over the last SETTLE_CHUNK periods
+    settled: bool
+    simulated_s: float
+    friction_work_per_period_J: float  # of the last period
+
+    @property
+    def rel_error(self) -> float:
+        """Largest |HB / exact - 1| over the output points (NaN without an HB solution)."""
+        return float(np.max(np.abs(self.hb_m / self.exact_m - 1.0))) if np.all(np.isfinite(self.hb_m)) else math.nan
+
+
+@dataclass(eq=False)
+class FrictionFRCResult:
+    """What :func:`compute` returns (:func:`write` writes it)."""
+
+    scene: Scene
+    names: tuple[str, ...]
+    load: np.ndarray  # (n,) the load direction b
+    curves: dict  # {P: FRCBranch or ContinuationError}
+    checks: dict  # {P: [FrictionCheck]}
+    linear: dict  # {P: (freq_hz (k,), amplitude (k, p))} the open-gap response without friction
+    stats: dict = field(default_factory=dict)
+
+
+def has_friction(scene: Scene) -> bool:
+    """The scene's model has friction at its tips (mu > 0)."""
+    return float(getattr(scene.model, "mu", 0.0) or 0.0) > 0.0
+
+
+def load_vector(spec, rows: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
+    """(n,) b: the row of ``[frc] point`` plus ``also_weights`` times the rows of ``also_points``.
+
+    >>> import numpy as np
+    >>> from bearingshaft.scenes.tables import FRCSpec
+    >>> load_vector(FRCSpec(point="x3", also_points=("u",), also_weights=(0.5,)), np.eye(4), ("x1", "x2", "x3", "u"))
+    array([0. , 0. , 1. , 0.5])
+    """
+    b = np.array(rows[names.index(spec.point)], float)
+    for p, w in zip(spec.also_points, spec.also_weights, strict=True):
+        b = b + w * rows[names.index(p)]
+    return b
+
+
+def settle(system, b: np.ndarray, P: float, f: float, state, tol: float, max_s: float) -> tuple:
+    """The exact friction response at f from ``state`` = (x, v, w), run SETTLE_CHUNK periods at a time until the
+    last period's amplitudes at the points move by less than ``tol`` (relative) from those SETTLE_CHUNK periods
+    before, or ``max_s``.
+
+    Returns
+    -------
+    (x_last_period (spp + 1, n), friction work of the last period J, change, settled, simulated s, end state)
+    """
+    spp, T = SAMPLES_PER_PERIOD, 1.0 / f
+    loads = Loads(np.atleast_2d(b), (Harmonic(P, f),))
+    x, v, w = state
+    before, change, t = None, math.inf, 0.0
+    while True:
+        run = integrate_exact_friction(system, x, v, SETTLE_CHUNK * T, spp * f, w0=w, loads=loads)
+        t += SETTLE_CHUNK * T
+        last = run.x[-spp - 1:]
+        amp = np.max(np.abs(last), axis=0)
+        x, v, w = run.x[-1].copy(), run.v[-1].copy(), run.w[-1].copy()
+        if before is not None:
+            change = float(np.max(np.abs(amp - before)) / max(float(np.max(amp)), 1e-300))
+        before = amp
+        if change < tol or t >= max_s:
+            work = float(run.friction[-1] - run.friction[-spp - 1])
+            return last, work, change, change < tol, t, (x, v, w)
+
+
+def compute(scene: Scene, progress: bool = False) -> FrictionFRCResult:
+    """The HB curves with friction, their Hill stability and the stepped sine by the exact friction integrator.
+
+    Parameters
+    ----------
+    scene : a scene with [frc] whose model has friction
+    progress : unused (the curves print nothing)
+
+    Returns
+    -------
+    FrictionFRCResult
+    """
+    spec = scene.frc
+    system, rows = model_system(scene.model, progress)
+    names = tuple(scene.model.point_names)
+    b = load_vector(spec, rows, names)
+    rows = np.asarray(rows, float)
+    curves, checks, linear, stats = {}, {}, {}, {"levels": {}}
+    f_lin = np.geomspace(spec.freq_min_hz, spec.freq_max_hz, 400)
+    for P in spec.levels_N:
+        t0 = time.perf_counter()
+        try:
+            br = friction_frc(system, b, P, spec.freq_min_hz, spec.freq_max_hz, spec.harmonics,
+                              harmonics="odd" if spec.odd_harmonics else "all", point_rows=rows, point_names=names,
+                              continuation=FRC_STEPS.replace(max_steps=spec.max_steps))
+        except ContinuationError as exc:
+            br = exc
+        wall = time.perf_counter() - t0
+        curves[P] = br
+        linear[P] = (f_lin, linear_frf(system.with_friction(None), b, P, f_lin, rows))
+        t1 = time.perf_counter()
+        checks[P] = _checks(system, b, P, spec, br, rows)
+        st = {"hb_wall_s": wall, "check_wall_s": time.perf_counter() - t1}
+        if not isinstance(br, Exception):
+            st.update(points=len(br.freq_hz), hill_wall_s=br.stability_wall_s, status=br.status,
+                      bifurcations=[[int(i), k] for i, k in br.bifurcations])
+        errs = [c.rel_error for c in checks[P] if math.isfinite(c.rel_error)]
+        st["worst_check_error"] = max(errs) if errs else math.nan
+        stats["levels"][str(P)] = st
+    return FrictionFRCResult(scene, names, b, curves, checks, linear, stats)
+
+
+def _checks(system, b: np.ndarray, P: float, spec, br, rows: np.ndarray) -> list[FrictionCheck]:
+    """The stepped sine up over ``stepped_sine_points`` frequencies (linear in the band, its ends excluded)."""
+    k = spec.stepped_sine_points
+    if k <= 0:
+        return []
+    freqs = np.linspace(spec.freq_min_hz, spec.freq_max_hz, k + 2)[1:-1]
+    n = system.n
+    state = (np.zeros(n), np.zeros(n), None)
+    out = []
+    for f in freqs:
+        last, work, change, ok, t, state = settle(system, b, P, float(f), state, spec.stepped_sine_tol,
+                                                  spec.stepped_sine_max_s)
+        exact = np.max(np.abs(last @ rows.T), axis=0)
+        hb = np.full(len(rows), math.nan)
+        if not isinstance(br, Exception):
+            amp, _, _ = solution_at_frequency(br, float(f), float(exact[0]), 0, stable_only=True)
+            if amp is not None:
+                hb = np.asarray(amp, float)
+        out.append(FrictionCheck(P, float(f), exact, hb, change, ok, t, work))
+    return out
+
+
+def write(result: FrictionFRCResult, writer) -> None:
+    """frc.csv, frc_friction_checks.csv, frc.png and frc.md (the files of the frictionless stage it skips are
+    named in frc.md, with the reason).
+
+    Parameters
+    ----------
+    result : FrictionFRCResult
+    writer : StageWriter
+    """
+    from bearingshaft.stages import frc_friction_files
+
+    frc_friction_files.write(result, writer)
+
+
+__all__ = ["SKIPPED", "FrictionCheck", "FrictionFRCResult", "compute", "has_friction", "load_vector", "settle",
+           "write"]

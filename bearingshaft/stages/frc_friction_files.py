@@ -1,0 +1,162 @@
+"""The files of the frc stage on a model with friction (:mod:`bearingshaft.stages.frc_friction`): frc.csv,
+frc_friction_checks.csv, frc.png and frc.md."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from bearingshaft.output import write_rows
+
+
+def write(result, writer) -> None:
+    """Write the files and put the statistics in ``writer.stats["frc"]``.
+
+    Parameters
+    ----------
+    result : FrictionFRCResult
+    writer : StageWriter
+    """
+    write_rows(writer.path("frc.csv"), curve_rows(result))
+    write_rows(writer.path("frc_friction_checks.csv"), check_rows(result))
+    writer.stats["frc"] = {"friction": True, **result.stats}
+    writer.path("frc.md").write_text(markdown(result), encoding="utf-8")
+    _plot(writer.path("frc.png"), result)
+
+
+def curve_rows(result) -> list[dict]:
+    """frc.csv: per level and HB point, the amplitude at every point, each slider's open, stick and slip
+    fractions of the period, the largest Hill multiplier and the verdict."""
+    rows = []
+    for P, br in result.curves.items():
+        if isinstance(br, Exception):
+            continue
+        fb = br.balance
+        sliders = br.balance.system.friction.names
+        for i in range(len(br.freq_hz)):
+            row = {"level_N": P, "freq_hz": float(br.freq_hz[i])}
+            row.update({f"{n}_m": float(a) for n, a in zip(result.names, br.amplitude_m[i], strict=True)})
+            st = fb.slider_state(br.z[i])
+            for k, s in enumerate(sliders):
+                row.update({f"{s}_open": float(st[k, 0]), f"{s}_stick": float(st[k, 1]), f"{s}_slip": float(st[k, 2])})
+            row.update(max_abs_mu=float(np.max(np.abs(br.multipliers[i]))), stable="true" if br.stable[i] else "false")
+            rows.append(row)
+    return rows
+
+
+def check_rows(result) -> list[dict]:
+    """frc_friction_checks.csv: the stepped sine's settled points against HB."""
+    rows = []
+    for P, checks in result.checks.items():
+        for c in checks:
+            row = {"level_N": P, "freq_hz": c.freq_hz}
+            for n, e, h in zip(result.names, c.exact_m, c.hb_m, strict=True):
+                row.update({f"{n}_exact_m": float(e), f"{n}_hb_m": float(h)})
+            row.update(max_rel_error=c.rel_error, settled_change=c.settled_change,
+                       settled="true" if c.settled else "false", simulated_s=c.simulated_s,
+                       friction_work_per_period_J=c.friction_work_per_period_J)
+            rows.append(row)
+    return rows
+
+
+def markdown(result) -> str:
+    """frc.md: the curves, their stability through stick-slip, the exact check, and what is skipped and why."""
+    from bearingshaft.stages.frc_friction import SKIPPED
+
+    spec, names = result.scene.frc, result.names
+    sys_f = next((br.balance.system.friction for br in result.curves.values() if not isinstance(br, Exception)),
+                 None)
+    load = f"{spec.point}" + "".join(f" + {w:g} x {p}" for p, w in zip(spec.also_points, spec.also_weights,
+                                                                        strict=True))
+    lines = [f"# Forced response with friction at the tips: {result.scene.name}", "",
+             f"Load P cos(2 pi f t) along ({load}), {spec.freq_min_hz:g}-{spec.freq_max_hz:g} Hz; HB by AFT "
+             f"(reduced.periodic.friction_aft.friction_frc: the stops projected exactly, each Jenkins slider by AFT), "
+             f"H = {spec.harmonics}{' (odd)' if spec.odd_harmonics else ''}; stability by Hill's method on the "
+             "consistent AFT Jacobian at every point."]
+    if sys_f is not None:
+        lines[-1] += (f" Sliders: {', '.join(sys_f.names)}, mu = {float(np.max(sys_f.mu)):g}, "
+                      f"k_t = {float(np.max(sys_f.k_t)):.4g} N/m.")
+    lines += ["", "| level [N] | HB points | stable | stick-slip points | Hill [s] | HB [s] | bifurcations | "
+              "stepped sine: settled | worst HB error at a settled point |", "|---|---|---|---|---|---|---|---|---|"]
+    for P, br in result.curves.items():
+        st = result.stats["levels"][str(P)]
+        ok = [c for c in result.checks[P] if c.settled]
+        errs = [c.rel_error for c in ok if math.isfinite(c.rel_error)]
+        worst = f"{max(errs):.3g}" if errs else "n/a"
+        if isinstance(br, Exception):
+            lines.append(f"| {P:g} | failed: {' '.join(str(br).split())[:120]} | | | | {st['hb_wall_s']:.1f} | | "
+                         f"{len(ok)}/{len(result.checks[P])} | {worst} |")
+            continue
+        fb = br.balance
+        ss = np.array([fb.slider_state(z) for z in br.z])  # (k, p, 3)
+        stick_slip = int(np.sum(np.any((ss[:, :, 1] > 0) & (ss[:, :, 2] > 0), axis=1)))
+        kinds = {}
+        for _, kind in br.bifurcations:
+            kinds[kind] = kinds.get(kind, 0) + 1
+        bif = ", ".join(f"{v} {k}" for k, v in kinds.items()) or "none"
+        lines.append(f"| {P:g} | {len(br.freq_hz)} | {int(np.sum(br.stable))} | {stick_slip} | "
+                     f"{br.stability_wall_s:.1f} | {st['hb_wall_s']:.1f} | {bif} | {len(ok)}/{len(result.checks[P])} "
+                     f"| {worst} |")
+    lines += ["", "## The stepped sine by the exact friction integrator (frc_friction_checks.csv)", "",
+              f"Up the band at {spec.stepped_sine_points} frequencies, the state (sliders included) carried from one "
+              f"to the next; each settled until its last period's amplitudes move by less than "
+              f"{spec.stepped_sine_tol:g} (relative) over {10} periods, or {spec.stepped_sine_max_s:g} s; compared "
+              "with the HB solution at its frequency on the stable piece nearest it (the largest relative error over "
+              f"the points {', '.join(names)}).", "",
+              "| level [N] | f [Hz] | " + " | ".join(f"{n} exact / HB [m]" for n in names)
+              + " | error | settled | friction work a period [J] |",
+              "|---" * (len(names) + 5) + "|"]
+    for P, checks in result.checks.items():
+        for c in checks:
+            amps = " | ".join(f"{e:.4g} / {h:.4g}" for e, h in zip(c.exact_m, c.hb_m, strict=True))
+            lines.append(f"| {P:g} | {c.freq_hz:.4g} | {amps} | {c.rel_error:.3g} | "
+                         f"{'yes' if c.settled else f'no ({c.settled_change:.2g})'} | "
+                         f"{c.friction_work_per_period_J:.3g} |")
+    lines += ["", "## Skipped with friction, and why", ""]
+    lines += [f"- **{what}**: {why}." for what, why in SKIPPED]
+    return "\n".join(lines) + "\n"
+
+
+def _plot(path, result) -> None:
+    """frc.png: the HB curves at the load's point (stable solid, unstable dotted), the frictionless open-gap
+    response dashed, the exact settled points as circles; below, the stick and slip fractions of each slider."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cols = [result.names.index(result.scene.frc.point)]
+    cols += [result.names.index(p) for p in result.scene.frc.also_points if result.names.index(p) not in cols]
+    fig, axes = plt.subplots(len(cols) + 1, 1, figsize=(8, 3.2 * (len(cols) + 1)), sharex=True,
+                             constrained_layout=True)
+    for ax, col in zip(axes, cols, strict=False):
+        for k, (P, br) in enumerate(result.curves.items()):
+            c = f"C{k}"
+            f_lin, a_lin = result.linear[P]
+            ax.plot(f_lin, a_lin[:, col] * 1e3, "--", color=c, lw=0.7, label=f"open gaps, no friction, {P:g} N")
+            if not isinstance(br, Exception):
+                a = br.amplitude_m[:, col] * 1e3
+                ax.plot(br.freq_hz, np.where(br.stable, a, np.nan), "-", color=c, label=f"HB with friction, {P:g} N")
+                ax.plot(br.freq_hz, np.where(br.stable, np.nan, a), ":", color=c)
+            pts = result.checks[P]
+            ax.plot([p.freq_hz for p in pts], [p.exact_m[col] * 1e3 for p in pts], "o", mfc="none", color=c,
+                    label=f"exact, settled, {P:g} N")
+        ax.set_yscale("log")
+        ax.set_ylabel(f"max |{result.names[col]}| [mm]")
+        ax.legend(fontsize=7)
+    ax = axes[-1]
+    for k, (P, br) in enumerate(result.curves.items()):
+        if isinstance(br, Exception):
+            continue
+        ss = np.array([br.balance.slider_state(z) for z in br.z])
+        for j, name in enumerate(br.balance.system.friction.names):
+            ax.plot(br.freq_hz, ss[:, j, 1], "-", color=f"C{k}", lw=0.8 + j, label=f"{name} stick, {P:g} N")
+            ax.plot(br.freq_hz, ss[:, j, 2], "--", color=f"C{k}", lw=0.8 + j, label=f"{name} slip, {P:g} N")
+    ax.set_ylabel("share of the period")
+    ax.set_xlabel("excitation frequency [Hz]")
+    if ax.lines:
+        ax.legend(fontsize=7, ncol=2)
+    fig.suptitle(f"{result.scene.name}: HB by AFT with friction at the tips", fontsize=10)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
