@@ -139,6 +139,11 @@ class AssemblyModel:
         if self.element not in ("hex8", "hex20", "hex27"):
             raise ValueError(f"element must be hex8, hex20 or hex27, got {self.element!r}")
         Material(self.E, self.nu, self.rho)  # validates the material
+        A = self.beam_mass / (self.rho * self.beam_length)  # a tiny rho overflows it to inf (a float, no error)
+        h = math.sqrt(12 * self.beam_EI / self.E / A) if A > 0 and math.isfinite(A) else 0.0
+        if not (math.isfinite(A) and A > 0 and h > 0 and math.isfinite(A / h)):
+            raise ValueError(f"rho, beam_mass and beam_length give no beam section (A = beam_mass / (rho "
+                             f"beam_length) = {A:.3g} m^2): rho = {self.rho!r} is out of range")
         self.geometry()  # validates the geometry before any gmsh call
 
     @property

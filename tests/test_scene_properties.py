@@ -210,3 +210,11 @@ def test_targets_cover_every_table_and_model_kind():
     kinds = {_scene_data(n).get("model", {}).get("kind", "discrete") for n in builtin_names()}
     assert kinds == set(MODEL_KINDS)
     assert len(TARGETS) > 300
+
+
+def test_a_density_that_overflows_the_beam_section_is_refused():
+    # found by the property test above: rho = 1.1e-308 makes A = beam_mass / (rho l_b) overflow to inf and
+    # the section's width inf / 0 (a ZeroDivisionError, exit 1); now refused in one line naming rho
+    text = ('description = "x"\n\n[model]\nkind = "assembly"\nlayout = "beam-free"\nelement_size = 0.02\n'
+            'rho = 1.1125369292536007e-308\n\n[modal]\nn_modes = 16\nshift_hz = 10.0\n')
+    _check(text, "rho", must_refuse=True)
