@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import reduced.periodic.stability as st
 from reduced.models.discrete import DiscreteParams
 from reduced.periodic.backbones import nnm_branch
 from reduced.periodic.shooting import conservative, shoot
@@ -57,3 +58,43 @@ def test_compare_flags_disagreements():
         [1.0, 2.0, 3.0], [1.0, 2.0, np.nan], [True, False, False], [1.0, 1.0, 1.0], [True, True, True]
     )
     assert list(c.agree) == [True, False, True] and c.n_disagree == 1
+
+
+# Hill's "shift-invert" solver against the dense eigenvalues of the same problem (an independent
+# LAPACK solve), on NNM 2 at H = 15 (companion matrix of 186 rows: the Arnoldi path, not the small-
+# problem fallback). Tolerance on lam T: the two solves differ by round-off times Hill's ill-conditioning,
+# measured below 1e-9 on rom-fep's 697 points; 1e-7 leaves room for another BLAS.
+@pytest.mark.parametrize("E", [0.05, 2.6, 50.0])
+def test_shift_invert_keeps_the_dense_exponents(nnm2_h15, E):
+    b = nnm2_h15
+    i = int(np.argmin(np.abs(np.log(b.energy_J / E))))
+    hb, X, w = b.residual.hb, b.X[i], b.omega[i]
+    T = 2 * np.pi / w
+    J0, J1, J2 = hb.hill_matrices(X, w)
+    near = st._nearest_exponents(J0, J1, J2, hb.n, w, strict_zone=False)
+    assert near is not None  # the Arnoldi path, certified
+    dense = st._dense_eigenvalues(hb, J0, J1, J2, "standard")
+    k = 2 * hb.n + st.EXTRA_EIGENVALUES
+    nearest = dense[np.argsort(np.abs(dense - st.SHIFT * w))[:k]]  # the k nearest the shift, by the dense solve
+    assert near.size == k
+    assert max(np.min(np.abs(nearest - x)) for x in near) * T < 1e-7
+    for strict in (False, True):
+        ref = hill(hb, X, w, solver="standard", strict_zone=strict)
+        si = hill(hb, X, w, solver="shift-invert", strict_zone=strict)
+        assert si.exponents.size == ref.exponents.size and si.stable == ref.stable
+        assert max(np.min(np.abs(si.exponents - x)) for x in ref.exponents) * T < 1e-7
+        assert si.max_multiplier == pytest.approx(ref.max_multiplier, rel=1e-7)
+
+
+def test_shift_invert_falls_back_to_the_dense_solve(nnm2_h15, monkeypatch):
+    b = nnm2_h15
+    hb, X, w = b.residual.hb, b.X[5], b.omega[5]
+    ref = hill(hb, X, w, solver="standard")
+    # a disc that cannot certify the selection, and a problem too small for Arnoldi: the dense solve, bit for bit
+    monkeypatch.setattr(st, "MU_MISSABLE", 1e300)
+    assert st._nearest_exponents(*hb.hill_matrices(X, w), hb.n, w, False) is None
+    assert np.array_equal(hill(hb, X, w, solver="shift-invert").exponents, ref.exponents)
+    monkeypatch.undo()
+    monkeypatch.setattr(st, "DENSE_BELOW", 100)
+    assert st._nearest_exponents(*hb.hill_matrices(X, w), hb.n, w, False) is None
+    assert np.array_equal(hill(hb, X, w, solver="shift-invert").exponents, ref.exponents)

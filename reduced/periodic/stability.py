@@ -27,7 +27,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 from scipy.linalg import eig
+from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigs
 
 from reduced.periodic.hb import HarmonicBalance
 
@@ -66,7 +68,13 @@ class HillResult:
         return self.max_multiplier <= 1.0 + self.tol
 
 
-HILL_SOLVERS = ("qz", "standard")
+HILL_SOLVERS = ("qz", "standard", "shift-invert")
+SHIFT = 0.01  # omega, the real shift of "shift-invert": off the trivial pair at 0 (J0 singular), inside the zone
+EXTRA_EIGENVALUES = 16  # "shift-invert" asks ARPACK for 2n + this many eigenvalues nearest the shift
+MU_MISSABLE = 1e4  # "shift-invert" is taken only if a first-zone exponent outside ARPACK's disc would have |mu| above
+# this (the largest Hill multiplier on rom-fep's drawn branches is 8.3e2, Floquet's 1.1e2); else the dense "standard"
+DENSE_BELOW = 4  # "shift-invert" falls back to "standard" when the companion matrix has fewer than this many times
+# the eigenvalues asked for (H = 1 of a 12-DOF model: 72 rows, dense in 1 ms)
 
 
 def hill(hb: HarmonicBalance, X: np.ndarray, omega: float, tol: float = HILL_TOL,
@@ -78,7 +86,13 @@ def hill(hb: HarmonicBalance, X: np.ndarray, omega: float, tol: float = HILL_TOL
     B^-1 A with the Hessenberg QR, about 3 times faster (1.2 s against 0.37 s at n = 12,
     H = 15). Both give the same exponents up to round-off (the multipliers of a reduced
     model agree to ~1e-5: Hill's eigenvalues are ill-conditioned); the 3-DOF results were
-    made with "qz" and are kept so, bit for bit.
+    made with "qz" and are kept so, bit for bit. "shift-invert" computes only the eigenvalues
+    nearest the real shift ``SHIFT`` omega (:func:`_nearest_exponents`: ARPACK on the pencil
+    shifted and inverted through Q(sigma) = J0 + sigma J1 + sigma^2 J2, one LU of n (2H+1) rows),
+    which hold the first zone: 3.5 times faster than "standard" at n = 12, H = 9 (15 against
+    52 ms a point), the same exponents to ~1e-11 omega. It falls back to "standard" where
+    ARPACK does not converge, where the problem is small (``DENSE_BELOW``) or where its disc
+    of eigenvalues does not certify the selection below (``MU_MISSABLE``).
 
     The 2n exponents kept are those of smallest |Im lam|; with ``strict_zone`` only those in
     the first zone itself, |Im lam| <= omega / 2 (at most 2n). A model with modes above
@@ -96,7 +110,7 @@ def hill(hb: HarmonicBalance, X: np.ndarray, omega: float, tol: float = HILL_TOL
         rad/s, the solution's frequency.
     tol : float
         Stability tolerance stored in the result.
-    solver : {'qz', 'standard'}
+    solver : {'qz', 'standard', 'shift-invert'}
         Eigensolver (above).
     strict_zone : bool
         Keep only the exponents with |Im lam| <= omega / 2.
@@ -113,18 +127,10 @@ def hill(hb: HarmonicBalance, X: np.ndarray, omega: float, tol: float = HILL_TOL
     if solver not in HILL_SOLVERS:
         raise ValueError(f"solver must be one of {', '.join(HILL_SOLVERS)}, got {solver!r}")
     J0, J1, J2 = hb.hill_matrices(X, omega)
-    nX = hb.size
     n = hb.n
-    Z = np.zeros((nX, nX))
-    I = np.eye(nX)
-    if solver == "standard":
-        Minv = np.linalg.inv(hb.M)
-        J2inv = np.kron(np.eye(2 * hb.H + 1), Minv)  # J2 = kron(I, M)
-        lam = np.linalg.eigvals(np.block([[Z, I], [-J2inv @ J0, -J2inv @ J1]]))
-    else:
-        A = np.block([[Z, I], [-J0, -J1]])
-        B = np.block([[I, Z], [Z, J2]])
-        lam = eig(A, B, right=False)
+    lam = _nearest_exponents(J0, J1, J2, n, omega, strict_zone) if solver == "shift-invert" else None
+    if lam is None:
+        lam = _dense_eigenvalues(hb, J0, J1, J2, "qz" if solver == "qz" else "standard")
     lam = lam[np.isfinite(lam)]
     # each exponent recurs shifted by i k omega: keep the copies in the first zone
     keep = np.argsort(np.abs(lam.imag), kind="stable")[: 2 * n]
@@ -135,6 +141,72 @@ def hill(hb: HarmonicBalance, X: np.ndarray, omega: float, tol: float = HILL_TOL
     mu = np.exp(lam * T)
     order = np.argsort(-np.abs(mu), kind="stable")
     return HillResult(lam[order], mu[order], tol)
+
+
+def _dense_eigenvalues(hb: HarmonicBalance, J0: np.ndarray, J1: np.ndarray, J2: np.ndarray, solver: str
+                       ) -> np.ndarray:
+    """All 2 n (2H+1) eigenvalues of Hill's companion pencil, by QZ or the standard form (:func:`hill`)."""
+    nX = hb.size
+    Z = np.zeros((nX, nX))
+    I = np.eye(nX)
+    if solver == "standard":
+        Minv = np.linalg.inv(hb.M)
+        J2inv = np.kron(np.eye(2 * hb.H + 1), Minv)  # J2 = kron(I, M)
+        return np.linalg.eigvals(np.block([[Z, I], [-J2inv @ J0, -J2inv @ J1]]))
+    A = np.block([[Z, I], [-J0, -J1]])
+    B = np.block([[I, Z], [Z, J2]])
+    return eig(A, B, right=False)
+
+
+def _nearest_exponents(J0: np.ndarray, J1: np.ndarray, J2: np.ndarray, n: int, omega: float,
+                       strict_zone: bool) -> np.ndarray | None:
+    """The eigenvalues of Hill's problem nearest sigma = SHIFT omega, which hold every exponent
+    :func:`hill` keeps, or None (use a dense solver).
+
+    ARPACK (``eigs``, largest modulus) on the companion pencil shifted and inverted: (A - sigma)^-1
+    [f; g] = [u; f + sigma u] with Q(sigma) u = -J2 g - (J1 + sigma J2) f, Q(sigma) = J0 + sigma J1
+    + sigma^2 J2 (one LU of n (2H+1) rows, no companion matrix), k = 2n + EXTRA_EIGENVALUES
+    eigenvalues, a fixed start vector (the same bits in every call), converged to machine
+    precision. They are the k eigenvalues nearest sigma: every eigenvalue inside the disc
+    |lam - sigma| < R (R: the farthest found) is among them. The exponents :func:`hill` keeps
+    have |Im lam| <= b (omega / 2 with ``strict_zone``, else the largest |Im| kept), so one
+    outside the disc would have |Re lam| >= sqrt(R^2 - b^2): the disc is taken only if that
+    is |mu| = exp(|Re lam| T) > MU_MISSABLE; else None, as where ARPACK does not converge.
+    """
+    nX = J0.shape[0]
+    k = 2 * n + EXTRA_EIGENVALUES
+    if 2 * nX < DENSE_BELOW * k:
+        return None
+    sigma = SHIFT * omega
+    try:
+        lu = scipy.linalg.lu_factor(J0 + sigma * J1 + sigma**2 * J2)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    J1s = J1 + sigma * J2
+
+    def solve(z: np.ndarray) -> np.ndarray:
+        f, g = z[:nX], z[nX:]
+        u = scipy.linalg.lu_solve(lu, -(J2 @ g) - J1s @ f)
+        return np.concatenate([u, f + sigma * u])
+
+    op = LinearOperator((2 * nX, 2 * nX), matvec=solve, dtype=float)
+    v0 = np.random.default_rng(0).standard_normal(2 * nX)
+    try:
+        nu = eigs(op, k=k, which="LM", v0=v0, tol=0.0, return_eigenvectors=False)
+    except ArpackNoConvergence:
+        return None
+    if not np.all(np.isfinite(nu)) or np.any(nu == 0.0):
+        return None
+    lam = sigma + 1.0 / nu
+    R = float(np.min(np.abs(nu))) ** -1
+    if strict_zone:
+        b = 0.5 * omega * (1.0 + 1e-9)  # hill's zone test
+    else:
+        b = float(np.sort(np.abs(lam.imag))[2 * n - 1])
+    T = 2.0 * np.pi / omega
+    if R <= b or T * np.sqrt(R**2 - b**2) <= np.log(MU_MISSABLE):
+        return None
+    return lam
 
 
 @dataclass(frozen=True, eq=False)
