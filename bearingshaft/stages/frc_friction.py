@@ -24,11 +24,11 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 
 from bearingshaft.scenes import Scene
+from bearingshaft.stages.frc_friction_results import SKIPPED, FrictionCheck, FrictionFRCResult  # noqa: F401
 from bearingshaft.systems import model_system
 from reduced.models.loads import Harmonic, Loads
 from reduced.periodic.continuation import ContinuationError
@@ -38,59 +38,27 @@ from reduced.transient.friction import integrate_exact_friction
 
 SAMPLES_PER_PERIOD = 400  # of the exact run's output: the amplitude read on these (error ~ (pi / 400)^2 / 2 = 3e-5)
 SETTLE_CHUNK = 10  # periods run at a time between two settling checks
-SKIPPED = (
-    ("converged curve by shooting", "the multiple shooting runs the exact flow without sliders: the sliders' "
-     "positions are not in its state vector, so its periodic orbits are those of the frictionless system"),
-    ("Floquet multipliers by shooting and monodromy", "the same: Hill's method on the consistent AFT Jacobian "
-     "gives the stability instead"),
-    ("response map", "its classifier (periodic, subharmonic, chaotic, Lyapunov exponent) runs the exact flow "
-     "without sliders"),
-    ("convergence in H", "each H's curve is a continuation with AFT (tens of seconds a curve); the stepped "
-     "sine's error at the curve's H says how far it is"),
-    ("backbone check", "with friction the free motion is not conservative: no NNM backbone to approach"),
-)
-
-
-@dataclass(eq=False)
-class FrictionCheck:
-    """One settled frequency of the stepped sine by the exact friction integrator, against HB."""
-
-    level_N: float
-    freq_hz: float
-    exact_m: np.ndarray  # (p,) m, max |x| over the last period at each output point
-    hb_m: np.ndarray  # (p,) m, the HB solution at freq_hz (NaN where no stable piece brackets it)
-    settled_change: float  # relative change of the amplitudes over the last SETTLE_CHUNK periods
-    settled: bool
-    simulated_s: float
-    friction_work_per_period_J: float  # of the last period
-
-    @property
-    def rel_error(self) -> float:
-        """Largest |HB / exact - 1| over the output points (NaN without an HB solution)."""
-        return float(np.max(np.abs(self.hb_m / self.exact_m - 1.0))) if np.all(np.isfinite(self.hb_m)) else math.nan
-
-
-@dataclass(eq=False)
-class FrictionFRCResult:
-    """What :func:`compute` returns (:func:`write` writes it)."""
-
-    scene: Scene
-    names: tuple[str, ...]
-    load: np.ndarray  # (n,) the load direction b
-    curves: dict  # {P: FRCBranch or ContinuationError}
-    checks: dict  # {P: [FrictionCheck]}
-    linear: dict  # {P: (freq_hz (k,), amplitude (k, p))} the open-gap response without friction
-    stats: dict = field(default_factory=dict)
-
-
 def has_friction(scene: Scene) -> bool:
-    """The scene's model has friction at its tips (mu > 0)."""
+    """The scene's model has friction at its tips (mu > 0).
+
+    Parameters
+    ----------
+    scene : the scene
+    """
     return float(getattr(scene.model, "mu", 0.0) or 0.0) > 0.0
 
 
 def load_vector(spec, rows: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
     """(n,) b: the row of ``[frc] point`` plus ``also_weights`` times the rows of ``also_points``.
 
+    Parameters
+    ----------
+    spec : the [frc] table
+    rows : (p, n) the output points' rows
+    names : the output points' names
+
+    Examples
+    --------
     >>> import numpy as np
     >>> from bearingshaft.scenes.tables import FRCSpec
     >>> load_vector(FRCSpec(point="x3", also_points=("u",), also_weights=(0.5,)), np.eye(4), ("x1", "x2", "x3", "u"))
@@ -106,6 +74,16 @@ def settle(system, b: np.ndarray, P: float, f: float, state, tol: float, max_s: 
     """The exact friction response at f from ``state`` = (x, v, w), run SETTLE_CHUNK periods at a time until the
     last period's amplitudes at the points move by less than ``tol`` (relative) from those SETTLE_CHUNK periods
     before, or ``max_s``.
+
+    Parameters
+    ----------
+    system : the gap system with sliders
+    b : (n,) the load direction
+    P : N, the load amplitude
+    f : Hz, the load frequency
+    state : (x, v, w) the start: positions, velocities, the sliders' positions
+    tol : relative change that counts as settled
+    max_s : s, the longest run
 
     Returns
     -------

@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from bearingshaft.output import write_rows
+from bearingshaft.stages.frc_friction_results import SKIPPED
 
 
 def write(result, writer) -> None:
@@ -27,7 +28,13 @@ def write(result, writer) -> None:
 
 def curve_rows(result) -> list[dict]:
     """frc.csv: per level and HB point, the amplitude at every point, each slider's open, stick and slip
-    fractions of the period, the largest Hill multiplier and the verdict."""
+    fractions of the period, the largest Hill multiplier and the verdict.
+
+
+    Parameters
+    ----------
+    result : FrictionFRCResult
+    """
     rows = []
     for P, br in result.curves.items():
         if isinstance(br, Exception):
@@ -46,7 +53,13 @@ def curve_rows(result) -> list[dict]:
 
 
 def check_rows(result) -> list[dict]:
-    """frc_friction_checks.csv: the stepped sine's settled points against HB."""
+    """frc_friction_checks.csv: the stepped sine's settled points against HB.
+
+
+    Parameters
+    ----------
+    result : FrictionFRCResult
+    """
     rows = []
     for P, checks in result.checks.items():
         for c in checks:
@@ -61,9 +74,13 @@ def check_rows(result) -> list[dict]:
 
 
 def markdown(result) -> str:
-    """frc.md: the curves, their stability through stick-slip, the exact check, and what is skipped and why."""
-    from bearingshaft.stages.frc_friction import SKIPPED
+    """frc.md: the curves, their stability through stick-slip, the exact check, and what is skipped and why.
 
+
+    Parameters
+    ----------
+    result : FrictionFRCResult
+    """
     spec, names = result.scene.frc, result.names
     sys_f = next((br.balance.system.friction for br in result.curves.values() if not isinstance(br, Exception)),
                  None)

@@ -400,7 +400,10 @@ def _node_peaks(lam, V, Vinv, yp, valid, B, offset, side, Y0, h, hmin, omega, fY
     form sampled (``samples_per_rad`` per radian of its fastest mode, 8 to ``q_max`` samples) and
     each extreme refined by safeguarded Newton on the closed form's derivative. Returns a status
     as :func:`_march_nodes`. Where st_n[k] >= 0 the node's contact-state stretches are taken from
-    st_state[k], st_tau[k] (recorded by :func:`_residual_kernel`) instead of marching again."""
+    st_state[k], st_tau[k] (recorded by :func:`_residual_kernel`) instead of marching again.
+
+    Long because it is one numba kernel: per stretch the output rows are projected once and the samples
+    stepped by e^{lam dt}, and each bracketed extreme refined in place, without allocating per sample."""
     S, N = Y0.shape
     n = N // 2
     m = B.shape[0]
