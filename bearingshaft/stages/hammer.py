@@ -780,8 +780,11 @@ def estimate(scene: Scene) -> list[Estimate]:
         states = (1 + 2 * 3 ** (p // 4)) ** 2  # sliders each sticking or slipping either way), two tips
         N = 2 * n + p  # [x; v; w]
         # V, V^-1 (complex), the friction power's form and the state's stiffness, in the friction table, its modal
-        # table and the forced one: three of like size (hammer-friction: 3553 MiB measured, 361 states)
-        exact += 3 * states * ((2 * 16 + 8) * N**2 + 8 * n**2)
+        # table and the forced one (built a chunk of states at a time): 2.3 tables' worth at the peak, and each
+        # level's record held twice (the run with sliders and its histories): calibrated on hammer-friction (3
+        # levels, 3552 MiB measured) and hammer-friction-oblique (1 level, 3183 MiB), 361 states each
+        exact += 2.3 * states * ((2 * 16 + 8) * N**2 + 8 * n**2)
+        levels *= 2
     return [Estimate("hammer", int(MATPLOTLIB_BYTES + COPIES * samples * per + levels * samples * per + exact),
                      f"{levels} records of {samples:.3g} samples x {n} DOFs",
                      "[ringdown] duration_s or sample_rate_hz, or [hammer] levels_N")]
