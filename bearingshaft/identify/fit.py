@@ -53,6 +53,7 @@ CORRELATION_LIMIT = 0.95  # |corr| at or above which two parameters are reported
 CONDITION_LIMIT = 1e6  # condition number of the scaled J^T J above which it is reported as near-singular
 XTOL = 1e-3  # stop when a step changes theta by less than this (relative): 0.1 %, far below any interval
 FTOL = 1e-4  # ... or the cost by less than this share
+CLOUD_STEPS = 3.0  # the cloud's half-width in finite-difference steps (module docstring)
 
 
 class SerialEvaluator:
@@ -80,6 +81,12 @@ class SerialEvaluator:
     def records(self, thetas) -> list:
         """(t, data) of the compared channels at ``thetas`` (:func:`bearingshaft.identify.problem.channels_at`)."""
         return [channels_at(self.problem, th) for th in thetas]
+
+    def scatter(self, target, theta, points, draws: int) -> list[Evaluation]:
+        """The point with its noise variances from ``draws`` draws, then the cloud's ``points``, the k-th with the
+        force redrawn by seed k + 1 (:mod:`bearingshaft.identify.scatter`)."""
+        return [evaluate(self.problem, target, theta, noise_draws=draws),
+                *[evaluate(self.problem, target, q, force_seed=k + 1) for k, q in enumerate(points)]]
 
 
 @dataclass(frozen=True, eq=False)
@@ -246,9 +253,23 @@ class _Runs:
         return np.column_stack(cols)
 
 
-def _weights_at(runs_at, theta) -> dict[str, BlockWeight]:
-    ev = runs_at([np.asarray(theta, float)])[0]
-    return block_weights(ev.blocks)
+def _weights_at(runs: _Runs, theta, kind: str) -> tuple[dict[str, BlockWeight], dict, dict]:
+    """The blocks' weights at ``theta`` from their scatters there, the slopes of their local planes and the
+    realisations of the scatter (:mod:`bearingshaft.identify.scatter`: the point with K_NOISE noise draws and
+    the cloud around it, one batch); the point joins the cache. Returns (weights, {block: (n_b, p) slopes},
+    {"noise": {block: (draws, n_b)}, "chaos": {block: (runs, n_b)}})."""
+    from bearingshaft.identify.scatter import K_NOISE, cloud, local_fit, sigmas
+
+    theta = np.asarray(theta, float).copy()
+    points = cloud(theta, CLOUD_STEPS * runs.step, (runs.lo, runs.hi), seed=len(runs.history))
+    evs = runs.evaluator.scatter(runs.handle, theta, points, K_NOISE)
+    base = evs[0]
+    runs.cache.setdefault(theta.tobytes(), base)
+    for ev in evs:
+        runs._log(ev, kind)
+    slopes, rough, about = local_fit(theta, [theta, *points], [e.blocks for e in evs])
+    weights = block_weights(base.blocks, sigmas(base.noise_var, rough, base.blocks))
+    return weights, slopes, {"noise": base.noise_draws, "chaos": about}
 
 
 def _target(problem: Problem, theta):
@@ -264,7 +285,7 @@ def _scan(problem: Problem, evaluator, theta: np.ndarray, bounds, history: list,
     target = _target(problem, theta)
     handle = evaluator.put(target)
     probe = _Runs(evaluator, handle, problem, {}, spec.step, bounds, 0, history)
-    weights = block_weights(probe.run([np.asarray(theta, float)], ["scan"])[0].blocks)
+    weights, _, _ = _weights_at(probe, theta, "scan")
     # the pointwise block is left out of the scan: a model a period early or late misfits it more than one that
     # never closes a gap, while the envelopes see the impacts' energy whatever their phase
     weights = {m: (w if m != "time" else replace(w, weight=0.0)) for m, w in weights.items()}
@@ -323,7 +344,7 @@ def identify(problem: Problem, evaluator=None, progress=None) -> Fit:
         target = _target(problem, theta)
         handle = evaluator.put(target)
         probe = _Runs(evaluator, handle, problem, {}, spec.step, bounds, k + 1, history)
-        weights = block_weights(probe.run([np.asarray(theta, float)], ["point"])[0].blocks)
+        weights, _, _ = _weights_at(probe, theta, "scatter")
         runs = _Runs(evaluator, handle, problem, weights, spec.step, bounds, k + 1, history)
         runs.cache.update(probe.cache)
         r0 = runs.residuals(theta)
@@ -340,24 +361,29 @@ def identify(problem: Problem, evaluator=None, progress=None) -> Fit:
         if k > 0 and np.max(np.abs(theta - start)) < XTOL:
             break
     # the covariance at the optimum, with the weights (and target) taken there
-    weights = _weights_at(lambda ths: runs.run(ths, ["point"]), theta)
+    # the covariance at the optimum: the weights, the Jacobian (the local planes' slopes over the cloud, a
+    # regression over the step rather than a difference of two runs) and the scatter's realisations, taken there
+    p = theta.size
+    runs.weights = {}
+    weights, slopes, draws = _weights_at(runs, theta, "final")
     runs.weights = weights
     r = stacked(runs.run([theta], ["point"])[0].blocks, weights)
-    J = runs.jacobian(theta, central=True)
-    p = theta.size
+    J = np.vstack([weights[m].apply_rows(slopes[m]) if m in slopes else np.zeros((weights[m].n, p))
+                   for m in weights])
     n_eff = float(sum(w.n_eff for w in weights.values()))
     norms = np.linalg.norm(J, axis=0)
     seen = norms > 0  # a parameter the residuals do not see has no information: an unbounded interval
     cov = np.full((p, p), math.nan)
-    cov_seen, s2, dof, tq = covariance(J[:, seen], r, n_eff, spec.confidence)
+    G = gradient_scatter(J, weights, draws)
+    cov_seen, s2, dof, tq = sandwich(J[:, seen], r, n_eff, spec.confidence,
+                                     {k: g[:, seen] for k, g in G.items()})
     cov[np.ix_(seen, seen)] = cov_seen
     sig = np.where(seen, np.sqrt(np.maximum(np.diag(cov), 0.0)), math.inf)
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(sig, sig)
     ci = {}
     for i, par in enumerate(problem.parameters):
-        lo, hi = par.value(theta[i] - tq * sig[i]), par.value(theta[i] + tq * sig[i])
-        ci[par.key] = (min(lo, hi), max(lo, hi))
+        ci[par.key] = interval(par, float(theta[i]), float(tq * sig[i]))
     Js = J / np.where(norms > 0, norms, 1.0)
     ev, vec = np.linalg.eigh(Js.T @ Js)
     cond = float(ev[-1] / ev[0]) if ev[0] > 0 else math.inf
@@ -369,9 +395,11 @@ def identify(problem: Problem, evaluator=None, progress=None) -> Fit:
                notes, weights, passes, history, target, stats)
 
 
-def covariance(J: np.ndarray, r: np.ndarray, n_eff: float, confidence: float) -> tuple[np.ndarray, float, float,
-                                                                                       float]:
-    """C = s^2 (J^T J)^+ of the scaled parameters, s^2 = |r|^2 / (N_eff - p), and the t quantile (module docstring).
+def covariance(J: np.ndarray, r: np.ndarray, n_eff: float, confidence: float,
+               min_s2: float = 0.0) -> tuple[np.ndarray, float, float, float]:
+    """C = s^2 (J^T J)^+ of the scaled parameters, s^2 = max(min_s2, |r|^2 / (N_eff - p)), and the t quantile
+    (the textbook intervals, as :func:`sandwich` has them when the weighted residuals are independent with unit
+    variance).
 
     Parameters
     ----------
@@ -383,6 +411,9 @@ def covariance(J: np.ndarray, r: np.ndarray, n_eff: float, confidence: float) ->
         Their effective number of independent values.
     confidence : float
         In (0, 1).
+    min_s2 : float
+        s^2 at least this: 1 when the residuals are weighted by their scatters (a fit closer than the noise
+        and chaos allow is luck, not precision); 0: the textbook s^2.
 
     Returns
     -------
@@ -392,9 +423,110 @@ def covariance(J: np.ndarray, r: np.ndarray, n_eff: float, confidence: float) ->
 
     p = J.shape[1]
     dof = max(n_eff - p, 1.0)
-    s2 = float(r @ r) / dof
+    s2 = max(float(min_s2), float(r @ r) / dof)
     cov = s2 * np.linalg.pinv(J.T @ J)
     return cov, s2, dof, float(student_t.ppf(0.5 + 0.5 * confidence, dof))
+
+
+def gradient_scatter(J: np.ndarray, weights: dict, draws: dict) -> dict:
+    """{kind: (k, p) g}: each realisation of the scatter (:mod:`bearingshaft.identify.scatter`) weighted as the
+    residuals and projected on J, g = J^T e; a block without realisations of a kind adds J_b^T e for the
+    e its weights assume (unit variance, n_eff independent: ``{"assumed": (p, p) J_b^T J_b summed}``).
+
+    Parameters
+    ----------
+    J : (N, p) ndarray of float
+        The weighted Jacobian, blocks in ``weights``' order.
+    weights : dict
+        {block: BlockWeight}.
+    draws : dict
+        {"noise": {block: (k, n_b)}, "chaos": {block: (k, n_b)}}, each realisation's residuals (the chaos ones
+        already over sqrt(dof)).
+
+    Returns
+    -------
+    dict
+        {"noise": (k, p), "chaos": (k, p), "assumed": (p, p)}.
+    """
+    p = J.shape[1]
+    out = {}
+    assumed = np.zeros((p, p))
+    off = {}
+    i = 0
+    for m, w in weights.items():
+        off[m] = slice(i, i + w.n)
+        i += w.n
+    for kind in ("noise", "chaos"):
+        real = draws.get(kind, {})
+        k = max((v.shape[0] for v in real.values()), default=0)
+        g = np.zeros((k, p))
+        for m, w in weights.items():
+            Jb = J[off[m]]
+            if m in real and real[m].shape == (k, w.n):
+                g += np.array([Jb.T @ w.apply(e) for e in real[m]])
+            elif kind == "noise":  # no draws kept (a long pointwise block): as its weights assume
+                assumed += Jb.T @ Jb
+        if kind == "noise" and k > 1:
+            g = g / math.sqrt(k - 1)  # the draws' deviations from their mean: k - 1 degrees of freedom
+        out[kind] = g
+    out["assumed"] = assumed
+    return out
+
+
+def sandwich(J: np.ndarray, r: np.ndarray, n_eff: float, confidence: float, G: dict) -> tuple[np.ndarray, float,
+                                                                                            float, float]:
+    """C = s^2 A^-1 B A^-1, A = J^T J, B = sum_k g_k g_k^T + the assumed part (:func:`gradient_scatter`): the
+    covariance of the estimate from what the noise and chaos do to the gradient, with all their
+    correlations; s^2 = max(1, |r|^2 / (N_eff - p)) the misfit beyond them (model error), and the t quantile
+    with the realisations' degrees of freedom (the noise draws' less one and the cloud's about its planes).
+
+    Parameters
+    ----------
+    J : (N, p) ndarray of float
+    r : (N,) ndarray of float
+        The weighted residuals at the optimum.
+    n_eff : float
+    confidence : float
+    G : dict
+        From :func:`gradient_scatter` (columns of the parameters seen).
+
+    Returns
+    -------
+    (C, s2, dof, t)
+    """
+    from scipy.stats import t as student_t
+
+    p = J.shape[1]
+    A_inv = np.linalg.pinv(J.T @ J)
+    B = G["assumed"].copy()
+    dof = 0.0
+    for kind in ("noise", "chaos"):
+        g = G.get(kind)
+        if g is not None and g.shape[0]:
+            B += g.T @ g
+            dof += g.shape[0] - (1 if kind == "noise" else 0)
+    chaos = G.get("chaos")
+    if chaos is not None and chaos.shape[0]:
+        dof -= p + 1  # the cloud's runs less the planes' p + 1 coefficients
+    dof = max(dof, 1.0)
+    s2 = max(1.0, float(r @ r) / max(n_eff - p, 1.0))
+    return s2 * A_inv @ B @ A_inv, s2, dof, float(student_t.ppf(0.5 + 0.5 * confidence, dof))
+
+
+UNBOUNDED = 50.0  # a half-width in theta past this (a factor e^50 on a log scale): the interval is unbounded
+
+
+def interval(par, theta: float, half: float) -> tuple[float, float]:
+    """(low, high) of ``par`` for theta -+ half (unbounded: -inf or 0 for a log scale, and inf, past UNBOUNDED).
+
+    >>> from bearingshaft.identify.parameters import Parameter
+    >>> interval(Parameter("model.gap", "m", 1e-4, 1e-5, 1e-3, "log"), 0.0, 1e9)
+    (0.0, inf)
+    """
+    if not math.isfinite(half) or half > UNBOUNDED:
+        return (0.0 if par.scale == "log" else -math.inf), math.inf
+    lo, hi = par.value(theta - half), par.value(theta + half)
+    return min(lo, hi), max(lo, hi)
 
 
 def interval_half_widths(J: np.ndarray, r: np.ndarray, n_eff: float, confidence: float) -> np.ndarray:
