@@ -54,6 +54,7 @@ CONDITION_LIMIT = 1e6  # condition number of the scaled J^T J above which it is 
 XTOL = 1e-3  # stop when a step changes theta by less than this (relative): 0.1 %, far below any interval
 FTOL = 1e-4  # ... or the cost by less than this share
 CLOUD_STEPS = 3.0  # the cloud's half-width in finite-difference steps (module docstring)
+MULTI_STARTS = 3  # the first pass runs from this many of the scan's points (module docstring)
 
 
 class SerialEvaluator:
@@ -278,9 +279,10 @@ def _target(problem: Problem, theta):
                          frame_s=sp.window_s if sp else 0.05, fmax_hz=sp.fmax_hz if sp else None)[0]
 
 
-def _scan(problem: Problem, evaluator, theta: np.ndarray, bounds, history: list, say) -> np.ndarray:
-    """The least squares' start: each parameter in turn over ``[identify] scan`` points across its bounds, the
-    others at the best so far, the target and weights at ``theta`` (module docstring)."""
+def _scan(problem: Problem, evaluator, theta: np.ndarray, bounds, history: list, say) -> list[np.ndarray]:
+    """The least squares' starts: each parameter in turn over ``[identify] scan`` points across its bounds, the
+    others at the best so far, the target and weights at ``theta``; the MULTI_STARTS cheapest points apart
+    (:func:`starts_from`; module docstring)."""
     spec = problem.scene.identify
     target = _target(problem, theta)
     handle = evaluator.put(target)
@@ -290,10 +292,11 @@ def _scan(problem: Problem, evaluator, theta: np.ndarray, bounds, history: list,
     # never closes a gap, while the envelopes see the impacts' energy whatever their phase
     weights = {m: (w if m != "time" else replace(w, weight=0.0)) for m, w in weights.items()}
     if not any(w.weight > 0 for w in weights.values()):
-        return np.asarray(theta, float)
+        return [np.asarray(theta, float)]
     runs = _Runs(evaluator, handle, problem, weights, spec.step, bounds, 0, history)
     runs.cache.update(probe.cache)
     best = np.asarray(theta, float).copy()
+    seen: dict[bytes, tuple[float, np.ndarray]] = {}
     for j, par in enumerate(problem.parameters):
         trial = []
         for v in np.linspace(bounds[0][j], bounds[1][j], spec.scan):
@@ -302,9 +305,36 @@ def _scan(problem: Problem, evaluator, theta: np.ndarray, bounds, history: list,
             trial.append(t)
         evs = runs.run([best, *trial], ["scan"] * (len(trial) + 1))
         costs = [float(np.sum(stacked(e.blocks, weights) ** 2)) for e in evs]
+        for c, t in zip(costs, [best, *trial], strict=True):
+            seen[t.tobytes()] = (c, t.copy())
         best = [best, *trial][int(np.argmin(costs))].copy()
         say(f"scan of {par.key}: {par.value(best[j]):.4g} (cost {min(costs):.4g})")
-    return best
+    return starts_from([v for v in seen.values()], (bounds[1] - bounds[0]) / max(spec.scan - 1, 1), MULTI_STARTS)
+
+
+def starts_from(scanned: list, spacing: np.ndarray, n: int) -> list[np.ndarray]:
+    """The ``n`` cheapest scanned points at least 1.5 scan spacings apart in some parameter (the first the cheapest).
+
+    Parameters
+    ----------
+    scanned : list of (cost, theta)
+    spacing : (p,) ndarray of float
+        The scan's spacing in each scaled parameter.
+    n : int
+
+    Examples
+    --------
+    >>> pts = [(1.0, np.array([0.0])), (1.1, np.array([0.1])), (2.0, np.array([1.0]))]
+    >>> [float(t[0]) for t in starts_from(pts, np.array([0.1]), 2)]
+    [0.0, 1.0]
+    """
+    out: list[np.ndarray] = []
+    for _, t in sorted(scanned, key=lambda ct: ct[0]):
+        if all(np.max(np.abs(t - u) / np.maximum(spacing, 1e-300)) >= 1.5 for u in out):
+            out.append(t)
+        if len(out) == n:
+            break
+    return out
 
 
 def identify(problem: Problem, evaluator=None, progress=None) -> Fit:
@@ -338,26 +368,37 @@ def identify(problem: Problem, evaluator=None, progress=None) -> Fit:
     passes: list[Pass] = []
     runs = None
     target = None
+    starts = [theta]
     if spec.scan:
-        theta = _scan(problem, evaluator, theta, bounds, history, say)
+        starts = _scan(problem, evaluator, theta, bounds, history, say)
+        theta = starts[0]
     for k in range(spec.passes):
         target = _target(problem, theta)
         handle = evaluator.put(target)
         probe = _Runs(evaluator, handle, problem, {}, spec.step, bounds, k + 1, history)
         weights, _, _ = _weights_at(probe, theta, "scatter")
-        runs = _Runs(evaluator, handle, problem, weights, spec.step, bounds, k + 1, history)
-        runs.cache.update(probe.cache)
-        r0 = runs.residuals(theta)
-        say(f"pass {k + 1}: {horizon_text(target)}; cost {float(r0 @ r0):.4g} at the start")
-        start = theta.copy()
-        res = least_squares(runs.residuals, theta, jac=runs.jacobian, bounds=bounds, method="trf",
-                            x_scale=1.0, xtol=XTOL, ftol=FTOL, max_nfev=spec.max_iterations)
-        theta = np.clip(res.x, *bounds)
+        best = None
+        # the first pass runs from each of the scan's starts with the target and weights of the cheapest (so that
+        # their costs compare) and keeps the lowest end; later passes from the last optimum alone
+        for start in (starts if k == 0 else [theta]):
+            runs = _Runs(evaluator, handle, problem, weights, spec.step, bounds, k + 1, history)
+            runs.cache.update(probe.cache)
+            r0 = runs.residuals(start)
+            say(f"pass {k + 1}: {horizon_text(target)}; cost {float(r0 @ r0):.4g} at the start "
+                + ", ".join(f"{key} = {v:.4g}" for key, v in problem.values(start).items()))
+            res = least_squares(runs.residuals, start, jac=runs.jacobian, bounds=bounds, method="trf",
+                                x_scale=1.0, xtol=XTOL, ftol=FTOL, max_nfev=spec.max_iterations)
+            end = np.clip(res.x, *bounds)
+            say(f"pass {k + 1}: {res.nfev} trial points, cost {2.0 * res.cost:.4g}: "
+                + ", ".join(f"{key} = {v:.4g}" for key, v in problem.values(end).items()))
+            if best is None or res.cost < best[1].cost:
+                best = (start.copy(), res, end, float(r0 @ r0), runs)
+            probe.cache.update(runs.cache)
+        start, res, theta, cost0, runs = best
         hz = target.horizon.horizon_s if target.horizon is not None else math.inf
-        passes.append(Pass(start, theta.copy(), weights, horizon_text(target), hz, res.message, int(res.nfev),
-                           float(r0 @ r0), float(2.0 * res.cost)))
-        say(f"pass {k + 1}: {res.nfev} trial points, cost {2.0 * res.cost:.4g}: "
-            + ", ".join(f"{key} = {v:.4g}" for key, v in problem.values(theta).items()))
+        message = res.message + (f" (the best of {len(starts)} starts)" if k == 0 and len(starts) > 1 else "")
+        passes.append(Pass(start, theta.copy(), weights, horizon_text(target), hz, message, int(res.nfev),
+                           cost0, float(2.0 * res.cost)))
         if k > 0 and np.max(np.abs(theta - start)) < XTOL:
             break
     # the covariance at the optimum, with the weights (and target) taken there

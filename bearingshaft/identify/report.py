@@ -40,8 +40,8 @@ def identified_rows(res: Identified) -> list[dict]:
     """
     fit = res.fit
     return [{"parameter": p.key, "unit": p.unit, "initial": format(p.initial, DIGITS),
-             "value": format(fit.values[p.key], DIGITS), "ci_low": format(fit.ci[p.key][0], ".3g"),
-             "ci_high": format(fit.ci[p.key][1], ".3g")} for p in fit.problem.parameters]
+             "value": format(fit.values[p.key], DIGITS), "ci_low": format(fit.ci[p.key][0], DIGITS),
+             "ci_high": format(fit.ci[p.key][1], DIGITS)} for p in fit.problem.parameters]
 
 
 def correlation_rows(res: Identified) -> list[dict]:
