@@ -412,12 +412,14 @@ def identify(problem: Problem, evaluator=None, progress=None) -> Fit:
     J = np.vstack([weights[m].apply_rows(slopes[m]) if m in slopes else np.zeros((weights[m].n, p))
                    for m in weights])
     n_eff = float(sum(w.n_eff for w in weights.values()))
+    # a parameter the residuals do not see has no information (an unbounded interval): its finite-difference
+    # column is exactly zero (runs with the test's own force: the cloud's slopes hold the redrawn forces' scatter)
+    seen = np.linalg.norm(runs.jacobian(theta), axis=0) > 0
+    J[:, ~seen] = 0.0
     norms = np.linalg.norm(J, axis=0)
-    seen = norms > 0  # a parameter the residuals do not see has no information: an unbounded interval
     cov = np.full((p, p), math.nan)
-    G = gradient_scatter(J, weights, draws)
-    cov_seen, s2, dof, tq = sandwich(J[:, seen], r, n_eff, spec.confidence,
-                                     {k: g[:, seen] for k, g in G.items()})
+    G = gradient_scatter(J[:, seen], weights, draws)
+    cov_seen, s2, dof, tq = sandwich(J[:, seen], r, n_eff, spec.confidence, G)
     cov[np.ix_(seen, seen)] = cov_seen
     sig = np.where(seen, np.sqrt(np.maximum(np.diag(cov), 0.0)), math.inf)
     with np.errstate(invalid="ignore", divide="ignore"):
