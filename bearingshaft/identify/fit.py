@@ -15,22 +15,36 @@ misfit that is left (a first guess's horizon can end at the blow: the pointwise 
 covers at least MIN_TIME_SPAN_S past it).
 
 The least squares find the nearest minimum, and a pointwise misfit has one wherever the model's first
-impacts fall a period early or late. So the fit starts where a scan puts it (``[identify] scan``
-points, 0: none): each parameter in turn over evenly spaced scaled values across its bounds, the
-others at the best found so far, with the target and weights at the scene's values; the cheapest
-point starts the first pass (a few dozen runs, in parallel batches of ``scan``).
+impacts fall a period early or late (and a misfit past the horizon has many, a chaotic motion's). So
+the fit starts where a scan puts it (``[identify] scan`` points, 0: none), with the target and
+weights at the scene's values: a Latin hypercube of LHS_PER_PARAMETER points per parameter over the
+whole box (one batch), then each parameter in turn over ``scan`` evenly spaced scaled values across
+its bounds, the others at the best found so far. The first pass runs from the MULTI_STARTS cheapest
+points at least 1.5 scan spacings apart (:func:`starts_from`), each with the target and weights of the
+cheapest, and keeps the lowest end.
 
 The Jacobian is by finite differences of ``step`` in theta (forward, backward at an upper
 bound), run with the point itself: a trial point and its p neighbours are one batch of p + 1 model
 runs in parallel (:class:`SerialEvaluator` here, :class:`bearingshaft.identify.run.DaskEvaluator`
 on Dask); a step the trust region rejects wastes its p neighbours, which accepted steps repay in
-time. At the optimum the Jacobian J is taken again by central differences (2p runs), and
+time. Each pass takes its weights at its start from the residuals' scatter there
+(:mod:`bearingshaft.identify.scatter`: the test's noise redrawn on the model's record, the roughness
+about local planes over a cloud of cloud_size(p) runs within -+ CLOUD_STEPS steps, each with the
+hammer force redrawn within its noise). At the optimum the same is done again, and the intervals come
+from a sandwich (:func:`sandwich`):
 
-    C = s^2 (J^T J)^-1,   s^2 = S(theta*) / (N_eff - p),   N_eff = sum_b n_eff,b,
+    C = s^2 A^-1 B A^-1,   A = J^T J,   B = sum_k g_k g_k^T,   s^2 = max(1, S(theta*) / (N_eff - p)),
 
-is the covariance of theta* (weighted residuals: J^T J is the information matrix when the weighted
-residuals are independent with unit variance, which the weights make them on average). The
-100 (1 - a) % interval of parameter i is theta*_i -+ t_{1-a/2, N_eff - p} sqrt(C_ii) in theta, mapped to
+J the weighted slopes of the local planes over the cloud (a regression over -+ CLOUD_STEPS steps, not a
+difference of two runs: past the horizon the latter is mostly chaos over the step), g_k = J^T e_k the
+realisations e_k of the scatter (each noise draw's residuals, each cloud run's residuals about its
+planes) projected on J (:func:`gradient_scatter`): what the noise and the chaos do to the gradient,
+with their correlations across channels, windows and blocks, which per-residual weights cannot
+carry; a block whose draws are not kept (a long pointwise block) adds J_b^T J_b, as its weights assume.
+s^2 > 1 is misfit that neither explains (model error). With the weighted residuals independent with
+unit variance C is the textbook s^2 (J^T J)^-1 (:func:`covariance`). The 100 (1 - a) % interval of
+parameter i is theta*_i -+ t_{1-a/2, dof} sqrt(C_ii) in theta, dof the realisations' degrees of
+freedom, mapped to
 the parameter (a log-scaled one's interval is p* exp(-+ ...): asymmetric in p). The correlations
 are C_ij / sqrt(C_ii C_jj). Two parameters cannot be told apart when |corr| >= CORRELATION_LIMIT;
 J^T J is near-singular when the condition number of its correlation form (J scaled to unit
@@ -55,6 +69,7 @@ XTOL = 1e-3  # stop when a step changes theta by less than this (relative): 0.1 
 FTOL = 1e-4  # ... or the cost by less than this share
 CLOUD_STEPS = 3.0  # the cloud's half-width in finite-difference steps (module docstring)
 MULTI_STARTS = 3  # the first pass runs from this many of the scan's points (module docstring)
+LHS_PER_PARAMETER = 8  # the scan's Latin hypercube: this many points per parameter (24 for three)
 
 
 class SerialEvaluator:
@@ -142,7 +157,7 @@ class Fit:
         C, in theta.
     correlation : (p, p) ndarray of float
     jacobian : (N, p) ndarray of float
-        J of the weighted residuals at the optimum (central differences).
+        J of the weighted residuals at the optimum (the local planes' slopes over the cloud).
     sigma_theta : (p,) ndarray of float
         sqrt(C_ii).
     s2 : float
@@ -295,8 +310,16 @@ def _scan(problem: Problem, evaluator, theta: np.ndarray, bounds, history: list,
         return [np.asarray(theta, float)]
     runs = _Runs(evaluator, handle, problem, weights, spec.step, bounds, 0, history)
     runs.cache.update(probe.cache)
-    best = np.asarray(theta, float).copy()
     seen: dict[bytes, tuple[float, np.ndarray]] = {}
+    # a Latin hypercube over the whole box first (one batch): the coordinate scan alone moves one parameter at a
+    # time from the scene's values and can pin the gap where the others' wrong values put its best
+    pts = [np.asarray(theta, float).copy(), *latin_hypercube(bounds, LHS_PER_PARAMETER * theta.size, seed=0)]
+    evs = runs.run(pts, ["scan"] * len(pts))
+    for t, e in zip(pts, evs, strict=True):
+        seen[t.tobytes()] = (float(np.sum(stacked(e.blocks, weights) ** 2)), t.copy())
+    best = min(seen.values(), key=lambda ct: ct[0])[1].copy()
+    say(f"Latin hypercube of {len(pts) - 1} points: the cheapest at "
+        + ", ".join(f"{key} = {v:.4g}" for key, v in problem.values(best).items()))
     for j, par in enumerate(problem.parameters):
         trial = []
         for v in np.linspace(bounds[0][j], bounds[1][j], spec.scan):
@@ -310,6 +333,19 @@ def _scan(problem: Problem, evaluator, theta: np.ndarray, bounds, history: list,
         best = [best, *trial][int(np.argmin(costs))].copy()
         say(f"scan of {par.key}: {par.value(best[j]):.4g} (cost {min(costs):.4g})")
     return starts_from([v for v in seen.values()], (bounds[1] - bounds[0]) / max(spec.scan - 1, 1), MULTI_STARTS)
+
+
+def latin_hypercube(bounds, n: int, seed: int = 0) -> list[np.ndarray]:
+    """``n`` points in the box ``bounds`` (scaled parameters), one in each of n equal strata of every parameter.
+
+    >>> pts = latin_hypercube((np.zeros(2), np.ones(2)), 4)
+    >>> sorted(int(4 * q[0]) for q in pts)
+    [0, 1, 2, 3]
+    """
+    lo, hi = np.asarray(bounds[0], float), np.asarray(bounds[1], float)
+    rng = np.random.default_rng(seed)
+    u = (np.array([rng.permutation(n) for _ in range(lo.size)]).T + rng.random((n, lo.size))) / n
+    return [lo + (hi - lo) * q for q in u]
 
 
 def starts_from(scanned: list, spacing: np.ndarray, n: int) -> list[np.ndarray]:
