@@ -1,10 +1,10 @@
 """Identification (issue 26): the contact parameters found back from tests the tool made with other values.
 
 A small reduced apparatus (10 fixed-interface modes on the hex8 mesh, every mode: planar = false; built
-once, as tests/test_hammer.py builds its own) is struck; its record (short: 0.1 s) with noise on every
-channel through the DAQ's anti-alias filter is the "measured" test, made with a gap, contact stiffness
-and modal damping other than the scene's. ``bearingshaft identify`` must find intervals that hold the
-values the test was made with. The full apparatus (120 modes, 2 s) is the slow test at the end and
+once, as tests/test_hammer.py builds its own) is struck; its record (short: 0.1 s, 0.25 s for the slow
+recovery test) with noise on every channel through the DAQ's anti-alias filter is the "measured" test,
+made with a gap, contact stiffness and modal damping other than the scene's. ``bearingshaft identify``
+must find intervals that hold the values the test was made with. The full apparatus (120 modes, 2 s) is
 benchmarks/identify_speed.py.
 """
 
@@ -139,8 +139,8 @@ def test_true_values_lie_in_the_intervals(built, tmp_path, seed):
     if not lo <= TRUTH["model.modal_damping[0]"] <= hi:
         # checked last so that the gap's and k_g's asserts above stay strict for every seed
         pytest.xfail(f"the damping is not yet reliable (issue 26): {r['value']} [{lo:.4g}, {hi:.4g}] misses "
-                     f"{TRUTH['model.modal_damping[0]']} (seed 11: its misfit has local minima ~10 % apart, rougher "
-                     f"than the intervals' local planes over -+3 % see)")
+                     f"{TRUTH['model.modal_damping[0]']} (its misfit has local minima ~10-20 % apart, rougher than "
+                     f"the intervals' local planes over -+3 % see, and the starts need not find the rivals)")
 
 
 def test_a_parameter_the_test_cannot_see_is_named(built, tmp_path):

@@ -21,7 +21,10 @@ weights at the scene's values: a Latin hypercube of LHS_PER_PARAMETER points per
 whole box (one batch), then each parameter in turn over ``scan`` evenly spaced scaled values across
 its bounds, the others at the best found so far. The first pass runs from the MULTI_STARTS cheapest
 points at least 1.5 scan spacings apart (:func:`starts_from`), each with the target and weights of the
-cheapest, and keeps the lowest end.
+cheapest, and keeps the lowest end. Past the horizon the misfit can have several minima the test cannot
+tell apart (the damping's, ~10 % apart on a short record); an end whose cost is within the chi-square
+quantile (p degrees of freedom, times s^2) of the lowest is such a rival, and the intervals are widened
+to reach it (:func:`rival_minima`; an identifiability note names it).
 
 The Jacobian is by finite differences of ``step`` in theta (forward, backward at an upper
 bound), run with the point itself: a trial point and its p neighbours are one batch of p + 1 model
@@ -335,6 +338,22 @@ def _scan(problem: Problem, evaluator, theta: np.ndarray, bounds, history: list,
     return starts_from([v for v in seen.values()], (bounds[1] - bounds[0]) / max(spec.scan - 1, 1), MULTI_STARTS)
 
 
+def rival_minima(ends: list, confidence: float, p: int, s2: float) -> list:
+    """The ends (cost, theta) other than the cheapest whose cost exceeds its by at most chi2_{confidence, p} s^2.
+
+    >>> [c for c, _ in rival_minima([(5.0, 0), (7.0, 1), (60.0, 2)], 0.95, 3, 1.0)]  # chi2_{0.95, 3} = 7.81
+    [7.0]
+    """
+    from scipy.stats import chi2
+
+    if len(ends) < 2:
+        return []
+    best = min(c for c, _ in ends)
+    limit = float(chi2.ppf(confidence, p)) * max(s2, 1.0)
+    cheapest = min(range(len(ends)), key=lambda i: ends[i][0])
+    return [e for i, e in enumerate(ends) if i != cheapest and e[0] - best <= limit]
+
+
 def latin_hypercube(bounds, n: int, seed: int = 0) -> list[np.ndarray]:
     """``n`` points in the box ``bounds`` (scaled parameters), one in each of n equal strata of every parameter.
 
@@ -405,6 +424,7 @@ def identify(problem: Problem, evaluator=None, progress=None) -> Fit:
     runs = None
     target = None
     starts = [theta]
+    ends: list[tuple[float, np.ndarray]] = []  # the first pass's ends from each start: (cost, theta)
     if spec.scan:
         starts = _scan(problem, evaluator, theta, bounds, history, say)
         theta = starts[0]
@@ -427,6 +447,8 @@ def identify(problem: Problem, evaluator=None, progress=None) -> Fit:
             end = np.clip(res.x, *bounds)
             say(f"pass {k + 1}: {res.nfev} trial points, cost {2.0 * res.cost:.4g}: "
                 + ", ".join(f"{key} = {v:.4g}" for key, v in problem.values(end).items()))
+            if k == 0:
+                ends.append((float(2.0 * res.cost), end.copy()))
             if best is None or res.cost < best[1].cost:
                 best = (start.copy(), res, end, float(r0 @ r0), runs)
             probe.cache.update(runs.cache)
@@ -463,10 +485,25 @@ def identify(problem: Problem, evaluator=None, progress=None) -> Fit:
     ci = {}
     for i, par in enumerate(problem.parameters):
         ci[par.key] = interval(par, float(theta[i]), float(tq * sig[i]))
+    # another start's end the test cannot reject against the best (a cost within the chi-square quantile of p
+    # degrees of freedom times s^2, costs taken with one set of weights): a minimum as good as the one reported
+    # as far as the test can tell, which a local interval about the best cannot see; the intervals reach it
+    rivals = rival_minima(ends, spec.confidence, p, s2)
+    for i, par in enumerate(problem.parameters):
+        lo, hi = ci[par.key]
+        for _, t in rivals:
+            v = par.value(float(t[i]))
+            lo, hi = min(lo, v), max(hi, v)
+        ci[par.key] = (lo, hi)
     Js = J / np.where(norms > 0, norms, 1.0)
     ev, vec = np.linalg.eigh(Js.T @ Js)
     cond = float(ev[-1] / ev[0]) if ev[0] > 0 else math.inf
     notes = identifiability_notes(problem, corr, cond, vec[:, 0], ci, norms)
+    for c, t in rivals:
+        notes.append("another minimum the test cannot tell from the best (cost " + f"{c:.4g} against "
+                     f"{min(e[0] for e in ends):.4g}, within the {round(100 * spec.confidence)} % chi-square quantile "
+                     f"of {p} degrees of freedom): " + ", ".join(f"{key} = {v:.4g}" for key, v in
+                                                              problem.values(t).items()) + "; the intervals reach it")
     stats = {"n_runs": len(history), "wall_s": time.perf_counter() - t_start, "workers": evaluator.workers,
              "where": evaluator.where, "cpu_s_runs": float(sum(h["cpu_s"] for h in history)),
              "passes": len(passes)}
