@@ -1,10 +1,10 @@
 """Identification (issue 26): the contact parameters found back from tests the tool made with other values.
 
 A small reduced apparatus (10 fixed-interface modes on the hex8 mesh, every mode: planar = false; built
-once, as tests/test_hammer.py builds its own) is struck; its record (short: 0.1 s) with noise on every
-channel through the DAQ's anti-alias filter is the "measured" test, made with a gap, contact stiffness
-and modal damping other than the scene's. ``bearingshaft identify`` must find intervals that hold the
-values the test was made with. The full apparatus (120 modes, 2 s) is the slow test at the end and
+once, as tests/test_hammer.py builds its own) is struck; its record (short: 0.1 s, 0.25 s for the slow
+recovery test) with noise on every channel through the DAQ's anti-alias filter is the "measured" test,
+made with a gap, contact stiffness and modal damping other than the scene's. ``bearingshaft identify``
+must find intervals that hold the values the test was made with. The full apparatus (120 modes, 2 s) is
 benchmarks/identify_speed.py.
 """
 
@@ -100,14 +100,12 @@ def _identified(folder) -> dict[str, dict]:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="not yet reliable (issue 26): with the gaps closing the misfit is rough "
-                   "(impact counts jump) and the fit can stop near but not at the truth with intervals too narrow "
-                   "to hold it; seeds 3 and 7 pass, 11 fails (and a 0.15 s record with narrower bounds misses the "
-                   "damping by 2x)")
-@pytest.mark.parametrize("seed", [3, 7, 11])
+@pytest.mark.parametrize("seed", [3, 7, 11, 5, 13])
 def test_true_values_lie_in_the_intervals(built, tmp_path, seed):
-    # a test made with gap, k_g and damping 1.18x, 1.43x and 3x the scene's, 2 % noise through the DAQ filter
-    scene = _scene(tmp_path)
+    # a test made with gap, k_g and damping 1.18x, 1.43x and 3x the scene's, 2 % noise through the DAQ filter, a
+    # 0.25 s record (a 0.1 s one holds too little free decay for the damping: its misfit there has minima every
+    # ~10 % of it), two passes; about a minute a seed
+    scene = _scene(tmp_path, duration=0.25, passes=2)
     test = _test_file(tmp_path, built, scene, TRUTH, 0.02, seed=seed)
     out = tmp_path / "out"
     rc, text, err = _cli("identify", "--scene", str(scene), "--test", str(test), "--out", str(out),
@@ -115,13 +113,15 @@ def test_true_values_lie_in_the_intervals(built, tmp_path, seed):
     assert rc == 0, err
     found = _identified(out)
     assert list(found) == list(TRUTH)
-    for key, truth in TRUTH.items():
+    for key in ("model.gap", "model.k_g"):
         r = found[key]
         lo, hi, value = float(r["ci_low"]), float(r["ci_high"]), float(r["value"])
-        assert lo <= truth <= hi, (key, truth, r)
+        assert lo <= TRUTH[key] <= hi, (key, TRUTH[key], r)
         assert lo <= value <= hi
-    # the gap is what the first impacts' timing fixes: it is found to a few per cent (its interval says so)
-    assert abs(float(found["model.gap"]["value"]) / TRUTH["model.gap"] - 1) < 0.05
+    # not absurdly wide: the first impacts' timing fixes the gap to a few tenths of a per cent (seeds 3, 7, 11:
+    # 0.3-0.4 % wide), so an interval 20 % wide would be one that says nothing the scene's bounds (/4, x4) do not
+    gap = found["model.gap"]
+    assert (float(gap["ci_high"]) - float(gap["ci_low"])) / float(gap["value"]) < 0.20
     for name in ("correlation.csv", "misfit_history.csv", "weights.csv", "identify.md",
                  "identified_overlay.png", "misfit_history.png"):
         assert (out / name).is_file(), name
@@ -134,6 +134,13 @@ def test_true_values_lie_in_the_intervals(built, tmp_path, seed):
     with open(out / "misfit_history.csv", newline="") as fh:
         hist = [r for r in csv.DictReader(fh) if r["kind"] == "point" and r["cost"] not in ("", "nan")]
     assert float(hist[-1]["cost"]) < float(hist[0]["cost"])  # the fit lowered the misfit
+    r = found["model.modal_damping[0]"]
+    lo, hi = float(r["ci_low"]), float(r["ci_high"])
+    if not lo <= TRUTH["model.modal_damping[0]"] <= hi:
+        # checked last so that the gap's and k_g's asserts above stay strict for every seed
+        pytest.xfail(f"the damping is not yet reliable (issue 26): {r['value']} [{lo:.4g}, {hi:.4g}] misses "
+                     f"{TRUTH['model.modal_damping[0]']} (its misfit has local minima ~10-20 % apart, rougher than "
+                     f"the intervals' local planes over -+3 % see, and the starts need not find the rivals)")
 
 
 def test_a_parameter_the_test_cannot_see_is_named(built, tmp_path):
@@ -268,3 +275,56 @@ def test_first_impact_block_measures_a_sub_sample_shift():
     assert IMPACT_REARM < 1
     assert r[0] == pytest.approx((shift - earlier) / length, abs=0.02 * shift / length)  # linear interpolation error
     assert r[1] == pytest.approx(0.1, abs=0.002)  # sampled peaks: within a sample of the top (1 - cos(pi dt / 5 ms))
+
+
+def test_the_sandwich_holds_correlated_scatter():
+    # a linear problem whose residuals' noise is correlated (AR(1), rho = 0.9: neighbouring samples alike): the
+    # estimate's covariance is (A^T A)^-1 A^T Sigma A (A^T A)^-1 in closed form; the sandwich built from noise draws
+    # (fit.gradient_scatter, fit.sandwich) must give it to the sampling error of 4000 draws (~2 % on a variance,
+    # 5 % allowed), where the textbook s^2 (A^T A)^-1 with independent residuals is ~4x too small
+    from bearingshaft.identify.fit import gradient_scatter, sandwich
+    from bearingshaft.identify.residuals import BlockWeight
+
+    rng = np.random.default_rng(1)
+    n, rho = 400, 0.9
+    t = np.linspace(0.0, 1.0, n)
+    A = np.column_stack([np.sin(2 * np.pi * t), t])
+    lags = np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+    Sigma = rho**lags
+    L = np.linalg.cholesky(Sigma)
+    draws = (L @ rng.standard_normal((n, 4000))).T
+    exact = np.linalg.inv(A.T @ A) @ A.T @ Sigma @ A @ np.linalg.inv(A.T @ A)
+    w = {"b": BlockWeight("b", n, float(n), 1.0, 1.0)}
+    G = gradient_scatter(A, w, {"noise": {"b": draws - draws.mean(axis=0)}, "chaos": {}})
+    C, s2, dof, tq = sandwich(A, np.zeros(n), float(n), 0.95, G)
+    assert s2 == 1.0 and dof == 3999
+    np.testing.assert_allclose(np.diag(C), np.diag(exact), rtol=0.05)
+    assert np.all(np.diag(np.linalg.inv(A.T @ A)) < 0.4 * np.diag(exact))  # what independent residuals would say
+
+
+def test_the_envelope_compares_the_model_with_the_tests_noise_added():
+    # a decaying 200 Hz tone; the "test" is the tone plus white noise of RMS 0.05, the model the clean tone. The
+    # RMS envelope of the test is sqrt(e^2 + n^2) (noise uncorrelated with the tone), so with the noise power added
+    # to the model's the envelope residual is ~0: the noise's mean square over 2000 samples a window scatters by
+    # sqrt(2 / 2000) = 3.2 %, its envelope's log by half that, 1.6 %, so each of the 20 windows within 0.05 (3 sd)
+    # and their mean within 0.01 (2.8 sd of a mean of 20); without it the late windows, where the tone has decayed
+    # under the noise, are far off (ln(e / sqrt(e^2 + n^2)) < -0.5 there)
+    from bearingshaft.identify.residuals import Target, blocks
+    from fem.uff import TimeHistory
+
+    rng = np.random.default_rng(2)
+    dt = 5e-5
+    t = np.arange(40000) * dt
+    tone = np.exp(-3.0 * t) * np.sin(2 * np.pi * 200 * t)
+    noise = 0.05
+    x = TimeHistory("a", 1, 3, "acceleration", tone + noise * rng.standard_normal(t.size), dt)
+    m = TimeHistory("a", 1, 3, "acceleration", tone, dt)
+    kw = dict(names=("a",), rows=(0,), tests=(x,), quantities=("acceleration",), floors=np.array([1e-3]),
+              window_s=(0.0, float(t[-1])), time_span_s=(0.0, 0.0), time_scale=np.ones(1), post_s=(0.0, 0.1),
+              envelope_window_s=0.1, frame_s=0.02, fmax_hz=None, measures=("envelope",),
+              envelope_floors=np.array([1e-3]))
+    with_noise = blocks(Target(**kw, noise=np.array([noise]), envelope_noise=np.array([noise])), [m])["envelope"]
+    without = blocks(Target(**kw), [m])["envelope"]
+    assert np.max(np.abs(with_noise)) < 0.05
+    assert abs(float(np.mean(with_noise))) < 0.01
+    assert np.min(without[0, -5:]) < -0.5

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -129,7 +129,43 @@ def make_problem(scene: Scene, rom, rig: VirtualRig, test: MeasuredTest, paramet
     return Problem(scene, rom, cut, test, tuple(parameters), (float(window_s[0]), float(window_s[1])), names, n_keep)
 
 
-def record_at(problem: Problem, theta) -> tuple[VirtualRig, Record]:
+def hammer_noise(test: MeasuredTest) -> float:
+    """N, the hammer channel's RMS before the blow (its noise; 0 without a pre-trigger).
+
+    Parameters
+    ----------
+    test : MeasuredTest
+    """
+    ref = test.channels[correlate.check_test_channels(test.channels)]
+    end = test.pulse_start_s - test.window.margin_s
+    k = int(end / ref.dt_s)
+    return float(np.sqrt(np.mean(ref.data[:k] ** 2))) if k >= 2 else 0.0
+
+
+def redrawn_force(test: MeasuredTest, seed: int):
+    """The test's driving force with its samples in the force window (all, without one) redrawn within the
+    hammer's noise: plus white noise of :func:`hammer_noise`'s RMS (:mod:`bearingshaft.identify.scatter`).
+
+    Parameters
+    ----------
+    test : MeasuredTest
+    seed : int
+
+    Returns
+    -------
+    Tabulated
+    """
+    from reduced.models.loads import Tabulated
+
+    sig = test.signal
+    t, f = np.asarray(sig.t_s, float), np.asarray(sig.force_N, float)
+    a, b = test.window.window_s if test.windowed else (-np.inf, np.inf)
+    inside = (t >= a) & (t <= b)
+    e = np.random.default_rng(seed).standard_normal(t.size)
+    return Tabulated(t, f + hammer_noise(test) * e * inside, source=f"{sig.source}, redrawn ({seed})")
+
+
+def record_at(problem: Problem, theta, force_seed: int | None = None) -> tuple[VirtualRig, Record]:
     """The model at ``theta`` over the fitted window at the test's sampling, driven by its force.
 
     Parameters
@@ -137,6 +173,8 @@ def record_at(problem: Problem, theta) -> tuple[VirtualRig, Record]:
     problem : Problem
     theta : (p,) array_like of float
         Scaled parameters.
+    force_seed : int, optional
+        Drive it with the force redrawn within the hammer's noise (:func:`redrawn_force`).
 
     Returns
     -------
@@ -145,7 +183,8 @@ def record_at(problem: Problem, theta) -> tuple[VirtualRig, Record]:
     test = problem.test
     rig = rig_at(problem, problem.values(theta))
     n = int(round(problem.window_s[1] * test.sample_rate_hz))
-    rec = run_record(rig, test.signal, problem.scene, test.level_N, duration_s=n / test.sample_rate_hz,
+    force = test.signal if force_seed is None else redrawn_force(test, force_seed)
+    rec = run_record(rig, force, problem.scene, test.level_N, duration_s=n / test.sample_rate_hz,
                      sample_rate_hz=test.sample_rate_hz)
     return rig, rec
 
@@ -191,14 +230,22 @@ class Evaluation:
         {block: (series, points) ndarray}.
     stats : dict
         ``wall_s``, ``cpu_s``, ``n_events`` of the run, ``worker``.
+    noise_var : dict
+        {block: variances from the test's noise} (:func:`bearingshaft.identify.scatter.noise_variance`;
+        empty unless asked).
+    noise_draws : dict
+        {block: (draws, n_b) the noise draws' residuals less their mean} (the same; blocks not too large).
     """
 
     theta: np.ndarray
     blocks: dict
     stats: dict
+    noise_var: dict = field(default_factory=dict)
+    noise_draws: dict = field(default_factory=dict)
 
 
-def evaluate(problem: Problem, target: Target, theta) -> Evaluation:
+def evaluate(problem: Problem, target: Target, theta, force_seed: int | None = None,
+             noise_draws: int = 0) -> Evaluation:
     """The residual blocks of the model at ``theta`` against the test (runs on a worker).
 
     Parameters
@@ -206,6 +253,10 @@ def evaluate(problem: Problem, target: Target, theta) -> Evaluation:
     problem : Problem
     target : Target
     theta : (p,) array_like of float
+    force_seed : int, optional
+        The force redrawn within the hammer's noise (:func:`record_at`).
+    noise_draws : int
+        Also the residuals' variances from the test's noise, from this many draws (0: not).
 
     Returns
     -------
@@ -213,12 +264,16 @@ def evaluate(problem: Problem, target: Target, theta) -> Evaluation:
     """
     import os
 
+    from bearingshaft.identify.scatter import noise_variance
+
     t0, c0 = time.perf_counter(), time.process_time()
-    rig, rec = record_at(problem, theta)
-    found = blocks(target, model_channels(problem, rig, rec))
+    rig, rec = record_at(problem, theta, force_seed)
+    model = model_channels(problem, rig, rec)
+    found = blocks(target, model)
+    nv, nd = noise_variance(target, model, noise_draws) if noise_draws else ({}, {})
     stats = {"wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
              "n_events": int(rec.stats.get("n_events", -1)), "worker": os.getpid()}
-    return Evaluation(np.asarray(theta, float).copy(), found, stats)
+    return Evaluation(np.asarray(theta, float).copy(), found, stats, nv, nd)
 
 
 def define_target(problem: Problem, theta, measures: tuple[str, ...], *, envelope_window_s: float,
@@ -257,6 +312,7 @@ def define_target(problem: Problem, theta, measures: tuple[str, ...], *, envelop
     noise_end = test.pulse_start_s - test.window.margin_s
     noise = (0.0, noise_end) if noise_end > 0 else None
     floors = correlate.channel_floors(pairs, window, noise)
+    noise_rms = np.array([correlate.rms(p.aligned(noise).test) if noise is not None else 0.0 for p in pairs])
     hz = None
     horizon_s = window[1]
     if any(m in measures for m in ("time", "ridges", "impacts")):
@@ -273,7 +329,8 @@ def define_target(problem: Problem, theta, measures: tuple[str, ...], *, envelop
                     tests=tuple(p.test for p in pairs), quantities=tuple(p.quantity for p in pairs), floors=f,
                     window_s=window, time_span_s=(t_a, t_h), time_scale=scale, post_s=post,
                     envelope_window_s=envelope_window_s, frame_s=frame_s, fmax_hz=fmax_hz, measures=tuple(measures),
-                    horizon=hz, envelope_band_hz=tuple(envelope_band_hz), envelope_floors=f)
+                    horizon=hz, envelope_band_hz=tuple(envelope_band_hz), envelope_floors=f, noise=noise_rms,
+                    envelope_noise=noise_rms)
     cells = [p for p in pairs if p.quantity == CONTACT_QUANTITY]
     last = [measured_last(p, window) for p in cells]
     last = [v for v in last if math.isfinite(v)]
@@ -283,7 +340,9 @@ def define_target(problem: Problem, theta, measures: tuple[str, ...], *, envelop
 
         banded = [band_passed(p, envelope_band_hz) for p in pairs]
         fb = correlate.channel_floors(banded, window, noise)
-        target = replace(target, envelope_floors=np.array([fb[p.name][0] for p in banded]))
+        target = replace(target, envelope_floors=np.array([fb[p.name][0] for p in banded]),
+                         envelope_noise=np.array([correlate.rms(p.aligned(noise).test) if noise is not None else 0.0
+                                                  for p in banded]))
     if "ridges" in measures:
         from bearingshaft.measures import ridges
 
@@ -328,5 +387,6 @@ def horizon_text(target: Target) -> str:
     return f"pointwise from {1e3 * a:.4g} to {1e3 * b:.4g} ms (horizon {h})"
 
 
-__all__ = ["Problem", "make_problem", "channels_at", "rig_at", "record_at", "evaluate", "Evaluation", "define_target",
+__all__ = ["Problem", "make_problem", "hammer_noise", "redrawn_force",
+           "channels_at", "rig_at", "record_at", "evaluate", "Evaluation", "define_target",
            "truncated", "model_channels", "horizon_text", "MIN_TIME_SPAN_S"]

@@ -1,7 +1,7 @@
 """The files and figures of an identification (:class:`bearingshaft.identify.results.Identified`); runs no model.
 
 - ``identified.csv``: ``parameter, unit, initial, value, ci_low, ci_high`` (the interval at the
-  [identify] confidence, 95 % by default, from the Jacobian at the optimum);
+  [identify] confidence, 95 % by default, from the sandwich at the optimum: :mod:`bearingshaft.identify.fit`);
 - ``correlation.csv``: the parameters' correlation matrix;
 - ``weights.csv``: each residual block's size, effective size, RMS and weight at the optimum;
 - ``misfit_history.csv``: every model run (pass, kind, the values, the weighted cost and each
@@ -13,7 +13,8 @@
 - ``misfit_history.png``: the cost and the parameters run by run.
 
 Numbers are written to 6 significant digits (``digits``): the fit stops at a relative step of 1e-3,
-so the values are reproducible to about that on another machine; the intervals to two digits.
+so the values are reproducible to about that on another machine; the intervals are written to as many
+digits (a gap known to 0.1 % needs four to show its interval at all), reproducible to about two.
 """
 
 from __future__ import annotations
@@ -40,8 +41,8 @@ def identified_rows(res: Identified) -> list[dict]:
     """
     fit = res.fit
     return [{"parameter": p.key, "unit": p.unit, "initial": format(p.initial, DIGITS),
-             "value": format(fit.values[p.key], DIGITS), "ci_low": format(fit.ci[p.key][0], ".3g"),
-             "ci_high": format(fit.ci[p.key][1], ".3g")} for p in fit.problem.parameters]
+             "value": format(fit.values[p.key], DIGITS), "ci_low": format(fit.ci[p.key][0], DIGITS),
+             "ci_high": format(fit.ci[p.key][1], DIGITS)} for p in fit.problem.parameters]
 
 
 def correlation_rows(res: Identified) -> list[dict]:
@@ -119,13 +120,13 @@ def markdown(res: Identified) -> str:
     for i, k in enumerate(keys):
         lines.append(f"| {k} | " + " | ".join(f"{fit.correlation[i, j]:+.3f}" for j in range(len(keys))) + " |")
     lines += ["", "## How the residuals are weighted", "",
-              "Each block is multiplied by sqrt(n_eff / n) / rms at the optimum: its RMS there is the misfit no "
-              "parameter removes (noise, and past the horizon the chaotic motion's scatter), n_eff the "
-              "independent residuals it holds (the integrated autocorrelation time along each series and the "
-              "participation ratio across channels), so each block counts as n_eff unit-variance residuals. "
-              f"The intervals are theta -+ t_(N_eff - p) sqrt(C_ii), C = s^2 (J^T J)^-1, J by central differences "
-              f"(step {spec.step:g} in the scaled parameters), s^2 = {fit.s2:.3g}, N_eff = {fit.n_eff:.4g}, "
-              f"t = {fit.t_quantile:.3f}.", "",
+              "Each residual is divided by its scatter at the optimum (bearingshaft.identify.scatter: the test's "
+              "noise redrawn on the model's record, and the roughness about local planes over a cloud of runs with "
+              "the hammer force redrawn within its noise: the chaos past the horizon), and each block by "
+              "sqrt(n_eff / n), n_eff the independent residuals it holds (the integrated autocorrelation time along "
+              "each series and the participation ratio across channels). The intervals are theta -+ t sqrt(C_ii), "
+              "C = s^2 A^-1 B A^-1 (a sandwich: A = J^T J, J the planes' slopes; B from the scatter's realisations "
+              f"projected on J), s^2 = {fit.s2:.3g}, N_eff = {fit.n_eff:.4g}, t = {fit.t_quantile:.3f}.", "",
               "| block | residuals | effective | RMS | weight |", "|---|---|---|---|---|"]
     for w in fit.weights.values():
         lines.append(f"| {w.measure} | {w.n} | {w.n_eff:.4g} | {w.rms:.4g} | {w.weight:.4g} |")

@@ -43,6 +43,13 @@ class DaskEvaluator:
         futures = [self.client.submit(evaluate, self.problem, target, th, pure=False) for th in thetas]
         return self.client.gather(futures)
 
+    def scatter(self, target, theta, points, draws: int) -> list:
+        """The point with its noise variances, then the cloud's points with the force redrawn (one task each)."""
+        futures = [self.client.submit(evaluate, self.problem, target, theta, noise_draws=draws, pure=False),
+                   *[self.client.submit(evaluate, self.problem, target, q, force_seed=k + 1, pure=False)
+                     for k, q in enumerate(points)]]
+        return self.client.gather(futures)
+
     def records(self, thetas) -> list:
         """(t, data) of the compared channels at ``thetas`` (one task each)."""
         return self.client.gather([self.client.submit(channels_at, self.problem, th, pure=False) for th in thetas])
