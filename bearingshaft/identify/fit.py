@@ -341,6 +341,15 @@ def _scan(problem: Problem, evaluator, theta: np.ndarray, bounds, history: list,
 def rival_minima(ends: list, confidence: float, p: int, s2: float) -> list:
     """The ends (cost, theta) other than the cheapest whose cost exceeds its by at most chi2_{confidence, p} s^2.
 
+    Parameters
+    ----------
+    ends : list of (cost, theta), the ends of the fit's starts
+    confidence : the intervals' level, e.g. 0.95
+    p : the number of parameters (the chi-square's degrees of freedom)
+    s2 : the residuals' variance factor (floored at 1)
+
+    Examples
+    --------
     >>> [c for c, _ in rival_minima([(5.0, 0), (7.0, 1), (60.0, 2)], 0.95, 3, 1.0)]  # chi2_{0.95, 3} = 7.81
     [7.0]
     """
@@ -357,6 +366,14 @@ def rival_minima(ends: list, confidence: float, p: int, s2: float) -> list:
 def latin_hypercube(bounds, n: int, seed: int = 0) -> list[np.ndarray]:
     """``n`` points in the box ``bounds`` (scaled parameters), one in each of n equal strata of every parameter.
 
+    Parameters
+    ----------
+    bounds : (low (p,), high (p,))
+    n : the number of points (and strata)
+    seed : the generator's seed (the same points on every run)
+
+    Examples
+    --------
     >>> pts = latin_hypercube((np.zeros(2), np.ones(2)), 4)
     >>> sorted(int(4 * q[0]) for q in pts)
     [0, 1, 2, 3]
@@ -635,6 +652,14 @@ UNBOUNDED = 50.0  # a half-width in theta past this (a factor e^50 on a log scal
 def interval(par, theta: float, half: float) -> tuple[float, float]:
     """(low, high) of ``par`` for theta -+ half (unbounded: -inf or 0 for a log scale, and inf, past UNBOUNDED).
 
+    Parameters
+    ----------
+    par : Parameter
+    theta : its scaled value at the optimum
+    half : the interval's half width in the scaled parameter
+
+    Examples
+    --------
     >>> from bearingshaft.identify.parameters import Parameter
     >>> interval(Parameter("model.gap", "m", 1e-4, 1e-5, 1e-3, "log"), 0.0, 1e9)
     (0.0, inf)

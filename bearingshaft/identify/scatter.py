@@ -135,7 +135,12 @@ def noise_variance(target: Target, model: list[TimeHistory], draws: int = K_NOIS
 
 
 def cloud_size(p: int) -> int:
-    """Points of the cloud for ``p`` parameters: CLOUD_PER_PARAMETER (p + 1)."""
+    """Points of the cloud for ``p`` parameters: CLOUD_PER_PARAMETER (p + 1).
+
+    Parameters
+    ----------
+    p : the number of parameters
+    """
     return CLOUD_PER_PARAMETER * (p + 1)
 
 
