@@ -536,7 +536,7 @@ class FRCSpec:
     period_doubling_families: int = 4  # period-doubled families per level at most
     period_doubling_depth: int = 1  # doublings of a cascade followed (1: 2 T; 2: also 4 T)
     period_doubling_steps: int = 600  # points of a period-doubled family at most
-    cover_families: int = 4  # families started from HB orbits of the contact band no family covers (0: none)
+    cover_families: int = 2  # families started from HB orbits of the contact band no family covers (0: none)
     switching_max_s: float = 0.0  # s, wall time per level after which no new family is started (0: none, reproducible)
     shooting_steps: int = 30000  # points of the main exact family at most
 

@@ -135,6 +135,8 @@ class ExactFRCOptions:
     cover_families : int
         Families started from the ``cover`` guesses of :func:`exact_frc` at frequencies no family
         covers (kind ``isolated``), at most; their branch points are switched at like the main one's.
+    cover_steps : int
+        Points of an isolated family at most, each way from its first orbit.
     deadline_s : float
         s of wall time after which no new family is started (the main one always runs).
     velocity_scale : {'fastest', 'omega'}
@@ -161,7 +163,8 @@ class ExactFRCOptions:
     period_doubling_families: int = 4
     period_doubling_depth: int = 1
     period_doubling_steps: int = 600
-    cover_families: int = 4
+    cover_families: int = 2
+    cover_steps: int = 1000
     deadline_s: float = math.inf
     velocity_scale: str = "fastest"
 
@@ -173,7 +176,7 @@ class ExactFRCOptions:
             _check.positive(key, getattr(self, key))
         if not self.deadline_s > 0.0:
             raise _check.InvalidArgument(f"deadline_s must be > 0 s, got {self.deadline_s!r}")
-        for key in ("max_iter", "max_steps", "family_steps", "period_doubling_steps"):
+        for key in ("max_iter", "max_steps", "family_steps", "period_doubling_steps", "cover_steps"):
             _check.integer(key, getattr(self, key))
         _check.integer("max_families", self.max_families, lo=0)
         _check.integer("depth", self.depth, lo=0)
@@ -1395,7 +1398,7 @@ def _cover(families, switches, residuals, cover, res, opts, band, rows, sym, bud
     """Isolated families from the ``cover`` guesses (:func:`exact_frc`), up to ``opts.cover_families``
     (at most COVER_TRIES guesses each): while some guess's frequency is covered by no family, the
     longest run (in ln f) of such guesses consecutive in frequency (split by covered frequencies and
-    by guesses already tried) is taken, and its middle guess shot (:func:`shoot_at`, at its
+    by guesses already tried) is taken, and its guess nearest its middle in ln f shot (:func:`shoot_at`, at its
     frequency). An orbit that is one of a family already found, or an image (:func:`_known`), is
     not followed; else it is followed down and up (each way until it leaves the band, retraces its
     path or runs onto a known family's path, :class:`_Joined`) as a family of kind ``isolated``,
@@ -1414,7 +1417,8 @@ def _cover(families, switches, residuals, cover, res, opts, band, rows, sym, bud
         if not runs:
             break
         run = max(runs, key=lambda r: (math.log(f[order[r[-1]]] / f[order[r[0]]]), len(r)))
-        j = int(order[run[len(run) // 2]])
+        mid = math.sqrt(f[order[run[0]]] * f[order[run[-1]]])  # the run's middle in ln f
+        j = int(order[run[int(np.argmin(np.abs(np.log(f[order[run]] / mid))))]])
         tried[j] = True
         rec = {"freq_hz": float(f[j]), "family": -1, "note": ""}
         out.append(rec)
@@ -1449,7 +1453,7 @@ def _isolated(families, switches, residuals, guess, res, opts, band, rows, sym, 
             if direction < 0 and y0[res.size] <= band[0] + 1e-12 or direction > 0 and y0[res.size] >= band[1] - 1e-12:
                 continue
             watch = _Joined(families, res, sym, own=(parts[0][1][0], parts[0][1][3]) if parts else None)
-            part = _follow(res, y0, res.size, direction, opts, opts.family_steps, band, an, stop_extra=watch)
+            part = _follow(res, y0, res.size, direction, opts, opts.cover_steps, band, an, stop_extra=watch)
             if watch.family != -1:
                 part[4][-1] = "joined" if watch.family >= 0 else "closed"
                 f_end = res.omega(part[0][-1]) / (2 * math.pi)
