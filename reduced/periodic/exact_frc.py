@@ -92,7 +92,7 @@ SWITCHED = {"pitchfork_mirror": "asymmetric", "pitchfork_half_wave": "half_wave_
 PD_CRITICAL_TOL = 0.05  # |mu + 1| of the located critical multiplier beyond which a period doubling is not switched at
 REJOIN_TOL = 1e-7  # symmetry-breaking part of a switched family, relative to its point, below which it has rejoined
 SAME_ORBIT_TOL = 1e-6  # relative: two orbits shot at the same frequency closer than this (nodes) are one orbit
-COVER_TRIES = 3  # guesses tried per family of cover_families at most (a guess may find no orbit)
+COVER_TRIES = 4  # guesses tried per family of cover_families at most (a guess may find no orbit)
 JOIN_DIST, JOIN_COS = 5e-3, 0.9  # an isolated family this close (scaled) to a known family's path, parallel: joined
 
 
