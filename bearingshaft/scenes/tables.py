@@ -485,6 +485,9 @@ class FRCSpec:
         Doublings of a cascade followed: 1 the 2 T families, 2 also the 4 T ones born on them.
     period_doubling_steps : int
         Points of a period-doubled family at most (each costs about twice a point of period 1).
+    cover_families : int
+        Families started from HB orbits of the contact band that no family covers, per level at most
+        (kind ``isolated``: an isola or a piece of the curve the main family does not reach; 0: none).
     switching_max_s : float
         s of wall time per level after which no new family is started; 0 (the default): no such limit, so the
         families found do not depend on the machine or its load.
@@ -533,6 +536,7 @@ class FRCSpec:
     period_doubling_families: int = 4  # period-doubled families per level at most
     period_doubling_depth: int = 1  # doublings of a cascade followed (1: 2 T; 2: also 4 T)
     period_doubling_steps: int = 600  # points of a period-doubled family at most
+    cover_families: int = 2  # families started from HB orbits of the contact band no family covers (0: none)
     switching_max_s: float = 0.0  # s, wall time per level after which no new family is started (0: none, reproducible)
     shooting_steps: int = 30000  # points of the main exact family at most
 
@@ -561,7 +565,7 @@ class FRCSpec:
         check(self.curve in FRC_CURVES, f"curve must be one of {', '.join(FRC_CURVES)}, got {self.curve!r}")
         tolerance(self, "hb_converged_tol")
         check(self.switching_max_s >= 0, f"switching_max_s must be >= 0 s, got {self.switching_max_s!r}")
-        for key in ("period_doubling_families", "period_doubling_depth"):
+        for key in ("period_doubling_families", "period_doubling_depth", "cover_families"):
             check(getattr(self, key) >= 0, f"{key} must be >= 0, got {getattr(self, key)!r}")
         for key in ("max_families", "family_steps", "shooting_steps", "period_doubling_steps"):
             check(getattr(self, key) >= (0 if key == "max_families" else 1),

@@ -280,19 +280,24 @@ def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: 
                            period_doubling=spec.period_doubling,
                            period_doubling_families=spec.period_doubling_families,
                            period_doubling_depth=spec.period_doubling_depth,
-                           period_doubling_steps=spec.period_doubling_steps,
+                           period_doubling_steps=spec.period_doubling_steps, cover_families=spec.cover_families,
                            deadline_s=spec.switching_max_s or math.inf)
+    in_contact = _in_contact(system, br) if ok else np.zeros(0, bool)
     try:
         if ok:  # the HB orbits at f_min, then at points spread over the curve (where HB is far from exact)
             idx = np.concatenate([[0], _evenly(len(br.freq_hz), START_GUESSES)[1:]])
             start = [(float(br.freq_hz[i]), hb_states(br.X[i], float(br.omega[i]), S)) for i in idx
                      if spec.freq_min_hz <= br.freq_hz[i] <= spec.freq_max_hz]
             x_ref = br.x_ref
+            # the HB orbits in contact: guesses of the orbits of the contact band no family covers (isolated families)
+            cover = [(float(br.freq_hz[i]), hb_states(br.X[i], float(br.omega[i]), S))
+                     for i in np.flatnonzero(in_contact) if spec.freq_min_hz <= br.freq_hz[i] <= spec.freq_max_hz]
         else:
             start = hb_start(system, b, P, spec.freq_min_hz, S)
             x_ref = float(np.max(np.abs(start[:, : system.n])))
+            cover = []
         ex = exact_frc(system, b, P, spec.freq_min_hz, spec.freq_max_hz, start, point_rows=rows, point_names=names,
-                       x_ref=x_ref, options=opts)
+                       x_ref=x_ref, options=opts, cover=cover)
     except (ShootingError, ContinuationError, NewtonError, RuntimeError) as exc:
         err = " ".join(str(exc).split())[:200]
         why = f"shooting failed ({err}): the HB curve at H = {spec.harmonics} is drawn and is NOT converged"
@@ -303,22 +308,40 @@ def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: 
     if spec.curve == "shooting":
         why = "exact flow, by shooting ([frc] curve = \"shooting\")"
     fill, refined = np.zeros(0, bool), ()
-    lo, hi = float(ex.main.freq_hz.min()), float(ex.main.freq_hz.max())
-    if ok and (lo > spec.freq_min_hz * (1 + 1e-9) or hi < spec.freq_max_hz * (1 - 1e-9)):
-        # the main family ends inside the band (it retraced its path or left it): outside its range the
+    outside = ~ex.covered(br.freq_hz) if ok else np.zeros(0, bool)
+    if ok and outside.any():
+        # the families end inside the band (they retraced their paths or left it): outside their ranges the
         # HB points whose orbits close no stop are linear, HB exact to round-off there: drawn instead
-        outside = (br.freq_hz < lo) | (br.freq_hz > hi)
-        fill = outside & ~_in_contact(system, br)
+        fill = outside & ~in_contact
         refined, notes = resonance_refinements(system, b, P, spec, br, rows, names, open_only=True)
-        refined = tuple(r for r in refined if (r.freq_hz.max() < lo or r.freq_hz.min() > hi)
-                        and not np.any(_in_contact(system, r)))
-        why += (f"; the main exact family covers {lo:.5g}-{hi:.5g} Hz only: outside it the {int(fill.sum())} HB "
-                f"points whose orbits close no stop (linear: exact) are drawn, {int(np.sum(outside & ~fill))} "
-                "in contact are not")
+        refined = tuple(r for r in refined if not np.any(ex.covered(r.freq_hz)) and not np.any(_in_contact(system, r)))
+        why += (f"; the exact families cover {_bands(ex.covered, br.freq_hz)} only: outside them the "
+                f"{int(fill.sum())} HB points whose orbits close no stop (linear: exact) are drawn, "
+                f"{int(np.sum(outside & ~fill))} in contact are not")
         if refined:
             why += "; " + "; ".join(n for n in notes if "drawn from" in n)
+    if ex.cover_freqs_hz.size:
+        gaps = ex.uncovered_bands()
+        made = sum(r["family"] >= 0 for r in ex.cover)
+        why += (f"; {made} isolated famil{'y' if made == 1 else 'ies'} started from HB orbits in contact no family "
+                f"covered ({len(ex.cover)} tried, `[frc] cover_families = {spec.cover_families}`); the contact band "
+                + ("is covered" if not gaps else "not covered: " + ", ".join(
+                    f"{a:.5g}-{c:.5g} Hz ({n} HB point{'' if n == 1 else 's'})" for a, c, n in gaps)))
     return ConvergedCurve(P, "shooting", why, spec.harmonics, Hc, change, contact, ex, "", time.perf_counter() - t0,
                           refined, fill)
+
+
+def _bands(covered, freq_hz: np.ndarray) -> str:
+    """'a-b Hz, c-d Hz': the runs of the sorted frequencies that ``covered`` (frequencies -> bool) says are covered.
+
+    >>> _bands(lambda f: (f < 2) | (f > 4), np.array([1.0, 3.0, 5.0, 1.5]))
+    '1-1.5 Hz, 5-5 Hz'
+    """
+    f = np.sort(np.asarray(freq_hz, float))
+    mask = np.asarray(covered(f), bool)
+    idx = np.flatnonzero(mask)
+    runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1) if idx.size else []
+    return ", ".join(f"{f[r[0]]:.5g}-{f[r[-1]]:.5g} Hz" for r in runs) or "no frequency of the HB curve"
 
 
 def resonance_refinements(system: GapSystem, b: np.ndarray, P: float, spec, br: FRCBranch, rows: np.ndarray,

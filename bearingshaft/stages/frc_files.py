@@ -265,6 +265,8 @@ def _family_rows(P: float, ex) -> list[dict]:
     rows = []
     for k, fam in enumerate(ex.families):
         pf, pi, born = fam.parent if fam.parent is not None else ("", "", "")
+        if fam.kind == "isolated":
+            born = f"guess at {fam.start_hz:.6g} Hz"
         rows.append({"level": P, "family": k, "kind": fam.kind, "period_k": fam.periods, "parent_family": pf,
                      "parent_index": pi, "born_at": born, "n_points": len(fam.freq_hz),
                      "freq_min_hz": sig(float(fam.freq_hz.min()), DIGITS),
@@ -473,6 +475,8 @@ def _converged_stats(result: FRCResult) -> dict:
                               "wall_s": round(f.wall_s, 3)} for f in cc.exact.families]
             d["switches_followed"] = sum(r["child"] >= 0 for r in cc.exact.switches)
             d["switches_not_followed"] = sum(r["child"] < 0 for r in cc.exact.switches)
+            d["contact_not_covered_hz"] = [[sig(a, DIGITS), sig(c, DIGITS), n]
+                                           for a, c, n in cc.exact.uncovered_bands()]
         out[f"{P:g} N"] = d
     return out
 
@@ -508,8 +512,9 @@ def frc_markdown(result: FRCResult) -> str:
         lines += ["| family | kind | period | born at | points | f [Hz] | stable points | max amplitude [m] | "
                   "max abs mu | ended |", "|---|---|---|---|---|---|---|---|---|---|"]
         for k, f in enumerate(ex.families):
-            born = "f_min" if f.parent is None else f"{f.parent[2]} of family {f.parent[0]} at " \
-                f"{ex.families[f.parent[0]].freq_hz[f.parent[1]]:.5g} Hz"
+            born = (f"{f.parent[2]} of family {f.parent[0]} at {ex.families[f.parent[0]].freq_hz[f.parent[1]]:.5g} Hz"
+                    if f.parent is not None else f"guess at {f.start_hz:.5g} Hz" if np.isfinite(f.start_hz)
+                    else "f_min")
             lines.append(f"| {k} | {f.kind} | {f.periods} T | {born} | {len(f.freq_hz)} | {f.freq_hz.min():.5g}-"
                          f"{f.freq_hz.max():.5g} | {int(np.sum(f.stable))} | {np.max(f.amplitude_m):.4g} | "
                          f"{np.max(np.abs(f.multipliers[:, 0])):.3g} | {f.status} |")
@@ -524,11 +529,36 @@ def frc_markdown(result: FRCResult) -> str:
                   f"{len(followed)}; not followed: {len(skipped)}"
                   + (" (" + "; ".join(sorted({r['note'].split(':')[0] for r in skipped if r['note']})) + ")"
                      if skipped else "") + ". Each is a row of frc_bifurcations.csv.",
-                  _period_doubled_line(ex, spec), "Run times: frc_convergence_timing.csv.", ""]
+                  _period_doubled_line(ex, spec), _cover_line(ex, spec), "Run times: frc_convergence_timing.csv.", ""]
         for note in [n for f in ex.families for n in f.notes][:10]:
             lines.append(f"- {note}")
         lines.append("")
     return "\n".join(lines)
+
+
+def _cover_line(ex, spec) -> str:
+    """frc.md: the isolated families of a level (started from HB orbits in contact that no family covered)
+    and the part of the contact band (its HB points) still covered by no family."""
+    iso = [k for k, f in enumerate(ex.families) if f.kind == "isolated"]
+    failed = {}
+    for r in ex.cover:
+        if r["family"] < 0:
+            note = r["note"]
+            why = ("orbit of a known family" if "one of family" in note else note.split(" (")[0].split(":")[0]
+                   or "not followed")
+            failed[why] = failed.get(why, 0) + 1
+    gaps = ex.uncovered_bands()
+    if not ex.cover_freqs_hz.size:
+        where = "no HB point in contact to cover"
+    elif not gaps:
+        where = f"every one of the {ex.cover_freqs_hz.size} HB points in contact is covered by a family"
+    else:
+        where = "not covered by any family: " + ", ".join(
+            f"{a:.5g}-{c:.5g} Hz ({n} HB point{'' if n == 1 else 's'} in contact)" for a, c, n in gaps)
+    return (f"Isolated families (started from HB orbits in contact no family covered, drawn with the others; "
+            f"`[frc] cover_families = {spec.cover_families}`): " + (", ".join(str(k) for k in iso) if iso else "none")
+            + ("; guesses tried without a new family: " + "; ".join(f"{n} {w}" for w, n in sorted(failed.items()))
+               if failed else "") + f". Contact band: {where}.")
 
 
 def _period_doubled_line(ex, spec) -> str:

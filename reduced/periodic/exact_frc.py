@@ -86,12 +86,14 @@ LOAD_STEPS = 400  # continuation steps in the load of the first orbit at most
 START_HARMONICS = 15  # harmonics of the balance that guesses the first orbit
 BISECTIONS = 12  # bisections locating a crossing between two points (the bracket shrinks 4096 times)
 SWITCH_H = (1e-3, 3e-4, 3e-3)  # offsets tried along the critical eigenvector (scaled unknowns), in order
-FAMILY_KINDS = ("main", "asymmetric", "half_wave_broken", "asymmetric_half_wave", "period_doubled")
+FAMILY_KINDS = ("main", "asymmetric", "half_wave_broken", "asymmetric_half_wave", "period_doubled", "isolated")
 SWITCHED = {"pitchfork_mirror": "asymmetric", "pitchfork_half_wave": "half_wave_broken",
             "pitchfork_mirror_half_wave": "asymmetric_half_wave", "period_doubling": "period_doubled"}
 PD_CRITICAL_TOL = 0.05  # |mu + 1| of the located critical multiplier beyond which a period doubling is not switched at
 REJOIN_TOL = 1e-7  # symmetry-breaking part of a switched family, relative to its point, below which it has rejoined
 SAME_ORBIT_TOL = 1e-6  # relative: two orbits shot at the same frequency closer than this (nodes) are one orbit
+COVER_TRIES = 4  # guesses tried per family of cover_families at most (a guess may find no orbit)
+JOIN_DIST, JOIN_COS = 5e-3, 0.9  # an isolated family this close (scaled) to a known family's path, parallel: joined
 
 
 @dataclass(frozen=True, slots=True)
@@ -130,6 +132,11 @@ class ExactFRCOptions:
         Doublings of a cascade followed: 1 the 2 T families only, 2 also the 4 T families born on them.
     period_doubling_steps : int
         Points of a period-doubled family at most (each costs about twice a period-1 point).
+    cover_families : int
+        Families started from the ``cover`` guesses of :func:`exact_frc` at frequencies no family
+        covers (kind ``isolated``), at most; their branch points are switched at like the main one's.
+    cover_steps : int
+        Points of an isolated family at most, each way from its first orbit.
     deadline_s : float
         s of wall time after which no new family is started (the main one always runs).
     velocity_scale : {'fastest', 'omega'}
@@ -156,6 +163,8 @@ class ExactFRCOptions:
     period_doubling_families: int = 4
     period_doubling_depth: int = 1
     period_doubling_steps: int = 600
+    cover_families: int = 2
+    cover_steps: int = 1000
     deadline_s: float = math.inf
     velocity_scale: str = "fastest"
 
@@ -167,12 +176,13 @@ class ExactFRCOptions:
             _check.positive(key, getattr(self, key))
         if not self.deadline_s > 0.0:
             raise _check.InvalidArgument(f"deadline_s must be > 0 s, got {self.deadline_s!r}")
-        for key in ("max_iter", "max_steps", "family_steps", "period_doubling_steps"):
+        for key in ("max_iter", "max_steps", "family_steps", "period_doubling_steps", "cover_steps"):
             _check.integer(key, getattr(self, key))
         _check.integer("max_families", self.max_families, lo=0)
         _check.integer("depth", self.depth, lo=0)
         _check.integer("period_doubling_families", self.period_doubling_families, lo=0)
         _check.integer("period_doubling_depth", self.period_doubling_depth, lo=0)
+        _check.integer("cover_families", self.cover_families, lo=0)
         _check.flag("branch_switching", self.branch_switching)
         _check.flag("period_doubling", self.period_doubling)
         _check.choice("velocity_scale", self.velocity_scale, ("fastest", "omega"))
@@ -245,8 +255,9 @@ class OrbitFamily:
     Attributes
     ----------
     kind : str
-        One of :data:`FAMILY_KINDS`: the main curve (from the bottom of the band), or the
-        family born at a pitchfork or period doubling.
+        One of :data:`FAMILY_KINDS`: the main curve (from the bottom of the band), the family
+        born at a pitchfork or period doubling, or (``isolated``) a family started from a guess at a
+        frequency no other family covers (an isola, or a piece of the curve the others do not reach).
     periods : int
         The orbits' period in load periods.
     freq_hz, omega : (k,) ndarray of float
@@ -278,6 +289,8 @@ class OrbitFamily:
         How the continuation ended, per piece, joined by '+'; "rejoined" when it met its parent again.
     notes : list of str
     wall_s : float
+    start_hz : float
+        Hz, the frequency of the first orbit (the guess it was found from) of a main or isolated family.
     """
 
     kind: str
@@ -300,6 +313,7 @@ class OrbitFamily:
     wall_s: float = 0.0
     Y: np.ndarray | None = field(default=None, repr=False)  # (k, 2nS + 1) the scaled points
     signs: np.ndarray | None = field(default=None, repr=False)  # (k, c) test-function signs
+    start_hz: float = math.nan
 
     @property
     def max_multiplier(self) -> np.ndarray:
@@ -327,7 +341,7 @@ class ExactFRC:
     point_names : tuple of str
     point_rows : (p, n) ndarray of float
     families : list of OrbitFamily
-        The main curve first, then the switched families in the order found.
+        The main curve first, then the switched and isolated families in the order found.
     switches : list of dict
         Per branch point met: family, index, freq_hz, kind, and the family switched onto
         (``child``, -1 if none) or why not (``note``).
@@ -337,6 +351,11 @@ class ExactFRC:
         m.
     wall_s : float
     notes : list of str
+    cover : list of dict
+        Per ``cover`` guess tried (:func:`exact_frc`): its ``freq_hz``, the ``family`` it started
+        (-1 if none) and ``note`` (why not).
+    cover_freqs_hz : (c,) ndarray of float
+        Hz, the frequencies of the ``cover`` guesses given (those to be covered).
     """
 
     amplitude_N: float
@@ -349,10 +368,51 @@ class ExactFRC:
     x_ref: float
     wall_s: float
     notes: list = field(default_factory=list)
+    cover: list = field(default_factory=list)
+    cover_freqs_hz: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def main(self) -> OrbitFamily:
         return self.families[0]
+
+    def covered(self, freq_hz) -> np.ndarray:
+        """(k,) bool: whether some family (any kind) has orbits at each frequency (:func:`covered`)."""
+        return covered(self.families, freq_hz)
+
+    def uncovered_bands(self) -> list[tuple[float, float, int]]:
+        """(first Hz, last Hz, guesses) of each run of ``cover_freqs_hz`` no family covers, in frequency order."""
+        f = np.sort(self.cover_freqs_hz)
+        return [(float(f[r[0]]), float(f[r[-1]]), len(r)) for r in _runs(~self.covered(f))]
+
+
+def covered(families: list, freq_hz) -> np.ndarray:
+    """(k,) bool: whether each frequency lies in the frequency range of a piece of one of the families
+    (a piece is a continuous curve: it has an orbit at each frequency of its range).
+
+    Parameters
+    ----------
+    families : list of OrbitFamily
+    freq_hz : (k,) Hz
+
+    Returns
+    -------
+    ndarray
+    """
+    f = np.atleast_1d(np.asarray(freq_hz, float))
+    out = np.zeros(f.shape, bool)
+    for fam in families:
+        for p in fam.pieces():
+            lo, hi = fam.freq_hz[p].min(), fam.freq_hz[p].max()
+            out |= (f >= lo * (1 - 1e-12)) & (f <= hi * (1 + 1e-12))
+    return out
+
+
+def _runs(mask: np.ndarray) -> list[np.ndarray]:
+    """The runs of consecutive True entries of ``mask``, as index arrays."""
+    idx = np.flatnonzero(mask)
+    if not idx.size:
+        return []
+    return np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1)
 
 
 # -- point data: multipliers, symmetry tests, peaks -------------------------------------------------
@@ -927,13 +987,15 @@ def first_orbit(res: ShootingResidual, guess: np.ndarray, omega: float) -> np.nd
 def exact_frc(system: GapSystem, load: np.ndarray, amplitude_N: float, f_min_hz: float, f_max_hz: float,
               starts, *, point_rows: np.ndarray | None = None, point_names: tuple | None = None,
               x_ref: float, options: ExactFRCOptions | None = None, mirror: np.ndarray | None = None,
-              progress=None) -> ExactFRC:
+              progress=None, cover=()) -> ExactFRC:
     """The forced-response families of ``system`` under load (n,) x amplitude_N cos(Omega t) on its
     exact flow over [f_min, f_max] (module docstring).
 
     The main family is continued from the first guess of ``starts`` whose orbit is found
     (:func:`first_orbit`), down to f_min and up to f_max; then, as the options say, the families
-    born at its pitchforks and period doublings.
+    born at its pitchforks and period doublings; then, up to ``options.cover_families``, families
+    started from the ``cover`` guesses at frequencies no family covers yet (:func:`_cover`, kind
+    ``isolated``), each with its own branch switching.
 
     Parameters
     ----------
@@ -951,6 +1013,10 @@ def exact_frc(system: GapSystem, load: np.ndarray, amplitude_N: float, f_min_hz:
     mirror : (n, n) candidate mirror of the DOFs (default: their reversal), kept if the system
         and load are invariant under it
     progress : None or a callable taking the fraction of the band the main family has covered
+    cover : sequence of (freq_hz, (S, 2n) guess)
+        Guesses of orbits at frequencies that should be covered (e.g. the HB orbits in contact): where
+        no family has an orbit at such a frequency, the orbit is shot from its guess and followed both
+        ways as a new family (not if it is the orbit, or an image, of a family already found)
 
     Returns
     -------
@@ -972,13 +1038,14 @@ def exact_frc(system: GapSystem, load: np.ndarray, amplitude_N: float, f_min_hz:
     if isinstance(starts, np.ndarray):
         starts = [(f0, starts)]
     starts = [(float(f), np.atleast_2d(np.asarray(g, float))) for f, g in starts]
-    for f, g in starts:
+    cover = [(float(f), np.atleast_2d(np.asarray(g, float))) for f, g in cover]
+    for f, g in starts + cover:
         if g.shape != (opts.segments, 2 * system.n) or not f0 <= f <= f1:
             raise _check.InvalidArgument(f"a start must be a frequency in the band and ({opts.segments}, "
                                          f"{2 * system.n}) nodes, got {f!r} Hz and {g.shape}")
     with single_thread_blas():
         return _exact_frc(system, b, P, f0, f1, starts, rows, names, x_ref, opts,
-                          find_symmetry(system, b, mirror), progress)
+                          find_symmetry(system, b, mirror), progress, cover)
 
 
 def _main_start(res: ShootingResidual, starts: list, f1: float) -> tuple[np.ndarray, list[str]]:
@@ -1002,7 +1069,7 @@ def _main_start(res: ShootingResidual, starts: list, f1: float) -> tuple[np.ndar
     raise ShootingError("no periodic orbit from any guess: " + "; ".join(notes))
 
 
-def _exact_frc(system, b, P, f0, f1, starts, rows, names, x_ref, opts, sym, progress) -> ExactFRC:
+def _exact_frc(system, b, P, f0, f1, starts, rows, names, x_ref, opts, sym, progress, cover=()) -> ExactFRC:
     budget = _Budget(opts.deadline_s)
     flow = ForcedFlow(system, b, P)
     w0, w1 = 2 * math.pi * f0, 2 * math.pi * f1
@@ -1033,10 +1100,16 @@ def _exact_frc(system, b, P, f0, f1, starts, rows, names, x_ref, opts, sym, prog
     Y, data, folds, seg, st, notes = _join(parts)
     notes = start_notes + notes
     families = [_family("main", 1, res, Y, data, folds, seg, st, notes, None, time.perf_counter() - t0, an)]
+    families[0].start_hz = res.omega(y0) / (2 * math.pi)
     switches = []
-    if opts.branch_switching and (opts.max_families > 0 or opts.period_doubling and opts.period_doubling_families > 0):
-        _switch_all(families, switches, {0: (res, an)}, opts, band, rows, sym, budget)
-    return ExactFRC(P, names, rows, families, switches, sym, opts, x_ref, budget.spent)
+    residuals = {0: (res, an)}
+    switching = opts.branch_switching and (opts.max_families > 0
+                                           or opts.period_doubling and opts.period_doubling_families > 0)
+    if switching:
+        _switch_all(families, switches, residuals, opts, band, rows, sym, budget)
+    tried = _cover(families, switches, residuals, cover, res, opts, band, rows, sym, budget, switching) if cover else []
+    return ExactFRC(P, names, rows, families, switches, sym, opts, x_ref, budget.spent, cover=tried,
+                    cover_freqs_hz=np.array([f for f, _ in cover]))
 
 
 def _join(parts: list) -> tuple:
@@ -1063,7 +1136,7 @@ def _join(parts: list) -> tuple:
     return Y, data, sorted(folds), seg, st, notes
 
 
-def _switch_all(families, switches, residuals, opts, band, rows, sym, budget) -> None:
+def _switch_all(families, switches, residuals, opts, band, rows, sym, budget, root: int = 0) -> None:
     """Branch switching at the pitchforks and period doublings of the families, within the budget
     (module docstring). Pitchforks first, family by family in the order found, on families of
     generation <= ``opts.depth`` (the main one is generation 1), up to ``opts.max_families``; then
@@ -1075,7 +1148,8 @@ def _switch_all(families, switches, residuals, opts, band, rows, sym, budget) ->
     PD_CRITICAL_TOL of -1 (a multiplier that jumps past -1 at a grazing bifurcates no smooth 2 T
     family off the eigenvector). A family whose first orbit is one of a family already found (or its
     image under a symmetry, or shifted by a load period) is not followed again: a period-doubled
-    family is born at both ends of its bubble, and on the symmetric images of its parent."""
+    family is born at both ends of its bubble, and on the symmetric images of its parent. ``root``: the
+    family whose switches are made (with those of its children): the main one, or an isolated one."""
     covered = set()  # (family, point) of branch points reached by a switched family's far end
     pending = []  # (rank, record, family, point) of the period doublings, followed after the pitchforks
 
@@ -1113,20 +1187,20 @@ def _switch_all(families, switches, residuals, opts, band, rows, sym, budget) ->
                 else:
                     pending.append((_pd_rank(fam, i), len(pending), rec, fi, i))
                 continue
-            n_pd = sum(f.kind == "period_doubled" for f in families)
+            n_sw = sum(f.kind in SWITCHED.values() and f.kind != "period_doubled" for f in families)
             if (fi, i) in covered:
                 rec["note"] = "reached by a family switched onto before"
             elif gen > opts.depth or fam.kind == "period_doubled":
                 rec["note"] = (f"not followed: depth = {opts.depth} reached" if gen > opts.depth else
                                "not followed: the pitchforks of a period-doubled family are not followed")
-            elif len(families) - 1 - n_pd >= opts.max_families:
+            elif n_sw >= opts.max_families:
                 rec["note"] = f"not followed: max_families = {opts.max_families} reached"
             else:
                 k = attempt(rec, fi, i, kind, fam, res, an)
                 if k is not None:
                     queue.append((k, gen + 1))
 
-    queue = [(0, 1)]  # (family index, generation)
+    queue = [(root, 1)]  # (family index, generation)
     gens = {}
     while queue:
         fi, gen = queue.pop(0)
@@ -1262,5 +1336,143 @@ def _child(fam: OrbitFamily, res: ShootingResidual, an: _Analyser, i: int, kind:
     return (fam_new, res_new, an_new, end), info
 
 
-__all__ = ["ExactFRC", "ExactFRCOptions", "FAMILY_KINDS", "OrbitFamily", "Symmetry", "exact_frc", "find_symmetry",
-           "first_orbit", "hb_start"]
+# -- covering the band: isolated families -------------------------------------------------------------
+class _Joined:
+    """The stop of an isolated family: it ran onto the path of a family already found (or of one of
+    its images under the symmetries), going along it: a point within JOIN_DIST (scaled unknowns)
+    of a chord between two consecutive points of that path, the step's secant within
+    arccos(JOIN_COS) of the chord (a family crossing it at a branch point is not stopped). ``own``:
+    (Y, segment) of the family's own run the other way from its first point, whose points more than
+    RETRACE_ARC of arclength from it count as a known path too (family -2: an isola closed)."""
+
+    def __init__(self, families: list, res: ShootingResidual, sym: Symmetry, own=None) -> None:
+        from scipy.spatial import cKDTree
+
+        A, B, who = [], [], []
+        if own is not None and len(own[0]) > 1:
+            Yo, so = own
+            arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(Yo, axis=0), axis=1))])
+            keep = (so[:-1] == so[1:]) & (arc[:-1] > RETRACE_ARC)
+            A.append(Yo[:-1][keep])
+            B.append(Yo[1:][keep])
+            who.append(np.flatnonzero(keep) - 2j)
+        for k, fam in enumerate(families):
+            if fam.periods != res.periods or fam.nodes.shape[1] != res.segments or len(fam.freq_hz) < 2:
+                continue
+            same = fam.segment[:-1] == fam.segment[1:]
+            per_point = [_images(nd, fam.periods, sym) for nd in fam.nodes]
+            ims = [np.array([res.point(p[m], w) for p, w in zip(per_point, fam.omega, strict=True)])
+                   for m in range(len(per_point[0]))]
+            for Yi in ims:
+                A.append(Yi[:-1][same])
+                B.append(Yi[1:][same])
+                who.append(np.flatnonzero(same) + 1j * k)
+        self.A = np.concatenate(A) if A else np.zeros((0, res.size + 1))
+        self.B = np.concatenate(B) if B else self.A
+        self.who = np.concatenate(who) if who else np.zeros(0, complex)
+        self.reach = float(np.max(np.linalg.norm(self.B - self.A, axis=1), initial=0.0))
+        self.tree = cKDTree(0.5 * (self.A + self.B)) if len(self.A) else None
+        self.prev = None
+        self.family = -1
+
+    def __call__(self, y: np.ndarray) -> bool:
+        prev, self.prev = self.prev, y
+        if self.tree is None or prev is None:
+            return False
+        step = y - prev
+        ns = float(np.linalg.norm(step))
+        if ns == 0.0:
+            return False
+        for j in self.tree.query_ball_point(y, 0.5 * self.reach + JOIN_DIST):
+            a, c = self.A[j], self.B[j] - self.A[j]
+            nc = float(c @ c)
+            th = min(max(float((y - a) @ c) / nc, 0.0), 1.0) if nc > 0 else 0.0
+            if (float(np.linalg.norm(y - a - th * c)) < JOIN_DIST
+                    and abs(float(step @ c)) > JOIN_COS * ns * math.sqrt(nc)):
+                self.family = int(self.who[j].imag)
+                return True
+        return False
+
+
+def _cover(families, switches, residuals, cover, res, opts, band, rows, sym, budget, switching) -> list[dict]:
+    """Isolated families from the ``cover`` guesses (:func:`exact_frc`), up to ``opts.cover_families``
+    (at most COVER_TRIES guesses each): while some guess's frequency is covered by no family, the
+    longest run (in ln f) of such guesses consecutive in frequency (split by covered frequencies and
+    by guesses already tried) is taken, and its guess nearest its middle in ln f shot (:func:`shoot_at`, at its
+    frequency). An orbit that is one of a family already found, or an image (:func:`_known`), is
+    not followed; else it is followed down and up (each way until it leaves the band, retraces its
+    path or runs onto a known family's path, :class:`_Joined`) as a family of kind ``isolated``,
+    whose branch points are then switched at (:func:`_switch_all`). Returns a record per guess tried."""
+    f = np.array([c[0] for c in cover])
+    tried = np.zeros(len(f), bool)
+    out = []
+    n_new = 0
+    order = np.argsort(f, kind="stable")
+    while n_new < opts.cover_families and len(out) < COVER_TRIES * opts.cover_families:
+        if not budget.left():
+            out.append({"freq_hz": math.nan, "family": -1, "note": f"deadline of {opts.deadline_s:g} s reached"})
+            break
+        free = ~covered(families, f[order]) & ~tried[order]
+        runs = _runs(free)
+        if not runs:
+            break
+        run = max(runs, key=lambda r: (math.log(f[order[r[-1]]] / f[order[r[0]]]), len(r)))
+        mid = math.sqrt(f[order[run[0]]] * f[order[run[-1]]])  # the run's middle in ln f
+        j = int(order[run[int(np.argmin(np.abs(np.log(f[order[run]] / mid))))]])
+        tried[j] = True
+        rec = {"freq_hz": float(f[j]), "family": -1, "note": ""}
+        out.append(rec)
+        rec["note"] = _isolated(families, switches, residuals, cover[j], res, opts, band, rows, sym, budget, switching)
+        if not rec["note"]:
+            rec["family"] = len(families) - 1
+            n_new += 1
+    return out
+
+
+def _isolated(families, switches, residuals, guess, res, opts, band, rows, sym, budget, switching) -> str:
+    """Shoot the orbit of one cover guess (freq_hz, nodes) and follow it as an isolated family
+    (appended to ``families``, its switches made); '' if done, else why not."""
+    t0 = time.perf_counter()
+    fq, nodes = guess
+    w = 2 * math.pi * fq
+    try:
+        y0 = shoot_at(res, nodes, w)
+    except ShootingError as exc:
+        return f"no orbit from the guess ({' '.join(str(exc).split())[:80]})"
+    same = _known(families, residuals, res, y0, sym)
+    if same is not None:
+        return f"the orbit found is one of family {same} (or an image of it under a symmetry)"
+    nodes0, _ = res.nodes(y0)
+    probe = _Analyser(res, sym, False, False, rows)
+    a0, hw0 = probe.measures(nodes0)
+    an = _Analyser(res, sym, bool(sym.mirror is not None and a0 < SYMMETRY_TOL),
+                   bool(sym.half_wave and hw0 < SYMMETRY_TOL), rows)
+    parts = []
+    try:
+        for direction in (-1.0, 1.0):
+            if direction < 0 and y0[res.size] <= band[0] + 1e-12 or direction > 0 and y0[res.size] >= band[1] - 1e-12:
+                continue
+            watch = _Joined(families, res, sym, own=(parts[0][1][0], parts[0][1][3]) if parts else None)
+            part = _follow(res, y0, res.size, direction, opts, opts.cover_steps, band, an, stop_extra=watch)
+            if watch.family != -1:
+                part[4][-1] = "joined" if watch.family >= 0 else "closed"
+                f_end = res.omega(part[0][-1]) / (2 * math.pi)
+                part[5].append(f"ran onto the path of family {watch.family} at {f_end:.6g} Hz: stopped there"
+                               if watch.family >= 0 else f"came back onto its own run down at {f_end:.6g} Hz (an "
+                               "isola): stopped there")
+            parts.append((direction, part))
+    except (ContinuationError, ShootingError) as exc:
+        return f"continuation failed: {' '.join(str(exc).split())[:120]}"
+    Y, data, folds, seg, st, notes = _join(parts)
+    fam = _family("isolated", 1, res, Y, data, folds, seg, st, [f"started from the guess at {fq:.6g} Hz"] + notes,
+                  None, time.perf_counter() - t0, an)
+    fam.start_hz = fq
+    families.append(fam)
+    residuals[len(families) - 1] = (res, an)
+    if switching:
+        _switch_all(families, switches, residuals, opts, band, rows, sym, budget, root=len(families) - 1)
+    return ""
+
+
+__all__ = ["ExactFRC", "ExactFRCOptions", "FAMILY_KINDS", "OrbitFamily", "Symmetry", "covered", "exact_frc",
+           "find_symmetry", "first_orbit", "hb_start"]
