@@ -175,7 +175,8 @@ def test_frc_stage_writes_the_response_map(tmp_path, monkeypatch):
     data["frc"].update({"levels_N": [1.0], "freq_min_hz": 15.0, "freq_max_hz": 30.0, "harmonics": 1,
                         "convergence_harmonics": [1], "hill_points": 0, "shooting_points": 0,
                         "stepped_sine_points": 0, "backbone_scales": [1.0], "max_steps": 200,
-                        "map_step_hz": 0.5, "map_coarse_points": 4, "map_periods": 64})
+                        "map_step_hz": 0.5, "map_coarse_points": 4, "map_periods": 64,
+                        "curve": "hb"})  # the map, not the exact families (tests/test_frc.py runs those)
     scene = parse_scene(tomli_w.dumps(data), "discrete-frc", "quick")
     run_stage(scene, "frc", tmp_path, progress=False)
     rows = list(csv.DictReader(open(tmp_path / "response_map.csv")))
