@@ -94,15 +94,15 @@ def markdown(result) -> str:
     if sys_f is not None:
         lines[-1] += (f" Sliders: {', '.join(sys_f.names)}, mu = {float(np.max(sys_f.mu)):g}, "
                       f"k_t = {float(np.max(sys_f.k_t)):.4g} N/m.")
-    lines += ["", "| level [N] | HB points | stable | stick-slip points | Hill [s] | HB [s] | bifurcations | "
-              "stepped sine: settled | worst HB error at a settled point |", "|---|---|---|---|---|---|---|---|---|"]
+    # run times are in provenance.json (the stage's stats), not here: this file is compared digit for digit
+    lines += ["", "| level [N] | HB points | stable | stick-slip points | bifurcations | "
+              "stepped sine: settled | worst HB error at a settled point |", "|---|---|---|---|---|---|---|"]
     for P, br in result.curves.items():
-        st = result.stats["levels"][str(P)]
         ok = [c for c in result.checks[P] if c.settled]
         errs = [c.rel_error for c in ok if math.isfinite(c.rel_error)]
         worst = f"{max(errs):.3g}" if errs else "n/a"
         if isinstance(br, Exception):
-            lines.append(f"| {P:g} | failed: {' '.join(str(br).split())[:120]} | | | | {st['hb_wall_s']:.1f} | | "
+            lines.append(f"| {P:g} | failed: {' '.join(str(br).split())[:120]} | | | | "
                          f"{len(ok)}/{len(result.checks[P])} | {worst} |")
             continue
         fb = br.balance
@@ -113,8 +113,7 @@ def markdown(result) -> str:
             kinds[kind] = kinds.get(kind, 0) + 1
         bif = ", ".join(f"{v} {k}" for k, v in kinds.items()) or "none"
         lines.append(f"| {P:g} | {len(br.freq_hz)} | {int(np.sum(br.stable))} | {stick_slip} | "
-                     f"{br.stability_wall_s:.1f} | {st['hb_wall_s']:.1f} | {bif} | {len(ok)}/{len(result.checks[P])} "
-                     f"| {worst} |")
+                     f"{bif} | {len(ok)}/{len(result.checks[P])} | {worst} |")
     lines += ["", "## The stepped sine by the exact friction integrator (frc_friction_checks.csv)", "",
               f"Up the band at {spec.stepped_sine_points} frequencies, the state (sliders included) carried from one "
               f"to the next; each settled until its last period's amplitudes move by less than "
