@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from bearingshaft.digits import human
-from bearingshaft.estimates import Estimate
+from bearingshaft.estimates import Estimate, has_friction
 from bearingshaft.registry import BY_NAME, stages_of
 from bearingshaft.scenes import Scene, SceneError
 
@@ -285,7 +285,7 @@ def stage_peak(scene: Scene, stage: str, cached: bool | None = None) -> StagePea
     -------
     StagePeak
     """
-    friction_frc = stage == "frc" and float(getattr(scene.model, "mu", 0.0) or 0.0) > 0.0
+    friction_frc = stage == "frc" and has_friction(scene)
     pm = PEAK_MODELS.get("frc_friction" if friction_frc else stage, UNCALIBRATED)
     cached = rom_cached(scene) if cached is None else cached
     fixed = pm.fixed + sum(b for table, b in pm.tables if getattr(scene, table, None) is not None)

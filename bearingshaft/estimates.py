@@ -71,6 +71,18 @@ def n_dofs(scene: Scene) -> int:
     return 0
 
 
+def has_friction(scene: Scene) -> bool:
+    """Whether the scene's model has friction at its tips (``mu`` > 0: the discrete friction model or a
+    reduced model with sliders), which changes what the frc and hammer stages compute.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+    """
+    return float(getattr(scene.model, "mu", 0.0) or 0.0) > 0.0
+
+
 def sliders(scene: Scene) -> int:
     """Friction sliders of the scene's reduced model: one a stop and direction (reduced.models.rom).
 
@@ -85,7 +97,7 @@ def sliders(scene: Scene) -> int:
         0 without friction, 4 along the beam, 8 along and across it.
     """
     m = scene.model
-    if scene.model_kind != "rom" or not getattr(m, "mu", 0.0) > 0:
+    if scene.model_kind != "rom" or not has_friction(scene):
         return 0
     return 4 * (2 if m.friction_directions == "axial+lateral" else 1)
 

@@ -10,9 +10,10 @@ import pytest
 
 import bearingshaft.scenes
 from bearingshaft.cli import main
+from bearingshaft.estimates import has_friction
 from bearingshaft.scenes import SceneError, load_scene
 from bearingshaft.scenes.parse import parse_scene
-from bearingshaft.stages.frc_friction import has_friction, load_vector, settle
+from bearingshaft.stages.frc_friction import load_vector, settle
 from bearingshaft.systems import model_system
 from reduced.periodic.frc import linear_frf, solution_at_frequency
 from reduced.periodic.friction_aft import friction_frc

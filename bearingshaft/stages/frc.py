@@ -39,7 +39,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from bearingshaft.estimates import FLOAT, HILL_COPIES, Estimate, n_dofs
+from bearingshaft.estimates import FLOAT, HILL_COPIES, Estimate, has_friction, n_dofs
 from bearingshaft.output import StageWriter
 from bearingshaft.progress import bar as progress_bar
 from bearingshaft.reproduction import Reproduction, chaotic, exact, sensitive, within
@@ -97,7 +97,7 @@ def compute(scene: Scene, progress: bool, workdir=None) -> FRCResult:
 
     with single_thread_blas(), warnings.catch_warnings():
         warnings.simplefilter("ignore")  # LinAlgWarning from LU on rejected continuation steps
-        if frc_friction.has_friction(scene):  # HB by AFT with the sliders (frc_friction: what it skips and why)
+        if has_friction(scene):  # HB by AFT with the sliders (frc_friction: what it skips and why)
             return frc_friction.compute(scene, progress)
         return _compute(scene, progress)
 

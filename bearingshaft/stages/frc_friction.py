@@ -38,16 +38,6 @@ from reduced.transient.friction import integrate_exact_friction
 
 SAMPLES_PER_PERIOD = 400  # of the exact run's output: the amplitude read on these (error ~ (pi / 400)^2 / 2 = 3e-5)
 SETTLE_CHUNK = 10  # periods run at a time between two settling checks
-def has_friction(scene: Scene) -> bool:
-    """The scene's model has friction at its tips (mu > 0).
-
-    Parameters
-    ----------
-    scene : the scene
-    """
-    return float(getattr(scene.model, "mu", 0.0) or 0.0) > 0.0
-
-
 def load_vector(spec, rows: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
     """(n,) b: the row of ``[frc] point`` plus ``also_weights`` times the rows of ``also_points``.
 
@@ -185,5 +175,5 @@ def write(result: FrictionFRCResult, writer) -> None:
     frc_friction_files.write(result, writer)
 
 
-__all__ = ["SKIPPED", "FrictionCheck", "FrictionFRCResult", "compute", "has_friction", "load_vector", "settle",
+__all__ = ["SKIPPED", "FrictionCheck", "FrictionFRCResult", "compute", "load_vector", "settle",
            "write"]
