@@ -58,7 +58,15 @@ from reduced.periodic.exact_frc import ExactFRCOptions, exact_frc, hb_start
 from reduced.periodic.exact_hb import default_root_samples
 from reduced.periodic.forced_balance import ForcedBalance, ForcedResidual
 from reduced.periodic.forced_stability import HILL_TOL, ShootingError, floquet_by_shooting, forced_hill, hb_states
-from reduced.periodic.frc import FRC_STEPS, FRCBranch, _synthesis, frc, max_abs_over_period, solution_at_frequency
+from reduced.periodic.frc import (
+    FRC_STEPS,
+    FRCBranch,
+    _synthesis,
+    frc,
+    linear_frf,
+    max_abs_over_period,
+    solution_at_frequency,
+)
 from reduced.periodic.hb import NewtonError, _derivative_matrix, newton
 from reduced.periodic.stepped_sine import SteppedSine, stepped_sine
 from reduced.transient.flow import Flow
@@ -387,14 +395,11 @@ def resonance_refinements(system: GapSystem, b: np.ndarray, P: float, spec, br: 
         if not (0 < zeta < 1 / (2 * RESONANCE_SPAN)) or lo < spec.freq_min_hz or hi > spec.freq_max_hz:
             continue
         inside = int(np.sum((br.freq_hz >= lo) & (br.freq_hz <= hi)))
-        lin = [float(np.max(np.abs(rows @ np.linalg.solve(system.K - w**2 * system.M + 1j * w * system.C, b))))
-               for w in 2 * np.pi * np.array([lo, f_r, hi])]
+        lin = np.max(linear_frf(system, b, 1.0, [lo, f_r, hi], rows), axis=1)
         if inside >= RESONANCE_POINTS or lin[1] < RESONANCE_PEAK * max(lin[0], lin[2]):
             continue  # resolved, or the load does not excite the mode at the output points (no peak)
-        if open_only and any(
-                np.any(P * np.abs(system.B @ np.linalg.solve(system.K - w**2 * system.M + 1j * w * system.C, b))
-                       > OPEN_MARGIN * np.abs(system.offset))
-                for w in 2 * np.pi * f_r * np.array([1 - zeta, 1.0, 1 + zeta])):
+        if open_only and np.any(linear_frf(system, b, P, f_r * np.array([1 - zeta, 1.0, 1 + zeta]), system.B)
+                                > OPEN_MARGIN * np.abs(system.offset)):
             continue  # the band closes a stop: its curve would be in contact, which the caller does not draw
         sub = _curve(system, b, P, spec, spec.harmonics, rows, names, hill_points=0, f_band=(lo, hi))
         if isinstance(sub, Exception):
