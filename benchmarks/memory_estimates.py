@@ -235,7 +235,8 @@ def plot(rows: list[dict], path: Path) -> None:
     ax2.grid(axis="x", alpha=0.3)
     older = any(r["source"].startswith("main_job") for r in rows)
     fig.suptitle("Memory estimate against the measured peak, each stage in a process of its own"
-                 + ("\n(* peak from results/performance/main_job.csv, ru_maxrss; the others VmHWM measured here)"
+                 + ("\n(* peak from an earlier main_job_cost.py run, ru_maxrss of the stage's own process; "
+                    "the others VmHWM, --measure)"
                     if older else ""))
     fig.savefig(path, dpi=110)
     plt.close(fig)
