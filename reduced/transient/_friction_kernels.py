@@ -50,6 +50,7 @@ from reduced.transient._modal import (
 from reduced.transient.friction_tables import KIND_SLIP_END
 
 STUCK_PER_EVENT = 8  # zero-length segments allowed in a row, per event slot, before the run is refused
+NEW_STATE = 2  # kernel status (free and forced): the run entered a state whose tables are not built yet
 
 
 @nb.njit(cache=True)
@@ -224,7 +225,7 @@ def _log(n_log, t, e, s, y, log_t, log_e, log_s, log_y):
 @nb.njit(cache=True)
 def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bounds, c, t_samples, i_samp, t_after,
                           out_y, out_W, out_Wf, W, Wf, hmin, floor, max_events, n_stuck, log_t, log_e, log_s, log_y,
-                          n_log):
+                          n_log, built, carry):
     """March events from t through the pieces ending at bounds[c], bounds[c + 1], ... (no loads), filling the
     sample buffer ``t_samples`` from i_samp (:func:`reduced.transient._modal._free_kernel` with friction).
 
@@ -242,6 +243,12 @@ def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bound
     A slider that would switch back at the instant it switched is decided by the consistency of its two
     states (the module docstring of :mod:`reduced.transient.friction_tables`): the consistent one is kept and
     its slot pinned below its round-off band for the segment (:func:`_pin`), never toggled.
+
+    The tables are built state by state as a run enters them (:class:`reduced.transient.friction_tables.
+    LazyFrictionTables`): a segment that starts in a state with built[s] False returns NEW_STATE before it
+    is searched, (y, s, t) at its start and the loop's memory of the last switch (the slot that held, the
+    last event's slot, the fresh slider, the state before it, the trend) in ``carry`` (int64 (5,)), read
+    back on entry, so that the run resumes where it stopped as if it had not.
 
     Long because it is the free kernel's loop with the friction work, the event switch, the consistency
     decision and the hold of a slider slot that fired twice in a row inlined, so that its arithmetic per
@@ -263,14 +270,18 @@ def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bound
     status = 0
     t_end = bounds[c]
     m = fric[6].shape[0]  # the stops: slots e >= m are the sliders'
-    e_prev = -1  # the slot of the last event
-    hold = -1  # a slider slot that may not fire within its round-off band in this segment (see below)
+    hold = carry[0]  # a slider slot that may not fire within its round-off band in this segment (see below)
+    e_prev = carry[1]  # the slot of the last event
     ekind = fric[4]
-    fresh = -1  # the slider slot of the event that started this segment (-1: none)
-    s_from = s  # the state before it
-    trend = 0  # a stick -> slip event's cone function: the sign of its first derivative beyond round-off
+    fresh = carry[2]  # the slider slot of the event that started this segment (-1: none)
+    s_from = carry[3]  # the state before it
+    trend = carry[4]  # a stick -> slip event's cone function: the sign of its first derivative beyond round-off
     pin = -1  # a slider slot held at this segment's start (_pin), once its switch is found consistent
     while True:
+        if not built[s]:  # only right after a switch (pin is -1 then): resumed here once s is built
+            carry[0], carry[1], carry[2], carry[3], carry[4] = hold, e_prev, fresh, s_from, trend
+            status = NEW_STATE
+            break
         K = nK[s]
         slipping = has_slip[s]
         n_live = _ev_start(s, K, y, Uinv, aUinv, yp, EU, aEU, E0, Escale, eact, lam, alam, floor, w, werr, coef, lc,
@@ -757,14 +768,15 @@ def _aug_trend(erow, s, j, V_s, X, z, werr, poly, P, tau):
 def _friction_forced_kernel(lam, V, Vinv, yp, erow, ec, eact, succ, reset, Df, LF, has_slip, hseg, C, damped, n, fric,
                             y, s, t, t_end, t_samples, i_samp, t_after, out_y, out_W, out_Wf, W, Wf, hmin, floor,
                             max_events, n_stuck, fz, fY, fU, fb, pstarts, pF, pp0, pp1, out_E, E, log_t, log_e, log_s,
-                            log_y, n_log):
+                            log_y, n_log, built, carry):
     """March events from t to t_end under the loads (:func:`reduced.transient._exact_kernels._forced_kernel` on
     the augmented state y = [x; v; w] and its friction states): the forced closed form of each segment, its
     first event among the state's (gap, stick -> slip, slip -> stick), the viscous, friction and loads' work
     in closed form (the friction power's quadratic part by its form Df[s] with the moments of the polynomial
     part, its linear part LF[s] . dx). A growing state's segment ends at hseg[s] at most (the free kernel's
     rule) and its march bounds the growing terms by their size there. Returns (t, W, Wf, E, s, i_samp,
-    n_events, n_iter, status, n_stuck, n_log); the buffer logic is that of the free kernel.
+    n_events, n_iter, status, n_stuck, n_log); the buffer logic and the states built as the run enters them
+    (NEW_STATE, ``built``, ``carry``) are those of the free kernel.
 
     Long because it is the forced kernel's loop with the friction work and the event switch inlined, so
     that its arithmetic per segment reads in one place."""
@@ -780,11 +792,15 @@ def _friction_forced_kernel(lam, V, Vinv, yp, erow, ec, eact, succ, reset, Df, L
     status = 0
     ekind = fric[4]
     m = fric[6].shape[0]  # the stops: slots e >= m are the sliders'
-    fresh = -1  # as in the free kernel: the slider slot of the event that started this segment
-    s_from = s
-    trend = 0
+    fresh = carry[2]  # as in the free kernel: the slider slot of the event that started this segment
+    s_from = carry[3]
+    trend = carry[4]
     pin = -1
     while True:
+        if not built[s]:
+            carry[2], carry[3], carry[4] = fresh, s_from, trend
+            status = NEW_STATE
+            break
         slipping = has_slip[s]
         ip, t_lim = _piece_at(pstarts, ip, t, t_end)
         t_lim = min(t_lim, t + hseg[s])  # a growing state: at most a doubling of its terms a segment

@@ -37,7 +37,12 @@ from reduced._blas import single_thread_blas
 from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
 from reduced.transient import stepper as _stepper
-from reduced.transient._friction_kernels import _cd_friction_kernel, _friction_forced_kernel, _friction_free_kernel
+from reduced.transient._friction_kernels import (
+    NEW_STATE,
+    _cd_friction_kernel,
+    _friction_forced_kernel,
+    _friction_free_kernel,
+)
 from reduced.transient._modal import BUFFER_FULL, EPS
 from reduced.transient.dop853 import Dop853Options
 from reduced.transient.exact import (
@@ -64,15 +69,14 @@ from reduced.transient.friction_tables import (
     KIND_STICK_DOWN,
     KIND_STICK_UP,
     FrictionTable,
-    friction_forced_table,
-    friction_modal_table,
-    friction_table,
+    LazyForcedTable,
+    LazyFrictionTables,
 )
 from reduced.transient.result import RingdownResult, RingdownStream, zeros_view
 
 EVENT_KINDS = {KIND_GAP: "gap", KIND_STICK_UP: "slip+", KIND_STICK_DOWN: "slip-", KIND_SLIP_END: "stick"}
-TABLES_KEPT = 1  # systems whose friction tables are kept for the next run (each holds S (2n + p)^2 complex x 4)
-_TABLES: OrderedDict = OrderedDict()  # digest of a system -> (FrictionTable, its modal table)
+TABLES_KEPT = 1  # systems whose friction tables are kept for the next run (each holds its built states')
+_TABLES: OrderedDict = OrderedDict()  # digest of a system -> its LazyFrictionTables
 _TABLES_LOCK = threading.Lock()
 
 
@@ -94,11 +98,12 @@ def clear_tables() -> None:
         _TABLES.clear()
 
 
-def friction_tables(system: GapSystem, omega_ref: float) -> tuple[tuple[FrictionTable, tuple], bool]:
-    """((table, modal table), reused) of ``system``: built (:func:`reduced.transient.friction_tables.friction_table`,
-    :func:`~reduced.transient.friction_tables.friction_modal_table`) or, for the same system as a recent run (the
-    hammer test's levels: the same rig under blows of other sizes), reused. The last ``TABLES_KEPT`` systems'
-    tables are kept, keyed by the sha256 of their matrices and friction; they are read only, never changed.
+def friction_tables(system: GapSystem, omega_ref: float) -> tuple[LazyFrictionTables, bool]:
+    """(tables, reused) of ``system``: new (:class:`reduced.transient.friction_tables.LazyFrictionTables`, whose
+    states are built as runs enter them) or, for the same system as a recent run (the hammer test's levels: the
+    same rig under blows of other sizes), the recent run's with the states it built. The last ``TABLES_KEPT``
+    systems' tables are kept, keyed by the sha256 of their matrices and friction; a state once built never
+    changes.
 
     Parameters
     ----------
@@ -109,15 +114,14 @@ def friction_tables(system: GapSystem, omega_ref: float) -> tuple[tuple[Friction
 
     Returns
     -------
-    ((FrictionTable, tuple), bool)
+    (LazyFrictionTables, bool)
     """
     key = _digest(system, omega_ref)
     with _TABLES_LOCK:
         if key in _TABLES:
             _TABLES.move_to_end(key)
             return _TABLES[key], True
-    table = friction_table(system, omega_ref)
-    entry = (table, friction_modal_table(system, table))
+    entry = LazyFrictionTables(system, omega_ref)
     with _TABLES_LOCK:
         _TABLES[key] = entry
         while len(_TABLES) > TABLES_KEPT:
@@ -253,13 +257,17 @@ class FrictionExactStepper(_stepper.Stepper):
         with single_thread_blas():
             omega_max = system.omega_max()
             t0 = time.perf_counter()
-            (self.table, self.mt), cached = friction_tables(system, omega_max)
-            table = self.table
-            self.ft = friction_forced_table(system, table, loads) if self.forced else None
+            self.lazy, cached = friction_tables(system, omega_max)
+            self.table = table = self.lazy.table
+            self.forced_table = LazyForcedTable(self.lazy, loads) if self.forced else None
+            self.ft = self.forced_table.table if self.forced else None
+            w0 = _unloaded(system, x0, options.w0)
+            self.y = np.concatenate([x0, v0, w0])
+            self.s = self.s0 = initial_friction_state(system, table, x0, w0)
+            self.lazy.ensure(self.s)
+            if self.forced:
+                self.forced_table.ensure(0)  # the open state's static deflections: the scales of the round-off
         self.hmin = HMIN_PERIODS / omega_max
-        w0 = _unloaded(system, x0, options.w0)
-        self.y = np.concatenate([x0, v0, w0])
-        self.s = self.s0 = initial_friction_state(system, table, x0, w0)
         stop_tip = np.concatenate([system.tip, np.full(2 * fr.p, -1)]).astype(np.int64)  # the tip of each event slot
         c = np.ascontiguousarray
         self.fric = (c(fr.Bt), c(fr.tip), stop_tip, c(fr.stop), c(table.ekind), c(table.states.stop_of), c(system.B),
@@ -269,9 +277,9 @@ class FrictionExactStepper(_stepper.Stepper):
         self.n_pieces = n_pieces = max(options.chunks, math.ceil(t_end / MAX_PIECE_S))
         self.breakpoints = loads.breakpoints(t_end) if self.forced else np.zeros(0)
         self.stats.update({"n_events": 0, "n_steps": 1, "n_march": 0, "n_states": int(table.states.S),
-                           "cond_V": float(np.max(table.cond)), "n_pieces": n_pieces, "n_sliders": fr.p,
-                           "table_s": time.perf_counter() - t0, "tables_reused": cached,
-                           "max_growth_per_s": float(max(np.max(table.lam.real), 0.0))})
+                           "n_pieces": n_pieces, "n_sliders": fr.p, "tables_reused": cached})
+        self.table_s = time.perf_counter() - t0
+        self._table_stats()
         if self.forced:
             self.stats.update(n_loads=loads.n_loads, n_breakpoints=int(self.breakpoints.size))
         self.offset_max = float(np.max(np.abs(system.offset), initial=0.0))
@@ -288,6 +296,14 @@ class FrictionExactStepper(_stepper.Stepper):
         N = self.y.size
         self.log = (np.zeros(cap), np.zeros(cap, np.int64), np.zeros(cap, np.int64), np.zeros((cap, N)))
         self.n_log = 0
+        self.carry = np.zeros(5, np.int64)  # the kernels' memory of the last switch, kept over a NEW_STATE return
+
+    def _table_stats(self) -> None:
+        """The tables' statistics over the states built so far (the time to build them in this run included)."""
+        table = self.table
+        self.stats.update({"n_states_built": int(np.count_nonzero(self.lazy.built)), "table_s": self.table_s,
+                           "cond_V": float(np.max(table.cond)),
+                           "max_growth_per_s": float(max(np.max(table.lam.real), 0.0))})
 
     @property
     def events(self) -> FrictionEvents | None:
@@ -365,21 +381,40 @@ class FrictionExactStepper(_stepper.Stepper):
             self.fargs = forced_arrays(self.ft, self.loads.pieces_at(starts))
 
     def _call(self, buf: _stepper.Buffer) -> int:
-        """The kernel of the present run on ``buf``; the state advanced; returns the kernel's status."""
+        """The kernel of the present run on ``buf``, resumed after building each state it enters for the first
+        time (``NEW_STATE``); the state advanced; returns the kernel's status."""
+        c = self.carry
+        c[:] = -1, -1, -1, self.s, 0  # no switch remembered (hold, last slot, fresh slider, state before, trend)
+        filled = buf.filled
+        while True:
+            status = self._call_once(buf)
+            if status != NEW_STATE:
+                break
+            t0 = time.perf_counter()
+            if self.runs[0][2] is None:
+                self.lazy.ensure(self.s)
+            else:
+                self.forced_table.ensure(self.s)
+            self.table_s += time.perf_counter() - t0
+            self._table_stats()
+        if self.runs[0][2] is None:
+            buf.arrays[3][filled:buf.filled] = self.E  # a free stretch of a forced run: the loads' work stays
+        return status
+
+    def _call_once(self, buf: _stepper.Buffer) -> int:
+        """One kernel call of the present run on ``buf`` (the state advanced); returns its status."""
         _, t_b, starts = self.runs[0]
         g = self.groups[self.g]
         out_y, out_W, out_Wf, out_E = buf.arrays
         left = self.options.max_events - self.n_events
-        modal, events, wv, wf = self.mt
+        modal, events, wv, wf, built = self.lazy.arrays()
         if starts is None:
             bounds = g if len(g) > 1 else np.array([t_b])
-            filled = buf.filled
             (self.t, self.W, self.Wf, self.s, buf.filled, ne, ni, status, self.n_stuck, self.c,
              self.n_log) = call_numba_kernel(
                 _friction_free_kernel, modal, events, wv, wf, self.fric, self.damped, self.n, self.y, self.s, self.t,
                 bounds, self.c, buf.t, buf.filled, buf.t_after, out_y, out_W, out_Wf, self.W, self.Wf, self.hmin,
-                self.floor, left, self.n_stuck, *self.log, self.n_log)
-            out_E[filled:buf.filled] = self.E  # a free stretch of a forced run: the loads' work stays
+                self.floor, left, self.n_stuck, *self.log, self.n_log, built, self.carry)
         else:
             tb = self.table
             (self.t, self.W, self.Wf, self.E, self.s, buf.filled, ne, ni, status,
@@ -388,7 +423,7 @@ class FrictionExactStepper(_stepper.Stepper):
                 tb.Df, tb.LF, events[7], modal[8], self.run_system.C, self.damped, self.n, self.fric, self.y, self.s,
                 self.t, t_b,
                 buf.t, buf.filled, buf.t_after, out_y, out_W, out_Wf, self.W, self.Wf, self.hmin, self.floor, left,
-                self.n_stuck, *self.fargs, out_E, self.E, *self.log, self.n_log)
+                self.n_stuck, *self.fargs, out_E, self.E, *self.log, self.n_log, self.forced_table.built, self.carry)
         self.n_events += ne
         self.n_iter += ni
         self.stats.update(n_events=self.n_events, n_steps=self.n_events + 1, n_march=self.n_iter)

@@ -70,6 +70,8 @@ linear part sum sigma mu k pen_j(y_p) R_k v integrates to L_s^T (x(tau) - x(0)) 
 from __future__ import annotations
 
 import math
+import threading
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -246,9 +248,9 @@ def _state_parts(system: GapSystem, closed: np.ndarray, slip: np.ndarray, stop_o
     return Ks, Fs, G, R, Q, smks
 
 
-def _structure(system: GapSystem, Ks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(lam, V_z) of A_z = [[0, I], [-M^-1 K_s, -M^-1 C]]: the real modes when K_s is symmetric and the
-    system undamped, else LAPACK's eigenpairs (flutter, Re lam > 0, included); refuses zero-frequency
+def _structure(system: GapSystem, Ks: np.ndarray, Minv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lam, V_z) of A_z = [[0, I], [-M^-1 K_s, -M^-1 C]] (Minv = M^-1): the real modes when K_s is symmetric
+    and the system undamped, else LAPACK's eigenpairs (flutter, Re lam > 0, included); refuses zero-frequency
     states (defective ones: :func:`friction_table`)."""
     n = system.n
     if system.undamped and np.array_equal(Ks, Ks.T):
@@ -258,7 +260,6 @@ def _structure(system: GapSystem, Ks: np.ndarray) -> tuple[np.ndarray, np.ndarra
                                        "use method 'explicit'")
         w = np.sqrt(w2)
         return np.concatenate([1j * w, -1j * w]), np.block([[phi, phi], [1j * w * phi, -1j * w * phi]]).astype(complex)
-    Minv = np.linalg.inv(system.M)
     A = np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ Ks, -Minv @ system.C]])
     lam, V = np.linalg.eig(A)
     if np.min(np.abs(lam)) <= 1e-9 * np.max(np.abs(lam)):
@@ -356,40 +357,59 @@ def friction_table(system: GapSystem, omega_ref: float) -> FrictionTable:
     eact, reset = np.zeros((S, E), bool), np.zeros((S, E), bool)
     succ, ekind = np.zeros((S, E), np.int64), np.zeros((S, E), np.int64)
     Df, LF = np.zeros((S, N, N)), np.zeros((S, n))
+    table = FrictionTable(st, lam, V, Vinv, yp, cond, Ks_all, R_all, erow, ec, eact, succ, reset, ekind, Df, LF,
+                          float(omega_ref))
     cache: dict[bytes, tuple] = {}
     with single_thread_blas():
+        Minv = np.linalg.inv(system.M)
         for s in range(S):
-            Ks, Fs, G, R, Q, smks = _state_parts(system, st.closed[s], st.slip[s], st.stop_of[s])
-            Ks_all[s], R_all[s] = Ks, R
-            xp = np.linalg.solve(Ks, Fs) if np.any(Fs) else np.zeros(n)
-            yp[s, :n] = xp
-            key = Ks.tobytes() + R.tobytes() + G.tobytes()
-            if key not in cache:
-                lz, Vz = _structure(system, Ks)
-                Vs = np.zeros((N, N), complex)
-                Vs[:2 * n, :2 * n] = Vz
-                Vs[2 * n:, :2 * n] = (R @ Vz[n:, :]) / lz
-                for k in range(p):
-                    Vs[2 * n + k, 2 * n + k] = 1.0
-                    if np.any(G[:, k]):
-                        Vs[:n, 2 * n + k] = np.linalg.solve(Ks, G[:, k])
-                sv = np.linalg.svd(Vs, compute_uv=False)
-                cs = sv[0] / sv[-1]
-                if not np.isfinite(cs) or cs > MAX_COND:
-                    raise ExactIntegratorError(
-                        f"friction state ({st.describe(system, s)}) is nearly defective (eigenvector condition "
-                        f"{cs:.1e}); use method 'explicit'")
-                cache[key] = (np.concatenate([lz, np.zeros(p)]), Vs, np.linalg.inv(Vs), cs)
-            lam[s], V[s], Vinv[s], cond[s] = cache[key]
-            rows, c, act, sc, rs, kd = _event_rows(system, st, s, R, omega_ref)
-            erow[s], ec[s], eact[s], succ[s], reset[s], ekind[s] = rows, c, act, sc, rs, kd
-            Df[s, :n, n:2 * n] = 0.5 * Q
-            Df[s, n:2 * n, :n] = 0.5 * Q.T
-            for k in np.flatnonzero(smks):  # f_k = a (B_j x - o_j), its static part times R_k v
-                j = st.stop_of[s, k]
-                LF[s] += smks[k] * (system.B[j] @ xp - system.offset[j]) * R[k]
-    return FrictionTable(st, lam, V, Vinv, yp, cond, Ks_all, R_all, erow, ec, eact, succ, reset, ekind, Df, LF,
-                         float(omega_ref))
+            _state_links(system, table, s)
+            _state_closed_form(system, table, s, Minv, cache)
+    return table
+
+
+def _state_links(system: GapSystem, table: FrictionTable, s: int) -> None:
+    """Fill state s's stiffness, slider rates and events (rows, constants, successors; cheap) in ``table``."""
+    st = table.states
+    _, _, _, R, _, _ = _state_parts(system, st.closed[s], st.slip[s], st.stop_of[s])
+    table.R[s] = R
+    rows, c, act, sc, rs, kd = _event_rows(system, st, s, R, table.omega_ref)
+    table.erow[s], table.ec[s], table.eact[s], table.succ[s], table.reset[s], table.ekind[s] = rows, c, act, sc, rs, kd
+
+
+def _state_closed_form(system: GapSystem, table: FrictionTable, s: int, Minv: np.ndarray, cache: dict) -> None:
+    """Fill state s's closed form (eigenpairs, equilibrium, condition) and friction power in ``table``
+    (``cache``: the decompositions made so far, by state matrices); refuses a nearly defective state."""
+    st = table.states
+    n, p = system.n, system.friction.p
+    N = 2 * n + p
+    Ks, Fs, G, R, Q, smks = _state_parts(system, st.closed[s], st.slip[s], st.stop_of[s])
+    table.Ks[s] = Ks
+    xp = np.linalg.solve(Ks, Fs) if np.any(Fs) else np.zeros(n)
+    table.yp[s, :n] = xp
+    key = Ks.tobytes() + R.tobytes() + G.tobytes()
+    if key not in cache:
+        lz, Vz = _structure(system, Ks, Minv)
+        Vs = np.zeros((N, N), complex)
+        Vs[:2 * n, :2 * n] = Vz
+        Vs[2 * n:, :2 * n] = (R @ Vz[n:, :]) / lz
+        for k in range(p):
+            Vs[2 * n + k, 2 * n + k] = 1.0
+            if np.any(G[:, k]):
+                Vs[:n, 2 * n + k] = np.linalg.solve(Ks, G[:, k])
+        sv = np.linalg.svd(Vs, compute_uv=False)
+        cs = sv[0] / sv[-1]
+        if not np.isfinite(cs) or cs > MAX_COND:
+            raise ExactIntegratorError(
+                f"friction state ({st.describe(system, s)}) is nearly defective (eigenvector condition "
+                f"{cs:.1e}); use method 'explicit'")
+        cache[key] = (np.concatenate([lz, np.zeros(p)]), Vs, np.linalg.inv(Vs), cs)
+    table.lam[s], table.V[s], table.Vinv[s], table.cond[s] = cache[key]
+    table.Df[s, :n, n:2 * n] = 0.5 * Q
+    table.Df[s, n:2 * n, :n] = 0.5 * Q.T
+    for k in np.flatnonzero(smks):  # f_k = a (B_j x - o_j), its static part times R_k v
+        j = st.stop_of[s, k]
+        table.LF[s] += smks[k] * (system.B[j] @ xp - system.offset[j]) * R[k]
 
 
 def _kept(lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -488,7 +508,7 @@ def _work_chunk(lk: np.ndarray, Uk: np.ndarray, kappa: np.ndarray, D: np.ndarray
     return Wm, Hd, irr_s
 
 
-def friction_modal_table(system: GapSystem, ft: FrictionTable) -> tuple:
+def friction_modal_table(system: GapSystem, ft: FrictionTable, work: tuple[bool, bool] = (True, True)) -> tuple:
     """The free segments' tables of :mod:`reduced.transient._friction_kernels`: the kept-term closed form,
     the events projected on the terms, the viscous and friction work.
 
@@ -498,6 +518,9 @@ def friction_modal_table(system: GapSystem, ft: FrictionTable) -> tuple:
         The system (with friction).
     ft : FrictionTable
         Its states.
+    work : (bool, bool)
+        Whether to tabulate the viscous and the friction work; a table not asked for is None (the kernels
+        read neither the viscous work of an undamped system nor the friction work of a state without slip).
 
     Returns
     -------
@@ -533,7 +556,8 @@ def friction_modal_table(system: GapSystem, ft: FrictionTable) -> tuple:
              np.ascontiguousarray(ft.yp), gmul, hseg)
     events = (EU, np.abs(EU), E0, Escale, np.ascontiguousarray(ft.eact), np.ascontiguousarray(ft.succ),
               np.ascontiguousarray(ft.reset), has_slip, np.ascontiguousarray(ft.LF))
-    return modal, events, work_tables(lk, Uk, kappa, Dv), work_tables(lk, Uk, kappa, ft.Df)
+    return (modal, events, work_tables(lk, Uk, kappa, Dv) if work[0] else None,
+            work_tables(lk, Uk, kappa, ft.Df) if work[1] else None)
 
 
 def growth_segments(lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -616,20 +640,215 @@ def friction_forced_table(system: GapSystem, ft: FrictionTable, loads) -> Fricti
     Minv_b = np.linalg.solve(system.M, b.T)
     g = np.zeros((N, L))
     g[n:2 * n] = Minv_b
-    Y = np.zeros((S, N, L), complex)
-    U = np.zeros((S, N, L), complex)
-    Sb = np.zeros((S, n, L))
+    table = FrictionForcedTable(omega, np.zeros((S, N, L), complex), np.zeros((S, N, L), complex),
+                                np.zeros((S, n, L)), b)
     for s in range(S):
-        lam = ft.lam[s, :2 * n]
-        U[s] = ft.Vinv[s] @ g
-        Sb[s] = solve(ft.Ks[s], b.T)
-        for l in range(L):
-            if omega[l] > 0.0:
-                i = int(np.argmin(np.abs(1j * omega[l] - lam)))
-                if abs(1j * omega[l] - lam[i]) <= RESONANCE_REL * omega[l]:
-                    raise ExactIntegratorError(
-                        f"load {l + 1} ({loads.points[l]}) at {omega[l] / (2 * math.pi):.6g} Hz is at an undamped "
-                        f"resonance of friction state ({ft.states.describe(system, s)}); use method 'explicit'")
-                # (i w - A)^-1 g = V diag(1 / (i w - lam)) V^-1 g
-                Y[s, :, l] = ft.V[s] @ (U[s, :, l] / (1j * omega[l] - ft.lam[s]))
-    return FrictionForcedTable(omega, Y, U, Sb, b)
+        _forced_state(system, ft, table, s, g, loads)
+    return table
+
+
+def _forced_state(system: GapSystem, ft: FrictionTable, table: FrictionForcedTable, s: int, g: np.ndarray,
+                  loads) -> None:
+    """Fill state s of ``table`` (``g`` (N, L): [0; M^-1 b_l; 0]); refuses a load at an undamped resonance."""
+    n = system.n
+    omega, b, U = table.omega, table.b, table.U
+    lam = ft.lam[s, :2 * n]
+    U[s] = ft.Vinv[s] @ g
+    table.Sb[s] = solve(ft.Ks[s], b.T)
+    for l in range(b.shape[0]):
+        if omega[l] > 0.0:
+            i = int(np.argmin(np.abs(1j * omega[l] - lam)))
+            if abs(1j * omega[l] - lam[i]) <= RESONANCE_REL * omega[l]:
+                raise ExactIntegratorError(
+                    f"load {l + 1} ({loads.points[l]}) at {omega[l] / (2 * math.pi):.6g} Hz is at an undamped "
+                    f"resonance of friction state ({ft.states.describe(system, s)}); use method 'explicit'")
+            # (i w - A)^-1 g = V diag(1 / (i w - lam)) V^-1 g
+            table.Y[s, :, l] = ft.V[s] @ (U[s, :, l] / (1j * omega[l] - ft.lam[s]))
+
+
+def _empty_table(system: GapSystem, omega_ref: float) -> FrictionTable:
+    """A FrictionTable of every state of ``system`` with zeros (cond 1) in place of the states' data."""
+    n, m, p = system.n, system.m, system.friction.p
+    N, E = 2 * n + p, m + 2 * p
+    st = friction_states(system)
+    S = st.S
+    return FrictionTable(st, np.zeros((S, N), complex), np.zeros((S, N, N), complex), np.zeros((S, N, N), complex),
+                         np.zeros((S, N)), np.ones(S), np.zeros((S, n, n)), np.zeros((S, p, n)), np.zeros((S, E, N)),
+                         np.zeros((S, E)), np.zeros((S, E), bool), np.zeros((S, E), np.int64), np.zeros((S, E), bool),
+                         np.zeros((S, E), np.int64), np.zeros((S, N, N)), np.zeros((S, n)), float(omega_ref))
+
+
+def _one_state(ft: FrictionTable, s: int) -> FrictionTable:
+    """State s of ``ft`` as a table of one state (views; the successors keep their indices into ``ft``)."""
+    st = ft.states
+    one = slice(s, s + 1)
+    return FrictionTable(FrictionStates(st.closed[one], st.slip[one], st.stop_of[one]), ft.lam[one], ft.V[one],
+                         ft.Vinv[one], ft.yp[one], ft.cond[one], ft.Ks[one], ft.R[one], ft.erow[one], ft.ec[one],
+                         ft.eact[one], ft.succ[one], ft.reset[one], ft.ekind[one], ft.Df[one], ft.LF[one], ft.omega_ref)
+
+
+class LazyFrictionTables:
+    """The tables of :func:`friction_table` and :func:`friction_modal_table`, each state's built the first time
+    a run enters it (:meth:`ensure`): a motion visits few of the states (a hammer record of the apparatus 36-61
+    of its 361), and a state's closed form (an eigendecomposition of order 2n + p, its inverse, condition and
+    work tables) is most of the tables' cost.
+
+    The links between the states (event rows, successors, resets, kinds) are built for every state at once
+    (cheap). A state's entries, once built, are those :func:`friction_table` and :func:`friction_modal_table`
+    give it (the same arithmetic on the state's slice) and never change; unbuilt entries hold zeros, which the
+    kernels never read (they return ``NEW_STATE`` on entering a state whose ``built`` flag is False). When a
+    state keeps more terms than the term arrays hold, they are reallocated larger. Each build makes a new
+    ``built`` array (and new arrays of the near-cancelling work terms), so a kernel running on the arrays of
+    :meth:`arrays` (in another thread) only reads states built before its call.
+
+    Parameters
+    ----------
+    system : GapSystem
+        With friction.
+    omega_ref : float
+        rad/s, the slip-end events' scale (:func:`friction_table`).
+    """
+
+    def __init__(self, system: GapSystem, omega_ref: float) -> None:
+        self.system = system
+        self.table = _empty_table(system, omega_ref)
+        for s in range(self.S):
+            _state_links(system, self.table, s)
+        self.built = np.zeros(self.S, bool)
+        self.has_slip = np.any(self.table.states.slip != 0, axis=1)
+        with single_thread_blas():
+            self._Minv = np.linalg.inv(system.M)
+        self._cache: dict[bytes, tuple] = {}
+        self._groups: list | None = None  # the modal, events, viscous and friction work arrays of every state
+        self._near: tuple = ([()] * self.S, [()] * self.S)  # each state's near-cancelling work terms
+        self._lock = threading.Lock()
+        self.build_s = 0.0  # s spent building states
+
+    @property
+    def S(self) -> int:
+        return self.table.states.S
+
+    def ensure(self, s: int) -> bool:
+        """Build state ``s`` unless it is built; True if it was built now.
+
+        Raises
+        ------
+        ExactIntegratorError
+            The state is nearly defective or has a zero-frequency mode (:func:`friction_table`).
+        """
+        if self.built[s]:
+            return False
+        with self._lock:
+            if self.built[s]:
+                return False
+            t0 = time.perf_counter()
+            with single_thread_blas():
+                _state_closed_form(self.system, self.table, s, self._Minv, self._cache)
+                groups = friction_modal_table(self.system, _one_state(self.table, s),
+                                              (not self.system.undamped, bool(self.has_slip[s])))
+            self._store(s, groups)
+            built = self.built.copy()
+            built[s] = True
+            self.built = built
+            self.build_s += time.perf_counter() - t0
+        return True
+
+    def _store(self, s: int, groups: tuple) -> None:
+        """Write state s's entries (``groups``: :func:`friction_modal_table` of the state alone)."""
+        K1 = groups[0][1].shape[1]
+        if self._groups is None or K1 > self._groups[0][1].shape[1]:
+            self._grow(K1)
+        for g, i in self._term_keys:
+            if groups[g] is None:
+                continue  # a work table not needed: its zeros stay
+            a = groups[g][i][0]  # its term axes may be shorter than the arrays'
+            self._groups[g][i][s][tuple(slice(0, d) for d in a.shape)] = a
+        modal, events = self._groups[0], self._groups[1]
+        modal[0][s], modal[8][s] = groups[0][0][0], groups[0][8][0]
+        events[2][s], events[3][s] = groups[1][2][0], groups[1][3][0]
+        for w in (0, 1):
+            work = groups[2 + w]
+            if work is not None:
+                self._near[w][s] = tuple(a[work[2][0]:work[2][1]] for a in work[3:])
+                self._groups[2 + w][2:] = _near_arrays(self._near[w])
+
+    def _grow(self, K: int) -> None:
+        """(Re)allocate the arrays of every state for K kept terms, the built states' entries copied."""
+        S, old = self.S, self._groups
+        t = self.table
+        N, E = t.lam.shape[1], t.ec.shape[1]
+        new = [[np.zeros(S, np.int64)] + [None] * 5 + [t.yp] + [None, np.zeros(S)],
+               [None, None, np.zeros((S, E)), np.zeros((S, E)), t.eact, t.succ, t.reset, self.has_slip, t.LF],
+               [None] * 8, [None] * 8]
+        shapes = {(0, 1): ((S, K), complex), (0, 2): ((S, K), float), (0, 3): ((S, 2, K, N), float),
+                  (0, 4): ((S, K, N), complex), (0, 5): ((S, K, N), float), (0, 7): ((S, K), float),
+                  (1, 0): ((S, E, K), complex), (1, 1): ((S, E, K), float), (2, 0): ((S, 4, K, K), float),
+                  (2, 1): ((S, 2, K), float), (3, 0): ((S, 4, K, K), float), (3, 1): ((S, 2, K), float)}
+        self._term_keys = tuple(shapes)  # the arrays whose axes run over the kept terms, by (group, index)
+        for (g, i), (shape, dtype) in shapes.items():
+            new[g][i] = np.ones(shape, dtype) if (g, i) == (0, 7) else np.zeros(shape, dtype)  # gmul pads with 1
+            if old is not None:
+                b = old[g][i]
+                new[g][i][tuple(slice(0, n) for n in b.shape)] = b
+        if old is not None:
+            for g, i in ((0, 0), (0, 8), (1, 2), (1, 3)):
+                new[g][i] = old[g][i]
+        for w in (2, 3):
+            new[w][2:] = _near_arrays(self._near[w - 2])
+        self._groups = new
+
+    def arrays(self) -> tuple:
+        """(modal, events, viscous work, friction work, built): the kernels' tables of every state
+        (:func:`friction_modal_table`'s layout) as they stand, with the flags of the states built."""
+        if self._groups is None:
+            raise RuntimeError("no state built yet: call ensure(s) first")
+        return tuple(tuple(g) for g in self._groups) + (self.built,)
+
+
+def _near_arrays(near: list) -> list:
+    """[pointer (S + 1,), i, k, kind, coefficient, z] of :func:`work_tables` from each state's near-cancelling
+    terms (a tuple of those five arrays, or () for a state without)."""
+    counts = [t[0].size if t else 0 for t in near]
+    ip = np.zeros(len(near) + 1, np.int64)
+    ip[1:] = np.cumsum(counts)
+    parts = [t for t in near if t]
+    dtypes = (np.int64, np.int64, np.int64, complex, complex)
+    cols = [np.concatenate([t[c] for t in parts]).astype(dt) if parts else np.zeros(0, dt)
+            for c, dt in enumerate(dtypes)]
+    return [ip] + cols
+
+
+class LazyForcedTable:
+    """The loads' per-state data (:func:`friction_forced_table`), each state's built with the state's tables
+    (:meth:`ensure`, :class:`LazyFrictionTables`).
+
+    Parameters
+    ----------
+    tables : LazyFrictionTables
+    loads : Loads
+    """
+
+    def __init__(self, tables: LazyFrictionTables, loads) -> None:
+        system = tables.system
+        n, p = system.n, system.p
+        N, S = 2 * n + p, tables.S
+        b = np.ascontiguousarray(loads.b, dtype=float)
+        L = b.shape[0]
+        self.tables, self.loads = tables, loads
+        self.table = FrictionForcedTable(loads.omegas(), np.zeros((S, N, L), complex), np.zeros((S, N, L), complex),
+                                         np.zeros((S, n, L)), b)
+        self._g = np.zeros((N, L))
+        self._g[n:2 * n] = np.linalg.solve(system.M, b.T)
+        self.built = np.zeros(S, bool)
+
+    def ensure(self, s: int) -> bool:
+        """Build state ``s`` (its tables first) unless it is built; True if it was built now."""
+        if self.built[s]:
+            return False
+        self.tables.ensure(s)
+        with single_thread_blas():
+            _forced_state(self.tables.system, self.tables.table, self.table, s, self._g, self.loads)
+        built = self.built.copy()
+        built[s] = True
+        self.built = built
+        return True
