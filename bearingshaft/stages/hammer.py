@@ -776,14 +776,17 @@ def estimate(scene: Scene) -> list[Estimate]:
     per = (2 * n + len(channel_names()) + 4) * FLOAT
     exact = 3 * 2**4 * (2 * n) ** 2 * 16  # the exact integrator's state table (4 stops)
     p = sliders(scene)
-    if p:  # with friction, tables for every friction state: 1 + 2 3^d a tip (open, or a stop closed with its d
-        states = (1 + 2 * 3 ** (p // 4)) ** 2  # sliders each sticking or slipping either way), two tips
+    if p:  # with friction, tables for the friction states the records enter: of 1 + 2 3^d a tip (open, or a stop
+        states = (1 + 2 * 3 ** (p // 4)) ** 2  # closed with its d sliders each sticking or slipping either way)
         N = 2 * n + p  # [x; v; w]
-        # V, V^-1 (complex), the friction power's form and the state's stiffness, in the friction table, its modal
-        # table and the forced one (built a chunk of states at a time): 2.3 tables' worth at the peak, and each
-        # level's record held twice (the run with sliders and its histories): calibrated on hammer-friction (3
-        # levels, 3552 MiB measured) and hammer-friction-oblique (1 level, 3183 MiB), 361 states each
-        exact += 2.3 * states * ((2 * 16 + 8) * N**2 + 8 * n**2)
+        # a built state holds V, V^-1 (complex), the friction power's form, its stiffness (40 N^2 + 8 n^2 bytes)
+        # and its terms (U^T, U^-1, |U^-1|, two work tables: ~36 N^2 with ~N/2 terms kept). The states entered:
+        # 15 % of them in the first record, 2.5 % more a further level (hammer-friction's 200, 500 and 1000 N
+        # records entered 36, 60 and 73 of 361; the oblique blow's one 53); x 2.7 and each level's record held
+        # twice (the run with sliders and its histories): calibrated on hammer-friction (3 levels, 2421 MiB
+        # measured, estimate 1.07 x) and hammer-friction-oblique (1 level, 1582 MiB, 1.24 x)
+        built = min(states, (0.15 + 0.025 * (levels - 1)) * states)
+        exact += 2.7 * built * (76 * N**2 + 8 * n**2)
         levels *= 2
     return [Estimate("hammer", int(MATPLOTLIB_BYTES + COPIES * samples * per + levels * samples * per + exact),
                      f"{levels} records of {samples:.3g} samples x {n} DOFs",

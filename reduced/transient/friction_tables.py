@@ -359,7 +359,7 @@ def friction_table(system: GapSystem, omega_ref: float) -> FrictionTable:
     Df, LF = np.zeros((S, N, N)), np.zeros((S, n))
     table = FrictionTable(st, lam, V, Vinv, yp, cond, Ks_all, R_all, erow, ec, eact, succ, reset, ekind, Df, LF,
                           float(omega_ref))
-    cache: dict[bytes, tuple] = {}
+    cache: dict[bytes, int] = {}
     with single_thread_blas():
         Minv = np.linalg.inv(system.M)
         for s in range(S):
@@ -379,7 +379,7 @@ def _state_links(system: GapSystem, table: FrictionTable, s: int) -> None:
 
 def _state_closed_form(system: GapSystem, table: FrictionTable, s: int, Minv: np.ndarray, cache: dict) -> None:
     """Fill state s's closed form (eigenpairs, equilibrium, condition) and friction power in ``table``
-    (``cache``: the decompositions made so far, by state matrices); refuses a nearly defective state."""
+    (``cache``: the state decomposed for each set of state matrices so far); refuses a nearly defective state."""
     st = table.states
     n, p = system.n, system.friction.p
     N = 2 * n + p
@@ -388,7 +388,11 @@ def _state_closed_form(system: GapSystem, table: FrictionTable, s: int, Minv: np
     xp = np.linalg.solve(Ks, Fs) if np.any(Fs) else np.zeros(n)
     table.yp[s, :n] = xp
     key = Ks.tobytes() + R.tobytes() + G.tobytes()
-    if key not in cache:
+    if key in cache:  # a state of the same matrices decomposed before: its entries copied
+        s0 = cache[key]
+        for a in (table.lam, table.V, table.Vinv, table.cond):
+            a[s] = a[s0]
+    else:
         lz, Vz = _structure(system, Ks, Minv)
         Vs = np.zeros((N, N), complex)
         Vs[:2 * n, :2 * n] = Vz
@@ -403,8 +407,9 @@ def _state_closed_form(system: GapSystem, table: FrictionTable, s: int, Minv: np
             raise ExactIntegratorError(
                 f"friction state ({st.describe(system, s)}) is nearly defective (eigenvector condition "
                 f"{cs:.1e}); use method 'explicit'")
-        cache[key] = (np.concatenate([lz, np.zeros(p)]), Vs, np.linalg.inv(Vs), cs)
-    table.lam[s], table.V[s], table.Vinv[s], table.cond[s] = cache[key]
+        table.lam[s], table.V[s], table.Vinv[s], table.cond[s] = np.concatenate([lz, np.zeros(p)]), Vs, \
+            np.linalg.inv(Vs), cs
+        cache[key] = s
     table.Df[s, :n, n:2 * n] = 0.5 * Q
     table.Df[s, n:2 * n, :n] = 0.5 * Q.T
     for k in np.flatnonzero(smks):  # f_k = a (B_j x - o_j), its static part times R_k v
@@ -718,7 +723,7 @@ class LazyFrictionTables:
         self.has_slip = np.any(self.table.states.slip != 0, axis=1)
         with single_thread_blas():
             self._Minv = np.linalg.inv(system.M)
-        self._cache: dict[bytes, tuple] = {}
+        self._cache: dict[bytes, int] = {}
         self._groups: list | None = None  # the modal, events, viscous and friction work arrays of every state
         self._near: tuple = ([()] * self.S, [()] * self.S)  # each state's near-cancelling work terms
         self._lock = threading.Lock()
