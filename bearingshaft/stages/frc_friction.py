@@ -181,9 +181,10 @@ def _shoot(system, b: np.ndarray, P: float, f: float, br, amplitude_ref: float, 
     point), then from HB at f with more harmonics (SHOOT_H_FACTORS) while it does not converge."""
     if isinstance(br, Exception):
         return ShootCheck(False, "not run: no HB curve")
-    amp, _, X = solution_at_frequency(br, f, amplitude_ref, 0, stable_only=False)
+    amp, i, X = solution_at_frequency(br, f, amplitude_ref, 0, stable_only=False)
     if X is None:
         return ShootCheck(False, "not run: no HB solution at this frequency")
+    hb_stable = bool(br.stable[i]) if br.stable[i] == br.stable[i + 1] else None
     H = br.balance.H
     t0 = time.perf_counter()
     fb, Xs, tried = br.balance, X, []
@@ -199,8 +200,8 @@ def _shoot(system, b: np.ndarray, P: float, f: float, br, amplitude_ref: float, 
         if r.converged:
             break
     wall = time.perf_counter() - t0
-    common = dict(start_H=fb.H, hb_m=np.asarray(amp, float), defect=r.defect, rank=r.rank, size=r.size,
-                  n_iter=r.n_iter, wall_s=wall)
+    common = dict(start_H=fb.H, hb_m=np.asarray(amp, float), defect=r.defect, hb_stable=hb_stable, rank=r.rank,
+                  size=r.size, n_iter=r.n_iter, wall_s=wall)
     if not r.converged:
         return ShootCheck(False, "; ".join(tried), **common)
     t, y = r.orbit(SHOOT_SAMPLES)

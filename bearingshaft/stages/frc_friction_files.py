@@ -78,7 +78,8 @@ def shoot_columns(sh, names: tuple[str, ...]) -> dict:
     """The shooting columns of frc_friction_checks.csv for one check (``sh`` a ShootCheck, or None where the
     stepped sine settled: no shooting, empty cells): the status and how Newton ended, the HB order it started
     from, the amplitudes shot and of the curve's HB at f, their relative difference at the first point and the
-    time histories' worst over the points, the defects, the largest |multiplier| and the verdict.
+    time histories' at every point, the defects, the largest |multiplier| and the verdict, Hill's verdict on
+    the HB solution, and the shooting Jacobian's rank.
 
     Parameters
     ----------
@@ -88,16 +89,18 @@ def shoot_columns(sh, names: tuple[str, ...]) -> dict:
     nan = math.nan
     out = {"shoot_status": "not run: settled" if sh is None else ("converged" if sh.converged else "not converged"),
            "shoot_message": "" if sh is None else sh.message, "shoot_start_H": "" if sh is None else sh.start_H}
+    conv = sh is not None and sh.converged
     for k, n in enumerate(names):
         out[f"{n}_shoot_m"] = nan if sh is None or sh.shoot_m is None else float(sh.shoot_m[k])
         out[f"{n}_hb_any_m"] = nan if sh is None or sh.hb_m is None else float(sh.hb_m[k])
-    conv = sh is not None and sh.converged
-    out.update({f"hb_vs_shoot_{names[0]}_rel": float(sh.amp_rel[0]) if conv else nan,
-                "hb_vs_shoot_history_rel": float(np.max(sh.history_rel)) if conv else nan,
-                "shoot_defect": nan if sh is None else sh.defect,
+    out[f"hb_vs_shoot_{names[0]}_rel"] = float(sh.amp_rel[0]) if conv else nan
+    for k, n in enumerate(names):
+        out[f"{n}_hb_vs_shoot_history_rel"] = float(sh.history_rel[k]) if conv else nan
+    out.update({"shoot_defect": nan if sh is None else sh.defect,
                 "shoot_period_defect": nan if sh is None else sh.period_defect,
                 "shoot_max_abs_multiplier": nan if sh is None else sh.max_abs_multiplier,
                 "shoot_stable": "" if not conv else ("true" if sh.stable else "false"),
+                "hb_hill_stable": "" if sh is None or sh.hb_stable is None else ("true" if sh.hb_stable else "false"),
                 "shoot_rank": "" if sh is None else f"{sh.rank}/{sh.size}"})
     return out
 
@@ -188,17 +191,21 @@ def shoot_markdown(result) -> list[str]:
               "with more harmonics at that frequency while Newton does not converge. The defect is in units of "
               "the amplitude (multiple shooting; the period defect from one run over the whole period). HB vs "
               f"shooting: the relative difference of max |{names[0]}|, and the largest difference of the time "
-              "histories over the period relative to each point's amplitude (worst point).", "",
+              f"histories over the period relative to the point's amplitude, at {names[0]} and at the worst point. "
+              "Stable: by the shot orbit's multipliers / by Hill's method on the HB solution.", "",
               "| level [N] | f [Hz] | start H | converged | defect | period defect | max abs multiplier | stable | "
-              + " | ".join(f"{n} shot / HB [m]" for n in names) + f" | HB vs shot: {names[0]} | history |",
-              "|---" * (len(names) + 10) + "|"]
+              + " | ".join(f"{n} shot / HB [m]" for n in names) + f" | HB vs shot: {names[0]} | history: "
+              f"{names[0]} / worst |", "|---" * (len(names) + 10) + "|"]
     for P, c in shots:
         sh = c.shooting
         if sh.converged:
             amps = " | ".join(f"{a:.4g} / {h:.4g}" for a, h in zip(sh.shoot_m, sh.hb_m, strict=True))
+            worst = int(np.argmax(sh.history_rel))
+            hill = {True: "yes", False: "no", None: "mixed"}[sh.hb_stable]
             lines.append(f"| {P:g} | {c.freq_hz:.4g} | {sh.start_H} | yes | {sh.defect:.2g} | {sh.period_defect:.2g} "
-                         f"| {sh.max_abs_multiplier:.4g} | {'yes' if sh.stable else 'no'} | {amps} | "
-                         f"{sh.amp_rel[0]:.3g} | {float(np.max(sh.history_rel)):.3g} |")
+                         f"| {sh.max_abs_multiplier:.4g} | {'yes' if sh.stable else 'no'} / {hill} | {amps} | "
+                         f"{sh.amp_rel[0]:.3g} | {sh.history_rel[0]:.3g} / {sh.history_rel[worst]:.3g} "
+                         f"({names[worst]}) |")
         else:
             why = sh.message.replace("|", "\\|")  # a message's |R| must not split the table's cell
             lines.append(f"| {P:g} | {c.freq_hz:.4g} | {sh.start_H} | no: {why} | {sh.defect:.2g} | | | |"

@@ -44,6 +44,8 @@ class ShootCheck:
     period_defect : |y(T) - y(0)| / amplitude of one exact run over the whole period from the orbit's start
     max_abs_multiplier : the largest |Floquet multiplier| (NaN if not converged)
     stable : the multipliers within the unit circle (None if not converged)
+    hb_stable : Hill's verdict on the curve's HB solution at the frequency (None where the bracketing points
+        disagree)
     rank, size : numerical rank of the shooting Jacobian, and its size (size - rank free slider directions)
     n_iter : Newton steps of the last start
     wall_s : s, all starts together
@@ -60,6 +62,7 @@ class ShootCheck:
     period_defect: float = math.nan
     max_abs_multiplier: float = math.nan
     stable: bool | None = None
+    hb_stable: bool | None = None
     rank: int = 0
     size: int = 0
     n_iter: int = 0
