@@ -3,7 +3,10 @@ load, its refusals, and HB by AFT against the exact friction integrator's settle
 
 from __future__ import annotations
 
+import math
+import re
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -13,7 +16,8 @@ from bearingshaft.cli import main
 from bearingshaft.estimates import has_friction
 from bearingshaft.scenes import SceneError, load_scene
 from bearingshaft.scenes.parse import parse_scene
-from bearingshaft.stages.frc_friction import load_vector, settle
+from bearingshaft.stages.frc_friction import FrictionCheck, ShootCheck, load_vector, settle
+from bearingshaft.stages.frc_friction_files import shoot_columns, shoot_markdown
 from bearingshaft.systems import model_system
 from reduced.periodic.frc import linear_frf, solution_at_frequency
 from reduced.periodic.friction_aft import friction_frc
@@ -69,5 +73,37 @@ def test_the_stage_writes_its_files_and_says_what_it_skips(tmp_path):
     assert rc in (0, None)
     md = (tmp_path / "out" / "frc.md").read_text()
     assert "Skipped with friction, and why" in md and "converged curve by shooting" in md
+    assert "Shooting with the sliders at the unsettled points" in md
+    assert "shoot_status" in (tmp_path / "out" / "frc_friction_checks.csv").read_text().splitlines()[0]
     for name in ("frc.csv", "frc_friction_checks.csv", "frc.png"):
         assert (tmp_path / "out" / name).exists(), name
+
+
+def test_the_shooting_columns_say_what_was_shot_and_why_not():
+    # the files' part only (no solver): a settled point is not shot, a converged one gives its numbers and
+    # verdict, one that did not converge gives its defect and the reason in the message, never a check
+    names = ("x1", "u")
+    ok = ShootCheck(True, "from H = 5: converged in 5 Newton steps", 5, shoot_m=np.array([2e-4, 1e-5]),
+                    hb_m=np.array([2.1e-4, 2e-5]), amp_rel=np.array([0.05, 1.0]), history_rel=np.array([0.08, 0.4]),
+                    defect=1e-13, period_defect=1e-11, max_abs_multiplier=14.2, stable=False, hb_stable=True, rank=9,
+                    size=10, n_iter=5, wall_s=1.0)
+    bad = ShootCheck(False, "from H = 5: defect 0.0043 after 14 Newton steps; HB with H = 11 not found (|R| = 0.008)",
+                     5, hb_m=np.array([2e-4, 1e-5]), defect=4.3e-3, rank=10, size=10, n_iter=14)
+    settled = shoot_columns(None, names)
+    assert settled["shoot_status"] == "not run: settled" and math.isnan(settled["x1_shoot_m"])
+    c = shoot_columns(ok, names)
+    assert c["shoot_status"] == "converged" and c["shoot_stable"] == "false" and c["shoot_rank"] == "9/10"
+    assert c["hb_hill_stable"] == "true"  # Hill on the HB solution can disagree with the exact orbit's multipliers
+    assert (c["x1_shoot_m"], c["u_hb_any_m"], c["hb_vs_shoot_x1_rel"], c["u_hb_vs_shoot_history_rel"]) == (
+        2e-4, 2e-5, 0.05, 0.4)
+    c = shoot_columns(bad, names)
+    assert c["shoot_status"] == "not converged" and "defect 0.0043" in c["shoot_message"]
+    assert c["shoot_defect"] == 4.3e-3 and math.isnan(c["shoot_max_abs_multiplier"]) and c["shoot_stable"] == ""
+    checks = [FrictionCheck(2.0, f, np.ones(2), np.full(2, np.nan), 0.1, sh is None, 20.0, 0.0, sh)
+              for f, sh in ((11.0, None), (14.0, ok), (23.0, bad))]
+    lines = shoot_markdown(SimpleNamespace(names=names, checks={2.0: checks}))
+    table = [ln for ln in lines if ln.startswith("|")]
+    assert len(table) == 4  # the header, its rule and the two unsettled points
+    assert len({len(re.findall(r"(?<!\\)\|", ln)) for ln in table}) == 1  # as many cells on every row
+    assert "| 14 | 5 | yes |" in table[2] and "| no / yes |" in table[2] and "| 0.08 / 0.4 (u) |" in table[2]
+    assert "no: from H = 5: defect 0.0043" in table[3]

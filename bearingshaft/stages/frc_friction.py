@@ -11,13 +11,19 @@ multipliers. The check: a stepped sine up by the exact friction integrator
 ``stepped_sine_points`` frequencies spread over the band, each settled (the state, sliders included, carried
 from one frequency to the next) until its last period's amplitudes move by less than ``stepped_sine_tol``
 from the one before, or ``stepped_sine_max_s`` of simulated time; every settled point against the HB solution
-at its frequency on the stable piece nearest it.
+at its frequency on the stable piece nearest it. Where the stepped sine does not settle (in contact, where the
+response it runs into is not periodic or the periodic orbit not attracting), the periodic orbit is shot for on
+the exact friction flow with the sliders' positions among the unknowns
+(:func:`reduced.periodic.friction_shooting.shoot_friction`, 8 nodes, Newton from the HB orbit at that
+frequency, then from HB with 2H + 1 and 4H + 1 harmonics there while it does not converge): its distance to
+the curve's HB orbit, its defect and its Floquet multipliers (an unstable orbit is why the sine does not
+settle), or the defect reached where Newton stops short.
 
 What the frictionless stage does and this one does not (frc.md says so too): the converged curve by multiple
-shooting, the Floquet multipliers by shooting and the response map (the shooting and the map's classifier run
-the exact flow without sliders: their states, the sliders' positions, are not in its state vector), the
-monodromy along the HB orbit (the same), the convergence study in H and the backbone check (NNMs of a system
-with friction are not conservative; and each H's curve costs a continuation with AFT).
+shooting continued in frequency (the continued shooting runs the exact flow without sliders), the Floquet
+multipliers and monodromy along the curve (Hill's method instead), the response map (its classifier runs the
+exact flow without sliders), the convergence study in H and the backbone check (NNMs of a system with friction
+are not conservative; and each H's curve costs a continuation with AFT).
 """
 
 from __future__ import annotations
@@ -28,16 +34,22 @@ import time
 import numpy as np
 
 from bearingshaft.scenes import Scene
-from bearingshaft.stages.frc_friction_results import SKIPPED, FrictionCheck, FrictionFRCResult  # noqa: F401
+from bearingshaft.stages.frc_friction_results import SKIPPED, FrictionCheck, FrictionFRCResult, ShootCheck  # noqa: F401
 from bearingshaft.systems import model_system
 from reduced.models.loads import Harmonic, Loads
 from reduced.periodic.continuation import ContinuationError
 from reduced.periodic.frc import FRC_STEPS, linear_frf, solution_at_frequency
 from reduced.periodic.friction_aft import friction_frc
+from reduced.periodic.friction_shooting import hb_at_frequency, hb_displacements, hb_nodes, shoot_friction
+from reduced.periodic.hb import NewtonError
 from reduced.transient.friction import integrate_exact_friction
 
 SAMPLES_PER_PERIOD = 400  # of the exact run's output: the amplitude read on these (error ~ (pi / 400)^2 / 2 = 3e-5)
 SETTLE_CHUNK = 10  # periods run at a time between two settling checks
+SHOOT_H_FACTORS = (2, 4)  # where shooting from the curve's orbit (H) does not converge, HB at f with 2H + 1, then
+# 4H + 1 harmonics is the next start (measured at 20.6 Hz in the scene: from H = 5 and 11 Newton stalls at a defect
+# of 2e-2 and 2e-3, from H = 21 it converges in 6 steps)
+SHOOT_SAMPLES = 500  # of each of the 8 segments of a shot orbit: its amplitudes read on 4000 points a period
 def load_vector(spec, rows: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
     """(n,) b: the row of ``[frc] point`` plus ``also_weights`` times the rows of ``also_points``.
 
@@ -129,7 +141,9 @@ def compute(scene: Scene, progress: bool = False) -> FrictionFRCResult:
         linear[P] = (f_lin, linear_frf(system.with_friction(None), b, P, f_lin, rows))
         t1 = time.perf_counter()
         checks[P] = _checks(system, b, P, spec, br, rows)
-        st = {"hb_wall_s": wall, "check_wall_s": time.perf_counter() - t1}
+        st = {"hb_wall_s": wall, "check_wall_s": time.perf_counter() - t1,
+              "shooting": [{"freq_hz": c.freq_hz, "converged": c.shooting.converged, "start_H": c.shooting.start_H,
+                            "wall_s": c.shooting.wall_s} for c in checks[P] if c.shooting is not None]}
         if not isinstance(br, Exception):
             st.update(points=len(br.freq_hz), hill_wall_s=br.stability_wall_s, status=br.status,
                       bifurcations=[[int(i), k] for i, k in br.bifurcations])
@@ -157,8 +171,46 @@ def _checks(system, b: np.ndarray, P: float, spec, br, rows: np.ndarray) -> list
             amp, _, _ = solution_at_frequency(br, float(f), float(exact[0]), 0, stable_only=True)
             if amp is not None:
                 hb = np.asarray(amp, float)
-        out.append(FrictionCheck(P, float(f), exact, hb, change, ok, t, work))
+        shot = None if ok else _shoot(system, b, P, float(f), br, float(exact[0]), rows)
+        out.append(FrictionCheck(P, float(f), exact, hb, change, ok, t, work, shot))
     return out
+
+
+def _shoot(system, b: np.ndarray, P: float, f: float, br, amplitude_ref: float, rows: np.ndarray) -> ShootCheck:
+    """Shooting from the curve's HB orbit at f (any stability; the piece nearest ``amplitude_ref`` at the first
+    point), then from HB at f with more harmonics (SHOOT_H_FACTORS) while it does not converge."""
+    if isinstance(br, Exception):
+        return ShootCheck(False, "not run: no HB curve")
+    amp, i, X = solution_at_frequency(br, f, amplitude_ref, 0, stable_only=False)
+    if X is None:
+        return ShootCheck(False, "not run: no HB solution at this frequency")
+    hb_stable = bool(br.stable[i]) if br.stable[i] == br.stable[i + 1] else None
+    H = br.balance.H
+    t0 = time.perf_counter()
+    fb, Xs, tried = br.balance, X, []
+    for factor in (0, *SHOOT_H_FACTORS):
+        if factor:
+            try:
+                fb, Xs = hb_at_frequency(fb, Xs, f, factor * H + 1)
+            except NewtonError as exc:
+                tried.append(f"HB with H = {factor * H + 1} not found ({exc})")
+                break
+        r = shoot_friction(system, b, P, f, hb_nodes(fb, Xs, f))
+        tried.append(f"from H = {fb.H}: {r.message}")
+        if r.converged:
+            break
+    wall = time.perf_counter() - t0
+    common = dict(start_H=fb.H, hb_m=np.asarray(amp, float), defect=r.defect, hb_stable=hb_stable, rank=r.rank,
+                  size=r.size, n_iter=r.n_iter, wall_s=wall)
+    if not r.converged:
+        return ShootCheck(False, "; ".join(tried), **common)
+    t, y = r.orbit(SHOOT_SAMPLES)
+    xs = y[:, :system.n] @ rows.T
+    xh = hb_displacements(X, f, t) @ rows.T
+    A = np.max(np.abs(xs), axis=0)
+    return ShootCheck(True, "; ".join(tried), shoot_m=A, amp_rel=np.abs(np.asarray(amp, float) / A - 1.0),
+                      history_rel=np.max(np.abs(xh - xs), axis=0) / A, period_defect=r.period_defect,
+                      max_abs_multiplier=r.max_abs_multiplier, stable=r.stable, **common)
 
 
 def write(result: FrictionFRCResult, writer) -> None:
@@ -175,5 +227,5 @@ def write(result: FrictionFRCResult, writer) -> None:
     frc_friction_files.write(result, writer)
 
 
-__all__ = ["SKIPPED", "FrictionCheck", "FrictionFRCResult", "compute", "load_vector", "settle",
+__all__ = ["SKIPPED", "FrictionCheck", "FrictionFRCResult", "ShootCheck", "compute", "load_vector", "settle",
            "write"]

@@ -69,8 +69,40 @@ def check_rows(result) -> list[dict]:
             row.update(max_rel_error=c.rel_error, settled_change=c.settled_change,
                        settled="true" if c.settled else "false", simulated_s=c.simulated_s,
                        friction_work_per_period_J=c.friction_work_per_period_J)
+            row.update(shoot_columns(c.shooting, result.names))
             rows.append(row)
     return rows
+
+
+def shoot_columns(sh, names: tuple[str, ...]) -> dict:
+    """The shooting columns of frc_friction_checks.csv for one check (``sh`` a ShootCheck, or None where the
+    stepped sine settled: no shooting, empty cells): the status and how Newton ended, the HB order it started
+    from, the amplitudes shot and of the curve's HB at f, their relative difference at the first point and the
+    time histories' at every point, the defects, the largest |multiplier| and the verdict, Hill's verdict on
+    the HB solution, and the shooting Jacobian's rank.
+
+    Parameters
+    ----------
+    sh : ShootCheck or None
+    names : the output points
+    """
+    nan = math.nan
+    out = {"shoot_status": "not run: settled" if sh is None else ("converged" if sh.converged else "not converged"),
+           "shoot_message": "" if sh is None else sh.message, "shoot_start_H": "" if sh is None else sh.start_H}
+    conv = sh is not None and sh.converged
+    for k, n in enumerate(names):
+        out[f"{n}_shoot_m"] = nan if sh is None or sh.shoot_m is None else float(sh.shoot_m[k])
+        out[f"{n}_hb_any_m"] = nan if sh is None or sh.hb_m is None else float(sh.hb_m[k])
+    out[f"hb_vs_shoot_{names[0]}_rel"] = float(sh.amp_rel[0]) if conv else nan
+    for k, n in enumerate(names):
+        out[f"{n}_hb_vs_shoot_history_rel"] = float(sh.history_rel[k]) if conv else nan
+    out.update({"shoot_defect": nan if sh is None else sh.defect,
+                "shoot_period_defect": nan if sh is None else sh.period_defect,
+                "shoot_max_abs_multiplier": nan if sh is None else sh.max_abs_multiplier,
+                "shoot_stable": "" if not conv else ("true" if sh.stable else "false"),
+                "hb_hill_stable": "" if sh is None or sh.hb_stable is None else ("true" if sh.hb_stable else "false"),
+                "shoot_rank": "" if sh is None else f"{sh.rank}/{sh.size}"})
+    return out
 
 
 def markdown(result) -> str:
@@ -96,14 +128,17 @@ def markdown(result) -> str:
                       f"k_t = {float(np.max(sys_f.k_t)):.4g} N/m.")
     # run times are in provenance.json (the stage's stats), not here: this file is compared digit for digit
     lines += ["", "| level [N] | HB points | stable | stick-slip points | bifurcations | "
-              "stepped sine: settled | worst HB error at a settled point |", "|---|---|---|---|---|---|---|"]
+              "stepped sine: settled | worst HB error at a settled point | unsettled points: orbit shot |",
+              "|---|---|---|---|---|---|---|---|"]
     for P, br in result.curves.items():
         ok = [c for c in result.checks[P] if c.settled]
         errs = [c.rel_error for c in ok if math.isfinite(c.rel_error)]
         worst = f"{max(errs):.3g}" if errs else "n/a"
+        shots = [c.shooting for c in result.checks[P] if c.shooting is not None]
+        shot = f"{sum(s.converged for s in shots)}/{len(shots)}"
         if isinstance(br, Exception):
             lines.append(f"| {P:g} | failed: {' '.join(str(br).split())[:120]} | | | | "
-                         f"{len(ok)}/{len(result.checks[P])} | {worst} |")
+                         f"{len(ok)}/{len(result.checks[P])} | {worst} | {shot} |")
             continue
         fb = br.balance
         ss = np.array([fb.slider_state(z) for z in br.z])  # (k, p, 3)
@@ -113,7 +148,7 @@ def markdown(result) -> str:
             kinds[kind] = kinds.get(kind, 0) + 1
         bif = ", ".join(f"{v} {k}" for k, v in kinds.items()) or "none"
         lines.append(f"| {P:g} | {len(br.freq_hz)} | {int(np.sum(br.stable))} | {stick_slip} | "
-                     f"{bif} | {len(ok)}/{len(result.checks[P])} | {worst} |")
+                     f"{bif} | {len(ok)}/{len(result.checks[P])} | {worst} | {shot} |")
     lines += ["", "## The stepped sine by the exact friction integrator (frc_friction_checks.csv)", "",
               f"Up the band at {spec.stepped_sine_points} frequencies, the state (sliders included) carried from one "
               f"to the next; each settled until its last period's amplitudes move by less than "
@@ -129,9 +164,53 @@ def markdown(result) -> str:
             lines.append(f"| {P:g} | {c.freq_hz:.4g} | {amps} | {c.rel_error:.3g} | "
                          f"{'yes' if c.settled else f'no ({c.settled_change:.2g})'} | "
                          f"{c.friction_work_per_period_J:.3g} |")
+    lines += shoot_markdown(result)
     lines += ["", "## Skipped with friction, and why", ""]
     lines += [f"- **{what}**: {why}." for what, why in SKIPPED]
     return "\n".join(lines) + "\n"
+
+
+def shoot_markdown(result) -> list[str]:
+    """frc.md's section on shooting at the unsettled points: per point the start, the outcome, the defects, the
+    largest |multiplier|, and the shot orbit against the curve's HB orbit (or the defect reached and why not).
+
+    Parameters
+    ----------
+    result : FrictionFRCResult
+    """
+    names = result.names
+    shots = [(P, c) for P, checks in result.checks.items() for c in checks if c.shooting is not None]
+    lines = ["", "## Shooting with the sliders at the unsettled points (frc_friction_checks.csv, shoot_*)", ""]
+    if not shots:
+        return lines + ["Every point of the stepped sine settled: nothing to shoot."]
+    lines += ["Where the stepped sine does not settle, the periodic orbit of the exact friction flow is shot for "
+              "(reduced.periodic.friction_shooting.shoot_friction: 8 nodes of the augmented state [x; v; w], w the "
+              "sliders' positions; Newton with a finite-difference Jacobian and minimum-norm steps, a slider open "
+              "or stuck the whole period being a free direction; the multipliers from the monodromy by central "
+              "differences), from the curve's HB orbit at that frequency whatever its stability, then from HB "
+              "with more harmonics at that frequency while Newton does not converge. The defect is in units of "
+              "the amplitude (multiple shooting; the period defect from one run over the whole period). HB vs "
+              f"shooting: the relative difference of max |{names[0]}|, and the largest difference of the time "
+              f"histories over the period relative to the point's amplitude, at {names[0]} and at the worst point. "
+              "Stable: by the shot orbit's multipliers / by Hill's method on the HB solution.", "",
+              "| level [N] | f [Hz] | start H | converged | defect | period defect | max abs multiplier | stable | "
+              + " | ".join(f"{n} shot / HB [m]" for n in names) + f" | HB vs shot: {names[0]} | history: "
+              f"{names[0]} / worst |", "|---" * (len(names) + 10) + "|"]
+    for P, c in shots:
+        sh = c.shooting
+        if sh.converged:
+            amps = " | ".join(f"{a:.4g} / {h:.4g}" for a, h in zip(sh.shoot_m, sh.hb_m, strict=True))
+            worst = int(np.argmax(sh.history_rel))
+            hill = {True: "yes", False: "no", None: "mixed"}[sh.hb_stable]
+            lines.append(f"| {P:g} | {c.freq_hz:.4g} | {sh.start_H} | yes | {sh.defect:.2g} | {sh.period_defect:.2g} "
+                         f"| {sh.max_abs_multiplier:.4g} | {'yes' if sh.stable else 'no'} / {hill} | {amps} | "
+                         f"{sh.amp_rel[0]:.3g} | {sh.history_rel[0]:.3g} / {sh.history_rel[worst]:.3g} "
+                         f"({names[worst]}) |")
+        else:
+            why = sh.message.replace("|", "\\|")  # a message's |R| must not split the table's cell
+            lines.append(f"| {P:g} | {c.freq_hz:.4g} | {sh.start_H} | no: {why} | {sh.defect:.2g} | | | |"
+                         + " |" * len(names) + " | |")
+    return lines
 
 
 def _plot(path, result) -> None:
@@ -157,7 +236,11 @@ def _plot(path, result) -> None:
                 ax.plot(br.freq_hz, np.where(br.stable, np.nan, a), ":", color=c)
             pts = result.checks[P]
             ax.plot([p.freq_hz for p in pts], [p.exact_m[col] * 1e3 for p in pts], "o", mfc="none", color=c,
-                    label=f"exact, settled, {P:g} N")
+                    label=f"exact, stepped sine, {P:g} N")
+            shot = [p for p in pts if p.shooting is not None and p.shooting.converged]
+            if shot:
+                ax.plot([p.freq_hz for p in shot], [p.shooting.shoot_m[col] * 1e3 for p in shot], "x", color=c,
+                        label=f"exact periodic orbit by shooting, {P:g} N")
         ax.set_yscale("log")
         ax.set_ylabel(f"max |{result.names[col]}| [mm]")
         ax.legend(fontsize=7)

@@ -12,16 +12,61 @@ import numpy as np
 from bearingshaft.scenes import Scene
 
 SKIPPED = (
-    ("converged curve by shooting", "the multiple shooting runs the exact flow without sliders: the sliders' "
-     "positions are not in its state vector, so its periodic orbits are those of the frictionless system"),
-    ("Floquet multipliers by shooting and monodromy", "the same: Hill's method on the consistent AFT Jacobian "
-     "gives the stability instead"),
+    ("converged curve by shooting", "the continued multiple shooting (reduced.periodic.forced_shooting) runs the "
+     "exact flow without sliders; shooting with the sliders (reduced.periodic.friction_shooting, finite-difference "
+     "Jacobians) is run at the stepped sine's unsettled points only, not continued along the curve"),
+    ("Floquet multipliers by shooting and monodromy along the curve", "Hill's method on the consistent AFT "
+     "Jacobian gives the stability along the curve; the multipliers by shooting are those of the unsettled "
+     "points' orbits"),
     ("response map", "its classifier (periodic, subharmonic, chaotic, Lyapunov exponent) runs the exact flow "
      "without sliders"),
     ("convergence in H", "each H's curve is a continuation with AFT (tens of seconds a curve); the stepped "
      "sine's error at the curve's H says how far it is"),
     ("backbone check", "with friction the free motion is not conservative: no NNM backbone to approach"),
 )
+
+
+@dataclass(eq=False)
+class ShootCheck:
+    """Shooting on the exact friction flow (:func:`reduced.periodic.friction_shooting.shoot_friction`) from the HB
+    orbit at a frequency where the stepped sine did not settle.
+
+    Attributes
+    ----------
+    converged : whether Newton reached the shooting tolerance
+    message : how Newton ended (the defect reached and why, if not converged), or why it did not run
+    start_H : the HB order of the start shot from last (the curve's H, or a higher one at that frequency)
+    shoot_m : (p,) m, max |x| over the shot orbit at each output point (NaN if not converged)
+    hb_m : (p,) m, the curve's HB solution at the frequency whatever its stability (NaN if none)
+    amp_rel : (p,) |HB / shooting - 1| of the amplitudes
+    history_rel : (p,) max over the period of |x_HB(t) - x_shooting(t)| / max |x_shooting| at each point
+    defect : the multiple-shooting defect reached, in units of the amplitude
+    period_defect : |y(T) - y(0)| / amplitude of one exact run over the whole period from the orbit's start
+    max_abs_multiplier : the largest |Floquet multiplier| (NaN if not converged)
+    stable : the multipliers within the unit circle (None if not converged)
+    hb_stable : Hill's verdict on the curve's HB solution at the frequency (None where the bracketing points
+        disagree)
+    rank, size : numerical rank of the shooting Jacobian, and its size (size - rank free slider directions)
+    n_iter : Newton steps of the last start
+    wall_s : s, all starts together
+    """
+
+    converged: bool
+    message: str
+    start_H: int = 0
+    shoot_m: np.ndarray | None = None
+    hb_m: np.ndarray | None = None
+    amp_rel: np.ndarray | None = None
+    history_rel: np.ndarray | None = None
+    defect: float = math.nan
+    period_defect: float = math.nan
+    max_abs_multiplier: float = math.nan
+    stable: bool | None = None
+    hb_stable: bool | None = None
+    rank: int = 0
+    size: int = 0
+    n_iter: int = 0
+    wall_s: float = 0.0
 
 
 @dataclass(eq=False)
@@ -37,6 +82,7 @@ class FrictionCheck:
     settled : whether that change fell below ``[frc] stepped_sine_tol``
     simulated_s : s of motion run at this frequency
     friction_work_per_period_J : J, the friction work of the last period
+    shooting : ShootCheck where the stepped sine did not settle, else None
     """
 
     level_N: float
@@ -47,6 +93,7 @@ class FrictionCheck:
     settled: bool
     simulated_s: float
     friction_work_per_period_J: float  # of the last period
+    shooting: ShootCheck | None = None  # where the stepped sine did not settle
 
     @property
     def rel_error(self) -> float:
@@ -78,4 +125,4 @@ class FrictionFRCResult:
     stats: dict = field(default_factory=dict)
 
 
-__all__ = ["SKIPPED", "FrictionCheck", "FrictionFRCResult"]
+__all__ = ["SKIPPED", "FrictionCheck", "FrictionFRCResult", "ShootCheck"]
