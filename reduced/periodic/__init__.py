@@ -15,7 +15,9 @@
 - :mod:`~reduced.periodic.stepped_sine`: the reference of the forced-response curves, a stepped
   sine by the exact flow.
 - :mod:`~reduced.periodic.friction_aft`: friction (Jenkins elements) in the forced balance by AFT, its
-  forced-response curves with Hill's stability.
+  forced-response curves with Hill's stability;
+- :mod:`~reduced.periodic.friction_shooting`: forced periodic orbits of the exact flow with friction (multiple
+  shooting on [x; v; w]), their Floquet multipliers: the reference of the friction HB in contact.
 
 Every continued curve takes one set of step options,
 :class:`~reduced.periodic.continuation.ContinuationOptions`; every shooting failure is one
