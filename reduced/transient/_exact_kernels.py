@@ -89,12 +89,31 @@ def _work_setup(X, C, lam, n, G, Gz, az):
 def _series_at(coef, lam, tau, q, d, dscale, Q2):
     """Add the terms c_i e^{lam_i tau} to q, q' = Re sum lam_i c_i e^{lam_i tau}, the scale of q'
     (sum |lam_i c_i e^{lam_i tau}|) and the bound Q2 = sum |lam_i|^2 |c_i e^{lam_i tau}| on |q''|."""
-    for i in range(lam.shape[0]):
-        e = coef[i] * np.exp(lam[i] * tau)
+    N = lam.shape[0]
+    i = 0
+    while i < N:
+        li = lam[i]
+        x = np.exp(li * tau)
+        al = abs(li)
+        al2 = al**2
+        e = coef[i] * x
         q += e.real
-        d += (lam[i] * e).real
-        dscale += abs(e) * abs(lam[i])
-        Q2 += abs(e) * abs(lam[i]) ** 2
+        d += (li * e).real
+        ae = abs(e)
+        dscale += ae * al
+        Q2 += ae * al2
+        i += 1
+        if i < N and lam[i].real == li.real and lam[i].imag == -li.imag:
+            # the conjugate exponent (the modes and harmonic loads come in such pairs): e^{conj(lam) tau} is
+            # conj(e^{lam tau}) to the bit (cos even, sin odd), |conj(lam)| = |lam|
+            lc = lam[i]
+            e = coef[i] * np.conj(x)
+            q += e.real
+            d += (lc * e).real
+            ae = abs(e)
+            dscale += ae * al
+            Q2 += ae * al2
+            i += 1
     return q, d, dscale, Q2
 
 
@@ -169,9 +188,17 @@ def _stop_series(B, j, sgn, offset_j, yp_s, X, coef):
 
 @nb.njit(cache=True)
 def _exponentials(lam, tau, e):
-    """e_i = exp(lam_i tau)."""
-    for i in range(lam.shape[0]):
-        e[i] = np.exp(lam[i] * tau)
+    """e_i = exp(lam_i tau) (the second of a conjugate pair as the conjugate of the first: the same bits,
+    :func:`_series_at`)."""
+    N = lam.shape[0]
+    i = 0
+    while i < N:
+        x = np.exp(lam[i] * tau)
+        e[i] = x
+        if i + 1 < N and lam[i + 1].real == lam[i].real and lam[i + 1].imag == -lam[i].imag:
+            e[i + 1] = np.conj(x)
+            i += 1
+        i += 1
 
 
 @nb.njit(cache=True)
@@ -195,7 +222,7 @@ def _eval_state(yp, X, lam, tau, out):
 
 @nb.njit(cache=True)
 def _forced_segment(s, sigma, ip, tau_lim, y, yp_s, lam_s, V, Vinv, fz, fY, fU, pF, pp0, pp1, n, X, z, P,
-                    Fs, phi, gam, werr, ypart):
+                    Fs, phi, gam, werr, ypart, noise=True):
     """A forced segment's closed form in state s (see the module docstring), with the loads' piece
     ``ip`` re-based to the segment start (``sigma`` after the piece start):
 
@@ -209,7 +236,8 @@ def _forced_segment(s, sigma, ip, tau_lim, y, yp_s, lam_s, V, Vinv, fz, fY, fU, 
     (c_D = -gam_D / lambda, c_k = ((k + 1) c_{k+1} - gam_k) / lambda, gam = V^-1 [0; M^-1 b] phi);
     a slow mode (|lambda| tau_lim < SLOW_LT) its Taylor series m h_m = lambda h_{m-1} + gam_{m-1},
     which cancels nothing. Fills X, z, P, Fs, phi and werr (the round-off of the modal
-    coordinates); returns whether there is a polynomial part.
+    coordinates; 0 without ``noise``: a march that passes no noise bound, :func:`_next_crossing`, does not
+    read it); returns whether there is a polynomial part.
     """
     N = 2 * n
     L = fz.shape[0]
@@ -258,7 +286,9 @@ def _forced_segment(s, sigma, ip, tau_lim, y, yp_s, lam_s, V, Vinv, fz, fY, fU, 
         err = 0.0
         for r in range(N):
             wi += Vinv[i, r] * (y[r] - yp_s[r] - ypart[r])
-            err += abs(Vinv[i, r]) * (abs(y[r]) + abs(yp_s[r]) + abs(ypart[r]))
+        if noise:
+            for r in range(N):
+                err += abs(Vinv[i, r]) * (abs(y[r]) + abs(yp_s[r]) + abs(ypart[r]))
         werr[i] = EPS * err
         if not poly:
             for r in range(N):
@@ -627,13 +657,13 @@ def _work_arrays(n, L):
 
 @nb.njit(cache=True)
 def _start_segment(s, t, t_end, ip, pstarts, y, yp_s, lam_s, V_s, Vinv_s, fz, fY, fU, pF, pp0, pp1, n, X, z, P,
-                   Fs, phi, gam, werr, ypart):
+                   Fs, phi, gam, werr, ypart, noise=True):
     """The segment from (t, y) in state s: the loads' piece holding t (advanced from ``ip``), where the
     segment must end (the next load breakpoint or t_end) and its closed form (:func:`_forced_segment`).
     Returns (ip, t_lim, poly)."""
     ip, t_lim = _piece_at(pstarts, ip, t, t_end)
     poly = _forced_segment(s, t - pstarts[ip], ip, t_lim - t, y, yp_s, lam_s, V_s, Vinv_s, fz, fY, fU, pF, pp0,
-                           pp1, n, X, z, P, Fs, phi, gam, werr, ypart)
+                           pp1, n, X, z, P, Fs, phi, gam, werr, ypart, noise)
     return ip, t_lim, poly
 
 

@@ -65,7 +65,6 @@ from reduced.models.loads import Harmonic, Loads
 from reduced.transient._exact_kernels import (
     _add_poly,
     _eval_state,
-    _eval_with,
     _exponentials,
     _next_crossing,
     _segment_arrays,
@@ -90,6 +89,18 @@ def _peak_rows(R, y, peak, row_out):
         row_out[r] = acc
         if abs(acc) > peak[r]:
             peak[r] = abs(acc)
+
+
+@nb.njit(cache=True)
+def _eval_x(yp, X, e, out, n):
+    """x = the first n rows of y = y_p + Re sum_i X[:, i] e_i (:func:`reduced.transient._exact_kernels._eval_with`
+    row by row: the same numbers; the peaks read x only)."""
+    K = e.shape[0]
+    for r in range(n):
+        acc = 0.0
+        for i in range(K):
+            acc += (X[r, i] * e[i]).real
+        out[r] = yp[r] + acc
 
 
 @nb.njit(cache=True)
@@ -122,7 +133,7 @@ def _march_period(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, 
         if not valid[s]:
             return n_seg, -2
         ip, t_lim, poly = _start_segment(s, t, T, ip, pstarts, y, yp[s], lam[s], V[s], Vinv[s], fz, fY, fU, pF, pp0,
-                                         pp1, n, X, z, P, Fs, phi, gam, werr, ypart)
+                                         pp1, n, X, z, P, Fs, phi, gam, werr, ypart, False)
         tau_ev, j_ev, _, status = _next_crossing(B, offset, side, active, yp[s], V[s], X, z, werr, poly, P, Qp, coef,
                                                  t_lim - t, hmin, 0.0, False)
         if status != 0:
@@ -140,9 +151,9 @@ def _march_period(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, 
         while i_u < n_uniform and i_u * h < t_next:  # the uniform samples in this segment
             tau_u = max(i_u * h - t, 0.0)
             _exponentials(z, tau_u, e)
-            _eval_with(yp[s], X, e, yq)
+            _eval_x(yp[s], X, e, yq, n)
             if poly:
-                _add_poly(P, tau_u, N, yq)
+                _add_poly(P, tau_u, n, yq)
             _peak_rows(R, yq, peak, row)
             if record:
                 for r in range(p):
@@ -155,9 +166,9 @@ def _march_period(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, 
             for i in range(n_inner):  # inside a contact segment: its peak is short and sharp
                 tau_i = tau_ev * (i + 1) / (n_inner + 1)
                 _exponentials(z, tau_i, e)
-                _eval_with(yp[s], X, e, yq)
+                _eval_x(yp[s], X, e, yq, n)
                 if poly:
-                    _add_poly(P, tau_i, N, yq)
+                    _add_poly(P, tau_i, n, yq)
                 _peak_rows(R, yq, peak, row)
         for r in range(N):
             y[r] = ytmp[r]
