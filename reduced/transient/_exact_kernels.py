@@ -103,9 +103,10 @@ def _series_at(coef, lam, tau, q, d, dscale, Q2):
         dscale += ae * al
         Q2 += ae * al2
         i += 1
-        if i < N and lam[i].real == li.real and lam[i].imag == -li.imag:
+        if i < N and li.imag != 0.0 and lam[i].real == li.real and lam[i].imag == -li.imag:
             # the conjugate exponent (the modes and harmonic loads come in such pairs): e^{conj(lam) tau} is
-            # conj(e^{lam tau}) to the bit (cos even, sin odd), |conj(lam)| = |lam|
+            # conj(e^{lam tau}) to the bit (cos even, sin odd), |conj(lam)| = |lam| (a real exponent is
+            # taken alone: the conjugate of e^{a tau} + 0j would carry -0j)
             lc = lam[i]
             e = coef[i] * np.conj(x)
             q += e.real
@@ -195,7 +196,7 @@ def _exponentials(lam, tau, e):
     while i < N:
         x = np.exp(lam[i] * tau)
         e[i] = x
-        if i + 1 < N and lam[i + 1].real == lam[i].real and lam[i + 1].imag == -lam[i].imag:
+        if i + 1 < N and lam[i].imag != 0.0 and lam[i + 1].real == lam[i].real and lam[i + 1].imag == -lam[i].imag:
             e[i + 1] = np.conj(x)
             i += 1
         i += 1
@@ -723,9 +724,19 @@ def _segment_state(tau, yp_s, X, z, P, poly, damped, G, Gz, az, ACp, Cpp, Pb, be
 
 
 @nb.njit(cache=True)
+def _state_only(tau, yp_s, X, z, P, poly, e, ytmp):
+    """:func:`_segment_state`'s state alone (the same numbers), no work: (0, 0)."""
+    _exponentials(z, tau, e)
+    _eval_with(yp_s, X, e, ytmp)
+    if poly:
+        _add_poly(P, tau, ytmp.shape[0], ytmp)
+    return 0.0, 0.0
+
+
+@nb.njit(cache=True)
 def _forced_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped, y, active, t, t_end, t_samples, i_samp,
                    t_after, out_y, out_W, W, hmin, floor, max_events, n_stuck, fz, fY, fU, fb, pstarts, pF, pp0, pp1,
-                   out_E, E):
+                   out_E, E, work=True):
     """March events from t to t_end under the loads, filling the sample buffer ``t_samples`` from index i_samp.
 
     (y, active, t, W, E) is the state at the start of a segment (an event, a load breakpoint or a
@@ -734,7 +745,9 @@ def _forced_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped, y, 
     buffer fills inside a segment that still has samples before its end (the next sample, at
     ``t_after``, lies in it), the kernel returns BUFFER_FULL *without* advancing that segment:
     called again with a new buffer it recomputes the segment from the same state, so the samples
-    do not depend on the buffer size. Returns (t, W, E, i_samp, n_events, n_iter, status, n_stuck).
+    do not depend on the buffer size. Without ``work`` the dissipated energy and the work of the loads
+    are not integrated (W and E stay as they are; the states and events are the same numbers).
+    Returns (t, W, E, i_samp, n_events, n_iter, status, n_stuck).
     """
     n = B.shape[1]
     m = B.shape[0]
@@ -754,19 +767,23 @@ def _forced_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped, y, 
             break
         ip, t_lim, poly = _start_segment(s, t, t_end, ip, pstarts, y, yp[s], lam[s], V[s], Vinv[s], fz, fY, fU, pF,
                                          pp0, pp1, n, X, z, P, Fs, phi, gam, werr, ypart)
-        if damped:
-            _work_setup(X, C, z, n, G, Gz, az)
-        _ext_setup(X, z, fb, fz, n, beta, rp, rm)
-        if poly:
-            _poly_setup(X, P, C, fb, n, damped, ACp, Cpp, Pb)
+        if work:
+            if damped:
+                _work_setup(X, C, z, n, G, Gz, az)
+            _ext_setup(X, z, fb, fz, n, beta, rp, rm)
+            if poly:
+                _poly_setup(X, P, C, fb, n, damped, ACp, Cpp, Pb)
         tau_ev, j_ev, seg_iter, status = _next_crossing(B, offset, side, active, yp[s], V[s], X, z, werr, poly, P,
                                                         Qp, coef, t_lim - t, hmin, floor, True)
         if status != 0:
             break
         t_next = t_lim if j_ev < 0 else t + tau_ev
         while i_samp < ns and t_samples[i_samp] <= t_next:
-            dW, dE = _segment_state(max(t_samples[i_samp] - t, 0.0), yp[s], X, z, P, poly, damped, G, Gz, az, ACp,
-                                    Cpp, Pb, beta, rp, rm, phi, Fs, fz, MOM, e, eiw, ytmp)
+            if work:
+                dW, dE = _segment_state(max(t_samples[i_samp] - t, 0.0), yp[s], X, z, P, poly, damped, G, Gz, az,
+                                        ACp, Cpp, Pb, beta, rp, rm, phi, Fs, fz, MOM, e, eiw, ytmp)
+            else:
+                dW, dE = _state_only(max(t_samples[i_samp] - t, 0.0), yp[s], X, z, P, poly, e, ytmp)
             out_E[i_samp] = E + dE
             out_W[i_samp] = W + dW
             for r in range(N):
@@ -776,8 +793,11 @@ def _forced_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped, y, 
             status = BUFFER_FULL  # the segment is searched again with the next buffer: count it then
             break
         n_iter += seg_iter
-        dW, dE = _segment_state(tau_ev, yp[s], X, z, P, poly, damped, G, Gz, az, ACp, Cpp, Pb, beta, rp, rm, phi,
-                                Fs, fz, MOM, e, eiw, ytmp)
+        if work:
+            dW, dE = _segment_state(tau_ev, yp[s], X, z, P, poly, damped, G, Gz, az, ACp, Cpp, Pb, beta, rp, rm, phi,
+                                    Fs, fz, MOM, e, eiw, ytmp)
+        else:
+            dW, dE = _state_only(tau_ev, yp[s], X, z, P, poly, e, ytmp)
         E += dE
         W += dW
         for r in range(N):
