@@ -917,14 +917,15 @@ class _LoadResidual:
         self.lw = math.log(omega / res.omega_ref)
         self.size = res.size
 
-    def _at(self, y: np.ndarray, lp: float):
+    def _at(self, y: np.ndarray, lp: float, jacobian: bool = True):
         self.res.flow.amplitude_N = self.P0 * math.exp(lp)
         self.res.forget()
-        return self.res(np.append(y[: self.size], self.lw))
+        Y = np.append(y[: self.size], self.lw)
+        return self.res(Y) if jacobian else self.res.value(Y)
 
     def __call__(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         h = 1e-7
-        Rp, _ = self._at(y, y[self.size] + h)
+        Rp = self._at(y, y[self.size] + h, jacobian=False)  # R only: the difference needs no Jacobian
         R, J = self._at(y, y[self.size])
         Jy = J.copy()
         Jy[:, self.size] = (Rp - R) / h

@@ -45,7 +45,7 @@ from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
 from reduced.models.loads import Harmonic, Loads
 from reduced.periodic.shooting import ShootingError
-from reduced.transient._exact_kernels import _eval_state, _next_crossing
+from reduced.transient._exact_kernels import _eval_state, _exponentials, _next_crossing
 from reduced.transient._modal import QTOL_REL, _state_of
 from reduced.transient.exact import HMIN_PERIODS
 from reduced.transient.exact_tables import forced_table, state_table
@@ -167,7 +167,8 @@ def _harmonic_flow(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin,
 def _segment_exp(lam, V, Vinv, s, tau, W):
     """exp(A_s tau) (2n, 2n) from the closed form Re(V diag(exp(lam tau)) V^-1); W is scratch."""
     N = W.shape[0]
-    e = np.exp(lam[s] * tau)
+    e = np.empty(N, np.complex128)
+    _exponentials(lam[s], tau, e)
     for r in range(N):
         for c in range(N):
             W[r, c] = V[s, r, c] * e[c]
@@ -213,13 +214,18 @@ def _walk(lam, V, Vinv, seg_state, seg_tau, n_seg, omega, F0k, t0k, fY, fYd, J, 
         for c in range(N):
             J[r, c] = 1.0 if r == c else 0.0
     sig = 0.0
+    first = True
     for i in range(n_seg):
         s = seg_state[i]
         tau = seg_tau[i]
         if tau == 0.0:
             continue
         E = _segment_exp(lam, V, Vinv, s, tau, W)
-        J[:, :] = E @ J
+        if first:
+            J[:, :] = E  # E @ I: the same numbers, without the product
+            first = False
+        else:
+            J[:, :] = E @ J
         # w(t) = Re((dY_s/dOmega + i t Y_s) P e^{i(Omega t + phi)}), t = t0k + sigma
         ea = F0k * np.exp(1j * omega * sig)
         eb = F0k * np.exp(1j * omega * (sig + tau))
@@ -288,11 +294,12 @@ def _vector_field(Minv, K, C, B, kst, offset, side, b, p, y, out):
 
 @nb.njit(cache=True)
 def _residual_kernel(lam, V, Vinv, yp, valid, B, offset, side, kst, Minv, K, C, bvec, amp, phase, Yv, d, dv, h,
-                     hmin, omega, fU, fb, seg_state, seg_tau, R, J, Js, n_events, st_state, st_tau, st_n):
+                     hmin, omega, fU, fb, seg_state, seg_tau, R, J, Js, n_events, st_state, st_tau, st_n, jac=True):
     """R and dR/dY (:class:`ShootingResidual`) at the scaled nodes Yv (S, 2n), D sqrt(S) = d (2n,) (dv:
     Omega dD/dOmega / D of the velocity rows, 1 if they scale with Omega, else 0),
     segment length h and frequency omega, in place, with the segments' monodromies Js and events,
     and each node's contact-state stretches (st_state, st_tau, st_n; st_n[k] = -1 if more than fit).
+    Without ``jac`` only R, the events and the stretches (J and Js untouched; R the same numbers).
     Returns (0, -1) or (status < 0, the node whose march failed)."""
     S, N = Yv.shape
     n = N // 2
@@ -312,9 +319,10 @@ def _residual_kernel(lam, V, Vinv, yp, valid, B, offset, side, kst, Minv, K, C, 
     f1 = np.empty(N)
     F0 = np.empty((1, 1), np.complex128)
     M = S * N
-    for r in range(M):
-        for c in range(M + 1):
-            J[r, c] = 0.0
+    if jac:
+        for r in range(M):
+            for c in range(M + 1):
+                J[r, c] = 0.0
     for k in range(S):
         t0k = k * h
         F0[0, 0] = amp * np.exp(1j * (omega * t0k + phase))
@@ -333,12 +341,16 @@ def _residual_kernel(lam, V, Vinv, yp, valid, B, offset, side, kst, Minv, K, C, 
             st_tau[k, :n_seg] = seg_tau[:n_seg]
         else:
             st_n[k] = -1
+        kk = (k + 1) % S
+        o = k * N
+        if not jac:
+            for r in range(N):
+                R[o + r] = y[r] / d[r] - Yv[kk, r]
+            continue
         _walk(lam, V, Vinv, seg_state, seg_tau, n_seg, omega, F0[0, 0], t0k, fY, fYd, Jk, z, W, wa, wb)
         Js[k] = Jk
         _vector_field(Minv, K, C, B, kst, offset, side, bvec, amp * math.cos(omega * t0k + phase), y0, f0)
         _vector_field(Minv, K, C, B, kst, offset, side, bvec, amp * math.cos(omega * (t0k + h) + phase), y, f1)
-        kk = (k + 1) % S
-        o = k * N
         for r in range(N):
             R[o + r] = y[r] / d[r] - Yv[kk, r]
             for c in range(N):
@@ -358,17 +370,21 @@ def _residual_kernel(lam, V, Vinv, yp, valid, B, offset, side, kst, Minv, K, C, 
 
 
 @nb.njit(cache=True)
-def _row_series(rows, Vs, Ys, yps, beta, Fa, omega, lam_s, sig, out):
+def _row_series(rows, Vs, Ys, yps, beta, Fa, omega, lam_s, sig, out, eb):
     """(x, x', x'') of each output point r . x at sigma into out (p, 3), for the closed form of one
-    contact state: x(sigma) = r . (x_s + Re(Y_s Fa e^{i Omega sigma}) + Re(V_s beta e^{lam sigma}))."""
+    contact state: x(sigma) = r . (x_s + Re(Y_s Fa e^{i Omega sigma}) + Re(V_s beta e^{lam sigma})).
+    eb: scratch (2n,) complex (beta e^{lam sigma}); the three sums are made in one pass over the terms."""
     n = rows.shape[1]
     e_h = Fa * np.exp(1j * omega * sig)
-    eb = beta * np.exp(lam_s * sig)
+    _exponentials(lam_s, sig, eb)
+    for m in range(eb.shape[0]):
+        eb[m] = beta[m] * eb[m]
     for p in range(rows.shape[0]):
         c0 = 0.0
         ch = 0.0 + 0.0j
         c1 = 0.0 + 0.0j
         c2 = 0.0 + 0.0j
+        c3 = 0.0 + 0.0j
         for r in range(n):
             w = rows[p, r]
             if w == 0.0:
@@ -378,15 +394,10 @@ def _row_series(rows, Vs, Ys, yps, beta, Fa, omega, lam_s, sig, out):
             for m in range(eb.shape[0]):
                 t = w * Vs[r, m] * eb[m]
                 c1 += t
-                c2 += t * lam_s[m]
-        # first and second derivatives: i Omega and lam_m per term
-        c3 = 0.0 + 0.0j
-        for r in range(n):
-            w = rows[p, r]
-            if w == 0.0:
-                continue
-            for m in range(eb.shape[0]):
-                c3 += w * Vs[r, m] * eb[m] * lam_s[m] * lam_s[m]
+                # first and second derivatives: lam_m per term, twice
+                u = t * lam_s[m]
+                c2 += u
+                c3 += u * lam_s[m]
         out[p, 0] = c0 + (ch * e_h).real + c1.real
         out[p, 1] = (1j * omega * ch * e_h).real + c2.real
         out[p, 2] = (-omega * omega * ch * e_h).real + c3.real
@@ -419,6 +430,7 @@ def _node_peaks(lam, V, Vinv, yp, valid, B, offset, side, Y0, h, hmin, omega, fY
     c0p = np.empty(P)
     chp = np.empty(P, np.complex128)
     eb = np.empty(N, np.complex128)
+    ebr = np.empty(N, np.complex128)
     step = np.empty(N, np.complex128)
     for k in range(S):
         if st_n[k] >= 0:
@@ -507,7 +519,7 @@ def _node_peaks(lam, V, Vinv, yp, valid, B, offset, side, Y0, h, hmin, omega, fY
                         flo = prev[p, 1]
                         t_ = 0.5 * (lo + hi)
                         for _ in range(40):
-                            _row_series(rows[p:p + 1], V[s, :n], Ys, yp[s, :n], beta, Fa, omega, lam[s], t_, one)
+                            _row_series(rows[p:p + 1], V[s, :n], Ys, yp[s, :n], beta, Fa, omega, lam[s], t_, one, ebr)
                             d1, d2 = one[0, 1], one[0, 2]
                             if (d1 > 0.0) == (flo > 0.0):
                                 lo = t_
@@ -520,7 +532,7 @@ def _node_peaks(lam, V, Vinv, yp, valid, B, offset, side, Y0, h, hmin, omega, fY
                                 t_ = tn
                                 break
                             t_ = tn
-                        _row_series(rows[p:p + 1], V[s, :n], Ys, yp[s, :n], beta, Fa, omega, lam[s], t_, one)
+                        _row_series(rows[p:p + 1], V[s, :n], Ys, yp[s, :n], beta, Fa, omega, lam[s], t_, one, ebr)
                         if one[0, 0] > pmax[k, p]:
                             pmax[k, p] = one[0, 0]
                         if one[0, 0] < pmin[k, p]:
@@ -584,10 +596,12 @@ class ForcedFlow:
             out = self._Y[omega] = (Y, Yd)
         return out
 
-    def residual(self, Yv: np.ndarray, d: np.ndarray, h: float, omega: float, dv: float = 1.0):
+    def residual(self, Yv: np.ndarray, d: np.ndarray, h: float, omega: float, dv: float = 1.0,
+                 jacobian: bool = True):
         """(R (2nS,), dR/dY (2nS, 2nS + 1), segment monodromies (S, 2n, 2n), events per segment (S,))
         of :class:`ShootingResidual` at the scaled nodes Yv (S, 2n) with scales d (2n,) (dv: 1 if the velocity
-        scales grow with Omega, 0 if fixed), in one numba call.
+        scales grow with Omega, 0 if fixed), in one numba call. Without ``jacobian`` the flow alone is
+        marched: R (the same numbers) and the events, dR/dY and the monodromies None.
 
         Raises
         ------
@@ -598,18 +612,21 @@ class ForcedFlow:
         Yv = np.ascontiguousarray(Yv, dtype=float)
         S, N = Yv.shape
         R = np.empty(S * N)
-        J = np.empty((S * N, S * N + 1))
-        Js = np.empty((S, N, N))
+        J = np.empty((S * N, S * N + 1)) if jacobian else np.empty((0, 0))
+        Js = np.empty((S, N, N)) if jacobian else np.empty((0, 0, 0))
         n_ev = np.zeros(S, np.int64)
         stretches = (np.empty((S, MAX_STRETCHES), np.int64), np.empty((S, MAX_STRETCHES)), np.empty(S, np.int64))
         status, k = call_numba_kernel(_residual_kernel, tb.lam, tb.V, tb.Vinv, tb.yp, tb.valid, sy.B, sy.offset,
                                       sy.side, sy.k, self._Minv, sy.K, sy.C, self.b, self.amplitude_N, self.phase, Yv,
                                       np.ascontiguousarray(d, dtype=float), float(dv), float(h), self.hmin,
                                       float(omega), self._U,
-                                      self._fb, self._seg_state, self._seg_tau, R, J, Js, n_ev, *stretches)
+                                      self._fb, self._seg_state, self._seg_tau, R, J, Js, n_ev, *stretches,
+                                      bool(jacobian))
         if status != 0:
             raise ShootingError(f"the exact flow failed from node {k} at {omega / (2 * math.pi):.6g} Hz: "
                                 f"{_STATUS.get(status, status)}")
+        if not jacobian:
+            return R, None, None, n_ev, stretches
         return R, J, Js, n_ev, stretches
 
     def vector_field(self, Y: np.ndarray, t: np.ndarray, omega: float) -> np.ndarray:
@@ -789,6 +806,17 @@ class ShootingResidual:
         self._segments = (key, Js, st)
         self._check_guard(Y, key)
         return R, J
+
+    def value(self, Y: np.ndarray) -> np.ndarray:
+        """R(Y) alone (the same numbers as ``self(Y)[0]``): the flow marched without the Jacobian's
+        products; memoised evaluations are used, nothing is memoised."""
+        key = Y.tobytes()
+        if key in self._memo:
+            return self._memo[key][0]
+        w = self.omega(Y)
+        _, h = self.times(w)
+        return self.flow.residual(Y[: self.size].reshape(self.segments, 2 * self.n), self.scale(w), h, w,
+                                  1.0 if self.omega_v is None else 0.0, jacobian=False)[0]
 
     def _check_guard(self, Y: np.ndarray, key: bytes) -> None:
         """Refuse (NewtonError) a point farther than ``guard``'s radius from its reference point

@@ -502,8 +502,10 @@ def classify(pm: PeriodMap, y0: np.ndarray, sigma: float, opts: MapOptions, mirr
         r = pm.run(y, opts.n_transient, tangent=W, samples_per_period=0, inner_samples=0)
         y, W, active, n_run = r.y, r.tangent, r.active, opts.n_transient
     for _ in range(opts.max_blocks):
+        # the record's peaks and samples are read only if no periodic orbit ends the classification here: the
+        # march records its segments and samples them afterwards if they are (PeriodMap.sampled, the same numbers)
         r = pm.run(y, opts.n_record, tangent=W, active=active, samples_per_period=opts.samples_per_period,
-                   inner_samples=opts.inner_samples, record_samples=True)
+                   inner_samples=opts.inner_samples, record_samples=True, defer_samples=True)
         n_run += opts.n_record
         y, W, active = r.y, r.tangent, r.active
         logs = r.log_growth[:, 0] / pm.period_s
@@ -513,7 +515,6 @@ def classify(pm: PeriodMap, y0: np.ndarray, sigma: float, opts: MapOptions, mirr
         lam_tol = max(floor, 1.5 * float(np.std(quarters, ddof=1)))  # 3 standard errors of the mean of 4
         Y = r.poincare[1:]
         contact = bool(r.n_events or np.any(r.active))
-        spec = order_spectrum(r.samples[:, :, 0])
         d = _returns(Y, pm, opts.max_period, opts.n_record // 4)
         p = int(np.argmax(d <= opts.periodic_tol)) + 1 if np.any(d <= opts.periodic_tol) else 0
         if p or lam < -lam_tol or not contact:  # returned, contracting, or linear (a unique periodic attractor)
@@ -523,8 +524,12 @@ def classify(pm: PeriodMap, y0: np.ndarray, sigma: float, opts: MapOptions, mirr
         sure = lam_tol <= floor  # the finite-time error is below the floor: a near-zero exponent is zero
         if lam > lam_tol or (abs(lam) <= floor and sure):
             regime = "chaotic" if lam > lam_tol else "quasi_periodic"
+            r = pm.sampled(r)
             return PointResponse(regime, 0, lam, lam_tol, float("nan"), True, r.peak, Y.copy(),
-                                 _asymmetry(r.peak, mirror), _broadband(Y[:, 0]), n_run, y.copy(), contact, spec)
+                                 _asymmetry(r.peak, mirror), _broadband(Y[:, 0]), n_run, y.copy(), contact,
+                                 order_spectrum(r.samples[:, :, 0]))
+    r = pm.sampled(r)
+    spec = order_spectrum(r.samples[:, :, 0])
     # undecided when the blocks ran out (a long transient, or an exponent within its error of 0): by its sign
     if lam > floor or abs(lam) <= floor:
         regime = "chaotic" if lam > floor else "quasi_periodic"

@@ -16,9 +16,8 @@ import numpy as np
 from reduced import _checks as _check
 from reduced.models.gaps import GapSystem
 from reduced.models.loads import Harmonic, Loads
-from reduced.transient.exact import ExactIntegratorError
+from reduced.transient.exact import ExactIntegratorError, integrate_exact
 from reduced.transient.flow import Flow
-from reduced.transient.integrate import ringdown
 
 SETTLE_ROUNDOFF = 1e-10  # relative change over a period below which the exact flow's round-off dominates
 SETTLE_BLOCK_PERIODS = 8  # periods between the periodicity checks of the stepped sine (grows x2 up to 64)
@@ -130,8 +129,9 @@ def stepped_sine(system: GapSystem, load: np.ndarray, amplitude_N: float, freq_h
     the remaining distance d rho / (1 - rho) (relative to the orbit's size); settled when it is
     below ``settle_tol`` (else twice the period is tried, else "not_settled" after
     ``max_settle_s`` of simulated time). The amplitude is then max |r . x| over one period
-    sampled at ``samples_per_period`` points by :func:`reduced.transient.ringdown` (exact
-    method, the load on): relative sampling error about (pi / samples)^2 / 2.
+    sampled at ``samples_per_period`` points by the exact integrator
+    (:func:`reduced.transient.exact.integrate_exact`, the load on, without its energy integrals):
+    relative sampling error about (pi / samples)^2 / 2.
 
     Parameters
     ----------
@@ -251,7 +251,8 @@ def _last_periods(system: GapSystem, loads: Loads, y: np.ndarray, f, resp: str, 
     n = system.n
     T = 1.0 / float(f)
     window = 1 if resp in ("periodic", "settling") else (2 if resp == "period_2" else 10)
-    r = ringdown(system, y[:n], y[n:], window * T, samples_per_period * float(f), method="exact", loads=loads)
+    # ringdown's exact method without its energy integrals (work=False: the same samples, which are all this reads)
+    r = integrate_exact(system, y[:n], y[n:], window * T, samples_per_period * float(f), loads=loads, work=False)
     xp = r.x[-(window * samples_per_period + 1):] @ rows.T
     return xp, np.concatenate([r.x[-1], r.v[-1]])
 

@@ -89,12 +89,32 @@ def _work_setup(X, C, lam, n, G, Gz, az):
 def _series_at(coef, lam, tau, q, d, dscale, Q2):
     """Add the terms c_i e^{lam_i tau} to q, q' = Re sum lam_i c_i e^{lam_i tau}, the scale of q'
     (sum |lam_i c_i e^{lam_i tau}|) and the bound Q2 = sum |lam_i|^2 |c_i e^{lam_i tau}| on |q''|."""
-    for i in range(lam.shape[0]):
-        e = coef[i] * np.exp(lam[i] * tau)
+    N = lam.shape[0]
+    i = 0
+    while i < N:
+        li = lam[i]
+        x = np.exp(li * tau)
+        al = abs(li)
+        al2 = al**2
+        e = coef[i] * x
         q += e.real
-        d += (lam[i] * e).real
-        dscale += abs(e) * abs(lam[i])
-        Q2 += abs(e) * abs(lam[i]) ** 2
+        d += (li * e).real
+        ae = abs(e)
+        dscale += ae * al
+        Q2 += ae * al2
+        i += 1
+        if i < N and li.imag != 0.0 and lam[i].real == li.real and lam[i].imag == -li.imag:
+            # the conjugate exponent (the modes and harmonic loads come in such pairs): e^{conj(lam) tau} is
+            # conj(e^{lam tau}) to the bit (cos even, sin odd), |conj(lam)| = |lam| (a real exponent is
+            # taken alone: the conjugate of e^{a tau} + 0j would carry -0j)
+            lc = lam[i]
+            e = coef[i] * np.conj(x)
+            q += e.real
+            d += (lc * e).real
+            ae = abs(e)
+            dscale += ae * al
+            Q2 += ae * al2
+            i += 1
     return q, d, dscale, Q2
 
 
@@ -169,9 +189,17 @@ def _stop_series(B, j, sgn, offset_j, yp_s, X, coef):
 
 @nb.njit(cache=True)
 def _exponentials(lam, tau, e):
-    """e_i = exp(lam_i tau)."""
-    for i in range(lam.shape[0]):
-        e[i] = np.exp(lam[i] * tau)
+    """e_i = exp(lam_i tau) (the second of a conjugate pair as the conjugate of the first: the same bits,
+    :func:`_series_at`)."""
+    N = lam.shape[0]
+    i = 0
+    while i < N:
+        x = np.exp(lam[i] * tau)
+        e[i] = x
+        if i + 1 < N and lam[i].imag != 0.0 and lam[i + 1].real == lam[i].real and lam[i + 1].imag == -lam[i].imag:
+            e[i + 1] = np.conj(x)
+            i += 1
+        i += 1
 
 
 @nb.njit(cache=True)
@@ -195,7 +223,7 @@ def _eval_state(yp, X, lam, tau, out):
 
 @nb.njit(cache=True)
 def _forced_segment(s, sigma, ip, tau_lim, y, yp_s, lam_s, V, Vinv, fz, fY, fU, pF, pp0, pp1, n, X, z, P,
-                    Fs, phi, gam, werr, ypart):
+                    Fs, phi, gam, werr, ypart, noise=True):
     """A forced segment's closed form in state s (see the module docstring), with the loads' piece
     ``ip`` re-based to the segment start (``sigma`` after the piece start):
 
@@ -209,7 +237,8 @@ def _forced_segment(s, sigma, ip, tau_lim, y, yp_s, lam_s, V, Vinv, fz, fY, fU, 
     (c_D = -gam_D / lambda, c_k = ((k + 1) c_{k+1} - gam_k) / lambda, gam = V^-1 [0; M^-1 b] phi);
     a slow mode (|lambda| tau_lim < SLOW_LT) its Taylor series m h_m = lambda h_{m-1} + gam_{m-1},
     which cancels nothing. Fills X, z, P, Fs, phi and werr (the round-off of the modal
-    coordinates); returns whether there is a polynomial part.
+    coordinates; 0 without ``noise``: a march that passes no noise bound, :func:`_next_crossing`, does not
+    read it); returns whether there is a polynomial part.
     """
     N = 2 * n
     L = fz.shape[0]
@@ -258,7 +287,9 @@ def _forced_segment(s, sigma, ip, tau_lim, y, yp_s, lam_s, V, Vinv, fz, fY, fU, 
         err = 0.0
         for r in range(N):
             wi += Vinv[i, r] * (y[r] - yp_s[r] - ypart[r])
-            err += abs(Vinv[i, r]) * (abs(y[r]) + abs(yp_s[r]) + abs(ypart[r]))
+        if noise:
+            for r in range(N):
+                err += abs(Vinv[i, r]) * (abs(y[r]) + abs(yp_s[r]) + abs(ypart[r]))
         werr[i] = EPS * err
         if not poly:
             for r in range(N):
@@ -627,13 +658,13 @@ def _work_arrays(n, L):
 
 @nb.njit(cache=True)
 def _start_segment(s, t, t_end, ip, pstarts, y, yp_s, lam_s, V_s, Vinv_s, fz, fY, fU, pF, pp0, pp1, n, X, z, P,
-                   Fs, phi, gam, werr, ypart):
+                   Fs, phi, gam, werr, ypart, noise=True):
     """The segment from (t, y) in state s: the loads' piece holding t (advanced from ``ip``), where the
     segment must end (the next load breakpoint or t_end) and its closed form (:func:`_forced_segment`).
     Returns (ip, t_lim, poly)."""
     ip, t_lim = _piece_at(pstarts, ip, t, t_end)
     poly = _forced_segment(s, t - pstarts[ip], ip, t_lim - t, y, yp_s, lam_s, V_s, Vinv_s, fz, fY, fU, pF, pp0,
-                           pp1, n, X, z, P, Fs, phi, gam, werr, ypart)
+                           pp1, n, X, z, P, Fs, phi, gam, werr, ypart, noise)
     return ip, t_lim, poly
 
 
@@ -693,9 +724,19 @@ def _segment_state(tau, yp_s, X, z, P, poly, damped, G, Gz, az, ACp, Cpp, Pb, be
 
 
 @nb.njit(cache=True)
+def _state_only(tau, yp_s, X, z, P, poly, e, ytmp):
+    """:func:`_segment_state`'s state alone (the same numbers), no work: (0, 0)."""
+    _exponentials(z, tau, e)
+    _eval_with(yp_s, X, e, ytmp)
+    if poly:
+        _add_poly(P, tau, ytmp.shape[0], ytmp)
+    return 0.0, 0.0
+
+
+@nb.njit(cache=True)
 def _forced_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped, y, active, t, t_end, t_samples, i_samp,
                    t_after, out_y, out_W, W, hmin, floor, max_events, n_stuck, fz, fY, fU, fb, pstarts, pF, pp0, pp1,
-                   out_E, E):
+                   out_E, E, work=True):
     """March events from t to t_end under the loads, filling the sample buffer ``t_samples`` from index i_samp.
 
     (y, active, t, W, E) is the state at the start of a segment (an event, a load breakpoint or a
@@ -704,7 +745,9 @@ def _forced_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped, y, 
     buffer fills inside a segment that still has samples before its end (the next sample, at
     ``t_after``, lies in it), the kernel returns BUFFER_FULL *without* advancing that segment:
     called again with a new buffer it recomputes the segment from the same state, so the samples
-    do not depend on the buffer size. Returns (t, W, E, i_samp, n_events, n_iter, status, n_stuck).
+    do not depend on the buffer size. Without ``work`` the dissipated energy and the work of the loads
+    are not integrated (W and E stay as they are; the states and events are the same numbers).
+    Returns (t, W, E, i_samp, n_events, n_iter, status, n_stuck).
     """
     n = B.shape[1]
     m = B.shape[0]
@@ -724,19 +767,23 @@ def _forced_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped, y, 
             break
         ip, t_lim, poly = _start_segment(s, t, t_end, ip, pstarts, y, yp[s], lam[s], V[s], Vinv[s], fz, fY, fU, pF,
                                          pp0, pp1, n, X, z, P, Fs, phi, gam, werr, ypart)
-        if damped:
-            _work_setup(X, C, z, n, G, Gz, az)
-        _ext_setup(X, z, fb, fz, n, beta, rp, rm)
-        if poly:
-            _poly_setup(X, P, C, fb, n, damped, ACp, Cpp, Pb)
+        if work:
+            if damped:
+                _work_setup(X, C, z, n, G, Gz, az)
+            _ext_setup(X, z, fb, fz, n, beta, rp, rm)
+            if poly:
+                _poly_setup(X, P, C, fb, n, damped, ACp, Cpp, Pb)
         tau_ev, j_ev, seg_iter, status = _next_crossing(B, offset, side, active, yp[s], V[s], X, z, werr, poly, P,
                                                         Qp, coef, t_lim - t, hmin, floor, True)
         if status != 0:
             break
         t_next = t_lim if j_ev < 0 else t + tau_ev
         while i_samp < ns and t_samples[i_samp] <= t_next:
-            dW, dE = _segment_state(max(t_samples[i_samp] - t, 0.0), yp[s], X, z, P, poly, damped, G, Gz, az, ACp,
-                                    Cpp, Pb, beta, rp, rm, phi, Fs, fz, MOM, e, eiw, ytmp)
+            if work:
+                dW, dE = _segment_state(max(t_samples[i_samp] - t, 0.0), yp[s], X, z, P, poly, damped, G, Gz, az,
+                                        ACp, Cpp, Pb, beta, rp, rm, phi, Fs, fz, MOM, e, eiw, ytmp)
+            else:
+                dW, dE = _state_only(max(t_samples[i_samp] - t, 0.0), yp[s], X, z, P, poly, e, ytmp)
             out_E[i_samp] = E + dE
             out_W[i_samp] = W + dW
             for r in range(N):
@@ -746,8 +793,11 @@ def _forced_kernel(lam, V, Vinv, yp, valid, B, offset, side, tip, C, damped, y, 
             status = BUFFER_FULL  # the segment is searched again with the next buffer: count it then
             break
         n_iter += seg_iter
-        dW, dE = _segment_state(tau_ev, yp[s], X, z, P, poly, damped, G, Gz, az, ACp, Cpp, Pb, beta, rp, rm, phi,
-                                Fs, fz, MOM, e, eiw, ytmp)
+        if work:
+            dW, dE = _segment_state(tau_ev, yp[s], X, z, P, poly, damped, G, Gz, az, ACp, Cpp, Pb, beta, rp, rm, phi,
+                                    Fs, fz, MOM, e, eiw, ytmp)
+        else:
+            dW, dE = _state_only(tau_ev, yp[s], X, z, P, poly, e, ytmp)
         E += dE
         W += dW
         for r in range(N):

@@ -90,7 +90,7 @@ def _flow_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, s
         if not valid[s]:
             return n_seg, -2
         ip, t_lim, poly = _start_segment(s, t, T, ip, pstarts, y, yp[s], lam[s], V[s], Vinv[s], fz, fY, fU, pF, pp0,
-                                         pp1, n, X, z, P, Fs, phi, gam, werr, ypart)
+                                         pp1, n, X, z, P, Fs, phi, gam, werr, ypart, False)
         tau_ev, j_ev, _, status = _next_crossing(B, offset, side, active, yp[s], V[s], X, z, werr, poly, P, Qp, coef,
                                                  t_lim - t, hmin, 0.0, False)
         if status != 0:

@@ -53,7 +53,7 @@ A. Wolf, J. B. Swift, H. L. Swinney, J. A. Vastano, Physica D 16 (1985) 285-317.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numba as nb
 import numpy as np
@@ -65,7 +65,6 @@ from reduced.models.loads import Harmonic, Loads
 from reduced.transient._exact_kernels import (
     _add_poly,
     _eval_state,
-    _eval_with,
     _exponentials,
     _next_crossing,
     _segment_arrays,
@@ -75,6 +74,7 @@ from reduced.transient._modal import _state_of, _terms
 from reduced.transient.exact_tables import ExactIntegratorError, StateTable, forced_arrays, modal_table, state_table
 from reduced.transient.flow import MAX_SEGMENTS, Flow, _against_its_rate, _check_status, _settle
 
+REPLAY_SEGMENTS = 32  # segments a period recorded by a run that defers its samples (more: it is marched again)
 TWO_RUN_SEPARATION = 1e-8  # relative start distance of the two-run method: far above round-off, far below the attractor
 
 
@@ -93,14 +93,59 @@ def _peak_rows(R, y, peak, row_out):
 
 
 @nb.njit(cache=True)
+def _eval_x(yp, X, e, out, n):
+    """x = the first n rows of y = y_p + Re sum_i X[:, i] e_i (:func:`reduced.transient._exact_kernels._eval_with`
+    row by row: the same numbers; the peaks read x only)."""
+    K = e.shape[0]
+    for r in range(n):
+        acc = 0.0
+        for i in range(K):
+            acc += (X[r, i] * e[i]).real
+        out[r] = yp[r] + acc
+
+
+@nb.njit(cache=True)
+def _segment_samples(yp_s, X, z, P, poly, t, t_next, tau_ev, closed, R, n_uniform, n_inner, h, i_u, peak, row,
+                     samples, record, e, yq, n):
+    """The peaks inside one segment of :func:`_march_period` (set up at t, ending at t_next after tau_ev):
+    ``peak`` <- max |R x| at the uniform times i_u h < t_next (each written to ``samples`` when ``record``)
+    and, when a stop is ``closed``, at ``n_inner`` evenly spaced points inside it. Returns the next i_u.
+    The march and its replay (:func:`_replay_kernel`) both sample here: the same numbers."""
+    p = R.shape[0]
+    while i_u < n_uniform and i_u * h < t_next:  # the uniform samples in this segment
+        tau_u = max(i_u * h - t, 0.0)
+        _exponentials(z, tau_u, e)
+        _eval_x(yp_s, X, e, yq, n)
+        if poly:
+            _add_poly(P, tau_u, n, yq)
+        _peak_rows(R, yq, peak, row)
+        if record:
+            for r in range(p):
+                samples[i_u, r] = row[r]
+        i_u += 1
+    if closed:
+        for i in range(n_inner):  # inside a contact segment: its peak is short and sharp
+            tau_i = tau_ev * (i + 1) / (n_inner + 1)
+            _exponentials(z, tau_i, e)
+            _eval_x(yp_s, X, e, yq, n)
+            if poly:
+                _add_poly(P, tau_i, n, yq)
+            _peak_rows(R, yq, peak, row)
+    return i_u
+
+
+@nb.njit(cache=True)
 def _march_period(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, seg_state, seg_tau, fz, fY, fU, fb,
-                  pstarts, pF, pp0, pp1, R, n_uniform, n_inner, peak, samples):
+                  pstarts, pF, pp0, pp1, R, n_uniform, n_inner, peak, samples, rec_i, rec_f, rec_y, rec_n):
     """March the forced flow over one period [0, T] (the march of :func:`reduced.transient.flow._flow_kernel`);
     y and active are updated in place. Returns (n_seg, status).
 
     On the way: ``peak`` (p,) <- max |R x| over the states at every segment end, at ``n_uniform``
     uniform times j T / n_uniform (written to ``samples`` (n_uniform, p) when it has that many rows)
-    and at ``n_inner`` evenly spaced points inside each segment with a stop closed."""
+    and at ``n_inner`` evenly spaced points inside each segment with a stop closed
+    (:func:`_segment_samples`). With a record (rec_i (cap, 2) int: state, a stop closed; rec_f (cap, 3):
+    t, tau, t_next; rec_y (cap, 2n): the state at its start; rec_n[0] segments recorded, -1 once cap is
+    exceeded) each segment is recorded for :func:`_replay_kernel` (cap 0: none)."""
     n = B.shape[1]
     N = 2 * n
     p = R.shape[0]
@@ -122,7 +167,7 @@ def _march_period(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, 
         if not valid[s]:
             return n_seg, -2
         ip, t_lim, poly = _start_segment(s, t, T, ip, pstarts, y, yp[s], lam[s], V[s], Vinv[s], fz, fY, fU, pF, pp0,
-                                         pp1, n, X, z, P, Fs, phi, gam, werr, ypart)
+                                         pp1, n, X, z, P, Fs, phi, gam, werr, ypart, False)
         tau_ev, j_ev, _, status = _next_crossing(B, offset, side, active, yp[s], V[s], X, z, werr, poly, P, Qp, coef,
                                                  t_lim - t, hmin, 0.0, False)
         if status != 0:
@@ -137,28 +182,24 @@ def _march_period(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, 
                 _add_poly(P, tau_ev, N, ytmp)
             j_ev = -2
         t_next = t_lim if j_ev == -1 else t + tau_ev
-        while i_u < n_uniform and i_u * h < t_next:  # the uniform samples in this segment
-            tau_u = max(i_u * h - t, 0.0)
-            _exponentials(z, tau_u, e)
-            _eval_with(yp[s], X, e, yq)
-            if poly:
-                _add_poly(P, tau_u, N, yq)
-            _peak_rows(R, yq, peak, row)
-            if record:
-                for r in range(p):
-                    samples[i_u, r] = row[r]
-            i_u += 1
         closed = False
         for j in range(active.shape[0]):
             closed = closed or active[j]
-        if closed:
-            for i in range(n_inner):  # inside a contact segment: its peak is short and sharp
-                tau_i = tau_ev * (i + 1) / (n_inner + 1)
-                _exponentials(z, tau_i, e)
-                _eval_with(yp[s], X, e, yq)
-                if poly:
-                    _add_poly(P, tau_i, N, yq)
-                _peak_rows(R, yq, peak, row)
+        i_u = _segment_samples(yp[s], X, z, P, poly, t, t_next, tau_ev, closed, R, n_uniform, n_inner, h, i_u, peak,
+                               row, samples, record, e, yq, n)
+        if rec_i.shape[0] > 0 and rec_n[0] >= 0:
+            g = rec_n[0]
+            if g < rec_i.shape[0]:
+                rec_i[g, 0] = s
+                rec_i[g, 1] = 1 if closed else 0
+                rec_f[g, 0] = t
+                rec_f[g, 1] = tau_ev
+                rec_f[g, 2] = t_next
+                for r in range(N):
+                    rec_y[g, r] = y[r]
+                rec_n[0] = g + 1
+            else:
+                rec_n[0] = -1  # more segments than the record holds: replayed by marching again
         for r in range(N):
             y[r] = ytmp[r]
         _peak_rows(R, y, peak, row)
@@ -216,12 +257,13 @@ def _tangent(tb, seg_s, seg_tau, n_seg, W):
 @nb.njit(cache=True)
 def _periods_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, seg_state, seg_tau, fz, fY, fU, fb,
                     pstarts, pF, pp0, pp1, tb, R, n_uniform, n_inner, n_periods, W, renorm, D, Dinv, out_y,
-                    out_peak, out_samples, out_log):
+                    out_peak, out_samples, out_log, rec_i, rec_f, rec_y, rec_n, rec_start):
     """``n_periods`` periods of the forced flow from y (updated in place, with active): out_y[k + 1] the state
     after period k, out_peak[k] its largest |R x|, out_samples[k] its uniform samples (when out_samples has
     n_periods rows), and the tangent W carried through each period (q = W.shape[1] columns, none if 0),
     re-orthonormalised by QR when ``renorm`` with out_log[k, i] = log |R_ii| (the QR of D W: lengths in
-    the norm |D w|, D = ``D``, its inverse ``Dinv``). Returns (periods done, segments, status)."""
+    the norm |D w|, D = ``D``, its inverse ``Dinv``); with a record (:func:`_march_period`) rec_start[k] its
+    first segment of period k (rec_start[n_periods] the end). Returns (periods done, segments, status)."""
     q = W.shape[1]
     N = W.shape[0]
     record = out_samples.shape[0] == n_periods
@@ -230,8 +272,13 @@ def _periods_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin
         for r in range(out_peak.shape[1]):
             out_peak[k, r] = 0.0
         smp = out_samples[k] if record else out_samples[0]
+        if rec_start.shape[0] > 0:
+            rec_start[k] = rec_n[0]
         n_seg, status = _march_period(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin, seg_state, seg_tau,
-                                      fz, fY, fU, fb, pstarts, pF, pp0, pp1, R, n_uniform, n_inner, out_peak[k], smp)
+                                      fz, fY, fU, fb, pstarts, pF, pp0, pp1, R, n_uniform, n_inner, out_peak[k], smp,
+                                      rec_i, rec_f, rec_y, rec_n)
+        if rec_start.shape[0] > 0:
+            rec_start[k + 1] = rec_n[0]
         if status != 0:
             return k, n_seg_total, status
         n_seg_total += n_seg
@@ -263,6 +310,47 @@ def _periods_kernel(lam, V, Vinv, yp, valid, B, offset, side, y, active, T, hmin
     return n_periods, n_seg_total, 0
 
 
+@nb.njit(cache=True)
+def _replay_kernel(lam, V, Vinv, yp, T, fz, fY, fU, fb, pstarts, pF, pp0, pp1, R, n_uniform, n_inner, out_y, rec_i,
+                   rec_f, rec_y, rec_start, out_peak, out_samples):
+    """The peaks and samples of a run recorded by :func:`_periods_kernel` (whose march sampled none), from its
+    record: each segment set up again from its recorded start (:func:`_start_segment`, the same closed form)
+    and sampled by :func:`_segment_samples` as the march samples, its end state evaluated at its recorded tau;
+    out_peak[k] and out_samples[k] (when it has a row per period) as a sampling march writes them, without
+    searching a crossing again."""
+    n = V.shape[1] // 2
+    N = 2 * n
+    p = R.shape[0]
+    X, z, coef, werr, ytmp, ypart, P, Qp, Fs, phi, gam = _segment_arrays(n, fb.shape[0])
+    yq = np.empty(N)
+    row = np.empty(p)
+    e = np.empty(z.shape[0], np.complex128)
+    K = out_peak.shape[0]
+    record = out_samples.shape[0] == K and out_samples.shape[1] == n_uniform
+    h = T / n_uniform if n_uniform > 0 else T
+    for k in range(K):
+        peak = out_peak[k]
+        for r in range(p):
+            peak[r] = 0.0
+        smp = out_samples[k] if record else out_samples[0]
+        _peak_rows(R, out_y[k], peak, row)
+        ip = 0
+        i_u = 0
+        for g in range(rec_start[k], rec_start[k + 1]):
+            s = rec_i[g, 0]
+            t = rec_f[g, 0]
+            tau_ev = rec_f[g, 1]
+            ip, t_lim, poly = _start_segment(s, t, T, ip, pstarts, rec_y[g], yp[s], lam[s], V[s], Vinv[s], fz, fY, fU,
+                                             pF, pp0, pp1, n, X, z, P, Fs, phi, gam, werr, ypart, False)
+            i_u = _segment_samples(yp[s], X, z, P, poly, t, rec_f[g, 2], tau_ev, rec_i[g, 1] != 0, R, n_uniform,
+                                   n_inner, h, i_u, peak, row, smp, record, e, yq, n)
+            _exponentials(z, tau_ev, e)  # the end state (its x: the peak reads no more)
+            _eval_x(yp[s], X, e, ytmp, n)
+            if poly:
+                _add_poly(P, tau_ev, n, ytmp)
+            _peak_rows(R, ytmp, peak, row)
+
+
 # -- the period map --------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class PeriodRun:
@@ -287,16 +375,20 @@ class PeriodRun:
         Closed-form segments marched (events + period ends).
     n_events : int
         Stop crossings (a period without one is one segment).
+    deferred : tuple or None
+        A run made with ``defer_samples`` (peak and samples None): its segments' record, from which
+        :meth:`PeriodMap.sampled` gives them.
     """
 
     poincare: np.ndarray
-    peak: np.ndarray
+    peak: np.ndarray | None
     samples: np.ndarray | None
     log_growth: np.ndarray
     tangent: np.ndarray
     active: np.ndarray
     n_segments: int
     n_events: int
+    deferred: tuple | None = None
 
     @property
     def y(self) -> np.ndarray:
@@ -394,7 +486,8 @@ class PeriodMap:
         return float(np.linalg.norm(self.norm_matrix @ dy))
 
     def run(self, y0, n_periods: int, *, tangent=None, renormalise: bool = True, samples_per_period: int = 64,
-            inner_samples: int = 8, record_samples: bool = False, active=None) -> PeriodRun:
+            inner_samples: int = 8, record_samples: bool = False, active=None, defer_samples: bool = False
+            ) -> PeriodRun:
         """``n_periods`` periods from y0 = [x0; v0] at a period start (phase 0 of the load).
 
         Parameters
@@ -407,6 +500,9 @@ class PeriodMap:
         inner_samples : samples inside each contact segment for the peaks
         record_samples : keep the uniform samples of r . x
         active : (m,) the contact state at y0 (default: from y0)
+        defer_samples : march without sampling, recording each segment instead: the run's peak and samples
+            are None until :meth:`sampled` gives them (the same numbers); a run whose peaks are not read then
+            costs the march alone
 
         Returns
         -------
@@ -431,20 +527,64 @@ class PeriodMap:
         out_y = np.empty((K + 1, N))
         out_y[0] = y
         out_peak = np.zeros((K, p))
-        out_samples = np.zeros((K, S, p)) if record_samples else np.zeros((1, 0, p))
+        out_samples = np.zeros((K, S, p)) if record_samples and not defer_samples else np.zeros((1, 0, p))
         out_log = np.zeros((K, W.shape[1] if renormalise else 0))
+        if defer_samples:
+            cap = REPLAY_SEGMENTS * K
+            rec = (np.empty((cap, 2), np.int64), np.empty((cap, 3)), np.empty((cap, N)), np.zeros(1, np.int64),
+                   np.zeros(K + 1, np.int64))
+            deferred = (rec, act.copy(), S, inner, bool(record_samples))
+        else:
+            rec = (np.empty((0, 2), np.int64), np.empty((0, 3)), np.empty((0, N)), np.zeros(1, np.int64),
+                   np.zeros(0, np.int64))
+            deferred = None
         tb = self.table
         done, n_seg, status = call_numba_kernel(
             _periods_kernel, tb.lam, tb.V, tb.Vinv, tb.yp, tb.valid, sy.B, sy.offset, sy.side, y, act,
-            self.period_s, self.flow.hmin, self._seg_state, self._seg_tau, *self._fargs, self.modal, self.rows, S,
-            inner, K, W, bool(renormalise and W.shape[1] > 0), self.norm_matrix, self._norm_inv, out_y, out_peak,
-            out_samples,
-            out_log if renormalise else np.zeros((K, 0)))
+            self.period_s, self.flow.hmin, self._seg_state, self._seg_tau, *self._fargs, self.modal, self.rows,
+            0 if defer_samples else S, 0 if defer_samples else inner, K, W, bool(renormalise and W.shape[1] > 0),
+            self.norm_matrix, self._norm_inv, out_y, out_peak, out_samples,
+            out_log if renormalise else np.zeros((K, 0)), *rec)
         if status != 0:
             _check_status(status, MAX_SEGMENTS, self.period_s)
             raise ExactIntegratorError(f"the period map failed (status {status}) after {done} periods")
+        if defer_samples:
+            return PeriodRun(out_y, None, None, out_log, W, act, int(n_seg), int(n_seg) - K, deferred)
         return PeriodRun(out_y, out_peak, out_samples if record_samples else None, out_log, W, act, int(n_seg),
                          int(n_seg) - K)
+
+    def sampled(self, run: PeriodRun) -> PeriodRun:
+        """``run`` with its peaks (and samples, if it was to record them) when it was made with
+        ``defer_samples``: the numbers :meth:`run` would have given sampling on its march, from the
+        segments it recorded (:func:`_replay_kernel`; a run with more than REPLAY_SEGMENTS segments a
+        period on average is marched again from its start). Any other run is returned as it is.
+
+        Parameters
+        ----------
+        run : PeriodRun
+            A run of this period map.
+
+        Returns
+        -------
+        PeriodRun
+        """
+        if run.deferred is None:
+            return run
+        (rec_i, rec_f, rec_y, rec_n, rec_start), act0, S, inner, record = run.deferred
+        K = run.poincare.shape[0] - 1
+        if rec_n[0] < 0:  # the record overflowed: the same march again, sampling (no tangent: it moves no state)
+            again = self.run(run.poincare[0], K, samples_per_period=S, inner_samples=inner, record_samples=record,
+                             active=act0)
+            return replace(run, peak=again.peak, samples=again.samples, deferred=None)
+        p = self.rows.shape[0]
+        out_peak = np.zeros((K, p))
+        out_samples = np.zeros((K, S, p)) if record else np.zeros((1, 0, p))
+        fz, fY, fU, fb, pstarts, pF, pp0, pp1 = self._fargs
+        tb = self.table
+        call_numba_kernel(_replay_kernel, tb.lam, tb.V, tb.Vinv, tb.yp, self.period_s, fz, fY, fU, fb, pstarts, pF,
+                          pp0, pp1, self.rows, S, inner, run.poincare, rec_i, rec_f, rec_y, rec_start, out_peak,
+                          out_samples)
+        return replace(run, peak=out_peak, samples=out_samples if record else None, deferred=None)
 
     def jacobian(self, y0, n_periods: int = 1, active=None) -> PeriodRun:
         """The run of ``n_periods`` from y0 whose ``tangent`` is d y / d y0 of those periods (2n, 2n): the

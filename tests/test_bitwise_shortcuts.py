@@ -1,0 +1,137 @@
+"""The speed shortcuts of the exact kernels give the same bits as the paths they shortcut (issue 28).
+
+Each shortcut is an exact rewrite, so each is checked for equality to the last bit against the path it
+replaces, run independently: e^{conj(lam) tau} taken as conj(e^{lam tau}) in the march's series sums
+(cos is even and sin odd in the C library), the response map's record blocks marched without sampling and
+replayed from their segments, the exact integrator without its energy integrals, and the shooting residual
+marched without its Jacobian. A changed bit would move a continuation's step path (its files are compared
+digit for digit with the committed results), so no tolerance is allowed.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+import pytest
+
+import reduced.transient.lyapunov as lyapunov
+from reduced.models.discrete import DiscreteParams
+from reduced.models.loads import Harmonic, Loads
+from reduced.periodic.forced_shooting import ForcedFlow, ShootingResidual
+from reduced.periodic.forced_stability import hb_states
+from reduced.transient._exact_kernels import _exponentials, _series_at
+from reduced.transient.exact import integrate_exact
+from reduced.transient.integrate import ringdown
+from reduced.transient.lyapunov import PeriodMap
+
+PARAMS = DiscreteParams()
+SYSTEM = PARAMS.system()
+LOAD = PARAMS.point_rows[1]  # x2, as discrete-frc
+
+
+@nb.njit(cache=True)
+def _exp_each(lam, tau):
+    """e^{lam_i tau} term by term (the kernels' form before the pairing)."""
+    out = np.empty(lam.shape[0], np.complex128)
+    for i in range(lam.shape[0]):
+        out[i] = np.exp(lam[i] * tau)
+    return out
+
+
+@nb.njit(cache=True)
+def _series_each(coef, lam, tau, q, d, dscale, Q2):
+    """The march's series sums term by term (the kernels' form before the pairing)."""
+    for i in range(lam.shape[0]):
+        e = coef[i] * np.exp(lam[i] * tau)
+        q += e.real
+        d += (lam[i] * e).real
+        dscale += abs(e) * abs(lam[i])
+        Q2 += abs(e) * abs(lam[i]) ** 2
+    return q, d, dscale, Q2
+
+
+def _exponents(rng) -> np.ndarray:
+    """Conjugate pairs as LAPACK orders them (lightly and heavily damped, fast), real ones (a repeated one
+    too: two equal reals are not a conjugate pair) and a harmonic load's +-i omega."""
+    pairs = [complex(-rng.uniform(0.1, 50.0), rng.uniform(1.0, 4e5)) for _ in range(5)]
+    lam = [v for p in pairs for v in (p, p.conjugate())]
+    lam += [-3.0 + 0.0j, -3.0 + 0.0j, -700.0 + 0.0j, 2j * np.pi * 37.0, -2j * np.pi * 37.0]
+    return np.array(lam)
+
+
+def test_conjugate_exponentials_are_the_bits_of_each_term():
+    rng = np.random.default_rng(5)
+    lam = _exponents(rng)
+    coef = rng.standard_normal(lam.size) + 1j * rng.standard_normal(lam.size)
+    e = np.empty(lam.size, complex)
+    for tau in (0.0, 1e-9, 3.7e-6, 1.3e-3, 0.21, 7.9):
+        _exponentials(lam, tau, e)
+        ref = _exp_each(lam, tau)
+        assert np.array_equal(e.view(float), ref.view(float))  # every real and imaginary part, signs of zeros too
+        assert _series_at(coef, lam, tau, 0.3, 0.0, 0.0, 0.0) == _series_each(coef, lam, tau, 0.3, 0.0, 0.0, 0.0)
+
+
+@pytest.fixture(scope="module")
+def attractor():
+    """The 1 N, 19 Hz period map on its chaotic attractor (contact every period: many segments)."""
+    pm = PeriodMap(SYSTEM, LOAD, 1.0, 19.0, rows=np.vstack([PARAMS.point_rows, PARAMS.point_rows[0]
+                                                            - PARAMS.point_rows[2]]))
+    y = np.zeros(6)
+    y[0] = y[2] = 2.6e-4
+    return pm, pm.run(y, 150, samples_per_period=0, inner_samples=0).y
+
+
+@pytest.mark.parametrize("record", [True, False])
+def test_deferred_samples_replay_the_sampling_march(attractor, record):
+    pm, y = attractor
+    W = np.full((6, 1), 0.4)
+    kw = dict(tangent=W, samples_per_period=64, inner_samples=8, record_samples=record)
+    ref = pm.run(y, 64, **kw)
+    lazy = pm.run(y, 64, defer_samples=True, **kw)
+    assert lazy.peak is None and lazy.samples is None and lazy.n_events > 64  # in contact: several events a period
+    got = pm.sampled(lazy)
+    for a, b in ((ref.peak, got.peak), (ref.poincare, got.poincare), (ref.log_growth, got.log_growth),
+                 (ref.tangent, got.tangent), (ref.active, got.active)):
+        assert np.array_equal(a, b)
+    assert (got.samples is None) if not record else np.array_equal(ref.samples, got.samples)
+    assert pm.sampled(ref) is ref  # a sampled run is returned as it is
+
+
+def test_a_record_too_small_is_marched_again(attractor, monkeypatch):
+    pm, y = attractor
+    monkeypatch.setattr(lyapunov, "REPLAY_SEGMENTS", 1)  # fewer than a period's segments: the record overflows
+    kw = dict(samples_per_period=32, inner_samples=4, record_samples=True)
+    ref = pm.run(y, 16, **kw)
+    lazy = pm.run(y, 16, defer_samples=True, **kw)
+    assert lazy.deferred[0][3][0] == -1
+    got = pm.sampled(lazy)
+    assert np.array_equal(ref.peak, got.peak) and np.array_equal(ref.samples, got.samples)
+
+
+def test_the_exact_integrator_without_work_gives_the_same_samples(attractor):
+    _, y = attractor
+    loads = Loads(LOAD[None, :], (Harmonic(1.0, 19.0),))
+    n = SYSTEM.n
+    ref = ringdown(SYSTEM, y[:n], y[n:], 3 / 19.0, 512 * 19.0, method="exact", loads=loads)
+    got = integrate_exact(SYSTEM, y[:n], y[n:], 3 / 19.0, 512 * 19.0, loads=loads, work=False)
+    assert ref.stats["n_events"] > 3  # a run in contact
+    assert np.array_equal(ref.x, got.x) and np.array_equal(ref.v, got.v)
+    assert ref.stats["n_events"] == got.stats["n_events"] and ref.stats["n_march"] == got.stats["n_march"]
+    assert np.all(np.isnan(got.dissipated)) and np.all(np.isnan(got.external))  # not integrated: not made up
+    assert np.isfinite(ref.energy_balance_error)
+
+
+def test_the_shooting_residual_without_its_jacobian_is_the_residual(attractor):
+    _, y = attractor
+    f, S = 19.0, 8
+    flow = ForcedFlow(SYSTEM, LOAD, 1.0)
+    res = ShootingResidual(flow, S, 1, 1e-4, 2 * np.pi * f, None)
+    # nodes off any orbit (a state on the attractor, spread over the period as harmonics would): R != 0
+    X = np.zeros((3, SYSTEM.n))
+    X[0], X[1] = y[:SYSTEM.n], y[SYSTEM.n:] / (2 * np.pi * f)
+    Y = res.point(hb_states(X, 2 * np.pi * f, S), 2 * np.pi * f)
+    alone = res.value(Y)
+    R, J = res(Y)
+    assert np.max(np.abs(R)) > 1e-3 and J.shape == (R.size, R.size + 1)
+    assert np.array_equal(alone, R)
+    assert res.value(Y) is R  # memoised: not marched again
