@@ -53,6 +53,14 @@ are C_ij / sqrt(C_ii C_jj). Two parameters cannot be told apart when |corr| >= C
 J^T J is near-singular when the condition number of its correlation form (J scaled to unit
 columns) passes CONDITION_LIMIT, and the eigenvector of its smallest eigenvalue names the
 combination the test does not fix.
+
+The local intervals hold where the misfit is a paraboloid at the cloud's scale; past the first impacts
+it is not (the apparatus' (gap, k_g) misfit is a long flat valley, its chaotic blocks' slopes over the
+cloud mostly chaos, and the least squares stop wherever the scan put them on its floor). So each
+parameter's profile is probed out to several half-widths (:mod:`bearingshaft.identify.profile`), the
+others on the valley floor, and every interval reaches the probes whose cost the test cannot reject
+against the optimum's (within chi2_{confidence, p} s^2, as the rival minima); ``Fit.local_ci`` keeps
+the local intervals.
 """
 
 from __future__ import annotations
@@ -64,6 +72,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from bearingshaft.identify.problem import Evaluation, Problem, channels_at, define_target, evaluate, horizon_text
+from bearingshaft.identify.profile import open_ends, profile, reach
 from bearingshaft.identify.residuals import BlockWeight, block_weights, stacked
 
 CORRELATION_LIMIT = 0.95  # |corr| at or above which two parameters are reported as not told apart
@@ -187,6 +196,12 @@ class Fit:
         The last pass's target.
     stats : dict
         ``n_runs``, ``wall_s``, ``workers``, ``where``, CPU seconds of the runs.
+    probes : list of Probe
+        The profile's probes (:mod:`bearingshaft.identify.profile`).
+    local_ci : dict
+        {key: (low, high)} the local planes' intervals, before the profile and the rival minima widened them.
+    profile_limit : float
+        The cost excess a probe (and a rival minimum) may have: chi2_{confidence, p} s^2.
     """
 
     problem: Problem
@@ -209,6 +224,9 @@ class Fit:
     history: list
     target: object
     stats: dict = field(default_factory=dict)
+    probes: list = field(default_factory=list)
+    local_ci: dict = field(default_factory=dict)
+    profile_limit: float = math.nan
 
 
 class _Runs:
@@ -505,6 +523,20 @@ def identify(problem: Problem, evaluator=None, progress=None) -> Fit:
     # another start's end the test cannot reject against the best (a cost within the chi-square quantile of p
     # degrees of freedom times s^2, costs taken with one set of weights): a minimum as good as the one reported
     # as far as the test can tell, which a local interval about the best cannot see; the intervals reach it
+    # the profile: each parameter probed out to PROFILE_MULTIPLES of its half-width, the others on the valley floor;
+    # a probe the test cannot reject against the optimum (the rivals' criterion) is reached by every interval
+    # (bearingshaft.identify.profile: past the first impacts the local planes' slopes are mostly chaos)
+    from scipy.stats import chi2
+
+    limit = float(chi2.ppf(spec.confidence, p)) * max(s2, 1.0)
+    local = dict(ci)
+    probes = profile(runs, theta, J, tq * sig, seen, float(r @ r), limit)
+    for i, par in enumerate(problem.parameters):
+        lo, hi = ci[par.key]
+        for t in reach(probes, theta, limit):
+            v = par.value(float(t[i]))
+            lo, hi = min(lo, v), max(hi, v)
+        ci[par.key] = (lo, hi)
     rivals = rival_minima(ends, spec.confidence, p, s2)
     for i, par in enumerate(problem.parameters):
         lo, hi = ci[par.key]
@@ -516,6 +548,7 @@ def identify(problem: Problem, evaluator=None, progress=None) -> Fit:
     ev, vec = np.linalg.eigh(Js.T @ Js)
     cond = float(ev[-1] / ev[0]) if ev[0] > 0 else math.inf
     notes = identifiability_notes(problem, corr, cond, vec[:, 0], ci, norms)
+    notes += profile_notes(problem, probes, local, ci, limit)
     for c, t in rivals:
         notes.append("another minimum the test cannot tell from the best (cost " + f"{c:.4g} against "
                      f"{min(e[0] for e in ends):.4g}, within the {round(100 * spec.confidence)} % chi-square quantile "
@@ -525,7 +558,53 @@ def identify(problem: Problem, evaluator=None, progress=None) -> Fit:
              "where": evaluator.where, "cpu_s_runs": float(sum(h["cpu_s"] for h in history)),
              "passes": len(passes)}
     return Fit(problem, theta, problem.values(theta), ci, cov, corr, J, sig, s2, n_eff, dof, tq, cond, vec[:, 0],
-               notes, weights, passes, history, target, stats)
+               notes, weights, passes, history, target, stats, probes, local, limit)
+
+
+def profile_notes(problem: Problem, probes: list, local: dict, ci: dict, limit: float) -> list[str]:
+    """The notes of the profile (:mod:`bearingshaft.identify.profile`): a probe cheaper than the optimum (the
+    least squares stopped short of it), an interval the profile widened, a profile still within the limit at its
+    last probe.
+
+    Parameters
+    ----------
+    problem : Problem
+    probes : list of Probe
+    local : dict
+        {key: (low, high)} the local planes' intervals.
+    ci : dict
+        {key: (low, high)} after the profile.
+    limit : float
+        The cost excess a probe may have.
+
+    Returns
+    -------
+    list of str
+    """
+    def where(t):
+        return ", ".join(f"{key} = {v:.4g}" for key, v in problem.values(t).items())
+
+    notes = []
+    lower = [pr for pr in probes if pr.excess < 0]
+    if lower:
+        best = min(lower, key=lambda pr: pr.excess)
+        notes.append(f"the profile found a lower misfit than the optimum ({len(lower)} probe(s), the lowest "
+                     f"{best.excess:+.4g} at {where(best.theta)}): the least squares stopped short on a rough misfit; "
+                     "the intervals reach it")
+    for i, par in enumerate(problem.parameters):
+        (a, b), (lo, hi) = local[par.key], ci[par.key]
+        if (lo < a or hi > b) and any(pr.index == i for pr in probes):
+            notes.append(f"{par.key}: the misfit's profile stays within the limit (chi-square quantile times s^2 = "
+                         f"{limit:.4g}) farther than the local planes' interval [{a:.4g}, {b:.4g}] says: the interval "
+                         "reaches the profile (the planes' slopes past the first impacts are mostly chaos, counted "
+                         "as information)")
+    for pr in open_ends(probes):
+        par = problem.parameters[pr.index]
+        if par.theta_bounds[0] < pr.theta[pr.index] < par.theta_bounds[1]:
+            notes.append(f"{par.key}: the misfit is still within the limit at the profile's last probe "
+                         f"({par.value(float(pr.theta[pr.index])):.4g}, {pr.multiple:g} half-widths out): the "
+                         "interval may reach further")
+    return notes
 
 
 def covariance(J: np.ndarray, r: np.ndarray, n_eff: float, confidence: float,

@@ -137,10 +137,40 @@ def markdown(res: Identified) -> str:
             return ", ".join(f"{p.value(t):.4g}" for p, t in zip(ps, th, strict=True))
         lines.append(f"| {k + 1} | {show(pa.start)} | {show(pa.end)} | {pa.n_iterations} | {pa.cost_start:.4g} | "
                      f"{pa.cost_end:.4g} | {pa.span} |")
+    lines += profile_lines(res)
     st = fit.stats
     lines += ["", f"{st['n_runs']} model runs ({short(st['cpu_s_runs'], '.3g')} s of CPU) on {st['where']} "
               f"({st['workers']} workers), {st['wall_s']:.1f} s wall for the fit.", ""]
     return "\n".join(lines)
+
+
+def profile_lines(res: Identified) -> list[str]:
+    """identify.md's profile section: the local intervals and every probe (:mod:`bearingshaft.identify.profile`).
+
+    Parameters
+    ----------
+    res : Identified
+    """
+    fit = res.fit
+    ps = fit.problem.parameters
+    if not fit.probes:
+        return []
+    lines = ["", "## Profile", "",
+             "Each parameter probed at multiples of its local half-width on either side, the others moved onto the "
+             "valley floor (the planes' regression, then one Gauss-Newton step); a probe whose cost exceeds the "
+             f"optimum's by at most {fit.profile_limit:.4g} (the chi-square quantile of {len(ps)} degrees of freedom "
+             "times s^2) is one the test cannot reject, and every interval reaches it.", "",
+             "| parameter | local interval | reported |", "|---|---|---|"]
+    for p in ps:
+        (a, b), (lo, hi) = fit.local_ci.get(p.key, (math.nan, math.nan)), fit.ci[p.key]
+        lines.append(f"| {p.key} | [{a:.4g}, {b:.4g}] | [{lo:.4g}, {hi:.4g}] |")
+    lines += ["", "| profiled | side | half-widths | " + " | ".join(p.key for p in ps) + " | cost excess | accepted |",
+              "|---|---|---|" + "---|" * len(ps) + "---|---|"]
+    for pr in fit.probes:
+        vals = " | ".join(f"{p.value(float(t)):.4g}" for p, t in zip(ps, pr.theta, strict=True))
+        lines.append(f"| {ps[pr.index].key} | {'+' if pr.side > 0 else '-'} | {pr.multiple:g} | {vals} | "
+                     f"{pr.excess:+.4g} | {'yes' if pr.accepted else 'no'} |")
+    return lines
 
 
 def _pick(names) -> list[int]:
@@ -236,5 +266,5 @@ def history_figure(res: Identified, path) -> None:
     plt.close(fig)
 
 
-__all__ = ["write", "markdown", "identified_rows", "correlation_rows", "weight_rows", "overlay_figure",
+__all__ = ["write", "markdown", "profile_lines", "identified_rows", "correlation_rows", "weight_rows", "overlay_figure",
            "history_figure"]

@@ -33,8 +33,13 @@ scatter of the gradient, and so of the estimate.
 
 Both are estimated from few draws, so each is smoothed along a series' points (a moving average
 over SMOOTH_SHARE of them: neighbouring samples and windows scatter alike) for series of at least
-SMOOTH_MIN points; in shorter blocks (the first impacts, the contact measures: a row per load cell,
-a column per quantity) each column is averaged over the rows (the four tips' cells scatter alike).
+SMOOTH_MIN points. Shorter blocks (the first impacts, the contact measures: a row per load cell, a
+column per quantity) keep each residual's own variance: the cells do not scatter alike (on the
+apparatus the top tips' first contact chatters, its time jumping by whole bounces, while the bottom
+tips' is smooth and known to ~1e-4 of its length; a variance pooled over the cells weighted the
+smooth ones by the chattering ones' scatter, 40-160x too little, and left the fit to the rough
+measures). A variance from K_NOISE draws and a cloud of 2p + 2 degrees of freedom is known to
+~50 %, which weights tolerate (the intervals' sandwich uses the draws, not only the variances).
 sigma_i = sqrt(noise_i + roughness_i).
 """
 
@@ -56,7 +61,7 @@ DAQ_OVERSAMPLE = 4  # the noise drawn at 4x the record's rate and anti-alias fil
 
 def smoothed(V: np.ndarray) -> np.ndarray:
     """A block's per-residual variances (series x points) averaged along each series over SMOOTH_SHARE of its
-    points (edges: the window shrinks), when it has at least SMOOTH_MIN points; else each point over the series.
+    points (edges: the window shrinks), when it has at least SMOOTH_MIN points; else as they are (module docstring).
 
     Parameters
     ----------
@@ -66,11 +71,13 @@ def smoothed(V: np.ndarray) -> np.ndarray:
     --------
     >>> smoothed(np.array([[0.0] * 10 + [9.0] * 10]))[0, [0, 9, 10, 19]].tolist()  # 20 points: over 3
     [0.0, 3.0, 6.0, 9.0]
+    >>> smoothed(np.array([[1.0, 4.0], [1e-4, 2.0]])).tolist()  # short rows: each residual its own
+    [[1.0, 4.0], [0.0001, 2.0]]
     """
     V = np.atleast_2d(np.asarray(V, float))
     k, n = V.shape
     if n < SMOOTH_MIN:
-        return np.broadcast_to(np.mean(V, axis=0), V.shape).copy()
+        return V.copy()
     half = max(1, int(round(SMOOTH_SHARE * n / 2)))
     c = np.concatenate([np.zeros((k, 1)), np.cumsum(V, axis=1)], axis=1)
     i = np.arange(n)
