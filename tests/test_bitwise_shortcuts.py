@@ -3,9 +3,10 @@
 Each shortcut is an exact rewrite, so each is checked for equality to the last bit against the path it
 replaces, run independently: e^{conj(lam) tau} taken as conj(e^{lam tau}) in the march's series sums
 (cos is even and sin odd in the C library), the response map's record blocks marched without sampling and
-replayed from their segments, the exact integrator without its energy integrals, and the shooting residual
-marched without its Jacobian. A changed bit would move a continuation's step path (its files are compared
-digit for digit with the committed results), so no tolerance is allowed.
+replayed from their segments, the exact integrator without its energy integrals, the shooting residual
+marched without its Jacobian, and Newton asking for the Jacobian only at the points it takes. A changed bit
+would move a continuation's step path (its files are compared digit for digit with the committed results),
+so no tolerance is allowed.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from reduced.models.discrete import DiscreteParams
 from reduced.models.loads import Harmonic, Loads
 from reduced.periodic.forced_shooting import ForcedFlow, ShootingResidual
 from reduced.periodic.forced_stability import hb_states
+from reduced.periodic.hb import newton
 from reduced.transient._exact_kernels import _exponentials, _series_at
 from reduced.transient.exact import integrate_exact
 from reduced.transient.integrate import ringdown
@@ -135,3 +137,44 @@ def test_the_shooting_residual_without_its_jacobian_is_the_residual(attractor):
     assert np.max(np.abs(R)) > 1e-3 and J.shape == (R.size, R.size + 1)
     assert np.array_equal(alone, R)
     assert res.value(Y) is R  # memoised: not marched again
+
+
+def test_the_lazy_jacobian_is_the_marched_one(attractor):
+    _, y = attractor
+    f, S = 19.0, 8
+    res = ShootingResidual(ForcedFlow(SYSTEM, LOAD, 1.0), S, 1, 1e-4, 2 * np.pi * f, None)
+    X = np.zeros((3, SYSTEM.n))
+    X[0], X[1] = y[:SYSTEM.n], y[SYSTEM.n:] / (2 * np.pi * f)
+    Y = res.point(hb_states(X, 2 * np.pi * f, S), 2 * np.pi * f)
+    R, jac = res.lazy(Y)
+    J = jac()
+    # the segments' monodromies of the Jacobian against those of the flow's own march of the nodes (another kernel)
+    assert np.array_equal(res.last_segment_monodromies(Y), res.segment_monodromies(Y))
+    n2 = 2 * SYSTEM.n
+    d = res.scale(2 * np.pi * f)
+    Js = res.last_segment_monodromies(Y)
+    assert np.array_equal(J[:n2, :n2], Js[0] * d[None, :] / d[:, None])  # the first block, as the kernel scales it
+    assert np.array_equal(res(Y)[1], J) and np.array_equal(res(Y)[0], R)
+
+
+def test_newton_asks_for_the_jacobian_only_where_it_steps():
+    # arctan from 2: the full Newton step overshoots, so the halving refuses trial points on R alone
+    asked, calls = [], []
+
+    def eager(y):
+        return np.arctan(y), np.diag(1.0 / (1.0 + y * y))
+
+    def lazy(y):
+        at = y.copy()
+        calls.append(at)
+
+        def jac():
+            asked.append(at)
+            return np.diag(1.0 / (1.0 + at * at))
+        return np.arctan(y), jac
+
+    y0 = np.array([2.0, -1.7])
+    a, b = newton(eager, y0, tol=1e-12), newton(lazy, y0, tol=1e-12)
+    assert np.array_equal(a.y, b.y) and a.n_iter == b.n_iter and np.array_equal(a.jacobian, b.jacobian)
+    assert abs(a.y).max() < 1e-12  # the root 0
+    assert len(asked) == b.n_iter + 1 < len(calls)  # the start and each point taken, none of the refused trials

@@ -209,7 +209,8 @@ def continue_branch(
 
     Parameters
     ----------
-    fun : y (p+1,) -> (R (p,), dR/dy (p, p+1))
+    fun : y (p+1,) -> (R (p,), dR/dy (p, p+1)); with a ``lazy`` method, y -> (R, a callable giving dR/dy),
+        the correctors ask for dR/dy only at the points Newton takes (the same numbers)
     y0 : initial guess; corrected with coordinate ``param`` held fixed
     param : the coordinate that starts the branch (its tangent component has the sign
         of ``direction`` at the start) and whose folds are always reported
@@ -318,10 +319,14 @@ def _advance(fun, y: np.ndarray, t: np.ndarray, ds: float, opt: ContinuationOpti
     """
     cos_max = math.cos(math.radians(opt.max_angle_deg))
     n_rej = 0
+    lazy = getattr(fun, "lazy", None)  # fun.lazy(y) -> (R, callable giving dR/dy): the Jacobian only when taken
     while True:
         yp = y + ds * t
 
         def corrector(z, yp=yp, t=t):
+            if lazy is not None:
+                R, Jz = lazy(z)
+                return np.concatenate([R, [t @ (z - yp)]]), lambda: np.vstack([Jz(), t])
             R, Jz = fun(z)
             return np.concatenate([R, [t @ (z - yp)]]), np.vstack([Jz, t])
 

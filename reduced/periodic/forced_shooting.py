@@ -35,6 +35,7 @@ flows of one period (about 0.3 ms for the three-mass model in contact).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numba as nb
@@ -293,45 +294,28 @@ def _vector_field(Minv, K, C, B, kst, offset, side, b, p, y, out):
 
 
 @nb.njit(cache=True)
-def _residual_kernel(lam, V, Vinv, yp, valid, B, offset, side, kst, Minv, K, C, bvec, amp, phase, Yv, d, dv, h,
-                     hmin, omega, fU, fb, seg_state, seg_tau, R, J, Js, n_events, st_state, st_tau, st_n, jac=True):
-    """R and dR/dY (:class:`ShootingResidual`) at the scaled nodes Yv (S, 2n), D sqrt(S) = d (2n,) (dv:
-    Omega dD/dOmega / D of the velocity rows, 1 if they scale with Omega, else 0),
-    segment length h and frequency omega, in place, with the segments' monodromies Js and events,
-    and each node's contact-state stretches (st_state, st_tau, st_n; st_n[k] = -1 if more than fit).
-    Without ``jac`` only R, the events and the stretches (J and Js untouched; R the same numbers).
-    Returns (0, -1) or (status < 0, the node whose march failed)."""
+def _march_kernel(lam, V, Vinv, yp, valid, B, offset, side, amp, phase, Yv, d, h, hmin, omega, fU, seg_state, seg_tau,
+                  R, Yend, n_events, st_state, st_tau, st_n):
+    """The marches of :class:`ShootingResidual` at the scaled nodes Yv (S, 2n), D sqrt(S) = d (2n,), segment
+    length h and frequency omega: R, the end states Yend (S, 2n), the events and each node's contact-state
+    stretches (st_state, st_tau, st_n; st_n[k] = -1 if more than fit), in place; dR/dY from them is
+    :func:`_jacobian_kernel`'s. Returns (0, -1) or (status < 0, the node whose march failed)."""
     S, N = Yv.shape
-    n = N // 2
     m = B.shape[0]
-    L = 1
-    fY = np.empty((lam.shape[0], N, L), np.complex128)
-    fYd = np.empty((lam.shape[0], N, L), np.complex128)
+    fY = np.empty((lam.shape[0], N, 1), np.complex128)
+    fYd = np.empty((lam.shape[0], N, 1), np.complex128)
     _particular(lam, V, fU, valid, omega, fY, fYd)
     active = np.empty(m, np.bool_)
-    Jk = np.empty((N, N))
-    W = np.empty((N, N), np.complex128)
-    z = np.empty(N)
-    wa = np.empty(N)
-    wb = np.empty(N)
     y0 = np.empty(N)
-    f0 = np.empty(N)
-    f1 = np.empty(N)
-    F0 = np.empty((1, 1), np.complex128)
-    M = S * N
-    if jac:
-        for r in range(M):
-            for c in range(M + 1):
-                J[r, c] = 0.0
     for k in range(S):
         t0k = k * h
-        F0[0, 0] = amp * np.exp(1j * (omega * t0k + phase))
+        F0k = amp * np.exp(1j * (omega * t0k + phase))
         for r in range(N):
             y0[r] = Yv[k, r] * d[r]
         y = y0.copy()
         _initial_active(B, offset, side, y, active)
         n_seg, status = _harmonic_flow(lam, V, Vinv, yp, valid, B, offset, side, y, active, h, hmin, seg_state,
-                                       seg_tau, omega, fY, F0[0, 0])
+                                       seg_tau, omega, fY, F0k)
         if status != 0:
             return status, k
         n_events[k] = n_seg - 1
@@ -343,16 +327,62 @@ def _residual_kernel(lam, V, Vinv, yp, valid, B, offset, side, kst, Minv, K, C, 
             st_n[k] = -1
         kk = (k + 1) % S
         o = k * N
-        if not jac:
-            for r in range(N):
-                R[o + r] = y[r] / d[r] - Yv[kk, r]
-            continue
-        _walk(lam, V, Vinv, seg_state, seg_tau, n_seg, omega, F0[0, 0], t0k, fY, fYd, Jk, z, W, wa, wb)
+        for r in range(N):
+            Yend[k, r] = y[r]
+            R[o + r] = y[r] / d[r] - Yv[kk, r]
+    return 0, -1
+
+
+@nb.njit(cache=True)
+def _jacobian_kernel(lam, V, Vinv, yp, valid, B, offset, side, kst, Minv, K, C, bvec, amp, phase, Yv, Yend, d, dv, h,
+                     hmin, omega, fU, seg_state, seg_tau, J, Js, st_state, st_tau, st_n):
+    """dR/dY (:class:`ShootingResidual`) and the segments' monodromies Js, in place, from the marches of
+    :func:`_march_kernel` (their end states Yend and stretches; a node whose stretches did not fit is marched
+    again, to the same stretches); dv: Omega dD/dOmega / D of the velocity rows, 1 if they scale with
+    Omega, else 0. Returns (0, -1) or (status < 0, the node whose march failed)."""
+    S, N = Yv.shape
+    n = N // 2
+    m = B.shape[0]
+    fY = np.empty((lam.shape[0], N, 1), np.complex128)
+    fYd = np.empty((lam.shape[0], N, 1), np.complex128)
+    _particular(lam, V, fU, valid, omega, fY, fYd)
+    active = np.empty(m, np.bool_)
+    Jk = np.empty((N, N))
+    W = np.empty((N, N), np.complex128)
+    z = np.empty(N)
+    wa = np.empty(N)
+    wb = np.empty(N)
+    y0 = np.empty(N)
+    f0 = np.empty(N)
+    f1 = np.empty(N)
+    M = S * N
+    for r in range(M):
+        for c in range(M + 1):
+            J[r, c] = 0.0
+    for k in range(S):
+        t0k = k * h
+        F0k = amp * np.exp(1j * (omega * t0k + phase))
+        for r in range(N):
+            y0[r] = Yv[k, r] * d[r]
+        if st_n[k] >= 0:
+            n_seg = st_n[k]
+            seg_state[:n_seg] = st_state[k, :n_seg]
+            seg_tau[:n_seg] = st_tau[k, :n_seg]
+        else:
+            y = y0.copy()
+            _initial_active(B, offset, side, y, active)
+            n_seg, status = _harmonic_flow(lam, V, Vinv, yp, valid, B, offset, side, y, active, h, hmin, seg_state,
+                                           seg_tau, omega, fY, F0k)
+            if status != 0:
+                return status, k
+        y = Yend[k]
+        _walk(lam, V, Vinv, seg_state, seg_tau, n_seg, omega, F0k, t0k, fY, fYd, Jk, z, W, wa, wb)
         Js[k] = Jk
         _vector_field(Minv, K, C, B, kst, offset, side, bvec, amp * math.cos(omega * t0k + phase), y0, f0)
         _vector_field(Minv, K, C, B, kst, offset, side, bvec, amp * math.cos(omega * (t0k + h) + phase), y, f1)
+        kk = (k + 1) % S
+        o = k * N
         for r in range(N):
-            R[o + r] = y[r] / d[r] - Yv[kk, r]
             for c in range(N):
                 J[o + r, o + c] = Jk[r, c] * d[c] / d[r]
             J[o + r, kk * N + r] -= 1.0
@@ -411,7 +441,7 @@ def _node_peaks(lam, V, Vinv, yp, valid, B, offset, side, Y0, h, hmin, omega, fY
     form sampled (``samples_per_rad`` per radian of its fastest mode, 8 to ``q_max`` samples) and
     each extreme refined by safeguarded Newton on the closed form's derivative. Returns a status
     as :func:`_march_nodes`. Where st_n[k] >= 0 the node's contact-state stretches are taken from
-    st_state[k], st_tau[k] (recorded by :func:`_residual_kernel`) instead of marching again.
+    st_state[k], st_tau[k] (recorded by :func:`_march_kernel`) instead of marching again.
 
     Long because it is one numba kernel: per stretch the output rows are projected once and the samples
     stepped by e^{lam dt}, and each bracketed extreme refined in place, without allocating per sample."""
@@ -551,6 +581,25 @@ def _node_peaks(lam, V, Vinv, yp, valid, B, offset, side, Y0, h, hmin, omega, fY
 
 
 # -- the flow of one frequency ---------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class _Shot:
+    """The nodes' marches at one point (:meth:`ForcedFlow.shoot`): the scaled nodes Yv (S, 2n), their
+    scales d (2n,), the segment length h (s), Omega (rad/s) and the load amplitude (N) they were marched
+    with; R (2nS,), the end states Yend (S, 2n), the events per segment (S,) and the contact-state
+    stretches (st_state, st_tau, st_n)."""
+
+    Yv: np.ndarray
+    d: np.ndarray
+    h: float
+    omega: float
+    amplitude_N: float
+    R: np.ndarray
+    Yend: np.ndarray
+    events: np.ndarray
+    stretches: tuple
+
+
+
 class ForcedFlow:
     """The exact forced flow of ``system`` under b P cos(Omega t + phi) at any Omega, lean: the
     contact states are decomposed once, the particular solutions of a new Omega are one batched
@@ -600,8 +649,23 @@ class ForcedFlow:
                  jacobian: bool = True):
         """(R (2nS,), dR/dY (2nS, 2nS + 1), segment monodromies (S, 2n, 2n), events per segment (S,))
         of :class:`ShootingResidual` at the scaled nodes Yv (S, 2n) with scales d (2n,) (dv: 1 if the velocity
-        scales grow with Omega, 0 if fixed), in one numba call. Without ``jacobian`` the flow alone is
-        marched: R (the same numbers) and the events, dR/dY and the monodromies None.
+        scales grow with Omega, 0 if fixed): :meth:`shoot`, then :meth:`shot_jacobian`. Without ``jacobian``
+        the flow alone is marched: R and the events, dR/dY and the monodromies None.
+
+        Raises
+        ------
+        ShootingError
+            A march the flow cannot finish.
+        """
+        shot = self.shoot(Yv, d, h, omega)
+        if not jacobian:
+            return shot.R, None, None, shot.events, shot.stretches
+        J, Js = self.shot_jacobian(shot, dv)
+        return shot.R, J, Js, shot.events, shot.stretches
+
+    def shoot(self, Yv: np.ndarray, d: np.ndarray, h: float, omega: float) -> _Shot:
+        """The nodes' marches of :meth:`residual` (one numba call, :func:`_march_kernel`): R, the end states,
+        the events and the stretches, from which :meth:`shot_jacobian` gives dR/dY without marching again.
 
         Raises
         ------
@@ -610,24 +674,36 @@ class ForcedFlow:
         """
         tb, sy = self.table, self.system
         Yv = np.ascontiguousarray(Yv, dtype=float)
+        d = np.ascontiguousarray(d, dtype=float)
         S, N = Yv.shape
         R = np.empty(S * N)
-        J = np.empty((S * N, S * N + 1)) if jacobian else np.empty((0, 0))
-        Js = np.empty((S, N, N)) if jacobian else np.empty((0, 0, 0))
+        Yend = np.empty((S, N))
         n_ev = np.zeros(S, np.int64)
         stretches = (np.empty((S, MAX_STRETCHES), np.int64), np.empty((S, MAX_STRETCHES)), np.empty(S, np.int64))
-        status, k = call_numba_kernel(_residual_kernel, tb.lam, tb.V, tb.Vinv, tb.yp, tb.valid, sy.B, sy.offset,
-                                      sy.side, sy.k, self._Minv, sy.K, sy.C, self.b, self.amplitude_N, self.phase, Yv,
-                                      np.ascontiguousarray(d, dtype=float), float(dv), float(h), self.hmin,
-                                      float(omega), self._U,
-                                      self._fb, self._seg_state, self._seg_tau, R, J, Js, n_ev, *stretches,
-                                      bool(jacobian))
+        status, k = call_numba_kernel(_march_kernel, tb.lam, tb.V, tb.Vinv, tb.yp, tb.valid, sy.B, sy.offset,
+                                      sy.side, self.amplitude_N, self.phase, Yv, d, float(h), self.hmin, float(omega),
+                                      self._U, self._seg_state, self._seg_tau, R, Yend, n_ev, *stretches)
         if status != 0:
             raise ShootingError(f"the exact flow failed from node {k} at {omega / (2 * math.pi):.6g} Hz: "
                                 f"{_STATUS.get(status, status)}")
-        if not jacobian:
-            return R, None, None, n_ev, stretches
-        return R, J, Js, n_ev, stretches
+        return _Shot(Yv, d, float(h), float(omega), float(self.amplitude_N), R, Yend, n_ev, stretches)
+
+    def shot_jacobian(self, shot: _Shot, dv: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+        """(dR/dY (2nS, 2nS + 1), segment monodromies (S, 2n, 2n)) of a :meth:`shoot` (its load amplitude,
+        whatever the flow's is now), by :func:`_jacobian_kernel`: the numbers the marches and the Jacobian
+        made together give."""
+        tb, sy = self.table, self.system
+        S, N = shot.Yv.shape
+        J = np.empty((S * N, S * N + 1))
+        Js = np.empty((S, N, N))
+        status, k = call_numba_kernel(_jacobian_kernel, tb.lam, tb.V, tb.Vinv, tb.yp, tb.valid, sy.B, sy.offset,
+                                      sy.side, sy.k, self._Minv, sy.K, sy.C, self.b, shot.amplitude_N, self.phase,
+                                      shot.Yv, shot.Yend, shot.d, float(dv), shot.h, self.hmin, shot.omega, self._U,
+                                      self._seg_state, self._seg_tau, J, Js, *shot.stretches)
+        if status != 0:
+            raise ShootingError(f"the exact flow failed from node {k} at {shot.omega / (2 * math.pi):.6g} Hz: "
+                                f"{_STATUS.get(status, status)}")
+        return J, Js
 
     def vector_field(self, Y: np.ndarray, t: np.ndarray, omega: float) -> np.ndarray:
         """(S, 2n) y' at the states Y (S, 2n) and times t (S,):
@@ -748,6 +824,7 @@ class ShootingResidual:
     _memo: dict = field(default_factory=dict, repr=False)
     _events: dict = field(default_factory=dict, repr=False)
     _segments: tuple | None = field(default=None, repr=False)
+    _gen: int = field(default=0, repr=False)  # forget() count: a Jacobian asked for after it is not memoised
     guard: tuple | None = field(default=None, repr=False)  # (Y_ref, its events, radius): see _check_guard
 
     @property
@@ -790,22 +867,41 @@ class ShootingResidual:
         return np.arange(self.segments) * h, h
 
     def __call__(self, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        R, jacobian = self.lazy(Y)
+        return R, jacobian()
+
+    def lazy(self, Y: np.ndarray) -> tuple[np.ndarray, Callable[[], np.ndarray]]:
+        """(R(Y), a callable giving dR/dY): the nodes are marched now (:meth:`ForcedFlow.shoot`), the
+        Jacobian's products made only when it is called (:meth:`ForcedFlow.shot_jacobian`): Newton's
+        halving refuses many trial points on R alone, and a point the guard refuses needs none. The same
+        numbers as ``self(Y)``; a point is memoised with its Jacobian."""
         key = Y.tobytes()
         if key in self._memo:
             self._check_guard(Y, key)
-            return self._memo[key]
+            R, J = self._memo[key]
+            return R, lambda: J
         w = self.omega(Y)
         _, h = self.times(w)
-        R, J, Js, n_ev, st = self.flow.residual(Y[: self.size].reshape(self.segments, 2 * self.n), self.scale(w), h,
-                                                 w, 1.0 if self.omega_v is None else 0.0)
-        self._memo.clear()
-        self._memo[key] = (R, J)
-        self._events[key] = int(n_ev.sum())
+        shot = self.flow.shoot(Y[: self.size].reshape(self.segments, 2 * self.n), self.scale(w), h, w)
+        self._events[key] = int(shot.events.sum())
         if len(self._events) > 64:
             self._events.pop(next(iter(self._events)))
-        self._segments = (key, Js, st)
         self._check_guard(Y, key)
-        return R, J
+        dv = 1.0 if self.omega_v is None else 0.0
+        gen = self._gen
+
+        def jacobian() -> np.ndarray:
+            hit = self._memo.get(key)
+            if hit is not None and gen == self._gen:
+                return hit[1]
+            J, Js = self.flow.shot_jacobian(shot, dv)
+            if gen == self._gen:  # not after forget(): the flow's load has changed since
+                self._memo.clear()
+                self._memo[key] = (shot.R, J)
+                self._segments = (key, Js, shot.stretches)
+            return J
+
+        return shot.R, jacobian
 
     def value(self, Y: np.ndarray) -> np.ndarray:
         """R(Y) alone (the same numbers as ``self(Y)[0]``): the flow marched without the Jacobian's
@@ -815,8 +911,7 @@ class ShootingResidual:
             return self._memo[key][0]
         w = self.omega(Y)
         _, h = self.times(w)
-        return self.flow.residual(Y[: self.size].reshape(self.segments, 2 * self.n), self.scale(w), h, w,
-                                  1.0 if self.omega_v is None else 0.0, jacobian=False)[0]
+        return self.flow.shoot(Y[: self.size].reshape(self.segments, 2 * self.n), self.scale(w), h, w).R
 
     def _check_guard(self, Y: np.ndarray, key: bytes) -> None:
         """Refuse (NewtonError) a point farther than ``guard``'s radius from its reference point
@@ -836,6 +931,7 @@ class ShootingResidual:
         self._memo.clear()
         self._events.clear()
         self._segments = None
+        self._gen += 1
 
     def events(self, Y: np.ndarray) -> int:
         """Contact events over the orbit's period at the point Y (a stop closing or opening): it

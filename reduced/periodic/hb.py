@@ -615,6 +615,11 @@ class NewtonResult:
     jacobian: np.ndarray  # at y (square, as solved)
 
 
+def _jacobian(J):
+    """J itself, or J() when ``fun`` gave it as a callable (made only once its point is taken)."""
+    return J() if callable(J) else J
+
+
 def newton(
     fun, y0: np.ndarray, *, tol: float = 1e-10, max_iter: int = 20, max_step: float | None = None
 ) -> NewtonResult:
@@ -631,7 +636,8 @@ def newton(
     Parameters
     ----------
     fun : callable
-        ``fun(y) -> (R (p,), dR/dy (p, p))``.
+        ``fun(y) -> (R (p,), dR/dy (p, p))``; dR/dy may be a callable returning it, called only for the
+        points Newton takes (a trial point the halving refuses needs R alone).
     y0 : (p,) array_like of float
         Starting point.
     tol : float
@@ -657,6 +663,7 @@ def newton(
     rtiny = 1e3 * np.finfo(float).eps * max(r0, 1.0)
     step = np.inf
     for it in range(1, max_iter + 1):
+        J = _jacobian(J)
         if not np.all(np.isfinite(R)) or not np.all(np.isfinite(J)):
             raise NewtonError(f"non-finite residual or Jacobian at iteration {it}")
         try:
@@ -684,7 +691,7 @@ def newton(
         if rn <= rtiny or (lam == 1.0 and step <= tol * (1.0 + float(np.max(np.abs(y))))):
             if rn > 1e-6 * max(r0, 1.0) and rn > 1e-8:
                 raise NewtonError(f"step converged but residual {rn:.3g} is not small")
-            return NewtonResult(y, rn, it, J)
+            return NewtonResult(y, rn, it, _jacobian(J))
     raise NewtonError(
         f"no convergence in {max_iter} iterations: |R| = {float(np.max(np.abs(R))):.3g}, last step {step:.3g}"
     )

@@ -222,6 +222,15 @@ def _eval_state(yp, X, lam, tau, out):
 
 
 @nb.njit(cache=True)
+def _modal_error(Vinv, i, y, yp_s, ypart):
+    """sum_r |V^-1_ir| (|y_r| + |y_p,r| + |ypart_r|): the scale of the round-off of modal coordinate i."""
+    err = 0.0
+    for r in range(Vinv.shape[1]):
+        err += abs(Vinv[i, r]) * (abs(y[r]) + abs(yp_s[r]) + abs(ypart[r]))
+    return err
+
+
+@nb.njit(cache=True)
 def _forced_segment(s, sigma, ip, tau_lim, y, yp_s, lam_s, V, Vinv, fz, fY, fU, pF, pp0, pp1, n, X, z, P,
                     Fs, phi, gam, werr, ypart, noise=True):
     """A forced segment's closed form in state s (see the module docstring), with the loads' piece
@@ -284,13 +293,9 @@ def _forced_segment(s, sigma, ip, tau_lim, y, yp_s, lam_s, V, Vinv, fz, fY, fU, 
         lam = lam_s[i]
         z[i] = lam
         wi = 0.0 + 0.0j
-        err = 0.0
         for r in range(N):
             wi += Vinv[i, r] * (y[r] - yp_s[r] - ypart[r])
-        if noise:
-            for r in range(N):
-                err += abs(Vinv[i, r]) * (abs(y[r]) + abs(yp_s[r]) + abs(ypart[r]))
-        werr[i] = EPS * err
+        werr[i] = EPS * _modal_error(Vinv, i, y, yp_s, ypart) if noise else 0.0
         if not poly:
             for r in range(N):
                 X[r, i] = V[r, i] * wi
