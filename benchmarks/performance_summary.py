@@ -56,16 +56,13 @@ LIMITS = (
      "vectorised. The same scheme in the open-gap modal coordinates (the next row, opt-in as it changes the "
      "bits) runs about 2x faster"),
     ("explicit (central difference) ringdown in the open-gap modal coordinates",
-     "measured on a machine loaded 12-20 on 2 cores (wall times several times the CPU times; the physical "
-     "kernel took 115-120 ns of CPU a step beside it, against 63 ns unloaded in the row above, measured "
-     "before the reduced beam had modal damping on every mode), so the steps/s in CPU time and the ratio to "
-     "the physical kernel in the same process (1.7-1.9x) are the figures to read; the unloaded rate was "
-     "not measured. The roofline in "
-     "the accuracy column: the step uses 12 % of the core's multiply-add peak and a fraction of its L1 "
-     "bandwidth; it is latency-bound, its sums over the coordinates (the tip rows, U^T y, the new velocity) "
-     "each waiting for the last. Two restructurings that take every sum at the step's start (one link "
-     "of latency a step instead of about four) were slower under this load (more flops on a shared core), "
-     "and were not kept"),
+     "measured at load 0.9-1.0 on 2 cores (2026-11-26 15:24 UTC): 1.53e7 steps/s in CPU time, the fastest run "
+     "1.64e7, 1.8x the physical kernel in the same process. The roofline in the accuracy column: the step "
+     "uses 11 % of the core's multiply-add peak and a fraction of its L1 bandwidth; it is latency-bound, its "
+     "sums over the coordinates (the tip rows, U^T y, the new velocity) each waiting for the last (a step "
+     "is about 4 x the measured latency of one dependent 12-term sum feeding a 12-term update). Two "
+     "restructurings that take every sum at the step's start (one link of latency a step instead of about "
+     "four) were slower under load (more flops on a shared core), and were not kept"),
     ("exact vs DOP853 restarted at every crossing",
      "the exact run's kernel (perf, issue 28) spends about a quarter of its time in libm (sincos, exp, expm1 of "
      "the terms e^{lam tau} at each march step) and most of the rest in the march's chains of dependent sqrt "
@@ -108,6 +105,10 @@ EARLIER_MACHINE = (
     "explicit steps 3.93e7 /s (3-DOF) and 9.47e6 /s (reduced beam)",
     "exact against DOP853 restarted at every crossing: 764x and 1370x on the 0.2 s window, 896x and 1200x on "
     "the 2 s window (errors 1e-6 and 1e-8), the exact run 4.9 and 27.6 ms, DOP853 3.8-33 s",
+    "and on this machine, one run earlier in the same session (2026-11-26 15:10 UTC, three helper agents "
+    "starting beside it): the exact 0.2 s run took 3.6 ms instead of 2.0 ms and DOP853 7 % longer, so 654x "
+    "and 1131x on the 0.2 s window, 990x and 1353x on the 2 s window: the 1e-6 rows, met by 6 % and 1 % on a "
+    "quiet machine, are missed with a little load",
 )
 COLUMNS = ("what", "ours_s", "baseline", "baseline_s", "ratio", "error", "target", "met")
 
