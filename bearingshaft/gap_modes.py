@@ -9,6 +9,9 @@ rule and why it does not depend on where its threshold sits.
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,10 +43,51 @@ def full_gap_modes(fe, spec, n_modes: int = N_FULL_MODES, Psi: np.ndarray | None
     dict
         ``{state: fem.contact.GapModes}`` for ``state`` in :data:`STATES`.
     """
-    from fem.contact import contact_pairs, gap_modes
+    from fem.contact import contact_pairs
 
     pairs = contact_pairs(fe, gap=spec.gap, k_g=spec.k_g)
-    return {s: gap_modes(fe, pairs, s, n_modes, Psi=Psi) for s in STATES}
+    return {s: _state_modes(fe, pairs, s, n_modes, Psi) for s in STATES}
+
+
+def _modes_key(fe, pairs, state: str, n_modes: int) -> str:
+    """sha256 (hex) of what one state's eigensolution depends on: K, M, the tips' rows and k_g (closed only),
+    the state, the number of modes, the code that builds and solves the model
+    (:func:`reduced.models.rom.source_hash`) and the thread count asked for (``BEARINGSHAFT_THREADS``)."""
+    from fem.contact import contact_rows
+    from reduced.models.rom import source_hash
+
+    h = hashlib.sha256(f"{state} {n_modes} {source_hash()} {os.environ.get('BEARINGSHAFT_THREADS', '')}".encode())
+    for A in (fe.K.tocsr(), fe.M.tocsr()):
+        for a in (A.indptr, A.indices, A.data):
+            h.update(np.ascontiguousarray(a).tobytes())
+    if state == "closed":  # the tied tips' stiffness k_g r r^T; the open state's K holds no contact
+        h.update(np.ascontiguousarray(contact_rows(pairs)).tobytes())
+        h.update(np.array([p.k_g for p in pairs], float).tobytes())
+    return h.hexdigest()
+
+
+def _load_modes(f) -> tuple[np.ndarray, np.ndarray]:
+    with np.load(f) as z:
+        return z["freq_hz"], z["phi"]
+
+
+def _state_modes(fe, pairs, state: str, n_modes: int, Psi):
+    """:func:`fem.contact.gap_modes` of one state, its eigensolution kept in the reduced-model cache
+    (``gapmodes-<key>.npz``): the scenes of one 3-D model (four reductions of the apparatus) share it, and a
+    loaded one is the bits a solve would give (the factorization is single-threaded, :func:`_modes_key`)."""
+    from fem.contact import gap_modes
+    from reduced.cache import load_entry, write_entry
+    from reduced.models.rom import cache_dir
+
+    key = _modes_key(fe, pairs, state, n_modes)
+    path = cache_dir() / f"gapmodes-{key[:20]}.npz"
+    modes = load_entry(path, key, _load_modes)
+    gm = gap_modes(fe, pairs, state, n_modes, Psi=Psi, modes=modes)
+    if modes is None:
+        with contextlib.suppress(OSError):  # a read-only cache: solved again next time
+            write_entry(path, lambda f: np.savez(f, freq_hz=gm.freq_hz, phi=gm.phi), key,
+                        info={"kind": "full model's gap modes", "state": state, "n_modes": n_modes})
+    return gm
 
 
 def expand(rom: ReducedModel, q: np.ndarray) -> np.ndarray:

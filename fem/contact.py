@@ -281,7 +281,7 @@ class GapModes:
 
 def gap_modes(fe, pairs: list[ContactPair], state: str, n_modes: int = 20, Psi: np.ndarray | None = None,
               tip_tol: float = 1e-5, mass_tol: float = 1e-6, sliders: list[TangentialRow] = (),
-              k_t: float = 0.0) -> GapModes:
+              k_t: float = 0.0, modes: tuple[np.ndarray, np.ndarray] | None = None) -> GapModes:
     """Lowest ``n_modes`` modes with the tips open (K) or tied (K + k_g sum r r^T; with ``sliders``, tied and
     sticking, :func:`tied_stiffness`).
 
@@ -318,6 +318,8 @@ def gap_modes(fe, pairs: list[ContactPair], state: str, n_modes: int = 20, Psi: 
         Tangential coordinates whose upper-stop faces stick in the closed state (friction).
     k_t : float
         N/m, their tangential stiffness.
+    modes : (freq_hz (n_modes,), phi (n_dofs, n_modes)), optional
+        This eigensolution already computed (a cache of it): it is not solved again.
 
     Returns
     -------
@@ -333,18 +335,21 @@ def gap_modes(fe, pairs: list[ContactPair], state: str, n_modes: int = 20, Psi: 
 
     if state not in ("open", "closed"):
         raise ValueError(f"state must be 'open' or 'closed', got {state!r}")
-    K = fe.K if state == "open" else tied_stiffness(fe.K, pairs, sliders, k_t)
-    res = modal_analysis(K, fe.M, n_modes=n_modes, shift_hz=0.1, method="lanczos", solver="superlu")
+    if modes is None:
+        K = fe.K if state == "open" else tied_stiffness(fe.K, pairs, sliders, k_t)
+        res = modal_analysis(K, fe.M, n_modes=n_modes, shift_hz=0.1, method="lanczos", solver="superlu")
+        modes = (res.freq_hz, res.phi)
+    freq_hz, phi = modes
     R = contact_rows(pairs)
-    tip = R @ res.phi
+    tip = R @ phi
     size = np.linalg.norm(tip, axis=0)
     moves = size > tip_tol * max(size.max(), 1e-300)
     if Psi is not None:
         scale = np.sqrt(np.max(np.einsum("ij,ij->j", Psi, fe.M @ Psi)))
-        moves |= np.linalg.norm(Psi.T @ (fe.M @ res.phi), axis=0) > mass_tol * scale
+        moves |= np.linalg.norm(Psi.T @ (fe.M @ phi), axis=0) > mass_tol * scale
     perm, sign = mirror_map(fe)
-    sym = np.einsum("ij,ij->j", res.phi, fe.M @ (sign[:, None] * res.phi[perm]))
-    return GapModes(state, res.freq_hz, res.phi, tip, sym, moves & (sym > 0.5))
+    sym = np.einsum("ij,ij->j", phi, fe.M @ (sign[:, None] * phi[perm]))
+    return GapModes(state, freq_hz, phi, tip, sym, moves & (sym > 0.5))
 
 
 def point_rows(fe) -> dict[str, np.ndarray]:

@@ -641,6 +641,46 @@ def store_in_cache(rom: ReducedModel, spec: RomSpec) -> None:
         pass
 
 
+def from_cache(spec: RomSpec) -> ReducedModel | None:
+    """The reduced model of ``spec`` if the cache holds it (with the contact, friction and damping of ``spec``),
+    else None: an entry is made by the same code (:func:`source_hash`) from the same inputs, so it holds the
+    bits a rebuild would give. A bad entry is reported in one line and removed (:mod:`reduced.cache`).
+
+    Parameters
+    ----------
+    spec : RomSpec
+        What is wanted.
+
+    Returns
+    -------
+    ReducedModel or None
+        The cached reduction, or None when there is none.
+    """
+    inputs = _inputs_hash(spec)
+    rom = load_entry(_cache_path(spec, inputs), inputs, ReducedModel.load)
+    return None if rom is None else rom.with_contact(spec)
+
+
+def build_fe(spec: RomSpec):
+    """The 3-D model :func:`build_rom` reduces (meshed and assembled, OpenBLAS on a fixed thread count).
+
+    Parameters
+    ----------
+    spec : RomSpec
+        Its ``fe_model()`` says what to mesh.
+
+    Returns
+    -------
+    fem.model.FESystem
+        The assembled model.
+    """
+    from fem._pardiso import fixed_threads
+    from fem.model import build_system
+
+    with fixed_threads():
+        return build_system(spec.fe_model())
+
+
 def cached_rom(spec: RomSpec, progress: bool = False) -> ReducedModel:
     """The reduced model of ``spec`` from the cache, built and stored there if absent.
 
@@ -662,14 +702,14 @@ def cached_rom(spec: RomSpec, progress: bool = False) -> ReducedModel:
     ReducedModel
         With the contact and damping of ``spec``.
     """
-    inputs = _inputs_hash(spec)
-    rom = load_entry(_cache_path(spec, inputs), inputs, ReducedModel.load)
+    rom = from_cache(spec)
     if rom is not None:
-        return rom.with_contact(spec)
+        return rom
     rom, _ = build_rom(spec, progress=progress)
     store_in_cache(rom, spec)
     return rom
 
 
-__all__ = ["RomSpec", "ReducedModel", "build_rom", "cache_key", "cached_rom", "damping_matrix", "modal_ratios",
+__all__ = ["RomSpec", "ReducedModel", "build_fe", "build_rom", "cache_key", "cached_rom", "damping_matrix",
+           "from_cache", "modal_ratios",
            "store_in_cache", "MODAL_DAMPING", "POINTS", "ROM_LAYOUTS", "FRICTION_DIRECTIONS", "STOPS"]
