@@ -232,12 +232,12 @@ def test_reduce_and_ringdown_cli(tmp_path, monkeypatch, capsys):
     assert main(["reduce", "--scene", str(scene), "--out", str(out), "--no-progress"]) == 0
     printed = capsys.readouterr().out  # a summary even without progress bars
     assert "[rom-short] reduced 2511 DOFs to 4" in printed and "open gap: 4 of the 24" in printed
-    import bearingshaft.stages.reduce as reduce_stage
+    import reduced.models.rom as rom_module
 
     def no_rebuild(*args, **kwargs):
         raise AssertionError("the rerun rebuilt the reduction the cache holds")
 
-    monkeypatch.setattr(reduce_stage, "build_rom", no_rebuild)  # the rerun loads it (the same bits)
+    monkeypatch.setattr(rom_module, "build_rom", no_rebuild)  # the rerun loads it (the same bits)
     assert main(["reduce", "--scene", str(scene), "--out", str(tmp_path / "again"), "--no-progress"]) == 0
     for name in ("gap_modes.csv", "cb_check.csv"):  # a rerun writes the same bytes
         assert (out / name).read_bytes() == (tmp_path / "again" / name).read_bytes(), name

@@ -35,7 +35,7 @@ from bearingshaft.reproduction import Reproduction, roundoff, within
 from bearingshaft.scenes import Scene
 from bearingshaft.stages.reduce_results import ReduceResult
 from reduced.models.modes import gap_moving_modes, linear_modes
-from reduced.models.rom import ReducedModel, build_fe, build_rom, from_cache
+from reduced.models.rom import ReducedModel, reduction
 
 __all__ = ["DESCRIPTION", "ReduceResult", "compute", "estimate", "write"]
 
@@ -96,11 +96,7 @@ def compute(scene: Scene, progress: bool, workdir) -> ReduceResult:
         and the expanded modes.
     """
     spec = scene.model
-    rom = from_cache(spec)  # the same bits as a rebuild (same inputs, same code): only the 3-D model is built
-    if rom is None:
-        rom, fe = build_rom(spec, progress=progress)
-    else:
-        fe = build_fe(spec)
+    rom, fe = reduction(spec, progress)  # from the cache if it holds it: the bits of a rebuild
     comps = compare_all(rom, fe, spec)
     fields, shapes = _mode_shapes(rom)
     bound = _upper_bound_check(comps["open"])  # a cached entry written by this stage holds it already

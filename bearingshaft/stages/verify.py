@@ -36,7 +36,7 @@ from reduced.models.gaps import GapSystem
 from reduced.models.identify import identify_discrete
 from reduced.models.initial import initial_state
 from reduced.models.modes import linear_modes
-from reduced.models.rom import ReducedModel, build_rom
+from reduced.models.rom import ReducedModel, reduction
 from reduced.periodic.backbones import hb_backbones
 from reduced.transient.integrate import ringdown
 from reduced.transient.spectrogram import spectrogram
@@ -185,7 +185,7 @@ def compute(scene: Scene, progress: bool, workdir) -> VerifyResult:
     """
     t0 = time.perf_counter()
     spec, vs = scene.model, scene.verify
-    rom, fe = build_rom(spec, progress=progress)
+    rom, fe = reduction(spec, progress)  # the reduce stage's, from the cache: the bits of a rebuild
     comps = compare_all(rom, fe, spec, full_gap_modes(fe, spec, Psi=rom.Psi))
     centres = np.asarray(rom.info["contact_centres_m"], float)
     L = 0.5 * float(np.linalg.norm(centres[1] - centres[0]))

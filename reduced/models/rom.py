@@ -681,6 +681,30 @@ def build_fe(spec: RomSpec):
         return build_system(spec.fe_model())
 
 
+def reduction(spec: RomSpec, progress: bool = False) -> tuple[ReducedModel, object]:
+    """(rom, fe): the reduced model of ``spec`` from the cache when it holds it, with the 3-D model it reduces
+    built again (meshing and assembly only), else :func:`build_rom` (not stored: :func:`store_in_cache`).
+
+    Parameters
+    ----------
+    spec : RomSpec
+        What is wanted.
+    progress : bool
+        Print a line before meshing, when building.
+
+    Returns
+    -------
+    rom : ReducedModel
+        The same bits whichever way it came (:func:`from_cache`).
+    fe : FESystem
+        The 3-D model.
+    """
+    rom = from_cache(spec)
+    if rom is None:
+        return build_rom(spec, progress=progress)
+    return rom, build_fe(spec)
+
+
 def cached_rom(spec: RomSpec, progress: bool = False) -> ReducedModel:
     """The reduced model of ``spec`` from the cache, built and stored there if absent.
 
@@ -711,5 +735,5 @@ def cached_rom(spec: RomSpec, progress: bool = False) -> ReducedModel:
 
 
 __all__ = ["RomSpec", "ReducedModel", "build_fe", "build_rom", "cache_key", "cached_rom", "damping_matrix",
-           "from_cache", "modal_ratios",
+           "from_cache", "modal_ratios", "reduction",
            "store_in_cache", "MODAL_DAMPING", "POINTS", "ROM_LAYOUTS", "FRICTION_DIRECTIONS", "STOPS"]
