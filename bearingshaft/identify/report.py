@@ -168,7 +168,7 @@ def estimate_lines(res: Identified) -> list[str]:
         lines.append(f"The reported values are the profile's cheapest probe, {where(fit.theta)}: its cost is "
                      f"{-excess:.4g} below the least squares' end ({where(fit.optimum)}), where the Jacobian, the "
                      "correlations and the local intervals were taken. The least squares stopped where the trust "
-                     "region saw no descent; the cheapest point the fit has seen is the better least-squares estimate, "
+                     "region saw no descent; the cheaper point is the better least-squares estimate, "
                      f"but a cost difference of {-excess:.4g} against the test's limit of {fit.profile_limit:.4g} is "
                      "no evidence for one point over the other.")
     else:
@@ -193,9 +193,9 @@ def estimate_lines(res: Identified) -> list[str]:
                      f"{fit.profile_limit:.4g} that the test's noise and chaos allow"
                      + (", and falls again farther out on a side: there the costs differ as new realisations of the "
                         "chaos do, not as the parameter moves them" if rough else "") + ". "
-                     f"The point {fit.values[p.key]:.4g} is where the search stopped on that floor, not a value the "
-                     f"test prefers; it says no more than the interval [{fit.ci[p.key][0]:.4g}, "
-                     f"{fit.ci[p.key][1]:.4g}].")
+                     f"The point {fit.values[p.key]:.4g} is the cheapest the search found on that floor, not a value "
+                     "the test prefers over the others there; it says no more than the interval "
+                     f"[{fit.ci[p.key][0]:.4g}, {fit.ci[p.key][1]:.4g}].")
     return lines
 
 
