@@ -137,13 +137,13 @@ def test_true_values_lie_in_the_intervals(built, tmp_path, seed):
     # the fit lowered the misfit: the first pass's best trial point below its first (one set of weights; the last
     # row can be a step the trust region rejected, and another pass's costs have other weights)
     assert min(float(r["cost"]) for r in hist) < float(hist[0]["cost"])
+    # the damping: its misfit has local minima ~10-20 % apart on this short record; the intervals reach the other
+    # starts' ends and the profile's probes the test cannot reject (seeds 3, 7, 11, 5, 13: 2.41-3.75, 2.59-3.52,
+    # 2.30-3.55, 2.82-3.27, 2.75-3.36 e-3 for 3e-3)
     r = found["model.modal_damping[0]"]
-    lo, hi = float(r["ci_low"]), float(r["ci_high"])
-    if not lo <= TRUTH["model.modal_damping[0]"] <= hi:
-        # checked last so that the gap's and k_g's asserts above stay strict for every seed
-        pytest.xfail(f"the damping is not yet reliable (issue 26): {r['value']} [{lo:.4g}, {hi:.4g}] misses "
-                     f"{TRUTH['model.modal_damping[0]']} (its misfit has local minima ~10-20 % apart, rougher than "
-                     f"the intervals' local planes over -+3 % see, and the starts need not find the rivals)")
+    lo, hi, value = float(r["ci_low"]), float(r["ci_high"]), float(r["value"])
+    assert lo <= TRUTH["model.modal_damping[0]"] <= hi, r
+    assert lo <= value <= hi
 
 
 def test_a_parameter_the_test_cannot_see_is_named(built, tmp_path):
