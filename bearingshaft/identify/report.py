@@ -178,11 +178,13 @@ def estimate_lines(res: Identified) -> list[str]:
         (a, b) = fit.local_ci.get(p.key, (math.nan, math.nan))
         if not own:
             continue
-        vals = [p.value(float(pr.theta[j])) for pr in own] + [fit.values[p.key]]
+        # the accepted probes, the least squares' end (excess 0) and the estimate (the cheapest probe, or the end)
+        end = fit.optimum if fit.optimum is not None else fit.theta
+        vals = [p.value(float(pr.theta[j])) for pr in own] + [fit.values[p.key], p.value(float(end[j]))]
         lo, hi = min(vals), max(vals)
         if not (lo < a or hi > b):
             continue
-        ex = [pr.excess for pr in own]
+        ex = [pr.excess for pr in own] + [0.0] + ([min(pr.excess for pr in fit.probes)] if fit.from_profile else [])
         # a cost that falls again farther out on a side: its differences are the chaos's, not the parameter's
         rough = any(any(b_.excess < a_.excess for a_, b_ in zip(line, line[1:], strict=False))
                     for line in (sorted((pr for pr in fit.probes if pr.index == j and pr.side == side),
@@ -351,7 +353,7 @@ def draw_overlay(res: Identified):
         ax.set_ylabel(f"{ov.names[i]} [{ov.units[i]}]")
         ax2.set_ylabel(f"RMS in {1e3 * tg.envelope_window_s:g} ms")
     axes[-1, 0].set_xlabel("t [ms] (shaded: the pointwise block, up to the horizon)")
-    axes[-1, 1].set_xlabel("t [s] (models: sqrt(e^2 + n^2), n the test's RMS before the blow, as the fit compares)")
+    axes[-1, 1].set_xlabel("t [s] (models: sqrt(e^2 + n^2), n the test's noise RMS)")
     axes[0, 0].legend(fontsize=8, loc="upper right")
     axes[0, 1].legend(fontsize=7, loc="upper right")
     vals = ", ".join(f"{k.split('.', 1)[1]} = {v:.4g}" for k, v in res.fit.values.items())
