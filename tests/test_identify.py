@@ -137,13 +137,13 @@ def test_true_values_lie_in_the_intervals(built, tmp_path, seed):
     # the fit lowered the misfit: the first pass's best trial point below its first (one set of weights; the last
     # row can be a step the trust region rejected, and another pass's costs have other weights)
     assert min(float(r["cost"]) for r in hist) < float(hist[0]["cost"])
+    # the damping: its misfit has local minima ~10-20 % apart on this short record; the intervals reach the other
+    # starts' ends and the profile's probes the test cannot reject (seeds 3, 7, 11, 5, 13: 2.41-3.75, 2.59-3.52,
+    # 2.30-3.55, 2.82-3.27, 2.75-3.36 e-3 for 3e-3)
     r = found["model.modal_damping[0]"]
-    lo, hi = float(r["ci_low"]), float(r["ci_high"])
-    if not lo <= TRUTH["model.modal_damping[0]"] <= hi:
-        # checked last so that the gap's and k_g's asserts above stay strict for every seed
-        pytest.xfail(f"the damping is not yet reliable (issue 26): {r['value']} [{lo:.4g}, {hi:.4g}] misses "
-                     f"{TRUTH['model.modal_damping[0]']} (its misfit has local minima ~10-20 % apart, rougher than "
-                     f"the intervals' local planes over -+3 % see, and the starts need not find the rivals)")
+    lo, hi, value = float(r["ci_low"]), float(r["ci_high"]), float(r["value"])
+    assert lo <= TRUTH["model.modal_damping[0]"] <= hi, r
+    assert lo <= value <= hi
 
 
 def test_a_parameter_the_test_cannot_see_is_named(built, tmp_path):
@@ -405,3 +405,76 @@ def test_the_profile_follows_a_flat_valley_past_the_local_interval():
     # the excess' slope at u*, 8 u* / s_w^2 = 24: ~0.003
     assert 0.4 <= top <= 0.5 + 0.01
     assert top >= 0.3 and min(float(t[1]) for t in ends) <= -0.3  # every interval reaches the test's point
+
+
+def test_the_overlay_draws_the_models_envelope_with_the_tests_noise():
+    # the overlay's envelope panel (bearingshaft.identify.report.draw_overlay) on a decaying 200 Hz tone: the test is
+    # the tone plus white noise of RMS 0.05, the identified model the clean tone. Drawn with the test's noise power
+    # added, the model's envelope must lie on the test's in every 0.1 s window (2000 samples: the noise's mean square
+    # scatters by sqrt(2 / 2000) = 3.2 %, the envelope's log by <= 1.6 %: 0.05 is 3 sd), where the model's alone
+    # (drawn dashed) falls under the noise late in the record (ln(e / sqrt(e^2 + n^2)) < -0.5 over the last 5 windows),
+    # and the noise floor is drawn at the test's RMS before the blow
+    from types import SimpleNamespace
+
+    from bearingshaft.identify.report import draw_overlay
+    from bearingshaft.identify.results import Overlay
+
+    rng = np.random.default_rng(5)
+    dt, noise = 5e-5, 0.05
+    t = np.arange(40000) * dt
+    tone = np.exp(-3.0 * t) * np.sin(2 * np.pi * 200 * t)
+    ov = Overlay(("a",), t, (tone + noise * rng.standard_normal(t.size))[None], 0.5 * tone[None], tone[None],
+                 ("m/s^2",))
+    target = SimpleNamespace(time_span_s=(0.0, 0.01), envelope_window_s=0.1, noise=np.array([noise]))
+    fit = SimpleNamespace(target=target, problem=SimpleNamespace(window_s=(0.0, float(t[-1]))),
+                          values={"model.gap": 3e-4})
+    fig = draw_overlay(SimpleNamespace(overlay=ov, fit=fit, scene=SimpleNamespace(name="synthetic")))
+    lines = {ln.get_label(): ln for ln in fig.axes[1].get_lines()}
+    test = lines["test"].get_ydata()
+    model = lines["model, identified + test's noise power"].get_ydata()
+    alone = lines["model, identified, alone"].get_ydata()
+    assert test.size == 20
+    assert np.max(np.abs(np.log(model / test))) < 0.05
+    assert np.max(np.log(alone / test)[-5:]) < -0.5
+    floor = lines["test's noise floor (RMS before the blow)"].get_ydata()
+    np.testing.assert_allclose(floor, noise)
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+
+
+def test_the_estimate_is_the_profiles_cheapest_probe_and_identify_md_says_what_it_is_worth():
+    # the apparatus' case in miniature: the least squares stopped at theta = 0; along k_g's profile the cost rises by
+    # less than the limit (7.8) and falls again (+0.5, +2.0, +1.0: chaos, not the parameter), and one probe is 0.8
+    # cheaper than the end; the gap's profile rejects its first probes. The estimate must be that probe, inside every
+    # interval; identify.md must name it as the profile's, and say of k_g (not of the gap) that the point says no more
+    # than its interval
+    from types import SimpleNamespace
+
+    from bearingshaft.identify.fit import estimate
+    from bearingshaft.identify.parameters import Parameter
+    from bearingshaft.identify.profile import Probe
+    from bearingshaft.identify.report import estimate_lines
+
+    ps = (Parameter("model.gap", "m", 3e-4, 7.5e-5, 1.2e-3, "log"),
+          Parameter("model.k_g", "N/m", 5e7, 1.25e7, 2e8, "log"))
+    probes = [Probe(1, -1, 1.0, np.array([-0.002, -0.05]), 0.5, True),
+              Probe(1, -1, 2.0, np.array([-0.004, -0.10]), 2.0, True),
+              Probe(1, -1, 3.0, np.array([-0.006, -0.15]), 1.0, True),
+              Probe(1, 1, 1.0, np.array([0.002, 0.05]), -0.8, True),
+              Probe(1, 1, 2.0, np.array([0.004, 0.10]), 30.0, False),
+              Probe(0, -1, 1.0, np.array([-0.01, -0.2]), 20.0, False),
+              Probe(0, 1, 1.0, np.array([0.01, 0.2]), 20.0, False)]
+    end = np.zeros(2)
+    est = estimate(end, probes)
+    np.testing.assert_array_equal(est, [0.002, 0.05])
+    assert estimate(end, [pr for pr in probes if pr.excess >= 0]) is not end  # a copy of the end when none is lower
+    values = {p.key: p.value(float(t)) for p, t in zip(ps, est, strict=True)}
+    local = {"model.gap": (ps[0].value(-0.01), ps[0].value(0.01)), "model.k_g": (ps[1].value(-0.05), ps[1].value(0.05))}
+    ci = {"model.gap": local["model.gap"], "model.k_g": (ps[1].value(-0.15), ps[1].value(0.05))}
+    fit = SimpleNamespace(problem=SimpleNamespace(parameters=ps), probes=probes, theta=est, optimum=end,
+                          from_profile=True, profile_limit=7.8, local_ci=local, values=values, ci=ci)
+    text = "\n".join(estimate_lines(SimpleNamespace(fit=fit)))
+    assert "the profile's cheapest probe" in text and "its cost is 0.8 below the least squares' end" in text
+    assert "- model.k_g:" in text and "falls again farther out" in text
+    assert "- model.gap:" not in text  # its profile rejects every probe: its local interval stands

@@ -60,7 +60,10 @@ cloud mostly chaos, and the least squares stop wherever the scan put them on its
 parameter's profile is probed out to several half-widths (:mod:`bearingshaft.identify.profile`), the
 others on the valley floor, and every interval reaches the probes whose cost the test cannot reject
 against the optimum's (within chi2_{confidence, p} s^2, as the rival minima); ``Fit.local_ci`` keeps
-the local intervals.
+the local intervals. A probe cheaper than the least squares' end (they stop on such a misfit where the
+trust region sees no descent) is reported as the estimate (:func:`estimate`; ``Fit.optimum`` keeps the
+end, where J and C were taken). On a flat valley that point is the cheapest of costs that differ by
+less than the chaos does: the estimate says no more than its interval (identify.md's Estimate section).
 """
 
 from __future__ import annotations
@@ -160,7 +163,8 @@ class Fit:
     ----------
     problem : Problem
     theta : (p,) ndarray of float
-        The optimum, scaled.
+        The estimate, scaled: the least squares' end, or the profile's cheapest probe where it is cheaper
+        (:func:`estimate`).
     values : dict
         {key: value} there.
     ci : dict
@@ -202,6 +206,9 @@ class Fit:
         {key: (low, high)} the local planes' intervals, before the profile and the rival minima widened them.
     profile_limit : float
         The cost excess a probe (and a rival minimum) may have: chi2_{confidence, p} s^2.
+    optimum : (p,) ndarray of float or None
+        The least squares' end, scaled, where the Jacobian, the covariance and the profile were taken (None: the
+        same as ``theta``).
     """
 
     problem: Problem
@@ -227,6 +234,12 @@ class Fit:
     probes: list = field(default_factory=list)
     local_ci: dict = field(default_factory=dict)
     profile_limit: float = math.nan
+    optimum: np.ndarray | None = None
+
+    @property
+    def from_profile(self) -> bool:
+        """The estimate is a profile's probe, not the least squares' end."""
+        return self.optimum is not None and not np.array_equal(self.optimum, self.theta)
 
 
 class _Runs:
@@ -544,6 +557,13 @@ def identify(problem: Problem, evaluator=None, progress=None) -> Fit:
             v = par.value(float(t[i]))
             lo, hi = min(lo, v), max(hi, v)
         ci[par.key] = (lo, hi)
+    # the estimate: the cheapest point the fit has seen with the final weights (a profile's probe below the least
+    # squares' end: they stop where the trust region cannot see a descent on a rough misfit); every interval holds it
+    est = estimate(theta, probes)
+    for i, par in enumerate(problem.parameters):
+        lo, hi = ci[par.key]
+        v = par.value(float(est[i]))
+        ci[par.key] = (min(lo, v), max(hi, v))
     Js = J / np.where(norms > 0, norms, 1.0)
     ev, vec = np.linalg.eigh(Js.T @ Js)
     cond = float(ev[-1] / ev[0]) if ev[0] > 0 else math.inf
@@ -557,8 +577,36 @@ def identify(problem: Problem, evaluator=None, progress=None) -> Fit:
     stats = {"n_runs": len(history), "wall_s": time.perf_counter() - t_start, "workers": evaluator.workers,
              "where": evaluator.where, "cpu_s_runs": float(sum(h["cpu_s"] for h in history)),
              "passes": len(passes)}
-    return Fit(problem, theta, problem.values(theta), ci, cov, corr, J, sig, s2, n_eff, dof, tq, cond, vec[:, 0],
-               notes, weights, passes, history, target, stats, probes, local, limit)
+    return Fit(problem, est, problem.values(est), ci, cov, corr, J, sig, s2, n_eff, dof, tq, cond, vec[:, 0],
+               notes, weights, passes, history, target, stats, probes, local, limit, theta.copy())
+
+
+def estimate(theta: np.ndarray, probes: list) -> np.ndarray:
+    """The reported estimate: the profile's cheapest probe if its cost is below the least squares' end's (negative
+    excess), else the end ``theta``.
+
+    Parameters
+    ----------
+    theta : (p,) ndarray of float
+        The least squares' end, scaled.
+    probes : list of Probe
+        The profile (:func:`bearingshaft.identify.profile.profile`), excesses over the end's cost.
+
+    Returns
+    -------
+    (p,) ndarray of float
+
+    Examples
+    --------
+    >>> from bearingshaft.identify.profile import Probe
+    >>> ps = [Probe(0, 1, 1.0, np.array([0.1]), -0.5, True), Probe(0, -1, 1.0, np.array([-0.1]), 2.0, True)]
+    >>> estimate(np.zeros(1), ps).tolist(), estimate(np.zeros(1), ps[1:]).tolist()
+    ([0.1], [0.0])
+    """
+    lower = [pr for pr in probes if pr.excess < 0]
+    if not lower:
+        return np.asarray(theta, float).copy()
+    return np.asarray(min(lower, key=lambda pr: pr.excess).theta, float).copy()
 
 
 def profile_notes(problem: Problem, probes: list, local: dict, ci: dict, limit: float) -> list[str]:
@@ -588,9 +636,10 @@ def profile_notes(problem: Problem, probes: list, local: dict, ci: dict, limit: 
     lower = [pr for pr in probes if pr.excess < 0]
     if lower:
         best = min(lower, key=lambda pr: pr.excess)
-        notes.append(f"the profile found a lower misfit than the optimum ({len(lower)} probe(s), the lowest "
-                     f"{best.excess:+.4g} at {where(best.theta)}): the least squares stopped short on a rough misfit; "
-                     "the intervals reach it")
+        notes.append(f"the profile found a lower misfit than the least squares' end ({len(lower)} probe(s), the "
+                     f"lowest {best.excess:+.4g} at {where(best.theta)}): the least squares stopped short on a rough "
+                     "misfit; that probe is reported as the estimate (the Jacobian, correlations and local intervals "
+                     "are the end's), and the intervals reach it")
     for i, par in enumerate(problem.parameters):
         (a, b), (lo, hi) = local[par.key], ci[par.key]
         if (lo < a or hi > b) and any(pr.index == i for pr in probes):
@@ -824,5 +873,5 @@ def identifiability_notes(problem: Problem, corr: np.ndarray, cond: float, weake
     return notes
 
 
-__all__ = ["identify", "covariance", "interval_half_widths", "Fit", "Pass", "SerialEvaluator", "identifiability_notes",
-           "CORRELATION_LIMIT", "CONDITION_LIMIT"]
+__all__ = ["identify", "estimate", "covariance", "interval_half_widths", "Fit", "Pass", "SerialEvaluator",
+           "identifiability_notes", "CORRELATION_LIMIT", "CONDITION_LIMIT"]

@@ -9,7 +9,8 @@
 - ``identify.md``: what was fitted to what, how the residuals are weighted, the passes, the
   intervals, the identifiability notes;
 - ``identified_overlay.png``: test, first guess and identified model, over the pointwise span and
-  as RMS envelopes over the window;
+  as RMS envelopes over the window (the models' with the test's noise power added, as the fit compares them,
+  and the test's noise floor);
 - ``misfit_history.png``: the cost and the parameters run by run.
 
 Numbers are written to 6 significant digits (``digits``): the fit stops at a relative step of 1e-3,
@@ -137,11 +138,67 @@ def markdown(res: Identified) -> str:
             return ", ".join(f"{p.value(t):.4g}" for p, t in zip(ps, th, strict=True))
         lines.append(f"| {k + 1} | {show(pa.start)} | {show(pa.end)} | {pa.n_iterations} | {pa.cost_start:.4g} | "
                      f"{pa.cost_end:.4g} | {pa.span} |")
+    lines += estimate_lines(res)
     lines += profile_lines(res)
     st = fit.stats
     lines += ["", f"{st['n_runs']} model runs ({short(st['cpu_s_runs'], '.3g')} s of CPU) on {st['where']} "
               f"({st['workers']} workers), {st['wall_s']:.1f} s wall for the fit.", ""]
     return "\n".join(lines)
+
+
+def estimate_lines(res: Identified) -> list[str]:
+    """identify.md's estimate section: where the reported values come from, and for each parameter whose profile
+    the test cannot reject over a range wider than its local interval, why its point says no more than its interval.
+
+    Parameters
+    ----------
+    res : Identified
+    """
+    fit = res.fit
+    ps = fit.problem.parameters
+    if not fit.probes:
+        return []
+
+    def where(th):
+        return ", ".join(f"{p.key} = {p.value(float(t)):.4g}" for p, t in zip(ps, th, strict=True))
+
+    lines = ["", "## Estimate", ""]
+    if fit.from_profile:
+        excess = min(pr.excess for pr in fit.probes)
+        lines.append(f"The reported values are the profile's cheapest probe, {where(fit.theta)}: its cost is "
+                     f"{-excess:.4g} below the least squares' end ({where(fit.optimum)}), where the Jacobian, the "
+                     "correlations and the local intervals were taken. The least squares stopped where the trust "
+                     "region saw no descent; the cheaper point is the better least-squares estimate, "
+                     f"but a cost difference of {-excess:.4g} against the test's limit of {fit.profile_limit:.4g} is "
+                     "no evidence for one point over the other.")
+    else:
+        lines.append("The reported values are the least squares' end: no probe of the profile is cheaper.")
+    for j, p in enumerate(ps):
+        own = [pr for pr in fit.probes if pr.index == j and pr.accepted]
+        (a, b) = fit.local_ci.get(p.key, (math.nan, math.nan))
+        if not own:
+            continue
+        # the accepted probes, the least squares' end (excess 0) and the estimate (the cheapest probe, or the end)
+        end = fit.optimum if fit.optimum is not None else fit.theta
+        vals = [p.value(float(pr.theta[j])) for pr in own] + [fit.values[p.key], p.value(float(end[j]))]
+        lo, hi = min(vals), max(vals)
+        if not (lo < a or hi > b):
+            continue
+        ex = [pr.excess for pr in own] + [0.0] + ([min(pr.excess for pr in fit.probes)] if fit.from_profile else [])
+        # a cost that falls again farther out on a side: its differences are the chaos's, not the parameter's
+        rough = any(any(b_.excess < a_.excess for a_, b_ in zip(line, line[1:], strict=False))
+                    for line in (sorted((pr for pr in fit.probes if pr.index == j and pr.side == side),
+                                        key=lambda pr: pr.multiple) for side in (-1, 1)))
+        lines.append("")
+        lines.append(f"- {p.key}: along its profile (the others on the valley floor) the cost stays within "
+                     f"{min(ex):+.4g} to {max(ex):+.4g} of the end's from {lo:.4g} to {hi:.4g}, under the limit "
+                     f"{fit.profile_limit:.4g} that the test's noise and chaos allow"
+                     + (", and falls again farther out on a side: there the costs differ as new realisations of the "
+                        "chaos do, not as the parameter moves them" if rough else "") + ". "
+                     f"The point {fit.values[p.key]:.4g} is the cheapest the search found on that floor, not a value "
+                     "the test prefers over the others there; it says no more than the interval "
+                     f"[{fit.ci[p.key][0]:.4g}, {fit.ci[p.key][1]:.4g}].")
+    return lines
 
 
 def profile_lines(res: Identified) -> list[str]:
@@ -179,14 +236,87 @@ def _pick(names) -> list[int]:
     return (first + rest)[:MAX_PANELS]
 
 
+def rms_envelope(t: np.ndarray, y: np.ndarray, per: int, window_s) -> tuple[np.ndarray, np.ndarray]:
+    """(t_c, e): the RMS of ``y`` in consecutive windows of ``per`` samples inside ``window_s``, at their mean times.
+
+    Parameters
+    ----------
+    t : (N,) ndarray of float
+        s.
+    y : (N,) ndarray of float
+        A channel, its unit.
+    per : int
+        Samples a window.
+    window_s : (float, float)
+        s.
+
+    Returns
+    -------
+    (t_c (n,) in s, e (n,) in y's unit)
+
+    Examples
+    --------
+    >>> tc, e = rms_envelope(np.arange(4.0), np.array([3.0, -3.0, 4.0, 4.0]), 2, (0.0, 3.0))
+    >>> tc.tolist(), e.tolist()
+    ([0.5, 2.5], [3.0, 4.0])
+    """
+    inside = (t >= window_s[0]) & (t <= window_s[1])
+    x, tt = y[inside], t[inside]
+    n = x.size // per
+    return tt[: n * per].reshape(n, per).mean(axis=1), np.sqrt(np.mean(x[: n * per].reshape(n, per) ** 2, axis=1))
+
+
+def with_noise_power(e: np.ndarray, noise: float) -> np.ndarray:
+    """The model's RMS envelope as a sensor of RMS noise ``noise`` would record it: sqrt(e^2 + noise^2), the
+    form the envelope block compares with the test's (:mod:`bearingshaft.identify.residuals`; noise uncorrelated
+    with the motion adds its power).
+
+    Parameters
+    ----------
+    e : ndarray of float
+        The model's RMS envelope, the channel's unit.
+    noise : float
+        The test channel's RMS before the blow, the same unit.
+
+    Examples
+    --------
+    >>> with_noise_power(np.array([3.0, 0.0]), 4.0).tolist()
+    [5.0, 4.0]
+    """
+    return np.sqrt(np.asarray(e, float) ** 2 + float(noise) ** 2)
+
+
 def overlay_figure(res: Identified, path) -> None:
-    """Test, first guess and identified model: the pointwise span (left) and RMS envelopes over the window (right).
+    """identified_overlay.png (:func:`draw_overlay`).
 
     Parameters
     ----------
     res : Identified
     path : str or Path
         The PNG written.
+    """
+    fig = draw_overlay(res)
+    import matplotlib.pyplot as plt
+
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def draw_overlay(res: Identified):
+    """Test, first guess and identified model: the pointwise span (left) and RMS envelopes over the window (right).
+
+    The test's envelope holds its sensor's noise, sqrt(e^2 + n^2) with n its RMS before the blow, so late in the
+    record, where the motion has decayed under the noise, it levels off at n while the model's alone keeps falling.
+    The right panels therefore draw the models' envelopes with the test's noise power added (:func:`with_noise_power`,
+    as the fit compares them), the identified model's alone dashed, and the noise floor n dotted.
+
+    Parameters
+    ----------
+    res : Identified
+
+    Returns
+    -------
+    matplotlib Figure (the caller saves and closes it)
     """
     import matplotlib
 
@@ -203,27 +333,32 @@ def overlay_figure(res: Identified, path) -> None:
     near = (ov.t >= a - pad) & (ov.t <= b + 4 * pad)
     win = res.fit.problem.window_s
     per = max(1, int(round(tg.envelope_window_s / float(ov.t[1] - ov.t[0]))))
+    # the test channels' RMS before the blow, as recorded (the overlay draws the channels unfiltered)
+    noise = np.zeros(len(ov.names)) if tg.noise is None else np.asarray(tg.noise, float)
     for ax, ax2, i in zip(axes[:, 0], axes[:, 1], rows, strict=True):
         for data, label, style in ((ov.test, "test", dict(color="k", lw=1.0)),
                                    (ov.initial, "model, first guess", dict(color="tab:blue", lw=0.7, alpha=0.6)),
                                    (ov.identified, "model, identified", dict(color="tab:red", lw=0.8))):
             ax.plot(1e3 * ov.t[near], data[i][near], label=label, **style)
-            inside = (ov.t >= win[0]) & (ov.t <= win[1])
-            y = data[i][inside]
-            n = y.size // per
-            env = np.sqrt(np.mean(y[: n * per].reshape(n, per) ** 2, axis=1))
-            tc = ov.t[inside][: n * per].reshape(n, per).mean(axis=1)
-            ax2.semilogy(tc, env, label=label, **style)
+            tc, env = rms_envelope(ov.t, data[i], per, win)
+            if data is ov.test:
+                ax2.semilogy(tc, env, label=label, **style)
+                continue
+            ax2.semilogy(tc, with_noise_power(env, noise[i]), label=f"{label} + test's noise power", **style)
+            if data is ov.identified and noise[i] > 0:
+                ax2.semilogy(tc, env, label=f"{label}, alone", color="tab:red", lw=0.7, ls="--")
+        if noise[i] > 0:
+            ax2.axhline(noise[i], color="0.4", lw=0.8, ls=":", label="test's noise floor (RMS before the blow)")
         ax.axvspan(1e3 * a, 1e3 * b, color="0.9", zorder=0)
         ax.set_ylabel(f"{ov.names[i]} [{ov.units[i]}]")
         ax2.set_ylabel(f"RMS in {1e3 * tg.envelope_window_s:g} ms")
     axes[-1, 0].set_xlabel("t [ms] (shaded: the pointwise block, up to the horizon)")
-    axes[-1, 1].set_xlabel("t [s]")
+    axes[-1, 1].set_xlabel("t [s] (models: sqrt(e^2 + n^2), n the test's noise RMS)")
     axes[0, 0].legend(fontsize=8, loc="upper right")
+    axes[0, 1].legend(fontsize=7, loc="upper right")
     vals = ", ".join(f"{k.split('.', 1)[1]} = {v:.4g}" for k, v in res.fit.values.items())
     fig.suptitle(f"{res.scene.name}: test and model, identified {vals}", fontsize=10)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig
 
 
 def history_figure(res: Identified, path) -> None:
@@ -266,5 +401,5 @@ def history_figure(res: Identified, path) -> None:
     plt.close(fig)
 
 
-__all__ = ["write", "markdown", "profile_lines", "identified_rows", "correlation_rows", "weight_rows", "overlay_figure",
-           "history_figure"]
+__all__ = ["write", "markdown", "profile_lines", "estimate_lines", "identified_rows", "correlation_rows", "weight_rows",
+           "overlay_figure", "draw_overlay", "history_figure", "rms_envelope", "with_noise_power"]
