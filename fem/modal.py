@@ -182,7 +182,8 @@ def _svqb(W, MW, drop: float = 1e-12):
 
 
 def _extend(V, MV, W, M):
-    """(W, M W) with W M-orthonormal and M-orthogonal to the M-orthonormal V (``MV`` = M V).
+    """(W, M W, V^T M W, W^T M W) with W M-orthonormal and M-orthogonal to the M-orthonormal V
+    (``MV`` = M V); the two products are the new columns of the projected mass matrix.
 
     Block Gram-Schmidt against V twice (Kahan-Parlett: twice is enough; it needs M V, not M W),
     then one product M W and SVQB on the block. M W is computed from W after the projections,
@@ -197,10 +198,11 @@ def _extend(V, MV, W, M):
             if V.shape[1]:
                 W = W - _fprod(V, MV.T @ W)
         W, MW = _svqb(W, M @ W)
-        off = np.abs(MV.T @ W).max() if V.shape[1] else 0.0
-        if off < ORTHO_TOL and np.abs(W.T @ MW - np.eye(W.shape[1])).max() < ORTHO_TOL:
+        VtMW, WtMW = V.T @ MW, W.T @ MW
+        if ((VtMW.size == 0 or np.abs(VtMW).max() < ORTHO_TOL)
+                and np.abs(WtMW - np.eye(W.shape[1])).max() < ORTHO_TOL):
             break
-    return W, MW
+    return W, MW, VtMW, WtMW
 
 
 def _block_krylov(K, M, solve, n_modes: int, sigma: float, tol: float, seed: int, max_steps: int = MAX_STEPS,
@@ -241,16 +243,16 @@ def _block_krylov(K, M, solve, n_modes: int, sigma: float, tol: float, seed: int
     locked = np.zeros(m, bool)
     while True:
         # -- extend the basis by W, M-orthogonal to V
-        W, MW = _extend(V[:, :k], MV[:, :k], W, M)
+        W, MW, VtMW, WtMW = _extend(V[:, :k], MV[:, :k], W, M)
         KW = K @ W
         b = W.shape[1]
         V[:, k:k + b], MV[:, k:k + b] = W, MW
         Kr[:k, k:k + b] = V[:, :k].T @ KW
         Kr[k:k + b, :k] = Kr[:k, k:k + b].T
         Kr[k:k + b, k:k + b] = (W.T @ KW + KW.T @ W) / 2
-        Mr[:k, k:k + b] = V[:, :k].T @ MW
-        Mr[k:k + b, :k] = Mr[:k, k:k + b].T
-        Mr[k:k + b, k:k + b] = (W.T @ MW + MW.T @ W) / 2
+        Mr[:k, k:k + b] = VtMW
+        Mr[k:k + b, :k] = VtMW.T
+        Mr[k:k + b, k:k + b] = (WtMW + WtMW.T) / 2
         k += b
         del W, MW, KW
         # -- Rayleigh-Ritz on (K, M); every unlocked mode checked with K y itself and its floor
