@@ -259,6 +259,70 @@ def _product_and_abs(indptr, indices, data, X):
     return KX, AX
 
 
+@njit(cache=True, parallel=True)
+def _narrow(indptr, indices, data, X, with_abs):
+    """K X (and |K| |X| if ``with_abs``) for X of four columns: the sums in registers (the loops of
+    :func:`_product_and_abs` keep them in memory), in storage order as scipy's."""
+    n = len(indptr) - 1
+    KX = np.empty((n, 4))
+    AX = np.empty((n if with_abs else 0, 4))
+    for r in prange(n):
+        k0 = k1 = k2 = k3 = 0.0
+        a0 = a1 = a2 = a3 = 0.0
+        for p in range(indptr[r], indptr[r + 1]):
+            a = data[p]
+            c = indices[p]
+            x0, x1, x2, x3 = X[c, 0], X[c, 1], X[c, 2], X[c, 3]
+            k0 += a * x0
+            k1 += a * x1
+            k2 += a * x2
+            k3 += a * x3
+            if with_abs:
+                aa = abs(a)
+                a0 += aa * abs(x0)
+                a1 += aa * abs(x1)
+                a2 += aa * abs(x2)
+                a3 += aa * abs(x3)
+        KX[r, 0], KX[r, 1], KX[r, 2], KX[r, 3] = k0, k1, k2, k3
+        if with_abs:
+            AX[r, 0], AX[r, 1], AX[r, 2], AX[r, 3] = a0, a1, a2, a3
+    return KX, AX
+
+
+NARROW = 4  # columns up to which the register kernel (fewer padded with zero columns) beats scipy's product;
+# 112,629 DOFs, K X for 4 columns: 0.055 -> 0.029 CPU s, with |K| |X|: 0.067 -> 0.033 (scipy's is
+# faster for one column, and at 16 it takes 0.077 s where four passes of the register kernel take 0.15)
+
+
+def _narrow_call(K, X, with_abs):
+    b = X.shape[1]
+    X4 = np.zeros((X.shape[0], NARROW))
+    X4[:, :b] = X
+    KX, AX = _narrow(K.indptr, K.indices, K.data.astype(np.float64, copy=False), X4, with_abs)
+    return KX[:, :b], AX[:, :b]
+
+
+def product(K, X: np.ndarray) -> np.ndarray:
+    """K X for a CSR matrix K: the numba register kernel for 2 to :data:`NARROW` columns, scipy's
+    product otherwise (the same sums in the same order: the same bits either way).
+
+    Parameters
+    ----------
+    K : (n, n) scipy.sparse.csr_matrix
+        Any units.
+    X : (n, b) ndarray of float
+        The vectors.
+
+    Returns
+    -------
+    (n, b) ndarray of float
+        K X, in the units of K times those of X.
+    """
+    if not 2 <= X.shape[1] <= NARROW:
+        return K @ X
+    return _narrow_call(K, X, False)[0]
+
+
 def product_and_abs(K, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """K X and |K| |X| (entrywise absolute values) in one pass over the CSR matrix K.
 
@@ -277,5 +341,7 @@ def product_and_abs(K, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     KX, AX : (n, b) ndarray of float
         K X and |K| |X|, in the units of K times those of X.
     """
+    if X.shape[1] <= NARROW:
+        return _narrow_call(K, X, True)
     X = np.ascontiguousarray(X, dtype=np.float64)
     return _product_and_abs(K.indptr, K.indices, K.data.astype(np.float64, copy=False), X)

@@ -32,7 +32,7 @@ import scipy.sparse as sp
 from scipy.linalg import eigh as dense_eigh
 from scipy.sparse.linalg import LinearOperator, eigsh, splu
 
-from fem._assembly import product_and_abs, upper_sum
+from fem._assembly import product, product_and_abs, upper_sum
 from fem._pardiso import PardisoCholesky, blas_threads, fixed_threads
 from fem._pardiso import has_pardiso as _has_pardiso
 
@@ -197,7 +197,7 @@ def _extend(V, MV, W, M):
         for _ in range(2):
             if V.shape[1]:
                 W = W - _fprod(V, MV.T @ W)
-        W, MW = _svqb(W, M @ W)
+        W, MW = _svqb(W, product(M, W))
         VtMW, WtMW = V.T @ MW, W.T @ MW
         if ((VtMW.size == 0 or np.abs(VtMW).max() < ORTHO_TOL)
                 and np.abs(WtMW - np.eye(W.shape[1])).max() < ORTHO_TOL):
@@ -244,7 +244,7 @@ def _block_krylov(K, M, solve, n_modes: int, sigma: float, tol: float, seed: int
     while True:
         # -- extend the basis by W, M-orthogonal to V
         W, MW, VtMW, WtMW = _extend(V[:, :k], MV[:, :k], W, M)
-        KW = K @ W
+        KW = product(K, W)
         b = W.shape[1]
         V[:, k:k + b], MV[:, k:k + b] = W, MW
         Kr[:k, k:k + b] = V[:, :k].T @ KW

@@ -2,15 +2,17 @@
 
 - the scatter by places (a node's three DOFs share their rows' columns) gives, bit for bit, the
   matrices of the scatter DOF by DOF (forced by numbering the DOFs so that they form no places);
-- K X and |K| |X| in one pass give scipy's K @ X (the same sums in the same order) and |K| @ |X|.
+- K X and |K| |X| in one pass, and K X alone, give scipy's K @ X and |K| @ |X| bit for bit (the same
+  sums in the same order), on both sides of the register kernel's width.
 """
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import scipy.sparse as sp
 
-from fem._assembly import _block_size, product_and_abs, scatter_pair
+from fem._assembly import NARROW, _block_size, product, product_and_abs, scatter_pair
 
 
 def _mesh_dofs(nx=3, ny=2, nz=2, bs=3):
@@ -53,13 +55,17 @@ def test_scatter_by_places_equals_the_scatter_dof_by_dof_bit_for_bit():
     assert np.abs(sp.csr_matrix((kd, ix, ip), shape=(n, n)).toarray() - D).max() <= 1e-13 * np.abs(D).max()
 
 
-def test_product_and_abs_is_scipys_product_and_the_absolute_product():
+@pytest.mark.parametrize("b", [1, 2, 3, NARROW, NARROW + 1])
+def test_products_are_scipys_product_and_the_absolute_product(b):
+    # widths on both sides of NARROW: the register kernel (zero-padded to NARROW columns) and the loops
     rng = np.random.default_rng(4)
     K = sp.random(300, 300, density=0.05, random_state=5, format="csr") - sp.eye(300, format="csr")
     K = (K + K.T).tocsr()
     K.sort_indices()
-    X = rng.standard_normal((300, 5))
+    X = rng.standard_normal((300, b))
     KX, AX = product_and_abs(K, np.asfortranarray(X))
-    assert np.array_equal(KX, K @ X)  # scipy sums each row in storage order too
+    # scipy sums each row in storage order too: the same bits, not just close
+    assert np.array_equal(KX, K @ X)
+    assert np.array_equal(product(K, np.asfortranarray(X)), K @ X)
     absK = sp.csr_matrix((np.abs(K.data), K.indices, K.indptr), shape=K.shape)
-    np.testing.assert_allclose(AX, absK @ np.abs(X), rtol=1e-15, atol=0)
+    assert np.array_equal(AX, absK @ np.abs(X))
