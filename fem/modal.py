@@ -48,7 +48,6 @@ MAX_BLOCKS = 8  # Krylov: basis of at most MAX_BLOCKS blocks before a thick rest
 MAX_STEPS = 60  # Krylov: block solves before giving up (a mode left unconverged is reported)
 START_EXTRA = 8  # Krylov: the first block is the wanted modes and this many more
 ORTHO_TOL = 1e-12  # Krylov: M-orthonormality asked of the basis
-NEAR = 3.0  # Krylov: a mode's round-off floor is computed once its residual is within NEAR x its bound
 
 
 @dataclass(frozen=True, eq=False)
@@ -217,14 +216,21 @@ def _block_krylov(K, M, solve, n_modes: int, sigma: float, tol: float, seed: int
     from V^T K V c = theta V^T M V c, so the inexact solves of the ill-conditioned K - sigma M
     (condition ~1e10) only slow the convergence, never bias a converged pair.
 
-    K V and M V are kept beside V (one product each per new block), so the projected matrices
-    grow by a block a step and the Ritz vectors' K y and M y are dense products; a mode whose
-    residual so estimated passes its bound is checked with K y itself before it counts.
-    Mode i is converged when ||K y - theta M y|| <= max(tol ||K y||, ROUNDOFF_FACTOR eps ||
-    |K| |y| ||) (the floor is computed only for modes near it). Past MAX_BLOCKS blocks the
-    basis restarts from its wanted and guard Ritz vectors. Returns (theta, Y, n_op, n_steps,
-    converged); ``info``, if given, receives each returned mode's relative residual and floor
-    (``residuals``, ``floors``: as :func:`residual_test`).
+    M V is kept beside V and K W computed once per new block, so the projected matrices grow by
+    a block a step. Every mode not yet locked is checked at every step with K y itself, K y and
+    |K| |y| coming from one pass over K (:func:`fem._assembly.product_and_abs`; blocks of 2-4
+    columns, the usual case once the low modes are locked, by a register kernel twice as fast as
+    scipy's, :func:`fem._assembly.product`). Mode i is converged when ||K y - theta M y|| <=
+    max(tol ||K y||, ROUNDOFF_FACTOR eps || |K| |y| ||); a converged mode is locked (its Ritz vector
+    no longer drives a block), and when all are, the locked ones are checked again with their
+    present Ritz vectors before returning (one that slipped is iterated again). Past MAX_BLOCKS
+    blocks the basis restarts from its wanted and guard Ritz vectors. Returns (theta, Y, n_op,
+    n_steps, converged); ``info``, if given, receives each returned mode's relative residual and
+    floor (``residuals``, ``floors``: as :func:`residual_test`).
+
+    112,629-DOF apparatus, 16 modes: 68 solves in 10 steps, the Krylov phase 5.0 CPU s (at load 6-10;
+    2.3 s of it the solves), against 7.3 s before K V was dropped, the floors computed with K y and
+    the narrow products added.
     """
     n = K.shape[0]
     m = n_modes
