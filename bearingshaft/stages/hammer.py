@@ -109,7 +109,11 @@ def run_record(rig: VirtualRig, signal, scene: Scene, level_N: float, duration_s
     -100 dB from fs/2) and decimated; the integration runs on past the record by the
     filter's half length so its last samples are exact too. The hammer channel is the force
     applied, sampled as it is (the model's input: a record drives the model again with the same
-    force). The state (x, v) and the energies are the exact ones at the record's samples.
+    force). The state (x, v) and the energies are the exact ones at the record's samples. At the fine
+    rate the integrator evaluates only the channels' rows of the state (:class:`ChannelRows`,
+    :func:`reduced.transient.integrate.ringdown_rows`: the exact method sums r rows over its terms
+    instead of the whole state and its work), the whole state at the record's samples; the energy
+    balance error is over those.
 
     Parameters
     ----------

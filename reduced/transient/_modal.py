@@ -271,7 +271,23 @@ def _rows_eval(s, K, RT, Ryp, w, e, zt, out_z, j):
 
 @nb.njit(cache=True)
 def no_rows(S, Kmax, N):
-    """The ``acq`` argument of a run that samples the whole state at every sample (no output rows)."""
+    """The ``acq`` argument of a run that samples the whole state at every sample (no output rows).
+
+    Parameters
+    ----------
+    S : int
+        States of the run's tables.
+    Kmax : int
+        Their most kept terms.
+    N : int
+        Length of the state y.
+
+    Returns
+    -------
+    tuple
+        (0, R (0, N), RT (S, 2, Kmax, 0), Ryp (S, 0), Es (S, Kmax), have (S,), out_z (0, 0), zt (0,)), as
+        :func:`_free_kernel_rows` reads them.
+    """
     return (0, np.zeros((0, N)), np.zeros((S, 2, Kmax, 0)), np.zeros((S, 0)), np.zeros((S, Kmax), np.complex128),
             np.zeros(S, np.bool_), np.zeros((0, 0)), np.zeros(0))
 

@@ -169,21 +169,36 @@ class SampleRows:
         >= 1: the whole state (and the work) at the samples j = 0, every, 2 every, ...
     R : (r, N) ndarray of float
         The rows, on the kernels' state y (N = 2n, or 2n + p with friction).
+    store : dict, optional
+        Where the per-state tables are kept for the next run on the same tables with the same rows and rate (a
+        friction system's :class:`~reduced.transient.friction_tables.LazyFrictionTables` keeps one: the hammer
+        test's levels), keyed by R, the rate and the tables' shape; a state's entries never change once filled.
+    fs : float
+        Hz, the samples' rate (the key of ``store``: e^{lam / fs}).
     """
 
-    def __init__(self, every: int, R: np.ndarray) -> None:
+    def __init__(self, every: int, R: np.ndarray, store: dict | None = None, fs: float = 0.0) -> None:
         self.every = int(every)
         self.R = np.ascontiguousarray(R, dtype=float)
         self._key: tuple | None = None
         self._arrays: tuple = ()
+        self._store = store
+        self._digest = (self.R.shape, self.R.tobytes(), float(fs))
 
     def acq(self, S: int, Kmax: int, out_z: np.ndarray) -> tuple:
         """The kernels' ``acq`` argument for tables of S states of at most Kmax terms (the per-state tables
         allocated anew, empty, when those change: a friction table's term arrays may grow during a run)."""
         if self._key != (S, Kmax):
-            r = self.R.shape[0]
-            self._arrays = (np.zeros((S, 2, Kmax, r)), np.zeros((S, r)), np.zeros((S, Kmax), np.complex128),
-                            np.zeros(S, np.bool_))
+            key = (self._digest, S, Kmax)
+            if self._store is not None and key in self._store:
+                self._arrays = self._store[key]
+            else:
+                r = self.R.shape[0]
+                self._arrays = (np.zeros((S, 2, Kmax, r)), np.zeros((S, r)), np.zeros((S, Kmax), np.complex128),
+                                np.zeros(S, np.bool_))
+                if self._store is not None:
+                    self._store.clear()  # the last rows' tables only
+                    self._store[key] = self._arrays
             self._key = (S, Kmax)
         return (self.every, self.R, *self._arrays, out_z, np.zeros(self.R.shape[0]))
 

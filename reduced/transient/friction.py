@@ -304,7 +304,7 @@ class FrictionExactStepper(_stepper.Stepper):
         """As :meth:`reduced.transient.exact.ExactStepper.sample_rows`, R (r, 2n + p) on y = [x; v; w]: the
         whole state, the works and the sliders at every ``every``-th sample only (the same bits as without rows),
         R y at every sample (:func:`reduced.transient._friction_kernels._friction_free_kernel`)."""
-        self.rows = SampleRows(every, R)
+        self.rows = SampleRows(every, R, self.lazy.row_tables, self.sample_rate_hz)
 
     def _table_stats(self) -> None:
         """The tables' statistics over the states built so far (the time to build them in this run included)."""

@@ -745,6 +745,7 @@ class LazyFrictionTables:
         self._near: tuple = ([()] * self.S, [()] * self.S)  # each state's near-cancelling work terms
         self._lock = threading.Lock()
         self.build_s = 0.0  # s spent building states
+        self.row_tables: dict = {}  # the output rows' per-state tables of the runs' kernels (exact.SampleRows)
 
     @property
     def S(self) -> int:
