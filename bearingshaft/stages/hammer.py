@@ -40,7 +40,7 @@ that depend on where the exact integrator lands a crossing), :mod:`bearingshaft.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -109,7 +109,11 @@ def run_record(rig: VirtualRig, signal, scene: Scene, level_N: float, duration_s
     -100 dB from fs/2) and decimated; the integration runs on past the record by the
     filter's half length so its last samples are exact too. The hammer channel is the force
     applied, sampled as it is (the model's input: a record drives the model again with the same
-    force). The state (x, v) and the energies are the exact ones at the record's samples.
+    force). The state (x, v) and the energies are the exact ones at the record's samples. At the fine
+    rate the integrator evaluates only the channels' rows of the state (:class:`ChannelRows`,
+    :func:`reduced.transient.integrate.ringdown_rows`: the exact method sums r rows over its terms
+    instead of the whole state and its work), the whole state at the record's samples; the energy
+    balance error is over those.
 
     Parameters
     ----------
@@ -124,8 +128,8 @@ def run_record(rig: VirtualRig, signal, scene: Scene, level_N: float, duration_s
     Record
     """
     from reduced.models.daq import Acquisition, oversampling
-    from reduced.transient.integrate import ringdown
-    from reduced.transient.result import sample_count
+    from reduced.transient.integrate import ringdown_rows
+    from reduced.transient.result import balance_error, sample_count
 
     rd = scene.ringdown
     n = rig.system.n
@@ -134,16 +138,100 @@ def run_record(rig: VirtualRig, signal, scene: Scene, level_N: float, duration_s
     acq = Acquisition(fs, oversampling(rig.system.omega_max() / (2 * math.pi), fs))
     q = acq.oversample
     fine_duration = (q * (n_out - 1) + acq.tail_samples) / acq.fine_rate_hz
-    res = ringdown(rig.system, np.zeros(n), np.zeros(n), fine_duration, acq.fine_rate_hz, rd.method,
-                   loads=rig.loads(signal), **solver_options(rd))
-    keep = slice(0, q * (n_out - 1) + 1, q)
-    fine = rig.channel_data(res.x, res.v, signal(res.t), res.w)
-    data = np.vstack([acq.acquire(fine[:-1], n_out), fine[-1:, keep]])  # the hammer: the applied force itself
+    rows = ChannelRows.of(rig)
+    res, z = ringdown_rows(rig.system, np.zeros(n), np.zeros(n), fine_duration, acq.fine_rate_hz, rows.R, q,
+                           rd.method, loads=rig.loads(signal), **solver_options(rd))
+    t_fine = np.arange(z.shape[0]) / acq.fine_rate_hz
+    fine = rows.channels(z, signal(t_fine))
+    data = np.vstack([acq.acquire(fine[:-1], n_out), fine[-1:, : q * (n_out - 1) + 1: q]])  # the hammer: the force
     stats = {**res.stats, "acquisition": acq.describe(), "oversample": q}
     fr = rig.system.friction is not None
-    return Record(level_N, res.t[keep], data, res.x[keep], res.v[keep], res.energy[keep], res.dissipated[keep],
-                  res.external[keep], stats, float(res.energy_balance_error), res.w[keep] if fr else None,
-                  res.friction[keep] if fr else None)
+    E = res.energy
+    balance = balance_error(E, res.dissipated, res.external, res.loads is not None)
+    keep = slice(0, n_out)
+    return Record(level_N, res.t[keep], data, res.x[keep], res.v[keep], E[keep], res.dissipated[keep],
+                  res.external[keep], stats, balance, res.w[keep] if fr else None, res.friction[keep] if fr else None)
+
+
+@dataclass(frozen=True, eq=False)
+class ChannelRows:
+    """The rig's channels as rows of the state y = [x; v] ([x; v; w] with friction) and the stops' forces
+    (:meth:`reduced.models.rig.VirtualRig.channel_data`, rewritten so that the integrator can evaluate the rows
+    alone at the DAQ's fine rate, :func:`reduced.transient.integrate.ringdown_rows`).
+
+    With Wr = [acc_rows; seat_rows] M^-1, each accelerometer axis and seat is
+    a = Wr (b p - C v - K x - B^T f(B x) - Bt^T k_t (Bt x - w)) = L y + (Wr b) p - (Wr B^T) f(B x),
+    L = [-Wr K - Wr Bt^T k_t Bt, -Wr C, Wr Bt^T k_t]; the stops' forces f need only s = B x. So R = [L; B 0 0].
+
+    Attributes
+    ----------
+    R : (n_acc + 4 + m, N) ndarray of float
+        L (m/s^2 per unit of y) for the accelerometer axes and the seats, then B (the stops' coordinates, m).
+    Wb : (n_acc + 4,) ndarray of float
+        m/s^2 per N: Wr b.
+    WB : (n_acc + 4, m) ndarray of float
+        m/s^2 per N: Wr B^T.
+    rig : VirtualRig
+    """
+
+    R: np.ndarray
+    Wb: np.ndarray
+    WB: np.ndarray
+    rig: VirtualRig
+
+    @classmethod
+    def of(cls, rig: VirtualRig) -> ChannelRows:
+        """The rows of ``rig``'s channels.
+
+        Parameters
+        ----------
+        rig : VirtualRig
+
+        Returns
+        -------
+        ChannelRows
+        """
+        s = rig.system
+        n, p = s.n, s.p
+        W = np.linalg.solve(s.M, np.vstack([rig.acc_rows, rig.seat_rows]).T).T  # rows of R M^-1 (M symmetric)
+        L = np.zeros((W.shape[0], 2 * n + p))
+        L[:, :n] = -(W @ s.K)
+        L[:, n:2 * n] = -(W @ s.C)
+        if p:
+            WBt = (W @ s.friction.Bt.T) * s.friction.k_t  # (rows, p): Wr Bt^T k_t
+            L[:, :n] -= WBt @ s.friction.Bt
+            L[:, 2 * n:] = WBt
+        B = np.zeros((s.m, 2 * n + p))
+        B[:, :n] = s.B
+        return cls(np.vstack([L, B]), W @ rig.b, W @ s.B.T, rig)
+
+    def channels(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """(n_channels, N) every channel from the rows z (N, r) = y @ R^T under the hammer force p (N,), N;
+        the same channels as :meth:`reduced.models.rig.VirtualRig.channel_data` of those states, to round-off.
+
+        Parameters
+        ----------
+        z : (N, r) ndarray of float
+            R y at N samples.
+        p : (N,) ndarray of float
+            N, the hammer's force at them.
+
+        Returns
+        -------
+        (n_channels, N) ndarray of float
+            m/s^2 (accelerometers), N (load cells, the hammer).
+        """
+        rig = self.rig
+        s = rig.system
+        k = self.Wb.shape[0]
+        d = z[:, k:] - s.offset  # (N, m): B x - o
+        f = np.where(s.side * d > 0.0, s.k * d, 0.0)  # the stops' forces along their rows
+        a = z[:, :k].T + np.outer(self.Wb, p) - self.WB @ f.T
+        n_acc = len(rig.acc_rows)
+        stop = (s.k * np.maximum(s.side * d, 0.0)).T  # (4, N) compression of x1+, x1-, x3+, x3-: TIP_CELLS order
+        sign = np.array([1.0 if c.endswith("top") else -1.0 for c in TIP_CELLS])[:, None]
+        cells = stop - sign * rig.seismic_mass_kg * a[n_acc:]
+        return np.vstack([a[:n_acc], cells, p[None, :]])
 
 
 def default_location(rom) -> tuple[float, float, float]:

@@ -41,8 +41,11 @@ from reduced.transient._modal import (
     QTOL_REL,
     _eval,
     _march,
+    _rows_eval,
+    _rows_of_state,
     _stop_scratch,
     _term_scratch,
+    _terms,
     _terms_m1,
     _work,
     _work_near,
@@ -225,7 +228,7 @@ def _log(n_log, t, e, s, y, log_t, log_e, log_s, log_y):
 @nb.njit(cache=True)
 def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bounds, c, t_samples, i_samp, t_after,
                           out_y, out_W, out_Wf, W, Wf, hmin, floor, max_events, n_stuck, log_t, log_e, log_s, log_y,
-                          n_log, built, carry):
+                          n_log, built, carry, fs, acq):
     """March events from t through the pieces ending at bounds[c], bounds[c + 1], ... (no loads), filling the
     sample buffer ``t_samples`` from i_samp (:func:`reduced.transient._modal._free_kernel` with friction).
 
@@ -250,6 +253,14 @@ def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bound
     last event's slot, the fresh slider, the state before it, the trend) in ``carry`` (int64 (5,)), read
     back on entry, so that the run resumes where it stopped as if it had not.
 
+    With output rows (``acq`` = (every, R, RT, Ryp, Es, have, out_z, zt), every > 0; :func:`reduced.transient.
+    _modal._free_kernel_rows`; the samples at t_j = j / ``fs``), every sample's R y goes to out_z, and the whole
+    state and the work to out_y, out_W, out_Wf only at the samples j that are multiples of ``every`` (the same bits
+    as without rows; the others' entries are left as they are). A sample between those needs its terms e^{lam tau}
+    alone: stepped from the sample before in the segment, e^{lam (tau + 1/fs)} = e^{lam tau} e^{lam / fs}
+    (Es[s] = e^{lam / fs}, worked out with RT[s], Ryp[s] the first time a sample of state s needs them), afresh
+    at the segment's first sample. ``acq`` = :func:`reduced.transient._modal.no_rows`: every sample whole.
+
     Long because it is the free kernel's loop with the friction work, the event switch, the consistency
     decision and the hold of a slider slot that fired twice in a row inlined, so that its arithmetic per
     segment reads in one place.
@@ -265,6 +276,7 @@ def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bound
     ytmp = np.empty(N)
     dy = np.empty(N)
     ay = np.empty(N)
+    every, R, RT, Ryp, Es, have, out_z, zt = acq
     n_events = 0
     n_iter = 0
     status = 0
@@ -324,15 +336,32 @@ def _friction_free_kernel(modal, events, wv, wf, fric, damped, n, y, s, t, bound
         pin = -1
         fresh = -1
         t_next = (t + tau_lim if capped else t_end) if e_ev < 0 else t + tau_ev
+        stepped = False  # e holds the terms of the sample before, in this segment
         while i_samp < ns and t_samples[i_samp] <= t_next:
             tau = max(t_samples[i_samp] - t, 0.0)
-            _terms_m1(lam[s], K, tau, e, em, am1)
-            _eval(s, K, UT, yp, w, e, ytmp)
-            dW, dWf = _seg_work(s, K, w, em, am1, tau, n, y, ytmp, damped, slipping, wv, wf, LF, gr, gi)
-            out_W[i_samp] = (W + dW) + (Wf + dWf)
-            out_Wf[i_samp] = Wf + dWf
-            for r in range(N):
-                out_y[i_samp, r] = ytmp[r]
+            if every > 0 and not have[s]:
+                _rows_of_state(s, K, UT, yp, R, RT, Ryp)
+                for i in range(K):  # e^{lam / fs}
+                    a = math.exp(lam[s, i].real / fs)
+                    b = lam[s, i].imag / fs
+                    Es[s, i] = complex(a * math.cos(b), a * math.sin(b))
+                have[s] = True
+            if every == 0 or round(t_samples[i_samp] * fs) % every == 0:
+                _terms_m1(lam[s], K, tau, e, em, am1)
+                _eval(s, K, UT, yp, w, e, ytmp)
+                dW, dWf = _seg_work(s, K, w, em, am1, tau, n, y, ytmp, damped, slipping, wv, wf, LF, gr, gi)
+                out_W[i_samp] = (W + dW) + (Wf + dWf)
+                out_Wf[i_samp] = Wf + dWf
+                for r in range(N):
+                    out_y[i_samp, r] = ytmp[r]
+            elif stepped:
+                for i in range(K):
+                    e[i] = e[i] * Es[s, i]
+            else:
+                _terms(lam[s], K, tau, e, ea)
+            if every > 0:
+                _rows_eval(s, K, RT, Ryp, w, e, zt, out_z, i_samp)
+            stepped = True
             i_samp += 1
         if i_samp == ns and t_after <= t_next:
             status = BUFFER_FULL

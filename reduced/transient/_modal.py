@@ -231,6 +231,68 @@ def _eval(s, K, UT, yp, w, e, out):
 
 
 @nb.njit(cache=True, inline="always")
+def _rows_of_state(s, K, UT, yp, R, RT, Ryp):
+    """The output rows R (r, N) on state s's terms: RT[s, 0, i] = R Re U[:, i], RT[s, 1, i] = R Im U[:, i] (rows
+    contiguous, as UT) and Ryp[s] = R y_p, so that R y = R y_p + Re sum_i (R U)[:, i] w_i e_i (:func:`_rows_eval`)."""
+    r = R.shape[0]
+    N = R.shape[1]
+    for c in range(r):
+        acc = 0.0
+        for q in range(N):
+            acc += R[c, q] * yp[s, q]
+        Ryp[s, c] = acc
+    for i in range(K):
+        for c in range(r):
+            a = 0.0
+            b = 0.0
+            for q in range(N):
+                a += R[c, q] * UT[s, 0, i, q]
+                b += R[c, q] * UT[s, 1, i, q]
+            RT[s, 0, i, c] = a
+            RT[s, 1, i, c] = b
+
+
+@nb.njit(cache=True, inline="always")
+def _rows_eval(s, K, RT, Ryp, w, e, zt, out_z, j):
+    """out_z[j] = R y = R y_p + Re sum_i (R U)[:, i] w_i e_i (:func:`_rows_of_state`; zt: scratch (r,)): r rows
+    for K r products where the whole state costs K N (:func:`_eval`)."""
+    r = zt.shape[0]
+    for c in range(r):
+        zt[c] = Ryp[s, c]
+    for i in range(K):
+        u = w[i] * e[i]
+        ur = u.real
+        ui = u.imag
+        for c in range(r):
+            zt[c] += RT[s, 0, i, c] * ur - RT[s, 1, i, c] * ui
+    for c in range(r):
+        out_z[j, c] = zt[c]
+
+
+@nb.njit(cache=True)
+def no_rows(S, Kmax, N):
+    """The ``acq`` argument of a run that samples the whole state at every sample (no output rows).
+
+    Parameters
+    ----------
+    S : int
+        States of the run's tables.
+    Kmax : int
+        Their most kept terms.
+    N : int
+        Length of the state y.
+
+    Returns
+    -------
+    tuple
+        (0, R (0, N), RT (S, 2, Kmax, 0), Ryp (S, 0), Es (S, Kmax), have (S,), out_z (0, 0), zt (0,)), as
+        :func:`_free_kernel_rows` reads them.
+    """
+    return (0, np.zeros((0, N)), np.zeros((S, 2, Kmax, 0)), np.zeros((S, 0)), np.zeros((S, Kmax), np.complex128),
+            np.zeros(S, np.bool_), np.zeros((0, 0)), np.zeros(0))
+
+
+@nb.njit(cache=True, inline="always")
 def _start(s, K, y, Uinv, aUinv, yp, BU, aBU, Byp, lam, alam, offset, side, active, floor, w, werr, coef, lc,
            l2c, a0, const, qtol, dnoise, live, dy, ay):
     """Segment start in state s: w = Uinv (y - y_p) and werr (its round-off, EPS sum |Uinv| (|y| + |y_p|)),
@@ -550,7 +612,26 @@ def _free_kernel(tb, offset, side, tip, damped, y, active, t, bounds, c, t_sampl
                      W, hmin, floor, max_events, n_stuck, out_E, E, seg_s, seg_tau, _term_scratch(Kmax),
                      _stop_scratch(offset.shape[0], Kmax), np.empty(N), np.empty(N), np.empty(N), fs,
                      (np.zeros(S, np.bool_), np.empty((S, Kmax), np.complex128), np.empty((S, Kmax), np.complex128),
-                      np.empty((S, Kmax))), np.ones(Kmax))
+                      np.empty((S, Kmax))), np.ones(Kmax), no_rows(S, Kmax, N))
+
+
+@nb.njit(cache=True)
+def _free_kernel_rows(tb, offset, side, tip, damped, y, active, t, bounds, c, t_samples, i_samp, t_after, out_y,
+                      out_W, W, hmin, floor, max_events, n_stuck, out_E, E, fs, acq):
+    """:func:`_free_kernel` (no segments recorded; ``fs`` > 0) with output rows ``acq`` = (every, R, RT, Ryp, Es,
+    have, out_z, zt): every sample's R y into out_z (:func:`_rows_eval`, R (r, N)); the whole state and the
+    dissipated work into out_y and out_W only at the samples j (at j / fs) that are multiples of ``every``, the
+    others' rows of out_y and out_W left as they are. Those samples are the same bits as :func:`_free_kernel`'s
+    (the terms are stepped through every sample as there). RT, Ryp (S, 2, Kmax, r), (S, r) are filled for a
+    state the first time a sample needs them (``have`` (S,) bool: per run, the run's tables); Es is not read.
+    Returns as :func:`_free_kernel`."""
+    N = y.shape[0]
+    S, Kmax = tb[1].shape
+    return _free_run(tb, offset, side, tip, damped, y, active, t, bounds, c, t_samples, i_samp, t_after, out_y, out_W,
+                     W, hmin, floor, max_events, n_stuck, out_E, E, np.zeros(0, np.int64), np.zeros(0),
+                     _term_scratch(Kmax), _stop_scratch(offset.shape[0], Kmax), np.empty(N), np.empty(N), np.empty(N),
+                     fs, (np.zeros(S, np.bool_), np.empty((S, Kmax), np.complex128),
+                          np.empty((S, Kmax), np.complex128), np.empty((S, Kmax))), np.ones(Kmax), acq)
 
 
 @nb.njit(cache=True, inline="always")
@@ -595,10 +676,11 @@ def _sample_terms(lam, s, K, tau, e, em, am1, j, fs, t, stepped, steps):
 @nb.njit(cache=True, _nrt=False)
 def _free_run(tb, offset, side, tip, damped, y, active, t, bounds, c, t_samples, i_samp, t_after, out_y, out_W,
               W, hmin, floor, max_events, n_stuck, out_E, E, seg_s, seg_tau, terms, stops, ytmp, dy, ay, fs, steps,
-              ones):
+              ones, acq):
     """:func:`_free_kernel`'s march, on its scratch (``terms``: :func:`_term_scratch`, ``stops``:
     :func:`_stop_scratch`, ytmp, dy, ay (2n,); ``ones`` (Kmax,) the march's bound factors: no growing terms, the
-    states decay or oscillate). Compiled without numba's reference counting (``_nrt=False``:
+    states decay or oscillate; ``acq``: the output rows, :func:`_free_kernel_rows`, or :func:`no_rows`).
+    Compiled without numba's reference counting (``_nrt=False``:
     it allocates nothing): every array passed to an inlined helper would otherwise cost two atomic
     reference counts per call, a fifth of the march's time on a small system."""
     (nK, lam, alam, UT, Uinv, aUinv, yp, BU, aBU, Byp, Wm, Hd, ip, ii, ik, ikind, icoef, iz) = tb
@@ -608,6 +690,7 @@ def _free_run(tb, offset, side, tip, damped, y, active, t, bounds, c, t_samples,
     has_E = out_E.shape[0] > 0
     w, werr, e, ea, em, am1, gr, gi = terms
     coef, lc, l2c, a0, const, qtol, dnoise, live, hprev, hnext, P = stops
+    every, R, RT, Ryp, _, have, out_z, zt = acq
     n_events = 0
     n_iter = 0
     status = 0
@@ -634,14 +717,20 @@ def _free_run(tb, offset, side, tip, damped, y, active, t, bounds, c, t_samples,
             tau = max(t_samples[i_samp] - t, 0.0)
             j = round(t_samples[i_samp] * fs) if fs > 0.0 else 0
             stepped = _sample_terms(lam, s, K, tau, e, em, am1, j, fs, t, stepped, steps)
-            _eval(s, K, UT, yp, w, e, ytmp)
-            out_W[i_samp] = W + ((_work(s, K, w, em, am1, tau, Wm, Hd, gr, gi)
-                                  + (_work_near(s, w, tau, ip, ii, ik, ikind, icoef, iz) if near else 0.0))
-                                 if damped else 0.0)
+            if every == 0 or j % every == 0:
+                _eval(s, K, UT, yp, w, e, ytmp)
+                out_W[i_samp] = W + ((_work(s, K, w, em, am1, tau, Wm, Hd, gr, gi)
+                                      + (_work_near(s, w, tau, ip, ii, ik, ikind, icoef, iz) if near else 0.0))
+                                     if damped else 0.0)
+                for r in range(N):
+                    out_y[i_samp, r] = ytmp[r]
             if has_E:
                 out_E[i_samp] = E
-            for r in range(N):
-                out_y[i_samp, r] = ytmp[r]
+            if every > 0:
+                if not have[s]:
+                    _rows_of_state(s, K, UT, yp, R, RT, Ryp)
+                    have[s] = True
+                _rows_eval(s, K, RT, Ryp, w, e, zt, out_z, i_samp)
             i_samp += 1
         if i_samp == ns and t_after <= t_next:
             status = BUFFER_FULL  # the segment is searched again with the next buffer: count it then

@@ -93,6 +93,7 @@ from reduced.transient._modal import (  # noqa: F401 (re-exported)
     TAYLOR_TERMS,
     TAYLOR_ZT,
     _free_kernel,
+    _free_kernel_rows,
 )
 from reduced.transient.exact_tables import (  # noqa: F401 (re-exported: the tables are part of this method's API)
     MAX_COND,
@@ -156,6 +157,50 @@ def _check_status(status: int, t: float, max_events: int) -> None:
         )
     if status == -3:
         raise ExactIntegratorError(f"event search did not converge near t = {t:.6g} s")
+
+
+class SampleRows:
+    """Output rows of an exact run (:meth:`ExactStepper.sample_rows`): R y at every sample, the whole state only
+    at every ``every``-th, and the per-state tables the kernels fill for them (R U, R y_p, e^{lam / fs}).
+
+    Parameters
+    ----------
+    every : int
+        >= 1: the whole state (and the work) at the samples j = 0, every, 2 every, ...
+    R : (r, N) ndarray of float
+        The rows, on the kernels' state y (N = 2n, or 2n + p with friction).
+    store : dict, optional
+        Where the per-state tables are kept for the next run on the same tables with the same rows and rate (a
+        friction system's :class:`~reduced.transient.friction_tables.LazyFrictionTables` keeps one: the hammer
+        test's levels), keyed by R, the rate and the tables' shape; a state's entries never change once filled.
+    fs : float
+        Hz, the samples' rate (the key of ``store``: e^{lam / fs}).
+    """
+
+    def __init__(self, every: int, R: np.ndarray, store: dict | None = None, fs: float = 0.0) -> None:
+        self.every = int(every)
+        self.R = np.ascontiguousarray(R, dtype=float)
+        self._key: tuple | None = None
+        self._arrays: tuple = ()
+        self._store = store
+        self._digest = (self.R.shape, self.R.tobytes(), float(fs))
+
+    def acq(self, S: int, Kmax: int, out_z: np.ndarray) -> tuple:
+        """The kernels' ``acq`` argument for tables of S states of at most Kmax terms (the per-state tables
+        allocated anew, empty, when those change: a friction table's term arrays may grow during a run)."""
+        if self._key != (S, Kmax):
+            key = (self._digest, S, Kmax)
+            if self._store is not None and key in self._store:
+                self._arrays = self._store[key]
+            else:
+                r = self.R.shape[0]
+                self._arrays = (np.zeros((S, 2, Kmax, r)), np.zeros((S, r)), np.zeros((S, Kmax), np.complex128),
+                                np.zeros(S, np.bool_))
+                if self._store is not None:
+                    self._store.clear()  # the last rows' tables only
+                    self._store[key] = self._arrays
+            self._key = (S, Kmax)
+        return (self.every, self.R, *self._arrays, out_z, np.zeros(self.R.shape[0]))
 
 
 class ExactStepper(_stepper.Stepper):
@@ -227,6 +272,16 @@ class ExactStepper(_stepper.Stepper):
         self.runs: list = []  # its runs still to go, the first under way
         self.c = 0  # the piece reached in the present run's bounds
         self.fargs: tuple = ()
+        self.rows: SampleRows | None = None
+
+    def sample_rows(self, every: int, R: np.ndarray) -> None:
+        """Sample R y (R (r, 2n)) at every sample, into the buffers' last array (k, r), and the whole state and
+        the works only at the samples j (at j / fs) that are multiples of ``every``: the same bits as a run
+        without rows there; the other samples' entries of x, v, W are not written (a free segment's sample
+        then costs the r rows instead of the state and its work: :func:`reduced.transient._modal.
+        _free_kernel_rows`). Call it before the first step; :func:`reduced.transient.integrate.ringdown_rows`
+        runs it."""
+        self.rows = SampleRows(every, R)
 
     def _scales(self, omega_max: float) -> tuple[float, float]:
         """(floor, load_scale) in m: motion below REST_FLOOR of the initial one (or of the static
@@ -260,10 +315,11 @@ class ExactStepper(_stepper.Stepper):
         return out
 
     def arrays(self, k: int) -> tuple[np.ndarray, ...]:
-        return np.empty((k, 2 * self.n)), np.empty(k), np.empty(k if self.forced else 0)
+        out = np.empty((k, 2 * self.n)), np.empty(k), np.empty(k if self.forced else 0)
+        return out if self.rows is None else (*out, np.empty((k, self.rows.R.shape[0])))
 
     def block(self, buf: _stepper.Buffer) -> tuple[np.ndarray, ...]:
-        out_y, out_W, out_E = buf.arrays
+        out_y, out_W, out_E = buf.arrays[:3]
         # one pass without a temporary: a non-finite sample makes the sum non-finite (the full test
         # only then, for a sum that overflowed)
         if not np.isfinite(np.add.reduce(out_y, axis=None)) and not np.all(np.isfinite(out_y)):
@@ -304,9 +360,17 @@ class ExactStepper(_stepper.Stepper):
         """The kernel of the present run on ``buf``; the state advanced; returns the kernel's status."""
         _, t_b, starts = self.runs[0]
         g = self.groups[self.g]
-        run, tb, (out_y, out_W, out_E) = self.run_system, self.table, buf.arrays
+        run, tb, (out_y, out_W, out_E) = self.run_system, self.table, buf.arrays[:3]
         left = self.options.max_events - self.n_events
-        if starts is None:
+        filled = buf.filled
+        if starts is None and self.rows is not None:
+            bounds = g if len(g) > 1 else np.array([t_b])
+            S, Kmax = self.mt[1].shape
+            self.t, self.W, buf.filled, ne, ni, status, self.n_stuck, self.c = call_numba_kernel(_free_kernel_rows,
+                self.mt, run.offset, run.side, run.tip, self.damped, self.y, self.active, self.t, bounds, self.c,
+                buf.t, buf.filled, buf.t_after, out_y, out_W, self.W, self.hmin, self.floor, left, self.n_stuck,
+                out_E, self.E, float(self.sample_rate_hz), self.rows.acq(S, Kmax, buf.arrays[3]))
+        elif starts is None:
             bounds = g if len(g) > 1 else np.array([t_b])
             self.t, self.W, buf.filled, ne, ni, status, self.n_stuck, self.c = call_numba_kernel(_free_kernel,
                 self.mt, run.offset, run.side, run.tip, self.damped, self.y, self.active, self.t, bounds, self.c,
@@ -317,6 +381,8 @@ class ExactStepper(_stepper.Stepper):
                 tb.lam, tb.V, tb.Vinv, tb.yp, tb.valid, run.B, run.offset, run.side, run.tip, run.C, self.damped,
                 self.y, self.active, self.t, t_b, buf.t, buf.filled, buf.t_after, out_y, out_W, self.W, self.hmin,
                 self.floor, left, self.n_stuck, *self.fargs, out_E, self.E, self.options.work)
+            if self.rows is not None:  # a forced stretch samples the whole state: its rows from it
+                buf.arrays[3][filled:buf.filled] = out_y[filled:buf.filled] @ self.rows.R.T
         self.n_events += ne
         self.n_iter += ni
         self.stats.update(n_events=self.n_events, n_steps=self.n_events + 1, n_march=self.n_iter)

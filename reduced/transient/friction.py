@@ -43,7 +43,7 @@ from reduced.transient._friction_kernels import (
     _friction_forced_kernel,
     _friction_free_kernel,
 )
-from reduced.transient._modal import BUFFER_FULL, EPS
+from reduced.transient._modal import BUFFER_FULL, EPS, no_rows
 from reduced.transient.dop853 import Dop853Options
 from reduced.transient.exact import (
     HMIN_PERIODS,
@@ -53,6 +53,7 @@ from reduced.transient.exact import (
     REST_FLOOR,
     ExactIntegratorError,
     ExactOptions,
+    SampleRows,
     _check_status,
 )
 from reduced.transient.exact_tables import forced_arrays
@@ -297,6 +298,13 @@ class FrictionExactStepper(_stepper.Stepper):
         self.log = (np.zeros(cap), np.zeros(cap, np.int64), np.zeros(cap, np.int64), np.zeros((cap, N)))
         self.n_log = 0
         self.carry = np.zeros(5, np.int64)  # the kernels' memory of the last switch, kept over a NEW_STATE return
+        self.rows: SampleRows | None = None
+
+    def sample_rows(self, every: int, R: np.ndarray) -> None:
+        """As :meth:`reduced.transient.exact.ExactStepper.sample_rows`, R (r, 2n + p) on y = [x; v; w]: the
+        whole state, the works and the sliders at every ``every``-th sample only (the same bits as without rows),
+        R y at every sample (:func:`reduced.transient._friction_kernels._friction_free_kernel`)."""
+        self.rows = SampleRows(every, R, self.lazy.row_tables, self.sample_rate_hz)
 
     def _table_stats(self) -> None:
         """The tables' statistics over the states built so far (the time to build them in this run included)."""
@@ -346,10 +354,11 @@ class FrictionExactStepper(_stepper.Stepper):
         return out
 
     def arrays(self, k: int) -> tuple[np.ndarray, ...]:
-        return np.empty((k, self.y.size)), np.empty(k), np.empty(k), np.empty(k if self.forced else 0)
+        out = np.empty((k, self.y.size)), np.empty(k), np.empty(k), np.empty(k if self.forced else 0)
+        return out if self.rows is None else (*out, np.empty((k, self.rows.R.shape[0])))
 
     def block(self, buf: _stepper.Buffer) -> tuple[np.ndarray, ...]:
-        out_y, out_W, out_Wf, out_E = buf.arrays
+        out_y, out_W, out_Wf, out_E = buf.arrays[:4]
         if not np.all(np.isfinite(out_y)):
             raise ExactIntegratorError("non-finite state: the friction states are ill-conditioned")
         n = self.n
@@ -399,22 +408,27 @@ class FrictionExactStepper(_stepper.Stepper):
             self._table_stats()
         if self.runs[0][2] is None:
             buf.arrays[3][filled:buf.filled] = self.E  # a free stretch of a forced run: the loads' work stays
+        elif self.rows is not None:  # a forced stretch samples the whole state: its rows from it
+            buf.arrays[4][filled:buf.filled] = buf.arrays[0][filled:buf.filled] @ self.rows.R.T
         return status
 
     def _call_once(self, buf: _stepper.Buffer) -> int:
         """One kernel call of the present run on ``buf`` (the state advanced); returns its status."""
         _, t_b, starts = self.runs[0]
         g = self.groups[self.g]
-        out_y, out_W, out_Wf, out_E = buf.arrays
+        out_y, out_W, out_Wf, out_E = buf.arrays[:4]
         left = self.options.max_events - self.n_events
         modal, events, wv, wf, built = self.lazy.arrays()
         if starts is None:
             bounds = g if len(g) > 1 else np.array([t_b])
+            S, Kmax = modal[1].shape
+            acq = no_rows(S, Kmax, out_y.shape[1]) if self.rows is None else self.rows.acq(S, Kmax, buf.arrays[4])
             (self.t, self.W, self.Wf, self.s, buf.filled, ne, ni, status, self.n_stuck, self.c,
              self.n_log) = call_numba_kernel(
                 _friction_free_kernel, modal, events, wv, wf, self.fric, self.damped, self.n, self.y, self.s, self.t,
                 bounds, self.c, buf.t, buf.filled, buf.t_after, out_y, out_W, out_Wf, self.W, self.Wf, self.hmin,
-                self.floor, left, self.n_stuck, *self.log, self.n_log, built, self.carry)
+                self.floor, left, self.n_stuck, *self.log, self.n_log, built, self.carry, float(self.sample_rate_hz),
+                acq)
         else:
             tb = self.table
             (self.t, self.W, self.Wf, self.E, self.s, buf.filled, ne, ni, status,

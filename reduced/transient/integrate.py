@@ -6,6 +6,9 @@
   independent of the duration);
 - :func:`ringdown_stream` gives the run as a :class:`RingdownStream` of chunks, for
   analyses that need no file (two runs compared sample by sample);
+- :func:`ringdown_rows` gives a run's whole state at every ``every``-th sample and chosen
+  rows of it at every sample (a DAQ's channels computed at an oversampled rate: the exact
+  integrator then evaluates the rows alone between the whole states);
 - :func:`ringdown_peak_bytes` and :func:`ringdown_disk_bytes` say beforehand what a run
   will allocate and write, so a caller can refuse it before any work.
 
@@ -16,14 +19,17 @@ driver :func:`reduced.transient.stepper.run`.
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
+
+import numpy as np
 
 from reduced import _checks as _check
 from reduced.models.gaps import GapSystem
 from reduced.transient import friction as _friction  # noqa: F401 (registers the steppers of systems with friction)
 from reduced.transient import stepper as _stepper
 from reduced.transient.dop853 import Dop853Options, Dop853Stepper
-from reduced.transient.exact import ExactOptions, ExactStepper
+from reduced.transient.exact import ExactIntegratorError, ExactOptions, ExactStepper
 from reduced.transient.explicit import DEFAULT_OMEGA_DT, ExplicitOptions, ExplicitStepper
 from reduced.transient.methods import METHODS
 from reduced.transient.result import RingdownResult, RingdownStream, sample_count
@@ -320,3 +326,92 @@ def ringdown(
         return stream.collect()
     return stream.save(out)
 
+
+def ringdown_rows(
+    system: GapSystem,
+    x0,
+    v0,
+    duration_s: float,
+    sample_rate_hz: float,
+    rows,
+    every: int,
+    method: str = "exact",
+    *,
+    loads=None,
+    **options,
+) -> tuple[RingdownResult, np.ndarray]:
+    """The run of :func:`ringdown` held whole at every ``every``-th sample, and ``rows`` of its state at every sample.
+
+    The exact method samples the rows alone between the whole states (:meth:`reduced.transient.exact.ExactStepper.
+    sample_rows`: R U w e^{lam tau}, r products a term instead of the state's 2n and the work's K): a DAQ's
+    channels, linear in the state, at an oversampled rate cost little more than the record at its own rate.
+    The samples held whole are the same bits as :func:`ringdown`'s at those times; the rows are R y to round-off
+    (summed over the terms instead of over y). The other methods run :func:`ringdown` and take R y of every sample.
+
+    Parameters
+    ----------
+    system, x0, v0, duration_s, sample_rate_hz, method, loads : as :func:`ringdown` (the rate of the rows)
+    rows : (r, N) array_like of float
+        R, on the state y = [x; v] (N = 2n), or [x; v; w] with friction (N = 2n + p, w the sliders' positions).
+    every : int
+        >= 1: the state is held at the samples j = 0, every, 2 every, ... of the N samples of the run.
+    **options : the method's options of :func:`ringdown` (dt, omega_dt, step_basis, rtol, atol)
+
+    Returns
+    -------
+    (RingdownResult, (N_samples, r) ndarray)
+        The run at t = j / sample_rate_hz for j = 0, every, ... (its ``energy_balance_error`` over those
+        samples), and R y at every sample.
+
+    Raises
+    ------
+    InvalidArgument
+        An argument out of range (as :func:`ringdown`; ``rows`` not (r, N) finite, ``every`` not >= 1).
+    """
+    method = _check.choice("method", method, METHODS)
+    _check.gap_system(system)
+    loads = _check.loads(loads, system.n)
+    every = _check.integer("every", every, lo=1)
+    R = np.asarray(rows, dtype=float)
+    N_state = 2 * system.n + system.p
+    if R.ndim != 2 or R.shape[1] != N_state or not np.all(np.isfinite(R)):
+        raise _check.InvalidArgument(f"rows must be a finite (r, {N_state}) array on the state [x; v"
+                                     f"{'; w' if system.p else ''}], got shape {R.shape}")
+    opts = method_options(method, **options)
+    if method != "exact":
+        res = ringdown(system, x0, v0, duration_s, sample_rate_hz, method, loads=loads, **options)
+        y = np.hstack([res.x, res.v] + ([res.w] if res.w is not None else []))
+        return _kept(res, every), y @ R.T
+    stepper = _stepper.setup(STEPPERS[method], system, x0, v0, duration_s, sample_rate_hz, opts, loads)
+    stepper.sample_rows(every, R)
+    N = stepper.n_samples
+    buf = _stepper.Buffer(0, N, N, sample_rate_hz, stepper.arrays(N))
+    t0 = time.perf_counter()
+    while not stepper.finished:
+        stepper.step(buf)
+    if not buf.full:
+        raise RuntimeError(f"internal: {N - buf.filled} exact samples not filled")
+    stepper.stats["wall_s"] = time.perf_counter() - t0
+    keep = slice(0, N, every)
+    n, fr = system.n, system.friction is not None
+    y, W, z = buf.arrays[0][keep], buf.arrays[1][keep], buf.arrays[-1]
+    if not (np.all(np.isfinite(y)) and np.all(np.isfinite(z))):
+        raise ExactIntegratorError("non-finite state: the contact states are ill-conditioned")
+    Wf = buf.arrays[2][keep] if fr else None
+    Wext = buf.arrays[3 if fr else 2][keep] if loads is not None else None
+    x = y[:, :n]
+    res = RingdownResult(system=system, t=np.arange(0, N, every) / sample_rate_hz, x=x, v=y[:, n:2 * n], dissipated=W,
+                         method=method, tolerance=float(stepper.tolerance(float(np.max(np.abs(x), initial=0.0)))),
+                         stats=stepper.stats, external=Wext, loads=loads, w=y[:, 2 * n:] if fr else None, friction=Wf,
+                         events=getattr(stepper, "events", None))
+    return res, z
+
+
+def _kept(res: RingdownResult, every: int) -> RingdownResult:
+    """``res`` at its samples 0, every, 2 every, ..."""
+    k = slice(0, None, every)
+    return RingdownResult(system=res.system, t=res.t[k], x=res.x[k], v=res.v[k], dissipated=res.dissipated[k],
+                          method=res.method, tolerance=res.tolerance, stats=res.stats,
+                          external=res.external[k] if res.loads is not None else None, loads=res.loads,
+                          w=None if res.w is None else res.w[k],
+                          friction=None if res.friction is None else res.friction[k], events=res.events)

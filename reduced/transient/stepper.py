@@ -147,6 +147,26 @@ def run(stepper_class: type[Stepper], system: GapSystem, x0, v0, duration_s: flo
     The arguments are checked in this order, before any work: the run's, the loads, the method's
     options, ``progress``, ``chunk_samples``.
     """
+    stepper = setup(stepper_class, system, x0, v0, duration_s, sample_rate_hz, options, loads, progress,
+                    chunk_samples)
+    N = stepper.n_samples
+    return stream(stepper, N if chunk_samples is None else _check.integer("chunk_samples", chunk_samples), progress)
+
+
+def setup(stepper_class: type[Stepper], system: GapSystem, x0, v0, duration_s: float, sample_rate_hz: float, options,
+          loads=None, progress: Callable[[float], None] | None = None, chunk_samples: int | None = None) -> Stepper:
+    """:func:`run`'s checks and its stepper, set up for the run (the stepper of systems with friction for one),
+    not yet stepped: for a caller that drives it itself (:func:`reduced.transient.integrate.ringdown_rows`).
+
+    Parameters
+    ----------
+    stepper_class, system, x0, v0, duration_s, sample_rate_hz, options, loads, progress, chunk_samples
+        As :func:`run` (``progress`` and ``chunk_samples`` only checked).
+
+    Returns
+    -------
+    Stepper
+    """
     n, x0, v0, duration_s, sample_rate_hz = _check.run_args(system, x0, v0, duration_s, sample_rate_hz)
     if system.friction is not None and not stepper_class.friction:
         if stepper_class.method not in FRICTION_STEPPERS:
@@ -158,9 +178,9 @@ def run(stepper_class: type[Stepper], system: GapSystem, x0, v0, duration_s: flo
     options = options.checked(system)
     _check.callback("progress", progress)
     N = sample_count(duration_s, sample_rate_hz)
-    chunk_samples = N if chunk_samples is None else _check.integer("chunk_samples", chunk_samples)
-    stepper = stepper_class(system, x0, v0, duration_s, N, sample_rate_hz, options, loads, progress is not None)
-    return stream(stepper, chunk_samples, progress)
+    if chunk_samples is not None:
+        _check.integer("chunk_samples", chunk_samples)
+    return stepper_class(system, x0, v0, duration_s, N, sample_rate_hz, options, loads, progress is not None)
 
 
 def stream(stepper: Stepper, chunk_samples: int, progress: Callable[[float], None] | None = None) -> RingdownStream:
