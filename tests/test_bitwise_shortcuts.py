@@ -178,3 +178,67 @@ def test_newton_asks_for_the_jacobian_only_where_it_steps():
     assert np.array_equal(a.y, b.y) and a.n_iter == b.n_iter and np.array_equal(a.jacobian, b.jacobian)
     assert abs(a.y).max() < 1e-12  # the root 0
     assert len(asked) == b.n_iter + 1 < len(calls)  # the start and each point taken, none of the refused trials
+
+
+def _strict(fun):
+    """``fun`` without its ``lazy`` method: continue_branch then asks for R and dR/dy together."""
+    return lambda y: fun(y)
+
+
+def test_the_nnm_residual_deferred_is_the_residual():
+    """NNMResidual.lazy: R now, dR/dy when asked, the bits of ``res(y)`` (signed zeros too), whatever other
+    frequencies the residual was evaluated at in between (A and dA/domega live in buffers shared by calls)."""
+    from reduced.periodic.hb import HarmonicBalance, NNMResidual
+    from reduced.periodic.shooting import conservative
+
+    system = conservative(SYSTEM)
+    rng = np.random.default_rng(3)
+    for H in (1, 5):
+        hb = HarmonicBalance.for_system(system, H)
+        res = NNMResidual(hb, 2 * np.pi * 20.0, 0)
+        ys = []
+        for k in range(6):
+            y = rng.normal(size=res.size) * 1e-2
+            y[hb.size] = (1.0 + rng.random()) * (-1.0 if k == 2 else 1.0)
+            y[hb.size + 1] = 0.0 if k % 2 else 1e-3 * rng.normal()
+            y[hb.size + 2] = -4.0 + 2.0 * rng.random()  # amplitudes up to ~1e-2 m: the stops close
+            ys.append(y)
+        lazies = [res.lazy(y) for y in ys]  # every R first, the Jacobians after
+        for y, (R, jac) in zip(ys[::-1], lazies[::-1], strict=True):
+            R0, J0 = res(y)
+            assert np.array_equal(R.view(np.int64), R0.view(np.int64))
+            assert np.array_equal(jac().view(np.int64), J0.view(np.int64))
+
+
+def test_an_nnm_branch_continued_lazily_is_the_strict_one():
+    """The backbone continued through the lazy residual (Newton's refused trial points without dR/dy) takes
+    the same steps, to the bit, as the one continued with R and dR/dy at every trial point."""
+    from reduced.periodic.backbones import NNM_STEPS, _nnm_start
+    from reduced.periodic.continuation import continue_branch
+    from reduced.periodic.shooting import conservative
+
+    res, y0, _ = _nnm_start(conservative(SYSTEM), 1, 5, None, None)
+    i_a = res.hb.size + 2
+    counts = {"R": 0, "J": 0}
+
+    class Counted:
+        """res, counting the residuals made and the Jacobians asked for."""
+
+        def __call__(self, y):
+            return res(y)
+
+        def lazy(self, y):
+            counts["R"] += 1
+            R, jac = res.lazy(y)
+
+            def asked():
+                counts["J"] += 1
+                return jac()
+            return R, asked
+
+    a, b = (continue_branch(f, y0, param=i_a, options=NNM_STEPS, max_steps=120, monitor=(res.hb.size,))
+            for f in (Counted(), _strict(res)))
+    assert np.array_equal(a.y, b.y) and np.array_equal(a.tangent, b.tangent) and np.array_equal(a.ds, b.ds)
+    assert a.n_rejected == b.n_rejected and a.folds == b.folds
+    assert a.y[-1, i_a] > y0[i_a] + 0.7  # past grazing (its amplitude is 1 / 0.3 that of the start) into contact
+    assert counts["J"] < counts["R"]  # some trial points were refused on R alone
