@@ -461,3 +461,36 @@ def test_an_frc_continued_lazily_is_the_strict_one(monkeypatch):
     assert len(ref.freq_hz) > 20 and 0 < sum(closes) < len(closes)  # into contact and out
     assert np.array_equal(lazy.z, ref.z) and np.array_equal(lazy.freq_hz, ref.freq_hz)
     assert lazy.n_rejected == ref.n_rejected
+
+
+def test_nnm_newtons_asking_lazily_are_the_eager_ones(monkeypatch):
+    """The backbone's point at a given energy (hb_point_at_energy) and its corrector at a fixed frequency
+    (the tongue step-over's) ask NNMResidual for dR/dy only where Newton steps: the same points to the bit
+    as with dR/dy made at every trial point."""
+    from reduced.periodic import backbones
+    from reduced.periodic.hb import NNMResidual
+    from reduced.periodic.shooting import conservative
+
+    br = backbones.nnm_branch(conservative(SYSTEM), 1, H=5, energy_max_J=1e-1)
+    res = br.residual
+    i_w = res.hb.size
+    k = len(br.energy_J) // 2
+    y0 = br.branches[0].y[k]
+
+    def both():
+        E = float(br.energy_J[k]) * 1.3
+        return (backbones.hb_point_at_energy(res, y0, E),
+                backbones._correct_at_frequency(res, y0, y0[i_w] * 1.01))
+
+    lazy = both()
+    lazily = NNMResidual.lazy
+
+    def eager(self, y):
+        R, jac = lazily(self, y)
+        J = jac()
+        return R, lambda: J
+
+    monkeypatch.setattr(NNMResidual, "lazy", eager)
+    ref = both()
+    assert ref[1] is not None and br.energy_J[-1] > 1e-2  # a branch into contact, a corrector that converged
+    assert np.array_equal(lazy[0], ref[0]) and np.array_equal(lazy[1], ref[1])
