@@ -343,10 +343,10 @@ def _correct_at_frequency(res: NNMResidual, guess: np.ndarray, w_t: float) -> np
     i_w = res.hb.size
 
     def fixed(z):
-        R, J = res(z)
+        R, jac = res.lazy(z)  # dR/dy only for the points Newton takes (the same numbers)
         e = np.zeros(z.size)
         e[i_w] = 1.0
-        return np.concatenate([R, [z[i_w] - w_t]]), np.vstack([J, e])
+        return np.concatenate([R, [z[i_w] - w_t]]), lambda: np.vstack([jac(), e])
 
     try:
         return newton(fixed, guess, max_iter=STEP_OVER_MAX_ITER, max_step=5.0).y
@@ -635,9 +635,11 @@ def hb_point_at_energy(
     """
 
     def fun(y):
-        R, J = res(y)
+        # dR/dy only for the points Newton takes (NNMResidual.lazy: the same numbers; its halving refuses
+        # trial points on R alone)
+        R, jac = res.lazy(y)
         E, dE = res.energy_and_gradient(y)
-        return np.concatenate([R, [(E - energy_J) / energy_J]]), np.vstack([J, dE / energy_J])
+        return np.concatenate([R, [(E - energy_J) / energy_J]]), lambda: np.vstack([jac(), dE / energy_J])
 
     with single_thread_blas():
         return newton(fun, y_guess, tol=tol, max_iter=30).y

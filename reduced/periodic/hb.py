@@ -46,6 +46,7 @@ import functools
 import math
 import threading
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -513,41 +514,58 @@ class NNMResidual:
 
     def __call__(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """R (size+2,) and dR/dy (size+2, size+3)."""
+        R, jacobian = self.lazy(y)
+        return R, jacobian()
+
+    def _linear(self, omega: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(A, dA/domega, kron(Nab, M)) at omega (the conservative ones from :meth:`_linear_parts`'s buffers)."""
+        hb = self.hb
+        if hb.C is None:
+            A, dA = self._linear_parts(omega)
+            return A, dA, self._operators[2]
+        return hb.linear_operator(omega), hb._linear_operator_domega(omega), np.kron(hb.Nab, hb.M)
+
+    def lazy(self, y: np.ndarray) -> tuple[np.ndarray, Callable[[], np.ndarray]]:
+        """(R (size+2,), a callable giving dR/dy (size+2, size+3)): the AFT forces now, their Jacobian and
+        the rest of dR/dy only when it is called (Newton's halving refuses many trial points on R alone:
+        :func:`reduced.periodic.continuation.continue_branch` asks through this). The same numbers as
+        ``self(y)``: the same operations, deferred (A and dA/domega made again from omega, which gives
+        the same bits: :meth:`_linear_parts` reuses its buffers from call to call)."""
         hb, wr = self.hb, self.omega_ref
         n, nX = hb.n, hb.size
         Psi, omega, delta, a = self.split(y)
-        if hb.C is None:
-            _, _, DM = self._operators
-            F, dF = hb.aft(a * Psi)
-            A, dA = self._linear_parts(omega)
-        else:
-            F, dF = hb.aft(a * Psi)
-            A = hb.linear_operator(omega)
-            DM = np.kron(hb.Nab, hb.M)
-            dA = hb._linear_operator_domega(omega)
+        f, w = hb.force(hb.E @ hb.unpack(a * Psi))  # HarmonicBalance.aft, its Jacobian deferred
+        F = (hb.P @ f).ravel()
+        A, _, DM = self._linear(omega)
         R = np.empty(nX + 2)
-        J = np.empty((nX + 2, nX + 3))  # every entry written below (the last two rows zeroed first)
         DMPsi, Fa = DM @ Psi, F / a
         R[:nX] = (A @ Psi + Fa - delta * omega * DMPsi) / wr**2
-        Jx = J[:nX, :nX]
-        np.add(A, dF, out=Jx)  # (A + dF - delta omega DM) / wr^2, in place
-        if delta != 0.0:
-            Jx -= delta * omega * DM
-        Jx /= wr**2
-        J[:nX, nX] = (dA @ Psi - delta * DMPsi) / wr
-        J[:nX, nX + 1] = -omega * DMPsi / wr
-        J[:nX, nX + 2] = np.log(10.0) * (dF @ Psi - Fa) / wr**2
-        J[nX:] = 0.0
         # phase: the fundamental sine coefficient of DOF ref
         i_s1 = 2 * n + self.ref
         R[nX] = Psi[i_s1]
-        J[nX, i_s1] = 1.0
         # normalisation of the fundamental
         c1, s1 = Psi[n : 2 * n], Psi[2 * n : 3 * n]
         R[nX + 1] = c1 @ hb.M @ c1 + s1 @ hb.M @ s1 - 1.0
-        J[nX + 1, n : 2 * n] = 2.0 * hb.M @ c1
-        J[nX + 1, 2 * n : 3 * n] = 2.0 * hb.M @ s1
-        return R, J
+
+        def jacobian() -> np.ndarray:
+            dF = hb._aft_jacobian(w)
+            A, dA, _ = self._linear(omega)
+            J = np.empty((nX + 2, nX + 3))  # every entry written below (the last two rows zeroed first)
+            Jx = J[:nX, :nX]
+            np.add(A, dF, out=Jx)  # (A + dF - delta omega DM) / wr^2, in place
+            if delta != 0.0:
+                Jx -= delta * omega * DM
+            Jx /= wr**2
+            J[:nX, nX] = (dA @ Psi - delta * DMPsi) / wr
+            J[:nX, nX + 1] = -omega * DMPsi / wr
+            J[:nX, nX + 2] = np.log(10.0) * (dF @ Psi - Fa) / wr**2
+            J[nX:] = 0.0
+            J[nX, i_s1] = 1.0
+            J[nX + 1, n : 2 * n] = 2.0 * hb.M @ c1
+            J[nX + 1, 2 * n : 3 * n] = 2.0 * hb.M @ s1
+            return J
+
+        return R, jacobian
 
     def start(self, phi: np.ndarray, omega: float, log10a: float) -> np.ndarray:
         """Initial y from a mass-normalised linear mode shape phi and its omega."""
