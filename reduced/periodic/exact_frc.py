@@ -64,7 +64,6 @@ from __future__ import annotations
 import functools
 import math
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -925,27 +924,12 @@ class _LoadResidual:
         return self.res(Y) if jacobian else self.res.value(Y)
 
     def __call__(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        R, jacobian = self.lazy(y)
-        return R, jacobian()
-
-    def lazy(self, y: np.ndarray) -> tuple[np.ndarray, Callable[[], np.ndarray]]:
-        """(R, a callable giving dR/dy): the nodes marched at y's load now; the Jacobian, and the march at
-        the load a step up that its difference needs, only when asked (the continuation's correctors take
-        it so: Newton's halving refuses trial points on R alone). Each march depends on its nodes and load
-        alone, so the numbers are those of the difference made first."""
         h = 1e-7
-        self.res.flow.amplitude_N = self.P0 * math.exp(y[self.size])
-        self.res.forget()
-        R, jac = self.res.lazy(np.append(y[: self.size], self.lw))
-
-        def jacobian() -> np.ndarray:
-            J = jac()
-            Rp = self._at(y, y[self.size] + h, jacobian=False)  # R only: the difference needs no Jacobian
-            Jy = J.copy()
-            Jy[:, self.size] = (Rp - R) / h
-            return Jy
-
-        return R, jacobian
+        Rp = self._at(y, y[self.size] + h, jacobian=False)  # R only: the difference needs no Jacobian
+        R, J = self._at(y, y[self.size])
+        Jy = J.copy()
+        Jy[:, self.size] = (Rp - R) / h
+        return R, Jy
 
 
 def first_orbit(res: ShootingResidual, guess: np.ndarray, omega: float) -> np.ndarray:

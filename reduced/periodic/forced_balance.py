@@ -42,7 +42,6 @@ rows scaled by 1 / x_ref.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -128,29 +127,22 @@ class ForcedBalance:
     # -- linear part -------------------------------------------------------------------------
     def receptances(self, omega: float, derivative: bool = False, harmonics: np.ndarray | None = None):
         """Per harmonic k (default 0..H): W_k = Z_k^-1 [U^T, f_k] (n, u + 1) complex, and dW_k/dOmega."""
-        k = np.arange(self.H + 1) if harmonics is None else np.asarray(harmonics)
-        Z, W = self._receptances(omega, k)
-        return W, (self._receptance_derivative(omega, k, Z, W) if derivative else None)
-
-    def _receptances(self, omega: float, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(Z_k, W_k) of :meth:`receptances` for the harmonics k."""
         s = self.system
         n, u = self.n, self.u
+        k = np.arange(self.H + 1) if harmonics is None else np.asarray(harmonics)
         Z = (s.K[None] - ((k * omega) ** 2)[:, None, None] * s.M[None]).astype(complex)
         if self._Cr is not None:
             Z = Z + 1j * (k * omega)[:, None, None] * self._Cr[None]
         rhs = np.zeros((k.size, n, u + 1), complex)
         rhs[:, :, :u] = self.U.T[None]
         rhs[k == 1, :, u] = self.b * self.amplitude_N * np.exp(1j * math.radians(self.phase_deg))
-        return Z, np.linalg.solve(Z, rhs)
-
-    def _receptance_derivative(self, omega: float, k: np.ndarray, Z: np.ndarray, W: np.ndarray) -> np.ndarray:
-        """dW_k/dOmega = -Z_k^-1 (dZ_k/dOmega) W_k."""
-        s = self.system
+        W = np.linalg.solve(Z, rhs)
+        if not derivative:
+            return W, None
         dZ = (-2.0 * omega * k**2)[:, None, None] * s.M[None] + 0j
         if self._Cr is not None:
             dZ = dZ + 1j * k[:, None, None] * self._Cr[None]
-        return -np.linalg.solve(Z, dZ @ W)
+        return W, -np.linalg.solve(Z, dZ @ W)
 
     @staticmethod
     def _real_rows(c: np.ndarray) -> np.ndarray:
@@ -197,52 +189,40 @@ class ForcedBalance:
     # -- residual ----------------------------------------------------------------------------
     def residual(self, z: np.ndarray, omega: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """R (size,), dR/dz (size, size), dR/dOmega (size,) at the free unknowns z [m] (module docstring)."""
-        R, derivatives = self.residual_lazy(z, omega)
-        return (R, *derivatives())
-
-    def residual_lazy(self, z: np.ndarray, omega: float) -> tuple[np.ndarray, Callable[[], tuple]]:
-        """(R (size,), a callable giving (dR/dz, dR/dOmega)): :meth:`residual` with its derivatives made
-        only when asked (the same operations: the receptances' derivative, the force derivative's blocks)."""
         u = self.u
         kp = self.keep
         q = self.full_q(z)
         phi, dphi, _ = self.contact(q)
         ks = self._harmonics_kept
-        Z, W = self._receptances(omega, ks)
-        UW = np.einsum("rn,knc->krc", self.U, W)
+        W, dW = self.receptances(omega, derivative=True, harmonics=ks)
+        UW, UdW = np.einsum("rn,knc->krc", self.U, W), np.einsum("rn,knc->krc", self.U, dW)
         Rc, qlin = UW[:, :, :u], UW[:, :, u]  # (len(ks), u, u), (len(ks), u)
+        dRc, dqlin = UdW[:, :, :u], UdW[:, :, u]
         phic = self._complex(phi)[ks]
         R = q[kp] - self._rows_of(qlin - np.einsum("krc,kc->kr", Rc, phic), ks)
-
-        def derivatives() -> tuple[np.ndarray, np.ndarray]:
-            dW = self._receptance_derivative(omega, ks, Z, W)
-            UdW = np.einsum("rn,knc->krc", self.U, dW)
-            dRc, dqlin = UdW[:, :, :u], UdW[:, :, u]
-            dRdw = -self._rows_of(dqlin - np.einsum("krc,kc->kr", dRc, phic), ks)
-            # dR/dz = I + Rblk D: Rblk the real form of Rc, block diagonal over the harmonics (rows
-            # (cos, sin) of harmonic k from (a, b) = (cos, sin) of phi_k: [[Re, Im], [-Im, Re]]), D
-            # the force derivative, block diagonal over the contact coordinates
-            nk, S = kp.size, self.size
-            D = np.zeros((nk, u, nk, u))
-            r = np.arange(u)
-            D[:, r, :, r] = dphi[:, kp][:, :, kp]
-            D = D.reshape(S, S)
-            RD = np.empty((S, S))
-            o = 0
-            if ks[0] == 0:  # the constant row: real
-                RD[:u] = Rc[0].real @ D[:u]
-                o = 1
-            Rk = Rc[o:]
-            blk = np.empty((Rk.shape[0], 2 * u, 2 * u))
-            blk[:, :u, :u] = blk[:, u:, u:] = Rk.real
-            blk[:, :u, u:] = Rk.imag
-            blk[:, u:, :u] = -Rk.imag
-            RD[o * u:] = np.einsum("bij,bjs->bis", blk, D[o * u:].reshape(Rk.shape[0], 2 * u, S)).reshape(-1, S)
-            J = RD
-            J[np.diag_indices(S)] += 1.0
-            return J, dRdw.ravel()
-
-        return R.ravel(), derivatives
+        dRdw = -self._rows_of(dqlin - np.einsum("krc,kc->kr", dRc, phic), ks)
+        # dR/dz = I + Rblk D: Rblk the real form of Rc, block diagonal over the harmonics (rows
+        # (cos, sin) of harmonic k from (a, b) = (cos, sin) of phi_k: [[Re, Im], [-Im, Re]]), D
+        # the force derivative, block diagonal over the contact coordinates
+        nk, S = kp.size, self.size
+        D = np.zeros((nk, u, nk, u))
+        r = np.arange(u)
+        D[:, r, :, r] = dphi[:, kp][:, :, kp]
+        D = D.reshape(S, S)
+        RD = np.empty((S, S))
+        o = 0
+        if ks[0] == 0:  # the constant row: real
+            RD[:u] = Rc[0].real @ D[:u]
+            o = 1
+        Rk = Rc[o:]
+        blk = np.empty((Rk.shape[0], 2 * u, 2 * u))
+        blk[:, :u, :u] = blk[:, u:, u:] = Rk.real
+        blk[:, :u, u:] = Rk.imag
+        blk[:, u:, :u] = -Rk.imag
+        RD[o * u:] = np.einsum("bij,bjs->bis", blk, D[o * u:].reshape(Rk.shape[0], 2 * u, S)).reshape(-1, S)
+        J = RD
+        J[np.diag_indices(S)] += 1.0
+        return R.ravel(), J, dRdw.ravel()
 
     @property
     def _harmonics_kept(self) -> np.ndarray:
@@ -318,40 +298,18 @@ class ForcedResidual:
         return np.concatenate([np.asarray(z, float) / self.x_ref, [math.log(omega / self.omega_ref)]])
 
     def __call__(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        R, jacobian = self.lazy(y)
-        return R, jacobian()
-
-    def lazy(self, y: np.ndarray) -> tuple[np.ndarray, Callable[[], np.ndarray]]:
-        """(R, a callable giving dR/dy): the derivatives made only when asked (the continuation's correctors
-        take it so: Newton's halving refuses trial points on R alone); a point is memoised with its Jacobian
-        (the driver evaluates an accepted point again for its tangent). The same numbers as ``self(y)``."""
         key = y.tobytes()
-        if key in self._memo:
-            R, Jy = self._memo[key]
-            return R, lambda: Jy
+        if key in self._memo:  # the driver evaluates an accepted point again for its tangent
+            return self._memo[key]
         z, omega = self.z_omega(y)
-        if type(self.fb).residual is ForcedBalance.residual:
-            R, derivatives = self.fb.residual_lazy(z, omega)
-        else:  # a balance with its own residual (friction_aft.FrictionBalance): made whole now
-            R, J, dRdw = self.fb.residual(z, omega)
-
-            def derivatives(J=J, dRdw=dRdw):
-                return J, dRdw
-        R = R / self.x_ref
-
-        def jacobian() -> np.ndarray:
-            hit = self._memo.get(key)
-            if hit is not None:
-                return hit[1]
-            J, dRdw = derivatives()
-            Jy = np.empty((self.size, self.size + 1))
-            Jy[:, : self.size] = J
-            Jy[:, self.size] = dRdw * (omega / self.x_ref)
-            self._memo.clear()
-            self._memo[key] = (R, Jy)
-            return Jy
-
-        return R, jacobian
+        R, J, dRdw = self.fb.residual(z, omega)
+        Jy = np.empty((self.size, self.size + 1))
+        Jy[:, : self.size] = J
+        Jy[:, self.size] = dRdw * (omega / self.x_ref)
+        out = (R / self.x_ref, Jy)
+        self._memo.clear()
+        self._memo[key] = out
+        return out
 
 
 __all__ = ["ForcedBalance", "ForcedResidual"]

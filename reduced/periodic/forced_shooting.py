@@ -1013,25 +1013,16 @@ def shoot_at(res: ShootingResidual, nodes: np.ndarray, omega: float, *, tol: flo
     known = [np.asarray(k)[:nz] for k in (known or [])]
 
     def fun(v):
-        # R now, dR/dv only for the points Newton takes (ShootingResidual.lazy: its halving refuses many
-        # trial points on R alone); the deflations' factors kept for it, the same operations in the same order
-        R, jac = res.lazy(np.append(v, lw))
-        factors = []
+        R, J = res(np.append(v, lw))
+        J = J[:, :nz]
         for ks in known:
             d = v - ks
             dd = float(d @ d)
             m = 1.0 / dd + 1.0
-            factors.append((m, d, dd, R))
+            # d(m R)/dv = m J + R (dm/dv)^T, dm/dv = -2 d / dd^2
+            J = m * J + np.outer(R, -2.0 * d / dd**2)
             R = m * R
-
-        def jacobian() -> np.ndarray:
-            J = jac()[:, :nz]
-            for m, d, dd, Rk in factors:
-                # d(m R)/dv = m J + R (dm/dv)^T, dm/dv = -2 d / dd^2
-                J = m * J + np.outer(Rk, -2.0 * d / dd**2)
-            return J
-
-        return R, jacobian
+        return R, J
 
     try:
         out = newton(fun, Y0[:nz], tol=tol, max_iter=max_iter)

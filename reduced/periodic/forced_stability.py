@@ -411,9 +411,7 @@ def floquet_by_shooting(flow, Y: np.ndarray, period_s: float, *, tol: float = 1e
     sc = np.concatenate([np.full(n, xs), np.full(n, w * xs)])
 
     def evaluate(Y):
-        # the marches alone: the segments' Jacobians are made from their records (Flow.jacobian_of, the same
-        # numbers) only for the points Newton takes, not for the trial points its halving refuses
-        segs = [flow(Y[k, :n], Y[k, n:], h, t0=k * h) for k in range(S)]
+        segs = [flow(Y[k, :n], Y[k, n:], h, jacobian=True, t0=k * h) for k in range(S)]
         r = np.concatenate([(segs[k].y - Y[(k + 1) % S]) / sc for k in range(S)])
         return segs, r
 
@@ -426,7 +424,7 @@ def floquet_by_shooting(flow, Y: np.ndarray, period_s: float, *, tol: float = 1e
         J = np.zeros((2 * n * S, 2 * n * S))
         for k in range(S):
             rows = slice(2 * n * k, 2 * n * (k + 1))
-            J[rows, rows] = flow.jacobian_of(segs[k]) * (sc[None, :] / sc[:, None])
+            J[rows, rows] = segs[k].jacobian * (sc[None, :] / sc[:, None])
             kk = (k + 1) % S
             J[rows, 2 * n * kk:2 * n * (kk + 1)] -= np.eye(2 * n)
         try:
@@ -451,7 +449,7 @@ def floquet_by_shooting(flow, Y: np.ndarray, period_s: float, *, tol: float = 1e
         raise ShootingError(f"no periodic orbit: closure {rn:.3g} after {it} iterations ({S} segments)")
     Phi = np.eye(2 * n)
     for sg in segs:
-        Phi = flow.jacobian_of(sg) @ Phi
+        Phi = sg.jacobian @ Phi
     return ForcedOrbit(Y[0, :n].copy(), Y[0, n:].copy(), float(period_s), Phi, multipliers_of(Phi), rn, it)
 
 

@@ -292,24 +292,12 @@ class Flow:
         )
         _check_status(status, MAX_SEGMENTS, T)
         seg = (self._seg_state[:n_seg].copy(), self._seg_tau[:n_seg].copy())
-        return FlowResult(y, active, self._jacobian(seg) if jacobian else None, n_seg - 1, seg)
-
-    def jacobian_of(self, result: FlowResult) -> np.ndarray:
-        """(2n, 2n) dy(T)/dy(0) of a march made without its Jacobian, from the segments it recorded: the
-        numbers ``jacobian=True`` gives (the same product), made only when needed (e.g. for the trial
-        points a damped Newton takes, not the ones it refuses)."""
-        return result.jacobian if result.jacobian is not None else self._jacobian(result.segments)
-
-    def _jacobian(self, seg: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-        """The product of the segment exponentials of the recorded segments (state, duration)."""
-        if self.loads is None:
+        J = None
+        if jacobian:
             J = np.eye(2 * self.system.n)
-            call_numba_kernel(_modal.flow_jacobian, self._modal, seg[0], seg[1], seg[0].size, J)
-            return J
-        J = np.eye(2 * self.system.n)
-        for s, tau in zip(*seg, strict=True):
-            J = self.segment_exponential(int(s), float(tau)) @ J
-        return J
+            for s, tau in zip(*seg, strict=True):
+                J = self.segment_exponential(int(s), float(tau)) @ J
+        return FlowResult(y, active, J, n_seg - 1, seg)
 
     def _free(self, y: np.ndarray, active: np.ndarray, T: float, jacobian: bool) -> FlowResult:
         """The autonomous flow by the exact integrator's free kernel (:mod:`reduced.transient._modal`:
@@ -323,7 +311,11 @@ class Flow:
         _check_status(status, MAX_SEGMENTS - 1, T)
         n_seg = n_ev + 1
         seg = (self._seg_state[:n_seg].copy(), self._seg_tau[:n_seg].copy())
-        return FlowResult(y, active, self._jacobian(seg) if jacobian else None, n_ev, seg)
+        J = None
+        if jacobian:
+            J = np.eye(2 * sy.n)
+            call_numba_kernel(_modal.flow_jacobian, self._modal, self._seg_state, self._seg_tau, n_seg, J)
+        return FlowResult(y, active, J, n_ev, seg)
 
 
 _NO_SAMPLES = np.zeros((0, 0))
