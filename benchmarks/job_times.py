@@ -18,7 +18,8 @@ the same session, so the load is alike (the 1-minute load average at each start 
   against ``python -m pytest -n 0``; the 15 slowest tests of ours are listed.
 
 Writes ``job_headline.csv`` (the rows of the performance table, targets of issue 28: main job under
-6 min, suite under 4 min, on 2 cores), ``job_machine.csv`` and ``job_durations.csv``.
+6 min, suite under 4 min, on 2 cores), ``job_machine.csv``, ``job_durations.csv`` and, from the main job's own
+stage lines (:func:`main_job_cost.from_log`), ``main_job.csv`` and ``main_job_wall.csv``.
 """
 
 from __future__ import annotations
@@ -65,7 +66,7 @@ def same_files(a: Path, b: Path) -> tuple[int, list[str]]:
     return len(names), differ
 
 
-def main_job(work: Path, baseline: bool, cold: bool) -> list[dict]:
+def main_job(work: Path, baseline: bool, cold: bool, out: Path | None = None) -> list[dict]:
     rows = []
     runs = [("ours", [])] + ([("baseline", ["--workers", "1"])] if baseline else [])
     for label, extra in runs:
@@ -77,6 +78,10 @@ def main_job(work: Path, baseline: bool, cold: bool) -> list[dict]:
               f"load {r['load_1min']:.2f}", flush=True)
         rows.append({"label": label, **r})
     ours = rows[0]
+    if ours["exit_code"] == 0 and out is not None:  # each stage's own wall time, read from the run's lines
+        from main_job_cost import from_log
+
+        from_log(work / "job-ours.log", out)
     total = re.search(r"run: (\d+) stages of (\d+) scenes", (work / "job-ours.log").read_text())
     what = (f"main job, bearingshaft run ({total[1]} stages of {total[2]} scenes"
             f"{', reductions built' if cold else ', reductions cached'}), on a LocalCluster of one worker per core"
@@ -132,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="job_times-") as tmp:
         work = Path(tmp)
         if "job" in args.what:
-            h, r = main_job(work, not args.no_baseline, args.cold)
+            h, r = main_job(work, not args.no_baseline, args.cold, out)
             headline += h
             raw += [{"job": "main job", **x} for x in r]
         if "suite" in args.what:
@@ -157,6 +162,12 @@ def main(argv: list[str] | None = None) -> int:
     machine += [{"key": f"{r['job']} {r['label']}",
                  "value": f"wall {r['wall_s']:.1f} s, CPU {r['cpu_s']:.1f} s, peak {r['peak_mb']:.0f} MB, "
                           f"load {r['load_1min']:.2f}, exit {r['exit_code']}"} for r in raw]
+    if (out / "job_machine.csv").exists():  # keep the run lines of the job not measured now
+        with open(out / "job_machine.csv", newline="") as f:
+            gone = ("main job",) if "job" in args.what else ()
+            gone += ("suite",) if "suite" in args.what else ()
+            machine += [r for r in csv.DictReader(f) if r["key"].startswith(("main job", "suite"))
+                        and not r["key"].startswith(gone)]
     write_rows(out / "job_machine.csv", machine)
     return 0 if all(r["exit_code"] == 0 for r in raw) else 1
 

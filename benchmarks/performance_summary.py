@@ -79,12 +79,13 @@ LIMITS = (
      "the machine's load (integrator_machine.csv: 10-16 on 2 cores during the issue-28 runs; this row was met "
      "at load ~1 with the same per-sample code)"),
     ("FE modal, 112,629 DOFs, 16 modes: mesh",
-     "measured at load 12-21 on 2 cores (2026-11-26; wall times 4-10x the CPU times, PARDISO on one thread): "
-     "7.4x in CPU seconds (15.2 s against 112 s), 5.7x in wall time. Of ours, in CPU: the PARDISO "
-     "factorization (two-level, 0.6 + 4.5-4.9 s one thread unloaded), assembly 1-2 s and 68 solves with the "
-     "factor in the block Krylov iteration, the rest. 10x needs <= 11 CPU s here, the factor's forward and "
-     "back solves being the part left to cut (fewer solves: a shift inside the wanted band needs an "
-     "indefinite LDL^T; untried)"),
+     "measured at load 1.9-3.3 on 2 cores (2026-11-26 16:50 UTC): 9.2x in wall time (12.0 s against 110.6 s), "
+     "8.8x in CPU (11.8 s against 104 s; 9.8x on the repeat whose baseline took 109.5 s). Of ours, in CPU on one "
+     "thread: PARDISO's analysis and factorization 0.65-0.75 + 4.0-4.9 s (about 108 GFLOP at 25 GFLOP/s; orderings "
+     "0/2/3, VBSR settings, RCM or random input orderings and the classic two-level factorization tried: none "
+     "faster, the improved two-level one fails), 68 solves in 10 block calls 2.3-2.4 s (0.09 s a call + 0.018 s a "
+     "right-hand side, no refinement steps), the Krylov products and dense work 2.5 s, assembly 1.1-1.3 s. 10x needs "
+     "about 1 s more; PARDISO on more threads would change the results' bits (fem._pardiso.solver_threads)"),
     ("FE modal, 112,629 DOFs: relative residual",
      "the twelve soft-spring modes (0.4-34 Hz) stop at 1-3x their round-off floor eps |||K| |phi||| / ||K phi||, "
      "above 1e-8 in double precision; the elastic modes reach 4-8e-10"),
