@@ -86,6 +86,14 @@ LIMITS = (
      "faster, the improved two-level one fails), 68 solves in 10 block calls 2.3-2.4 s (0.09 s a call + 0.018 s a "
      "right-hand side, no refinement steps), the Krylov products and dense work 2.5 s, assembly 1.1-1.3 s. 10x needs "
      "about 1 s more; PARDISO on more threads would change the results' bits (fem._pardiso.solver_threads)"),
+    ("main job, bearingshaft run",
+     "measured twice at load 1.2-1.6 (2026-11-26 17:00-17:20 UTC) after warming the reduced-model cache: 502 and "
+     "486 s wall, 903 and 875 s CPU on 2 workers; the stages' own walls sum to 811 s (main_job.csv). 360 s on 2 "
+     "cores needs about 700 s of CPU. The longest chain is rom-frc's frc stage, 300 s wall beside the other "
+     "worker's stages (about 220 s CPU alone): its exact families by shooting take 69 % of it (their branch "
+     "switching 23 %), the response map 9 %, HB 10 % (py-spy); the shooting marches, LU and segment Jacobians "
+     "inside are kernels whose bits the files depend on. Running its levels and its branch switching as separate "
+     "Dask tasks would shorten that chain; not done"),
     ("FE modal, 112,629 DOFs: relative residual",
      "the twelve soft-spring modes (0.4-34 Hz) stop at 1-3x their round-off floor eps |||K| |phi||| / ||K phi||, "
      "above 1e-8 in double precision; the elastic modes reach 4-8e-10"),
