@@ -255,17 +255,9 @@ def _rows_of_state(s, K, UT, yp, R, RT, Ryp):
 @nb.njit(cache=True, inline="always")
 def _rows_eval(s, K, RT, Ryp, w, e, zt, out_z, j):
     """out_z[j] = R y = R y_p + Re sum_i (R U)[:, i] w_i e_i (:func:`_rows_of_state`; zt: scratch (r,)): r rows
-    for K r products where the whole state costs K N (:func:`_eval`)."""
-    r = zt.shape[0]
-    for c in range(r):
-        zt[c] = Ryp[s, c]
-    for i in range(K):
-        u = w[i] * e[i]
-        ur = u.real
-        ui = u.imag
-        for c in range(r):
-            zt[c] += RT[s, 0, i, c] * ur - RT[s, 1, i, c] * ui
-    for c in range(r):
+    for K r products where the whole state costs K N: :func:`_eval` on the rows' tables, the same operations)."""
+    _eval(s, K, RT, Ryp, w, e, zt)
+    for c in range(zt.shape[0]):
         out_z[j, c] = zt[c]
 
 
