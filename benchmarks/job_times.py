@@ -13,7 +13,8 @@ the same session, so the load is alike (the 1-minute load average at each start 
   against ``... --workers 1`` (every stage in order in one process, the behaviour before issue 28);
   the files of the two runs are compared byte for byte (``provenance.json`` holds finishing times
   and is left out): the speed-up must not change a file. Both use the user's reduced-model cache
-  unless ``--cold`` gives each its own empty one (a fresh clone: the reductions are built);
+  unless ``--cold`` gives each its own empty one (a fresh clone: the reductions are built); after a change to the
+  code that builds them (its source hash keys the cache) fill it first with ``benchmarks/warm_cache.py``;
 - suite: ``python -m pytest`` (pytest-xdist, ``-n auto --dist loadfile`` from pyproject.toml)
   against ``python -m pytest -n 0``; the 15 slowest tests of ours are listed.
 

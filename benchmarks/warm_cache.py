@@ -1,0 +1,41 @@
+"""Fill the reduced-model cache for every built-in scene with a reduced model: its reduction and the full 3-D
+model's open- and closed-gap modes (what ``reduce`` and ``verify`` load), so that a timed ``bearingshaft run``
+measures the job with its reductions cached, as ``benchmarks/job_times.py`` reports it.
+
+    PYTHONPATH=. python benchmarks/warm_cache.py
+
+Prints each scene with "built" or "cached" and its time. A scene whose ``rom_file`` names a saved model is skipped.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+
+def main() -> int:
+    import bearingshaft.scenes as scenes
+    from bearingshaft.gap_modes import full_gap_modes
+    from bearingshaft.scenes import load_scene
+    from reduced.models.rom import RomSpec, from_cache, reduction, store_in_cache
+
+    for path in sorted(Path(scenes.__file__).parent.glob("*.toml")):
+        spec = load_scene(path.stem).model
+        if not isinstance(spec, RomSpec) or spec.rom_file:
+            continue
+        t0 = time.perf_counter()
+        had = from_cache(spec) is not None
+        rom, fe = reduction(spec)
+        if not had:
+            store_in_cache(rom, spec)
+        full_gap_modes(fe, spec, Psi=rom.Psi)
+        print(f"{path.stem}: {'cached' if had else 'built'} in {time.perf_counter() - t0:.1f} s", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
