@@ -25,8 +25,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.fft import rfft, rfftfreq
-from scipy.signal import ShortTimeFFT
-from scipy.signal.windows import hann
 
 from reduced import _checks as _check
 from reduced.transient.spectral import dominant_freq_hz
@@ -163,7 +161,11 @@ class StftAccumulator:
             max_frames = _check.integer("max_frames", max_frames)
         self.t0 = _check.number("t0", t0, unit="s")
         self.n_win, self.hop, self.p_lo, self.p_hi = frame_grid(n_samples, self.fs, window_s, overlap, max_frames)
-        # the window exactly as ShortTimeFFT scales it for a power spectral density
+        # the window exactly as ShortTimeFFT scales it for a power spectral density (scipy.signal is imported
+        # here, not with the module: it takes ~0.5 s, and a run without a spectrogram never needs it)
+        from scipy.signal import ShortTimeFFT
+        from scipy.signal.windows import hann
+
         self.win = ShortTimeFFT(hann(self.n_win, sym=False), hop=self.hop, fs=self.fs, scale_to="psd").win
         f = rfftfreq(self.n_win, 1.0 / self.fs)
         self.n_keep = f.size if fmax_hz is None else max(1, int(np.searchsorted(f, fmax_hz, side="right")))
