@@ -11,13 +11,14 @@ The contract of a stage module (``bearingshaft/stages/<name>.py``)::
     compute(scene, progress, workdir, **options) -> result   # a frozen dataclass: arrays, numbers,
                                                              # solver statistics; no file is written
                                                              # but arrays streamed into ``workdir``
-    write(result, writer)                                    # CSV/NPZ/UFF/Markdown and figures from
-                                                             # the result; runs no solver
     estimate(scene) -> list[Estimate]                        # peak memory and disk, from the scene
     DESCRIPTION                                              # what the subcommand does and writes
+    REPRODUCTION                                             # how its files compare with the reference
 
 with the result dataclasses in ``<name>_results.py`` and the writers and figures in
-``<name>_files.py`` (the only part that loads matplotlib; ``write`` imports it when called).
+``<name>_files.py``, whose ``write(result, writer)`` writes CSV/NPZ/UFF/Markdown and figures from the
+result and runs no solver. It is the only part that loads matplotlib, and the registry imports it
+only when a stage's files are written (:meth:`Stage.write`), so computing never loads it.
 Bigger stages have more parts (``hammer_linear.py``, ``nnm_fep.py``); a stage imports no other
 stage's parts: what two stages share goes in a helper module named for it.
 
@@ -30,6 +31,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from importlib import import_module
 
 from bearingshaft.reproduction import Reproduction
 from bearingshaft.scenes import Scene
@@ -75,8 +77,6 @@ class Stage:
         ``wanted(scene) -> bool``: does the scene ask for it?
     compute : callable
         ``compute(scene, progress, workdir, **options) -> result``.
-    write : callable
-        ``write(result, writer)``: the files, into a :class:`bearingshaft.output.StageWriter`.
     estimate : callable
         ``estimate(scene) -> list[Estimate]``.
     help : str
@@ -87,37 +87,55 @@ class Stage:
         Its command-line options.
     reproduction : Reproduction
         How its files compare with the committed reference (:mod:`bearingshaft.reproduction`).
+    files : str
+        The module of ``bearingshaft.stages`` that writes its files (default ``"<name>_files"``).
     """
 
     name: str
     asked_by: str  # the tables (or keys) that ask for it, as a refusal names them
     wanted: Callable[[Scene], bool]  # does the scene ask for it?
     compute: Callable  # compute(scene, progress, workdir, **options) -> result
-    write: Callable  # write(result, writer)
     estimate: Callable  # estimate(scene) -> list[Estimate]
     help: str  # one line in `bearingshaft --help`
     description: str  # what the subcommand does and writes (`bearingshaft NAME --help`)
     options: tuple[Option, ...] = field(default=())
     reproduction: Reproduction = field(default=Reproduction())  # how its files compare with the reference
+    files: str = ""  # bearingshaft.stages.<files>.write(result, writer); "" is "<name>_files"
+
+    def write(self, result, writer) -> None:
+        """Write ``result``'s files with ``bearingshaft.stages.<files>.write``, imported only now.
+
+        Parameters
+        ----------
+        result : object
+            What the stage's compute returned.
+        writer : bearingshaft.output.StageWriter
+            Where the files go (its ``stats`` are filled for provenance.json).
+
+        Returns
+        -------
+        None
+        """
+        import_module(f"bearingshaft.stages.{self.files or self.name + '_files'}").write(result, writer)
 
 
 STAGES: tuple[Stage, ...] = (
-    Stage("modal", "[modal]", lambda s: s.modal is not None, modal.compute, modal.write, modal.estimate,
+    Stage("modal", "[modal]", lambda s: s.modal is not None, modal.compute, modal.estimate,
           help="build the mesh and run the modal analysis of a 3-D scene",
           description=modal.DESCRIPTION,
           reproduction=modal.REPRODUCTION),
-    Stage("reduce", '[model] kind = "rom"', lambda s: s.model_kind == "rom", reduce.compute, reduce.write,
+    Stage("reduce", '[model] kind = "rom"', lambda s: s.model_kind == "rom", reduce.compute,
           reduce.estimate, help="reduce the 3-D model to its tips (Craig-Bampton): rom.npz, cb_check.csv",
           description=reduce.DESCRIPTION,
           reproduction=reduce.REPRODUCTION),
     Stage("ringdown", "[ringdown]", lambda s: s.ringdown is not None and s.hammer is None,  # [hammer] records its own
-          ringdown.compute, ringdown.write, ringdown.estimate,
+          ringdown.compute, ringdown.estimate,
           help="free (or forced) response from the scene's initial state",
           description=ringdown.DESCRIPTION,
           options=(Option("--method", "method", "integrator (default: the scene's, else exact)",
                           choices=("exact", "explicit", "dop853")),),
           reproduction=ringdown.REPRODUCTION),
-    Stage("hammer", "[hammer]", lambda s: s.hammer is not None, hammer.compute, hammer.write, hammer.estimate,
+    Stage("hammer", "[hammer]", lambda s: s.hammer is not None, hammer.compute, hammer.estimate,
           help="virtual hammer test of the apparatus, every rig channel (UFF 58 out); --test FILE.uff compares a "
                "measured test",
           description=hammer.DESCRIPTION,
@@ -129,7 +147,7 @@ STAGES: tuple[Stage, ...] = (
                    Option("--measures", "measures", "with --test: the measures, comma separated, among time, ridges, "
                           "envelope, impacts, open, backbone (default all)", metavar="LIST")),
           reproduction=hammer.REPRODUCTION),
-    Stage("frf", "[frf]", lambda s: s.frf is not None, frf.compute, frf.write, frf.estimate,
+    Stage("frf", "[frf]", lambda s: s.frf is not None, frf.compute, frf.estimate,
           help="FRFs (H1, H2, coherence) and modal parameters (pLSCF, LSFD, MAC) of a hammer test; --test FILE.uff "
                "for a measured one",
           description=frf.DESCRIPTION,
@@ -137,19 +155,19 @@ STAGES: tuple[Stage, ...] = (
                           "record opens a blow) instead of the virtual one (default results folder: "
                           "runs/<scene>/test-<file name>/)", metavar="FILE.uff"),),
           reproduction=frf.REPRODUCTION),
-    Stage("nnm", "[nnm]", lambda s: s.nnm is not None or s.fep is not None, nnm.compute, nnm.write,
+    Stage("nnm", "[nnm]", lambda s: s.nnm is not None or s.fep is not None, nnm.compute,
           nnm.estimate, help="frequency-energy relations of the nonlinear normal modes",
           description=nnm.DESCRIPTION,
           reproduction=nnm.REPRODUCTION),
     Stage("study", "[work_precision], [stiff_cases] or [rom_convergence]",
           lambda s: s.work_precision is not None or s.stiff_cases is not None or s.rom_convergence is not None,
-          study.compute, study.write, study.estimate, help="error against run time, stiff and extreme cases",
+          study.compute, study.estimate, help="error against run time, stiff and extreme cases",
           description=study.DESCRIPTION,
           reproduction=study.REPRODUCTION),
-    Stage("verify", "[verify]", lambda s: s.verify is not None, verify.compute, verify.write, verify.estimate,
+    Stage("verify", "[verify]", lambda s: s.verify is not None, verify.compute, verify.estimate,
           help="verify the reduced model against the discrete model", description=verify.DESCRIPTION,
           reproduction=verify.REPRODUCTION),
-    Stage("frc", "[frc]", lambda s: s.frc is not None, frc.compute, frc.write, frc.estimate,
+    Stage("frc", "[frc]", lambda s: s.frc is not None, frc.compute, frc.estimate,
           help="forced-response curves by harmonic balance, stepped sine and stability",
           description=frc.DESCRIPTION,
           reproduction=frc.REPRODUCTION),

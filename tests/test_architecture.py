@@ -15,6 +15,7 @@ from __future__ import annotations
 import ast
 import subprocess
 import sys
+from importlib import import_module
 from pathlib import Path
 
 import pytest
@@ -241,3 +242,16 @@ def test_computing_never_loads_matplotlib():
             + "print('matplotlib' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
     assert out.stdout.strip() == "False", "a computing module imports matplotlib (directly or through a writer)"
+
+
+def test_every_stage_is_written_by_a_files_module():
+    # the registry writes a stage's files with bearingshaft.stages.<name>_files.write, imported when the files
+    # are written (Stage.write): a stage whose writer module was renamed or lost fails here, not mid-run
+    from bearingshaft.registry import STAGES
+
+    for s in STAGES:
+        files = f"bearingshaft.stages.{s.files or s.name + '_files'}"
+        assert files in MODULES, f"{s.name}: no module {files}"
+        tree = ast.parse(MODULES[files].read_text(encoding="utf-8"))
+        assert any(isinstance(n, ast.FunctionDef) and n.name == "write" for n in tree.body), f"{files} has no write"
+        assert not hasattr(import_module(s.compute.__module__), "write"), f"{s.name}: a second writer in its stage"

@@ -738,7 +738,9 @@ def frc_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
     -------
     None
     """
-    write(compute(scene, progress, writer.scratch), writer)
+    from bearingshaft.stages import frc_files  # matplotlib: loaded only when files are written
+
+    frc_files.write(compute(scene, progress, writer.scratch), writer)
 
 
 def estimate(scene: Scene) -> list[Estimate]:
@@ -763,30 +765,9 @@ def estimate(scene: Scene) -> list[Estimate]:
 
 
 __all__ = ["DESCRIPTION", "FRCResult", "check_harmonics", "compute", "converged_curve", "estimate", "frc_stage",
-           "hb_change", "orbit_amplitude", "shooting_error", "write"]
+           "hb_change", "orbit_amplitude", "shooting_error"]
 
 
-def write(result, writer) -> None:
-    """The stage's files and figures from ``result`` (:mod:`bearingshaft.stages.frc_files`; matplotlib
-    is loaded only here, so computing never loads it).
-
-    Parameters
-    ----------
-    result : FRCResult
-        What :func:`compute` returned.
-    writer : StageWriter
-        Where the files go (its ``stats`` are filled for provenance.json).
-
-    Returns
-    -------
-    None
-    """
-    from bearingshaft.stages import frc_files, frc_friction
-
-    if isinstance(result, frc_friction.FrictionFRCResult):
-        frc_friction.write(result, writer)
-        return
-    frc_files.write(result, writer)
 
 
 # -- the reproduction report (bearingshaft.reproduction): how these files compare with the reference -----

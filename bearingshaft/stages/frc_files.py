@@ -22,6 +22,7 @@ import numpy as np
 from bearingshaft.digits import sig
 from bearingshaft.output import StageWriter, write_rows
 from bearingshaft.stages import frc_map_files
+from bearingshaft.stages.frc_friction_results import FrictionFRCResult
 from bearingshaft.stages.frc_results import ConvergenceRun, FRCResult, PointCheck  # noqa: F401  (re-exported)
 
 DIGITS = 10  # significant digits of frequencies and amplitudes (a rerun on this machine: identical)
@@ -42,16 +43,22 @@ BACKBONE_FIELDS = ["level", "scale", "load_N", "nnm", "peak_freq_hz", "peak_ampl
 
 
 # -- the files ---------------------------------------------------------------------------------------
-def write(result: FRCResult, writer: StageWriter) -> None:
+def write(result: FRCResult | FrictionFRCResult, writer: StageWriter) -> None:
     """Write the frc stage's files (module docstring) and put its statistics in ``writer.stats``.
 
     Parameters
     ----------
-    result : FRCResult
-        What :func:`bearingshaft.stages.frc.compute` returned.
+    result : FRCResult or FrictionFRCResult
+        What :func:`bearingshaft.stages.frc.compute` returned (with sliders at the tips, the files of
+        :func:`bearingshaft.stages.frc_friction_files.write`).
     writer : StageWriter
         Where the files go.
     """
+    if isinstance(result, FrictionFRCResult):  # HB by AFT with the sliders: its own files (frc_friction_files)
+        from bearingshaft.stages import frc_friction_files
+
+        frc_friction_files.write(result, writer)
+        return
     spec, names = result.spec, result.names
     stats = {"curves": _curve_stats(result), "stepped_sine": {}, "stability": {}}
     write_rows(writer.path("stepped_sine.csv"), _stepped_sine_rows(result, stats))
@@ -667,8 +674,9 @@ def draw_frc(result: FRCResult):
 
     Parameters
     ----------
-    result : FRCResult
-        What :func:`bearingshaft.stages.frc.compute` returned.
+    result : FRCResult or FrictionFRCResult
+        What :func:`bearingshaft.stages.frc.compute` returned (with sliders at the tips, the files of
+        :func:`bearingshaft.stages.frc_friction_files.write`).
 
     Returns
     -------
@@ -723,8 +731,9 @@ def draw_receptance(result: FRCResult):
 
     Parameters
     ----------
-    result : FRCResult
-        What :func:`bearingshaft.stages.frc.compute` returned.
+    result : FRCResult or FrictionFRCResult
+        What :func:`bearingshaft.stages.frc.compute` returned (with sliders at the tips, the files of
+        :func:`bearingshaft.stages.frc_friction_files.write`).
 
     Returns
     -------

@@ -213,19 +213,6 @@ def _shoot(system, b: np.ndarray, P: float, f: float, br, amplitude_ref: float, 
                       max_abs_multiplier=r.max_abs_multiplier, stable=r.stable, **common)
 
 
-def write(result: FrictionFRCResult, writer) -> None:
-    """frc.csv, frc_friction_checks.csv, frc.png and frc.md (the files of the frictionless stage it skips are
-    named in frc.md, with the reason).
-
-    Parameters
-    ----------
-    result : FrictionFRCResult
-    writer : StageWriter
-    """
-    from bearingshaft.stages import frc_friction_files
-
-    frc_friction_files.write(result, writer)
 
 
-__all__ = ["SKIPPED", "FrictionCheck", "FrictionFRCResult", "ShootCheck", "compute", "load_vector", "settle",
-           "write"]
+__all__ = ["SKIPPED", "FrictionCheck", "FrictionFRCResult", "ShootCheck", "compute", "load_vector", "settle"]

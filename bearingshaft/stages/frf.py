@@ -32,7 +32,6 @@ import time
 import numpy as np
 
 from bearingshaft.estimates import FLOAT, MATPLOTLIB_BYTES, Estimate
-from bearingshaft.output import StageWriter
 from bearingshaft.reproduction import Reproduction, record, within
 from bearingshaft.scenes import Scene, SceneError
 from bearingshaft.stages.frf_results import Blows, Dof, FRFResult, ModelModes, Windows
@@ -311,17 +310,6 @@ def compute(scene: Scene, progress: bool, workdir, test_file: str | None = None)
                      mac_assembly=mac_assembly, match=match, geometry=geometry, stats=stats, lines=(line,))
 
 
-def write(result: FRFResult, writer: StageWriter) -> None:
-    """Write the files of ``result`` (:func:`bearingshaft.stages.frf_files.write`); runs no solver.
-
-    Parameters
-    ----------
-    result : from :func:`compute`
-    writer : the stage's writer
-    """
-    from bearingshaft.stages import frf_files  # matplotlib: loaded only when files are written
-
-    frf_files.write(result, writer)
 
 
 # -- the registry's contract (bearingshaft.registry) -------------------------------------------
@@ -362,7 +350,7 @@ def estimate(scene: Scene) -> list[Estimate]:
                      "[ringdown] duration_s or sample_rate_hz, or [frf] blows")]
 
 
-__all__ = ["compute", "write", "estimate", "DESCRIPTION", "read_blows", "windowed", "model_modes", "test_geometry",
+__all__ = ["compute", "estimate", "DESCRIPTION", "read_blows", "windowed", "model_modes", "test_geometry",
            "TRIGGER_SHARE", "PRE_SHARE"]
 
 

@@ -47,7 +47,6 @@ import numpy as np
 
 from bearingshaft import measured
 from bearingshaft.estimates import COPIES, FLOAT, MATPLOTLIB_BYTES, Estimate, n_dofs, sliders
-from bearingshaft.output import StageWriter
 from bearingshaft.progress import bar as progress_bar
 from bearingshaft.reproduction import Reproduction, chaotic, exact, record, roundoff
 from bearingshaft.scenes import HammerSpec, Scene, SceneError
@@ -812,17 +811,6 @@ def _summary_line(scene: Scene, rig: VirtualRig, rec: Record, s: dict, linear: L
     return text
 
 
-def write(result: VirtualTest | Comparison, writer: StageWriter) -> None:
-    """Write the files of ``result`` (:func:`bearingshaft.stages.hammer_files.write`); runs no solver.
-
-    Parameters
-    ----------
-    result : from :func:`compute`
-    writer : the stage's writer (its folder and statistics)
-    """
-    from bearingshaft.stages import hammer_files  # matplotlib: loaded only when files are written
-
-    hammer_files.write(result, writer)
 
 
 # -- the registry's contract (bearingshaft.registry) -------------------------------------------
@@ -881,7 +869,7 @@ def estimate(scene: Scene) -> list[Estimate]:
                      "[ringdown] duration_s or sample_rate_hz, or [hammer] levels_N")]
 
 
-__all__ = ["compute", "write", "estimate", "DESCRIPTION", "run_record", "blow", "Record", "pseudo_rigid",
+__all__ = ["compute", "estimate", "DESCRIPTION", "run_record", "blow", "Record", "pseudo_rigid",
            "coupled_subsystem", "default_location", "impacts", "modal_energy_end", "backbones", "level_summary",
            "channel_backbones"]
 

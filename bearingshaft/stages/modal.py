@@ -39,7 +39,7 @@ from bearingshaft.reproduction import Reproduction
 from bearingshaft.scenes import Scene
 from bearingshaft.stages.modal_results import Correlation, ModalStageResult
 
-__all__ = ["DESCRIPTION", "ModalStageResult", "compute", "estimate", "modal_estimate", "write"]
+__all__ = ["DESCRIPTION", "ModalStageResult", "compute", "estimate", "modal_estimate"]
 
 STEPS = ("mesh and assemble", "eigensolution", "labels", "correlation")  # the progress bar's steps
 
@@ -217,24 +217,6 @@ def modal_estimate(model, n_modes: int) -> Estimate:
                     advice="lower n_modes" if by_modes else "raise element_size")
 
 
-def write(result, writer) -> None:
-    """The stage's files and figures from ``result`` (:mod:`bearingshaft.stages.modal_files`; matplotlib
-    is loaded only here, so computing never loads it).
-
-    Parameters
-    ----------
-    result : ModalStageResult
-        What :func:`compute` returned.
-    writer : StageWriter
-        Where the files go (its ``stats`` are filled for provenance.json).
-
-    Returns
-    -------
-    None
-    """
-    from bearingshaft.stages import modal_files
-
-    modal_files.write(result, writer)
 
 
 # -- the reproduction report (bearingshaft.reproduction): how these files compare with the reference -----

@@ -97,7 +97,9 @@ def nnm_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
     -------
     None
     """
-    write(compute(scene, progress, writer.scratch), writer)
+    from bearingshaft.stages import nnm_files  # matplotlib: loaded only when files are written
+
+    nnm_files.write(compute(scene, progress, writer.scratch), writer)
 
 
 # -- the registry's contract (bearingshaft.registry) -------------------------------------------
@@ -135,27 +137,9 @@ def estimate(scene: Scene) -> list[Estimate]:
     return out
 
 
-__all__ = ["CHECK_CHI", "DESCRIPTION", "compute", "estimate", "nnm_stage", "write"]
+__all__ = ["CHECK_CHI", "DESCRIPTION", "compute", "estimate", "nnm_stage"]
 
 
-def write(result, writer) -> None:
-    """The stage's files and figures from ``result`` (:mod:`bearingshaft.stages.nnm_files`; matplotlib
-    is loaded only here, so computing never loads it).
-
-    Parameters
-    ----------
-    result : NNMResult
-        What :func:`compute` returned.
-    writer : StageWriter
-        Where the files go (its ``stats`` are filled for provenance.json).
-
-    Returns
-    -------
-    None
-    """
-    from bearingshaft.stages import nnm_files
-
-    nnm_files.write(result, writer)
 
 
 # -- the reproduction report (bearingshaft.reproduction): how these files compare with the reference -----

@@ -37,7 +37,7 @@ from bearingshaft.stages.reduce_results import ReduceResult
 from reduced.models.modes import gap_moving_modes, linear_modes
 from reduced.models.rom import ReducedModel, reduction
 
-__all__ = ["DESCRIPTION", "ReduceResult", "compute", "estimate", "write"]
+__all__ = ["DESCRIPTION", "ReduceResult", "compute", "estimate"]
 
 ELASTIC_HZ = 100.0  # Hz, the upper-bound check starts here (the beam's first bending mode is ~730 Hz)
 UPPER_BOUND_TOL = -1e-9  # relative: round-off of the elastic modes' eigenvalues (~1e-9 above 100 Hz)
@@ -128,24 +128,6 @@ def estimate(scene: Scene) -> list[Estimate]:
     return []
 
 
-def write(result, writer) -> None:
-    """The stage's files and figures from ``result`` (:mod:`bearingshaft.stages.reduce_files`; matplotlib
-    is loaded only here, so computing never loads it).
-
-    Parameters
-    ----------
-    result : ReduceResult
-        What :func:`compute` returned.
-    writer : StageWriter
-        Where the files go (its ``stats`` are filled for provenance.json).
-
-    Returns
-    -------
-    None
-    """
-    from bearingshaft.stages import reduce_files
-
-    reduce_files.write(result, writer)
 
 
 # -- the reproduction report (bearingshaft.reproduction): how these files compare with the reference -----

@@ -304,20 +304,6 @@ def run_summary(res: RingdownFile, P: np.ndarray, point_names: tuple[str, ...]) 
                       float((res.n_samples - 1) / fs))
 
 
-def write(result: RingdownOutcome, writer: StageWriter) -> None:
-    """ringdown.png, the stage's statistics and summary lines, and the files of the analyses.
-
-    Parameters
-    ----------
-    result : what :func:`compute` returned
-    writer : the stage's results folder
-
-    The writing is :func:`bearingshaft.stages.ringdown_files.write` (imported here when called, so
-    that computing imports no figure code).
-    """
-    from bearingshaft.stages import ringdown_files
-
-    ringdown_files.write(result, writer)
 
 
 def ringdown_stage(scene: Scene, writer: StageWriter, progress: bool, method: str | None = None) -> None:
@@ -330,7 +316,9 @@ def ringdown_stage(scene: Scene, writer: StageWriter, progress: bool, method: st
     progress : show progress bars
     method : the integrator (default: the scene's)
     """
-    write(compute(scene, progress, writer.scratch, method), writer)
+    from bearingshaft.stages import ringdown_files  # matplotlib: loaded only when files are written
+
+    ringdown_files.write(compute(scene, progress, writer.scratch, method), writer)
 
 
 def _point_mean(res, P: np.ndarray, point: int) -> float:

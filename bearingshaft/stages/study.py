@@ -47,7 +47,7 @@ from bearingshaft.stages.study_results import CONVERGENCE_BUDGET_S, StudyResult,
 from reduced._blas import single_thread_blas
 from reduced.studies import STIFF_FIELDS, rom_case, rom_convergence, stiff_cases, work_precision
 
-__all__ = ["DESCRIPTION", "StudyResult", "compute", "estimate", "write"]
+__all__ = ["DESCRIPTION", "StudyResult", "compute", "estimate"]
 
 ROM_MAX_EXPLICIT_STEPS = 1e8  # explicit stiff-case runs of the reduced model predicted beyond this
 # are refused (~20 s at 7 DOFs; a 10 s run at k_g = 1e11 would need ~1.2e8)
@@ -181,24 +181,6 @@ def estimate(scene: Scene) -> list[Estimate]:
     return out
 
 
-def write(result, writer) -> None:
-    """The stage's files and figures from ``result`` (:mod:`bearingshaft.stages.study_files`; matplotlib
-    is loaded only here, so computing never loads it).
-
-    Parameters
-    ----------
-    result : StudyResult
-        What :func:`compute` returned.
-    writer : StageWriter
-        Where the files go (its ``stats`` are filled for provenance.json).
-
-    Returns
-    -------
-    None
-    """
-    from bearingshaft.stages import study_files
-
-    study_files.write(result, writer)
 
 
 # -- the reproduction report (bearingshaft.reproduction): how these files compare with the reference -----

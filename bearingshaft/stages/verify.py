@@ -41,7 +41,7 @@ from reduced.periodic.backbones import hb_backbones
 from reduced.transient.integrate import ringdown
 from reduced.transient.spectrogram import spectrogram
 
-__all__ = ["DESCRIPTION", "VerifyResult", "compute", "estimate", "write"]
+__all__ = ["DESCRIPTION", "VerifyResult", "compute", "estimate"]
 
 N_COMPARE = 3  # coupled modes compared per contact state (the three-mass model has three)
 UNITS = {"k_s": "N/m", "kappa": "N m/rad", "k_g": "N/m", "L": "m", "gap": "m", "m1": "kg", "m2": "kg", "m3": "kg",
@@ -233,24 +233,6 @@ def estimate(scene: Scene) -> list[Estimate]:
                      f"3 models x 3 ringdowns of {samples:.3g} samples", "[verify] duration_s or sample_rate_hz")]
 
 
-def write(result, writer) -> None:
-    """The stage's files and figures from ``result`` (:mod:`bearingshaft.stages.verify_files`; matplotlib
-    is loaded only here, so computing never loads it).
-
-    Parameters
-    ----------
-    result : VerifyResult
-        What :func:`compute` returned.
-    writer : StageWriter
-        Where the files go (its ``stats`` are filled for provenance.json).
-
-    Returns
-    -------
-    None
-    """
-    from bearingshaft.stages import verify_files
-
-    verify_files.write(result, writer)
 
 
 # -- the reproduction report (bearingshaft.reproduction): how these files compare with the reference -----
