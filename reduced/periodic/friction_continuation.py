@@ -1,0 +1,344 @@
+"""Forced periodic orbits with friction continued in frequency by shooting on the exact friction flow.
+
+The multiple-shooting equations of :mod:`reduced.periodic.friction_shooting` (S nodes y_k = [x; v; w] at
+t_k = k T / S, Newton's unknowns z = [x; v; d], d = Bt x - w the sliders' stretches, residual in units of D)
+with the load's frequency f (Hz) as one more unknown, u = [z / D; f]:
+
+    G(u) = R(Y(z), f) = 0   ((2n + p) S equations),
+    t_i . (u - u_i) - ds = 0   (pseudo-arclength, t_i the unit tangent at the last point u_i).
+
+**Predictor / corrector.** Predictor u_i + ds t_i; corrector Newton on [G; t_i . (u - u_i) - ds] with the
+bordered Jacobian [[dG/dz, dG/df]; t_i^T], first as a chord (the Jacobian of the last point, kept while each step
+cuts the defect by ``CHORD_RATE``), then refreshed at the iterate; each step the minimum-norm least-squares
+solution (a slider open or stuck the whole period leaves a null direction of dG/dz, as in the shooting at one
+frequency: rank < size). The tangent at a converged point solves [[dG/du]; t_i^T] t = [0; 1] (least squares),
+normalised and oriented along t_i, so it passes folds where df/ds = 0. ds grows by ``DS_GROW`` after a corrector
+of at most ``EASY_STEPS`` steps and is halved after one that fails (down to ``ds_min``: the branch ends there).
+
+**Jacobian, monodromy and the non-smooth transitions.** dG/dz is the segments' monodromies by forward
+differences on the exact integrator (step ``FD_STEP`` D, :meth:`_Residual.blocks`), dG/df by a forward
+difference of ``FD_FREQ`` f. The Floquet multipliers at each point are the eigenvalues of the product of the
+same forward-difference blocks at the converged point (Phi = Phi_{S-1} ... Phi_0, in [x; v; w]): the
+**saltation** of every stick-slip, slip-stick, closing and opening event is included through the differences,
+not written out, as long as no event is created or lost within a step of 1e-7 of the amplitude (at a grazing
+contact the difference is one-sided: the multipliers there are those of the side the step lands on; the
+HB-curve stage marks such points by their neighbours' verdicts).
+
+**Bifurcations** between two consecutive points, from the multipliers counted outside the unit circle
+(|mu| > 1 + STABLE_TOL; a free slider's multiplier 1 is on it): a real one through +1 with a sign change of
+df/ds is a ``fold``, without it a ``branch_point``; a real one through -1 a ``period_doubling``; a complex pair
+a ``neimark_sacker``; where a slider's tip opens or closes for the whole
+period between the two points (the rank of dG/dz changes) a ``grazing``, a non-smooth transition where the
+multipliers jump. (A branch point where no multiplier crosses, e.g. a symmetric pitchfork of a stable orbit, is
+not detected: the bordered determinant is zero along free-slider directions and cannot be used.)
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from reduced import _checks as _check
+from reduced.models.gaps import GapSystem
+from reduced.periodic.friction_shooting import (
+    FD_STEP,
+    RANK_RTOL,
+    STABLE_TOL,
+    FrictionShootingResult,
+    _Residual,
+    flow,
+)
+from reduced.transient.exact import ExactIntegratorError
+
+FD_FREQ = 1e-7  # x f: the forward-difference step of dG/df (as FD_STEP in z: truncation ~1e-7 of the column)
+TOL = 1e-10  # max |G| in units of D at a continued point (the integrator is exact to ~1e-13; a chord step
+# converges linearly, 1e-10 keeps the amplitudes far below the 1e-4 the HB comparison reads)
+CHORD_RATE = 0.25  # a chord step must cut max |G| by this, else the Jacobian is refreshed at the iterate
+MAX_CORRECTOR = 12  # corrector steps at most (chord and refreshed together)
+EASY_STEPS = 4  # a corrector of at most this many steps grows ds
+DS_GROW = 1.5  # the factor
+REAL_TOL = 1e-8  # |Im mu| <= this x |mu|: a real multiplier
+SAMPLES_PER_SEGMENT = 50  # of each segment when the amplitudes are read (400 a period at S = 8: error ~3e-5)
+
+
+@dataclass(eq=False)
+class FrictionShootingBranch:
+    """Periodic orbits with friction continued in frequency (:func:`continue_friction`).
+
+    Attributes
+    ----------
+    freq_hz : (k,) Hz
+    nodes : (k, S, 2n + p) the states [x; v; w] at t_j = j T / S of each orbit
+    amplitude_m : (k, q) m, max |x| over the period at each output point (rows ``point_rows``)
+    multipliers : (k, 2n + p) complex Floquet multipliers (forward-difference monodromy)
+    stable : (k,) bool, max |mu| <= 1 + STABLE_TOL
+    defect : (k,) max |G| at each point, in units of D
+    rank : (k,) numerical rank of dG/dz (size - rank free slider directions)
+    tangent_f : (k,) the tangent's frequency component (its sign changes at a fold)
+    bifurcations : [(i, kind)]: between points i - 1 and i (module docstring)
+    n_corrector : (k,) corrector steps of each point (0 for the start)
+    status : why the branch ended
+    wall_s : s
+    """
+
+    freq_hz: np.ndarray
+    nodes: np.ndarray
+    amplitude_m: np.ndarray
+    multipliers: np.ndarray
+    stable: np.ndarray
+    defect: np.ndarray
+    rank: np.ndarray
+    tangent_f: np.ndarray
+    bifurcations: list = field(default_factory=list)
+    n_corrector: np.ndarray | None = None
+    status: str = ""
+    wall_s: float = 0.0
+
+    @property
+    def max_abs_multiplier(self) -> np.ndarray:
+        """(k,) the largest |mu| at each point."""
+        return np.max(np.abs(self.multipliers), axis=1)
+
+
+class _Continuation:
+    """G(u), its Jacobian and the monodromy at fixed D, S and load (module docstring)."""
+
+    def __init__(self, system, b, P, phase_deg, S, D):
+        self.system, self.b, self.P, self.phase, self.S, self.D = system, b, P, phase_deg, S, D
+        self.N = D.size
+
+    def res(self, f: float) -> _Residual:
+        return _Residual(self.system, self.b, self.P, f, self.phase, self.S, self.D)
+
+    def G(self, u: np.ndarray) -> tuple[np.ndarray, _Residual, np.ndarray, np.ndarray]:
+        """(G, residual object, Y, ends) at u = [z / D; f]."""
+        res = self.res(float(u[-1]))
+        Y = res.y_of(u[:-1].reshape(self.S, self.N) * self.D)
+        ends = res.ends(Y)
+        return res.residual(Y, ends), res, Y, ends
+
+    def jacobian(self, u: np.ndarray, G: np.ndarray, res: _Residual, Y: np.ndarray,
+                 ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """((S N, S N + 1) dG/du, (S, N, N) the blocks in units of D) by forward differences."""
+        blocks = res.blocks(Y, ends, FD_STEP)
+        df = FD_FREQ * float(u[-1])
+        up = u.copy()
+        up[-1] += df
+        Gf = self.G(up)[0]
+        return np.hstack([res.jacobian(blocks), ((Gf - G) / df)[:, None]]), blocks
+
+    def monodromy(self, res: _Residual, blocks: np.ndarray) -> np.ndarray:
+        """(N, N) dy(T)/dy(0) in [x; v; w] from the blocks (as :meth:`_Residual.monodromy`)."""
+        Phi = np.eye(self.N)
+        for Jk in blocks:
+            Phi = Jk * (self.D[:, None] / self.D[None, :]) @ Phi
+        n = self.system.n
+        Tm = np.eye(self.N)
+        Tm[2 * n:, :n] = res.Bt
+        Tm[2 * n:, 2 * n:] = -np.eye(res.Bt.shape[0])
+        return Tm @ Phi @ Tm
+
+
+def _tangent(J: np.ndarray, t_prev: np.ndarray) -> np.ndarray:
+    """The unit tangent: [J; t_prev^T] t = [0; 1] by least squares, oriented along t_prev."""
+    A = np.vstack([J, t_prev[None, :]])
+    rhs = np.zeros(A.shape[0])
+    rhs[-1] = 1.0
+    t = np.linalg.lstsq(A, rhs, rcond=RANK_RTOL)[0]
+    t /= np.linalg.norm(t)
+    return t if float(t @ t_prev) >= 0.0 else -t
+
+
+def _counts(mu: np.ndarray) -> tuple[int, int, int]:
+    """(real > 1, real < -1, complex) multipliers outside the unit circle."""
+    out = np.abs(mu) > 1.0 + STABLE_TOL
+    real = np.abs(mu.imag) <= REAL_TOL * np.abs(mu)
+    return (int(np.sum(out & real & (mu.real > 0))), int(np.sum(out & real & (mu.real < 0))),
+            int(np.sum(out & ~real)))
+
+
+def bifurcations(multipliers: np.ndarray, tangent_f: np.ndarray,
+                 rank: np.ndarray | None = None) -> list[tuple[int, str]]:
+    """[(i, kind)]: the changes of the counts of multipliers outside the unit circle between points i - 1 and i
+    (module docstring: fold, branch_point, period_doubling, neimark_sacker); where the rank of dG/dz changes
+    between the two points (a slider's tip opens or closes for the whole period) the change is a ``grazing``
+    (a non-smooth transition: the multipliers jump, they do not cross).
+
+    Parameters
+    ----------
+    multipliers : (k, N) complex
+    tangent_f : (k,) the tangents' frequency components
+    rank : (k,) the rank of dG/dz at each point (None: not used)
+
+    Returns
+    -------
+    list of (int, str)
+
+    Examples
+    --------
+    >>> mu = np.array([[0.5, 0.2], [1.5, 0.2], [1.5, -1.2]], complex)
+    >>> bifurcations(mu, np.array([1.0, -1.0, -1.0]))
+    [(1, 'fold'), (2, 'period_doubling')]
+    """
+    out = []
+    c = [_counts(m) for m in np.asarray(multipliers)]
+    for i in range(1, len(c)):
+        if rank is not None and rank[i] != rank[i - 1]:
+            if c[i] != c[i - 1]:
+                out.append((i, "grazing"))
+            continue
+        if c[i][0] != c[i - 1][0]:
+            out.append((i, "fold" if tangent_f[i] * tangent_f[i - 1] < 0 else "branch_point"))
+        if c[i][1] != c[i - 1][1]:
+            out.append((i, "period_doubling"))
+        if c[i][2] != c[i - 1][2]:
+            out.append((i, "neimark_sacker"))
+    return out
+
+
+def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_max_hz: float, *,
+                      direction: float = 1.0, ds: float = 0.05, ds_min: float = 1e-4, ds_max: float = 0.5,
+                      max_steps: int = 40, point_rows: np.ndarray | None = None,
+                      tol: float = TOL) -> FrictionShootingBranch:
+    """Continue a converged friction orbit in frequency by pseudo-arclength on the shooting equations.
+
+    Unknowns u = [z / D; f] (z = [x; v; Bt x - w] at the S nodes, D the start's scale, f in Hz); equations
+    R_k = (phi(y_k; t_k, T / S) - y_{k+1}) / D = 0 (:mod:`reduced.periodic.friction_shooting`) and
+    t_i . (u - u_i) = ds; the Floquet multipliers of every point from the forward-difference monodromy; the
+    bifurcations from their crossings (module docstring).
+
+    Parameters
+    ----------
+    start : FrictionShootingResult
+        A converged orbit (:func:`reduced.periodic.friction_shooting.shoot_friction`): its system, load, nodes.
+    freq_min_hz, freq_max_hz : Hz, the branch ends when it leaves this band
+    direction : the sign of df/ds at the start
+    ds : the first arclength step (z / D and Hz together)
+    ds_min, ds_max : its bounds
+    max_steps : points after the start at most
+    point_rows : (q, n) the output points' rows (default: the identity, every DOF)
+    tol : max |G| at a point, units of D
+
+    Returns
+    -------
+    FrictionShootingBranch
+
+    Raises
+    ------
+    reduced._checks.InvalidArgument
+        ``start`` not converged.
+    """
+    if not start.converged:
+        raise _check.InvalidArgument("start must be a converged orbit (shoot_friction(...).converged)")
+    f0 = _check.positive("freq_min_hz", freq_min_hz, "Hz")
+    f1 = _check.positive("freq_max_hz", freq_max_hz, "Hz")
+    max_steps = _check.integer("max_steps", max_steps, lo=0)
+    system: GapSystem = start.system
+    n = system.n
+    rows = np.eye(n) if point_rows is None else np.asarray(point_rows, float)
+    S, N = start.nodes.shape
+    D = start.scale
+    cont = _Continuation(system, start.b, start.amplitude_N, start.phase_deg, S, D)
+    t_clock = time.perf_counter()
+
+    def amplitudes(Y: np.ndarray, f: float) -> np.ndarray:
+        h = 1.0 / f / S
+        xs = np.vstack([flow(system, start.b, start.amplitude_N, f, Y[k], k * h, h, SAMPLES_PER_SEGMENT,
+                             start.phase_deg)[:, :n] for k in range(S)])
+        return np.max(np.abs(xs @ rows.T), axis=0)
+
+    res0 = cont.res(start.freq_hz)
+    u = np.concatenate([(res0.z_of(start.nodes) / D).ravel(), [start.freq_hz]])
+    G, res, Y, ends = cont.G(u)
+    J, blocks = cont.jacobian(u, G, res, Y, ends)
+    e = np.zeros(u.size)
+    e[-1] = 1.0 if direction >= 0 else -1.0
+    t = _tangent(J, e)
+    pts = []
+
+    def record(u, G, res, Y, J, blocks, t, k_corr):
+        mu = np.linalg.eigvals(cont.monodromy(res, blocks))
+        rank = int(np.linalg.matrix_rank(J[:, :-1], tol=RANK_RTOL * np.linalg.norm(J[:, :-1], 2)))
+        pts.append((float(u[-1]), Y.copy(), amplitudes(Y, float(u[-1])), mu, float(np.max(np.abs(G))), rank,
+                    float(t[-1]), k_corr))
+
+    record(u, G, res, Y, J, blocks, t, 0)
+    status, h = f"{max_steps} steps", float(ds)
+    while len(pts) <= max_steps:
+        ok, k_corr = False, 0
+        try:
+            v = u + h * t
+            Jc = J
+            Gv, res_v, Yv, ends_v = cont.G(v)
+            r = float(np.max(np.abs(Gv)))
+            for k_corr in range(1, MAX_CORRECTOR + 1):  # noqa: B007 (the count is recorded)
+                A = np.vstack([Jc, t[None, :]])
+                rhs = -np.concatenate([Gv, [t @ (v - u) - h]])
+                du = np.linalg.lstsq(A, rhs, rcond=RANK_RTOL)[0]
+                v = v + du
+                r_old, G_old = r, Gv
+                Gv, res_v, Yv, ends_v = cont.G(v)
+                r = float(np.max(np.abs(Gv)))
+                if r <= tol:
+                    ok = True
+                    break
+                if r > CHORD_RATE * r_old:  # Broyden's update first, a fresh Jacobian if that did not help
+                    if r > r_old:
+                        Jc = cont.jacobian(v, Gv, res_v, Yv, ends_v)[0]
+                    else:
+                        Jc = Jc + np.outer(Gv - G_old - Jc @ du, du) / float(du @ du)
+        except (ExactIntegratorError, np.linalg.LinAlgError, ValueError):
+            ok = False
+        if not ok:
+            h *= 0.5
+            if h < ds_min:
+                status = f"ds below {ds_min:g} at f = {u[-1]:.6g} Hz (the corrector does not converge)"
+                break
+            continue
+        J, blocks = cont.jacobian(v, Gv, res_v, Yv, ends_v)
+        t = _tangent(J, t)
+        u, G, res, Y = v, Gv, res_v, Yv
+        record(u, G, res, Y, J, blocks, t, k_corr)
+        if not f0 <= u[-1] <= f1:
+            status = f"left the band at f = {u[-1]:.6g} Hz"
+            break
+        if k_corr <= EASY_STEPS:
+            h = min(h * DS_GROW, ds_max)
+    f, Ys, A, mu, dfc, rk, tf, kc = (np.array(c) for c in zip(*pts, strict=True))
+    stable = np.max(np.abs(mu), axis=1) <= 1.0 + STABLE_TOL
+    return FrictionShootingBranch(f, Ys, A, mu, stable, dfc, rk, tf, bifurcations(mu, tf, rk), kc, status,
+                                  time.perf_counter() - t_clock)
+
+
+def joined(down: FrictionShootingBranch, up: FrictionShootingBranch) -> FrictionShootingBranch:
+    """One branch of two continued from the same start in opposite directions: ``down`` reversed (its start
+    dropped, its tangents turned to point along ``up``'s), then ``up``; the bifurcations found again over the
+    whole.
+
+    Parameters
+    ----------
+    down, up : FrictionShootingBranch
+        ``down.freq_hz[0] == up.freq_hz[0]`` (the common start).
+
+    Returns
+    -------
+    FrictionShootingBranch
+    """
+    if down.freq_hz[0] != up.freq_hz[0]:
+        raise _check.InvalidArgument("down and up must start at the same point")
+
+    def cat(a, b):
+        return np.concatenate([a[:0:-1], b])
+
+    tf = np.concatenate([-down.tangent_f[:0:-1], up.tangent_f])
+    mu, rk = cat(down.multipliers, up.multipliers), cat(down.rank, up.rank)
+    return FrictionShootingBranch(cat(down.freq_hz, up.freq_hz), cat(down.nodes, up.nodes),
+                                  cat(down.amplitude_m, up.amplitude_m), mu, cat(down.stable, up.stable),
+                                  cat(down.defect, up.defect), rk, tf, bifurcations(mu, tf, rk),
+                                  cat(down.n_corrector, up.n_corrector),
+                                  f"down: {down.status}; up: {up.status}", down.wall_s + up.wall_s)
+
+
+__all__ = ["FD_FREQ", "FrictionShootingBranch", "bifurcations", "continue_friction", "joined"]
