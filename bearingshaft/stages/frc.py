@@ -719,7 +719,7 @@ and frc_backbone.png; the response map (each frequency of a dense stepped sine p
 quasi-periodic or chaotic, with its Lyapunov exponent): response_map.csv, response_map_jumps.csv,
 response_map.png and response_map_spectra.png. With friction at the tips ([model] mu > 0): HB by AFT with the
 Jenkins sliders, Hill's stability through stick-slip and a stepped sine by the exact friction integrator only
-(frc.csv, frc_friction_checks.csv, frc.png, frc.md; frc.md says what is skipped and why)."""
+(frc.csv, frc_friction_checks.csv, frc_friction_shooting.csv, frc.png, frc.md; frc.md says what is skipped and why)."""
 
 
 def frc_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
@@ -784,6 +784,9 @@ REPRODUCTION = Reproduction(rules=(
     sensitive("frc.csv", why=CONTINUATION),
     sensitive("frc_friction_checks.csv", why="the stepped sine by the exact friction integrator, compared with HB at "
               "its frequencies: " + CONTINUATION),
+    sensitive("frc_friction_shooting.csv", why="the exact friction orbits continued by shooting, compared with HB at "
+              "their frequencies (" + CONTINUATION + "); their own step path is set by the corrector's steps, "
+              "which round-off in the finite-difference Jacobians can change"),
     sensitive("frc_harmonics.csv", why=CONTINUATION),
     sensitive("frc_bifurcations.csv", why=CONTINUATION + " (the folds and bifurcations found between its points)"),
     sensitive("frc_stability.csv", why=CONTINUATION + " (stability at those points)"),

@@ -34,12 +34,19 @@ import time
 import numpy as np
 
 from bearingshaft.scenes import Scene
-from bearingshaft.stages.frc_friction_results import SKIPPED, FrictionCheck, FrictionFRCResult, ShootCheck  # noqa: F401
+from bearingshaft.stages.frc_friction_results import (  # noqa: F401
+    SKIPPED,
+    FrictionCheck,
+    FrictionFRCResult,
+    ShootCheck,
+    ShootingCurve,
+)
 from bearingshaft.systems import model_system
 from reduced.models.loads import Harmonic, Loads
 from reduced.periodic.continuation import ContinuationError
 from reduced.periodic.frc import FRC_STEPS, linear_frf, solution_at_frequency
 from reduced.periodic.friction_aft import friction_frc
+from reduced.periodic.friction_continuation import continue_friction, joined
 from reduced.periodic.friction_shooting import hb_at_frequency, hb_displacements, hb_nodes, shoot_friction
 from reduced.periodic.hb import NewtonError
 from reduced.transient.friction import integrate_exact_friction
@@ -50,6 +57,8 @@ SHOOT_H_FACTORS = (2, 4)  # where shooting from the curve's orbit (H) does not c
 # 4H + 1 harmonics is the next start (measured at 20.6 Hz in the scene: from H = 5 and 11 Newton stalls at a defect
 # of 2e-2 and 2e-3, from H = 21 it converges in 6 steps)
 SHOOT_SAMPLES = 500  # of each of the 8 segments of a shot orbit: its amplitudes read on 4000 points a period
+SHOOT_CONTINUATION_DS = 0.3  # the first arclength step of the continued shooting (z / D and Hz: ~0.1 Hz at the
+# start's tangent in the scene; measured from 14.29 Hz down, 10 points over 0.9 Hz in 3.9 s CPU, load 4)
 def load_vector(spec, rows: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
     """(n,) b: the row of ``[frc] point`` plus ``also_weights`` times the rows of ``also_points``.
 
@@ -126,7 +135,7 @@ def compute(scene: Scene, progress: bool = False) -> FrictionFRCResult:
     names = tuple(scene.model.point_names)
     b = load_vector(spec, rows, names)
     rows = np.asarray(rows, float)
-    curves, checks, linear, stats = {}, {}, {}, {"levels": {}}
+    curves, checks, linear, shooting, stats = {}, {}, {}, {}, {"levels": {}}
     f_lin = np.geomspace(spec.freq_min_hz, spec.freq_max_hz, 400)
     for P in spec.levels_N:
         t0 = time.perf_counter()
@@ -149,8 +158,42 @@ def compute(scene: Scene, progress: bool = False) -> FrictionFRCResult:
                       bifurcations=[[int(i), k] for i, k in br.bifurcations])
         errs = [c.rel_error for c in checks[P] if math.isfinite(c.rel_error)]
         st["worst_check_error"] = max(errs) if errs else math.nan
+        t2, c2 = time.perf_counter(), time.process_time()
+        shooting[P] = _continued(spec, br, checks[P], rows)
+        st["continued_shooting"] = {"wall_s": time.perf_counter() - t2, "cpu_s": time.process_time() - c2}
+        if isinstance(shooting[P], ShootingCurve):
+            st["continued_shooting"].update(points=len(shooting[P].branch.freq_hz), status=shooting[P].branch.status,
+                                            bifurcations=[[int(i), k] for i, k in shooting[P].branch.bifurcations])
         stats["levels"][str(P)] = st
-    return FrictionFRCResult(scene, names, b, curves, checks, linear, stats)
+    return FrictionFRCResult(scene, names, b, curves, checks, linear, stats, shooting)
+
+
+def _continued(spec, br, checks: list, rows: np.ndarray):
+    """The exact orbits continued both ways in frequency from the first orbit shot at an unsettled point
+    (``[frc] shooting_steps`` // 2 points each way; :func:`reduced.periodic.friction_continuation.continue_friction`),
+    each point against the HB curve's solution at its frequency nearest it; or why not (a str)."""
+    half = spec.shooting_steps // 2
+    if half <= 0:
+        return "not run: shooting_steps = 0"
+    start = next((c.shooting.orbit for c in checks if c.shooting is not None and c.shooting.orbit is not None), None)
+    if start is None:
+        return "not run: no orbit was shot at an unsettled point of the stepped sine"
+    kw = dict(max_steps=half, point_rows=rows, ds=SHOOT_CONTINUATION_DS)
+    down = continue_friction(start, spec.freq_min_hz, spec.freq_max_hz, direction=-1.0, **kw)
+    up = continue_friction(start, spec.freq_min_hz, spec.freq_max_hz, direction=1.0, **kw)
+    branch = joined(down, up)
+    hb = np.full(branch.amplitude_m.shape, math.nan)
+    hb_stable = [None] * len(branch.freq_hz)
+    if not isinstance(br, Exception):
+        for i, (f, a) in enumerate(zip(branch.freq_hz, branch.amplitude_m, strict=True)):
+            try:
+                amp, j, _ = solution_at_frequency(br, float(f), float(a[0]), 0, stable_only=False)
+            except NewtonError:
+                continue
+            if amp is not None:
+                hb[i] = np.asarray(amp, float)
+                hb_stable[i] = bool(br.stable[j]) if br.stable[j] == br.stable[j + 1] else None
+    return ShootingCurve(branch, hb, hb_stable)
 
 
 def _checks(system, b: np.ndarray, P: float, spec, br, rows: np.ndarray) -> list[FrictionCheck]:
@@ -204,15 +247,17 @@ def _shoot(system, b: np.ndarray, P: float, f: float, br, amplitude_ref: float, 
                   size=r.size, n_iter=r.n_iter, wall_s=wall)
     if not r.converged:
         return ShootCheck(False, "; ".join(tried), **common)
+    # the continued shooting starts from this orbit (multipliers again along the branch: not kept here)
     t, y = r.orbit(SHOOT_SAMPLES)
     xs = y[:, :system.n] @ rows.T
     xh = hb_displacements(X, f, t) @ rows.T
     A = np.max(np.abs(xs), axis=0)
     return ShootCheck(True, "; ".join(tried), shoot_m=A, amp_rel=np.abs(np.asarray(amp, float) / A - 1.0),
                       history_rel=np.max(np.abs(xh - xs), axis=0) / A, period_defect=r.period_defect,
-                      max_abs_multiplier=r.max_abs_multiplier, stable=r.stable, **common)
+                      max_abs_multiplier=r.max_abs_multiplier, stable=r.stable, orbit=r, **common)
 
 
 
 
-__all__ = ["SKIPPED", "FrictionCheck", "FrictionFRCResult", "ShootCheck", "compute", "load_vector", "settle"]
+__all__ = ["SKIPPED", "FrictionCheck", "FrictionFRCResult", "ShootCheck", "ShootingCurve", "compute", "load_vector",
+           "settle"]

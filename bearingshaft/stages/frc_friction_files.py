@@ -1,5 +1,5 @@
 """The files of the frc stage on a model with friction (:mod:`bearingshaft.stages.frc_friction`): frc.csv,
-frc_friction_checks.csv, frc.png and frc.md."""
+frc_friction_checks.csv, frc_friction_shooting.csv, frc.png and frc.md."""
 
 from __future__ import annotations
 
@@ -8,7 +8,9 @@ import math
 import numpy as np
 
 from bearingshaft.output import write_rows
-from bearingshaft.stages.frc_friction_results import SKIPPED
+from bearingshaft.stages.frc_friction_results import SKIPPED, ShootingCurve
+
+AGREE = (1e-3, 1e-2, 1e-1)  # the bands of |HB / shooting - 1| the agreement table counts points in
 
 
 def write(result, writer) -> None:
@@ -21,6 +23,7 @@ def write(result, writer) -> None:
     """
     write_rows(writer.path("frc.csv"), curve_rows(result))
     write_rows(writer.path("frc_friction_checks.csv"), check_rows(result))
+    write_rows(writer.path("frc_friction_shooting.csv"), shooting_rows(result))
     writer.stats["frc"] = {"friction": True, **result.stats}
     writer.path("frc.md").write_text(markdown(result), encoding="utf-8")
     _plot(writer.path("frc.png"), result)
@@ -72,6 +75,94 @@ def check_rows(result) -> list[dict]:
             row.update(shoot_columns(c.shooting, result.names))
             rows.append(row)
     return rows
+
+
+def shooting_rows(result) -> list[dict]:
+    """frc_friction_shooting.csv: per level and continued exact orbit, its frequency, the amplitudes shot and of the
+    HB curve nearest them, their largest relative difference, the largest |multiplier| and both verdicts, the
+    defect, the rank and the corrector steps.
+
+    Parameters
+    ----------
+    result : FrictionFRCResult
+    """
+    rows = []
+    for P, sc in result.shooting.items():
+        if not isinstance(sc, ShootingCurve):
+            continue
+        br, err = sc.branch, sc.rel_error
+        for i in range(len(br.freq_hz)):
+            row = {"level_N": P, "freq_hz": float(br.freq_hz[i])}
+            for k, n in enumerate(result.names):
+                row.update({f"{n}_shoot_m": float(br.amplitude_m[i, k]), f"{n}_hb_m": float(sc.hb_m[i, k])})
+            hs = sc.hb_stable[i]
+            row.update(hb_vs_shoot_rel=float(err[i]), max_abs_multiplier=float(br.max_abs_multiplier[i]),
+                       shoot_stable="true" if br.stable[i] else "false",
+                       hb_hill_stable="" if hs is None else ("true" if hs else "false"),
+                       defect=float(br.defect[i]), rank=int(br.rank[i]), tangent_f=float(br.tangent_f[i]),
+                       corrector_steps=int(br.n_corrector[i]),
+                       bifurcation=" ".join(k for j, k in br.bifurcations if j == i))
+            rows.append(row)
+    return rows
+
+
+def shooting_markdown(result) -> list[str]:
+    """frc.md's section on the continued shooting: how, where it went, its bifurcations, and a table of the
+    frequency stretches where HB and shooting agree to 1e-3, 1e-2, 1e-1 or not.
+
+    Parameters
+    ----------
+    result : FrictionFRCResult
+    """
+    lines = ["", "## Exact orbits continued by shooting (frc_friction_shooting.csv)", "",
+             "From the first orbit shot at an unsettled point, the exact friction orbits are continued both ways in "
+             "frequency (reduced.periodic.friction_continuation.continue_friction: pseudo-arclength on the 8-node "
+             "shooting equations with the frequency as unknown, a chord/Broyden corrector with minimum-norm steps). "
+             "Stability: the Floquet multipliers of the monodromy by forward differences (step 1e-7 of the "
+             "amplitude) at every point, so the saltation at the stick, slip and gap events enters through the "
+             "differences; bifurcations from the multipliers crossing the unit circle between two points (a fold "
+             "where df/ds also changes sign; grazing where a tip opens or closes for the whole period: the "
+             "multipliers jump). Each point against the HB curve's solution at its frequency nearest it (any "
+             "stability): the largest |HB / shooting - 1| over the points.", ""]
+    for P, sc in result.shooting.items():
+        if not isinstance(sc, ShootingCurve):
+            lines.append(f"- {P:g} N: {sc}")
+            continue
+        br, err = sc.branch, sc.rel_error
+        bif = ", ".join(f"{k} near {br.freq_hz[i]:.5g} Hz" for i, k in br.bifurcations) or "none"
+        lines += [f"- {P:g} N: {len(br.freq_hz)} orbits, {br.freq_hz.min():.5g}-{br.freq_hz.max():.5g} Hz "
+                  f"(start {br.freq_hz[np.argmax(br.n_corrector == 0)]:.5g} Hz; {br.status}); "
+                  f"{int(np.sum(br.stable))} stable; worst defect {float(np.max(br.defect)):.2g}; "
+                  f"bifurcations: {bif}.", ""]
+        lines += ["| level [N] | from [Hz] | to [Hz] | points | HB vs shooting | stable (shooting) | "
+                  "stable (Hill on HB) |", "|---|---|---|---|---|---|---|"]
+        for a, b, label in _stretches(err):
+            hs = [sc.hb_stable[i] for i in range(a, b)]
+            hill = {True: "yes", False: "no"}.get(hs[0], "n/a") if len(set(hs)) == 1 else "mixed"
+            st = br.stable[a:b]
+            lines.append(f"| {P:g} | {br.freq_hz[a]:.5g} | {br.freq_hz[b - 1]:.5g} | {b - a} | {label} | "
+                         f"{'yes' if st.all() else ('no' if not st.any() else 'mixed')} | {hill} |")
+        lines.append("")
+    return lines
+
+
+def _stretches(err: np.ndarray) -> list[tuple[int, int, str]]:
+    """[(first, end, label)] consecutive points in the same band of AGREE."""
+    def label(e):
+        if not math.isfinite(e):
+            return "no HB solution"
+        for a in AGREE:
+            if e <= a:
+                return f"agree within {a:g}"
+        return f"differ by more than {AGREE[-1]:g}"
+
+    out, a = [], 0
+    for i in range(1, len(err) + 1):
+        if i == len(err) or label(err[i]) != label(err[a]):
+            worst = float(np.max(err[a:i])) if np.all(np.isfinite(err[a:i])) else math.nan
+            out.append((a, i, label(err[a]) + (f" (worst {worst:.2g})" if math.isfinite(worst) else "")))
+            a = i
+    return out
 
 
 def shoot_columns(sh, names: tuple[str, ...]) -> dict:
@@ -165,6 +256,7 @@ def markdown(result) -> str:
                          f"{'yes' if c.settled else f'no ({c.settled_change:.2g})'} | "
                          f"{c.friction_work_per_period_J:.3g} |")
     lines += shoot_markdown(result)
+    lines += shooting_markdown(result)
     lines += ["", "## Skipped with friction, and why", ""]
     lines += [f"- **{what}**: {why}." for what, why in SKIPPED]
     return "\n".join(lines) + "\n"
@@ -237,6 +329,17 @@ def _plot(path, result) -> None:
             pts = result.checks[P]
             ax.plot([p.freq_hz for p in pts], [p.exact_m[col] * 1e3 for p in pts], "o", mfc="none", color=c,
                     label=f"exact, stepped sine, {P:g} N")
+            sc = result.shooting.get(P)
+            if isinstance(sc, ShootingCurve):
+                sb = sc.branch
+                a = sb.amplitude_m[:, col] * 1e3
+                ax.plot(sb.freq_hz, np.where(sb.stable, a, np.nan), "-", color="k", lw=1.6,
+                        label=f"exact orbits continued by shooting, stable, {P:g} N")
+                ax.plot(sb.freq_hz, np.where(sb.stable, np.nan, a), ".", color="k", ms=3,
+                        label=f"exact orbits continued by shooting, unstable, {P:g} N")
+                for i, kind in sb.bifurcations:
+                    ax.plot(sb.freq_hz[i], a[i], "s", mfc="none", color="r", ms=6)
+                    ax.annotate(kind, (sb.freq_hz[i], a[i]), fontsize=6, color="r", rotation=30)
             shot = [p for p in pts if p.shooting is not None and p.shooting.converged]
             if shot:
                 ax.plot([p.freq_hz for p in shot], [p.shooting.shoot_m[col] * 1e3 for p in shot], "x", color=c,

@@ -12,12 +12,10 @@ import numpy as np
 from bearingshaft.scenes import Scene
 
 SKIPPED = (
-    ("converged curve by shooting", "the continued multiple shooting (reduced.periodic.forced_shooting) runs the "
-     "exact flow without sliders; shooting with the sliders (reduced.periodic.friction_shooting, finite-difference "
-     "Jacobians) is run at the stepped sine's unsettled points only, not continued along the curve"),
-    ("Floquet multipliers by shooting and monodromy along the curve", "Hill's method on the consistent AFT "
-     "Jacobian gives the stability along the curve; the multipliers by shooting are those of the unsettled "
-     "points' orbits"),
+    ("converged curve by shooting", "the exact orbits are continued by shooting with the sliders "
+     "(reduced.periodic.friction_continuation) from the first unsettled point's orbit for [frc] shooting_steps "
+     "points only (finite-difference Jacobians: about a second of CPU a point in contact), not over the band; "
+     "Hill's method gives the stability along the whole HB curve"),
     ("response map", "its classifier (periodic, subharmonic, chaotic, Lyapunov exponent) runs the exact flow "
      "without sliders"),
     ("convergence in H", "each H's curve is a continuation with AFT (tens of seconds a curve); the stepped "
@@ -67,6 +65,7 @@ class ShootCheck:
     size: int = 0
     n_iter: int = 0
     wall_s: float = 0.0
+    orbit: object = None  # the FrictionShootingResult where converged (the continued shooting's start)
 
 
 @dataclass(eq=False)
@@ -102,6 +101,29 @@ class FrictionCheck:
 
 
 @dataclass(eq=False)
+class ShootingCurve:
+    """The exact friction orbits continued in frequency by shooting
+    (:func:`reduced.periodic.friction_continuation.continue_friction`), each against the HB curve.
+
+    Attributes
+    ----------
+    branch : FrictionShootingBranch
+    hb_m : (k, p) m, the HB curve's solution at each point's frequency nearest its amplitude at the first
+        output point, any stability (NaN where none)
+    hb_stable : [bool or None] Hill's verdict there (None: none, or the bracketing points disagree)
+    """
+
+    branch: object
+    hb_m: np.ndarray
+    hb_stable: list
+
+    @property
+    def rel_error(self) -> np.ndarray:
+        """(k,) the largest |HB / shooting - 1| over the output points (NaN without HB)."""
+        return np.max(np.abs(self.hb_m / self.branch.amplitude_m - 1.0), axis=1)
+
+
+@dataclass(eq=False)
 class FrictionFRCResult:
     """What :func:`bearingshaft.stages.frc_friction.compute` returns (its ``write`` writes it).
 
@@ -114,6 +136,7 @@ class FrictionFRCResult:
     checks : {P: [FrictionCheck]}, the stepped sine's settled points
     linear : {P: (freq_hz (k,), amplitude (k, p))}, the open-gap response without friction
     stats : the stage's statistics
+    shooting : {P: ShootingCurve or str}, the exact orbits continued by shooting, or why not
     """
 
     scene: Scene
@@ -123,6 +146,7 @@ class FrictionFRCResult:
     checks: dict  # {P: [FrictionCheck]}
     linear: dict  # {P: (freq_hz (k,), amplitude (k, p))} the open-gap response without friction
     stats: dict = field(default_factory=dict)
+    shooting: dict = field(default_factory=dict)  # {P: ShootingCurve or str}
 
 
-__all__ = ["SKIPPED", "FrictionCheck", "FrictionFRCResult", "ShootCheck"]
+__all__ = ["SKIPPED", "FrictionCheck", "FrictionFRCResult", "ShootCheck", "ShootingCurve"]
