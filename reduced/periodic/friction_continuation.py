@@ -198,6 +198,35 @@ def bifurcations(multipliers: np.ndarray, tangent_f: np.ndarray,
     return out
 
 
+def _correct(cont: _Continuation, J: np.ndarray, t: np.ndarray, u: np.ndarray, h: float, tol: float) -> tuple:
+    """(converged, corrector steps, v, G, residual object, Y, ends): the corrector from the predictor u + h t on
+    [G; t . (v - u) - h] = 0, chord with J, Broyden's update where a step cuts max |G| by less than CHORD_RATE,
+    a fresh Jacobian where it raises it (module docstring); not converged if the integrator fails."""
+    k_corr, v = 0, u + h * t
+    try:
+        Jc = J
+        Gv, res_v, Yv, ends_v = cont.G(v)
+        r = float(np.max(np.abs(Gv)))
+        for k_corr in range(1, MAX_CORRECTOR + 1):  # noqa: B007 (the count is returned)
+            A = np.vstack([Jc, t[None, :]])
+            rhs = -np.concatenate([Gv, [t @ (v - u) - h]])
+            du = np.linalg.lstsq(A, rhs, rcond=RANK_RTOL)[0]
+            v = v + du
+            r_old, G_old = r, Gv
+            Gv, res_v, Yv, ends_v = cont.G(v)
+            r = float(np.max(np.abs(Gv)))
+            if r <= tol:
+                return True, k_corr, v, Gv, res_v, Yv, ends_v
+            if r > CHORD_RATE * r_old:  # Broyden's update first, a fresh Jacobian if that did not help
+                if r > r_old:
+                    Jc = cont.jacobian(v, Gv, res_v, Yv, ends_v)[0]
+                else:
+                    Jc = Jc + np.outer(Gv - G_old - Jc @ du, du) / float(du @ du)
+    except (ExactIntegratorError, np.linalg.LinAlgError, ValueError):
+        pass
+    return False, k_corr, v, None, None, None, None
+
+
 def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_max_hz: float, *,
                       direction: float = 1.0, ds: float = 0.05, ds_min: float = 1e-4, ds_max: float = 0.5,
                       max_steps: int = 40, point_rows: np.ndarray | None = None,
@@ -267,30 +296,7 @@ def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_ma
     record(u, G, res, Y, J, blocks, t, 0)
     status, h = f"{max_steps} steps", float(ds)
     while len(pts) <= max_steps:
-        ok, k_corr = False, 0
-        try:
-            v = u + h * t
-            Jc = J
-            Gv, res_v, Yv, ends_v = cont.G(v)
-            r = float(np.max(np.abs(Gv)))
-            for k_corr in range(1, MAX_CORRECTOR + 1):  # noqa: B007 (the count is recorded)
-                A = np.vstack([Jc, t[None, :]])
-                rhs = -np.concatenate([Gv, [t @ (v - u) - h]])
-                du = np.linalg.lstsq(A, rhs, rcond=RANK_RTOL)[0]
-                v = v + du
-                r_old, G_old = r, Gv
-                Gv, res_v, Yv, ends_v = cont.G(v)
-                r = float(np.max(np.abs(Gv)))
-                if r <= tol:
-                    ok = True
-                    break
-                if r > CHORD_RATE * r_old:  # Broyden's update first, a fresh Jacobian if that did not help
-                    if r > r_old:
-                        Jc = cont.jacobian(v, Gv, res_v, Yv, ends_v)[0]
-                    else:
-                        Jc = Jc + np.outer(Gv - G_old - Jc @ du, du) / float(du @ du)
-        except (ExactIntegratorError, np.linalg.LinAlgError, ValueError):
-            ok = False
+        ok, k_corr, v, Gv, res_v, Yv, ends_v = _correct(cont, J, t, u, h, tol)
         if not ok:
             h *= 0.5
             if h < ds_min:
