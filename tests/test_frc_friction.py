@@ -17,10 +17,12 @@ from bearingshaft.estimates import has_friction
 from bearingshaft.scenes import SceneError, load_scene
 from bearingshaft.scenes.parse import parse_scene
 from bearingshaft.stages.frc_friction import FrictionCheck, ShootCheck, load_vector, settle
-from bearingshaft.stages.frc_friction_files import shoot_columns, shoot_markdown
+from bearingshaft.stages.frc_friction_files import shoot_columns, shoot_markdown, shooting_markdown, shooting_rows
+from bearingshaft.stages.frc_friction_results import ShootingCurve
 from bearingshaft.systems import model_system
 from reduced.periodic.frc import linear_frf, solution_at_frequency
 from reduced.periodic.friction_aft import friction_frc
+from reduced.periodic.friction_continuation import FrictionShootingBranch
 
 
 def test_the_scene_has_friction_and_a_slanted_load():
@@ -75,7 +77,8 @@ def test_the_stage_writes_its_files_and_says_what_it_skips(tmp_path):
     assert "Skipped with friction, and why" in md and "converged curve by shooting" in md
     assert "Shooting with the sliders at the unsettled points" in md
     assert "shoot_status" in (tmp_path / "out" / "frc_friction_checks.csv").read_text().splitlines()[0]
-    for name in ("frc.csv", "frc_friction_checks.csv", "frc.png"):
+    assert "Exact orbits continued by shooting" in md
+    for name in ("frc.csv", "frc_friction_checks.csv", "frc_friction_shooting.csv", "frc.png"):
         assert (tmp_path / "out" / name).exists(), name
 
 
@@ -107,3 +110,26 @@ def test_the_shooting_columns_say_what_was_shot_and_why_not():
     assert len({len(re.findall(r"(?<!\\)\|", ln)) for ln in table}) == 1  # as many cells on every row
     assert "| 14 | 5 | yes |" in table[2] and "| no / yes |" in table[2] and "| 0.08 / 0.4 (u) |" in table[2]
     assert "no: from H = 5: defect 0.0043" in table[3]
+
+
+def test_the_continued_shooting_table_says_where_hb_agrees():
+    # the files' part only (no solver): five continued orbits, HB within 1e-4 at the first two (open gaps,
+    # stable), 5e-3 at the next two, none at the last; the stretches group consecutive points by band, the rows
+    # carry the relative difference and the bifurcation at its point, and a level without a branch says why
+    f = np.array([13.0, 13.5, 14.0, 14.2, 14.3])
+    A = np.full((5, 2), 1e-4)
+    hb = A * (1 + np.array([1e-5, 5e-5, 5e-3, 4e-3, np.nan]))[:, None]
+    mu = np.array([[0.5, 1.0], [0.5, 1.0], [3.0, 1.0], [3.0, 1.0], [3.0, 1.0]], complex)
+    br = FrictionShootingBranch(f, np.zeros((5, 8, 5)), A, mu, np.array([True, True, False, False, False]),
+                                np.full(5, 1e-12), np.full(5, 9), np.ones(5), [(2, "branch_point")],
+                                np.array([0, 3, 4, 5, 6]), "down: 2 steps; up: 2 steps", 1.0)
+    sc = ShootingCurve(br, hb, [True, True, False, False, None])
+    result = SimpleNamespace(names=("x1", "u"), shooting={2.0: sc, 5.0: "not run: shooting_steps = 0"})
+    md = "\n".join(shooting_markdown(result))
+    assert "| 2 | 13 | 13.5 | 2 | agree within 0.001 (worst 5e-05) | yes | yes |" in md, md
+    assert "| 2 | 14 | 14.2 | 2 | agree within 0.01 (worst 0.005) | no | no |" in md, md
+    assert "| 2 | 14.3 | 14.3 | 1 | no HB solution | no | n/a |" in md, md
+    assert "branch_point near 14 Hz" in md and "- 5 N: not run: shooting_steps = 0" in md
+    rows = shooting_rows(result)
+    assert len(rows) == 5 and rows[2]["bifurcation"] == "branch_point" and rows[4]["hb_hill_stable"] == ""
+    assert rows[0]["hb_vs_shoot_rel"] == pytest.approx(1e-5) and math.isnan(rows[4]["hb_vs_shoot_rel"])
