@@ -388,6 +388,9 @@ def _timing_rows(result: FRCResult) -> list[dict]:
             for k, f in enumerate(cc.exact.families if cc.exact is not None else ()):
                 rows.append({"level": P, "what": f"exact family {k} ({f.kind})", "harmonics": "",
                              "points": len(f.freq_hz), "wall_s": round(f.wall_s, 4)})
+            for what, t in (cc.exact.cpu_s.items() if cc.exact is not None else ()):
+                rows.append({"level": P, "what": f"{what.replace('_', ' ')} (CPU s in wall_s)", "harmonics": "",
+                             "points": len(getattr(cc.exact, what)), "wall_s": round(t, 4)})
     return rows
 
 

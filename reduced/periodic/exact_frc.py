@@ -363,6 +363,8 @@ class ExactFRC:
         :class:`reduced.periodic.uncovered.Verdict` per HB point in contact no family covered, where judged.
     close_returns : list
         :class:`reduced.periodic.uncovered.CloseReturn` per seed tried from a chaotic response's Poincare samples.
+    cpu_s : dict
+        s of CPU time of the searches run after the families (``verdicts``, ``close_returns``).
     """
 
     amplitude_N: float
@@ -379,6 +381,7 @@ class ExactFRC:
     cover_freqs_hz: np.ndarray = field(default_factory=lambda: np.zeros(0))
     verdicts: list = field(default_factory=list)
     close_returns: list = field(default_factory=list)
+    cpu_s: dict = field(default_factory=dict)
 
     @property
     def main(self) -> OrbitFamily:
