@@ -400,50 +400,54 @@ def close_return_families(ex: ExactFRC, system, load: np.ndarray, samples: list,
                                        f"Newton residuals on {S * k * m} nodes)", d))
                 continue
             rk = ShootingResidual(flow, S * k, k, ex.x_ref, res1.omega_ref, omega_v)
-            try:  # the orbit on the families' S k nodes (exact: Newton converges at once)
-                Y = shoot_at(rk, rm.nodes(Y)[0][::m], w)
-            except ShootingError:
-                out.append(CloseReturn(fq, direction, k, n, dist, -1, "no orbit on S k nodes", d))
-                continue
-            nd = rk.nodes(Y)[0]
-            p = _smallest_period(nd, k)
-            if p < k:
-                out.append(CloseReturn(fq, direction, k, n, dist, -1, f"the orbit has period {p} T", d))
-                continue
-            same = _known(ex.families, residuals, rk, Y, ex.symmetry)
-            if same is not None:
-                out.append(CloseReturn(fq, direction, k, n, dist, -1,
-                                       f"the orbit is one of family {same} (or an image of it)", d))
-                continue
-            a, hw = _Analyser(rk, ex.symmetry, False, False, ex.point_rows).measures(nd)
-            an = _Analyser(rk, ex.symmetry, bool(ex.symmetry.mirror is not None and a < SYMMETRY_TOL),
-                           bool(ex.symmetry.half_wave and k == 1 and hw < SYMMETRY_TOL), ex.point_rows)
-            parts = []
-            try:
-                for sgn in (-1.0, 1.0):
-                    if sgn < 0 and Y[rk.size] <= band[0] + 1e-12 or sgn > 0 and Y[rk.size] >= band[1] - 1e-12:
-                        continue
-                    watch = _Joined(ex.families, rk, ex.symmetry, own=(parts[0][1][0], parts[0][1][3]) if parts
-                                    else None)
-                    part = _follow(rk, Y, rk.size, sgn, opts, family_steps, band, an, stop_extra=watch)
-                    if watch.family != -1:
-                        part[4][-1] = "joined" if watch.family >= 0 else "closed"
-                    parts.append((sgn, part))
-            except Exception as exc:  # noqa: BLE001 -- ContinuationError, ShootingError, NewtonError: reported
-                out.append(CloseReturn(fq, direction, k, n, dist, -1,
-                                       f"continuation failed: {' '.join(str(exc).split())[:100]}", d))
-                continue
-            Yf, data, folds, seg, st, notes = _join(parts)
-            fam = _family("close_return", k, rk, Yf, data, folds, seg, st,
-                          [f"started from a close return (k = {k}, distance {dist:.2g}) of the {direction} stepped "
-                           f"sine at {fq:.6g} Hz"] + notes, None, time.perf_counter() - t0, an)
-            fam.start_hz = fq
-            ex.families.append(fam)
-            residuals[len(ex.families) - 1] = (rk, an)
-            made += 1
-            out.append(CloseReturn(fq, direction, k, n, dist, len(ex.families) - 1,
-                                   f"family {len(ex.families) - 1} ({k} T)", d))
+            note = _new_family(ex, residuals, rk, rm.nodes(Y)[0][::m], w, band, opts, family_steps,
+                               f"started from a close return (k = {k}, distance {dist:.2g}) of the {direction} "
+                               f"stepped sine at {fq:.6g} Hz", t0)
+            made += not note
+            out.append(CloseReturn(fq, direction, k, n, dist, -1 if note else len(ex.families) - 1,
+                                   note or f"family {len(ex.families) - 1} ({k} T)", d))
     return out
+
+
+def _new_family(ex: ExactFRC, residuals: dict, rk: ShootingResidual, nodes: np.ndarray, w: float, band, opts,
+                family_steps: int, first_note: str, t0: float) -> str:
+    """Shoot the k T orbit on rk (S k nodes) from ``nodes`` (exact: Newton converges at once) and, if it has
+    period k and is new, follow it both ways as a ``close_return`` family appended to ``ex`` ('' done, else why
+    not)."""
+    k = rk.periods
+    try:
+        Y = shoot_at(rk, nodes, w)
+    except ShootingError:
+        return "no orbit on S k nodes"
+    nd = rk.nodes(Y)[0]
+    p = _smallest_period(nd, k)
+    if p < k:
+        return f"the orbit has period {p} T"
+    same = _known(ex.families, residuals, rk, Y, ex.symmetry)
+    if same is not None:
+        return f"the orbit is one of family {same} (or an image of it)"
+    a, hw = _Analyser(rk, ex.symmetry, False, False, ex.point_rows).measures(nd)
+    an = _Analyser(rk, ex.symmetry, bool(ex.symmetry.mirror is not None and a < SYMMETRY_TOL),
+                   bool(ex.symmetry.half_wave and k == 1 and hw < SYMMETRY_TOL), ex.point_rows)
+    parts = []
+    try:
+        for sgn in (-1.0, 1.0):
+            if sgn < 0 and Y[rk.size] <= band[0] + 1e-12 or sgn > 0 and Y[rk.size] >= band[1] - 1e-12:
+                continue
+            watch = _Joined(ex.families, rk, ex.symmetry, own=(parts[0][1][0], parts[0][1][3]) if parts else None)
+            part = _follow(rk, Y, rk.size, sgn, opts, family_steps, band, an, stop_extra=watch)
+            if watch.family != -1:
+                part[4][-1] = "joined" if watch.family >= 0 else "closed"
+            parts.append((sgn, part))
+    except Exception as exc:  # noqa: BLE001 -- ContinuationError, ShootingError, NewtonError: reported
+        return f"continuation failed: {' '.join(str(exc).split())[:100]}"
+    Yf, data, folds, seg, st, notes = _join(parts)
+    fam = _family("close_return", k, rk, Yf, data, folds, seg, st, [first_note] + notes, None,
+                  time.perf_counter() - t0, an)
+    fam.start_hz = w / (2 * math.pi)
+    ex.families.append(fam)
+    residuals[len(ex.families) - 1] = (rk, an)
+    return ""
 
 
 def _march(flow: ForcedFlow, y0: np.ndarray, omega: float, nodes: int, periods: int) -> np.ndarray | None:
