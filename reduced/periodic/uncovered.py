@@ -14,8 +14,9 @@ so deflation acts only through the families started by earlier verdicts); either
 (``orbit``: the orbit starts an ``isolated`` family, continued both ways with its multipliers, or
 it is one of a known family, ``known``), or ``no_orbit`` with the best relative defect
 max |R| / max |Y| met (both in the scaled unknowns: displacements in x_ref, velocities in
-omega_v x_ref, the same scale for both) over all the Newton iterations. A point a family started by
-an earlier verdict covers is ``covered``.
+omega_v x_ref, the same scale for both) over all the Newton iterations (``stalled`` where that best is
+below ``STALLED_DEFECT``: next to an orbit Newton could not close, e.g. at a grazing). A point a family started
+by an earlier verdict covers is ``covered``.
 
 **Unstable periodic orbits from chaos** (:func:`close_return_families`; Lathrop & Kostelich 1989,
 Phys. Rev. A 40, 4028). The Poincare samples y_n (the state at t = n T) of a chaotic stepped-sine
@@ -63,6 +64,7 @@ CLOSE_PERIODS = (1, 2, 3, 4)  # k of the close returns |P^k y_n - y_n|
 CLOSE_TOL = 0.1  # relative distance of a close return used as a seed at most
 CLOSE_ITER = 30  # Newton steps per close return at most
 CLOSE_MULTIPLE = 2  # nodes per load period of a close return's shooting, as a multiple of the families' S
+STALLED_DEFECT = 1e-6  # relative: a verdict's Newton that stopped below this defect stalled next to an orbit
 SAME_PERIOD_TOL = 1e-6  # relative: an orbit whose nodes repeat after k / d periods within this has period k / d
 
 
@@ -78,7 +80,8 @@ class Verdict:
         m, the HB orbit's amplitude at the load point.
     verdict : str
         ``orbit`` (a new family started), ``known`` (the orbit is a known family's), ``orbit_not_followed``
-        (found, its continuation failed), ``no_orbit``, ``covered`` (a family started by a verdict covers the
+        (found, its continuation failed), ``stalled`` (Newton stopped below a defect of ``STALLED_DEFECT``: an
+        orbit within reach, not converged), ``no_orbit``, ``covered`` (a family started by a verdict covers the
         frequency) or ``not_judged`` (outside the sample).
     defect : float
         Relative defect max |R| / max |Y| of the orbit found, else the best met over every Newton step.
@@ -282,6 +285,10 @@ def _judge(ex, flow, res, residuals, band, omega_v, opts, fq, nodes_of, multiple
         best, n_ev = min(best, d), n_ev + n
         if Y is not None:
             break
+    if Y is None and best < STALLED_DEFECT:
+        return ("stalled", best, seg, n_ev, -1, f"Newton stalled at defect {best:.2g} ({n_ev} Newton residuals on "
+                f"{', '.join(str(S * m) for m in multiples)} nodes): an orbit is within reach but not converged "
+                "(a contact grazing near it stops Newton's quadratic convergence), no family started")
     if Y is None:
         return ("no_orbit", best, seg, n_ev, -1, f"no orbit of the exact flow near this HB point (best defect "
                 f"{best:.2g} after {n_ev} Newton residuals on {', '.join(str(S * m) for m in multiples)} nodes)")
