@@ -160,9 +160,10 @@ def _plot_unstable_families(axs, result: FRCResult, P: float, col: int) -> None:
         S = fam.nodes.shape[1] // fam.periods
         n = fam.nodes.shape[2] // 2
         lab = f"unstable {fam.periods} T orbits (close returns)"
-        axs[0].plot(fam.freq_hz, fam.amplitude_m[:, col], "-", color="m", lw=0.8, label=lab)
-        for j in range(fam.periods):
-            axs[1].plot(fam.freq_hz, fam.nodes[:, j * S, :n] @ ex.point_rows[col], "-", color="m", lw=0.8, label=lab)
+        axs[0].plot(fam.freq_hz, fam.amplitude_m[:, col], "-", color="m", lw=1.8, label=lab, zorder=6)
+        for j in range(fam.periods):  # on top of the chaotic samples they are embedded in
+            axs[1].plot(fam.freq_hz, fam.nodes[:, j * S, :n] @ ex.point_rows[col], "-", color="m", lw=1.8,
+                        label=lab, zorder=6)
 
 
 def _plot_level(axs, result: FRCResult, P: float, lvl, col: int) -> None:
