@@ -226,7 +226,7 @@ def cover_verdicts(ex: ExactFRC, system, load: np.ndarray, guesses: list, *, poi
     guesses : list of (freq_hz, hb_amplitude_m, nodes_of)
         The HB points in contact; ``nodes_of(S)`` gives the HB orbit's states (S, 2n) at S equally spaced phases.
     points_per_band : int
-        Points given a verdict per run of consecutive uncovered points (in frequency), evenly spread (the
+        Points given a verdict per run of consecutive uncovered points (in frequency), spread evenly in frequency (the
         cost: a verdict is up to ``len(multiples) * max_iter`` residuals with their Jacobians).
     f_band : (Hz, Hz) the band ``ex`` was computed over
     multiples : nodes per period tried, as multiples of the families' S
@@ -245,7 +245,7 @@ def cover_verdicts(ex: ExactFRC, system, load: np.ndarray, guesses: list, *, poi
         f = np.array([g[0] for g in guesses], float)
         order = np.argsort(f, kind="stable")
         runs = [order[r] for r in _runs(~covered(ex.families, f[order]))]  # the uncovered bands
-        picks = {int(r[i]) for r in runs for i in _even(len(r), points_per_band)}
+        picks = {int(r[i]) for r in runs for i in _spread(f[r], points_per_band)}
         band_of = {int(j): (float(f[r[0]]), float(f[r[-1]])) for r in runs for j in r}
         judged = {}
         for j in sorted(picks, key=lambda j: f[j]):
@@ -264,7 +264,8 @@ def cover_verdicts(ex: ExactFRC, system, load: np.ndarray, guesses: list, *, poi
             cov = _covering(ex, fq)
             out.append(Verdict(fq, amp, "covered" if cov >= 0 else "not_judged", math.nan, 0, 0, cov,
                                f"in the range of family {cov}" if cov >= 0 else
-                               f"not judged ({points_per_band} points per band, evenly spread)", band_of[j]))
+                               f"not judged ({points_per_band} points per band, spread evenly in frequency)",
+                               band_of[j]))
     return out
 
 
@@ -302,17 +303,18 @@ def _judge(ex, flow, res, residuals, band, omega_v, opts, fq, nodes_of, multiple
     return ("orbit", d, seg, n_ev, k, f"an orbit of the exact flow (defect {d:.2g}, {seg} nodes): family {k}")
 
 
-def _even(k: int, count: int) -> list[int]:
-    """At most ``count`` indices spread evenly over 0..k-1 (the middle one for count 1).
+def _spread(f: np.ndarray, count: int) -> list[int]:
+    """Indices of at most ``count`` of the sorted frequencies f, spread evenly in frequency over [f_0, f_-1]: the
+    nearest to each of ``count`` equally spaced targets (the middle one for count 1); a continuation crowds its
+    points near folds, so an even spread of indices would judge the folds only.
 
-    >>> _even(10, 3), _even(5, 1), _even(2, 4)
-    ([0, 4, 9], [2], [0, 1])
+    >>> _spread(np.array([1.0, 2.0, 2.1, 2.2, 2.3, 5.0]), 3), _spread(np.array([1.0, 2.0, 4.0]), 1)
+    ([0, 4, 5], [1])
     """
-    if count <= 0 or k == 0:
+    if count <= 0 or not len(f):
         return []
-    if count == 1:
-        return [(k - 1) // 2]
-    return sorted({int(round(x)) for x in np.linspace(0, k - 1, min(count, k))})
+    targets = [0.5 * (f[0] + f[-1])] if count == 1 else np.linspace(f[0], f[-1], count)
+    return sorted({int(np.argmin(np.abs(f - t))) for t in targets})
 
 
 def _residuals(ex: ExactFRC, flow: ForcedFlow, f_band: tuple[float, float]):
