@@ -188,14 +188,16 @@ def _shoot(res: ShootingResidual, nodes: np.ndarray, omega: float, known: list, 
 
 
 def _orbits_at(ex: ExactFRC, residuals: dict, res: ShootingResidual, omega: float) -> list[np.ndarray]:
-    """Scaled points (of ``res``: period k, S k nodes) of the orbits the families of a period p dividing k have
-    at Omega (Newton at Omega from each piece's nearest point), each repeated k / p times."""
+    """Scaled points (of ``res``: period k) of the orbits the families of a period p dividing k have at Omega
+    (Newton at Omega from each piece's nearest point), sampled at res's nodes and repeated k / p times."""
     f = omega / (2 * math.pi)
     k = res.periods
     out = []
     for j, fam in enumerate(ex.families):
-        if k % fam.periods or fam.nodes.shape[1] * (k // fam.periods) != res.segments:
+        reps = k // fam.periods if k % fam.periods == 0 else 0
+        if not reps or res.segments % (fam.nodes.shape[1] * reps):
             continue
+        sub = res.segments // (fam.nodes.shape[1] * reps)  # res's nodes per segment of the family's
         r = residuals[j][0]
         for p in fam.pieces():
             fr = fam.freq_hz[p]
@@ -204,9 +206,11 @@ def _orbits_at(ex: ExactFRC, residuals: dict, res: ShootingResidual, omega: floa
             i = int(p[np.argmin(np.abs(fr - f))])
             try:
                 nodes = r.nodes(shoot_at(r, fam.nodes[i], omega))[0]
+                if sub > 1:  # the orbit at res's nodes: each segment marched in sub steps
+                    nodes = r.flow.sample(nodes, omega, fam.periods, sub)[:-1]
             except ShootingError:
                 continue
-            out.append(res.point(np.tile(nodes, (k // fam.periods, 1)), omega))
+            out.append(res.point(np.tile(nodes, (reps, 1)), omega))
     return out
 
 
