@@ -8,27 +8,27 @@ frequency no family covers is a guess of an exact orbit that the continuation ne
 verdict: multiple shooting on the exact flow at that frequency (Newton on
 R_k = phi(y_k; t_k, T / S) - y_{k+1} = 0, :func:`reduced.periodic.forced_shooting.shoot_at`) from
 the HB orbit's states at S m nodes, m = ``multiples`` in turn (more segments: each node sees
-|mu|^(1 / (S m)) of the orbit's growth, so orbits with |mu| ~ 1e5 converge), deflated from the
-orbits the families have at that frequency (Farrell et al. 2015; none where no family covers it,
-so deflation acts only through the families started by earlier verdicts); either Newton converges
-(``orbit``: the orbit starts an ``isolated`` family, continued both ways with its multipliers, or
-it is one of a known family, ``known``), or ``no_orbit`` with the best relative defect
+|mu|^(1 / (S m)) of the orbit's growth, so orbits with |mu| ~ 1e5 converge); either Newton converges
+(``orbit``: the orbit starts an ``isolated`` family, continued both ways with its multipliers; where
+it is a known family's orbit or an image of one, Newton runs once more with that orbit deflated,
+Farrell, Birkisson & Funke 2015, and ``known`` if it finds nothing else), or ``no_orbit`` with the best relative defect
 max |R| / max |Y| met (both in the scaled unknowns: displacements in x_ref, velocities in
 omega_v x_ref, the same scale for both) over all the Newton iterations (``stalled`` where that best is
 below ``STALLED_DEFECT``: next to an orbit Newton could not close, e.g. at a grazing). A point a family started
 by an earlier verdict covers is ``covered``.
 
-**Unstable periodic orbits from chaos** (:func:`close_return_families`; Lathrop & Kostelich 1989,
-Phys. Rev. A 40, 4028). The Poincare samples y_n (the state at t = n T) of a chaotic stepped-sine
-response come close to the unstable periodic orbits embedded in the attractor: a close return
-|y_{n+k} - y_n| small (relative, in the same scaled norm) for k = 1..4 seeds multiple shooting of
-a k T orbit (S k nodes marched from y_n along the recorded trajectory itself), deflated from the
-known families' orbits at that frequency (a period-p orbit, p | k, repeated k / p times: a fixed
-point of the k T map too). A converged orbit reduced to its smallest period and new (not a known
-family's nor an image of it) is continued as a family of kind ``close_return`` (period k, its
-symmetry, its multipliers over k T), each way until it leaves the band, retraces its path or runs
-onto a known family. The seeds are tried from the closest return up, the smallest period first
-among equal distances.
+**Unstable periodic orbits from chaos** (:func:`close_return_families`; Lathrop & Kostelich 1989, Phys. Rev. A
+40, 4028). The Poincare samples y_n (the state at t = n T) of a chaotic stepped-sine response come close to
+the unstable periodic orbits embedded in the attractor: a close return |y_{n+k} - y_n| small (relative, in the
+same scaled norm) for k = 1..4 seeds multiple shooting of a k T orbit (2 S k nodes marched from y_n along the
+recorded trajectory itself). A converged orbit of period k that is new (not a known family's nor an image of
+it) is continued as a family of kind ``close_return`` (period k, its symmetry, its multipliers over k T), each
+way until it leaves the band, retraces its path or runs onto a known family; one of a shorter period or a
+known family's is deflated (Newton once more from the seed, that orbit deflated). The seeds are tried from the
+closest return up, the smallest period first among equal distances. Deflating every known orbit up front (the
+tens of families of a contact band, each multiplying R by 1 / |Y - Y*|^2 + 1) bends Newton's path enough to
+lose orbits it finds otherwise (discrete-frc at 1 N: a 4 T orbit at 17 Hz), so only the orbit Newton actually
+fell onto is deflated.
 """
 
 from __future__ import annotations
@@ -187,33 +187,6 @@ def _shoot(res: ShootingResidual, nodes: np.ndarray, omega: float, known: list, 
     return Y, d, best[1]
 
 
-def _orbits_at(ex: ExactFRC, residuals: dict, res: ShootingResidual, omega: float) -> list[np.ndarray]:
-    """Scaled points (of ``res``: period k) of the orbits the families of a period p dividing k have at Omega
-    (Newton at Omega from each piece's nearest point), sampled at res's nodes and repeated k / p times."""
-    f = omega / (2 * math.pi)
-    k = res.periods
-    out = []
-    for j, fam in enumerate(ex.families):
-        reps = k // fam.periods if k % fam.periods == 0 else 0
-        if not reps or res.segments % (fam.nodes.shape[1] * reps):
-            continue
-        sub = res.segments // (fam.nodes.shape[1] * reps)  # res's nodes per segment of the family's
-        r = residuals[j][0]
-        for p in fam.pieces():
-            fr = fam.freq_hz[p]
-            if not fr.min() <= f <= fr.max():
-                continue
-            i = int(p[np.argmin(np.abs(fr - f))])
-            try:
-                nodes = r.nodes(shoot_at(r, fam.nodes[i], omega))[0]
-                if sub > 1:  # the orbit at res's nodes: each segment marched in sub steps
-                    nodes = r.flow.sample(nodes, omega, fam.periods, sub)[:-1]
-            except ShootingError:
-                continue
-            out.append(res.point(np.tile(nodes, (reps, 1)), omega))
-    return out
-
-
 def cover_verdicts(ex: ExactFRC, system, load: np.ndarray, guesses: list, *, points_per_band: int,
                    f_band: tuple[float, float], multiples: tuple = VERDICT_MULTIPLES, max_iter: int = VERDICT_ITER,
                    family_steps: int = 300) -> list[Verdict]:
@@ -286,7 +259,7 @@ def _judge(ex, flow, res, residuals, band, omega_v, opts, fq, nodes_of, multiple
     for m in multiples:
         seg = S * m
         r_m = ShootingResidual(flow, seg, 1, ex.x_ref, res.omega_ref, omega_v)
-        Y, d, n = _shoot(r_m, nodes_of(seg), w, _orbits_at(ex, residuals, r_m, w), max_iter)
+        Y, d, n = _shoot(r_m, nodes_of(seg), w, [], max_iter)
         best, n_ev = min(best, d), n_ev + n
         if Y is not None:
             break
@@ -300,6 +273,14 @@ def _judge(ex, flow, res, residuals, band, omega_v, opts, fq, nodes_of, multiple
     nodes_S = r_m.nodes(Y)[0][:: seg // S]  # the exact orbit's states at the families' S nodes
     note = _isolated(ex.families, ex.switches, residuals, (fq, nodes_S), res, opts, band, ex.point_rows,
                      ex.symmetry, _Budget(math.inf), False)
+    if "one of family" in note:  # a known orbit: once more with it deflated
+        Y2, d2, n = _shoot(r_m, nodes_of(seg), w, [Y], max_iter)
+        n_ev += n
+        if Y2 is not None:
+            d = d2
+            nodes_S = r_m.nodes(Y2)[0][:: seg // S]
+            note = _isolated(ex.families, ex.switches, residuals, (fq, nodes_S), res, opts, band, ex.point_rows,
+                             ex.symmetry, _Budget(math.inf), False)
     if note:
         return ("known" if "one of family" in note else "orbit_not_followed", d, seg, n_ev, -1, note)
     k = len(ex.families) - 1
@@ -407,15 +388,21 @@ def close_return_families(ex: ExactFRC, system, load: np.ndarray, samples: list,
             if nodes is None:
                 out.append(CloseReturn(fq, direction, k, n, dist, -1, "the flow failed from the seed", math.nan))
                 continue
-            Y, d, n_ev = _shoot(rm, nodes, w, _orbits_at(ex, residuals, rm, w), max_iter)
+            Y, d, n_ev = _shoot(rm, nodes, w, [], max_iter)
             if Y is None:
                 out.append(CloseReturn(fq, direction, k, n, dist, -1, f"no orbit (best defect {d:.2g} after {n_ev} "
                                        f"Newton residuals on {S * k * m} nodes)", d))
                 continue
             rk = ShootingResidual(flow, S * k, k, ex.x_ref, res1.omega_ref, omega_v)
-            note = _new_family(ex, residuals, rk, rm.nodes(Y)[0][::m], w, band, opts, family_steps,
-                               f"started from a close return (k = {k}, distance {dist:.2g}) of the {direction} "
-                               f"stepped sine at {fq:.6g} Hz", t0)
+            first = (f"started from a close return (k = {k}, distance {dist:.2g}) of the {direction} stepped sine "
+                     f"at {fq:.6g} Hz")
+            note = _new_family(ex, residuals, rk, rm.nodes(Y)[0][::m], w, band, opts, family_steps, first, t0)
+            if note.startswith(("the orbit has period", "the orbit is one of")):  # once more, that orbit deflated
+                Y2, d2, n2 = _shoot(rm, nodes, w, [Y], max_iter)
+                if Y2 is not None:
+                    d = d2
+                    note = _new_family(ex, residuals, rk, rm.nodes(Y2)[0][::m], w, band, opts, family_steps,
+                                       first + " (with the orbit first found deflated)", t0)
             made += not note
             out.append(CloseReturn(fq, direction, k, n, dist, -1 if note else len(ex.families) - 1,
                                    note or f"family {len(ex.families) - 1} ({k} T)", d))
