@@ -488,6 +488,18 @@ class FRCSpec:
     cover_families : int
         Families started from HB orbits of the contact band that no family covers, per level at most
         (kind ``isolated``: an isola or a piece of the curve the main family does not reach; 0: none).
+    verdict_points : int
+        HB points in contact judged per band no exact family covers (evenly spread; 0: none): multiple shooting
+        from the HB orbit with 2 and 4 times the segments, an orbit starts an isolated family, else "no orbit
+        near this HB point" with the best defect (:func:`reduced.periodic.uncovered.cover_verdicts`).
+    close_return_families : int
+        Families per level started from close returns of the response map's chaotic Poincare samples
+        (unstable periodic orbits of period 1-4 T, :func:`reduced.periodic.uncovered.close_return_families`;
+        0: none).
+    close_return_tries : int
+        Close returns shot per level at most.
+    close_return_steps : int
+        Points of such a family (and of a family started by a verdict) at most, each way.
     switching_max_s : float
         s of wall time per level after which no new family is started; 0 (the default): no such limit, so the
         families found do not depend on the machine or its load.
@@ -537,6 +549,10 @@ class FRCSpec:
     period_doubling_depth: int = 1  # doublings of a cascade followed (1: 2 T; 2: also 4 T)
     period_doubling_steps: int = 600  # points of a period-doubled family at most
     cover_families: int = 2  # families started from HB orbits of the contact band no family covers (0: none)
+    verdict_points: int = 3  # uncovered HB points in contact judged by shooting per band (0: none)
+    close_return_families: int = 2  # families from close returns of chaotic Poincare samples per level (0: none)
+    close_return_tries: int = 6  # close returns shot per level at most
+    close_return_steps: int = 200  # points of such a family (or one from a verdict) at most, each way
     switching_max_s: float = 0.0  # s, wall time per level after which no new family is started (0: none, reproducible)
     shooting_steps: int = 30000  # points of the main exact family at most
 
@@ -565,9 +581,10 @@ class FRCSpec:
         check(self.curve in FRC_CURVES, f"curve must be one of {', '.join(FRC_CURVES)}, got {self.curve!r}")
         tolerance(self, "hb_converged_tol")
         check(self.switching_max_s >= 0, f"switching_max_s must be >= 0 s, got {self.switching_max_s!r}")
-        for key in ("period_doubling_families", "period_doubling_depth", "cover_families"):
+        for key in ("period_doubling_families", "period_doubling_depth", "cover_families", "verdict_points",
+                    "close_return_families", "close_return_tries"):
             check(getattr(self, key) >= 0, f"{key} must be >= 0, got {getattr(self, key)!r}")
-        for key in ("max_families", "family_steps", "shooting_steps", "period_doubling_steps"):
+        for key in ("max_families", "family_steps", "shooting_steps", "period_doubling_steps", "close_return_steps"):
             check(getattr(self, key) >= (0 if key == "max_families" else 1),
                   f"{key} must be >= {0 if key == 'max_families' else 1}, got {getattr(self, key)!r}")
         check(self.map_step_hz >= 0, f"map_step_hz must be >= 0 Hz, got {self.map_step_hz!r}")

@@ -32,6 +32,7 @@ stop forces projected exactly, H = ``harmonics``) is continued in frequency over
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 import warnings
@@ -69,6 +70,7 @@ from reduced.periodic.frc import (
 )
 from reduced.periodic.hb import NewtonError, _derivative_matrix, newton
 from reduced.periodic.stepped_sine import SteppedSine, stepped_sine
+from reduced.periodic.uncovered import close_return_families, cover_verdicts
 from reduced.transient.exact import integrate_exact
 from reduced.transient.flow import Flow
 
@@ -144,6 +146,7 @@ def _compute(scene: Scene, progress: bool) -> FRCResult:
     convergence = _convergence(system, b, spec, rows, names, load_col, curves, checks, sweeps, bar)
     backbone = _backbone_check(system, b, rows, names, spec, load_col, curves, bar)
     maps = compute_maps(system, b, rows, names, spec, curves, bar)
+    uncovered_orbits(system, b, rows, names, spec, curves, converged, maps)
     bar.close()
     return FRCResult(scene.name, spec, names, load_col, curves, {P: _events(br, load_col) for P, br in curves.items()},
                      checks, sweeps, sweep_hb, convergence, *backbone, converged=converged, response_maps=maps)
@@ -337,6 +340,54 @@ def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: 
                     f"{a:.5g}-{c:.5g} Hz ({n} HB point{'' if n == 1 else 's'})" for a, c, n in gaps)))
     return ConvergedCurve(P, "shooting", why, spec.harmonics, Hc, change, contact, ex, "", time.perf_counter() - t0,
                           refined, fill)
+
+
+def uncovered_orbits(system: GapSystem, b: np.ndarray, rows: np.ndarray, names: tuple, spec, curves: dict,
+                     converged: dict, maps: dict) -> None:
+    """What the exact flow has where the families of each level drawn by shooting do not reach, added
+    to its :class:`reduced.periodic.exact_frc.ExactFRC` (``verdicts``, ``close_returns``, new families):
+    a verdict at ``[frc] verdict_points`` HB points in contact per uncovered band
+    (:func:`reduced.periodic.uncovered.cover_verdicts`), then up to ``[frc] close_return_families``
+    families of unstable periodic orbits seeded by close returns of the response map's chaotic Poincare
+    samples (:func:`reduced.periodic.uncovered.close_return_families`).
+
+    Parameters
+    ----------
+    system, b : the gap system and the load direction (n,)
+    rows, names : the output points
+    spec : the [frc] table
+    curves : P -> the HB curve (or its exception)
+    converged : P -> ConvergedCurve (their ExactFRC mutated)
+    maps : P -> MapLevel (may be empty)
+
+    Returns
+    -------
+    None
+    """
+    col = names.index(spec.point)
+    band = (spec.freq_min_hz, spec.freq_max_hz)
+    for P, cc in converged.items():
+        ex, br = cc.exact, curves.get(P)
+        if ex is None or br is None or isinstance(br, Exception):
+            continue
+        if spec.verdict_points > 0:
+            t0 = time.process_time()
+            g = [(float(br.freq_hz[i]), float(br.amplitude_m[i, col]),
+                  functools.partial(hb_states, br.X[i], float(br.omega[i])))
+                 for i in np.flatnonzero(_in_contact(system, br)) if band[0] <= br.freq_hz[i] <= band[1]]
+            ex.verdicts = cover_verdicts(ex, system, b, g, points_per_band=spec.verdict_points, f_band=band,
+                                         family_steps=spec.close_return_steps)
+            ex.cpu_s["verdicts"] = time.process_time() - t0
+        lvl = maps.get(P)
+        if spec.close_return_families > 0 and lvl is not None:
+            t0 = time.process_time()
+            samples = [(float(f), d, p.poincare) for d, rm in lvl.sweeps.items()
+                       for f, p in zip(rm.freq_hz, rm.points, strict=True) if p.regime == "chaotic"]
+            ex.close_returns = close_return_families(ex, system, b, samples, f_band=band,
+                                                     families=spec.close_return_families,
+                                                     tries=spec.close_return_tries,
+                                                     family_steps=spec.close_return_steps)
+            ex.cpu_s["close_returns"] = time.process_time() - t0
 
 
 def _bands(covered, freq_hz: np.ndarray) -> str:
@@ -711,7 +762,11 @@ down by the exact integrator, the error against H and run time, and the backbone
 curve of each level is converged ([frc] curve): HB where its amplitudes no longer move with H (with
 the lightly damped resonances it stepped over refined), else the families of periodic orbits of the
 exact flow by multiple shooting, with their stability and branch switching; frc.md says which and
-why, frc_families.csv lists the families. Writes frc.csv, frc.md, frc_families.csv, frc.png,
+why, frc_families.csv lists the families. Where the families do not reach, frc_cover.csv gives a verdict per HB
+point in contact (multiple shooting with more segments from it: an orbit that starts a family, or no orbit near it
+with the best defect) and frc_close_returns.csv the unstable periodic orbits seeded by close returns of the chaotic
+stepped sine (families of kind close_return, drawn over the bifurcation diagram). Writes frc.csv, frc.md,
+frc_families.csv, frc_cover.csv, frc_close_returns.csv, frc.png,
 frc_receptance.png (the response per newton, m/N), frc_harmonics.csv,
 frc_bifurcations.csv, frc_stability.csv,
 stepped_sine.csv, frc_convergence.csv, frc_convergence_timing.csv and .png, frc_backbone.csv
@@ -789,6 +844,13 @@ REPRODUCTION = Reproduction(rules=(
               "which round-off in the finite-difference Jacobians can change"),
     sensitive("frc_harmonics.csv", why=CONTINUATION),
     sensitive("frc_bifurcations.csv", why=CONTINUATION + " (the folds and bifurcations found between its points)"),
+    sensitive("frc_cover.csv", why="verdicts at the HB points in contact no family covers: " + CONTINUATION),
+    # the close returns come from the response map's chaotic Poincare samples: which returns, which orbits and families
+    chaotic("frc_close_returns.csv", "*", why="close returns of a chaotic stepped sine and the orbits they seed"),
+    chaotic("frc_families.csv", "*", rows=r"^(?:[^,]*,){2}close_return,", why="families seeded by close returns of a "
+            "chaotic stepped sine"),
+    chaotic("frc.md", r"close_return|Close-return|^Bifurcations:", why="families seeded by close returns of a chaotic "
+            "stepped sine (and the bifurcations counted on them)"),
     sensitive("frc_stability.csv", why=CONTINUATION + " (stability at those points)"),
     sensitive("frc_convergence.csv", why=CONTINUATION + " (points, reach, folds and errors at the points)"),
     sensitive("stepped_sine.csv", why="the stepped sine at the HB curve's points, compared with HB there: "

@@ -39,6 +39,10 @@ FRC_FIELDS = ["level", "method", "harmonics", "freq_hz", "point", "amplitude_m",
 FAMILY_FIELDS = ["level", "family", "kind", "period_k", "parent_family", "parent_index", "born_at", "n_points",
                  "freq_min_hz", "freq_max_hz", "stable_points", "max_amplitude_m", "max_abs_mu", "n_bifurcations",
                  "status", "notes"]
+COVER_FIELDS = ["level", "freq_hz", "hb_amplitude_m", "verdict", "defect", "segments", "newton_residuals", "family",
+                "family_kind", "band_lo_hz", "band_hi_hz", "note"]
+CLOSE_RETURN_FIELDS = ["level", "freq_hz", "direction", "period_k", "sample", "distance", "defect", "family",
+                       "family_freq_min_hz", "family_freq_max_hz", "max_abs_mu_min", "asymmetry", "half_wave", "note"]
 BACKBONE_FIELDS = ["level", "scale", "load_N", "nnm", "peak_freq_hz", "peak_amplitude_m", "log_distance", "note"]
 
 
@@ -75,6 +79,8 @@ def write(result: FRCResult | FrictionFRCResult, writer: StageWriter) -> None:
                 and r["level"] == Pc and "monodromy" not in r["what"]}
         stats["speed_ratio_stepped_sine_over_hb"] = {f"H={h}": round(t_ss / t, 2) for h, t in t_hb.items() if t > 0}
     write_rows(writer.path("frc_backbone.csv"), _backbone_rows(result), fields=BACKBONE_FIELDS)
+    write_rows(writer.path("frc_cover.csv"), _cover_rows(result), fields=COVER_FIELDS)
+    write_rows(writer.path("frc_close_returns.csv"), _close_return_rows(result), fields=CLOSE_RETURN_FIELDS)
     frc_map_files.write(result, writer, stats)  # response_map.csv, response_map_jumps.csv, response_map.png
     writer.stats["frc"] = stats
     writer.path("frc.md").write_text(frc_markdown(result), encoding="utf-8")
@@ -274,6 +280,8 @@ def _family_rows(P: float, ex) -> list[dict]:
         pf, pi, born = fam.parent if fam.parent is not None else ("", "", "")
         if fam.kind == "isolated":
             born = f"guess at {fam.start_hz:.6g} Hz"
+        elif fam.kind == "close_return":
+            born = f"close return at {fam.start_hz:.6g} Hz"
         rows.append({"level": P, "family": k, "kind": fam.kind, "period_k": fam.periods, "parent_family": pf,
                      "parent_index": pi, "born_at": born, "n_points": len(fam.freq_hz),
                      "freq_min_hz": sig(float(fam.freq_hz.min()), DIGITS),
@@ -282,6 +290,45 @@ def _family_rows(P: float, ex) -> list[dict]:
                      "max_abs_mu": sig(float(np.max(np.abs(fam.multipliers[:, 0]))), 6),
                      "n_bifurcations": len(fam.bifurcations), "status": fam.status,
                      "notes": "; ".join(fam.notes)})
+    return rows
+
+
+def _cover_rows(result: FRCResult) -> list[dict]:
+    """frc_cover.csv: the verdict at each HB point in contact no exact family covered
+    (:func:`reduced.periodic.uncovered.cover_verdicts`)."""
+    rows = []
+    for P, cc in result.converged.items():
+        ex = cc.exact
+        for v in (ex.verdicts if ex is not None else []):
+            rows.append({"level": P, "freq_hz": sig(v.freq_hz, DIGITS), "hb_amplitude_m": sig(v.hb_amplitude_m, DIGITS),
+                         "verdict": v.verdict, "defect": "" if not np.isfinite(v.defect) else sig(v.defect, ERR_DIGITS),
+                         "segments": v.segments or "", "newton_residuals": v.iterations or "",
+                         "family": v.family if v.family >= 0 else "",
+                         "family_kind": ex.families[v.family].kind if v.family >= 0 else "",
+                         "band_lo_hz": sig(v.band_hz[0], DIGITS), "band_hi_hz": sig(v.band_hz[1], DIGITS),
+                         "note": v.note})
+    return rows
+
+
+def _close_return_rows(result: FRCResult) -> list[dict]:
+    """frc_close_returns.csv: each close return of a chaotic response shot, and the family it started."""
+    rows = []
+    for P, cc in result.converged.items():
+        ex = cc.exact
+        for c in (ex.close_returns if ex is not None else []):
+            fam = ex.families[c.family] if c.family >= 0 else None
+            rows.append({"level": P, "freq_hz": sig(c.freq_hz, DIGITS), "direction": c.direction,
+                         "period_k": c.period_k, "sample": c.index, "distance": sig(c.distance, ERR_DIGITS),
+                         "defect": "" if not np.isfinite(c.defect) else sig(c.defect, ERR_DIGITS),
+                         "family": c.family if fam is not None else "",
+                         "family_freq_min_hz": sig(float(fam.freq_hz.min()), DIGITS) if fam is not None else "",
+                         "family_freq_max_hz": sig(float(fam.freq_hz.max()), DIGITS) if fam is not None else "",
+                         "max_abs_mu_min": sig(float(np.min(fam.max_multiplier)), 6) if fam is not None else "",
+                         "asymmetry": sig(float(np.nanmax(fam.asymmetry)), ERR_DIGITS)
+                         if fam is not None and np.any(np.isfinite(fam.asymmetry)) else "",
+                         "half_wave": sig(float(np.nanmax(fam.half_wave)), ERR_DIGITS)
+                         if fam is not None and np.any(np.isfinite(fam.half_wave)) else "",
+                         "note": c.note})
     return rows
 
 
@@ -348,6 +395,9 @@ def _timing_rows(result: FRCResult) -> list[dict]:
             for k, f in enumerate(cc.exact.families if cc.exact is not None else ()):
                 rows.append({"level": P, "what": f"exact family {k} ({f.kind})", "harmonics": "",
                              "points": len(f.freq_hz), "wall_s": round(f.wall_s, 4)})
+            for what, t in (cc.exact.cpu_s.items() if cc.exact is not None else ()):
+                rows.append({"level": P, "what": f"{what.replace('_', ' ')} (CPU s in wall_s)", "harmonics": "",
+                             "points": len(getattr(cc.exact, what)), "wall_s": round(t, 4)})
     return rows
 
 
@@ -536,7 +586,9 @@ def frc_markdown(result: FRCResult) -> str:
                   f"{len(followed)}; not followed: {len(skipped)}"
                   + (" (" + "; ".join(sorted({r['note'].split(':')[0] for r in skipped if r['note']})) + ")"
                      if skipped else "") + ". Each is a row of frc_bifurcations.csv.",
-                  _period_doubled_line(ex, spec), _cover_line(ex, spec), "Run times: frc_convergence_timing.csv.", ""]
+                  _period_doubled_line(ex, spec), _cover_line(ex, spec),
+                  *_verdict_lines(ex, result.response_maps.get(P)), _close_return_line(ex, spec),
+                  "Run times: frc_convergence_timing.csv.", ""]
         for note in [n for f in ex.families for n in f.notes][:10]:
             lines.append(f"- {note}")
         lines.append("")
@@ -566,6 +618,70 @@ def _cover_line(ex, spec) -> str:
             f"`[frc] cover_families = {spec.cover_families}`): " + (", ".join(str(k) for k in iso) if iso else "none")
             + ("; guesses tried without a new family: " + "; ".join(f"{n} {w}" for w, n in sorted(failed.items()))
                if failed else "") + f". Contact band: {where}.")
+
+
+def _map_regimes(lvl, lo: float, hi: float) -> str:
+    """'chaotic 40, periodic 3 (up); ...': the response map's regimes over [lo, hi] Hz per sweep ('' without)."""
+    if lvl is None:
+        return ""
+    out = []
+    for d, rm in lvl.sweeps.items():
+        n = {}
+        for f, p in zip(rm.freq_hz, rm.points, strict=True):
+            if lo - 1e-9 <= f <= hi + 1e-9:
+                key = p.regime + ("" if p.regime not in ("periodic", "subharmonic") else
+                                  f" {p.period_k} T{' with contact' if p.contact else ' without contact'}")
+                n[key] = n.get(key, 0) + 1
+        if n:
+            out.append(", ".join(f"{k} at {v}" for k, v in sorted(n.items(), key=lambda kv: -kv[1])) + f" ({d})")
+    return "; ".join(out)
+
+
+def _verdict_lines(ex, lvl) -> list[str]:
+    """frc.md: one line per band of HB points in contact no family covered: the verdicts of shooting at its
+    judged points (frc_cover.csv) and what the response map's stepped sine shows there."""
+    bands = {}
+    for v in ex.verdicts:
+        bands.setdefault(v.band_hz, []).append(v)
+    out = []
+    for (lo, hi), vs in sorted(bands.items()):
+        judged = [v for v in vs if v.verdict not in ("covered", "not_judged") or v.segments]
+        said = []
+        for v in judged:
+            if v.verdict == "orbit":
+                fam = ex.families[v.family]
+                said.append(f"{v.freq_hz:.5g} Hz an exact orbit ({v.segments} nodes): family {v.family}, "
+                            f"{fam.freq_hz.min():.5g}-{fam.freq_hz.max():.5g} Hz, "
+                            + (f"stable at {int(fam.stable.sum())} points" if fam.stable.any() else "unstable"))
+            elif v.verdict == "no_orbit":
+                said.append(f"{v.freq_hz:.5g} Hz no orbit of the exact flow near the HB point (best defect "
+                            f"{v.defect:.2g} after {v.iterations} Newton residuals, up to {v.segments} nodes)")
+            else:
+                said.append(f"{v.freq_hz:.5g} Hz {v.verdict} ({v.note[:80]})")
+        now = sum(v.family >= 0 for v in vs)
+        regimes = _map_regimes(lvl, lo, hi)
+        out.append(f"- Uncovered band {lo:.5g}-{hi:.5g} Hz ({len(vs)} HB points in contact): judged by shooting at "
+                   f"{len(judged)}: " + "; ".join(said) + f". Now covered by a family: {now} of {len(vs)}."
+                   + (f" The stepped sine there (response_map.csv): {regimes}." if regimes else ""))
+    return out
+
+
+def _close_return_line(ex, spec) -> str:
+    """frc.md: the families started from close returns of the chaotic Poincare samples (frc_close_returns.csv)."""
+    made = [c for c in ex.close_returns if c.family >= 0]
+    why = {}
+    for c in ex.close_returns:
+        if c.family < 0:
+            key = c.note.split(" (")[0]
+            why[key] = why.get(key, 0) + 1
+    fams = "; ".join(
+        f"family {c.family}: {c.period_k} T from {c.direction} at {c.freq_hz:.5g} Hz (return {c.distance:.2g}), "
+        f"{ex.families[c.family].freq_hz.min():.5g}-{ex.families[c.family].freq_hz.max():.5g} Hz, |mu| >= "
+        f"{np.min(ex.families[c.family].max_multiplier):.3g}" for c in made)
+    return (f"Close-return families (unstable periodic orbits of the chaotic stepped sine, `[frc] "
+            f"close_return_families = {spec.close_return_families}`): {len(ex.close_returns)} close returns shot"
+            + (f"; {fams}" if fams else "; none converged to a new orbit")
+            + ("; not followed: " + "; ".join(f"{n} {w}" for w, n in sorted(why.items())) if why else "") + ".")
 
 
 def _period_doubled_line(ex, spec) -> str:

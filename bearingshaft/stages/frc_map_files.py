@@ -148,10 +148,29 @@ def _plot_curves(ax, result: FRCResult, P: float, col: int) -> None:
                     label="exact orbit (shooting)")
 
 
+def _plot_unstable_families(axs, result: FRCResult, P: float, col: int) -> None:
+    """The families of unstable periodic orbits found from the chaotic stepped sine's close returns (kind
+    ``close_return``, :mod:`reduced.periodic.uncovered`): their amplitude (top) and their Poincare samples, x at
+    t = j T for j < k of a k T orbit (bottom), over the bifurcation diagram."""
+    cc = result.converged.get(P)
+    ex = cc.exact if cc is not None else None
+    for fam in (ex.families if ex is not None else ()):
+        if fam.kind != "close_return":
+            continue
+        S = fam.nodes.shape[1] // fam.periods
+        n = fam.nodes.shape[2] // 2
+        lab = f"unstable {fam.periods} T orbits (close returns)"
+        axs[0].plot(fam.freq_hz, fam.amplitude_m[:, col], "-", color="m", lw=1.8, label=lab, zorder=6)
+        for j in range(fam.periods):  # on top of the chaotic samples they are embedded in
+            axs[1].plot(fam.freq_hz, fam.nodes[:, j * S, :n] @ ex.point_rows[col], "-", color="m", lw=1.8,
+                        label=lab, zorder=6)
+
+
 def _plot_level(axs, result: FRCResult, P: float, lvl, col: int) -> None:
     """Top: the curve, the shooting orbits and the measured envelope of each sweep; bottom: the Poincare samples."""
     top, bot = axs
     _plot_curves(top, result, P, col)
+    _plot_unstable_families(axs, result, P, col)
     for d, rm in lvl.sweeps.items():
         st = rm.peak_stats(col)
         order = np.argsort(rm.freq_hz)

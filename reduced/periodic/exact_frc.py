@@ -86,7 +86,8 @@ LOAD_STEPS = 400  # continuation steps in the load of the first orbit at most
 START_HARMONICS = 15  # harmonics of the balance that guesses the first orbit
 BISECTIONS = 12  # bisections locating a crossing between two points (the bracket shrinks 4096 times)
 SWITCH_H = (1e-3, 3e-4, 3e-3)  # offsets tried along the critical eigenvector (scaled unknowns), in order
-FAMILY_KINDS = ("main", "asymmetric", "half_wave_broken", "asymmetric_half_wave", "period_doubled", "isolated")
+FAMILY_KINDS = ("main", "asymmetric", "half_wave_broken", "asymmetric_half_wave", "period_doubled", "isolated",
+                "close_return")
 SWITCHED = {"pitchfork_mirror": "asymmetric", "pitchfork_half_wave": "half_wave_broken",
             "pitchfork_mirror_half_wave": "asymmetric_half_wave", "period_doubling": "period_doubled"}
 PD_CRITICAL_TOL = 0.05  # |mu + 1| of the located critical multiplier beyond which a period doubling is not switched at
@@ -257,7 +258,9 @@ class OrbitFamily:
     kind : str
         One of :data:`FAMILY_KINDS`: the main curve (from the bottom of the band), the family
         born at a pitchfork or period doubling, or (``isolated``) a family started from a guess at a
-        frequency no other family covers (an isola, or a piece of the curve the others do not reach).
+        frequency no other family covers (an isola, or a piece of the curve the others do not reach), or
+        (``close_return``) one started from a close return of a chaotic response's Poincare samples
+        (:mod:`reduced.periodic.uncovered`).
     periods : int
         The orbits' period in load periods.
     freq_hz, omega : (k,) ndarray of float
@@ -356,6 +359,12 @@ class ExactFRC:
         (-1 if none) and ``note`` (why not).
     cover_freqs_hz : (c,) ndarray of float
         Hz, the frequencies of the ``cover`` guesses given (those to be covered).
+    verdicts : list
+        :class:`reduced.periodic.uncovered.Verdict` per HB point in contact no family covered, where judged.
+    close_returns : list
+        :class:`reduced.periodic.uncovered.CloseReturn` per seed tried from a chaotic response's Poincare samples.
+    cpu_s : dict
+        s of CPU time of the searches run after the families (``verdicts``, ``close_returns``).
     """
 
     amplitude_N: float
@@ -370,6 +379,9 @@ class ExactFRC:
     notes: list = field(default_factory=list)
     cover: list = field(default_factory=list)
     cover_freqs_hz: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    verdicts: list = field(default_factory=list)
+    close_returns: list = field(default_factory=list)
+    cpu_s: dict = field(default_factory=dict)
 
     @property
     def main(self) -> OrbitFamily:
