@@ -24,7 +24,7 @@ import io
 import resource
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from bearingshaft.scenes import Scene, load_scene
@@ -57,6 +57,8 @@ class StageTask:
         Keys of the tasks that must finish first.
     seconds : float
         s, the scheduling hint of this task alone.
+    level : float
+        s, its bottom level (:func:`priorities`): the priority of the task and of the pieces it fans out.
     """
 
     key: str
@@ -66,6 +68,7 @@ class StageTask:
     out: Path
     after: tuple[str, ...] = ()
     seconds: float = 1.0
+    level: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -239,6 +242,7 @@ def run_task(task: StageTask, *after: StageRun) -> StageRun:
     -------
     StageRun
     """
+    from bearingshaft.fanout import mapping
     from bearingshaft.pipeline import run_stage_anywhere
     from bearingshaft.sweep.run import worker_name
 
@@ -249,7 +253,7 @@ def run_task(task: StageTask, *after: StageRun) -> StageRun:
     printed = io.StringIO()
     error = ""
     try:
-        with contextlib.redirect_stdout(printed):
+        with contextlib.redirect_stdout(printed), mapping(_cluster_map(task.level) if _on_worker() else None):
             run_stage_anywhere(load_scene(task.scene_arg), task.stage, task.out, task.scene_arg)
     except MemoryError:
         error = "out of memory (see `bearingshaft check` for the estimates)"
@@ -257,6 +261,32 @@ def run_task(task: StageTask, *after: StageRun) -> StageRun:
         error = one_line(exc, typed=False)
     return StageRun(task.key, time.perf_counter() - t0, printed.getvalue(), error, peak_bytes=_peak_bytes(),
                     worker=worker_name())
+
+
+def _on_worker() -> bool:
+    try:
+        from distributed import get_worker
+
+        get_worker()
+    except (ImportError, ValueError):
+        return False
+    return True
+
+
+def _cluster_map(level: float):
+    """A mapper for :func:`bearingshaft.fanout.fan_out` from a task on a worker: the pieces become tasks of the
+    same cluster, at the priority of the stage that made them (its bottom level, so the pieces of the longest chain
+    go first); the stage's thread leaves the worker's pool while it waits (``worker_client`` secedes and rejoins),
+    so the pieces may run on its own worker too."""
+
+    def cluster_map(fn, items):
+        from distributed import worker_client
+
+        with worker_client() as client:
+            futures = client.map(fn, items, key="fanout", pure=False, priority=int(round(level)) + 1)
+            return client.gather(futures)
+
+    return cluster_map
 
 
 def default_workers(scenes: list[Scene], cores: int, available: int) -> int:
@@ -327,7 +357,8 @@ def run_job(runs: list[tuple[str, Scene, Path]], stages_of, *, workers: int | No
         client.run(warm_up)
         futures = {}
         for t in tasks:  # the order of the graph: a task's predecessors are submitted before it
-            futures[t.key] = client.submit(run_task, t, *(futures[k] for k in t.after), key=f"stage-{t.key}",
+            futures[t.key] = client.submit(run_task, replace(t, level=level[t.key]), *(futures[k] for k in t.after),
+                                           key=f"stage-{t.key}",
                                            priority=int(round(level[t.key])), pure=False)
         pbar = bar(total=len(tasks), desc="run", unit="stage", enabled=progress)
         try:
