@@ -27,8 +27,8 @@ PACKAGES = ("geometry", "fem", "reduced", "bearingshaft")
 APP_FLOORS = (
     ("bearingshaft", "bearingshaft.scenes"),
     ("bearingshaft.digits", "bearingshaft.fanout", "bearingshaft.progress", "bearingshaft.output",
-     "bearingshaft.estimates", "bearingshaft.systems", "bearingshaft.plots", "bearingshaft.render", "bearingshaft.correlate",
-     "bearingshaft.gap_modes", "bearingshaft.envelopes", "bearingshaft.measures",
+     "bearingshaft.estimates", "bearingshaft.systems", "bearingshaft.plots", "bearingshaft.render",
+     "bearingshaft.correlate", "bearingshaft.gap_modes", "bearingshaft.envelopes", "bearingshaft.measures",
      "bearingshaft.measured", "bearingshaft.reproduction"),
     ("bearingshaft.stages",),
     ("bearingshaft.registry",),

@@ -127,9 +127,12 @@ def _compute(scene: Scene, progress: bool) -> FRCResult:
     curves = dict(zip(levels, fan_out(_level_part, [("curve", system, b, P, spec, None, rows, names, load_col)
                                                      for P in levels]), strict=True))
     bar.update(len(levels))
-    parts = LEVEL_PARTS if spec.map_step_hz > 0 else LEVEL_PARTS[:-1]
-    bar.set_postfix_str("converged curves, Hill and shooting, stepped sines" + (", maps" if len(parts) == 4 else ""))
-    jobs = [(part, system, b, P, spec, curves[P], rows, names, load_col) for P in levels for part in parts]
+    parts = [p for p in LEVEL_PARTS if p != "map" or spec.map_step_hz > 0]
+    bar.set_postfix_str("converged curves, Hill and shooting, stepped sines" + (", maps" if "map" in parts else ""))
+    # the longest pieces first (a cluster starts them in this order): the converged curves and the maps, the
+    # highest level first (the most contact), then the stepped sines and the checks
+    jobs = [(part, system, b, P, spec, curves[P], rows, names, load_col) for part in parts
+            for P in sorted(levels, reverse=True)]
     done = dict(zip([(job[0], job[3]) for job in jobs], fan_out(_level_part, jobs), strict=True))
     bar.update(len(jobs))
     converged = {P: done[("converged", P)] for P in levels}
@@ -144,7 +147,7 @@ def _compute(scene: Scene, progress: bool) -> FRCResult:
                      checks, sweeps, sweep_hb, convergence, *backbone, converged=converged, response_maps=maps)
 
 
-LEVEL_PARTS = ("converged", "checks", "sweeps", "map")  # what _level_part computes from a level's HB curve
+LEVEL_PARTS = ("converged", "map", "sweeps", "checks")  # what _level_part computes from a level's HB curve
 
 
 def _level_part(job: tuple):

@@ -286,8 +286,9 @@ def _branches(fm: FEPModel, spec, jobs: list, bar) -> dict:
     for mode, H, N in jobs:
         first.setdefault((mode, H, N or default_samples(H)), (mode, H, N))
     bar.set_postfix_str(f"{len(first)} HB branches")
-    pieces = [("branch", fm, spec, mode, H, N) for mode, H, N in first.values()]
-    done = dict(zip(first, fan_out(_piece, pieces), strict=True))
+    keys = sorted(first, key=lambda k: -k[1])  # the highest H first: the longest pieces start first on a cluster
+    pieces = [("branch", fm, spec, *first[k]) for k in keys]
+    done = dict(zip(keys, fan_out(_piece, pieces), strict=True))
     bar.update(len(jobs))
     return {(mode, H, N): done[(mode, H, N or default_samples(H))] for mode, H, N in jobs}
 
