@@ -169,6 +169,18 @@ def stage_seconds(scene_name: str, stage: str) -> float:
     """s, the scheduling hint of one stage: :data:`SCENE_SECONDS` for the main job's long stages, else
     :data:`STAGE_SECONDS` of its kind (10 s for a stage it does not list).
 
+    Parameters
+    ----------
+    scene_name : str
+        The scene's name.
+    stage : str
+        The stage.
+
+    Returns
+    -------
+    float
+        s.
+
     Examples
     --------
     >>> stage_seconds("rom-frc", "frc"), stage_seconds("my-scene", "frc"), stage_seconds("x", "new")
@@ -398,5 +410,5 @@ def run_job(runs: list[tuple[str, Scene, Path]], stages_of, *, workers: int | No
     return JobResult(tuple(done), where, time.perf_counter() - t0)
 
 
-__all__ = ["SCENE_SECONDS", "STAGE_SECONDS", "JobResult", "StageRun", "StageTask", "default_workers", "job_tasks", "priorities",
-           "run_job", "run_task", "scene_arg", "stage_seconds"]
+__all__ = ["SCENE_SECONDS", "STAGE_SECONDS", "JobResult", "StageRun", "StageTask", "default_workers", "job_tasks",
+           "priorities", "run_job", "run_task", "scene_arg", "stage_seconds"]
