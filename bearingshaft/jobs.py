@@ -24,16 +24,22 @@ import io
 import resource
 import sys
 import time
-from dataclasses import dataclass
+import uuid
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from bearingshaft.scenes import Scene, load_scene
 from reduced._checks import one_line
 
-# s, about what each stage takes in the main job (results/performance/main_job.csv, 2 cores; frc: 161 and 664 s):
-# a scheduling hint only, so that the longest chains start first; a wrong hint changes the order, not the files
+# s, about what each stage takes in the main job (results/performance/main_job.csv, 2 cores): a scheduling hint
+# only, so that the longest chains start first; a wrong hint changes the order, not the files
 STAGE_SECONDS = {"modal": 8.0, "reduce": 10.0, "ringdown": 6.0, "nnm": 60.0, "study": 20.0, "verify": 9.0,
-                 "frc": 400.0, "hammer": 60.0, "frf": 10.0}
+                 "frc": 100.0, "hammer": 60.0, "frf": 10.0}
+# s, the main job's long stages, each by its scene (main_job.csv at 230e773, 486 s wall on 2 cores): their
+# pieces run side by side (bearingshaft.fanout), but the longest of them (rom-frc's converged curve at 10 N,
+# ~240 s) still sets the job's end, so that chain must start first
+SCENE_SECONDS = {"rom-frc/frc": 300.0, "discrete-frc/frc": 120.0, "rom-fep/nnm": 100.0, "hammer-test/hammer": 52.0,
+                 "discrete-fep/nnm": 42.0, "discrete-friction-frc/frc": 40.0, "discrete-symmetric/ringdown": 16.0}
 BUILD_SECONDS = 40.0  # s, a reduced model built from the 3-D model, added to the stage that builds it
 
 
@@ -57,6 +63,8 @@ class StageTask:
         Keys of the tasks that must finish first.
     seconds : float
         s, the scheduling hint of this task alone.
+    level : float
+        s, its bottom level (:func:`priorities`): the priority of the task and of the pieces it fans out.
     """
 
     key: str
@@ -66,6 +74,7 @@ class StageTask:
     out: Path
     after: tuple[str, ...] = ()
     seconds: float = 1.0
+    level: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -156,6 +165,30 @@ def _reduction_key(scene: Scene) -> str | None:
     return cache_key(scene.model)
 
 
+def stage_seconds(scene_name: str, stage: str) -> float:
+    """s, the scheduling hint of one stage: :data:`SCENE_SECONDS` for the main job's long stages, else
+    :data:`STAGE_SECONDS` of its kind (10 s for a stage it does not list).
+
+    Parameters
+    ----------
+    scene_name : str
+        The scene's name.
+    stage : str
+        The stage.
+
+    Returns
+    -------
+    float
+        s.
+
+    Examples
+    --------
+    >>> stage_seconds("rom-frc", "frc"), stage_seconds("my-scene", "frc"), stage_seconds("x", "new")
+    (300.0, 100.0, 10.0)
+    """
+    return SCENE_SECONDS.get(f"{scene_name}/{stage}", STAGE_SECONDS.get(stage, 10.0))
+
+
 def job_tasks(runs: list[tuple[str, Scene, Path]], stages_of) -> list[StageTask]:
     """The graph of a job: each scene's stages in a chain; scenes sharing a reduced model after the first.
 
@@ -180,7 +213,7 @@ def job_tasks(runs: list[tuple[str, Scene, Path]], stages_of) -> list[StageTask]
         for i, stage in enumerate(stages_of(scene)):
             key = f"{scene.name}/{stage}"
             after = (previous,) if previous else ()
-            seconds = STAGE_SECONDS.get(stage, 10.0)
+            seconds = stage_seconds(scene.name, stage)
             if i == 0 and red is not None:
                 if red in builder:
                     after = (builder[red],)
@@ -239,6 +272,7 @@ def run_task(task: StageTask, *after: StageRun) -> StageRun:
     -------
     StageRun
     """
+    from bearingshaft.fanout import mapping
     from bearingshaft.pipeline import run_stage_anywhere
     from bearingshaft.sweep.run import worker_name
 
@@ -249,7 +283,7 @@ def run_task(task: StageTask, *after: StageRun) -> StageRun:
     printed = io.StringIO()
     error = ""
     try:
-        with contextlib.redirect_stdout(printed):
+        with contextlib.redirect_stdout(printed), mapping(_cluster_map(task.level) if _on_worker() else None):
             run_stage_anywhere(load_scene(task.scene_arg), task.stage, task.out, task.scene_arg)
     except MemoryError:
         error = "out of memory (see `bearingshaft check` for the estimates)"
@@ -257,6 +291,36 @@ def run_task(task: StageTask, *after: StageRun) -> StageRun:
         error = one_line(exc, typed=False)
     return StageRun(task.key, time.perf_counter() - t0, printed.getvalue(), error, peak_bytes=_peak_bytes(),
                     worker=worker_name())
+
+
+def _on_worker() -> bool:
+    try:
+        from distributed import get_worker
+
+        get_worker()
+    except (ImportError, ValueError):
+        return False
+    return True
+
+
+def _cluster_map(level: float):
+    """A mapper for :func:`bearingshaft.fanout.fan_out` from a task on a worker: the pieces become tasks of the
+    same cluster, just above the priority of the stage that made them (its bottom level, so the pieces of the
+    longest chain go first), and among themselves in the order given (a stage lists its longest pieces first);
+    the stage's thread leaves the worker's pool while it waits (``worker_client`` secedes and rejoins), so the
+    pieces may run on its own worker too."""
+
+    def cluster_map(fn, items):
+        from distributed import worker_client
+
+        base = int(round(level)) + 1
+        with worker_client() as client:
+            futures = [client.submit(fn, item, key=f"fanout-{uuid.uuid4().hex}", pure=False,
+                                     priority=base + (len(items) - i) / (len(items) + 1))
+                       for i, item in enumerate(items)]
+            return client.gather(futures)
+
+    return cluster_map
 
 
 def default_workers(scenes: list[Scene], cores: int, available: int) -> int:
@@ -327,7 +391,8 @@ def run_job(runs: list[tuple[str, Scene, Path]], stages_of, *, workers: int | No
         client.run(warm_up)
         futures = {}
         for t in tasks:  # the order of the graph: a task's predecessors are submitted before it
-            futures[t.key] = client.submit(run_task, t, *(futures[k] for k in t.after), key=f"stage-{t.key}",
+            futures[t.key] = client.submit(run_task, replace(t, level=level[t.key]), *(futures[k] for k in t.after),
+                                           key=f"stage-{t.key}",
                                            priority=int(round(level[t.key])), pure=False)
         pbar = bar(total=len(tasks), desc="run", unit="stage", enabled=progress)
         try:
@@ -345,5 +410,5 @@ def run_job(runs: list[tuple[str, Scene, Path]], stages_of, *, workers: int | No
     return JobResult(tuple(done), where, time.perf_counter() - t0)
 
 
-__all__ = ["STAGE_SECONDS", "JobResult", "StageRun", "StageTask", "default_workers", "job_tasks", "priorities",
-           "run_job", "run_task", "scene_arg"]
+__all__ = ["SCENE_SECONDS", "STAGE_SECONDS", "JobResult", "StageRun", "StageTask", "default_workers", "job_tasks",
+           "priorities", "run_job", "run_task", "scene_arg", "stage_seconds"]

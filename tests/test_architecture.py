@@ -26,9 +26,9 @@ PACKAGES = ("geometry", "fem", "reduced", "bearingshaft")
 # bearingshaft's own floors, bottom up (a module imports only from its floor and below)
 APP_FLOORS = (
     ("bearingshaft", "bearingshaft.scenes"),
-    ("bearingshaft.digits", "bearingshaft.progress", "bearingshaft.output", "bearingshaft.estimates",
-     "bearingshaft.systems", "bearingshaft.plots", "bearingshaft.render", "bearingshaft.correlate",
-     "bearingshaft.gap_modes", "bearingshaft.envelopes", "bearingshaft.measures",
+    ("bearingshaft.digits", "bearingshaft.fanout", "bearingshaft.progress", "bearingshaft.output",
+     "bearingshaft.estimates", "bearingshaft.systems", "bearingshaft.plots", "bearingshaft.render",
+     "bearingshaft.correlate", "bearingshaft.gap_modes", "bearingshaft.envelopes", "bearingshaft.measures",
      "bearingshaft.measured", "bearingshaft.reproduction"),
     ("bearingshaft.stages",),
     ("bearingshaft.registry",),

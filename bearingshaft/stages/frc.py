@@ -41,6 +41,7 @@ from dataclasses import replace
 import numpy as np
 
 from bearingshaft.estimates import FLOAT, HILL_COPIES, Estimate, has_friction, n_dofs
+from bearingshaft.fanout import fan_out
 from bearingshaft.output import StageWriter
 from bearingshaft.progress import bar as progress_bar
 from bearingshaft.reproduction import Reproduction, chaotic, exact, sensitive, within
@@ -122,34 +123,51 @@ def _compute(scene: Scene, progress: bool) -> FRCResult:
     n_tasks = 4 * len(levels) + len(spec.convergence_harmonics) + len(levels) * len(spec.backbone_scales) + 1
     n_tasks += len(levels) if spec.map_step_hz > 0 else 0  # the response map (frc_map)
     bar = progress_bar(total=n_tasks, desc=f"{scene.name}: forced response", enabled=progress, unit="task")
-    curves = {}
-    for P in levels:
-        bar.set_postfix_str(f"HB {P:g} N, H={spec.harmonics}")
-        curves[P] = _curve(system, b, P, spec, spec.harmonics, rows, names, hill_points=0)
-        bar.update()
-    converged = {}
-    for P in levels:
-        bar.set_postfix_str(f"converged curve {P:g} N")
-        converged[P] = converged_curve(system, b, P, spec, curves[P], rows, names)
-        bar.update()
-    checks = {}
-    for P in levels:
-        bar.set_postfix_str(f"Hill and shooting {P:g} N")
-        checks[P] = [] if isinstance(curves[P], Exception) else _point_checks(system, b, P, curves[P], rows, spec)
-        bar.update()
-    sweeps = {}
-    for P in levels:
-        bar.set_postfix_str(f"stepped sine {P:g} N")
-        sweeps[P] = _sweeps(system, b, P, spec, curves[P], rows, names, load_col)
-        bar.update()
+    # each level's HB curve, then what each level computes from its curve: independent pieces, on the job's
+    # cluster when there is one (bearingshaft.fanout), results in the order of the levels either way
+    bar.set_postfix_str(f"HB at H={spec.harmonics}")
+    curves = dict(zip(levels, fan_out(_level_part, [("curve", system, b, P, spec, None, rows, names, load_col)
+                                                     for P in levels]), strict=True))
+    bar.update(len(levels))
+    parts = [p for p in LEVEL_PARTS if p != "map" or spec.map_step_hz > 0]
+    bar.set_postfix_str("converged curves, Hill and shooting, stepped sines" + (", maps" if "map" in parts else ""))
+    # the longest pieces first (a cluster starts them in this order): the converged curves and the maps, the
+    # highest level first (the most contact), then the stepped sines and the checks
+    jobs = [(part, system, b, P, spec, curves[P], rows, names, load_col) for part in parts
+            for P in sorted(levels, reverse=True)]
+    done = dict(zip([(job[0], job[3]) for job in jobs], fan_out(_level_part, jobs), strict=True))
+    bar.update(len(jobs))
+    converged = {P: done[("converged", P)] for P in levels}
+    checks = {P: done[("checks", P)] for P in levels}
+    sweeps = {P: done[("sweeps", P)] for P in levels}
     sweep_hb = {(P, d): _hb_at_sweep(curves[P], ss, load_col) for P in levels for d, ss in sweeps[P].items()}
     convergence = _convergence(system, b, spec, rows, names, load_col, curves, checks, sweeps, bar)
     backbone = _backbone_check(system, b, rows, names, spec, load_col, curves, bar)
-    maps = compute_maps(system, b, rows, names, spec, curves, bar)
-    uncovered_orbits(system, b, rows, names, spec, curves, converged, maps)
+    maps = {P: done[("map", P)] for P in levels} if "map" in parts else {}
+    uncovered_orbits(system, b, rows, names, spec, curves, converged, maps)  # needs a level's curve and map together
     bar.close()
     return FRCResult(scene.name, spec, names, load_col, curves, {P: _events(br, load_col) for P, br in curves.items()},
                      checks, sweeps, sweep_hb, convergence, *backbone, converged=converged, response_maps=maps)
+
+
+LEVEL_PARTS = ("converged", "map", "sweeps", "checks")  # what _level_part computes from a level's HB curve
+
+
+def _level_part(job: tuple):
+    """One independent piece of a level: ``job = (part, system, b, P, spec, curve, rows, names, load_col)`` with
+    part "curve" (the HB curve at ``harmonics``, ``curve`` unused) or one of :data:`LEVEL_PARTS` of that curve."""
+    part, system, b, P, spec, br, rows, names, load_col = job
+    if part == "curve":
+        return _curve(system, b, P, spec, spec.harmonics, rows, names, hill_points=0)
+    if part == "converged":
+        return converged_curve(system, b, P, spec, br, rows, names)
+    if part == "checks":
+        return [] if isinstance(br, Exception) else _point_checks(system, b, P, br, rows, spec)
+    if part == "sweeps":
+        return _sweeps(system, b, P, spec, br, rows, names, load_col)
+    if part == "map":
+        return compute_maps(system, b, rows, names, spec, {P: br}, levels=(P,))[P]
+    raise ValueError(f"unknown part {part!r}")
 
 
 def _curve(system, b, P, spec, H, rows, names, f_band=None, **kw):

@@ -85,7 +85,7 @@ def contact_bands(system: GapSystem, b: np.ndarray, P: float, spec, curve) -> li
 
 
 def compute_maps(system: GapSystem, b: np.ndarray, rows: np.ndarray, names: tuple, spec, curves: dict,
-                 bar=None) -> dict:
+                 bar=None, levels=None) -> dict:
     """P -> MapLevel for every level of ``[frc] levels_N`` (empty with ``map_step_hz = 0``).
 
     Parameters
@@ -96,6 +96,7 @@ def compute_maps(system: GapSystem, b: np.ndarray, rows: np.ndarray, names: tupl
     spec : the [frc] table
     curves : P -> FRCBranch (or its exception), for the contact bands
     bar : a tqdm bar to describe the work on (or None)
+    levels : the levels (N) to map, default every level of ``[frc] levels_N``
 
     Returns
     -------
@@ -106,7 +107,7 @@ def compute_maps(system: GapSystem, b: np.ndarray, rows: np.ndarray, names: tupl
         return {}
     opts = MapOptions(n_record=spec.map_periods)
     out = {}
-    for P in spec.levels_N:
+    for P in spec.levels_N if levels is None else levels:
         t0 = time.perf_counter()
         bands = contact_bands(system, b, P, spec, curves.get(P, ValueError("no curve")))
         freqs = map_frequencies(spec.freq_min_hz, spec.freq_max_hz, bands, spec.map_step_hz, spec.map_coarse_points)

@@ -47,6 +47,7 @@ import numpy as np
 
 from bearingshaft import measured
 from bearingshaft.estimates import COPIES, FLOAT, MATPLOTLIB_BYTES, Estimate, n_dofs, sliders
+from bearingshaft.fanout import fan_out
 from bearingshaft.progress import bar as progress_bar
 from bearingshaft.reproduction import Reproduction, chaotic, exact, record, roundoff
 from bearingshaft.scenes import HammerSpec, Scene, SceneError
@@ -594,10 +595,11 @@ def _virtual_test(scene: Scene, rom, rig: VirtualRig, lm, labels: dict, stats: d
     """Every level's record, their summaries, the backbones and (if asked) the linear check."""
     spec = scene.hammer
     levels = sorted({*spec.levels_N, spec.peak_N})
-    records = {}
-    bar = progress_bar(levels, desc=f"{scene.name}: virtual tests", unit="level", enabled=progress)
-    for level in bar:
-        records[level] = run_record(rig, blow(spec, level), scene, level)
+    # the levels are independent pieces (on the job's cluster when there is one), in this order either way
+    bar = progress_bar(total=len(levels), desc=f"{scene.name}: virtual tests", unit="level", enabled=progress)
+    records = dict(zip(levels, fan_out(_level_record, [(rig, scene, level) for level in levels]), strict=True))
+    bar.update(len(levels))
+    bar.close()
     nominal = records[spec.peak_N]
     # with friction the sliders' states are not in the record, so a displaced run could not start 1e-9 from it:
     # no exponent (the report then says no horizon was measured)
@@ -622,6 +624,12 @@ def _virtual_test(scene: Scene, rom, rig: VirtualRig, lm, labels: dict, stats: d
     return VirtualTest(scene=scene, rig=rig, labels=labels, records=records, summary=summary, backbones=curves,
                        linear=linear, end_share_s=END_SHARE_S, stats=stats, lines=(line,), friction=friction,
                        lyapunov=tuple(lyapunov))
+
+
+def _level_record(job: tuple) -> Record:
+    """The record of one level: ``job = (rig, scene, level_N)``."""
+    rig, scene, level = job
+    return run_record(rig, blow(scene.hammer, level), scene, level)
 
 
 def record_lyapunov(rig: VirtualRig, signal, scene: Scene, rec: Record, seeds: int = LYAPUNOV_SEEDS) -> list:

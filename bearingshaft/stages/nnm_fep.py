@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from bearingshaft.fanout import fan_out
 from bearingshaft.output import StageWriter
 from bearingshaft.progress import bar as progress_bar
 from bearingshaft.scenes import Scene
@@ -250,8 +251,7 @@ def _compute_fep(scene: Scene, progress: bool) -> FEPResult:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # LinAlgWarning from LU on rejected steps
         branches = _branches(fm, spec, jobs, bar)
-        shots = _shooting(fm, spec, branches, bar)
-        hills = _hills(fm, spec, branches, bar)
+        shots, hills = _shooting_and_hills(fm, spec, branches, bar)
     bar.close()
     srows, n_dis = _stability(spec, n, branches, shots, hills)
     exact_err = _exact_errors(fm, branches)
@@ -281,46 +281,59 @@ def _jobs(spec, fm: FEPModel) -> list[tuple[int, int, int | None]]:
 
 def _branches(fm: FEPModel, spec, jobs: list, bar) -> dict:
     """{(nnm, H, N): NNMBranch} of the work list (a study branch at the default N is the branch
-    already computed)."""
-    branches, done = {}, {}
+    already computed); the distinct branches are independent pieces (:func:`bearingshaft.fanout.fan_out`)."""
+    first = {}  # (nnm, H, N or its default) -> the first job that asks for it: the one computed
     for mode, H, N in jobs:
-        bar.set_postfix_str(f"NNM {mode + 1}, H={H}" + (f", N={N}" if N else ""))
-        key = (mode, H, N or default_samples(H))
-        if key not in done:
-            done[key] = nnm_branch(fm.system, fm.modes[mode], H=H, N=N, energy_max_J=spec.energy_max_J, **fm.branch)
-        branches[(mode, H, N)] = done[key]
-        bar.update()
-    return branches
+        first.setdefault((mode, H, N or default_samples(H)), (mode, H, N))
+    bar.set_postfix_str(f"{len(first)} HB branches")
+    keys = sorted(first, key=lambda k: -k[1])  # the highest H first: the longest pieces start first on a cluster
+    pieces = [("branch", fm, spec, *first[k]) for k in keys]
+    done = dict(zip(keys, fan_out(_piece, pieces), strict=True))
+    bar.update(len(jobs))
+    return {(mode, H, N): done[(mode, H, N or default_samples(H))] for mode, H, N in jobs}
 
 
-def _shooting(fm: FEPModel, spec, branches: dict, bar) -> dict:
-    """{nnm: (energies, orbits, wall_s)}: shooting along each NNM, guided by the best complete HB branches."""
-    flow = Flow(fm.system)
-    shots = {}
-    for mode in range(len(fm.modes)):
-        bar.set_postfix_str(f"shooting NNM {mode + 1}")
-        guides = [branches[(mode, 1, None)]]
-        hi = max(spec.harmonics)
-        if branches[(mode, hi, None)].energy_J[-1] >= spec.energy_max_J:
-            guides.insert(0, branches[(mode, hi, None)])
+def _piece(job: tuple):
+    """One independent piece of the study: ``("branch", fm, spec, nnm, H, N)`` an HB branch,
+    ``("shooting", fm, spec, nnm, guides)`` the shooting orbits of one NNM (energies, orbits, wall_s), or
+    ``("hill", fm, spec, nnm, branch)`` Hill's method at every point of one branch."""
+    kind, fm, spec, mode = job[:4]
+    if kind == "branch":
+        H, N = job[4:]
+        return nnm_branch(fm.system, fm.modes[mode], H=H, N=N, energy_max_J=spec.energy_max_J, **fm.branch)
+    if kind == "shooting":
+        guides = job[4]
         E0 = guides[-1].energy_J[0]
         energies = np.logspace(np.log10(E0), np.log10(spec.energy_max_J), spec.n_shooting)
         t0 = time.perf_counter()
-        shots[mode] = (energies, shooting_branch(flow, energies, guides, **fm.shooting), time.perf_counter() - t0)
-        bar.update()
-    return shots
+        return energies, shooting_branch(Flow(fm.system), energies, guides, **fm.shooting), time.perf_counter() - t0
+    if kind == "hill":
+        b = job[4]
+        return [hill(b.residual.hb, b.X[i], b.omega[i], **fm.hill) for i in range(len(b.energy_J))]
+    raise ValueError(f"unknown piece {kind!r}")
 
 
-def _hills(fm: FEPModel, spec, branches: dict, bar) -> dict:
-    """{(nnm, H): [HillResult per point]}: Hill's method on every HB point of the drawn branches."""
-    hills = {}
-    for mode in range(len(fm.modes)):
-        bar.set_postfix_str(f"Hill NNM {mode + 1}")
-        for H in spec.harmonics:
-            b = branches[(mode, H, None)]
-            hills[(mode, H)] = [hill(b.residual.hb, b.X[i], b.omega[i], **fm.hill) for i in range(len(b.energy_J))]
-        bar.update()
-    return hills
+def _guides(fm: FEPModel, spec, branches: dict, mode: int) -> list:
+    """The HB branches that guide the shooting along one NNM: the best complete ones (H = 1 last)."""
+    guides = [branches[(mode, 1, None)]]
+    hi = max(spec.harmonics)
+    if branches[(mode, hi, None)].energy_J[-1] >= spec.energy_max_J:
+        guides.insert(0, branches[(mode, hi, None)])
+    return guides
+
+
+def _shooting_and_hills(fm: FEPModel, spec, branches: dict, bar) -> tuple[dict, dict]:
+    """({nnm: (energies, orbits, wall_s)}, {(nnm, H): [HillResult per point]}): shooting along each NNM, guided
+    by the best complete HB branches, and Hill's method on every HB point of the drawn branches; independent
+    pieces (:func:`bearingshaft.fanout.fan_out`)."""
+    n = len(fm.modes)
+    bar.set_postfix_str("shooting and Hill")
+    hill_keys = [(mode, H) for mode in range(n) for H in spec.harmonics]
+    pieces = [("shooting", fm, spec, mode, _guides(fm, spec, branches, mode)) for mode in range(n)]
+    pieces += [("hill", fm, spec, mode, branches[(mode, H, None)]) for mode, H in hill_keys]
+    out = fan_out(_piece, pieces)
+    bar.update(2 * n)
+    return dict(zip(range(n), out[:n], strict=True)), dict(zip(hill_keys, out[n:], strict=True))
 
 
 def _stability(spec, n: int, branches: dict, shots: dict, hills: dict) -> tuple[list[dict], dict]:

@@ -480,6 +480,13 @@ class NNMResidual:
         """Per-thread (A, dA, sign of dA's pattern) buffers of :meth:`_linear_parts`."""
         return threading.local()
 
+    def __getstate__(self) -> dict:
+        """Pickled (to another process: bearingshaft.fanout) without the per-thread buffers, which are
+        rebuilt on first use there."""
+        state = dict(self.__dict__)
+        state.pop("_scratch", None)
+        return state
+
     def _linear_parts(self, omega: float) -> tuple[np.ndarray, np.ndarray]:
         """(A, dA) = (kron(I, K) + omega^2 kron(Nab^2, M), 2 omega kron(Nab^2, M)) of a conservative HB, bit
         for bit the full sums, with only the diagonal blocks recomputed (into buffers kept between calls).
