@@ -212,8 +212,16 @@ class Symmetry:
     half_wave: bool
 
     def state_mirror(self) -> np.ndarray | None:
-        """(2n, 2n) R on [x; v]."""
-        return None if self.mirror is None else np.kron(np.eye(2), self.mirror)
+        """(2n, 2n) R on [x; v] (built once, read-only: every point of a family asks for it)."""
+        return self._state_mirror
+
+    @functools.cached_property
+    def _state_mirror(self) -> np.ndarray | None:
+        if self.mirror is None:
+            return None
+        Rs = np.kron(np.eye(2), self.mirror)
+        Rs.setflags(write=False)
+        return Rs
 
 
 def _stops(system: GapSystem, B: np.ndarray, offset: np.ndarray, side: np.ndarray) -> set:
@@ -1271,6 +1279,23 @@ def _images(nodes: np.ndarray, periods: int, sym: Symmetry) -> list[np.ndarray]:
     return out
 
 
+def _image_points(res: ShootingResidual, nodes: np.ndarray, omega: np.ndarray, periods: int, sym: Symmetry
+                  ) -> list[np.ndarray]:
+    """Per image of :func:`_images`, the scaled points (k, 2nS + 1) of ``res`` (``res.point``) of the orbits
+    through nodes (k, S, 2n) at the frequencies omega (k,) rad/s: the same numbers as :func:`_images` and
+    ``res.point`` point by point (the mirror is a signed permutation: its products are exact), all points at once."""
+    k, S, N = nodes.shape
+    out = [np.roll(nodes, -j * S // periods, axis=1) for j in range(periods)]
+    if sym.half_wave and S % (2 * periods) == 0:
+        out += [-np.roll(x, -S // (2 * periods), axis=1) for x in out]
+    Rs = sym.state_mirror()
+    if Rs is not None:
+        out += [x @ Rs.T for x in out]
+    D = np.array([res.scale(float(w)) for w in omega]).reshape(k, 1, N)
+    lw = np.array([math.log(float(w) / res.omega_ref) for w in omega])  # math.log, as res.point
+    return [np.concatenate([(x / D).reshape(k, S * N), lw[:, None]], axis=1) for x in out]
+
+
 def _known(families: list, residuals: dict, res_new: ShootingResidual, y_new: np.ndarray, sym: Symmetry):
     """The index of a family of the same period whose orbit at y_new's frequency (Newton at that
     frequency from its nearest points on each side) is y_new's orbit or one of its images
@@ -1373,10 +1398,7 @@ class _Joined:
             if fam.periods != res.periods or fam.nodes.shape[1] != res.segments or len(fam.freq_hz) < 2:
                 continue
             same = fam.segment[:-1] == fam.segment[1:]
-            per_point = [_images(nd, fam.periods, sym) for nd in fam.nodes]
-            ims = [np.array([res.point(p[m], w) for p, w in zip(per_point, fam.omega, strict=True)])
-                   for m in range(len(per_point[0]))]
-            for Yi in ims:
+            for Yi in _image_points(res, fam.nodes, fam.omega, fam.periods, sym):
                 A.append(Yi[:-1][same])
                 B.append(Yi[1:][same])
                 who.append(np.flatnonzero(same) + 1j * k)

@@ -826,6 +826,7 @@ class ShootingResidual:
     _segments: tuple | None = field(default=None, repr=False)
     _gen: int = field(default=0, repr=False)  # forget() count: a Jacobian asked for after it is not memoised
     guard: tuple | None = field(default=None, repr=False)  # (Y_ref, its events, radius): see _check_guard
+    _scale: tuple | None = field(default=None, repr=False)  # (Omega, D sqrt(S)) of the last scale() asked for
 
     @property
     def n(self) -> int:
@@ -845,8 +846,16 @@ class ShootingResidual:
     def scale(self, omega: float) -> np.ndarray:
         """(2n,) D sqrt(S): x_ref for displacements, Omega x_ref for velocities, times sqrt(S) so that
         a step's length is the RMS change of the nodes whatever S is."""
+        hit = self._scale
+        if hit is not None and hit[0] == omega:
+            return hit[1]  # asked for several times at every trial point; callers never write into it
         c = math.sqrt(self.segments) * self.x_ref
-        return np.concatenate([np.full(self.n, c), np.full(self.n, self.velocity_scale(omega) * c)])
+        n = self.n
+        d = np.empty(2 * n)
+        d[:n] = c
+        d[n:] = self.velocity_scale(omega) * c
+        self._scale = (omega, d)
+        return d
 
     def omega(self, Y: np.ndarray) -> float:
         return float(self.omega_ref * math.exp(Y[self.size]))

@@ -50,7 +50,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg import LinAlgWarning, lu_factor, lu_solve
+from scipy.linalg import LinAlgWarning, get_lapack_funcs, lu_factor, lu_solve
 
 from reduced import _checks as _check
 from reduced.models.gaps import GapSystem
@@ -640,6 +640,29 @@ class NewtonResult:
     jacobian: np.ndarray  # at y (square, as solved)
 
 
+_DGETRF, _DGETRS = get_lapack_funcs(("getrf", "getrs"), (np.zeros((1, 1)),))
+
+
+def _lu_solve(J: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """J^-1 R by LAPACK's getrf and getrs: the numbers of ``lu_solve(lu_factor(J), R)`` (the calls it
+    makes), without its wrappers' overhead (a few tens of microseconds, as much as the factorisation
+    of the 49 x 49 Jacobian of a shooting corrector). A zero pivot gives inf, as there. Raises
+    ValueError on an illegal argument."""
+    if J.dtype != np.float64 or R.dtype != np.float64 or J.ndim != 2 or R.ndim != 1:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", LinAlgWarning)  # a zero pivot gives inf: the caller checks
+            return lu_solve(lu_factor(J, check_finite=False), R, check_finite=False)
+    if J.shape[0] != J.shape[1] or J.shape[0] != R.shape[0]:
+        raise ValueError(f"Jacobian {J.shape} and residual {R.shape} do not match")
+    lu, piv, info = _DGETRF(J)
+    if info < 0:
+        raise ValueError(f"illegal value in {-info}th argument of internal getrf")
+    x, info = _DGETRS(lu, piv, R)
+    if info != 0:
+        raise ValueError(f"illegal value in {-info}th argument of internal getrs")
+    return x
+
+
 def _jacobian(J):
     """J itself, or J() when ``fun`` gave it as a callable (made only once its point is taken)."""
     return J() if callable(J) else J
@@ -692,10 +715,7 @@ def newton(
         if not np.all(np.isfinite(R)) or not np.all(np.isfinite(J)):
             raise NewtonError(f"non-finite residual or Jacobian at iteration {it}")
         try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", LinAlgWarning)  # a zero pivot gives inf: caught below
-                lu = lu_factor(J, check_finite=False)
-                dy = -lu_solve(lu, R, check_finite=False)
+            dy = -_lu_solve(J, R)
         except (ValueError, np.linalg.LinAlgError) as exc:
             raise NewtonError(f"singular Jacobian at iteration {it}: {exc}") from None
         if not np.all(np.isfinite(dy)):
