@@ -313,7 +313,9 @@ def _quick_scene() -> str:
     data["frc"].update({"levels_N": [1.0], "freq_max_hz": 40.0, "harmonics": 3,
                         "convergence_harmonics": [1, 3], "hill_points": 3, "shooting_points": 2,
                         "stepped_sine_points": 6, "stepped_sine_max_s": 9.0, "backbone_scales": [1.0],
-                        "map_step_hz": 0.0})  # the response map: tests/test_response_map.py
+                        "map_step_hz": 0.0,  # the response map: tests/test_response_map.py
+                        "verdict_points": 0, "close_return_families": 0})  # tests/test_cover_verdicts.py and
+    # tests/test_close_returns.py judge uncovered HB points and shoot close returns
     return tomli_w.dumps(data)
 
 
