@@ -100,6 +100,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", metavar="N", type=_workers, help="worker processes of the local cluster (default: "
                    "one per core, fewer if the memory estimates say so; 1: one scene after the other in this process)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run on this Dask scheduler (tcp://host:8786) instead")
+    p.add_argument("--fan-out", action="store_true", help="split long stages (FRC levels, FEP branches, hammer "
+                   "levels) into tasks of their own: for a cluster with more workers than long stages (on 2 "
+                   "cores it is slower)")
     p = sub.add_parser("check", help="validate scenes, their memory estimates and --out without running",
                        description="Validate scenes (all built-in scenes if none is named): every key, the memory "
                        "each stage would need against the memory available, every case of a [sweep], and that "
@@ -299,7 +302,8 @@ def main(argv: list[str] | None = None) -> int:
                 from bearingshaft.jobs import run_job
 
                 given = [(n, s, o) for n, (s, o) in zip(names, runs, strict=True)]
-                job = run_job(given, stages_of, workers=args.workers, scheduler=args.scheduler, progress=progress)
+                job = run_job(given, stages_of, workers=args.workers, scheduler=args.scheduler, progress=progress,
+                              fan_out=args.fan_out)
                 code = _reproduction(args, runs)
                 print(run_total(n_stages, len(runs), job.wall_s, job.peak_bytes, job.workers))  # the last line
                 return EXIT_FAILED if job.failed else code

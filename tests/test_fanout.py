@@ -92,7 +92,7 @@ def test_a_stage_fanned_out_on_the_cluster_writes_the_files_of_a_serial_run(clus
     run_stage(scene, stage, serial, progress=False)
     with get_task_stream(cluster) as ts:
         job = jobs.run_job([(str(path), scene, par)], stages_of, scheduler=cluster.scheduler.address,
-                           progress=False, echo=lambda *_: None)
+                           progress=False, echo=lambda *_: None, fan_out=True)
     assert not job.failed, job.failed
     pieces = [t for t in ts.data if t["key"].startswith("fanout")]
     assert len(pieces) >= 4, "the stage did not fan out"
