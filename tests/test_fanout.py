@@ -3,6 +3,7 @@ the workers, come back in their order, and the stage's files are those of the se
 
 from __future__ import annotations
 
+import sys
 import tomllib
 from importlib import resources
 from pathlib import Path
@@ -16,21 +17,12 @@ from bearingshaft.pipeline import run_stage
 from bearingshaft.registry import stages_of
 from bearingshaft.scenes import load_scene
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from test_hb_fep_stage import SCENE as FEP_SCENE  # noqa: E402
+
 pytestmark = pytest.mark.slow  # a cluster of two processes and two small stages run twice: ~40 s CPU
 
-FEP = """
-description = "fep on a small configuration (tests/test_hb_fep_stage.py)"
-[model]
-kind = "discrete"
-[nnm]
-[fep]
-harmonics = [1, 3]
-convergence_harmonics = [1, 3]
-samples_study_harmonics = 3
-samples = [64, 128]
-energy_max_J = 1e3
-n_shooting = 8
-"""
+FEP = 'description = "fep on a small configuration (tests/test_hb_fep_stage.py)"\n' + FEP_SCENE
 
 
 def _frc_scene() -> str:
