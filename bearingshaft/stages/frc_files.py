@@ -23,6 +23,7 @@ from bearingshaft.digits import sig
 from bearingshaft.output import StageWriter, write_rows
 from bearingshaft.stages import frc_map_files
 from bearingshaft.stages.frc_friction_results import FrictionFRCResult
+from bearingshaft.stages.frc_plot import draw_curve
 from bearingshaft.stages.frc_results import ConvergenceRun, FRCResult, PointCheck  # noqa: F401  (re-exported)
 
 DIGITS = 10  # significant digits of frequencies and amplitudes (a rerun on this machine: identical)
@@ -81,7 +82,7 @@ def write(result: FRCResult | FrictionFRCResult, writer: StageWriter) -> None:
     write_rows(writer.path("frc_backbone.csv"), _backbone_rows(result), fields=BACKBONE_FIELDS)
     write_rows(writer.path("frc_cover.csv"), _cover_rows(result), fields=COVER_FIELDS)
     write_rows(writer.path("frc_close_returns.csv"), _close_return_rows(result), fields=CLOSE_RETURN_FIELDS)
-    frc_map_files.write(result, writer, stats)  # response_map.csv, response_map_jumps.csv, response_map.png
+    frc_map_files.write(result, writer, stats, drawn_curves(result))  # response_map.csv, _jumps.csv, .png
     writer.stats["frc"] = stats
     writer.path("frc.md").write_text(frc_markdown(result), encoding="utf-8")
     stats["converged"] = _converged_stats(result)
@@ -740,12 +741,7 @@ def _draw_curves(ax, result: FRCResult, c: int, colours: dict, per_newton: bool,
         col, scale = colours[P], (1.0 / P if per_newton else 1.0)
         lw = 1.2 + 1.4 * (len(levels) - 1 - rank) if per_newton else 1.2
         if not isinstance(br, Exception):
-            for idx in br.pieces():
-                a, fr, stb = br.amplitude_m[idx, c] * scale, br.freq_hz[idx], br.stable[idx]
-                ax.plot(fr, np.where(stb, a, np.nan), "-", color=col, lw=lw)
-                uns = ~stb
-                edge = uns | np.roll(uns, 1) | np.roll(uns, -1)  # join the dashed pieces to the solid ones
-                ax.plot(fr, np.where(edge, a, np.nan), "--", color=col, lw=0.75 * lw)
+            draw_curve(ax, br, c, col, lw, scale)
         for d, mk in (("up", "^"), ("down", "v")):
             ss = result.sweeps.get(P, {}).get(d)
             if ss is None:

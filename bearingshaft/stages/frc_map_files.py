@@ -12,7 +12,9 @@ round-off sets: the reproduction report does not require what follows to reprodu
 ``response_map_jumps.csv``: the jumps, each with the regimes and mean amplitudes on both sides (and
 ``after_chaos``). ``response_map.png``: per level, the
 brute-force bifurcation diagram (Poincare samples of x1 against frequency, up and down) under the
-HB curve (stable solid, unstable dashed) with the shooting orbits and the measured envelope.
+level's drawn curve (:func:`bearingshaft.stages.frc_files.drawn_curves`: HB where it no longer moves with H,
+else the exact flow's families; stable solid, unstable dashed; never an unconverged HB curve in contact)
+with the shooting orbits and the measured envelope.
 ``response_map_spectra.png``: the order spectrum of x1 at every frequency of each sweep (response
 frequency over excitation frequency, power fraction in dB): lines at the integers for a periodic
 response, at multiples of 1/p for a subharmonic of period p, a continuum for chaos.
@@ -26,6 +28,7 @@ import numpy as np
 
 from bearingshaft.digits import sig
 from bearingshaft.output import write_rows
+from bearingshaft.stages.frc_plot import draw_curve
 from bearingshaft.stages.frc_results import FRCResult
 
 DIGITS = 10  # significant digits of frequencies and amplitudes
@@ -39,7 +42,7 @@ UNPREDICTABLE = ("chaotic", "quasi_periodic")  # regimes after which a sweep's s
 REGIME_COLORS = {"periodic": "C0", "subharmonic": "C2", "quasi_periodic": "C4", "chaotic": "C3"}
 
 
-def write(result: FRCResult, writer, stats: dict) -> None:
+def write(result: FRCResult, writer, stats: dict, drawn: dict) -> None:
     """Write the response map's files and put its statistics in ``stats["response_map"]`` (nothing
     without a map).
 
@@ -51,6 +54,8 @@ def write(result: FRCResult, writer, stats: dict) -> None:
         Where the files go.
     stats : dict
         The frc stage's statistics (for provenance.json).
+    drawn : dict
+        P -> the level's drawn curve (:func:`bearingshaft.stages.frc_files.drawn_curves`), drawn over the map.
     """
     maps = getattr(result, "response_maps", {}) or {}
     if not maps:
@@ -66,7 +71,7 @@ def write(result: FRCResult, writer, stats: dict) -> None:
     write_rows(writer.path("response_map.csv"), rows, fields=MAP_FIELDS)
     write_rows(writer.path("response_map_jumps.csv"), jumps, fields=JUMP_FIELDS)
     stats["response_map"] = st
-    _plot_map(writer.path("response_map.png"), result, col)
+    _plot_map(writer.path("response_map.png"), result, col, drawn)
     _plot_spectra(writer.path("response_map_spectra.png"), result)
 
 
@@ -132,16 +137,10 @@ def _zoom(lvl, spec) -> tuple[float, float] | None:
     return max(min(fs) / 1.05, spec.freq_min_hz), min(max(fs) * 1.05, spec.freq_max_hz)
 
 
-def _plot_curves(ax, result: FRCResult, P: float, col: int) -> None:
-    """The HB curve at P (stable solid, unstable dashed) and the shooting orbits (open: unstable)."""
-    br = result.curves.get(P)
-    if br is not None and not isinstance(br, Exception):
-        for idx in br.pieces():
-            a, fr, stb = br.amplitude_m[idx, col], br.freq_hz[idx], br.stable[idx]
-            ax.plot(fr, np.where(stb, a, np.nan), "-", color="k", lw=1.0, label=f"HB H={br.H}, stable")
-            uns = ~stb
-            edge = uns | np.roll(uns, 1) | np.roll(uns, -1)
-            ax.plot(fr, np.where(edge, a, np.nan), "--", color="k", lw=0.6, label=f"HB H={br.H}, unstable")
+def _plot_curves(ax, result: FRCResult, P: float, col: int, curve) -> None:
+    """The level's drawn curve (stable solid, unstable dashed) and the shooting orbits (open: unstable)."""
+    if curve is not None and not isinstance(curve, Exception):
+        draw_curve(ax, curve, col, "k", 0.8, label="periodic orbits (the drawn curve)")
     for r in result.checks.get(P, []):
         if r.shoot_amp is not None:
             ax.plot(r.freq_hz, r.shoot_amp[col], "s", ms=5, mec="k", mfc="k" if r.shoot_stable else "none",
@@ -166,10 +165,11 @@ def _plot_unstable_families(axs, result: FRCResult, P: float, col: int) -> None:
                         label=lab, zorder=6)
 
 
-def _plot_level(axs, result: FRCResult, P: float, lvl, col: int) -> None:
-    """Top: the curve, the shooting orbits and the measured envelope of each sweep; bottom: the Poincare samples."""
+def _plot_level(axs, result: FRCResult, P: float, lvl, col: int, curve) -> None:
+    """Top: the drawn curve, the shooting orbits and the measured envelope of each sweep; bottom: the Poincare
+    samples."""
     top, bot = axs
-    _plot_curves(top, result, P, col)
+    _plot_curves(top, result, P, col, curve)
     _plot_unstable_families(axs, result, P, col)
     for d, rm in lvl.sweeps.items():
         st = rm.peak_stats(col)
@@ -190,12 +190,14 @@ def _plot_level(axs, result: FRCResult, P: float, lvl, col: int) -> None:
     top.set_ylabel("max |x1| over a period [m]")
     bot.set_ylabel("x1 at t = k T (Poincare) [m]")
     bot.set_xlabel("excitation frequency [Hz]")
-    top.set_title(f"{P:g} N", fontsize=9)
+    curve_label = "" if curve is None or isinstance(curve, Exception) else \
+        f": {getattr(curve, 'label', None) or f'HB H={curve.H}'}"
+    top.set_title(f"{P:g} N{curve_label}", fontsize=9)
     for ax in axs:
         ax.grid(True, alpha=0.2)
 
 
-def _plot_map(path, result: FRCResult, col: int) -> None:
+def _plot_map(path, result: FRCResult, col: int, drawn: dict) -> None:
     """response_map.png: one column per level (module docstring)."""
     import matplotlib
 
@@ -205,7 +207,7 @@ def _plot_map(path, result: FRCResult, col: int) -> None:
     maps = result.response_maps
     fig, axs = plt.subplots(2, len(maps), figsize=(5.6 * len(maps), 8.0), squeeze=False, sharex="col")
     for c, (P, lvl) in enumerate(maps.items()):
-        _plot_level((axs[0][c], axs[1][c]), result, P, lvl, col)
+        _plot_level((axs[0][c], axs[1][c]), result, P, lvl, col, drawn.get(P))
         zoom = _zoom(lvl, result.spec)
         if zoom is None:
             axs[0][c].set_xscale("log")
