@@ -18,8 +18,10 @@ frictionless and the friction integrator's), and the levels run in order in one 
 runs them: the first record builds the states it enters, the later ones reuse them and build those they
 enter first. Each record is timed (CPU seconds of ``run_record``, its set-up and the tables it builds
 included; BLAS on one thread, so CPU time is the work, whatever the machine's load; wall time too), and
-then run again with every table it needs kept (``warm``). Ratios are friction / frictionless (same level,
-same pass): per record cold (``ratio_cold``) and warm (``ratio_warm``), and over the stage, the sum of the
+then run again with every table it needs kept (``warm``); the whole is repeated ``--repeats`` times (tables
+forgotten before each pass) and each record's median kept (one record's CPU time moves by 20-40 % from run to
+run on the shared 2-core machine). Ratios are friction / frictionless (same level,
+medians): per record cold (``ratio_cold``) and warm (``ratio_warm``), and over the stage, the sum of the
 cold records of all levels (``stage``).
 Writes hammer_friction_speed.csv (model, level_N, n, cold and warm CPU and wall s, table_s (the tables'
 build inside the cold record), states built, n_events, energy_balance_error, friction_J, the ratios) and
@@ -53,6 +55,8 @@ def main(argv=None) -> None:
     ap.add_argument("--levels", type=float, nargs="+", default=[200.0, 500.0, 1000.0])
     ap.add_argument("--mu", type=float, default=0.3)
     ap.add_argument("--directions", default="axial+lateral")
+    ap.add_argument("--repeats", type=int, default=3, help="cold and warm passes per model (the median is kept: "
+                    "CPU time of one record moves by 20-40 %% from run to run on the shared 2-core machine)")
     ap.add_argument("--out", default=str(ROOT / "results" / "hammer-friction-speed"))
     args = ap.parse_args(argv)
     from reduced.transient.exact_tables import clear_table_cache
@@ -76,20 +80,28 @@ def main(argv=None) -> None:
         rom_fric = fric.reduced(True)
         models = {"frictionless": rom_plain, "basis, mu = 0": rom_fric.with_contact(replace(fric, mu=0.0)),
                   "friction": rom_fric}
+        rigs = {}
         for name, rom in models.items():
             scene = replace(base, model=fric if name == "friction" else plain)
-            rig = hammer._rig(scene, rom)
-            hammer.run_record(rig, hammer.blow(scene.hammer, 20.0), scene, 20.0, duration_s=0.02)  # compile
-            clear_tables()
-            clear_table_cache()
-            cold = {}
-            for level in args.levels:  # the stage's order: tables built as the records enter their states
-                cold[level] = timed(rig, scene, level)
-            for level in args.levels:  # every table the record needs kept
-                rec, wall, cpu = cold[level]
-                _, warm_wall, warm_cpu = timed(rig, scene, level)
+            rigs[name] = (hammer._rig(scene, rom), scene)
+            hammer.run_record(rigs[name][0], hammer.blow(scene.hammer, 20.0), scene, 20.0, duration_s=0.02)  # compile
+        passes = {name: [] for name in models}
+        for _ in range(args.repeats):  # the models in turn within each pass: a slow spell of the machine falls on all
+            for name, (rig, scene) in rigs.items():
+                clear_tables()
+                clear_table_cache()
+                cold = {level: timed(rig, scene, level) for level in args.levels}  # the stage's order: tables
+                # built as the records enter their states; then every table the record needs kept
+                passes[name].append((cold, {level: timed(rig, scene, level) for level in args.levels}))
+        for name, (rig, _) in rigs.items():
+            ps = passes[name]
+            for level in args.levels:
+                rec = ps[0][0][level][0]
+                wall, cpu = (float(np.median([p[0][level][k] for p in ps])) for k in (1, 2))
+                table_s = float(np.median([p[0][level][0].stats.get("table_s", 0.0) for p in ps]))
+                warm_wall, warm_cpu = (float(np.median([p[1][level][k] for p in ps])) for k in (1, 2))
                 rows.append({"model": name, "level_N": level, "n": rig.system.n, "cold_cpu_s": cpu, "cold_wall_s": wall,
-                             "warm_cpu_s": warm_cpu, "warm_wall_s": warm_wall, "table_s": rec.stats.get("table_s", 0.0),
+                             "warm_cpu_s": warm_cpu, "warm_wall_s": warm_wall, "table_s": table_s,
                              "states_built": rec.stats.get("n_states_built", 0),
                              "n_events": rec.stats.get("n_events", 0),
                              "energy_balance_error": rec.balance_error,
@@ -114,7 +126,8 @@ def main(argv=None) -> None:
     machine = {"machine": platform.machine(), "python": platform.python_version(), "numpy": np.__version__,
                "numba": numba.__version__, "cpus": os.cpu_count(), "load_before": " ".join(f"{x:.2f}" for x in load0),
                "load_after": " ".join(f"{x:.2f}" for x in os.getloadavg()), "mu": args.mu,
-               "directions": args.directions, "levels": " ".join(f"{v:g}" for v in args.levels),
+               "directions": args.directions, "repeats": args.repeats,
+               "levels": " ".join(f"{v:g}" for v in args.levels),
                "stage_cpu_s_frictionless": f"{stage['frictionless']:.2f}",
                "stage_cpu_s_friction": f"{stage['friction']:.2f}", "stage_ratio": f"{stage_ratio:.3f}"}
     (out / "machine.csv").write_text("key,value\n" + "".join(f"{k},{v}\n" for k, v in machine.items()))

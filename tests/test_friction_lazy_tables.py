@@ -114,3 +114,35 @@ def test_the_condition_bound_brackets_the_2_norm_condition():
         c2 = sv[0] / sv[-1]
         assert c == condition_bound(V, Vi)
         assert c2 * (1 - 1e-12) <= c <= N * c2, (c, c2)
+
+
+def test_work_tables_over_the_power_rows_equal_the_full_quadratic_form():
+    """work_tables forms U^T D U over the coordinates D involves (its nonzero rows) with real products; on
+    random kept terms and a D with a zero block it equals the full complex product U^T D U (the old form) to
+    round-off: G and H are sums of at most N products of O(1) terms, so 1e-13 relative is ~100 ulps."""
+    from reduced.transient.friction_tables import work_tables
+
+    rng = np.random.default_rng(7)
+    S, N, K = 3, 12, 5
+    lk = -rng.uniform(0.1, 1.0, (S, K)) + 1j * rng.uniform(1.0, 10.0, (S, K))
+    Uk = rng.standard_normal((S, N, K)) + 1j * rng.standard_normal((S, N, K))
+    kappa = np.full((S, K), 2.0)
+    D = np.zeros((S, N, N))
+    Q = rng.standard_normal((S, 3, 3))
+    D[0, 4:7, 4:7] = Q[0] + Q[0].T  # the power on three coordinates only, other ones in each state
+    D[1, 8:11, 8:11] = Q[1] + Q[1].T
+    D[2] = 0.0  # a state without power: its G, H vanish
+    Wm, Hd = work_tables(lk, Uk, kappa, D)[:2]
+    G = 0.5 * np.matmul(Uk.transpose(0, 2, 1), np.matmul(D.astype(complex), Uk))
+    H = 0.5 * np.matmul(Uk.transpose(0, 2, 1), np.conj(np.matmul(D.astype(complex), Uk)))
+    zG, zH = lk[:, :, None] + lk[:, None, :], lk[:, :, None] + np.conj(lk)[:, None, :]
+    off = ~np.eye(K, dtype=bool)
+    Gz, Hz = G / zG, np.where(off, H / np.where(off, zH, 1.0), 0.0)
+    ref = np.stack([Gz.real + Hz.real, Hz.imag - Gz.imag, Gz.imag + Hz.imag, Gz.real - Hz.real],
+                   axis=1).transpose(0, 1, 3, 2)
+    hd = np.diagonal(H, axis1=1, axis2=2).real / (2.0 * lk.real)
+    scale = np.max(np.abs(ref))
+    assert scale > 0.1
+    assert np.max(np.abs(Wm - ref)) < 1e-13 * scale, np.max(np.abs(Wm - ref)) / scale
+    assert np.max(np.abs(Hd[:, 0] - hd)) < 1e-13 * np.max(np.abs(hd))
+    assert not np.any(Wm[2]) and not np.any(Hd[2])

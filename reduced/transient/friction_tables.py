@@ -520,9 +520,14 @@ def _work_chunk(lk: np.ndarray, Uk: np.ndarray, kappa: np.ndarray, D: np.ndarray
     """(Wm, Hd, near-cancelling terms per state) of :func:`work_tables` for the states given (all arrays
     cut to them)."""
     S, _, Kmax = Uk.shape
-    DU = np.matmul(D, Uk)
-    G = 0.5 * np.matmul(Uk.transpose(0, 2, 1), DU)
-    H = 0.5 * np.matmul(Uk.transpose(0, 2, 1), np.conj(DU))
+    nz = np.flatnonzero(np.any(D != 0.0, axis=(0, 1)))  # the coordinates the power involves (D symmetric): the
+    # viscous form only the velocities', the friction form a few contact rows; the products over them alone,
+    # real D times the real and imaginary parts (the same sums without their zero terms, in another order)
+    Un = Uk[:, nz, :]
+    Dn = D[:, nz][:, :, nz]
+    DU = np.matmul(Dn, Un.real) + 1j * np.matmul(Dn, Un.imag)
+    G = 0.5 * np.matmul(Un.transpose(0, 2, 1), DU)
+    H = 0.5 * np.matmul(Un.transpose(0, 2, 1), np.conj(DU))
     zG = lk[:, :, None] + lk[:, None, :]
     zH = lk[:, :, None] + np.conj(lk)[:, None, :]
     scale = ZNEAR * (np.abs(lk)[:, :, None] + np.abs(lk)[:, None, :])
