@@ -344,7 +344,15 @@ def test_frc_stage_writes_its_files_and_reruns_byte_for_byte(tmp_path, monkeypat
                                  "bifurcation"]
     methods = {r["method"] for r in rows}
     # at 1 N a stop closes and HB moves with H: the drawn curve is the exact flow's (shooting)
-    assert methods == {"hb", "shooting", "stepped_sine_up", "stepped_sine_down"}
+    assert methods == {"hb", "shooting", "open_gap", "stepped_sine_up", "stepped_sine_down"}
+    # beside them, where the HB orbit closes a stop, the open-gap orbit that closes none: the linear FRF there
+    og = [r for r in rows if r["method"] == "open_gap"]
+    assert og and {r["drawn"] for r in og} == {"true"} and {r["stable"] for r in og} == {"true"}
+    col = {"x1": 0, "x2": 1, "x3": 2}
+    lin = [linear_frf(P.system(), B2, float(r["level"]), np.array([float(r["freq_hz"])]))[0, col[r["point"]]]
+           for r in og]
+    # frequency and amplitude written to 10 digits; near the mode (f/A) dA/df reaches ~1e2: 1e-7 bounds it
+    assert np.allclose([float(r["amplitude_m"]) for r in og], lin, rtol=1e-7, atol=0.0)
     assert {r["point"] for r in rows} == {"x1", "x2", "x3"}
     assert {r["stable"] for r in rows} <= {"true", "false"}
     hb_kinds = {"", "fold", "branch_point", "period_doubling", "neimark_sacker"}

@@ -48,7 +48,7 @@ from bearingshaft.reproduction import Reproduction, chaotic, exact, sensitive, w
 from bearingshaft.scenes import Scene
 from bearingshaft.stages.frc_friction import load_vector
 from bearingshaft.stages.frc_map import compute_maps
-from bearingshaft.stages.frc_results import ConvergedCurve, ConvergenceRun, FRCResult, PointCheck
+from bearingshaft.stages.frc_results import ConvergedCurve, ConvergenceRun, FRCResult, OpenGapOrbits, PointCheck
 from bearingshaft.systems import model_system
 from reduced._blas import single_thread_blas
 from reduced.models.gaps import GapSystem
@@ -67,6 +67,7 @@ from reduced.periodic.frc import (
     frc,
     linear_frf,
     max_abs_over_period,
+    open_gap_orbits,
     solution_at_frequency,
 )
 from reduced.periodic.hb import NewtonError, _derivative_matrix, newton
@@ -356,8 +357,34 @@ def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: 
                 f"covered ({len(ex.cover)} tried, `[frc] cover_families = {spec.cover_families}`); the contact band "
                 + ("is covered" if not gaps else "not covered: " + ", ".join(
                     f"{a:.5g}-{c:.5g} Hz ({n} HB point{'' if n == 1 else 's'})" for a, c, n in gaps)))
+    open_gap = _open_gap(system, b, P, br, rows, in_contact) if ok else None
+    if open_gap is not None:
+        runs = ", ".join(f"{open_gap.freq_hz[open_gap.segment == k].min():.5g}-"
+                         f"{open_gap.freq_hz[open_gap.segment == k].max():.5g} Hz" for k in np.unique(open_gap.segment))
+        hot = int(np.sum(np.isin(open_gap.freq_hz, br.freq_hz[in_contact])))
+        why += (f"; the orbit of the open-gap (linear) system closes no stop over {runs} ({hot} frequencies where "
+                f"the HB orbit closes one; {'stable' if open_gap.stable else 'unstable'}): an exact orbit, drawn")
     return ConvergedCurve(P, "shooting", why, spec.harmonics, Hc, change, contact, ex, "", time.perf_counter() - t0,
-                          refined, fill)
+                          refined, fill, open_gap)
+
+
+def _open_gap(system: GapSystem, b: np.ndarray, P: float, br, rows: np.ndarray, in_contact: np.ndarray
+              ) -> OpenGapOrbits | None:
+    """The open-gap system's orbits (:func:`reduced.periodic.frc.open_gap_orbits`) at the HB curve's
+    frequencies (sorted) that close no stop, kept where the HB orbit closes one or beside such a frequency
+    (so that the line joins the HB points drawn next to it); None where there is none."""
+    if not np.any(in_contact):
+        return None
+    f = np.unique(br.freq_hz)
+    amp, pen, stable = open_gap_orbits(system, b, P, f, rows)
+    hot = np.isin(f, br.freq_hz[in_contact])
+    near = hot.copy()
+    near[1:] |= hot[:-1]
+    near[:-1] |= hot[1:]
+    keep = near & (pen < 0.0) & (f >= br.freq_hz.min())
+    if not np.any(keep & hot):
+        return None
+    return OpenGapOrbits(f[keep], amp[keep], -pen[keep], stable, np.cumsum(~keep)[keep])
 
 
 def uncovered_orbits(system: GapSystem, b: np.ndarray, rows: np.ndarray, names: tuple, spec, curves: dict,

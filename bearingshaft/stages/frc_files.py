@@ -183,6 +183,8 @@ def _curve_files(result: FRCResult, writer: StageWriter, stats: dict) -> None:
                                      "response": ss.response[j], "segment": "",
                                      "receptance_m_per_N": sig(float(ss.amplitude_m[j, c]) / P, DIGITS)})
         cc = result.converged.get(P)
+        if cc is not None and cc.open_gap is not None:
+            rows_csv += _open_gap_rows(result, P, cc.open_gap)
         if cc is not None and cc.exact is not None:
             rows_csv += _exact_rows(result, P, cc.exact)
             bif_rows += _exact_bifurcation_rows(result, P, cc.exact)
@@ -230,6 +232,15 @@ def _exact_rows(result: FRCResult, P: float, ex) -> list[dict]:
                  "receptance_m_per_N": sig(float(fam.amplitude_m[i, c]) / P, DIGITS)}
                 for i in range(len(fam.freq_hz)) for c, nm in enumerate(result.names)]
     return out
+
+
+def _open_gap_rows(result: FRCResult, P: float, og) -> list[dict]:
+    """frc.csv rows of the open-gap system's orbits that close no stop (method "open_gap", drawn; family -1)."""
+    return [{"level": P, "method": "open_gap", "harmonics": 1, "freq_hz": sig(og.freq_hz[i], DIGITS), "point": nm,
+             "amplitude_m": sig(float(og.amplitude_m[i, c]), DIGITS), "stable": _bool(og.stable), "bifurcation": "",
+             "response": "", "segment": int(og.segment[i]), "drawn": "true", "family": -1, "family_kind": "open_gap",
+             "period_k": 1, "receptance_m_per_N": sig(float(og.amplitude_m[i, c]) / P, DIGITS)}
+            for i in range(og.freq_hz.size) for c, nm in enumerate(result.names)]
 
 
 def _harmonic_rows(result: FRCResult, P: float, br) -> list[dict]:
@@ -513,6 +524,11 @@ def drawn_curves(result: FRCResult) -> dict:
             hb = _spliced(DrawnCurve(br.freq_hz[idx], br.amplitude_m[idx], br.stable[idx], pieces, ""), cc.refined)
             parts.append((hb.freq_hz, hb.amplitude_m, hb.stable, hb.segment + 1000 * (len(fams) + 1)))
             label += ", HB where no stop closes"
+        og = cc.open_gap
+        if og is not None:  # the open-gap system's orbits that close no stop (frc.converged_curve)
+            parts.append((og.freq_hz, og.amplitude_m, np.full(og.freq_hz.size, og.stable),
+                          og.segment + 1000 * (len(fams) + 2)))
+            label += ", the open-gap orbit where it closes no stop"
         out[P] = DrawnCurve(*(np.concatenate([p[j] for p in parts]) for j in range(4)), label)
     return out
 

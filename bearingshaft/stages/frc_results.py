@@ -114,6 +114,9 @@ class ConvergedCurve:
     hb_fill : ndarray
         (k,) bool over the HB curve's points: drawn beside the exact families (outside the main
         family's range, where the orbit closes no stop); empty where HB is drawn or not needed.
+    open_gap : OpenGapOrbits or None
+        The orbits of the open-gap (linear) system at the HB curve's frequencies in contact where they
+        close no stop (exact orbits that coexist with the contact ones), drawn beside the families.
     """
 
     level: float
@@ -128,6 +131,34 @@ class ConvergedCurve:
     wall_s: float = 0.0
     refined: tuple = ()  # FRCBranch over the bands of modes the HB curve stepped over
     hb_fill: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # HB points drawn beside the families
+    open_gap: object = None  # OpenGapOrbits or None
+
+
+@dataclass(frozen=True, eq=False)
+class OpenGapOrbits:
+    """Orbits of the system with every stop open that close no stop (:func:`reduced.periodic.frc.open_gap_orbits`):
+    exact periodic orbits of the gap system, drawn where the HB curve is in contact (and at the frequencies
+    beside those, so that the line joins the HB points drawn there).
+
+    Attributes
+    ----------
+    freq_hz : ndarray
+        (k,) Hz, increasing.
+    amplitude_m : ndarray
+        (k, p) m, max |x| over a period at each output point.
+    margin_m : ndarray
+        (k,) m, the smallest clearance left over a period, min_j (side_j o_j - |B_j X|) > 0.
+    stable : bool
+        Asymptotically stable (the open system is: every eigenvalue has Re < 0).
+    segment : ndarray
+        (k,) int, a piece per run of consecutive frequencies.
+    """
+
+    freq_hz: np.ndarray
+    amplitude_m: np.ndarray
+    margin_m: np.ndarray
+    stable: bool
+    segment: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)

@@ -362,6 +362,47 @@ def linear_frf(system: GapSystem, load: np.ndarray, amplitude_N: float, freq_hz:
     return np.array(out)
 
 
+def open_gap_orbits(system: GapSystem, load: np.ndarray, amplitude_N: float, freq_hz: np.ndarray,
+                    rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+    """The harmonic orbits of the system with every stop open, x(t) = Re(X e^{i Omega t}),
+    X = (K - Omega^2 M + i Omega C)^-1 b P, and whether each is an orbit of the gap system.
+
+    Over a period, max |r x(t)| = |r X| and the largest penetration of stop j is
+    max_t side_j (B_j x(t) - o_j) = |B_j X| - side_j o_j. Where that is negative for every stop the
+    orbit closes none: it is an exact periodic orbit of the gap system (no harmonics, no truncation),
+    whatever other orbits coexist with it at that frequency. It is asymptotically stable when the open
+    system is (every eigenvalue of its state matrix has Re < 0): a small perturbation decays before it
+    can close a stop, the orbit's margin to every stop being positive.
+
+    Parameters
+    ----------
+    system : the gap system
+    load : (n,) force direction b
+    amplitude_N : N, P
+    freq_hz : (k,) Hz
+    rows : (p, n) output points
+
+    Returns
+    -------
+    tuple
+        ((k, p) m the amplitudes max |r x|, (k,) m the largest penetration over a period of any stop
+        (<= 0: no stop closes), whether the orbits are asymptotically stable).
+    """
+    rows = np.atleast_2d(rows)
+    b = np.asarray(load, float) * amplitude_N
+    amp, pen = [], []
+    for f in np.atleast_1d(freq_hz):
+        w = 2.0 * np.pi * float(f)
+        X = np.linalg.solve(system.K - w**2 * system.M + 1j * w * system.C, b)
+        amp.append(np.abs(rows @ X))
+        pen.append(float(np.max(np.abs(system.B @ X) - system.side * system.offset)) if system.m else -math.inf)
+    n = system.n
+    A = np.block([[np.zeros((n, n)), np.eye(n)], [-np.linalg.solve(system.M, system.K),
+                                                   -np.linalg.solve(system.M, system.C)]])
+    stable = bool(np.max(np.linalg.eigvals(A).real) < 0.0)
+    return np.array(amp).reshape(-1, rows.shape[0]), np.array(pen), stable
+
+
 def default_x_ref(fb: ForcedBalance, f_min_hz: float, f_max_hz: float) -> float:
     """m, scale of the contact coordinates: their largest linear open-stop response over the band,
     but no more than the stops let through (largest stop offset + the closed-state response).
