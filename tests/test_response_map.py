@@ -191,6 +191,20 @@ def test_frc_stage_writes_the_response_map(tmp_path, monkeypatch):
     assert {r["direction"] for r in jumps_rows} == {"up", "down"}  # hysteresis: each sweep jumps in and out
     assert (tmp_path / "response_map.png").stat().st_size > 10_000
     assert (tmp_path / "response_map_spectra.png").stat().st_size > 10_000
+    # what a test would see (frc_regimes.csv): every frequency of each sweep in exactly one band, in sweep order
+    bands = list(csv.DictReader(open(tmp_path / "frc_regimes.csv")))
+    for d in ("up", "down"):
+        mine, swept = [b for b in bands if b["direction"] == d], [r for r in rows if r["direction"] == d]
+        assert sum(int(b["points"]) for b in mine) == len(swept)
+        assert mine[0]["freq_from_hz"] == swept[0]["freq_hz"] and mine[-1]["freq_to_hz"] == swept[-1]["freq_hz"]
+        assert all(a["key"] != b["key"] for a, b in zip(
+            [{"key": (x["regime"], x["period_k"], x["contact"], x["orbit"])} for x in mine[:-1]],
+            [{"key": (x["regime"], x["period_k"], x["contact"], x["orbit"])} for x in mine[1:]], strict=True))
+    # a periodic response without contact is the open-gap orbit (the linear system's only one); chaos has no
+    # orbit and a positive exponent
+    free = [b for b in bands if b["regime"] == "periodic" and b["contact"] == "false"]
+    assert free and all(b["orbit"] == "open_gap" and b["orbit_stable"] == "true" for b in free)
+    assert all(b["orbit"] == "" and float(b["lyapunov_max_per_s"]) > 0 for b in bands if b["regime"] == "chaotic")
 
 
 @pytest.mark.slow

@@ -21,7 +21,7 @@ import numpy as np
 
 from bearingshaft.digits import sig
 from bearingshaft.output import StageWriter, write_rows
-from bearingshaft.stages import frc_map_files
+from bearingshaft.stages import frc_map_files, frc_regimes
 from bearingshaft.stages.frc_friction_results import FrictionFRCResult
 from bearingshaft.stages.frc_plot import draw_curve
 from bearingshaft.stages.frc_results import ConvergenceRun, FRCResult, PointCheck  # noqa: F401  (re-exported)
@@ -82,7 +82,10 @@ def write(result: FRCResult | FrictionFRCResult, writer: StageWriter) -> None:
     write_rows(writer.path("frc_backbone.csv"), _backbone_rows(result), fields=BACKBONE_FIELDS)
     write_rows(writer.path("frc_cover.csv"), _cover_rows(result), fields=COVER_FIELDS)
     write_rows(writer.path("frc_close_returns.csv"), _close_return_rows(result), fields=CLOSE_RETURN_FIELDS)
-    frc_map_files.write(result, writer, stats, drawn_curves(result))  # response_map.csv, _jumps.csv, .png
+    drawn = drawn_curves(result)
+    frc_map_files.write(result, writer, stats, drawn)  # response_map.csv, _jumps.csv, .png
+    write_rows(writer.path("frc_regimes.csv"), frc_regimes.regime_rows(result, drawn, _x1(result)),
+               fields=frc_regimes.FIELDS)
     writer.stats["frc"] = stats
     writer.path("frc.md").write_text(frc_markdown(result), encoding="utf-8")
     stats["converged"] = _converged_stats(result)
@@ -91,6 +94,11 @@ def write(result: FRCResult | FrictionFRCResult, writer: StageWriter) -> None:
     _plot_backbone(writer.path("frc_backbone.png"), result.backbone_curves, result.backbones, names, result.load_col,
                    spec, result.peaks)
     _plot_convergence(writer.path("frc_convergence_timing.png"), conv_rows, timing_rows, Pc)
+
+
+def _x1(result: FRCResult) -> int:
+    """The column of x1 among the output points (the response map's), else the first."""
+    return result.names.index("x1") if "x1" in result.names else 0
 
 
 def _bool(v) -> str:
@@ -574,12 +582,13 @@ def frc_markdown(result: FRCResult) -> str:
              f"move by at most {spec.hb_converged_tol:g} from the next lower H, else the periodic orbits of the exact "
              "flow continued by multiple shooting (no harmonics), with their Floquet multipliers (frc.csv: `drawn`, "
              "`method`, `family`).", ""]
+    regimes = frc_regimes.regime_rows(result, drawn_curves(result), _x1(result))
     for P in spec.levels_N:
         cc = result.converged.get(P)
         if cc is None:
             continue
         lines += [f"## {P:g} N: {'exact flow (shooting)' if cc.method == 'shooting' else f'HB, H = {cc.hb_H}'}", "",
-                  cc.reason + ".", ""]
+                  cc.reason + ".", *frc_regimes.markdown(regimes, P), ""]
         ex = cc.exact
         if ex is None:
             continue
