@@ -613,7 +613,7 @@ def frc_markdown(result: FRCResult) -> str:
                   + (" (" + "; ".join(sorted({r['note'].split(':')[0] for r in skipped if r['note']})) + ")"
                      if skipped else "") + ". Each is a row of frc_bifurcations.csv.",
                   _period_doubled_line(ex, spec), _cover_line(ex, spec),
-                  *_verdict_lines(ex, result.response_maps.get(P)), _close_return_line(ex, spec),
+                  *_verdict_lines(ex, result.response_maps.get(P), cc.open_gap), _close_return_line(ex, spec),
                   "Run times: frc_convergence_timing.csv.", ""]
         for note in [n for f in ex.families for n in f.notes][:10]:
             lines.append(f"- {note}")
@@ -663,9 +663,11 @@ def _map_regimes(lvl, lo: float, hi: float) -> str:
     return "; ".join(out)
 
 
-def _verdict_lines(ex, lvl) -> list[str]:
+def _verdict_lines(ex, lvl, open_gap=None) -> list[str]:
     """frc.md: one line per band of HB points in contact no family covered: the verdicts of shooting at its
-    judged points (frc_cover.csv) and what the response map's stepped sine shows there."""
+    judged points (frc_cover.csv), whether the open-gap orbit closes no stop there (``open_gap``:
+    :class:`bearingshaft.stages.frc_results.OpenGapOrbits`) and what the response map's stepped sine shows
+    there."""
     bands = {}
     for v in ex.verdicts:
         bands.setdefault(v.band_hz, []).append(v)
@@ -686,8 +688,11 @@ def _verdict_lines(ex, lvl) -> list[str]:
                 said.append(f"{v.freq_hz:.5g} Hz {v.verdict} ({v.note[:80]})")
         now = sum(v.family >= 0 for v in vs)
         regimes = _map_regimes(lvl, lo, hi)
+        free = 0 if open_gap is None else int(np.sum(np.isin([v.freq_hz for v in vs], open_gap.freq_hz)))
         out.append(f"- Uncovered band {lo:.5g}-{hi:.5g} Hz ({len(vs)} HB points in contact): judged by shooting at "
                    f"{len(judged)}: " + "; ".join(said) + f". Now covered by a family: {now} of {len(vs)}."
+                   + (f" The open-gap orbit closes no stop at {free} of them: an exact orbit beside the HB one, drawn."
+                      if free else "")
                    + (f" The stepped sine there (response_map.csv): {regimes}." if regimes else ""))
     return out
 
