@@ -355,8 +355,11 @@ def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: 
         made = sum(r["family"] >= 0 for r in ex.cover)
         why += (f"; {made} isolated famil{'y' if made == 1 else 'ies'} started from HB orbits in contact no family "
                 f"covered ({len(ex.cover)} tried, `[frc] cover_families = {spec.cover_families}`); the contact band "
-                + ("is covered" if not gaps else "not covered: " + ", ".join(
-                    f"{a:.5g}-{c:.5g} Hz ({n} HB point{'' if n == 1 else 's'})" for a, c, n in gaps)))
+                + ("is covered" if not gaps else "no family from the HB curve covers: " + ", ".join(
+                    f"{a:.5g}-{c:.5g} Hz ({n} HB point{'' if n == 1 else 's'})" for a, c, n in gaps)
+                    + (" (what the exact flow has there, judged by shooting at HB points of each band: the lines "
+                       "'Uncovered band' below and frc_cover.csv)" if spec.verdict_points else
+                       " (not judged: `[frc] verdict_points = 0`)")))
     open_gap = _open_gap(system, b, P, br, rows, in_contact) if ok else None
     if open_gap is not None:
         runs = ", ".join(f"{open_gap.freq_hz[open_gap.segment == k].min():.5g}-"
