@@ -59,7 +59,14 @@ from reduced.periodic.continuation import ContinuationError
 from reduced.periodic.exact_frc import ExactFRCOptions, exact_frc, hb_start
 from reduced.periodic.exact_hb import default_root_samples
 from reduced.periodic.forced_balance import ForcedBalance, ForcedResidual
-from reduced.periodic.forced_stability import HILL_TOL, ShootingError, floquet_by_shooting, forced_hill, hb_states
+from reduced.periodic.forced_stability import (
+    HILL_TOL,
+    BranchStability,
+    ShootingError,
+    floquet_by_shooting,
+    forced_hill,
+    hb_states,
+)
 from reduced.periodic.frc import (
     FRC_STEPS,
     FRCBranch,
@@ -143,7 +150,8 @@ def _compute(scene: Scene, progress: bool) -> FRCResult:
     sweeps = {P: done[("sweeps", P)] for P in levels}
     sweep_hb = {(P, d): _hb_at_sweep(curves[P], ss, load_col) for P in levels for d, ss in sweeps[P].items()}
     convergence = _convergence(system, b, spec, rows, names, load_col, curves, checks, sweeps, bar)
-    backbone = _backbone_check(system, b, rows, names, spec, load_col, curves, bar)
+    backbone = _backbone_check(system, b, rows, names, spec, load_col, curves, bar,
+                               {(spec.convergence_level_N, r.H): r.curve for r in convergence})
     maps = {P: done[("map", P)] for P in levels} if "map" in parts else {}
     uncovered_orbits(system, b, rows, names, spec, curves, converged, maps)  # needs a level's curve and map together
     bar.close()
@@ -690,8 +698,12 @@ def _convergence(system, b, spec, rows, names, load_col, curves, checks, sweeps,
     for Hc in spec.convergence_harmonics:
         bar.set_postfix_str(f"convergence H={Hc}")
         t0 = time.perf_counter()
-        bc = _curve(system, b, Pc, spec, Hc, rows, names, stability=False)
-        wall = time.perf_counter() - t0
+        own = curves.get(Pc) if Hc == spec.harmonics else None
+        if own is not None:  # the level's own curve: the same continuation (stability does not steer it)
+            bc, wall = _without_stability(own), (own.wall_s if not isinstance(own, Exception) else 0.0)
+        else:
+            bc = _curve(system, b, Pc, spec, Hc, rows, names, stability=False)
+            wall = time.perf_counter() - t0
         e_ss, e_sh, fails = [], [], 0
         if not isinstance(bc, Exception):  # computed without stability: every piece counts, the nearest taken
             e_ss = [np.max(np.abs(a / amp - 1.0)) for f, amp in ref_ss
@@ -713,15 +725,35 @@ def _convergence(system, b, spec, rows, names, load_col, curves, checks, sweeps,
     return runs
 
 
+def _without_stability(br):
+    """The curve ``br`` as :func:`_curve` with ``stability=False`` gives it: the same points (the continuation
+    does not depend on the stability computed along it), the stability skipped (every point stable, the
+    folds as its only bifurcations); a ContinuationError as it is.
+
+    >>> _without_stability(ValueError("no start")).args
+    ('no start',)
+    """
+    if isinstance(br, Exception):
+        return br
+    st = BranchStability.skipped(len(br.z), 2 * br.balance.n, br.folds)
+    return replace(br, multipliers=st.multipliers, stable=st.stable, hill_index=st.hill_index, hill=st.hill,
+                   bifurcations=st.bifurcations, stability_wall_s=0.0, notes=list(br.notes))
+
+
 # -- the backbone check -------------------------------------------------------------------------------
-def _backbone_check(system, b, rows, names, spec, load_col, curves, bar) -> tuple[dict, dict, dict, dict]:
+def _backbone_check(system, b, rows, names, spec, load_col, curves, bar, done=None) -> tuple[dict, dict, dict, dict]:
     """(curves with damping and load scaled, the NNM backbones, each curve's peak, the backbone
-    nearest each peak with its log distance)."""
+    nearest each peak with its log distance). ``done``: {(P, H): curve without stability} already computed
+    (the convergence study's): at scale 1 the H = 1 curve of such a level is taken from it (the same call)."""
     bb_curves = {}
+    done = done or {}
     for P in spec.levels_N:
         for eps in spec.backbone_scales:
             bar.set_postfix_str(f"backbone {P:g} N x {eps:g}")
-            bc = _curve(_scaled_damping(system, eps), b, P * eps, spec, 1, rows, names, stability=False)
+            if eps == 1.0 and (P, 1) in done:  # C * 1 and P * 1 are C and P to the bit: the same curve
+                bc = done[(P, 1)]
+            else:
+                bc = _curve(_scaled_damping(system, eps), b, P * eps, spec, 1, rows, names, stability=False)
             if not isinstance(bc, Exception):
                 bb_curves[(P, eps)] = bc
             bar.update()

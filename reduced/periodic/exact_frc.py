@@ -64,6 +64,7 @@ from __future__ import annotations
 import functools
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -83,6 +84,7 @@ CORRECTOR_TOL = 1e-8  # last Newton step of a corrector, relative (the point is 
 RETRACE_DIST, RETRACE_ARC, RETRACE_BATCH = 0.03, 1.0, 500  # _Retrace: distance, arclength, tree rebuilds
 CLOSE_STEPS, CLOSE_DIST = 20, 1e-3  # a family back within CLOSE_DIST of its first point after CLOSE_STEPS is closed
 LOAD_STEPS = 400  # continuation steps in the load of the first orbit at most
+LOAD_DIFF = 1e-7  # forward-difference step of dR/d ln P in the load continuation of the first orbit
 START_HARMONICS = 15  # harmonics of the balance that guesses the first orbit
 BISECTIONS = 12  # bisections locating a crossing between two points (the bracket shrinks 4096 times)
 SWITCH_H = (1e-3, 3e-4, 3e-3)  # offsets tried along the critical eigenvector (scaled unknowns), in order
@@ -483,8 +485,9 @@ class _Analyser:
                 G = -Phi
         return Phi, G
 
-    def signs(self, Js: np.ndarray) -> np.ndarray:
-        Phi, G = self.maps(Js)
+    def signs(self, Js: np.ndarray, maps: tuple | None = None) -> np.ndarray:
+        """The test signs of the channels from the segments' monodromies (``maps``: their :meth:`maps`, if made)."""
+        Phi, G = self.maps(Js) if maps is None else maps
         out = []
         for _, Q in self.blocks:
             lamP = np.linalg.eigvals(Q.T @ Phi @ Q)
@@ -519,12 +522,12 @@ class _Analyser:
         res = self.res
         res(Y)
         Js = res.last_segment_monodromies(Y)
-        Phi, _ = self.maps(Js)
-        mu = np.linalg.eigvals(Phi)
+        maps = self.maps(Js)
+        mu = np.linalg.eigvals(maps[0])
         mu = mu[np.argsort(-np.abs(mu), kind="stable")]
         pmax, pmin = res.peaks(Y, self.rows)
         a, hw = self.measures(res.nodes(Y)[0])
-        return mu, self.signs(Js), res.events(Y), a, hw, np.maximum(pmax, -pmin)
+        return mu, self.signs(Js, maps), res.events(Y), a, hw, np.maximum(pmax, -pmin)
 
 
 # -- continuation of one family -------------------------------------------------------------------
@@ -944,12 +947,27 @@ class _LoadResidual:
         return self.res(Y) if jacobian else self.res.value(Y)
 
     def __call__(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        h = 1e-7
-        Rp = self._at(y, y[self.size] + h, jacobian=False)  # R only: the difference needs no Jacobian
-        R, J = self._at(y, y[self.size])
-        Jy = J.copy()
-        Jy[:, self.size] = (Rp - R) / h
-        return R, Jy
+        R, jacobian = self.lazy(y)
+        return R, jacobian()
+
+    def lazy(self, y: np.ndarray) -> tuple[np.ndarray, Callable[[], np.ndarray]]:
+        """(R(y), a callable giving dR/dy): the nodes marched at P now, the Jacobian's products and the march at
+        P e^h of the load's difference only when it is called (Newton's halving refuses many trial points on R
+        alone: :meth:`reduced.periodic.forced_shooting.ShootingResidual.lazy`). The same numbers in either order:
+        each march and product depends on y and the load it was made at alone."""
+        lp = float(y[self.size])
+        self.res.flow.amplitude_N = self.P0 * math.exp(lp)
+        self.res.forget()
+        R, jac = self.res.lazy(np.append(y[: self.size], self.lw))
+
+        def jacobian() -> np.ndarray:
+            J = jac()  # from the marches at P (their load is kept with them), whatever the flow's load is now
+            Rp = self._at(y, lp + LOAD_DIFF, jacobian=False)  # R only: the difference needs no Jacobian
+            Jy = J.copy()
+            Jy[:, self.size] = (Rp - R) / LOAD_DIFF
+            return Jy
+
+        return R, jacobian
 
 
 def first_orbit(res: ShootingResidual, guess: np.ndarray, omega: float) -> np.ndarray:
