@@ -110,7 +110,7 @@ def _curves(scs) -> list:
     return [c for c in scs if isinstance(c, ShootingCurve)] if isinstance(scs, list) else []
 
 
-def bifurcation_labels(result) -> list[tuple[float, int, int, float, str]]:
+def _bifurcation_labels(result) -> list[tuple[float, int, int, float, str]]:
     """[(level, branch, point, f_hz, kind)] every continued branch's bifurcations, numbered 1, 2, ... in this
     order in frc.png and frc.md."""
     out = []
@@ -141,7 +141,7 @@ def shooting_markdown(result) -> list[str]:
              "multipliers jump), numbered as in frc.png. Each point against the HB curve's solution at its "
              "frequency nearest it (any "
              "stability): the largest |HB / shooting - 1| over the points.", ""]
-    labels = {(P, m, i): j + 1 for j, (P, m, i, _, _) in enumerate(bifurcation_labels(result))}
+    labels = {(P, m, i): j + 1 for j, (P, m, i, _, _) in enumerate(_bifurcation_labels(result))}
     for P, scs in result.shooting.items():
         if not isinstance(scs, list):
             lines.append(f"- {P:g} N: {scs}")
@@ -360,7 +360,7 @@ def _plot(path, result) -> None:
                         label=f"exact orbits continued by shooting, stable, {P:g} N" if first else None)
                 ax.plot(sb.freq_hz, np.where(sb.stable, np.nan, a), ".", color="k", ms=3,
                         label=f"exact orbits continued by shooting, unstable, {P:g} N" if first else None)
-            for j, (PP, m, i, f, _kind) in enumerate(bifurcation_labels(result)):
+            for j, (PP, m, i, f, _kind) in enumerate(_bifurcation_labels(result)):
                 if PP != P:
                     continue
                 ai = result.shooting[P][m - 1].branch.amplitude_m[i, col] * 1e3
