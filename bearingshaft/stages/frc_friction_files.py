@@ -111,12 +111,15 @@ def _curves(scs) -> list:
 
 
 def _bifurcation_labels(result) -> list[tuple[float, int, int, float, str]]:
-    """[(level, branch, point, f_hz, kind)] every continued branch's bifurcations, numbered 1, 2, ... in this
-    order in frc.png and frc.md."""
+    """[(level, branch, point, f_hz, kinds)] every continued branch's bifurcation points (the kinds found between
+    the same two points joined by " + "), numbered 1, 2, ... in this order in frc.png and frc.md."""
     out = []
     for P, scs in result.shooting.items():
         for m, sc in enumerate(_curves(scs)):
-            out += [(P, m + 1, int(i), float(sc.branch.freq_hz[i]), k) for i, k in sc.branch.bifurcations]
+            at: dict = {}
+            for i, k in sc.branch.bifurcations:
+                at.setdefault(int(i), []).append(k)
+            out += [(P, m + 1, i, float(sc.branch.freq_hz[i]), " + ".join(ks)) for i, ks in at.items()]
     return out
 
 
@@ -148,8 +151,8 @@ def shooting_markdown(result) -> list[str]:
             continue
         for m, sc in enumerate(_curves(scs)):
             br = sc.branch
-            bif = ", ".join(f"[{labels[(P, m + 1, int(i))]}] {k} near {br.freq_hz[i]:.5g} Hz"
-                            for i, k in br.bifurcations) or "none"
+            bif = ", ".join(f"[{labels[(PP, mm, i)]}] {k} near {f:.5g} Hz"
+                            for PP, mm, i, f, k in _bifurcation_labels(result) if (PP, mm) == (P, m + 1)) or "none"
             lines += [f"- {P:g} N, branch {m + 1}: {len(br.freq_hz)} orbits, {br.freq_hz.min():.5g}-"
                       f"{br.freq_hz.max():.5g} Hz (start {br.freq_hz[np.argmax(br.n_corrector == 0)]:.5g} Hz; "
                       f"{br.status}); {int(np.sum(br.stable))} stable; worst defect {float(np.max(br.defect)):.2g}; "
@@ -366,8 +369,8 @@ def _plot(path, result) -> None:
                 ai = result.shooting[P][m - 1].branch.amplitude_m[i, col] * 1e3
                 ax.plot(f, ai, "s", mfc="none", color="r", ms=6,
                         label="bifurcations of the continued orbits (numbered: frc.md)" if j == 0 else None)
-                # numbers above and below by turns, apart from each other and off the curve
-                ax.annotate(str(j + 1), (f, ai), xytext=(0, 9 if j % 2 == 0 else -13), textcoords="offset points",
+                # numbers above and below by turns, at two heights each: apart from each other and off the curve
+                ax.annotate(str(j + 1), (f, ai), xytext=(0, (9, -14, 18, -23)[j % 4]), textcoords="offset points",
                             fontsize=7, color="r", ha="center",
                             bbox=dict(boxstyle="round,pad=0.1", fc="w", ec="none", alpha=0.8))
             shot = [p for p in pts if p.shooting is not None and p.shooting.converged]
