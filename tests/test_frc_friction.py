@@ -124,12 +124,27 @@ def test_the_continued_shooting_table_says_where_hb_agrees():
                                 np.full(5, 1e-12), np.full(5, 9), np.ones(5), [(2, "branch_point")],
                                 np.array([0, 3, 4, 5, 6]), "down: 2 steps; up: 2 steps", 1.0)
     sc = ShootingCurve(br, hb, [True, True, False, False, None])
-    result = SimpleNamespace(names=("x1", "u"), shooting={2.0: sc, 5.0: "not run: shooting_steps = 0"})
+    result = SimpleNamespace(names=("x1", "u"), shooting={2.0: [sc], 5.0: "not run: shooting_steps = 0"})
     md = "\n".join(shooting_markdown(result))
-    assert "| 2 | 13 | 13.5 | 2 | agree within 0.001 (worst 5e-05) | yes | yes |" in md, md
-    assert "| 2 | 14 | 14.2 | 2 | agree within 0.01 (worst 0.005) | no | no |" in md, md
-    assert "| 2 | 14.3 | 14.3 | 1 | no HB solution | no | n/a |" in md, md
-    assert "branch_point near 14 Hz" in md and "- 5 N: not run: shooting_steps = 0" in md
+    assert "| 2 | 1 | 13 | 13.5 | 2 | agree within 0.001 (worst 5e-05) | yes | yes |" in md, md
+    assert "| 2 | 1 | 14 | 14.2 | 2 | agree within 0.01 (worst 0.005) | no | no |" in md, md
+    assert "| 2 | 1 | 14.3 | 14.3 | 1 | no HB solution | no | n/a |" in md, md
+    assert "[1] branch_point near 14 Hz" in md and "- 5 N: not run: shooting_steps = 0" in md
     rows = shooting_rows(result)
-    assert len(rows) == 5 and rows[2]["bifurcation"] == "branch_point" and rows[4]["hb_hill_stable"] == ""
+    assert len(rows) == 5 and rows[2]["bifurcation"] == "branch_point" and rows[0]["branch"] == 1
+    assert rows[4]["hb_hill_stable"] == ""
     assert rows[0]["hb_vs_shoot_rel"] == pytest.approx(1e-5) and math.isnan(rows[4]["hb_vs_shoot_rel"])
+
+
+def test_a_continued_orbit_meets_a_branch_only_on_it():
+    # _meets interpolates a branch's amplitudes linearly in frequency: an orbit 1e-3 off the interpolant at a
+    # frequency between two points meets it (MEET_REL = 2e-2); 5e-2 off, or outside its frequencies, it does not
+    from bearingshaft.stages.frc_friction import MEET_REL, _meets
+
+    br = SimpleNamespace(freq_hz=np.array([14.3, 14.2, 14.0]), amplitude_m=np.array([[1e-4, 2e-4], [2e-4, 2e-4],
+                                                                                      [3e-4, 1e-4]]))
+    mid = np.array([1.5e-4, 2e-4])  # at 14.25 Hz, halfway between the first two points
+    assert MEET_REL == 2e-2
+    assert _meets([br], 14.25, mid * (1 + 1e-3))
+    assert not _meets([br], 14.25, mid * (1 + 5e-2))
+    assert not _meets([br], 14.35, mid) and not _meets([], 14.25, mid)

@@ -59,6 +59,9 @@ SHOOT_H_FACTORS = (2, 4)  # where shooting from the curve's orbit (H) does not c
 SHOOT_SAMPLES = 500  # of each of the 8 segments of a shot orbit: its amplitudes read on 4000 points a period
 SHOOT_CONTINUATION_DS = 0.3  # the first arclength step of the continued shooting (z / D and Hz: ~0.1 Hz at the
 # start's tangent in the scene; measured from 14.29 Hz down, 10 points over 0.9 Hz in 3.9 s CPU, load 4)
+SHOOT_CONTINUATION_DS_MAX = 2.0  # its bound: away from the resonances the amplitudes move slowly, the steps grow
+MEET_REL = 2e-2  # a continued orbit within this of a branch before it (interpolated linearly between its points)
+# is on it: the interpolation's own error between points ~0.1 Hz apart is below 1e-2 off the folds
 def load_vector(spec, rows: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
     """(n,) b: the row of ``[frc] point`` plus ``also_weights`` times the rows of ``also_points``.
 
@@ -161,27 +164,61 @@ def compute(scene: Scene, progress: bool = False) -> FrictionFRCResult:
         t2, c2 = time.perf_counter(), time.process_time()
         shooting[P] = _continued(spec, br, checks[P], rows)
         st["continued_shooting"] = {"wall_s": time.perf_counter() - t2, "cpu_s": time.process_time() - c2}
-        if isinstance(shooting[P], ShootingCurve):
-            st["continued_shooting"].update(points=len(shooting[P].branch.freq_hz), status=shooting[P].branch.status,
-                                            bifurcations=[[int(i), k] for i, k in shooting[P].branch.bifurcations])
+        if isinstance(shooting[P], list):
+            st["continued_shooting"]["branches"] = [
+                {"points": len(c.branch.freq_hz), "status": c.branch.status,
+                 "bifurcations": [[int(i), k] for i, k in c.branch.bifurcations]} for c in shooting[P]]
         stats["levels"][str(P)] = st
     return FrictionFRCResult(scene, names, b, curves, checks, linear, stats, shooting)
 
 
-def _continued(spec, br, checks: list, rows: np.ndarray):
-    """The exact orbits continued both ways in frequency from the first orbit shot at an unsettled point
-    (``[frc] shooting_steps`` // 2 points each way; :func:`reduced.periodic.friction_continuation.continue_friction`),
-    each point against the HB curve's solution at its frequency nearest it; or why not (a str)."""
+def _continued(spec, br, checks: list, rows: np.ndarray) -> list | str:
+    """The exact orbits continued both ways in frequency from every orbit shot at an unsettled point (in frequency
+    order; :func:`reduced.periodic.friction_continuation.continue_friction`), each way for at most ``[frc]
+    shooting_steps`` // 2 points, until it leaves the band or meets a branch continued before it (:func:`_meets`);
+    a start already on such a branch is not continued again. Each point against the HB curve's solution at its
+    frequency nearest it. A list of ShootingCurve, or why none (a str)."""
     half = spec.shooting_steps // 2
     if half <= 0:
         return "not run: shooting_steps = 0"
-    start = next((c.shooting.orbit for c in checks if c.shooting is not None and c.shooting.orbit is not None), None)
-    if start is None:
+    starts = sorted((c.shooting.orbit for c in checks if c.shooting is not None and c.shooting.orbit is not None),
+                    key=lambda o: o.freq_hz)
+    if not starts:
         return "not run: no orbit was shot at an unsettled point of the stepped sine"
-    kw = dict(max_steps=half, point_rows=rows, ds=SHOOT_CONTINUATION_DS)
-    down = continue_friction(start, spec.freq_min_hz, spec.freq_max_hz, direction=-1.0, **kw)
-    up = continue_friction(start, spec.freq_min_hz, spec.freq_max_hz, direction=1.0, **kw)
-    branch = joined(down, up)
+    done: list = []
+    out = []
+    for start in starts:
+        a0 = np.max(np.abs(start.orbit(SHOOT_SAMPLES // 10)[1][:, :rows.shape[1]] @ rows.T), axis=0)
+        if _meets(done, start.freq_hz, a0):
+            continue
+        kw = dict(max_steps=half, point_rows=rows, ds=SHOOT_CONTINUATION_DS, ds_max=SHOOT_CONTINUATION_DS_MAX,
+                  stop=lambda f, a: (f"met a branch continued before at f = {f:.6g} Hz"
+                                     if _meets(done, f, a) else None))
+        down = continue_friction(start, spec.freq_min_hz, spec.freq_max_hz, direction=-1.0, **kw)
+        up = continue_friction(start, spec.freq_min_hz, spec.freq_max_hz, direction=1.0, **kw)
+        branch = joined(down, up)
+        done.append(branch)
+        out.append(_against_hb(branch, br))
+    return out
+
+
+def _meets(branches: list, f: float, a: np.ndarray) -> bool:
+    """Whether the orbit of amplitudes ``a`` at f lies on one of ``branches``: between two consecutive points of
+    it, within MEET_REL of the amplitudes interpolated linearly in frequency."""
+    for b in branches:
+        F, A = b.freq_hz, b.amplitude_m
+        for i in range(len(F) - 1):
+            lo, hi = sorted((F[i], F[i + 1]))
+            if lo <= f <= hi:
+                w = (f - F[i]) / (F[i + 1] - F[i]) if F[i + 1] != F[i] else 0.0
+                ref = (1.0 - w) * A[i] + w * A[i + 1]
+                if float(np.max(np.abs(a / ref - 1.0))) <= MEET_REL:
+                    return True
+    return False
+
+
+def _against_hb(branch, br) -> ShootingCurve:
+    """The branch with the HB curve's solution at each point's frequency nearest it (any stability)."""
     hb = np.full(branch.amplitude_m.shape, math.nan)
     hb_stable = [None] * len(branch.freq_hz)
     if not isinstance(br, Exception):

@@ -87,23 +87,40 @@ def shooting_rows(result) -> list[dict]:
     result : FrictionFRCResult
     """
     rows = []
-    for P, sc in result.shooting.items():
-        if not isinstance(sc, ShootingCurve):
-            continue
-        br, err = sc.branch, sc.rel_error
-        for i in range(len(br.freq_hz)):
-            row = {"level_N": P, "freq_hz": float(br.freq_hz[i])}
-            for k, n in enumerate(result.names):
-                row.update({f"{n}_shoot_m": float(br.amplitude_m[i, k]), f"{n}_hb_m": float(sc.hb_m[i, k])})
-            hs = sc.hb_stable[i]
-            row.update(hb_vs_shoot_rel=float(err[i]), max_abs_multiplier=float(br.max_abs_multiplier[i]),
-                       shoot_stable="true" if br.stable[i] else "false",
-                       hb_hill_stable="" if hs is None else ("true" if hs else "false"),
-                       defect=float(br.defect[i]), rank=int(br.rank[i]), tangent_f=float(br.tangent_f[i]),
-                       corrector_steps=int(br.n_corrector[i]),
-                       bifurcation=" ".join(k for j, k in br.bifurcations if j == i))
-            rows.append(row)
+    for P, scs in result.shooting.items():
+        for m, sc in enumerate(_curves(scs)):
+            br, err = sc.branch, sc.rel_error
+            for i in range(len(br.freq_hz)):
+                row = {"level_N": P, "branch": m + 1, "freq_hz": float(br.freq_hz[i])}
+                for k, n in enumerate(result.names):
+                    row.update({f"{n}_shoot_m": float(br.amplitude_m[i, k]), f"{n}_hb_m": float(sc.hb_m[i, k])})
+                hs = sc.hb_stable[i]
+                row.update(hb_vs_shoot_rel=float(err[i]), max_abs_multiplier=float(br.max_abs_multiplier[i]),
+                           shoot_stable="true" if br.stable[i] else "false",
+                           hb_hill_stable="" if hs is None else ("true" if hs else "false"),
+                           defect=float(br.defect[i]), rank=int(br.rank[i]), tangent_f=float(br.tangent_f[i]),
+                           corrector_steps=int(br.n_corrector[i]),
+                           bifurcation=" ".join(k for j, k in br.bifurcations if j == i))
+                rows.append(row)
     return rows
+
+
+def _curves(scs) -> list:
+    """The ShootingCurves of a level ([] where the continuation did not run: a str)."""
+    return [c for c in scs if isinstance(c, ShootingCurve)] if isinstance(scs, list) else []
+
+
+def _bifurcation_labels(result) -> list[tuple[float, int, int, float, str]]:
+    """[(level, branch, point, f_hz, kinds)] every continued branch's bifurcation points (the kinds found between
+    the same two points joined by " + "), numbered 1, 2, ... in this order in frc.png and frc.md."""
+    out = []
+    for P, scs in result.shooting.items():
+        for m, sc in enumerate(_curves(scs)):
+            at: dict = {}
+            for i, k in sc.branch.bifurcations:
+                at.setdefault(int(i), []).append(k)
+            out += [(P, m + 1, i, float(sc.branch.freq_hz[i]), " + ".join(ks)) for i, ks in at.items()]
+    return out
 
 
 def shooting_markdown(result) -> list[str]:
@@ -115,33 +132,42 @@ def shooting_markdown(result) -> list[str]:
     result : FrictionFRCResult
     """
     lines = ["", "## Exact orbits continued by shooting (frc_friction_shooting.csv)", "",
-             "From the first orbit shot at an unsettled point, the exact friction orbits are continued both ways in "
-             "frequency (reduced.periodic.friction_continuation.continue_friction: pseudo-arclength on the 8-node "
-             "shooting equations with the frequency as unknown, a chord/Broyden corrector with minimum-norm steps). "
-             "Stability: the Floquet multipliers of the monodromy by forward differences (step 1e-7 of the "
-             "amplitude) at every point, so the saltation at the stick, slip and gap events enters through the "
-             "differences; bifurcations from the multipliers crossing the unit circle between two points (a fold "
+             "From every orbit shot at an unsettled point (in frequency order), the exact friction orbits are "
+             "continued both ways in frequency (reduced.periodic.friction_continuation.continue_friction: "
+             "pseudo-arclength on the 8-node shooting equations with the frequency as unknown, a chord/Broyden "
+             "corrector with minimum-norm steps), each way for at most [frc] shooting_steps / 2 points, until it "
+             "leaves the band or meets a branch continued before it (within 2e-2 of its amplitudes; a start on such "
+             "a branch is not continued again). Jacobian and monodromy exact (reduced.periodic.friction_sensitivity: "
+             "the state transition matrices of the states visited and the saltation matrix at every stick, slip and "
+             "gap event); bifurcations from the multipliers crossing the unit circle between two points (a fold "
              "where df/ds also changes sign; grazing where a tip opens or closes for the whole period: the "
-             "multipliers jump). Each point against the HB curve's solution at its frequency nearest it (any "
+             "multipliers jump), numbered as in frc.png. Each point against the HB curve's solution at its "
+             "frequency nearest it (any "
              "stability): the largest |HB / shooting - 1| over the points.", ""]
-    for P, sc in result.shooting.items():
-        if not isinstance(sc, ShootingCurve):
-            lines.append(f"- {P:g} N: {sc}")
+    labels = {(P, m, i): j + 1 for j, (P, m, i, _, _) in enumerate(_bifurcation_labels(result))}
+    for P, scs in result.shooting.items():
+        if not isinstance(scs, list):
+            lines.append(f"- {P:g} N: {scs}")
             continue
-        br, err = sc.branch, sc.rel_error
-        bif = ", ".join(f"{k} near {br.freq_hz[i]:.5g} Hz" for i, k in br.bifurcations) or "none"
-        lines += [f"- {P:g} N: {len(br.freq_hz)} orbits, {br.freq_hz.min():.5g}-{br.freq_hz.max():.5g} Hz "
-                  f"(start {br.freq_hz[np.argmax(br.n_corrector == 0)]:.5g} Hz; {br.status}); "
-                  f"{int(np.sum(br.stable))} stable; worst defect {float(np.max(br.defect)):.2g}; "
-                  f"bifurcations: {bif}.", ""]
-        lines += ["| level [N] | from [Hz] | to [Hz] | points | HB vs shooting | stable (shooting) | "
-                  "stable (Hill on HB) |", "|---|---|---|---|---|---|---|"]
-        for a, b, label in _stretches(err):
-            hs = [sc.hb_stable[i] for i in range(a, b)]
-            hill = {True: "yes", False: "no"}.get(hs[0], "n/a") if len(set(hs)) == 1 else "mixed"
-            st = br.stable[a:b]
-            lines.append(f"| {P:g} | {br.freq_hz[a]:.5g} | {br.freq_hz[b - 1]:.5g} | {b - a} | {label} | "
-                         f"{'yes' if st.all() else ('no' if not st.any() else 'mixed')} | {hill} |")
+        for m, sc in enumerate(_curves(scs)):
+            br = sc.branch
+            bif = ", ".join(f"[{labels[(PP, mm, i)]}] {k} near {f:.5g} Hz"
+                            for PP, mm, i, f, k in _bifurcation_labels(result) if (PP, mm) == (P, m + 1)) or "none"
+            lines += [f"- {P:g} N, branch {m + 1}: {len(br.freq_hz)} orbits, {br.freq_hz.min():.5g}-"
+                      f"{br.freq_hz.max():.5g} Hz (start {br.freq_hz[np.argmax(br.n_corrector == 0)]:.5g} Hz; "
+                      f"{br.status}); {int(np.sum(br.stable))} stable; worst defect {float(np.max(br.defect)):.2g}; "
+                      f"bifurcations (numbered as in frc.png): {bif}."]
+        lines.append("")
+        lines += ["| level [N] | branch | from [Hz] | to [Hz] | points | HB vs shooting | stable (shooting) | "
+                  "stable (Hill on HB) |", "|---|---|---|---|---|---|---|---|"]
+        for m, sc in enumerate(_curves(scs)):
+            br = sc.branch
+            for a, b, label in _stretches(sc.rel_error):
+                hs = [sc.hb_stable[i] for i in range(a, b)]
+                hill = {True: "yes", False: "no"}.get(hs[0], "n/a") if len(set(hs)) == 1 else "mixed"
+                st = br.stable[a:b]
+                lines.append(f"| {P:g} | {m + 1} | {br.freq_hz[a]:.5g} | {br.freq_hz[b - 1]:.5g} | {b - a} | {label} | "
+                             f"{'yes' if st.all() else ('no' if not st.any() else 'mixed')} | {hill} |")
         lines.append("")
     return lines
 
@@ -329,17 +355,24 @@ def _plot(path, result) -> None:
             pts = result.checks[P]
             ax.plot([p.freq_hz for p in pts], [p.exact_m[col] * 1e3 for p in pts], "o", mfc="none", color=c,
                     label=f"exact, stepped sine, {P:g} N")
-            sc = result.shooting.get(P)
-            if isinstance(sc, ShootingCurve):
+            for m, sc in enumerate(_curves(result.shooting.get(P))):
                 sb = sc.branch
                 a = sb.amplitude_m[:, col] * 1e3
+                first = m == 0
                 ax.plot(sb.freq_hz, np.where(sb.stable, a, np.nan), "-", color="k", lw=1.6,
-                        label=f"exact orbits continued by shooting, stable, {P:g} N")
+                        label=f"exact orbits continued by shooting, stable, {P:g} N" if first else None)
                 ax.plot(sb.freq_hz, np.where(sb.stable, np.nan, a), ".", color="k", ms=3,
-                        label=f"exact orbits continued by shooting, unstable, {P:g} N")
-                for i, kind in sb.bifurcations:
-                    ax.plot(sb.freq_hz[i], a[i], "s", mfc="none", color="r", ms=6)
-                    ax.annotate(kind, (sb.freq_hz[i], a[i]), fontsize=6, color="r", rotation=30)
+                        label=f"exact orbits continued by shooting, unstable, {P:g} N" if first else None)
+            for j, (PP, m, i, f, _kind) in enumerate(_bifurcation_labels(result)):
+                if PP != P:
+                    continue
+                ai = result.shooting[P][m - 1].branch.amplitude_m[i, col] * 1e3
+                ax.plot(f, ai, "s", mfc="none", color="r", ms=6,
+                        label="bifurcations of the continued orbits (numbered: frc.md)" if j == 0 else None)
+                # numbers above and below by turns, at two heights each: apart from each other and off the curve
+                ax.annotate(str(j + 1), (f, ai), xytext=(0, (9, -14, 18, -23)[j % 4]), textcoords="offset points",
+                            fontsize=7, color="r", ha="center",
+                            bbox=dict(boxstyle="round,pad=0.1", fc="w", ec="none", alpha=0.8))
             shot = [p for p in pts if p.shooting is not None and p.shooting.converged]
             if shot:
                 ax.plot([p.freq_hz for p in shot], [p.shooting.shoot_m[col] * 1e3 for p in shot], "x", color=c,

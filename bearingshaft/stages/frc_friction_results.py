@@ -13,8 +13,8 @@ from bearingshaft.scenes import Scene
 
 SKIPPED = (
     ("converged curve by shooting", "the exact orbits are continued by shooting with the sliders "
-     "(reduced.periodic.friction_continuation) from the first unsettled point's orbit for [frc] shooting_steps "
-     "points only (finite-difference Jacobians: about a second of CPU a point in contact), not over the band; "
+     "(reduced.periodic.friction_continuation, exact Jacobians) from every orbit shot at an unsettled point, each "
+     "way for [frc] shooting_steps / 2 points (about 0.3 s of CPU a point in contact), not over the whole band; "
      "Hill's method gives the stability along the whole HB curve"),
     ("response map", "its classifier (periodic, subharmonic, chaotic, Lyapunov exponent) runs the exact flow "
      "without sliders"),

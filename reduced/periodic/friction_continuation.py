@@ -15,14 +15,16 @@ frequency: rank < size). The tangent at a converged point solves [[dG/du]; t_i^T
 normalised and oriented along t_i, so it passes folds where df/ds = 0. ds grows by ``DS_GROW`` after a corrector
 of at most ``EASY_STEPS`` steps and is halved after one that fails (down to ``ds_min``: the branch ends there).
 
-**Jacobian, monodromy and the non-smooth transitions.** dG/dz is the segments' monodromies by forward
-differences on the exact integrator (step ``FD_STEP`` D, :meth:`_Residual.blocks`), dG/df by a forward
-difference of ``FD_FREQ`` f. The Floquet multipliers at each point are the eigenvalues of the product of the
-same forward-difference blocks at the converged point (Phi = Phi_{S-1} ... Phi_0, in [x; v; w]): the
-**saltation** of every stick-slip, slip-stick, closing and opening event is included through the differences,
-not written out, as long as no event is created or lost within a step of 1e-7 of the amplitude (at a grazing
-contact the difference is one-sided: the multipliers there are those of the side the step lands on; the
-HB-curve stage marks such points by their neighbours' verdicts).
+**Jacobian, monodromy and the non-smooth transitions.** dG/dz is the segments' monodromies, exact
+(:mod:`reduced.periodic.friction_sensitivity`: within a friction state the flow is affine, so over a piece the
+sensitivity is the state's matrix exponential; at each event of the integrator's log (gap open / close,
+stick -> slip, slip -> stick) the saltation matrix; no differences), dG/df by a forward difference of ``FD_FREQ``
+f. (``JACOBIAN = "fd"`` restores the forward differences on the integrator, step ``FD_STEP`` D,
+:meth:`_Residual.blocks`.) The Floquet multipliers at each point are the eigenvalues of the product of the same
+blocks at the converged point (Phi = Phi_{S-1} ... Phi_0, in [x; v; w]): the **saltation** of every stick-slip,
+slip-stick, closing and opening event is in it. At a grazing contact or a node on a slip reversal the map has a
+kink: the exact product is the derivative of the side the integrator's event log takes; the HB-curve stage marks
+such points by their neighbours' verdicts.
 
 **Bifurcations** between two consecutive points, from the multipliers counted outside the unit circle
 (|mu| > 1 + STABLE_TOL; a free slider's multiplier 1 is on it): a real one through +1 with a sign change of
@@ -41,7 +43,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from reduced import _checks as _check
+from reduced._blas import single_thread_blas
 from reduced.models.gaps import GapSystem
+from reduced.periodic.friction_sensitivity import FlowSensitivity
 from reduced.periodic.friction_shooting import (
     FD_STEP,
     RANK_RTOL,
@@ -52,6 +56,7 @@ from reduced.periodic.friction_shooting import (
 )
 from reduced.transient.exact import ExactIntegratorError
 
+JACOBIAN = "exact"  # dG/dz: "exact" (state transition and saltation matrices) or "fd" (forward differences)
 FD_FREQ = 1e-7  # x f: the forward-difference step of dG/df (as FD_STEP in z: truncation ~1e-7 of the column)
 TOL = 1e-10  # max |G| in units of D at a continued point (the integrator is exact to ~1e-13; a chord step
 # converges linearly, 1e-10 keeps the amplitudes far below the 1e-4 the HB comparison reads)
@@ -119,10 +124,24 @@ class _Continuation:
         ends = res.ends(Y)
         return res.residual(Y, ends), res, Y, ends
 
+    def blocks(self, f: float, Y: np.ndarray) -> np.ndarray:
+        """(S, N, N) the segments' monodromies in z, units of D, exact (:mod:`reduced.periodic.friction_sensitivity`:
+        state transition matrices and saltation matrices along the integrator's events)."""
+        sens = FlowSensitivity(self.system, self.b, self.P, f, self.phase)
+        h = 1.0 / f / self.S
+        n = self.system.n
+        Tm = np.eye(self.N)
+        Tm[2 * n:, :n] = self.system.friction.Bt
+        Tm[2 * n:, 2 * n:] = -np.eye(self.system.friction.Bt.shape[0])
+        scale = self.D[None, :] / self.D[:, None]
+        with single_thread_blas():  # small matrices: threads only spin (measured 10 ms an expm at load 10, 20 us alone)
+            return np.array([Tm @ sens.segment(Y[k], k * h, h)[1] @ Tm * scale for k in range(self.S)])
+
     def jacobian(self, u: np.ndarray, G: np.ndarray, res: _Residual, Y: np.ndarray,
                  ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """((S N, S N + 1) dG/du, (S, N, N) the blocks in units of D) by forward differences."""
-        blocks = res.blocks(Y, ends, FD_STEP)
+        """((S N, S N + 1) dG/du, (S, N, N) the blocks in units of D): dG/dz exact (``JACOBIAN`` = "exact") or by
+        forward differences ("fd"), dG/df by a forward difference."""
+        blocks = self.blocks(float(u[-1]), Y) if JACOBIAN == "exact" else res.blocks(Y, ends, FD_STEP)
         df = FD_FREQ * float(u[-1])
         up = u.copy()
         up[-1] += df
@@ -230,7 +249,7 @@ def _correct(cont: _Continuation, J: np.ndarray, t: np.ndarray, u: np.ndarray, h
 def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_max_hz: float, *,
                       direction: float = 1.0, ds: float = 0.05, ds_min: float = 1e-4, ds_max: float = 0.5,
                       max_steps: int = 40, point_rows: np.ndarray | None = None,
-                      tol: float = TOL) -> FrictionShootingBranch:
+                      tol: float = TOL, stop=None) -> FrictionShootingBranch:
     """Continue a converged friction orbit in frequency by pseudo-arclength on the shooting equations.
 
     Unknowns u = [z / D; f] (z = [x; v; Bt x - w] at the S nodes, D the start's scale, f in Hz); equations
@@ -249,6 +268,9 @@ def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_ma
     max_steps : points after the start at most
     point_rows : (q, n) the output points' rows (default: the identity, every DOF)
     tol : max |G| at a point, units of D
+    stop : callable, optional
+        ``stop(f_hz, amplitude_m) -> str or None`` after each new point: a str ends the branch there (its status),
+        e.g. where it meets another branch.
 
     Returns
     -------
@@ -309,6 +331,10 @@ def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_ma
         record(u, G, res, Y, J, blocks, t, k_corr)
         if not f0 <= u[-1] <= f1:
             status = f"left the band at f = {u[-1]:.6g} Hz"
+            break
+        why = stop(float(u[-1]), pts[-1][2]) if stop is not None else None
+        if why:
+            status = why
             break
         if k_corr <= EASY_STEPS:
             h = min(h * DS_GROW, ds_max)
