@@ -368,20 +368,23 @@ def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: 
 def _open_gap(system: GapSystem, b: np.ndarray, P: float, br, rows: np.ndarray, in_contact: np.ndarray
               ) -> OpenGapOrbits | None:
     """The open-gap system's orbits (:func:`reduced.periodic.frc.open_gap_orbits`) at the HB curve's
-    frequencies (sorted) that close no stop, kept where the HB orbit closes one or beside such a frequency
-    (so that the line joins the HB points drawn next to it); None where there is none."""
+    frequencies (sorted) that close no stop, from the one before the first frequency where the HB orbit
+    closes a stop to the one after the last (so that the line joins the HB points drawn beside it), in
+    runs of consecutive frequencies, a run of one frequency left out (no line); None where there is none."""
     if not np.any(in_contact):
         return None
     f = np.unique(br.freq_hz)
     amp, pen, stable = open_gap_orbits(system, b, P, f, rows)
-    hot = np.isin(f, br.freq_hz[in_contact])
-    near = hot.copy()
-    near[1:] |= hot[:-1]
-    near[:-1] |= hot[1:]
-    keep = near & (pen < 0.0) & (f >= br.freq_hz.min())
-    if not np.any(keep & hot):
+    hot = np.flatnonzero(np.isin(f, br.freq_hz[in_contact]))
+    span = np.zeros(f.size, bool)
+    span[max(hot[0] - 1, 0): hot[-1] + 2] = True
+    keep = span & (pen < 0.0)
+    run = np.cumsum(~keep)
+    vals, counts = np.unique(run[keep], return_counts=True)
+    keep &= np.isin(run, vals[counts >= 2])  # runs of two frequencies or more
+    if not np.any(keep[hot]):
         return None
-    return OpenGapOrbits(f[keep], amp[keep], -pen[keep], stable, np.cumsum(~keep)[keep])
+    return OpenGapOrbits(f[keep], amp[keep], -pen[keep], stable, run[keep])
 
 
 def uncovered_orbits(system: GapSystem, b: np.ndarray, rows: np.ndarray, names: tuple, spec, curves: dict,
