@@ -28,7 +28,17 @@ def _runs(mask: np.ndarray) -> list[np.ndarray]:
 
 
 def owners(families: list, freq_hz: np.ndarray) -> np.ndarray:
-    """(k,) int: the lowest-numbered family whose range holds each frequency (Hz), -1 where none does."""
+    """(k,) int: the lowest-numbered family whose range holds each frequency, -1 where none does.
+
+    Parameters
+    ----------
+    families : list of reduced.periodic.exact_frc.OrbitFamily
+    freq_hz : (k,) Hz
+
+    Returns
+    -------
+    ndarray
+    """
     f = np.asarray(freq_hz, float)
     out = np.full(f.shape, -1)
     for k, fam in enumerate(families):
@@ -38,7 +48,17 @@ def owners(families: list, freq_hz: np.ndarray) -> np.ndarray:
 
 def map_regimes(lvl, lo: float, hi: float) -> str:
     """'chaotic at 40, periodic 1 T with contact at 3 (up); ...': the response map's regimes over [lo, hi] Hz per
-    sweep ('' without a response map, ``lvl`` None: a :class:`bearingshaft.stages.frc_results.MapLevel`)."""
+    sweep ('' without a response map).
+
+    Parameters
+    ----------
+    lvl : bearingshaft.stages.frc_results.MapLevel or None
+    lo, hi : Hz, the band's ends
+
+    Returns
+    -------
+    str
+    """
     if lvl is None:
         return ""
     out = []
