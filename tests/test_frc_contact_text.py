@@ -68,3 +68,42 @@ def test_every_point_covered_and_not_judged():
     text = contact_statement(ex, None, None, 0)
     assert "reaches 10-13 Hz (4 HB points): not judged (`[frc] verdict_points = 0`); covered now by a family: 0 of 4" \
         in text
+
+
+# -- the committed results ---------------------------------------------------------------------------------------
+def _csv(path):
+    import csv
+
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_committed_results_every_map_frequency_in_one_band_and_one_statement_per_level():
+    from pathlib import Path
+
+    import pytest
+
+    for scene in ("discrete-frc", "rom-frc"):
+        root = Path(__file__).resolve().parents[1] / "results" / scene
+        if not (root / "frc_regimes.csv").exists():
+            pytest.skip(f"{scene}: no committed frc_regimes.csv")
+        rows, bands = _csv(root / "response_map.csv"), _csv(root / "frc_regimes.csv")
+        for key in {(r["level"], r["direction"]) for r in rows}:
+            swept = [float(r["freq_hz"]) for r in rows if (r["level"], r["direction"]) == key]
+            mine = [b for b in bands if (b["level"], b["direction"]) == key]
+            # each frequency of the sweep (in sweep order) lies in exactly one band: the bands tile the sweep
+            hits = [sum(min(float(b["freq_from_hz"]), float(b["freq_to_hz"])) <= f <=
+                        max(float(b["freq_from_hz"]), float(b["freq_to_hz"])) for b in mine) for f in swept]
+            assert sum(int(b["points"]) for b in mine) == len(swept), (scene, key)
+            assert all(h == 1 for h in hits), (scene, key)
+            assert float(mine[0]["freq_from_hz"]) == swept[0] and float(mine[-1]["freq_to_hz"]) == swept[-1]
+        # one statement per level: every level with HB points in contact states its contact band once, and
+        # each band judged (frc_cover.csv) is in that statement
+        text = (root / "frc.md").read_text("utf-8")
+        cover = _csv(root / "frc_cover.csv")
+        assert "Uncovered band" not in text
+        for level in {r["level"] for r in cover}:
+            part = text.split(f"## {float(level):g} N")[1].split("\n## ")[0]
+            assert part.count("Contact band (") == 1, (scene, level)
+            for lo in {float(r["band_lo_hz"]) for r in cover if r["level"] == level}:
+                assert f"reaches {lo:.5g}-" in part or f") {lo:.5g}-" in part, (scene, level, lo)
