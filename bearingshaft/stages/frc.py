@@ -359,15 +359,9 @@ def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: 
         if refined:
             why += "; " + "; ".join(n for n in notes if "drawn from" in n)
     if ex.cover_freqs_hz.size:
-        gaps = ex.uncovered_bands()
         made = sum(r["family"] >= 0 for r in ex.cover)
         why += (f"; {made} isolated famil{'y' if made == 1 else 'ies'} started from HB orbits in contact no family "
-                f"covered ({len(ex.cover)} tried, `[frc] cover_families = {spec.cover_families}`); the contact band "
-                + ("is covered" if not gaps else "no family from the HB curve covers: " + ", ".join(
-                    f"{a:.5g}-{c:.5g} Hz ({n} HB point{'' if n == 1 else 's'})" for a, c, n in gaps)
-                    + (" (what the exact flow has there, judged by shooting at HB points of each band: the lines "
-                       "'Uncovered band' below and frc_cover.csv)" if spec.verdict_points else
-                       " (not judged: `[frc] verdict_points = 0`)")))
+                f"covered ({len(ex.cover)} tried, `[frc] cover_families = {spec.cover_families}`)")
     open_gap = _open_gap(system, b, P, br, rows, in_contact) if ok else None
     if open_gap is not None:
         runs = ", ".join(f"{open_gap.freq_hz[open_gap.segment == k].min():.5g}-"

@@ -21,7 +21,7 @@ import numpy as np
 
 from bearingshaft.digits import sig
 from bearingshaft.output import StageWriter, write_rows
-from bearingshaft.stages import frc_map_files, frc_regimes
+from bearingshaft.stages import frc_contact, frc_map_files, frc_regimes
 from bearingshaft.stages.frc_friction_results import FrictionFRCResult
 from bearingshaft.stages.frc_plot import draw_curve
 from bearingshaft.stages.frc_results import ConvergenceRun, FRCResult, PointCheck  # noqa: F401  (re-exported)
@@ -588,7 +588,8 @@ def frc_markdown(result: FRCResult) -> str:
         if cc is None:
             continue
         lines += [f"## {P:g} N: {'exact flow (shooting)' if cc.method == 'shooting' else f'HB, H = {cc.hb_H}'}", "",
-                  cc.reason + ".", *frc_regimes.markdown(regimes, P), ""]
+                  cc.reason + "." + _contact(cc, result.response_maps.get(P), spec), *frc_regimes.markdown(regimes, P),
+                  ""]
         ex = cc.exact
         if ex is None:
             continue
@@ -613,7 +614,7 @@ def frc_markdown(result: FRCResult) -> str:
                   + (" (" + "; ".join(sorted({r['note'].split(':')[0] for r in skipped if r['note']})) + ")"
                      if skipped else "") + ". Each is a row of frc_bifurcations.csv.",
                   _period_doubled_line(ex, spec), _cover_line(ex, spec),
-                  *_verdict_lines(ex, result.response_maps.get(P), cc.open_gap), _close_return_line(ex, spec),
+                  _close_return_line(ex, spec),
                   "Run times: frc_convergence_timing.csv.", ""]
         for note in [n for f in ex.families for n in f.notes][:10]:
             lines.append(f"- {note}")
@@ -621,9 +622,17 @@ def frc_markdown(result: FRCResult) -> str:
     return "\n".join(lines)
 
 
+def _contact(cc, lvl, spec) -> str:
+    """' Contact band (...): ...': the level's statement about its contact band
+    (:func:`bearingshaft.stages.frc_contact.contact_statement`), '' without exact families or contact."""
+    if cc.exact is None:
+        return ""
+    text = frc_contact.contact_statement(cc.exact, lvl, cc.open_gap, spec.verdict_points)
+    return " " + text if text else ""
+
+
 def _cover_line(ex, spec) -> str:
-    """frc.md: the isolated families of a level (started from HB orbits in contact that no family covered)
-    and the part of the contact band (its HB points) still covered by no family."""
+    """frc.md: the isolated families of a level (started from HB orbits in contact that no family covered)."""
     iso = [k for k, f in enumerate(ex.families) if f.kind == "isolated"]
     failed = {}
     for r in ex.cover:
@@ -632,69 +641,10 @@ def _cover_line(ex, spec) -> str:
             why = ("orbit of a known family" if "one of family" in note else note.split(" (")[0].split(":")[0]
                    or "not followed")
             failed[why] = failed.get(why, 0) + 1
-    gaps = ex.uncovered_bands()
-    if not ex.cover_freqs_hz.size:
-        where = "no HB point in contact to cover"
-    elif not gaps:
-        where = f"every one of the {ex.cover_freqs_hz.size} HB points in contact is covered by a family"
-    else:
-        where = "not covered by any family: " + ", ".join(
-            f"{a:.5g}-{c:.5g} Hz ({n} HB point{'' if n == 1 else 's'} in contact)" for a, c, n in gaps)
     return (f"Isolated families (started from HB orbits in contact no family covered, drawn with the others; "
             f"`[frc] cover_families = {spec.cover_families}`): " + (", ".join(str(k) for k in iso) if iso else "none")
             + ("; guesses tried without a new family: " + "; ".join(f"{n} {w}" for w, n in sorted(failed.items()))
-               if failed else "") + f". Contact band: {where}.")
-
-
-def _map_regimes(lvl, lo: float, hi: float) -> str:
-    """'chaotic 40, periodic 3 (up); ...': the response map's regimes over [lo, hi] Hz per sweep ('' without)."""
-    if lvl is None:
-        return ""
-    out = []
-    for d, rm in lvl.sweeps.items():
-        n = {}
-        for f, p in zip(rm.freq_hz, rm.points, strict=True):
-            if lo - 1e-9 <= f <= hi + 1e-9:
-                key = p.regime + ("" if p.regime not in ("periodic", "subharmonic") else
-                                  f" {p.period_k} T{' with contact' if p.contact else ' without contact'}")
-                n[key] = n.get(key, 0) + 1
-        if n:
-            out.append(", ".join(f"{k} at {v}" for k, v in sorted(n.items(), key=lambda kv: -kv[1])) + f" ({d})")
-    return "; ".join(out)
-
-
-def _verdict_lines(ex, lvl, open_gap=None) -> list[str]:
-    """frc.md: one line per band of HB points in contact no family covered: the verdicts of shooting at its
-    judged points (frc_cover.csv), whether the open-gap orbit closes no stop there (``open_gap``:
-    :class:`bearingshaft.stages.frc_results.OpenGapOrbits`) and what the response map's stepped sine shows
-    there."""
-    bands = {}
-    for v in ex.verdicts:
-        bands.setdefault(v.band_hz, []).append(v)
-    out = []
-    for (lo, hi), vs in sorted(bands.items()):
-        judged = [v for v in vs if v.verdict not in ("covered", "not_judged") or v.segments]
-        said = []
-        for v in judged:
-            if v.verdict == "orbit":
-                fam = ex.families[v.family]
-                said.append(f"{v.freq_hz:.5g} Hz an exact orbit ({v.segments} nodes): family {v.family}, "
-                            f"{fam.freq_hz.min():.5g}-{fam.freq_hz.max():.5g} Hz, "
-                            + (f"stable at {int(fam.stable.sum())} points" if fam.stable.any() else "unstable"))
-            elif v.verdict == "no_orbit":
-                said.append(f"{v.freq_hz:.5g} Hz no orbit of the exact flow near the HB point (best defect "
-                            f"{v.defect:.2g} after {v.iterations} Newton residuals, up to {v.segments} nodes)")
-            else:
-                said.append(f"{v.freq_hz:.5g} Hz {v.verdict} ({v.note[:80]})")
-        now = sum(v.family >= 0 for v in vs)
-        regimes = _map_regimes(lvl, lo, hi)
-        free = 0 if open_gap is None else int(np.sum(np.isin([v.freq_hz for v in vs], open_gap.freq_hz)))
-        out.append(f"- Uncovered band {lo:.5g}-{hi:.5g} Hz ({len(vs)} HB points in contact): judged by shooting at "
-                   f"{len(judged)}: " + "; ".join(said) + f". Now covered by a family: {now} of {len(vs)}."
-                   + (f" The open-gap orbit closes no stop at {free} of them: an exact orbit beside the HB one, drawn."
-                      if free else "")
-                   + (f" The stepped sine there (response_map.csv): {regimes}." if regimes else ""))
-    return out
+               if failed else "") + ". What covers the contact band: the level's first paragraph.")
 
 
 def _close_return_line(ex, spec) -> str:

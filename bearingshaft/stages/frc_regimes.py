@@ -36,7 +36,19 @@ FIELDS = ["level", "direction", "freq_from_hz", "freq_to_hz", "points", "regime"
 
 def orbit_pieces(result, P: float, curve, col: int) -> list[tuple]:
     """(label, kind, period_k, freq_hz (k,), amplitude (k,), stable (k,)) per drawn piece of level P: each
-    exact family's pieces, the open-gap orbits', HB's where it is drawn (``curve``: the drawn curve)."""
+    exact family's pieces, the open-gap orbits', HB's where it is drawn (``curve``: the drawn curve).
+
+    Parameters
+    ----------
+    result : FRCResult
+    P : N, the level
+    curve : the level's drawn curve (or an exception)
+    col : the column of the output point x1
+
+    Returns
+    -------
+    list of tuple (frequencies in Hz, amplitudes in m)
+    """
     out = []
     cc = result.converged.get(P)
     ex = cc.exact if cc is not None else None
@@ -65,6 +77,17 @@ def match(f: float, amp: float, period_k: int, pieces: list[tuple]) -> tuple[str
     """(orbit, kind, stable, relative difference) of the drawn piece of period ``period_k`` whose amplitude,
     interpolated linearly at f between two consecutive points that bracket it, is nearest ``amp``;
     ("none", "", None, nearest difference or inf) when none is within :data:`MATCH_TOL`.
+
+    Parameters
+    ----------
+    f : Hz
+    amp : m, the response's max abs x1
+    period_k : forcing periods
+    pieces : :func:`orbit_pieces`
+
+    Returns
+    -------
+    tuple
 
     >>> pcs = [("family 0", "main", 1, np.array([1.0, 2.0]), np.array([1.0, 3.0]), np.array([True, True]))]
     >>> match(1.5, 2.0, 1, pcs)
@@ -146,7 +169,18 @@ def _row(b: dict) -> dict:
 
 
 def markdown(rows: list[dict], P: float, limit: int = 24) -> list[str]:
-    """frc.md: the level's bands as a table (at most ``limit`` per sweep, the widest; all in frc_regimes.csv)."""
+    """frc.md: the level's bands as a table (at most ``limit`` per sweep, the widest; all in frc_regimes.csv).
+
+    Parameters
+    ----------
+    rows : frc_regimes.csv rows (frequencies in Hz, envelopes in m)
+    P : N, the level
+    limit : bands per sweep
+
+    Returns
+    -------
+    list of str
+    """
     mine = [r for r in rows if r["level"] == P]
     if not mine:
         return []
