@@ -192,7 +192,7 @@ def _plot_level(axs, result: FRCResult, P: float, lvl, col: int, curve) -> None:
     bot.set_xlabel("excitation frequency [Hz]")
     curve_label = "" if curve is None or isinstance(curve, Exception) else \
         f": {getattr(curve, 'label', None) or f'HB H={curve.H}'}"
-    top.set_title(f"{P:g} N{curve_label}", fontsize=9)
+    top.set_title(textwrap.fill(f"{P:g} N{curve_label}", 64), fontsize=8)
     for ax in axs:
         ax.grid(True, alpha=0.2)
 
