@@ -8,8 +8,11 @@ for bit, so a test sees exactly the model it would have built itself).
 
 from __future__ import annotations
 
+import csv
 import fcntl
 import pickle
+from collections import defaultdict
+from pathlib import Path
 
 import pytest
 
@@ -45,3 +48,50 @@ def assembly_rom20(tmp_path_factory, worker_id):
         return build_rom(RomSpec(layout="assembly", planar=False, n_modes=20))
 
     return _once(tmp_path_factory, worker_id, "assembly_rom20", build)
+
+
+# --- Scheduling: the longest files first (issue 28) --------------------------------------------------------------
+# With --dist loadfile a file is one unit of work and xdist hands the units out in collection order (with
+# --no-loadscope-reorder; its default reorders by the number of tests, which has little to do with time). The wall
+# time of the suite is the busier worker's: a 40 s file handed out last leaves the other worker idle for 40 s. So
+# the files are collected longest first (greedy longest-processing-time scheduling, within a few seconds of the
+# best split on 2 workers), by the seconds each took in a recorded run: tests/file_seconds.csv, rewritten by
+#     PYTHONPATH=. python -m pytest --file-seconds tests/file_seconds.csv
+# A file missing from it (a new one) counts as 0 s: it runs after the recorded ones, in name order.
+FILE_SECONDS = Path(__file__).with_name("file_seconds.csv")
+
+
+def pytest_addoption(parser):
+    parser.addoption("--file-seconds", metavar="CSV", default=None,
+                     help="write the seconds (setup + call + teardown) each test file took to CSV (issue 28)")
+
+
+def _file_of(nodeid: str) -> str:
+    return nodeid.split("::", 1)[0]
+
+
+def pytest_collection_modifyitems(session, config, items):
+    try:
+        rows = csv.DictReader(FILE_SECONDS.open())
+        seconds = {r["file"]: float(r["seconds"]) for r in rows}
+    except FileNotFoundError:
+        return
+    items.sort(key=lambda item: -seconds.get(_file_of(item.nodeid), 0.0))  # stable: name order otherwise
+
+
+_spent: dict[str, float] = defaultdict(float)
+
+
+def pytest_runtest_logreport(report):
+    _spent[_file_of(report.nodeid)] += report.duration  # under xdist, the controller sees every worker's reports
+
+
+def pytest_sessionfinish(session, exitstatus):
+    path = session.config.getoption("--file-seconds")
+    if not path or hasattr(session.config, "workerinput"):  # the controller writes it, not each worker
+        return
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["file", "seconds"])
+        for name, s in sorted(_spent.items(), key=lambda kv: (-kv[1], kv[0])):
+            w.writerow([name, f"{s:.2f}"])
