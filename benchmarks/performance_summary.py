@@ -79,21 +79,29 @@ LIMITS = (
      "the machine's load (integrator_machine.csv: 10-16 on 2 cores during the issue-28 runs; this row was met "
      "at load ~1 with the same per-sample code)"),
     ("FE modal, 112,629 DOFs, 16 modes: mesh",
-     "measured at load 1.9-3.3 on 2 cores (2026-11-26 16:50 UTC): 9.2x in wall time (12.0 s against 110.6 s), "
-     "8.8x in CPU (11.8 s against 104 s; 9.8x on the repeat whose baseline took 109.5 s). Of ours, in CPU on one "
+     "measured at load 0.5-1.1 on 2 cores (2026-11-26 22:11 UTC): 9.0x in wall time (11.9 s against 107 s), "
+     "9.4x in CPU (11.9 s against 111 s); earlier at load 1.9-3.3: 9.2x wall, 8.8x CPU. Of ours, in CPU on one "
      "thread: PARDISO's analysis and factorization 0.65-0.75 + 4.0-4.9 s (about 108 GFLOP at 25 GFLOP/s; orderings "
      "0/2/3, VBSR settings, RCM or random input orderings and the classic two-level factorization tried: none "
      "faster, the improved two-level one fails), 68 solves in 10 block calls 2.3-2.4 s (0.09 s a call + 0.018 s a "
      "right-hand side, no refinement steps), the Krylov products and dense work 2.5 s, assembly 1.1-1.3 s. 10x needs "
      "about 1 s more; PARDISO on more threads would change the results' bits (fem._pardiso.solver_threads)"),
     ("main job, bearingshaft run",
-     "measured twice at load 1.2-1.6 (2026-11-26 17:00-17:20 UTC) after warming the reduced-model cache: 502 and "
-     "486 s wall, 903 and 875 s CPU on 2 workers; the stages' own walls sum to 811 s (main_job.csv). 360 s on 2 "
-     "cores needs about 700 s of CPU. The longest chain is rom-frc's frc stage, 300 s wall beside the other "
-     "worker's stages (about 220 s CPU alone): its exact families by shooting take 69 % of it (their branch "
-     "switching 23 %), the response map 9 %, HB 10 % (py-spy); the shooting marches, LU and segment Jacobians "
-     "inside are kernels whose bits the files depend on. Running its levels and its branch switching as separate "
-     "Dask tasks would shorten that chain; not done"),
+     "measured on a quiet machine after warming the reduced-model cache (2026-11-26 23:26 UTC, load 1.2 at the "
+     "start): 448 s wall, 854 s CPU on 2 workers (452 s, 883 s at 22:00 before that session's merges); the "
+     "stages' own walls sum to 804 s (main_job.csv). 360 s on 2 cores needs about 700 s of CPU. The longest chain "
+     "is rom-frc's frc stage, 265 s wall beside the other worker's stages (about 296 s CPU alone without numba's "
+     "compilation, cProfile): its converged curves (exact families by shooting) 179 s, the response map 68 s, the "
+     "backbone check 26 s, the stepped sines 23 s, the uncovered orbits 23 s; nothing is integrated twice "
+     "(11,037 marches on 11,035 distinct inputs). The shooting marches, LU and segment Jacobians inside are "
+     "kernels whose bits the files depend on; block solves of the cyclic shooting Jacobian would change round-off "
+     "and so the continuation paths. Running the levels as Dask tasks (`run --fan-out`) was slower on 2 cores"),
+    ("test suite, python -m pytest",
+     "measured on a quiet machine (2026-11-26 23:39 UTC, load 1.4): 272 s wall, 532 s CPU for 1337 tests (265 s, "
+     "515 s for 1288 at the session's start: the new tests cost more than the cuts saved). The files go to the "
+     "two xdist workers longest first (tests/conftest.py, tests/file_seconds.csv), so both finish together; the "
+     "slowest tests run a stage twice (byte-for-byte reruns), start processes (kills, 8 writers, a LocalCluster) "
+     "or compare full and reduced models, each the only check of its claim. 240 s needs about 470 s of CPU"),
     ("FE modal, 112,629 DOFs: relative residual",
      "the twelve soft-spring modes (0.4-34 Hz) stop at 1-3x their round-off floor eps |||K| |phi||| / ||K phi||, "
      "above 1e-8 in double precision; the elastic modes reach 4-8e-10"),
