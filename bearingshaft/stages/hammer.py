@@ -895,8 +895,11 @@ REPRODUCTION = Reproduction(lyapunov=("lyapunov.csv",), rules=(
     exact("lyapunov.csv", "seed", "delta", "saturation", "window_s"),
     chaotic("lyapunov.csv", why="Lyapunov exponents fitted to the separation of chaotic records 1e-9 apart"),
     # with friction at the tips (friction.csv, hammer.md's friction section): both records impact
-    chaotic("friction.csv", "peak_J_*", "end_J_*", "t_1pct_s_*", why=f"energies and decay times {IMPACTING}"),
+    # the decay rates and the 1 % times estimated from them are fitted to the chaotic records too: a change of
+    # round-off in the friction tables (one factorization of K_s for all sliders) moved t_1pct_est_s 14.6 -> 7.5 s
+    chaotic("friction.csv", "peak_J_*", "end_J_*", "t_1pct_s_*", "rate_per_s_*", "t_1pct_est_s_*",
+            why=f"energies, decay rates and decay times {IMPACTING}"),
     chaotic("hammer.md", r"^The nominal blow again with mu = 0", r"^\| [a-z]+ \| [0-9.]+ \| [0-9.e+-]+ / ",
-            r"^The spectrogram's channel after the blow",
+            r"^The spectrogram's channel after the blow", r"^The gaps stay open after",
             why=f"impacts, friction work, energies and decay times with and without friction {IMPACTING}"),
 ))
