@@ -928,6 +928,18 @@ REPRODUCTION = Reproduction(rules=(
             "chaotic stepped sine"),
     chaotic("frc.md", r"close_return|Close-return|^Bifurcations:", why="families seeded by close returns of a chaotic "
             "stepped sine (and the bifurcations counted on them)"),
+    # what a test would see (frc_regimes): bands of the response map's frequencies, a chaotic band's numbers chaotic;
+    # after a chaotic frequency a sweep's state is set by round-off, so where the bands end moves with it
+    chaotic("frc_regimes.csv", "*", rows=r"^(?:[^,]*,){5}(?:chaotic|quasi_periodic),", why=MAP_CHAOS),
+    sensitive("frc_regimes.csv", why=MAP_AFTER),
+    chaotic("frc.md", r"^\| (?:up|down) \| [^|]*\| [^|]*\| (?:chaotic|quasi_periodic)", why=MAP_CHAOS),
+    sensitive("frc.md", r"^\| (?:up|down) \| ", why=MAP_AFTER),
+    # with friction (frc_friction_files): the stepped sine's and the shot and continued orbits' tables and lines
+    # mirror frc_friction_checks.csv and frc_friction_shooting.csv (a round-off change in the friction tables moved
+    # the unsettled points' amplitudes and the branches' ends)
+    sensitive("frc.md", r"^\| [0-9.]+ \| [0-9.]+ \|", r"^- [0-9.]+ N, branch [0-9]+:",
+              why="the friction stepped sine and the exact friction orbits (frc_friction_checks.csv, "
+              "frc_friction_shooting.csv): " + CONTINUATION),
     sensitive("frc_stability.csv", why=CONTINUATION + " (stability at those points)"),
     sensitive("frc_convergence.csv", why=CONTINUATION + " (points, reach, folds and errors at the points)"),
     sensitive("stepped_sine.csv", why="the stepped sine at the HB curve's points, compared with HB there: "
