@@ -15,6 +15,7 @@ runs here.
 
 from __future__ import annotations
 
+import textwrap
 from dataclasses import dataclass
 
 import numpy as np
@@ -742,9 +743,9 @@ def _legend_handles(result: FRCResult, colours: dict, backbones: bool) -> list:
 
     drawn = drawn_curves(result)
     bad = {P for P, cc in result.converged.items() if cc.error}  # shooting failed: HB drawn, not converged
-    out = [Line2D([], [], color=colours[P], lw=3, label=f"P = {P:g} N: {_label(drawn[P])}"
-                  + (" (NOT converged)" if P in bad else "")) for P in sorted(drawn)
-           if not isinstance(drawn[P], Exception)]
+    out = [Line2D([], [], color=colours[P], lw=3, label=textwrap.fill(f"P = {P:g} N: {_label(drawn[P])}"
+                  + (" (NOT converged)" if P in bad else ""), 44, subsequent_indent="  ")) for P in sorted(drawn)
+           if not isinstance(drawn[P], Exception)]  # wrapped: a long label would squeeze the panels
     out += [Line2D([], [], color=colours[P], lw=3, label=f"P = {P:g} N (no curve)") for P in sorted(drawn)
             if isinstance(drawn[P], Exception)]
     out += [Line2D([], [], color="k", lw=1.2, label="periodic orbit, stable"),
