@@ -31,6 +31,7 @@ import numpy as np  # noqa: E402
 from bearingshaft.output import write_rows  # noqa: E402
 from bearingshaft.scenes import load_scene  # noqa: E402
 from bearingshaft.stages.frc import _curve, _without_stability  # noqa: E402
+from bearingshaft.stages.frc_friction import load_vector  # noqa: E402
 from bearingshaft.systems import model_system  # noqa: E402
 from reduced._blas import single_thread_blas  # noqa: E402
 from reduced.periodic import exact_frc as E  # noqa: E402
@@ -97,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     spec = scene.frc
     system, rows = model_system(scene.model)
     names = tuple(scene.model.point_names)
-    b = rows[names.index(spec.point)]
+    b = load_vector(spec, rows, names)  # the stage's own load direction
     out = []
     with single_thread_blas(), warnings.catch_warnings():
         warnings.simplefilter("ignore")  # LinAlgWarning from LU on rejected continuation steps, as the stage

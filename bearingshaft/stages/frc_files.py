@@ -85,7 +85,7 @@ def write(result: FRCResult | FrictionFRCResult, writer: StageWriter) -> None:
     write_rows(writer.path("frc_close_returns.csv"), _close_return_rows(result), fields=CLOSE_RETURN_FIELDS)
     drawn = drawn_curves(result)
     frc_map_files.write(result, writer, stats, drawn)  # response_map.csv, _jumps.csv, .png
-    write_rows(writer.path("frc_regimes.csv"), frc_regimes.regime_rows(result, drawn, _x1(result)),
+    write_rows(writer.path("frc_regimes.csv"), frc_regimes.regime_rows(result, drawn, frc_map_files.x1_column(result)),
                fields=frc_regimes.FIELDS)
     writer.stats["frc"] = stats
     writer.path("frc.md").write_text(frc_markdown(result), encoding="utf-8")
@@ -95,11 +95,6 @@ def write(result: FRCResult | FrictionFRCResult, writer: StageWriter) -> None:
     _plot_backbone(writer.path("frc_backbone.png"), result.backbone_curves, result.backbones, names, result.load_col,
                    spec, result.peaks)
     _plot_convergence(writer.path("frc_convergence_timing.png"), conv_rows, timing_rows, Pc)
-
-
-def _x1(result: FRCResult) -> int:
-    """The column of x1 among the output points (the response map's), else the first."""
-    return result.names.index("x1") if "x1" in result.names else 0
 
 
 def _bool(v) -> str:
@@ -583,7 +578,7 @@ def frc_markdown(result: FRCResult) -> str:
              f"move by at most {spec.hb_converged_tol:g} from the next lower H, else the periodic orbits of the exact "
              "flow continued by multiple shooting (no harmonics), with their Floquet multipliers (frc.csv: `drawn`, "
              "`method`, `family`).", ""]
-    regimes = frc_regimes.regime_rows(result, drawn_curves(result), _x1(result))
+    regimes = frc_regimes.regime_rows(result, drawn_curves(result), frc_map_files.x1_column(result))
     for P in spec.levels_N:
         cc = result.converged.get(P)
         if cc is None:

@@ -60,7 +60,7 @@ def write(result: FRCResult, writer, stats: dict, drawn: dict) -> None:
     maps = getattr(result, "response_maps", {}) or {}
     if not maps:
         return
-    col = result.names.index("x1") if "x1" in result.names else 0
+    col = x1_column(result)
     rows, jumps, st = [], [], {}
     for P, lvl in maps.items():
         for d, rm in lvl.sweeps.items():
@@ -73,6 +73,21 @@ def write(result: FRCResult, writer, stats: dict, drawn: dict) -> None:
     stats["response_map"] = st
     _plot_map(writer.path("response_map.png"), result, col, drawn)
     _plot_spectra(writer.path("response_map_spectra.png"), result)
+
+
+def x1_column(result: FRCResult) -> int:
+    """The column of x1 among the output points (the response map's point), else the first.
+
+    Parameters
+    ----------
+    result : FRCResult
+        The stage's result.
+
+    Returns
+    -------
+    int
+    """
+    return result.names.index("x1") if "x1" in result.names else 0
 
 
 def _bool(v) -> str:
