@@ -70,7 +70,7 @@ def test_friction_on_the_reduced_model_balances_energy_at_round_off(rom_f):
     # a blow that closes the tips and slides the faces: stick, slip both ways and gap events (86); the balance
     # E = E0 + W_ext - W_viscous - W_friction at round-off (1e-10: measured 1.4e-11, the closed-form works
     # of ~90 segments, each ~1e-13 of E0), and the run agrees with DOP853 restarted at every state change
-    # (its events located to its tolerance, rtol 1e-10, after ~80 state changes: measured 1.9e-6 of the
+    # (its events located to its tolerance, rtol 1e-12, after ~80 state changes: measured 0.8-1.9e-6 of the
     # motion, so 1e-5)
     s = rom_f.system()
     x0, v0 = blow(rom_f)

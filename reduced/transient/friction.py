@@ -790,13 +790,28 @@ def _reference_leg(system: GapSystem, closed, slip, loads, t0: float, t_bound: f
     fr, n, p = system.friction, system.n, system.p
     Minv = np.linalg.inv(system.M)
     forces, events = _physics(system, closed, slip)
+    # within one state the physics is affine in y = (x, v, w): sample it at y = 0 and the N unit vectors
+    # once (exact to round-off), so each of DOP853's ~10^5 evaluations is a few products, not a Python loop
+    N = 2 * n + p
+    cols = [np.concatenate(forces(e[:n], e[n:2 * n], e[2 * n:])) for e in np.vstack([np.zeros(N), np.eye(N)])]
+    S = np.array(cols).T  # (n + 2p, N + 1): the forces at 0, then at each unit vector
+    s0, G = S[:, 0], S[:, 1:] - S[:, :1]
+    A = -Minv @ (np.hstack([system.K, system.C, np.zeros((n, p))]) + G[:n] + fr.Bt.T @ G[n:n + p])
+    a0 = -Minv @ (s0[:n] + fr.Bt.T @ s0[n:n + p])
+    # u = R y + r0 = (v, v', w', f): the state's rate and the slider forces in one product
+    R = np.vstack([np.eye(n, N, n), A, G[n + p:], G[n:n + p]])
+    r0 = np.concatenate([np.zeros(n), a0, s0[n + p:], s0[n:n + p]])
+    C = system.C
 
     def rhs(t, zz):
-        x, v, ww = zz[:n], zz[n:2 * n], zz[2 * n:2 * n + p]
-        fc, f, wd = forces(x, v, ww)
-        fe = loads.force(t) if loads is not None else np.zeros(n)
-        a = Minv @ (fe - system.K @ x - system.C @ v - fc - fr.Bt.T @ f)
-        return np.concatenate([v, a, wd, [v @ system.C @ v, f @ wd, v @ fe]])
+        u = R @ zz[:N]
+        u += r0
+        v, wd, f = u[:n], u[2 * n:N], u[N:]
+        if loads is None:
+            return np.concatenate([u[:N], (v @ C @ v, f @ wd, 0.0)])
+        fe = loads.force(t)
+        u[n:2 * n] += Minv @ fe
+        return np.concatenate([u[:N], (v @ C @ v, f @ wd, v @ fe)])
 
     funcs = []
     for _, g in events:
