@@ -3,6 +3,7 @@ refused, not coerced), NaN, infinities and absurd magnitudes refused, unknown ke
 
 from __future__ import annotations
 
+import functools
 import math
 import types
 import typing
@@ -121,6 +122,13 @@ def absolute_paths(data: dict, base: str | Path | None) -> dict:
     return {k: [fix(t) for t in v] if isinstance(v, list) else fix(v) for k, v in data.items()}
 
 
+@functools.cache
+def type_hints(cls: type) -> dict:
+    """``typing.get_type_hints(cls)``, worked out once per class (a scene check asks for it per table, and
+    it evaluates every annotation's string each time)."""
+    return typing.get_type_hints(cls)
+
+
 def from_table(cls: type, table: dict, where: str, base: str | Path | None = None):
     """Build dataclass ``cls`` from a TOML table, naming ``where`` in every error.
 
@@ -149,7 +157,7 @@ def from_table(cls: type, table: dict, where: str, base: str | Path | None = Non
     """
     if not isinstance(table, dict):
         raise SceneError(f"{where}: expected a table, got {show(table)}")
-    hints = typing.get_type_hints(cls)
+    hints = type_hints(cls)
     known = [f.name for f in fields(cls)]
     for key in table:
         if key not in known:

@@ -28,7 +28,7 @@ import typing
 from dataclasses import dataclass
 from functools import cache
 
-from bearingshaft.scenes.convert import PATH_KEYS
+from bearingshaft.scenes.convert import PATH_KEYS, type_hints
 from bearingshaft.scenes.loads import LOAD_KINDS
 from bearingshaft.scenes.models import MODEL_KINDS, model_class
 from bearingshaft.scenes.sweep import SweepSpec
@@ -281,7 +281,7 @@ def allowed_values(cls: type, name: str) -> str:
         check refuses a probe; ``COUPLED`` is added where a probe was refused by a check that ties the key
         to others (``freq_max_hz must exceed freq_min_hz``, a geometry that no longer fits).
     """
-    hint = typing.get_type_hints(cls)[name]
+    hint = type_hints(cls)[name]
     if name in PATH_KEYS:
         return 'an existing file, relative to the scene file\'s folder ("" for none)'
     if _base_type(hint)[0] is bool:
@@ -386,7 +386,7 @@ def table_keys(table: str, cls: type) -> list[Key]:
     -------
     list of Key
     """
-    hints = typing.get_type_hints(cls)
+    hints = type_hints(cls)
     comments = field_comments(cls)
     shown = _shown_table(table)
     rows = []
