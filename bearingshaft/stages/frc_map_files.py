@@ -220,7 +220,7 @@ def _plot_map(path, result: FRCResult, col: int, drawn: dict) -> None:
     import matplotlib.pyplot as plt
 
     maps = result.response_maps
-    fig, axs = plt.subplots(2, len(maps), figsize=(5.6 * len(maps), 8.0), squeeze=False, sharex="col")
+    fig, axs = plt.subplots(2, len(maps), figsize=(5.6 * len(maps) + 2.4, 8.0), squeeze=False, sharex="col")
     for c, (P, lvl) in enumerate(maps.items()):
         _plot_level((axs[0][c], axs[1][c]), result, P, lvl, col, drawn.get(P))
         zoom = _zoom(lvl, result.spec)
@@ -234,7 +234,9 @@ def _plot_map(path, result: FRCResult, col: int, drawn: dict) -> None:
         for ax in row:
             handles, labels = ax.get_legend_handles_labels()
             uniq.update(zip(labels, handles, strict=True))
-        row[-1].legend(uniq.values(), uniq.keys(), fontsize=6, loc="best", markerscale=2)
+        # beside the last panel, not over it: in contact the data fill every corner of the panels
+        row[-1].legend(uniq.values(), uniq.keys(), fontsize=6, loc="upper left", bbox_to_anchor=(1.02, 1.0),
+                       borderaxespad=0.0, markerscale=2)
     fig.suptitle(_title(f"{result.scene_name}: response map under a load at {result.spec.point} (stepped sine by "
                         "the exact flow, up and down; regimes by Poincare samples and the largest Lyapunov exponent)",
                         len(maps)), fontsize=9)
