@@ -85,10 +85,10 @@ def write(result: FRCResult | FrictionFRCResult, writer: StageWriter) -> None:
     write_rows(writer.path("frc_close_returns.csv"), _close_return_rows(result), fields=CLOSE_RETURN_FIELDS)
     drawn = drawn_curves(result)
     frc_map_files.write(result, writer, stats, drawn)  # response_map.csv, _jumps.csv, .png
-    write_rows(writer.path("frc_regimes.csv"), frc_regimes.regime_rows(result, drawn, frc_map_files.x1_column(result)),
-               fields=frc_regimes.FIELDS)
+    regimes = frc_regimes.regime_rows(result, drawn, frc_map_files.x1_column(result))
+    write_rows(writer.path("frc_regimes.csv"), regimes, fields=frc_regimes.FIELDS)
     writer.stats["frc"] = stats
-    writer.path("frc.md").write_text(frc_markdown(result), encoding="utf-8")
+    writer.path("frc.md").write_text(frc_markdown(result, regimes), encoding="utf-8")
     stats["converged"] = _converged_stats(result)
     _plot_frc(writer.path("frc.png"), result)
     _plot_receptance(writer.path("frc_receptance.png"), result)
@@ -451,6 +451,9 @@ class DrawnCurve:
         The piece (family) each point belongs to.
     label : str
         How the curve was computed, for the legend.
+    hb : ndarray of bool, optional
+        The points that are HB's (where the exact families leave HB the band no stop closes in); None: all of
+        them (a curve of HB alone).
     """
 
     freq_hz: np.ndarray
@@ -458,9 +461,14 @@ class DrawnCurve:
     stable: np.ndarray
     segment: np.ndarray
     label: str
+    hb: np.ndarray | None = None
 
     def pieces(self) -> list[np.ndarray]:
         return [np.flatnonzero(self.segment == k) for k in np.unique(self.segment)]
+
+    def hb_pieces(self) -> list[np.ndarray]:
+        """The pieces drawn from the HB curve (indices into the points)."""
+        return [i for i in self.pieces() if self.hb is None or np.all(self.hb[i])]
 
 
 def _spliced(br, refined: tuple) -> DrawnCurve:
@@ -521,11 +529,12 @@ def drawn_curves(result: FRCResult) -> dict:
         label = f"exact flow ({len(fams)} famil{'y' if len(fams) == 1 else 'ies'})"
         parts = [(np.concatenate([f.freq_hz for f in fams]), np.concatenate([f.amplitude_m for f in fams]),
                   np.concatenate([f.stable for f in fams]), seg)]
-        fill = cc.hb_fill
+        fill, hb_part = cc.hb_fill, -1
         if fill.size and fill.any():  # HB beside the families, where no stop closes (frc.converged_curve)
             idx = np.flatnonzero(fill)
             pieces = np.concatenate([[0], np.cumsum(np.diff(idx) > 1)])  # a new piece at each gap
             hb = _spliced(DrawnCurve(br.freq_hz[idx], br.amplitude_m[idx], br.stable[idx], pieces, ""), cc.refined)
+            hb_part = len(parts)
             parts.append((hb.freq_hz, hb.amplitude_m, hb.stable, hb.segment + 1000 * (len(fams) + 1)))
             label += ", HB where no stop closes"
         og = cc.open_gap
@@ -533,7 +542,8 @@ def drawn_curves(result: FRCResult) -> dict:
             parts.append((og.freq_hz, og.amplitude_m, np.full(og.freq_hz.size, og.stable),
                           og.segment + 1000 * (len(fams) + 2)))
             label += ", the open-gap orbit where it closes no stop"
-        out[P] = DrawnCurve(*(np.concatenate([p[j] for p in parts]) for j in range(4)), label)
+        hb_points = np.concatenate([np.full(p[0].size, k == hb_part) for k, p in enumerate(parts)])
+        out[P] = DrawnCurve(*(np.concatenate([p[j] for p in parts]) for j in range(4)), label, hb_points)
     return out
 
 
@@ -559,13 +569,15 @@ def _converged_stats(result: FRCResult) -> dict:
     return out
 
 
-def frc_markdown(result: FRCResult) -> str:
+def frc_markdown(result: FRCResult, regimes: list[dict]) -> str:
     """frc.md: per level, which curve is drawn and why, its families, bifurcations and branch switches.
 
     Parameters
     ----------
     result : FRCResult
         The stage's result.
+    regimes : list of dict
+        The rows of frc_regimes.csv (:func:`frc_regimes.regime_rows`).
 
     Returns
     -------
@@ -578,7 +590,6 @@ def frc_markdown(result: FRCResult) -> str:
              f"move by at most {spec.hb_converged_tol:g} from the next lower H, else the periodic orbits of the exact "
              "flow continued by multiple shooting (no harmonics), with their Floquet multipliers (frc.csv: `drawn`, "
              "`method`, `family`).", ""]
-    regimes = frc_regimes.regime_rows(result, drawn_curves(result), frc_map_files.x1_column(result))
     for P in spec.levels_N:
         cc = result.converged.get(P)
         if cc is None:

@@ -64,10 +64,8 @@ def orbit_pieces(result, P: float, curve, col: int) -> list[tuple]:
                 i = np.flatnonzero(og.segment == s)
                 out.append(("open_gap", "open_gap", 1, og.freq_hz[i], og.amplitude_m[i, col],
                             np.full(i.size, og.stable)))
-        hb = [i for i in curve.pieces() if np.all(curve.segment[i] >= 1000 * (len(ex.families) + 1))
-              and np.all(curve.segment[i] < 1000 * (len(ex.families) + 2))] if not isinstance(curve, Exception) else []
-    else:
-        hb = curve.pieces() if curve is not None and not isinstance(curve, Exception) else []
+    hb = curve.hb_pieces() if hasattr(curve, "hb_pieces") else \
+        curve.pieces() if curve is not None and not isinstance(curve, Exception) else []
     for i in hb:
         out.append(("hb", "main", 1, curve.freq_hz[i], curve.amplitude_m[i, col], curve.stable[i]))
     return out
