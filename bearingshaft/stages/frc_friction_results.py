@@ -124,6 +124,40 @@ class ShootingCurve:
 
 
 @dataclass(eq=False)
+class BranchVerdict:
+    """Who is right where HB and shooting disagree, at a continued branch's start orbit
+    (:func:`bearingshaft.stages.frc_friction._verdict`).
+
+    Attributes
+    ----------
+    freq_hz : Hz, the start orbit's frequency
+    shoot_m : (p,) m, max |x| over the shot orbit at each output point
+    defect : the multiple-shooting defect, in units of the amplitude
+    period_defect : |y(T) - y(0)| / D of one exact run over the whole period from the orbit's start
+    dop853_rel : max over one period of |y_DOP853(t) - y_exact(t)| / D, DOP853 restarted at every state change
+        (:func:`reduced.transient.friction.reference_dop853`, rtol 1e-12) from the orbit's start: the independent check
+    max_abs_multiplier : the largest |Floquet multiplier| of the start orbit
+    hb : [(H, (p,) amplitude HB / shooting - 1 or None where Newton found no HB solution, (p,) max over the period
+        of |x_HB - x_shooting| / max |x_shooting|, or None)] HB at the orbit's frequency for each H of HB_CONVERGENCE_H
+    """
+
+    freq_hz: float
+    shoot_m: np.ndarray
+    defect: float
+    period_defect: float
+    dop853_rel: float
+    max_abs_multiplier: float
+    hb: list = field(default_factory=list)
+
+    def hb_moves(self) -> np.ndarray | None:
+        """(p,) |A_H / A_H' - 1| between the two highest H with a solution (None: fewer than two)."""
+        got = [(H, a) for H, a, _ in self.hb if a is not None]
+        if len(got) < 2:
+            return None
+        return np.abs((1.0 + got[-1][1]) / (1.0 + got[-2][1]) - 1.0)
+
+
+@dataclass(eq=False)
 class FrictionFRCResult:
     """What :func:`bearingshaft.stages.frc_friction.compute` returns (its ``write`` writes it).
 
@@ -137,6 +171,8 @@ class FrictionFRCResult:
     linear : {P: (freq_hz (k,), amplitude (k, p))}, the open-gap response without friction
     stats : the stage's statistics
     shooting : {P: ShootingCurve or str}, the exact orbits continued by shooting, or why not
+    verdicts : {P: [BranchVerdict]}, one per continued branch (its start orbit): shooting checked independently, HB
+        against it for H = HB_CONVERGENCE_H
     """
 
     scene: Scene
@@ -147,6 +183,7 @@ class FrictionFRCResult:
     linear: dict  # {P: (freq_hz (k,), amplitude (k, p))} the open-gap response without friction
     stats: dict = field(default_factory=dict)
     shooting: dict = field(default_factory=dict)  # {P: ShootingCurve or str}
+    verdicts: dict = field(default_factory=dict)  # {P: [BranchVerdict]}
 
 
-__all__ = ["SKIPPED", "FrictionCheck", "FrictionFRCResult", "ShootCheck", "ShootingCurve"]
+__all__ = ["SKIPPED", "BranchVerdict", "FrictionCheck", "FrictionFRCResult", "ShootCheck", "ShootingCurve"]

@@ -13,7 +13,13 @@ cuts the defect by ``CHORD_RATE``), then refreshed at the iterate; each step the
 solution (a slider open or stuck the whole period leaves a null direction of dG/dz, as in the shooting at one
 frequency: rank < size). The tangent at a converged point solves [[dG/du]; t_i^T] t = [0; 1] (least squares),
 normalised and oriented along t_i, so it passes folds where df/ds = 0. ds grows by ``DS_GROW`` after a corrector
-of at most ``EASY_STEPS`` steps and is halved after one that fails (down to ``ds_min``: the branch ends there).
+of at most ``EASY_STEPS`` steps or one that moved the predictor by at most ``SMALL_CORRECTION`` ds, and is halved
+after one that fails (down to ``ds_min``: the branch ends there).
+
+**Where a branch ends**, each with its reason in ``status``: it leaves the band; the corrector fails down to
+``ds_min``; a new point lies within ``RETRACE_STEP`` ds of an earlier point of its own (past a fold the path has
+turned back onto orbits it passed); the caller's ``stop`` says so (e.g. it meets a branch continued before,
+:func:`on_branch`); or ``max_steps`` points.
 
 **Jacobian, monodromy and the non-smooth transitions.** dG/dz is the segments' monodromies, exact
 (:mod:`reduced.periodic.friction_sensitivity`: within a friction state the flow is affine, so over a piece the
@@ -64,6 +70,11 @@ CHORD_RATE = 0.25  # a chord step must cut max |G| by this, else the Jacobian is
 MAX_CORRECTOR = 12  # corrector steps at most (chord and refreshed together)
 EASY_STEPS = 4  # a corrector of at most this many steps grows ds
 DS_GROW = 1.5  # the factor
+SMALL_CORRECTION = 0.1  # a corrector that moved the predictor by at most this x ds also grows ds: the chord's count
+# of steps says little about the step (it converges linearly to TOL: 6-10 steps at any ds in contact, measured on the
+# discrete friction model), the predictor's error does (the branch's curvature x ds^2)
+RETRACE_SKIP = 3  # the last points a new one is not compared with for a retrace (its own neighbours)
+RETRACE_STEP = 0.5  # x ds: a new point this near (in u) an earlier one of its own branch has turned back onto it
 REAL_TOL = 1e-8  # |Im mu| <= this x |mu|: a real multiplier
 SAMPLES_PER_SEGMENT = 50  # of each segment when the amplitudes are read (400 a period at S = 8: error ~3e-5)
 
@@ -217,6 +228,38 @@ def bifurcations(multipliers: np.ndarray, tangent_f: np.ndarray,
     return out
 
 
+def _retrace(us: list, u: np.ndarray, h: float) -> str | None:
+    """Why the branch ends if its new point u (the last of ``us``) lies within RETRACE_STEP x h of an earlier point
+    of its own (not one of its last RETRACE_SKIP): past a fold the path has turned back onto orbits it passed."""
+    for j in range(len(us) - 1 - RETRACE_SKIP):
+        if float(np.linalg.norm(us[j] - u)) <= RETRACE_STEP * h:
+            return (f"turned back onto its own orbit at f = {u[-1]:.6g} Hz (point {j}, within {RETRACE_STEP:g} "
+                    "of a step)")
+    return None
+
+
+def on_branch(freq_hz: np.ndarray, amplitude_m: np.ndarray, f: float, a: np.ndarray, rel: float) -> bool:
+    """Whether the orbit of amplitudes a (q,) m at f Hz lies on the branch (freq_hz (k,), amplitude_m (k, q)): between
+    two consecutive points of it, within ``rel`` of the amplitudes interpolated linearly in frequency.
+
+    Examples
+    --------
+    >>> on_branch(np.array([1.0, 2.0]), np.array([[1.0], [2.0]]), 1.5, np.array([1.51]), 0.02)
+    True
+    >>> on_branch(np.array([1.0, 2.0]), np.array([[1.0], [2.0]]), 2.5, np.array([2.5]), 0.02)
+    False
+    """
+    F, A = freq_hz, amplitude_m
+    for i in range(len(F) - 1):
+        lo, hi = sorted((F[i], F[i + 1]))
+        if lo <= f <= hi:
+            w = (f - F[i]) / (F[i + 1] - F[i]) if F[i + 1] != F[i] else 0.0
+            ref = (1.0 - w) * A[i] + w * A[i + 1]
+            if float(np.max(np.abs(a / ref - 1.0))) <= rel:
+                return True
+    return False
+
+
 def _correct(cont: _Continuation, J: np.ndarray, t: np.ndarray, u: np.ndarray, h: float, tol: float) -> tuple:
     """(converged, corrector steps, v, G, residual object, Y, ends): the corrector from the predictor u + h t on
     [G; t . (v - u) - h] = 0, chord with J, Broyden's update where a step cuts max |G| by less than CHORD_RATE,
@@ -270,7 +313,7 @@ def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_ma
     tol : max |G| at a point, units of D
     stop : callable, optional
         ``stop(f_hz, amplitude_m) -> str or None`` after each new point: a str ends the branch there (its status),
-        e.g. where it meets another branch.
+        e.g. where it meets another branch. (A point back on the branch's own path ends it too: module docstring.)
 
     Returns
     -------
@@ -316,6 +359,7 @@ def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_ma
                     float(t[-1]), k_corr))
 
     record(u, G, res, Y, J, blocks, t, 0)
+    us = [u]  # the points in u, for the retrace check
     status, h = f"{max_steps} steps", float(ds)
     while len(pts) <= max_steps:
         ok, k_corr, v, Gv, res_v, Yv, ends_v = _correct(cont, J, t, u, h, tol)
@@ -325,18 +369,20 @@ def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_ma
                 status = f"ds below {ds_min:g} at f = {u[-1]:.6g} Hz (the corrector does not converge)"
                 break
             continue
+        u_prev, t_prev = u, t
         J, blocks = cont.jacobian(v, Gv, res_v, Yv, ends_v)
         t = _tangent(J, t)
         u, G, res, Y = v, Gv, res_v, Yv
         record(u, G, res, Y, J, blocks, t, k_corr)
+        us.append(u)
         if not f0 <= u[-1] <= f1:
             status = f"left the band at f = {u[-1]:.6g} Hz"
             break
-        why = stop(float(u[-1]), pts[-1][2]) if stop is not None else None
+        why = _retrace(us, u, h) or (stop(float(u[-1]), pts[-1][2]) if stop is not None else None)
         if why:
             status = why
             break
-        if k_corr <= EASY_STEPS:
+        if k_corr <= EASY_STEPS or float(np.linalg.norm(v - (u_prev + h * t_prev))) <= SMALL_CORRECTION * h:
             h = min(h * DS_GROW, ds_max)
     f, Ys, A, mu, dfc, rk, tf, kc = (np.array(c) for c in zip(*pts, strict=True))
     stable = np.max(np.abs(mu), axis=1) <= 1.0 + STABLE_TOL
@@ -373,4 +419,4 @@ def joined(down: FrictionShootingBranch, up: FrictionShootingBranch) -> Friction
                                   f"down: {down.status}; up: {up.status}", down.wall_s + up.wall_s)
 
 
-__all__ = ["FD_FREQ", "FrictionShootingBranch", "bifurcations", "continue_friction", "joined"]
+__all__ = ["FD_FREQ", "FrictionShootingBranch", "bifurcations", "continue_friction", "joined", "on_branch"]
