@@ -49,7 +49,7 @@ from reduced.periodic.frc import FRC_STEPS, linear_frf, solution_at_frequency
 from reduced.periodic.friction_aft import friction_frc
 from reduced.periodic.friction_continuation import continue_friction, joined, on_branch
 from reduced.periodic.friction_shooting import flow, hb_at_frequency, hb_displacements, hb_nodes, shoot_friction
-from reduced.periodic.hb import NewtonError, _phases, _projection_matrix
+from reduced.periodic.hb import NewtonError
 from reduced.transient.friction import integrate_exact_friction, reference_dop853
 
 SAMPLES_PER_PERIOD = 400  # of the exact run's output: the amplitude read on these (error ~ (pi / 400)^2 / 2 = 3e-5)
@@ -61,12 +61,11 @@ SHOOT_SAMPLES = 500  # of each of the 8 segments of a shot orbit: its amplitudes
 SHOOT_CONTINUATION_DS = 0.3  # the first arclength step of the continued shooting (z / D and Hz: ~0.1 Hz at the
 # start's tangent in the scene; measured from 14.29 Hz down, 10 points over 0.9 Hz in 3.9 s CPU, load 4)
 SHOOT_CONTINUATION_DS_MAX = 2.0  # its bound: away from the resonances the amplitudes move slowly, the steps grow
-HB_CONVERGENCE_H = (5, 9, 15, 25)  # HB at each continued branch's start frequency, each H from the one before (or
-# from the shot orbit's harmonics where that fails): measured 0.1-0.7 s of CPU each at H = 25 in the scene
+HB_CONVERGENCE_H = (5, 9, 15, 25)  # HB at each continued branch's start frequency, each H from the last one found
+# (measured 0.1-0.7 s of CPU each at H = 25 in the scene; from the shot orbit's harmonics Newton fails below H = 41)
 VERDICT_SAMPLES = 64  # a segment, where the shot orbit is compared with DOP853 and HB (512 a period at S = 8)
 HB_MAX_ITER = 30  # Newton steps of each: from the H before it converges in 5-30 (measured; the AFT residual has kinks)
 # a start that needs more is not near an HB solution (60 steps that fail cost 1-4 s of CPU at H = 25)
-START_HARMONICS = 41  # of the shot orbit, HB's second start where Newton does not converge from the lower H
 MEET_REL = 2e-2  # a continued orbit within this of a branch before it (interpolated linearly between its points)
 # is on it: the interpolation's own error between points ~0.1 Hz apart is below 1e-2 off the folds
 def load_vector(spec, rows: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
@@ -202,7 +201,8 @@ def _continued(spec, br, checks: list, rows: np.ndarray, verdicts: list | None =
         a0 = np.max(np.abs(start.orbit(SHOOT_SAMPLES // 10)[1][:, :rows.shape[1]] @ rows.T), axis=0)
         if _meets(done, start.freq_hz, a0):
             continue
-        kw = dict(max_steps=half, point_rows=rows, ds=SHOOT_CONTINUATION_DS, ds_max=SHOOT_CONTINUATION_DS_MAX)
+        kw = dict(max_steps=half, point_rows=rows, ds=SHOOT_CONTINUATION_DS, ds_max=SHOOT_CONTINUATION_DS_MAX,
+                  leave_contact=True)
         down = continue_friction(start, spec.freq_min_hz, spec.freq_max_hz, direction=-1.0,
                                  stop=lambda f, a: _met(done, [], f, a), **kw)
         up = continue_friction(start, spec.freq_min_hz, spec.freq_max_hz, direction=1.0,
@@ -238,8 +238,8 @@ def _verdict(start, br, rows: np.ndarray) -> BranchVerdict:
     Shooting: its defect, one exact run over the period (period defect), and DOP853 restarted at every state change
     over the period from the orbit's first node, sampled VERDICT_SAMPLES a segment, against the exact flow run from
     each node (max |y_DOP853 - y_exact| / D). HB: at the orbit's frequency for each H of HB_CONVERGENCE_H, Newton
-    from the one before (the first from the curve's HB orbit there; from the shot orbit's START_HARMONICS harmonics
-    where that fails), its amplitudes and time histories against the shot orbit's."""
+    from the last H found (the first from the curve's HB orbit there), its amplitudes and time histories against
+    the shot orbit's."""
     system, f, S = start.system, start.freq_hz, start.nodes.shape[0]
     n = system.n
     m = VERDICT_SAMPLES
@@ -258,18 +258,14 @@ def _verdict(start, br, rows: np.ndarray) -> BranchVerdict:
     if isinstance(br, Exception):
         return out
     _, _, X = solution_at_frequency(br, f, float(A[0]), 0, stable_only=False)
-    shot_X = _projection_matrix(START_HARMONICS, _phases(len(t) - 1)) @ y[:-1, :n]
     fb, Xc = br.balance, X
     for H in HB_CONVERGENCE_H:
         got = None
-        for X0 in (Xc, shot_X):
-            if X0 is None:
-                continue
+        if Xc is not None:
             try:
-                got = hb_at_frequency(fb, X0, f, H, max_iter=HB_MAX_ITER)
-                break
+                got = hb_at_frequency(fb, Xc, f, H, max_iter=HB_MAX_ITER)
             except NewtonError:
-                continue
+                pass
         if got is None:
             out.hb.append((H, None, None))
             continue

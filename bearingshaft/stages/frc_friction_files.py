@@ -33,7 +33,9 @@ def write(result, writer) -> None:
 
 def curve_rows(result) -> list[dict]:
     """frc.csv: per level and HB point, the amplitude at every point, each slider's open, stick and slip
-    fractions of the period, the largest Hill multiplier and the verdict.
+    fractions of the period, the largest Hill multiplier and the verdict, and whether the point is part of the
+    drawn curve (``drawn`` false: in contact where HB is not converged in H, :func:`hb_converged`; the continued
+    exact orbits of frc_friction_shooting.csv are the drawn curve there).
 
 
     Parameters
@@ -46,13 +48,15 @@ def curve_rows(result) -> list[dict]:
             continue
         fb = br.balance
         sliders = br.balance.system.friction.names
+        faint = _hb_unconverged_in_contact(result, P, br)
         for i in range(len(br.freq_hz)):
             row = {"level_N": P, "freq_hz": float(br.freq_hz[i])}
             row.update({f"{n}_m": float(a) for n, a in zip(result.names, br.amplitude_m[i], strict=True)})
             st = fb.slider_state(br.z[i])
             for k, s in enumerate(sliders):
                 row.update({f"{s}_open": float(st[k, 0]), f"{s}_stick": float(st[k, 1]), f"{s}_slip": float(st[k, 2])})
-            row.update(max_abs_mu=float(np.max(np.abs(br.multipliers[i]))), stable="true" if br.stable[i] else "false")
+            row.update(max_abs_mu=float(np.max(np.abs(br.multipliers[i]))), stable="true" if br.stable[i] else "false",
+                       drawn="false" if faint[i] else "true")
             rows.append(row)
     return rows
 
@@ -137,9 +141,13 @@ def shooting_markdown(result) -> list[str]:
              "From every orbit shot at an unsettled point (in frequency order), the exact friction orbits are "
              "continued both ways in frequency (reduced.periodic.friction_continuation.continue_friction: "
              "pseudo-arclength on the 8-node shooting equations with the frequency as unknown, a chord/Broyden "
-             "corrector with minimum-norm steps), each way for at most [frc] shooting_steps / 2 points, until it "
-             "leaves the band or meets a branch continued before it (within 2e-2 of its amplitudes; a start on such "
-             "a branch is not continued again). Jacobian and monodromy exact (reduced.periodic.friction_sensitivity: "
+             "corrector with minimum-norm steps; the step grows where the corrector moved the predictor by at most "
+             "0.1 of it), each way until it leaves the band, leaves the contact (no stop closes over the period: the "
+             "open-gap orbit, linear, where HB is exact), meets a branch continued before it (within 2e-2 of its "
+             "amplitudes; a start on such a branch is not continued again), turns back onto its own path or its own "
+             "down half past a fold, its corrector fails, or after [frc] shooting_steps / 2 points (the CPU budget: "
+             "about 0.3 s a point in contact); each end is stated with its reason. Jacobian and monodromy exact "
+             "(reduced.periodic.friction_sensitivity: "
              "the state transition matrices of the states visited and the saltation matrix at every stick, slip and "
              "gap event); bifurcations from the multipliers crossing the unit circle between two points (a fold "
              "where df/ds also changes sign; grazing where a tip opens or closes for the whole period: the "
@@ -317,7 +325,7 @@ def verdict_markdown(result) -> list[str]:
              "(reduced.transient.friction.reference_dop853, rtol 1e-12), over the period from the orbit's start, "
              "against the exact flow (max |y_DOP853 - y_exact| in units of the amplitude, 512 samples). HB: Newton at "
              f"the orbit's frequency for H = {', '.join(str(h) for h in hs)} (the curve's harmonic set and AFT "
-             "sampling rule, each H from the one before), its amplitudes against the shot orbit's (HB / shooting - 1) "
+             "sampling rule, each H from the last found), its amplitudes against the shot orbit's (HB / shooting - 1) "
              "and the largest difference of the time histories over the period relative to the point's amplitude "
              "(worst point). Issue 25's rule: the drawn curve is the one whose amplitudes no longer move with H "
              f"(here: by at most {HB_CONVERGED:g} between the two highest H), or the orbits continued by shooting "

@@ -14,12 +14,14 @@ from bearingshaft.scenes import Scene
 SKIPPED = (
     ("converged curve by shooting", "the exact orbits are continued by shooting with the sliders "
      "(reduced.periodic.friction_continuation, exact Jacobians) from every orbit shot at an unsettled point, each "
-     "way for [frc] shooting_steps / 2 points (about 0.3 s of CPU a point in contact), not over the whole band; "
-     "Hill's method gives the stability along the whole HB curve"),
+     "way for at most [frc] shooting_steps / 2 points (about 0.3 s of CPU a point in contact), not over the whole "
+     "contact band: the exact branch folds every 0.5-1 Hz and advances ~0.05 Hz a point on average (measured on "
+     "this scene: covering 14.3-30 Hz would take some 300 points, ~100 s of CPU); Hill's method gives the "
+     "stability along the whole HB curve"),
     ("response map", "its classifier (periodic, subharmonic, chaotic, Lyapunov exponent) runs the exact flow "
      "without sliders"),
-    ("convergence in H", "each H's curve is a continuation with AFT (tens of seconds a curve); the stepped "
-     "sine's error at the curve's H says how far it is"),
+    ("convergence in H of the whole curve", "each H's curve is a continuation with AFT (tens of seconds a curve): "
+     "HB's convergence in H is measured at each continued branch's start instead (its section above)"),
     ("backbone check", "with friction the free motion is not conservative: no NNM backbone to approach"),
 )
 

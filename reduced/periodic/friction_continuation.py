@@ -18,7 +18,8 @@ after one that fails (down to ``ds_min``: the branch ends there).
 
 **Where a branch ends**, each with its reason in ``status``: it leaves the band; the corrector fails down to
 ``ds_min``; a new point lies within ``RETRACE_STEP`` ds of an earlier point of its own (past a fold the path has
-turned back onto orbits it passed); the caller's ``stop`` says so (e.g. it meets a branch continued before,
+turned back onto orbits it passed); with ``leave_contact``, its orbit no longer touches a stop; the caller's
+``stop`` says so (e.g. it meets a branch continued before,
 :func:`on_branch`); or ``max_steps`` points.
 
 **Jacobian, monodromy and the non-smooth transitions.** dG/dz is the segments' monodromies, exact
@@ -292,7 +293,7 @@ def _correct(cont: _Continuation, J: np.ndarray, t: np.ndarray, u: np.ndarray, h
 def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_max_hz: float, *,
                       direction: float = 1.0, ds: float = 0.05, ds_min: float = 1e-4, ds_max: float = 0.5,
                       max_steps: int = 40, point_rows: np.ndarray | None = None,
-                      tol: float = TOL, stop=None) -> FrictionShootingBranch:
+                      tol: float = TOL, stop=None, leave_contact: bool = False) -> FrictionShootingBranch:
     """Continue a converged friction orbit in frequency by pseudo-arclength on the shooting equations.
 
     Unknowns u = [z / D; f] (z = [x; v; Bt x - w] at the S nodes, D the start's scale, f in Hz); equations
@@ -314,6 +315,8 @@ def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_ma
     stop : callable, optional
         ``stop(f_hz, amplitude_m) -> str or None`` after each new point: a str ends the branch there (its status),
         e.g. where it meets another branch. (A point back on the branch's own path ends it too: module docstring.)
+    leave_contact : end the branch, started in contact, at its first orbit on which no stop closes (sampled
+        SAMPLES_PER_SEGMENT a segment): the open-gap orbit is linear, HB gives it exactly
 
     Returns
     -------
@@ -337,10 +340,13 @@ def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_ma
     cont = _Continuation(system, start.b, start.amplitude_N, start.phase_deg, S, D)
     t_clock = time.perf_counter()
 
+    touching = []  # whether a stop closes somewhere on each point's orbit (sampled as the amplitudes)
+
     def amplitudes(Y: np.ndarray, f: float) -> np.ndarray:
         h = 1.0 / f / S
         xs = np.vstack([flow(system, start.b, start.amplitude_N, f, Y[k], k * h, h, SAMPLES_PER_SEGMENT,
                              start.phase_deg)[:, :n] for k in range(S)])
+        touching.append(bool(system.m) and bool(np.any(system.side * (xs @ system.B.T - system.offset) > 0.0)))
         return np.max(np.abs(xs @ rows.T), axis=0)
 
     res0 = cont.res(start.freq_hz)
@@ -377,6 +383,10 @@ def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_ma
         us.append(u)
         if not f0 <= u[-1] <= f1:
             status = f"left the band at f = {u[-1]:.6g} Hz"
+            break
+        if leave_contact and touching[0] and not touching[-1]:
+            status = (f"left the contact at f = {u[-1]:.6g} Hz (every stop open over the period: the open-gap "
+                      "orbit, linear)")
             break
         why = _retrace(us, u, h) or (stop(float(u[-1]), pts[-1][2]) if stop is not None else None)
         if why:
