@@ -13,8 +13,7 @@ cuts the defect by ``CHORD_RATE``), then refreshed at the iterate; each step the
 solution (a slider open or stuck the whole period leaves a null direction of dG/dz, as in the shooting at one
 frequency: rank < size). The tangent at a converged point solves [[dG/du]; t_i^T] t = [0; 1] (least squares),
 normalised and oriented along t_i, so it passes folds where df/ds = 0. ds grows by ``DS_GROW`` after a corrector
-of at most ``EASY_STEPS`` steps or one that moved the predictor by at most ``SMALL_CORRECTION`` ds, and is halved
-after one that fails (down to ``ds_min``: the branch ends there).
+of at most ``EASY_STEPS`` steps and is halved after one that fails (down to ``ds_min``: the branch ends there).
 
 **Where a branch ends**, each with its reason in ``status``: it leaves the band; the corrector fails down to
 ``ds_min``; a new point lies within ``RETRACE_STEP`` ds of an earlier point of its own (past a fold the path has
@@ -71,9 +70,6 @@ CHORD_RATE = 0.25  # a chord step must cut max |G| by this, else the Jacobian is
 MAX_CORRECTOR = 12  # corrector steps at most (chord and refreshed together)
 EASY_STEPS = 4  # a corrector of at most this many steps grows ds
 DS_GROW = 1.5  # the factor
-SMALL_CORRECTION = 0.1  # a corrector that moved the predictor by at most this x ds also grows ds: the chord's count
-# of steps says little about the step (it converges linearly to TOL: 6-10 steps at any ds in contact, measured on the
-# discrete friction model), the predictor's error does (the branch's curvature x ds^2)
 RETRACE_SKIP = 3  # the last points a new one is not compared with for a retrace (its own neighbours)
 RETRACE_STEP = 0.5  # x ds: a new point this near (in u) an earlier one of its own branch has turned back onto it
 REAL_TOL = 1e-8  # |Im mu| <= this x |mu|: a real multiplier
@@ -366,7 +362,7 @@ def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_ma
 
     record(u, G, res, Y, J, blocks, t, 0)
     us = [u]  # the points in u, for the retrace check
-    status, h = f"{max_steps} steps", float(ds)
+    status, h = "", float(ds)
     while len(pts) <= max_steps:
         ok, k_corr, v, Gv, res_v, Yv, ends_v = _correct(cont, J, t, u, h, tol)
         if not ok:
@@ -375,7 +371,6 @@ def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_ma
                 status = f"ds below {ds_min:g} at f = {u[-1]:.6g} Hz (the corrector does not converge)"
                 break
             continue
-        u_prev, t_prev = u, t
         J, blocks = cont.jacobian(v, Gv, res_v, Yv, ends_v)
         t = _tangent(J, t)
         u, G, res, Y = v, Gv, res_v, Yv
@@ -392,8 +387,9 @@ def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_ma
         if why:
             status = why
             break
-        if k_corr <= EASY_STEPS or float(np.linalg.norm(v - (u_prev + h * t_prev))) <= SMALL_CORRECTION * h:
+        if k_corr <= EASY_STEPS:
             h = min(h * DS_GROW, ds_max)
+    status = status or f"point budget ({max_steps} points) at f = {u[-1]:.6g} Hz"
     f, Ys, A, mu, dfc, rk, tf, kc = (np.array(c) for c in zip(*pts, strict=True))
     stable = np.max(np.abs(mu), axis=1) <= 1.0 + STABLE_TOL
     return FrictionShootingBranch(f, Ys, A, mu, stable, dfc, rk, tf, bifurcations(mu, tf, rk), kc, status,
