@@ -301,7 +301,16 @@ def markdown(result) -> str:
 
 def hb_converged(v) -> bool | None:
     """Whether HB is converged in H at a branch's start (no amplitude moves by more than HB_CONVERGED between the two
-    highest H with a solution; None: fewer than two)."""
+    highest H with a solution; None: fewer than two).
+
+    Parameters
+    ----------
+    v : BranchVerdict
+
+    Returns
+    -------
+    bool or None
+    """
     moves = v.hb_moves()
     return None if moves is None else bool(np.max(moves) <= HB_CONVERGED)
 

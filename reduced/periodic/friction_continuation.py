@@ -239,6 +239,18 @@ def on_branch(freq_hz: np.ndarray, amplitude_m: np.ndarray, f: float, a: np.ndar
     """Whether the orbit of amplitudes a (q,) m at f Hz lies on the branch (freq_hz (k,), amplitude_m (k, q)): between
     two consecutive points of it, within ``rel`` of the amplitudes interpolated linearly in frequency.
 
+    Parameters
+    ----------
+    freq_hz : (k,) Hz, the branch's points
+    amplitude_m : (k, q) m, their amplitudes
+    f : Hz, the orbit's frequency
+    a : (q,) m, its amplitudes
+    rel : the largest max |a / interpolated - 1| that counts as on the branch
+
+    Returns
+    -------
+    bool
+
     Examples
     --------
     >>> on_branch(np.array([1.0, 2.0]), np.array([[1.0], [2.0]]), 1.5, np.array([1.51]), 0.02)
@@ -291,6 +303,8 @@ def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_ma
                       max_steps: int = 40, point_rows: np.ndarray | None = None,
                       tol: float = TOL, stop=None, leave_contact: bool = False) -> FrictionShootingBranch:
     """Continue a converged friction orbit in frequency by pseudo-arclength on the shooting equations.
+
+    Long because the predictor-corrector loop and its ends (module docstring) share the state of the branch.
 
     Unknowns u = [z / D; f] (z = [x; v; Bt x - w] at the S nodes, D the start's scale, f in Hz); equations
     R_k = (phi(y_k; t_k, T / S) - y_{k+1}) / D = 0 (:mod:`reduced.periodic.friction_shooting`) and
