@@ -49,7 +49,7 @@ from reduced.periodic.frc import FRC_STEPS, linear_frf, solution_at_frequency
 from reduced.periodic.friction_aft import friction_frc
 from reduced.periodic.friction_continuation import continue_friction, joined, on_branch
 from reduced.periodic.friction_shooting import flow, hb_at_frequency, hb_displacements, hb_nodes, shoot_friction
-from reduced.periodic.hb import NewtonError
+from reduced.periodic.hb import NewtonError, _phases, _projection_matrix
 from reduced.transient.friction import integrate_exact_friction, reference_dop853
 
 SAMPLES_PER_PERIOD = 400  # of the exact run's output: the amplitude read on these (error ~ (pi / 400)^2 / 2 = 3e-5)
@@ -61,8 +61,9 @@ SHOOT_SAMPLES = 500  # of each of the 8 segments of a shot orbit: its amplitudes
 SHOOT_CONTINUATION_DS = 0.3  # the first arclength step of the continued shooting (z / D and Hz: ~0.1 Hz at the
 # start's tangent in the scene; measured from 14.29 Hz down, 10 points over 0.9 Hz in 3.9 s CPU, load 4)
 SHOOT_CONTINUATION_DS_MAX = 2.0  # its bound: away from the resonances the amplitudes move slowly, the steps grow
-HB_CONVERGENCE_H = (5, 9, 15, 25)  # HB at each continued branch's start frequency, each H from the last one found
-# (measured 0.1-0.7 s of CPU each at H = 25 in the scene; from the shot orbit's harmonics Newton fails below H = 41)
+HB_CONVERGENCE_H = (5, 9, 15, 25)  # HB at each continued branch's start frequency, each H from the last one found,
+# else from the shot orbit's harmonics (measured 0.1-0.7 s of CPU each at H = 25 in the scene)
+START_HARMONICS = 41  # of the shot orbit, HB's second start where Newton does not converge from the last H found
 VERDICT_SAMPLES = 64  # a segment, where the shot orbit is compared with DOP853 and HB (512 a period at S = 8)
 HB_MAX_ITER = 30  # Newton steps of each: from the H before it converges in 5-30 (measured; the AFT residual has kinks)
 # a start that needs more is not near an HB solution (60 steps that fail cost 1-4 s of CPU at H = 25)
@@ -238,8 +239,8 @@ def _verdict(start, br, rows: np.ndarray) -> BranchVerdict:
     Shooting: its defect, one exact run over the period (period defect), and DOP853 restarted at every state change
     over the period from the orbit's first node, sampled VERDICT_SAMPLES a segment, against the exact flow run from
     each node (max |y_DOP853 - y_exact| / D). HB: at the orbit's frequency for each H of HB_CONVERGENCE_H, Newton
-    from the last H found (the first from the curve's HB orbit there), its amplitudes and time histories against
-    the shot orbit's."""
+    from the last H found (the first from the curve's HB orbit there), else from the shot orbit's START_HARMONICS
+    harmonics, its amplitudes and time histories against the shot orbit's."""
     system, f, S = start.system, start.freq_hz, start.nodes.shape[0]
     n = system.n
     m = VERDICT_SAMPLES
@@ -258,14 +259,18 @@ def _verdict(start, br, rows: np.ndarray) -> BranchVerdict:
     if isinstance(br, Exception):
         return out
     _, _, X = solution_at_frequency(br, f, float(A[0]), 0, stable_only=False)
+    shot_X = _projection_matrix(START_HARMONICS, _phases(len(t) - 1)) @ y[:-1, :n]
     fb, Xc = br.balance, X
     for H in HB_CONVERGENCE_H:
         got = None
-        if Xc is not None:
+        for X0 in (Xc, shot_X):
+            if X0 is None:
+                continue
             try:
-                got = hb_at_frequency(fb, Xc, f, H, max_iter=HB_MAX_ITER)
+                got = hb_at_frequency(fb, X0, f, H, max_iter=HB_MAX_ITER)
+                break
             except NewtonError:
-                pass
+                continue
         if got is None:
             out.hb.append((H, None, None))
             continue

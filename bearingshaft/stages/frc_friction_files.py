@@ -334,11 +334,11 @@ def verdict_markdown(result) -> list[str]:
              "(reduced.transient.friction.reference_dop853, rtol 1e-12), over the period from the orbit's start, "
              "against the exact flow (max |y_DOP853 - y_exact| in units of the amplitude, 512 samples). HB: Newton at "
              f"the orbit's frequency for H = {', '.join(str(h) for h in hs)} (the curve's harmonic set and AFT "
-             "sampling rule, each H from the last found), its amplitudes against the shot orbit's (HB / shooting - 1) "
-             "and the largest difference of the time histories over the period relative to the point's amplitude "
-             "(worst point). Issue 25's rule: the drawn curve is the one whose amplitudes no longer move with H "
-             f"(here: by at most {HB_CONVERGED:g} between the two highest H), or the orbits continued by shooting "
-             "on the exact flow.", "",
+             "sampling rule, each H from the last found, else from the shot orbit's harmonics), its amplitudes "
+             "against the shot orbit's (HB / shooting - 1) and the largest difference of the time histories over the "
+             "period relative to the point's amplitude (worst point). Issue 25's rule: the drawn curve is the one "
+             f"whose amplitudes no longer move with H (here: by at most {HB_CONVERGED:g} between the two highest H), "
+             "or the orbits continued by shooting on the exact flow.", "",
              "| level [N] | branch | f [Hz] | shooting defect | period defect | DOP853 vs exact | max abs multiplier | "
              "H | " + " | ".join(f"{n}: HB / shot - 1" for n in names) + " | history (worst) |",
              "|---" * (len(names) + 9) + "|"]
