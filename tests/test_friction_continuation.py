@@ -93,3 +93,18 @@ def test_the_bifurcations_are_read_from_the_multipliers():
     got = bifurcations(mu, tf, rank)
     assert got == [(1, "fold"), (3, "branch_point"), (4, "branch_point"), (4, "period_doubling"),
                    (5, "period_doubling"), (5, "neimark_sacker"), (6, "grazing")], got
+
+
+def test_a_branch_that_turns_back_onto_its_own_path_ends_there():
+    # _retrace: a new point within RETRACE_STEP x ds of an earlier point of its own (not its last RETRACE_SKIP
+    # neighbours) ends the branch with the reason; a point a step away from all of them does not
+    from reduced.periodic.friction_continuation import RETRACE_SKIP, RETRACE_STEP, _retrace
+
+    path = [np.array([0.0, float(k)]) for k in range(6)]  # a straight path, one unit a step
+    assert _retrace(path + [np.array([0.0, 6.0])], np.array([0.0, 6.0]), 1.0) is None
+    back = np.array([0.2 * RETRACE_STEP, 1.0])  # past a fold, back near point 1
+    why = _retrace(path + [back], back, 1.0)
+    assert why is not None and "turned back onto its own orbit" in why and "point 1" in why
+    # the last RETRACE_SKIP points are its own neighbours: no retrace on them
+    near = np.array([0.0, 5.0 + 0.1])
+    assert RETRACE_SKIP >= 2 and _retrace(path + [near], near, 1.0) is None

@@ -36,6 +36,7 @@ import numpy as np
 from bearingshaft.scenes import Scene
 from bearingshaft.stages.frc_friction_results import (  # noqa: F401
     SKIPPED,
+    BranchVerdict,
     FrictionCheck,
     FrictionFRCResult,
     ShootCheck,
@@ -46,10 +47,10 @@ from reduced.models.loads import Harmonic, Loads
 from reduced.periodic.continuation import ContinuationError
 from reduced.periodic.frc import FRC_STEPS, linear_frf, solution_at_frequency
 from reduced.periodic.friction_aft import friction_frc
-from reduced.periodic.friction_continuation import continue_friction, joined
-from reduced.periodic.friction_shooting import hb_at_frequency, hb_displacements, hb_nodes, shoot_friction
-from reduced.periodic.hb import NewtonError
-from reduced.transient.friction import integrate_exact_friction
+from reduced.periodic.friction_continuation import continue_friction, joined, on_branch
+from reduced.periodic.friction_shooting import flow, hb_at_frequency, hb_displacements, hb_nodes, shoot_friction
+from reduced.periodic.hb import NewtonError, _phases, _projection_matrix
+from reduced.transient.friction import integrate_exact_friction, reference_dop853
 
 SAMPLES_PER_PERIOD = 400  # of the exact run's output: the amplitude read on these (error ~ (pi / 400)^2 / 2 = 3e-5)
 SETTLE_CHUNK = 10  # periods run at a time between two settling checks
@@ -60,6 +61,12 @@ SHOOT_SAMPLES = 500  # of each of the 8 segments of a shot orbit: its amplitudes
 SHOOT_CONTINUATION_DS = 0.3  # the first arclength step of the continued shooting (z / D and Hz: ~0.1 Hz at the
 # start's tangent in the scene; measured from 14.29 Hz down, 10 points over 0.9 Hz in 3.9 s CPU, load 4)
 SHOOT_CONTINUATION_DS_MAX = 2.0  # its bound: away from the resonances the amplitudes move slowly, the steps grow
+HB_CONVERGENCE_H = (5, 9, 15, 25)  # HB at each continued branch's start frequency, each H from the last one found,
+# else from the shot orbit's harmonics (measured 0.1-0.7 s of CPU each at H = 25 in the scene)
+START_HARMONICS = 41  # of the shot orbit, HB's second start where Newton does not converge from the last H found
+VERDICT_SAMPLES = 64  # a segment, where the shot orbit is compared with DOP853 and HB (512 a period at S = 8)
+HB_MAX_ITER = 30  # Newton steps of each: from the H before it converges in 5-30 (measured; the AFT residual has kinks)
+# a start that needs more is not near an HB solution (60 steps that fail cost 1-4 s of CPU at H = 25)
 MEET_REL = 2e-2  # a continued orbit within this of a branch before it (interpolated linearly between its points)
 # is on it: the interpolation's own error between points ~0.1 Hz apart is below 1e-2 off the folds
 def load_vector(spec, rows: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
@@ -138,7 +145,7 @@ def compute(scene: Scene, progress: bool = False) -> FrictionFRCResult:
     names = tuple(scene.model.point_names)
     b = load_vector(spec, rows, names)
     rows = np.asarray(rows, float)
-    curves, checks, linear, shooting, stats = {}, {}, {}, {}, {"levels": {}}
+    curves, checks, linear, shooting, verdicts, stats = {}, {}, {}, {}, {}, {"levels": {}}
     f_lin = np.geomspace(spec.freq_min_hz, spec.freq_max_hz, 400)
     for P in spec.levels_N:
         t0 = time.perf_counter()
@@ -162,22 +169,26 @@ def compute(scene: Scene, progress: bool = False) -> FrictionFRCResult:
         errs = [c.rel_error for c in checks[P] if math.isfinite(c.rel_error)]
         st["worst_check_error"] = max(errs) if errs else math.nan
         t2, c2 = time.perf_counter(), time.process_time()
-        shooting[P] = _continued(spec, br, checks[P], rows)
+        verdicts[P] = []
+        shooting[P] = _continued(spec, br, checks[P], rows, verdicts[P])
         st["continued_shooting"] = {"wall_s": time.perf_counter() - t2, "cpu_s": time.process_time() - c2}
         if isinstance(shooting[P], list):
             st["continued_shooting"]["branches"] = [
                 {"points": len(c.branch.freq_hz), "status": c.branch.status,
                  "bifurcations": [[int(i), k] for i, k in c.branch.bifurcations]} for c in shooting[P]]
         stats["levels"][str(P)] = st
-    return FrictionFRCResult(scene, names, b, curves, checks, linear, stats, shooting)
+    return FrictionFRCResult(scene, names, b, curves, checks, linear, stats, shooting, verdicts)
 
 
-def _continued(spec, br, checks: list, rows: np.ndarray) -> list | str:
+def _continued(spec, br, checks: list, rows: np.ndarray, verdicts: list | None = None) -> list | str:
     """The exact orbits continued both ways in frequency from every orbit shot at an unsettled point (in frequency
     order; :func:`reduced.periodic.friction_continuation.continue_friction`), each way for at most ``[frc]
     shooting_steps`` // 2 points, until it leaves the band or meets a branch continued before it (:func:`_meets`);
-    a start already on such a branch is not continued again. Each point against the HB curve's solution at its
-    frequency nearest it. A list of ShootingCurve, or why none (a str)."""
+    a start already on such a branch is not continued again. The up direction also ends where it comes back onto
+    its own down half, and either where it turns back onto its own path, fails, or leaves the band
+    (:func:`reduced.periodic.friction_continuation.continue_friction`: each end with its reason). Each point against
+    the HB curve's solution at its frequency nearest it; each branch's start orbit judged by :func:`_verdict` into
+    ``verdicts``. A list of ShootingCurve, or why none (a str)."""
     half = spec.shooting_steps // 2
     if half <= 0:
         return "not run: shooting_steps = 0"
@@ -192,29 +203,81 @@ def _continued(spec, br, checks: list, rows: np.ndarray) -> list | str:
         if _meets(done, start.freq_hz, a0):
             continue
         kw = dict(max_steps=half, point_rows=rows, ds=SHOOT_CONTINUATION_DS, ds_max=SHOOT_CONTINUATION_DS_MAX,
-                  stop=lambda f, a: (f"met a branch continued before at f = {f:.6g} Hz"
-                                     if _meets(done, f, a) else None))
-        down = continue_friction(start, spec.freq_min_hz, spec.freq_max_hz, direction=-1.0, **kw)
-        up = continue_friction(start, spec.freq_min_hz, spec.freq_max_hz, direction=1.0, **kw)
+                  leave_contact=True)
+        down = continue_friction(start, spec.freq_min_hz, spec.freq_max_hz, direction=-1.0,
+                                 stop=lambda f, a: _met(done, [], f, a), **kw)
+        up = continue_friction(start, spec.freq_min_hz, spec.freq_max_hz, direction=1.0,
+                               stop=lambda f, a, down=down: _met(done, [down], f, a), **kw)
         branch = joined(down, up)
         done.append(branch)
         out.append(_against_hb(branch, br))
+        if verdicts is not None:
+            verdicts.append(_verdict(start, br, rows))
     return out
+
+
+def _met(done: list, own: list, f: float, a: np.ndarray) -> str | None:
+    """Why a continued direction ends at (f, a): on a branch continued before, or back on its own down half (the
+    up direction past a fold); None to go on."""
+    if _meets(done, f, a):
+        return f"met a branch continued before at f = {f:.6g} Hz"
+    if _meets(own, f, a):
+        return f"turned back onto its own down half at f = {f:.6g} Hz"
+    return None
 
 
 def _meets(branches: list, f: float, a: np.ndarray) -> bool:
     """Whether the orbit of amplitudes ``a`` at f lies on one of ``branches``: between two consecutive points of
-    it, within MEET_REL of the amplitudes interpolated linearly in frequency."""
-    for b in branches:
-        F, A = b.freq_hz, b.amplitude_m
-        for i in range(len(F) - 1):
-            lo, hi = sorted((F[i], F[i + 1]))
-            if lo <= f <= hi:
-                w = (f - F[i]) / (F[i + 1] - F[i]) if F[i + 1] != F[i] else 0.0
-                ref = (1.0 - w) * A[i] + w * A[i + 1]
-                if float(np.max(np.abs(a / ref - 1.0))) <= MEET_REL:
-                    return True
-    return False
+    it, within MEET_REL of the amplitudes interpolated linearly in frequency
+    (:func:`reduced.periodic.friction_continuation.on_branch`)."""
+    return any(on_branch(b.freq_hz, b.amplitude_m, f, a, MEET_REL) for b in branches)
+
+
+def _verdict(start, br, rows: np.ndarray) -> BranchVerdict:
+    """Who is right at a continued branch's start orbit (issue 25's rule: the drawn curve is the converged one).
+
+    Shooting: its defect, one exact run over the period (period defect), and DOP853 restarted at every state change
+    over the period from the orbit's first node, sampled VERDICT_SAMPLES a segment, against the exact flow run from
+    each node (max |y_DOP853 - y_exact| / D). HB: at the orbit's frequency for each H of HB_CONVERGENCE_H, Newton
+    from the last H found (the first from the curve's HB orbit there), else from the shot orbit's START_HARMONICS
+    harmonics, its amplitudes and time histories against the shot orbit's."""
+    system, f, S = start.system, start.freq_hz, start.nodes.shape[0]
+    n = system.n
+    m = VERDICT_SAMPLES
+    t, y = start.orbit(m)
+    x = y[:, :n] @ rows.T
+    A = np.max(np.abs(x), axis=0)
+    loads = Loads(np.atleast_2d(start.b), (Harmonic(start.amplitude_N, f, start.phase_deg),))
+    y0 = start.nodes[0]
+    ref = reference_dop853(system, y0[:n], y0[n:2 * n], 1.0 / f, m * S * f, w0=y0[2 * n:], loads=loads, rtol=1e-12)
+    yr = np.hstack([ref.x, ref.v, ref.w])
+    k = min(len(yr), len(y))
+    dop = float(np.max(np.abs(yr[:k] - y[:k]) / start.scale))
+    end = flow(system, start.b, start.amplitude_N, f, y0, 0.0, 1.0 / f, 1, start.phase_deg)[-1]
+    out = BranchVerdict(f, A, float(start.defect), float(np.max(np.abs(end - y0) / start.scale)), dop,
+                        float(start.max_abs_multiplier))
+    if isinstance(br, Exception):
+        return out
+    _, _, X = solution_at_frequency(br, f, float(A[0]), 0, stable_only=False)
+    shot_X = _projection_matrix(START_HARMONICS, _phases(len(t) - 1)) @ y[:-1, :n]
+    fb, Xc = br.balance, X
+    for H in HB_CONVERGENCE_H:
+        got = None
+        for X0 in (Xc, shot_X):
+            if X0 is None:
+                continue
+            try:
+                got = hb_at_frequency(fb, X0, f, H, max_iter=HB_MAX_ITER)
+                break
+            except NewtonError:
+                continue
+        if got is None:
+            out.hb.append((H, None, None))
+            continue
+        fb, Xc = got
+        xh = hb_displacements(Xc, f, t) @ rows.T
+        out.hb.append((H, np.max(np.abs(xh), axis=0) / A - 1.0, np.max(np.abs(xh - x), axis=0) / A))
+    return out
 
 
 def _against_hb(branch, br) -> ShootingCurve:
@@ -296,5 +359,5 @@ def _shoot(system, b: np.ndarray, P: float, f: float, br, amplitude_ref: float, 
 
 
 
-__all__ = ["SKIPPED", "FrictionCheck", "FrictionFRCResult", "ShootCheck", "ShootingCurve", "compute", "load_vector",
-           "settle"]
+__all__ = ["SKIPPED", "BranchVerdict", "FrictionCheck", "FrictionFRCResult", "ShootCheck", "ShootingCurve", "compute",
+           "load_vector", "settle"]

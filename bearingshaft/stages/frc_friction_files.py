@@ -11,6 +11,8 @@ from bearingshaft.output import write_rows
 from bearingshaft.stages.frc_friction_results import SKIPPED, ShootingCurve
 
 AGREE = (1e-3, 1e-2, 1e-1)  # the bands of |HB / shooting - 1| the agreement table counts points in
+HB_CONVERGED = 1e-2  # HB is converged in H where no amplitude moves by more than this between its two highest H (the
+# drawing's resolution; the shot orbits are exact to ~1e-9, by DOP853)
 
 
 def write(result, writer) -> None:
@@ -31,7 +33,9 @@ def write(result, writer) -> None:
 
 def curve_rows(result) -> list[dict]:
     """frc.csv: per level and HB point, the amplitude at every point, each slider's open, stick and slip
-    fractions of the period, the largest Hill multiplier and the verdict.
+    fractions of the period, the largest Hill multiplier and the verdict, and whether the point is part of the
+    drawn curve (``drawn`` false: in contact where HB is not converged in H, :func:`hb_converged`; the continued
+    exact orbits of frc_friction_shooting.csv are the drawn curve there).
 
 
     Parameters
@@ -44,13 +48,15 @@ def curve_rows(result) -> list[dict]:
             continue
         fb = br.balance
         sliders = br.balance.system.friction.names
+        faint = _hb_unconverged_in_contact(result, P, br)
         for i in range(len(br.freq_hz)):
             row = {"level_N": P, "freq_hz": float(br.freq_hz[i])}
             row.update({f"{n}_m": float(a) for n, a in zip(result.names, br.amplitude_m[i], strict=True)})
             st = fb.slider_state(br.z[i])
             for k, s in enumerate(sliders):
                 row.update({f"{s}_open": float(st[k, 0]), f"{s}_stick": float(st[k, 1]), f"{s}_slip": float(st[k, 2])})
-            row.update(max_abs_mu=float(np.max(np.abs(br.multipliers[i]))), stable="true" if br.stable[i] else "false")
+            row.update(max_abs_mu=float(np.max(np.abs(br.multipliers[i]))), stable="true" if br.stable[i] else "false",
+                       drawn="false" if faint[i] else "true")
             rows.append(row)
     return rows
 
@@ -135,9 +141,13 @@ def shooting_markdown(result) -> list[str]:
              "From every orbit shot at an unsettled point (in frequency order), the exact friction orbits are "
              "continued both ways in frequency (reduced.periodic.friction_continuation.continue_friction: "
              "pseudo-arclength on the 8-node shooting equations with the frequency as unknown, a chord/Broyden "
-             "corrector with minimum-norm steps), each way for at most [frc] shooting_steps / 2 points, until it "
-             "leaves the band or meets a branch continued before it (within 2e-2 of its amplitudes; a start on such "
-             "a branch is not continued again). Jacobian and monodromy exact (reduced.periodic.friction_sensitivity: "
+             "corrector with minimum-norm steps), each way until it leaves the band, leaves the contact (no stop "
+             "closes over the period: the open-gap orbit, linear, where HB is exact), meets a branch continued "
+             "before it (within 2e-2 of its amplitudes; a start on such a branch is not continued again), turns back "
+             "onto its own path or its own down half past a fold, its corrector fails, or after [frc] "
+             "shooting_steps / 2 points (the CPU budget: about 0.3 s a point in contact); each end is stated with "
+             "its reason. Jacobian and monodromy exact "
+             "(reduced.periodic.friction_sensitivity: "
              "the state transition matrices of the states visited and the saltation matrix at every stick, slip and "
              "gap event); bifurcations from the multipliers crossing the unit circle between two points (a fold "
              "where df/ds also changes sign; grazing where a tip opens or closes for the whole period: the "
@@ -283,9 +293,91 @@ def markdown(result) -> str:
                          f"{c.friction_work_per_period_J:.3g} |")
     lines += shoot_markdown(result)
     lines += shooting_markdown(result)
+    lines += verdict_markdown(result)
     lines += ["", "## Skipped with friction, and why", ""]
     lines += [f"- **{what}**: {why}." for what, why in SKIPPED]
     return "\n".join(lines) + "\n"
+
+
+def hb_converged(v) -> bool | None:
+    """Whether HB is converged in H at a branch's start (no amplitude moves by more than HB_CONVERGED between the two
+    highest H with a solution; None: fewer than two).
+
+    Parameters
+    ----------
+    v : BranchVerdict
+
+    Returns
+    -------
+    bool or None
+    """
+    moves = v.hb_moves()
+    return None if moves is None else bool(np.max(moves) <= HB_CONVERGED)
+
+
+def verdict_markdown(result) -> list[str]:
+    """frc.md's section on who is right where HB and shooting disagree: per continued branch, the start orbit checked
+    independently, HB against it for each H, and which curve is drawn.
+
+    Parameters
+    ----------
+    result : FrictionFRCResult
+    """
+    names = result.names
+    verdicts = getattr(result, "verdicts", {}) or {}
+    if not any(verdicts.values()):
+        return []
+    hs = sorted({H for vs in verdicts.values() for v in vs for H, _, _ in v.hb})
+    lines = ["", "## Who is right where HB and shooting disagree: HB's convergence in H", "",
+             "At each continued branch's start orbit. Shooting: its defect, the period defect of one exact run over "
+             "the period, and an independent integration, DOP853 restarted at every state change "
+             "(reduced.transient.friction.reference_dop853, rtol 1e-12), over the period from the orbit's start, "
+             "against the exact flow (max |y_DOP853 - y_exact| in units of the amplitude, 512 samples). HB: Newton at "
+             f"the orbit's frequency for H = {', '.join(str(h) for h in hs)} (the curve's harmonic set and AFT "
+             "sampling rule, each H from the last found, else from the shot orbit's harmonics), its amplitudes "
+             "against the shot orbit's (HB / shooting - 1) and the largest difference of the time histories over the "
+             "period relative to the point's amplitude (worst point). Issue 25's rule: the drawn curve is the one "
+             f"whose amplitudes no longer move with H (here: by at most {HB_CONVERGED:g} between the two highest H), "
+             "or the orbits continued by shooting on the exact flow.", "",
+             "| level [N] | branch | f [Hz] | shooting defect | period defect | DOP853 vs exact | max abs multiplier | "
+             "H | " + " | ".join(f"{n}: HB / shot - 1" for n in names) + " | history (worst) |",
+             "|---" * (len(names) + 9) + "|"]
+    for P, vs in verdicts.items():
+        for m, v in enumerate(vs):
+            head = (f"| {P:g} | {m + 1} | {v.freq_hz:.5g} | {v.defect:.2g} | {v.period_defect:.2g} | "
+                    f"{v.dop853_rel:.2g} | {v.max_abs_multiplier:.4g} |")
+            for j, (H, a, h) in enumerate(v.hb):
+                lead = head if j == 0 else "| | | | | | | |"
+                if a is None:
+                    lines.append(f"{lead} {H} | " + " | ".join("no HB solution" for _ in names) + " | |")
+                    continue
+                w = int(np.argmax(h))
+                lines.append(f"{lead} {H} | " + " | ".join(f"{e:.3g}" for e in a) + f" | {h[w]:.3g} ({names[w]}) |")
+    lines += ["", "Verdicts, per branch (the drawn curve):", ""]
+    for P, vs in verdicts.items():
+        for m, v in enumerate(vs):
+            got = [(H, a) for H, a, _ in v.hb if a is not None]
+            ok = hb_converged(v)
+            exact = (f"the shot orbit is exact (defect {v.defect:.2g}, DOP853 within {v.dop853_rel:.2g} over a "
+                     "period)")
+            if ok is None:
+                lines.append(f"- {P:g} N, branch {m + 1} ({v.freq_hz:.5g} Hz): {exact}; HB found at fewer than two H: "
+                             "not judged. Drawn: the continued orbits.")
+                continue
+            moves = v.hb_moves()
+            w = int(np.argmax(moves))
+            (Ha, _), (Hb, ab) = got[-2], got[-1]
+            k = int(np.argmax(np.abs(ab)))
+            if ok:
+                lines.append(f"- {P:g} N, branch {m + 1} ({v.freq_hz:.5g} Hz): {exact}; HB converged in H (amplitudes "
+                             f"move by at most {moves[w]:.2g} between H = {Ha} and {Hb}) and within "
+                             f"{abs(ab[k]):.2g} of it ({names[k]}). Both agree; drawn: the continued orbits.")
+            else:
+                lines.append(f"- {P:g} N, branch {m + 1} ({v.freq_hz:.5g} Hz): {exact}; HB is not converged in H: "
+                             f"{names[w]} moves by {moves[w]:.2g} between H = {Ha} and {Hb} (HB / shooting - 1 at "
+                             f"H = {Hb}: {ab[k]:.2g} at {names[k]}). The shooting is right; drawn: the continued "
+                             "orbits, HB in contact faint.")
+    return lines
 
 
 def shoot_markdown(result) -> list[str]:
@@ -331,8 +423,18 @@ def shoot_markdown(result) -> list[str]:
     return lines
 
 
+def _hb_unconverged_in_contact(result, P, br) -> np.ndarray:
+    """(k,) bool: the HB curve's points where a slider's tip touches, if the verdict at some continued branch says
+    HB is not converged in H there (:func:`hb_converged`): drawn faint, the continued orbits being the drawn curve."""
+    vs = (getattr(result, "verdicts", {}) or {}).get(P, [])
+    if not any(hb_converged(v) is False for v in vs):
+        return np.zeros(len(br.freq_hz), bool)
+    return np.array([bool(np.any(br.balance.slider_state(z)[:, 0] < 1.0)) for z in br.z])
+
+
 def _plot(path, result) -> None:
-    """frc.png: the HB curves at the load's point (stable solid, unstable dotted), the frictionless open-gap
+    """frc.png: the HB curves at the load's point (stable solid, unstable dotted; faint in contact where HB is not
+    converged in H), the exact orbits continued by shooting (the drawn curve there), the frictionless open-gap
     response dashed, the exact settled points as circles; below, the stick and slip fractions of each slider."""
     import matplotlib
 
@@ -350,8 +452,15 @@ def _plot(path, result) -> None:
             ax.plot(f_lin, a_lin[:, col] * 1e3, "--", color=c, lw=0.7, label=f"open gaps, no friction, {P:g} N")
             if not isinstance(br, Exception):
                 a = br.amplitude_m[:, col] * 1e3
-                ax.plot(br.freq_hz, np.where(br.stable, a, np.nan), "-", color=c, label=f"HB with friction, {P:g} N")
-                ax.plot(br.freq_hz, np.where(br.stable, np.nan, a), ":", color=c)
+                H = br.balance.H
+                faint = _hb_unconverged_in_contact(result, P, br)
+                sure = np.where(faint, np.nan, a)
+                ax.plot(br.freq_hz, np.where(br.stable, sure, np.nan), "-", color=c,
+                        label=f"HB with friction, H = {H}, {P:g} N")
+                ax.plot(br.freq_hz, np.where(br.stable, np.nan, sure), ":", color=c)
+                if np.any(faint):
+                    ax.plot(br.freq_hz, np.where(faint, a, np.nan), "-", color=c, lw=0.6, alpha=0.35,
+                            label=f"HB, H = {H}, in contact: not converged in H (frc.md), {P:g} N")
             pts = result.checks[P]
             ax.plot([p.freq_hz for p in pts], [p.exact_m[col] * 1e3 for p in pts], "o", mfc="none", color=c,
                     label=f"exact, stepped sine, {P:g} N")
@@ -392,6 +501,7 @@ def _plot(path, result) -> None:
     ax.set_xlabel("excitation frequency [Hz]")
     if ax.lines:
         ax.legend(fontsize=7, ncol=2)
-    fig.suptitle(f"{result.scene.name}: HB by AFT with friction at the tips", fontsize=10)
+    fig.suptitle(f"{result.scene.name}: forced response with friction at the tips (HB by AFT, exact orbits by "
+                 "shooting)", fontsize=10)
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -14,12 +14,15 @@ from bearingshaft.scenes import Scene
 SKIPPED = (
     ("converged curve by shooting", "the exact orbits are continued by shooting with the sliders "
      "(reduced.periodic.friction_continuation, exact Jacobians) from every orbit shot at an unsettled point, each "
-     "way for [frc] shooting_steps / 2 points (about 0.3 s of CPU a point in contact), not over the whole band; "
-     "Hill's method gives the stability along the whole HB curve"),
+     "way for at most [frc] shooting_steps / 2 points (about 0.3 s of CPU a point in contact), not over the whole "
+     "contact band: in contact the exact branch advances 0.03-0.04 Hz a point and folds back (measured on this "
+     "scene: 0.65-0.85 Hz in 20 points; folds at 14.30 and 27.09 Hz here, at 18.03 and 26.12 Hz in runs of 40-60 "
+     "points), so 14.3-30 Hz would take 400-500 points, 120-150 s of CPU; Hill's method gives the stability along "
+     "the whole HB curve"),
     ("response map", "its classifier (periodic, subharmonic, chaotic, Lyapunov exponent) runs the exact flow "
      "without sliders"),
-    ("convergence in H", "each H's curve is a continuation with AFT (tens of seconds a curve); the stepped "
-     "sine's error at the curve's H says how far it is"),
+    ("convergence in H of the whole curve", "each H's curve is a continuation with AFT (tens of seconds a curve): "
+     "HB's convergence in H is measured at each continued branch's start instead (its section above)"),
     ("backbone check", "with friction the free motion is not conservative: no NNM backbone to approach"),
 )
 
@@ -124,6 +127,40 @@ class ShootingCurve:
 
 
 @dataclass(eq=False)
+class BranchVerdict:
+    """Who is right where HB and shooting disagree, at a continued branch's start orbit
+    (:func:`bearingshaft.stages.frc_friction._verdict`).
+
+    Attributes
+    ----------
+    freq_hz : Hz, the start orbit's frequency
+    shoot_m : (p,) m, max |x| over the shot orbit at each output point
+    defect : the multiple-shooting defect, in units of the amplitude
+    period_defect : |y(T) - y(0)| / D of one exact run over the whole period from the orbit's start
+    dop853_rel : max over one period of |y_DOP853(t) - y_exact(t)| / D, DOP853 restarted at every state change
+        (:func:`reduced.transient.friction.reference_dop853`, rtol 1e-12) from the orbit's start: the independent check
+    max_abs_multiplier : the largest |Floquet multiplier| of the start orbit
+    hb : [(H, (p,) amplitude HB / shooting - 1 or None where Newton found no HB solution, (p,) max over the period
+        of |x_HB - x_shooting| / max |x_shooting|, or None)] HB at the orbit's frequency for each H of HB_CONVERGENCE_H
+    """
+
+    freq_hz: float
+    shoot_m: np.ndarray
+    defect: float
+    period_defect: float
+    dop853_rel: float
+    max_abs_multiplier: float
+    hb: list = field(default_factory=list)
+
+    def hb_moves(self) -> np.ndarray | None:
+        """(p,) |A_H / A_H' - 1| between the two highest H with a solution (None: fewer than two)."""
+        got = [(H, a) for H, a, _ in self.hb if a is not None]
+        if len(got) < 2:
+            return None
+        return np.abs((1.0 + got[-1][1]) / (1.0 + got[-2][1]) - 1.0)
+
+
+@dataclass(eq=False)
 class FrictionFRCResult:
     """What :func:`bearingshaft.stages.frc_friction.compute` returns (its ``write`` writes it).
 
@@ -137,6 +174,8 @@ class FrictionFRCResult:
     linear : {P: (freq_hz (k,), amplitude (k, p))}, the open-gap response without friction
     stats : the stage's statistics
     shooting : {P: ShootingCurve or str}, the exact orbits continued by shooting, or why not
+    verdicts : {P: [BranchVerdict]}, one per continued branch (its start orbit): shooting checked independently, HB
+        against it for H = HB_CONVERGENCE_H
     """
 
     scene: Scene
@@ -147,6 +186,7 @@ class FrictionFRCResult:
     linear: dict  # {P: (freq_hz (k,), amplitude (k, p))} the open-gap response without friction
     stats: dict = field(default_factory=dict)
     shooting: dict = field(default_factory=dict)  # {P: ShootingCurve or str}
+    verdicts: dict = field(default_factory=dict)  # {P: [BranchVerdict]}
 
 
-__all__ = ["SKIPPED", "FrictionCheck", "FrictionFRCResult", "ShootCheck", "ShootingCurve"]
+__all__ = ["SKIPPED", "BranchVerdict", "FrictionCheck", "FrictionFRCResult", "ShootCheck", "ShootingCurve"]

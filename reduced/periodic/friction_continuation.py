@@ -15,6 +15,12 @@ frequency: rank < size). The tangent at a converged point solves [[dG/du]; t_i^T
 normalised and oriented along t_i, so it passes folds where df/ds = 0. ds grows by ``DS_GROW`` after a corrector
 of at most ``EASY_STEPS`` steps and is halved after one that fails (down to ``ds_min``: the branch ends there).
 
+**Where a branch ends**, each with its reason in ``status``: it leaves the band; the corrector fails down to
+``ds_min``; a new point lies within ``RETRACE_STEP`` ds of an earlier point of its own (past a fold the path has
+turned back onto orbits it passed); with ``leave_contact``, its orbit no longer touches a stop; the caller's
+``stop`` says so (e.g. it meets a branch continued before,
+:func:`on_branch`); or ``max_steps`` points.
+
 **Jacobian, monodromy and the non-smooth transitions.** dG/dz is the segments' monodromies, exact
 (:mod:`reduced.periodic.friction_sensitivity`: within a friction state the flow is affine, so over a piece the
 sensitivity is the state's matrix exponential; at each event of the integrator's log (gap open / close,
@@ -64,6 +70,8 @@ CHORD_RATE = 0.25  # a chord step must cut max |G| by this, else the Jacobian is
 MAX_CORRECTOR = 12  # corrector steps at most (chord and refreshed together)
 EASY_STEPS = 4  # a corrector of at most this many steps grows ds
 DS_GROW = 1.5  # the factor
+RETRACE_SKIP = 3  # the last points a new one is not compared with for a retrace (its own neighbours)
+RETRACE_STEP = 0.5  # x ds: a new point this near (in u) an earlier one of its own branch has turned back onto it
 REAL_TOL = 1e-8  # |Im mu| <= this x |mu|: a real multiplier
 SAMPLES_PER_SEGMENT = 50  # of each segment when the amplitudes are read (400 a period at S = 8: error ~3e-5)
 
@@ -217,6 +225,50 @@ def bifurcations(multipliers: np.ndarray, tangent_f: np.ndarray,
     return out
 
 
+def _retrace(us: list, u: np.ndarray, h: float) -> str | None:
+    """Why the branch ends if its new point u (the last of ``us``) lies within RETRACE_STEP x h of an earlier point
+    of its own (not one of its last RETRACE_SKIP): past a fold the path has turned back onto orbits it passed."""
+    for j in range(len(us) - 1 - RETRACE_SKIP):
+        if float(np.linalg.norm(us[j] - u)) <= RETRACE_STEP * h:
+            return (f"turned back onto its own orbit at f = {u[-1]:.6g} Hz (point {j}, within {RETRACE_STEP:g} "
+                    "of a step)")
+    return None
+
+
+def on_branch(freq_hz: np.ndarray, amplitude_m: np.ndarray, f: float, a: np.ndarray, rel: float) -> bool:
+    """Whether the orbit of amplitudes a (q,) m at f Hz lies on the branch (freq_hz (k,), amplitude_m (k, q)): between
+    two consecutive points of it, within ``rel`` of the amplitudes interpolated linearly in frequency.
+
+    Parameters
+    ----------
+    freq_hz : (k,) Hz, the branch's points
+    amplitude_m : (k, q) m, their amplitudes
+    f : Hz, the orbit's frequency
+    a : (q,) m, its amplitudes
+    rel : the largest max |a / interpolated - 1| that counts as on the branch
+
+    Returns
+    -------
+    bool
+
+    Examples
+    --------
+    >>> on_branch(np.array([1.0, 2.0]), np.array([[1.0], [2.0]]), 1.5, np.array([1.51]), 0.02)
+    True
+    >>> on_branch(np.array([1.0, 2.0]), np.array([[1.0], [2.0]]), 2.5, np.array([2.5]), 0.02)
+    False
+    """
+    F, A = freq_hz, amplitude_m
+    for i in range(len(F) - 1):
+        lo, hi = sorted((F[i], F[i + 1]))
+        if lo <= f <= hi:
+            w = (f - F[i]) / (F[i + 1] - F[i]) if F[i + 1] != F[i] else 0.0
+            ref = (1.0 - w) * A[i] + w * A[i + 1]
+            if float(np.max(np.abs(a / ref - 1.0))) <= rel:
+                return True
+    return False
+
+
 def _correct(cont: _Continuation, J: np.ndarray, t: np.ndarray, u: np.ndarray, h: float, tol: float) -> tuple:
     """(converged, corrector steps, v, G, residual object, Y, ends): the corrector from the predictor u + h t on
     [G; t . (v - u) - h] = 0, chord with J, Broyden's update where a step cuts max |G| by less than CHORD_RATE,
@@ -249,8 +301,10 @@ def _correct(cont: _Continuation, J: np.ndarray, t: np.ndarray, u: np.ndarray, h
 def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_max_hz: float, *,
                       direction: float = 1.0, ds: float = 0.05, ds_min: float = 1e-4, ds_max: float = 0.5,
                       max_steps: int = 40, point_rows: np.ndarray | None = None,
-                      tol: float = TOL, stop=None) -> FrictionShootingBranch:
+                      tol: float = TOL, stop=None, leave_contact: bool = False) -> FrictionShootingBranch:
     """Continue a converged friction orbit in frequency by pseudo-arclength on the shooting equations.
+
+    Long because the predictor-corrector loop and its ends (module docstring) share the state of the branch.
 
     Unknowns u = [z / D; f] (z = [x; v; Bt x - w] at the S nodes, D the start's scale, f in Hz); equations
     R_k = (phi(y_k; t_k, T / S) - y_{k+1}) / D = 0 (:mod:`reduced.periodic.friction_shooting`) and
@@ -270,7 +324,9 @@ def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_ma
     tol : max |G| at a point, units of D
     stop : callable, optional
         ``stop(f_hz, amplitude_m) -> str or None`` after each new point: a str ends the branch there (its status),
-        e.g. where it meets another branch.
+        e.g. where it meets another branch. (A point back on the branch's own path ends it too: module docstring.)
+    leave_contact : end the branch, started in contact, at its first orbit on which no stop closes (sampled
+        SAMPLES_PER_SEGMENT a segment): the open-gap orbit is linear, HB gives it exactly
 
     Returns
     -------
@@ -294,10 +350,13 @@ def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_ma
     cont = _Continuation(system, start.b, start.amplitude_N, start.phase_deg, S, D)
     t_clock = time.perf_counter()
 
+    touching = []  # whether a stop closes somewhere on each point's orbit (sampled as the amplitudes)
+
     def amplitudes(Y: np.ndarray, f: float) -> np.ndarray:
         h = 1.0 / f / S
         xs = np.vstack([flow(system, start.b, start.amplitude_N, f, Y[k], k * h, h, SAMPLES_PER_SEGMENT,
                              start.phase_deg)[:, :n] for k in range(S)])
+        touching.append(bool(system.m) and bool(np.any(system.side * (xs @ system.B.T - system.offset) > 0.0)))
         return np.max(np.abs(xs @ rows.T), axis=0)
 
     res0 = cont.res(start.freq_hz)
@@ -316,7 +375,8 @@ def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_ma
                     float(t[-1]), k_corr))
 
     record(u, G, res, Y, J, blocks, t, 0)
-    status, h = f"{max_steps} steps", float(ds)
+    us = [u]  # the points in u, for the retrace check
+    status, h = "", float(ds)
     while len(pts) <= max_steps:
         ok, k_corr, v, Gv, res_v, Yv, ends_v = _correct(cont, J, t, u, h, tol)
         if not ok:
@@ -329,15 +389,21 @@ def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_ma
         t = _tangent(J, t)
         u, G, res, Y = v, Gv, res_v, Yv
         record(u, G, res, Y, J, blocks, t, k_corr)
+        us.append(u)
         if not f0 <= u[-1] <= f1:
             status = f"left the band at f = {u[-1]:.6g} Hz"
             break
-        why = stop(float(u[-1]), pts[-1][2]) if stop is not None else None
+        if leave_contact and touching[0] and not touching[-1]:
+            status = (f"left the contact at f = {u[-1]:.6g} Hz (every stop open over the period: the open-gap "
+                      "orbit, linear)")
+            break
+        why = _retrace(us, u, h) or (stop(float(u[-1]), pts[-1][2]) if stop is not None else None)
         if why:
             status = why
             break
         if k_corr <= EASY_STEPS:
             h = min(h * DS_GROW, ds_max)
+    status = status or f"point budget ({max_steps} points) at f = {u[-1]:.6g} Hz"
     f, Ys, A, mu, dfc, rk, tf, kc = (np.array(c) for c in zip(*pts, strict=True))
     stable = np.max(np.abs(mu), axis=1) <= 1.0 + STABLE_TOL
     return FrictionShootingBranch(f, Ys, A, mu, stable, dfc, rk, tf, bifurcations(mu, tf, rk), kc, status,
@@ -373,4 +439,4 @@ def joined(down: FrictionShootingBranch, up: FrictionShootingBranch) -> Friction
                                   f"down: {down.status}; up: {up.status}", down.wall_s + up.wall_s)
 
 
-__all__ = ["FD_FREQ", "FrictionShootingBranch", "bifurcations", "continue_friction", "joined"]
+__all__ = ["FD_FREQ", "FrictionShootingBranch", "bifurcations", "continue_friction", "joined", "on_branch"]
