@@ -125,7 +125,18 @@ def absolute_paths(data: dict, base: str | Path | None) -> dict:
 @functools.cache
 def type_hints(cls: type) -> dict:
     """``typing.get_type_hints(cls)``, worked out once per class (a scene check asks for it per table, and
-    it evaluates every annotation's string each time)."""
+    it evaluates every annotation's string each time).
+
+    Parameters
+    ----------
+    cls : type
+        A dataclass.
+
+    Returns
+    -------
+    dict
+        Field name -> type; shared between callers, so read only.
+    """
     return typing.get_type_hints(cls)
 
 
