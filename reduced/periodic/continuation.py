@@ -116,6 +116,24 @@ def tangent(J: np.ndarray, t_prev: np.ndarray | None = None) -> np.ndarray:
     return t
 
 
+def _corrector_tangent(Jb: np.ndarray, t_prev: np.ndarray) -> np.ndarray:
+    """``tangent(Jb[:-1], t_prev)`` for a corrector's Jacobian ``Jb`` = [dR/dy; t_prev]: the matrix that
+    :func:`tangent` would stack is ``Jb`` itself, so it is solved as it stands (the same numbers, one copy
+    of an HB Jacobian fewer each step)."""
+    if not np.array_equal(Jb[-1], t_prev):
+        return tangent(Jb[:-1], t_prev)
+    b = np.zeros(Jb.shape[1])
+    b[-1] = 1.0
+    try:
+        t = np.linalg.solve(Jb, b)
+    except np.linalg.LinAlgError:
+        t = np.linalg.svd(Jb[:-1])[2][-1]
+    t = t / np.linalg.norm(t)
+    if t @ t_prev < 0.0:
+        t = -t
+    return t
+
+
 @dataclass(frozen=True, slots=True)
 class ContinuationOptions:
     """Step control of a pseudo-arclength continuation (module docstring), in the scaled unknowns.
@@ -332,7 +350,7 @@ def _advance(fun, y: np.ndarray, t: np.ndarray, ds: float, opt: ContinuationOpti
 
         try:
             res = newton(corrector, yp, tol=opt.tol, max_iter=opt.max_iter, max_step=_max_jump(ds, opt.corner_ds))
-            tn = tangent(res.jacobian[:-1], t)  # newton's Jacobian is at res.y: the arclength row dropped
+            tn = _corrector_tangent(res.jacobian, t)  # newton's Jacobian is at res.y: [dR/dy; t]
             # a corner (the square-root onset of contact at grazing) turns the tangent by
             # up to 90 degrees however short the step: accept it once the step is short
             turn_ok = tn @ t >= cos_max or (ds <= opt.corner_ds and tn @ t > 0.0)

@@ -509,15 +509,75 @@ class NNMResidual:
             buf.A = KI + 1.0 * NM2
             buf.dA = (NM2neg if neg else NM2).copy()
             buf.neg = neg
+            n = self.hb.n  # the views of the diagonal blocks, made once (as_strided costs ~10 us a call)
+            buf.Ab, buf.dAb = _diagonal_blocks(buf.A, n), _diagonal_blocks(buf.dA, n)
+            buf.omega = None
         elif neg != buf.neg:
             np.copyto(buf.dA, NM2neg if neg else NM2)
             buf.neg = neg
-        n = self.hb.n
-        Ab, dAb = _diagonal_blocks(buf.A, n), _diagonal_blocks(buf.dA, n)
+            buf.omega = None
+        if buf.omega == omega:  # the buffers hold this omega already (lazy() then its jacobian(): the same bits)
+            return buf.A, buf.dA
+        Ab, dAb = buf.Ab, buf.dAb
         np.multiply(NM2b, w2, out=Ab)
         np.add(KIb, Ab, out=Ab)
         np.multiply(NM2b, s, out=dAb)
+        buf.omega = omega
         return buf.A, buf.dA
+
+    @functools.cached_property
+    def _dm_blocks(self) -> tuple[tuple[slice, slice], ...]:
+        """(rows, columns) of the n x n blocks of kron(Nab, M) that are not zero (Nab[p, q] != 0)."""
+        n = self.hb.n
+        return tuple((slice(p * n, (p + 1) * n), slice(q * n, (q + 1) * n))
+                     for p, q in zip(*np.nonzero(self.hb.Nab), strict=True))
+
+    @functools.cached_property
+    def _force_pattern(self) -> tuple[tuple[int, int, tuple[int, ...]], ...] | None:
+        """(i, j, the stops r with Q_r[i, j] != 0) of each entry (i, j) that some Q_r fills, when every Q_r
+        holds only zeros and ones and no entry is filled by more than two stops (a gap system whose stops act
+        on single coordinates: B_j a unit row); else None.
+
+        Then dF/dX = sum_r kron(G_r, Q_r) is G_r, or G_r + G_r', on those entries of each block and zero
+        elsewhere, exactly the numbers the contraction of :meth:`HarmonicBalance._aft_jacobian` gives (a
+        product by 1 is exact, a sum of two terms rounds once whatever the order, added zeros change
+        nothing), without its (h h', n n) product and transposed copy.
+        """
+        Q = self.hb.Qr
+        if Q.ndim != 3 or not np.all((Q == 0.0) | (Q == 1.0)):
+            return None
+        out = []
+        for i, j in zip(*np.nonzero(np.any(Q != 0.0, axis=0)), strict=True):
+            stops = tuple(int(r) for r in np.flatnonzero(Q[:, i, j]))
+            if len(stops) > 2:
+                return None
+            out.append((int(i), int(j), stops))
+        return tuple(out)
+
+    def _force_jacobian(self, w: np.ndarray) -> np.ndarray:
+        """dF/dX (size, size) from the force weights w (N, r): :meth:`HarmonicBalance._aft_jacobian`'s numbers
+        (up to the sign of its zeros), written into a per-thread buffer whose other entries stay zero when
+        :attr:`_force_pattern` allows (valid until the next call in this thread)."""
+        hb = self.hb
+        pattern = self._force_pattern
+        if pattern is None:
+            return hb._aft_jacobian(w)
+        buf = self._scratch
+        if getattr(buf, "dF", None) is None:
+            buf.dF = np.zeros((hb.size, hb.size))
+        h, n = 2 * hb.H + 1, hb.n
+        dF4 = buf.dF.reshape(h, n, h, n)
+        if not w.any():
+            for i, j, _ in pattern:
+                dF4[:, i, :, j] = 0.0
+            return buf.dF
+        G = hb.weighted_gram(w)  # (r, h, h')
+        for i, j, stops in pattern:
+            if len(stops) == 1:
+                dF4[:, i, :, j] = G[stops[0]]
+            else:
+                np.add(G[stops[0]], G[stops[1]], out=dF4[:, i, :, j])
+        return buf.dF
 
     def __call__(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """R (size+2,) and dR/dy (size+2, size+3)."""
@@ -538,10 +598,16 @@ class NNMResidual:
         :func:`reduced.periodic.continuation.continue_branch` asks through this). The same numbers as
         ``self(y)``: the same operations, deferred (A and dA/domega made again from omega, which gives
         the same bits: :meth:`_linear_parts` reuses its buffers from call to call)."""
+        R, jacobian, _, _ = self._lazy(y)
+        return R, jacobian
+
+    def _lazy(self, y: np.ndarray) -> tuple[np.ndarray, Callable[[], np.ndarray], np.ndarray, np.ndarray]:
+        """:meth:`lazy`'s (R, dR/dy callable) and the samples x (N, n) and forces f (N, n) it synthesised."""
         hb, wr = self.hb, self.omega_ref
         n, nX = hb.n, hb.size
         Psi, omega, delta, a = self.split(y)
-        f, w = hb.force(hb.E @ hb.unpack(a * Psi))  # HarmonicBalance.aft, its Jacobian deferred
+        x = hb.E @ hb.unpack(a * Psi)
+        f, w = hb.force(x)  # HarmonicBalance.aft, its Jacobian deferred
         F = (hb.P @ f).ravel()
         A, _, DM = self._linear(omega)
         R = np.empty(nX + 2)
@@ -555,13 +621,15 @@ class NNMResidual:
         R[nX + 1] = c1 @ hb.M @ c1 + s1 @ hb.M @ s1 - 1.0
 
         def jacobian() -> np.ndarray:
-            dF = hb._aft_jacobian(w)
+            dF = self._force_jacobian(w)
             A, dA, _ = self._linear(omega)
             J = np.empty((nX + 2, nX + 3))  # every entry written below (the last two rows zeroed first)
             Jx = J[:nX, :nX]
             np.add(A, dF, out=Jx)  # (A + dF - delta omega DM) / wr^2, in place
             if delta != 0.0:
-                Jx -= delta * omega * DM
+                c = delta * omega
+                for rows, cols in self._dm_blocks:  # DM = kron(Nab, M): elsewhere c DM is a zero (no change)
+                    Jx[rows, cols] -= c * DM[rows, cols]
             Jx /= wr**2
             J[:nX, nX] = (dA @ Psi - delta * DMPsi) / wr
             J[:nX, nX + 1] = -omega * DMPsi / wr
@@ -572,7 +640,7 @@ class NNMResidual:
             J[nX + 1, 2 * n : 3 * n] = 2.0 * hb.M @ s1
             return J
 
-        return R, jacobian
+        return R, jacobian, x, f
 
     def start(self, phi: np.ndarray, omega: float, log10a: float) -> np.ndarray:
         """Initial y from a mass-normalised linear mode shape phi and its omega."""
@@ -596,25 +664,38 @@ class NNMResidual:
         E = mean_i [v_i^T M v_i / 2 + x_i^T K x_i / 2 + U(x_i)] and
         dE/dX_h = mean_i [E[i,h] (K x_i + f(x_i)) + omega (E Nab)[i,h] M v_i].
         """
+        E, gradient = self._energy_lazy(y)
+        return E, gradient()
+
+    def _energy_lazy(self, y: np.ndarray, x: np.ndarray | None = None, f: np.ndarray | None = None
+                     ) -> tuple[float, Callable[[], np.ndarray]]:
+        """(E, a callable giving dE/dy) of :meth:`energy_and_gradient`, the gradient made only when called;
+        ``x`` and ``f``, the samples and forces :meth:`_lazy` synthesised at the same y (the same numbers),
+        are not made again."""
         hb = self.hb
         nX = hb.size
         Psi, omega, _, a = self.split(y)
         Xm = hb.unpack(a * Psi)
-        x = hb.E @ Xm
+        if x is None:
+            x = hb.E @ Xm
         G = hb.synthesis_derivative
         v = omega * (G @ Xm)
-        f, _ = hb.force(x)
         N = x.shape[0]
         Kx, Mv = x @ hb.K, v @ hb.M
         kin2 = np.vdot(Mv, v) / N  # mean of v_i^T M v_i
         potential = getattr(hb.force, "potential", None)
         E = float(0.5 * kin2 + 0.5 * np.vdot(Kx, x) / N + (0.0 if potential is None else np.mean(potential(x))))
-        dX = (hb.E.T @ (Kx + f) + omega * (G.T @ Mv)) / N
-        g = np.zeros(nX + 3)
-        g[:nX] = a * dX.ravel()
-        g[nX] = float(kin2) / omega * self.omega_ref
-        g[nX + 2] = np.log(10.0) * float(dX.ravel() @ (a * Psi))
-        return E, g
+
+        def gradient() -> np.ndarray:
+            fx = hb.force(x)[0] if f is None else f
+            dX = (hb.E.T @ (Kx + fx) + omega * (G.T @ Mv)) / N
+            g = np.zeros(nX + 3)
+            g[:nX] = a * dX.ravel()
+            g[nX] = float(kin2) / omega * self.omega_ref
+            g[nX + 2] = np.log(10.0) * float(dX.ravel() @ (a * Psi))
+            return g
+
+        return E, gradient
 
 
 # -- Newton ---------------------------------------------------------------------------------
@@ -630,14 +711,14 @@ class NewtonResult:
         ||R(y)||_inf.
     n_iter : int
         Newton iterations made.
-    jacobian : ndarray of float
-        dR/dy at y (square, as solved).
+    jacobian : ndarray of float or None
+        dR/dy at y (square, as solved); None if :func:`newton` was told not to make it.
     """
 
     y: np.ndarray
     residual_norm: float
     n_iter: int
-    jacobian: np.ndarray  # at y (square, as solved)
+    jacobian: np.ndarray | None  # at y (square, as solved)
 
 
 _DGETRF, _DGETRS = get_lapack_funcs(("getrf", "getrs"), (np.zeros((1, 1)),))
@@ -669,7 +750,8 @@ def _jacobian(J):
 
 
 def newton(
-    fun, y0: np.ndarray, *, tol: float = 1e-10, max_iter: int = 20, max_step: float | None = None
+    fun, y0: np.ndarray, *, tol: float = 1e-10, max_iter: int = 20, max_step: float | None = None,
+    final_jacobian: bool = True,
 ) -> NewtonResult:
     """Solve fun(y) = 0, ``fun(y) -> (R, dR/dy)`` square, by Newton's method.
 
@@ -694,6 +776,9 @@ def newton(
         Most iterations.
     max_step : float, optional
         Largest ||dy||_inf allowed (None: any).
+    final_jacobian : bool
+        Make dR/dy at the solution for ``NewtonResult.jacobian`` (False: None there, for a caller that
+        needs the point alone; the iterations are the same).
 
     Returns
     -------
@@ -736,7 +821,7 @@ def newton(
         if rn <= rtiny or (lam == 1.0 and step <= tol * (1.0 + float(np.max(np.abs(y))))):
             if rn > 1e-6 * max(r0, 1.0) and rn > 1e-8:
                 raise NewtonError(f"step converged but residual {rn:.3g} is not small")
-            return NewtonResult(y, rn, it, _jacobian(J))
+            return NewtonResult(y, rn, it, _jacobian(J) if final_jacobian else None)
     raise NewtonError(
         f"no convergence in {max_iter} iterations: |R| = {float(np.max(np.abs(R))):.3g}, last step {step:.3g}"
     )
