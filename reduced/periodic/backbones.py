@@ -360,7 +360,8 @@ def _correct_at_frequency(res: NNMResidual, guess: np.ndarray, w_t: float) -> np
         return np.concatenate([R, [z[i_w] - w_t]]), lambda: np.vstack([jac(), e])
 
     try:
-        return newton(fixed, guess, max_iter=STEP_OVER_MAX_ITER, max_step=5.0, final_jacobian=False).y
+        return newton(fixed, guess, max_iter=STEP_OVER_MAX_ITER, max_step=5.0, final_jacobian=False,
+                      solve=res.bordered_solver).y
     except NewtonError:
         return None
 
@@ -665,4 +666,4 @@ def hb_point_at_energy(
         return np.concatenate([R, [(E - energy_J) / energy_J]]), lambda: np.vstack([jac(), dE() / energy_J])
 
     with single_thread_blas():
-        return newton(fun, y_guess, tol=tol, max_iter=30, final_jacobian=False).y
+        return newton(fun, y_guess, tol=tol, max_iter=30, final_jacobian=False, solve=res.bordered_solver).y

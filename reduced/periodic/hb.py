@@ -57,6 +57,13 @@ from reduced.models.gaps import GapSystem
 
 SAMPLES_PER_COEFFICIENT = 32  # AFT samples per Fourier coefficient (gap forces need >> 2)
 NEWTON_HALVINGS = 6  # trial steps of a Newton iteration: dy, dy/2, ..., dy/32
+BLOCK_SOLVE_MIN_H = 15  # NNMResidual.solve_bordered from this H on. Measured on rom-fep's 12-coordinate model (CPU
+# a branch): H = 25 12.5 -> 5.2 s, H = 15 6.7 -> 3.8 s (NNM 1) and 3.5 -> 2.0 s (NNM 2); at H = 9 a solve is 1.5x
+# faster too, but the branches of H = 9 are drawn (fep.png), guide the shooting and give the stability, and a
+# continuation path follows the last bits of its solves (results/rom-fep: from H = 15 on only the convergence
+# study's branches change, at round-off, their tongue anchors with them)
+BLOCK_SOLVE_TOL = 1e-12  # NNMResidual.solve_bordered: a residual |J z - r| above this times |J| |z| + |r| takes
+# the dense LU instead (a dense LU's is ~1e-16 of it; an ill-conditioned harmonic block would show here)
 
 
 class NewtonError(RuntimeError):
@@ -579,6 +586,95 @@ class NNMResidual:
                 np.add(G[stops[0]], G[stops[1]], out=dF4[:, i, :, j])
         return buf.dF
 
+    @functools.cached_property
+    def _block_plan(self) -> tuple | None:
+        """Index sets of :meth:`solve_bordered`'s elimination, or None (dense LU).
+
+        F: the coefficients of the coordinates no stop acts on (nf of the n), by harmonic group (g = 0 the
+        constant term, g = k the pair cos k, sin k); C: the coefficients of the coordinates the stops act
+        on (nc), then the three last unknowns (w, d, log10 a); c_g: the C unknowns the rows of group g's F
+        touch (its own stop coordinates and the three last), as positions in C. Returns (F0, c0, Fk (H,
+        2 nf), ck (H, 2 nc + 3), C, F). Taken only where the stops act on few coordinates (nf >= 2 nc: a
+        reduced model's two tips among its 12 coordinates; not the 3-DOF model) and H >= BLOCK_SOLVE_MIN_H.
+        """
+        pattern = self._force_pattern
+        hb = self.hb
+        if pattern is None or hb.H < BLOCK_SOLVE_MIN_H:
+            return None
+        n, nX, H = hb.n, hb.size, hb.H
+        tips = np.array(sorted({i for i, _, _ in pattern} | {j for _, j, _ in pattern}))
+        free = np.array([d for d in range(n) if d not in set(tips.tolist())])
+        nt = tips.size
+        if free.size < 2 * nt:
+            return None
+        border = np.arange((2 * H + 1) * nt, (2 * H + 1) * nt + 3)  # positions of w, d, log10 a in C
+        F0 = free.copy()
+        c0 = np.concatenate([np.arange(nt), border])
+        Fk = np.array([np.concatenate([(2 * k - 1) * n + free, 2 * k * n + free]) for k in range(1, H + 1)])
+        ck = np.array([np.concatenate([np.arange((2 * k - 1) * nt, (2 * k + 1) * nt), border]) for k in range(1, H + 1)])
+        C = np.concatenate([(r * n + tips) for r in range(2 * H + 1)] + [np.arange(nX, nX + 3)])
+        return F0, c0, Fk, ck, C, np.concatenate([F0, Fk.ravel()])
+
+    @property
+    def bordered_solver(self) -> Callable[[np.ndarray, np.ndarray], np.ndarray] | None:
+        """:meth:`solve_bordered` where this model has its structure (:attr:`_block_plan`), else None (the
+        callers' dense LU, as before)."""
+        return self.solve_bordered if self._block_plan is not None else None
+
+    def solve_bordered(self, J: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """J^-1 r for a square J (size, size) whose first hb.size rows are dR/dy's HB rows (any three rows
+        below: the phase, the normalisation, and an arclength, energy or fixed-coordinate row).
+
+        Those rows couple the coefficients of the coordinates no stop acts on only within one harmonic
+        (A(omega) is block diagonal, kron(Nab, M) pairs cos k with sin k, dF/dX is zero there), and only
+        to the stop coordinates of that harmonic and the three last unknowns. They are eliminated group
+        by group (a small LU per harmonic, with pivoting inside it), leaving a dense LU on the stops'
+        coordinates and the three last unknowns (:attr:`_block_plan`): at H = 25 on a 12-coordinate
+        reduced model, 105 rows instead of 615. The same solution up to round-off; where the blocks are
+        too ill-conditioned for that (a residual |J z - r| above BLOCK_SOLVE_TOL of |J| |z| + |r|), or the
+        model has no such structure, the dense LU (:func:`_lu_solve`).
+
+        Parameters
+        ----------
+        J : (size, size) ndarray of float
+            The bordered Jacobian.
+        r : (size,) ndarray of float
+            Right-hand side.
+
+        Returns
+        -------
+        (size,) ndarray of float
+        """
+        plan = self._block_plan
+        if plan is None or J.shape != (self.size, self.size) or r.shape != (self.size,):
+            return _lu_solve(J, r)
+        F0, c0, Fk, ck, C, F = plan
+        nC = C.size
+        with np.errstate(all="ignore"):
+            try:
+                S = np.concatenate([J[np.ix_(C, C)], r[C, None]], axis=1)  # [J_CC, r_C], then its Schur complement
+                # group 0: W0 = A_00^-1 [J_(F0, c0), r_F0]; S[c0, (c0, r)] -= J_(c0, F0) W0
+                W0 = np.linalg.solve(J[np.ix_(F0, F0)], np.concatenate([J[np.ix_(F0, C[c0])], r[F0, None]], axis=1))
+                cols0 = np.append(c0, nC)
+                S[np.ix_(c0, cols0)] -= J[np.ix_(C[c0], F0)] @ W0
+                # groups 1..H at once
+                Ck = C[ck]  # (H, 2 nc + 3) unknowns
+                Wk = np.linalg.solve(J[Fk[:, :, None], Fk[:, None, :]],
+                                     np.concatenate([J[Fk[:, :, None], Ck[:, None, :]], r[Fk][:, :, None]], axis=2))
+                U = J[Ck[:, :, None], Fk[:, None, :]] @ Wk  # (H, 2 nc + 3, 2 nc + 4)
+                colsk = np.concatenate([ck, np.full((ck.shape[0], 1), nC)], axis=1)
+                np.add.at(S, (ck[:, :, None], colsk[:, None, :]), -U)  # the three last rows and columns: summed
+                zC = np.linalg.solve(S[:, :nC], S[:, nC])
+            except np.linalg.LinAlgError:
+                return _lu_solve(J, r)
+            z = np.empty(self.size)
+            z[C] = zC
+            z[F0] = W0[:, -1] - W0[:, :-1] @ zC[c0]
+            z[Fk] = Wk[:, :, -1] - np.einsum("hij,hj->hi", Wk[:, :, :-1], zC[ck])
+            scale = max(float(np.max(J)), -float(np.min(J))) * float(np.max(np.abs(z))) + float(np.max(np.abs(r)))
+            ok = bool(np.all(np.isfinite(z))) and float(np.max(np.abs(J @ z - r))) <= BLOCK_SOLVE_TOL * scale
+        return z if ok else _lu_solve(J, r)
+
     def __call__(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """R (size+2,) and dR/dy (size+2, size+3)."""
         R, jacobian = self.lazy(y)
@@ -751,7 +847,7 @@ def _jacobian(J):
 
 def newton(
     fun, y0: np.ndarray, *, tol: float = 1e-10, max_iter: int = 20, max_step: float | None = None,
-    final_jacobian: bool = True,
+    final_jacobian: bool = True, solve: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
 ) -> NewtonResult:
     """Solve fun(y) = 0, ``fun(y) -> (R, dR/dy)`` square, by Newton's method.
 
@@ -779,6 +875,8 @@ def newton(
     final_jacobian : bool
         Make dR/dy at the solution for ``NewtonResult.jacobian`` (False: None there, for a caller that
         needs the point alone; the iterations are the same).
+    solve : callable, optional
+        ``solve(J, R) -> J^-1 R`` (e.g. :meth:`NNMResidual.solve_bordered`); default: the dense LU.
 
     Returns
     -------
@@ -800,7 +898,7 @@ def newton(
         if not np.all(np.isfinite(R)) or not np.all(np.isfinite(J)):
             raise NewtonError(f"non-finite residual or Jacobian at iteration {it}")
         try:
-            dy = -_lu_solve(J, R)
+            dy = -(_lu_solve if solve is None else solve)(J, R)
         except (ValueError, np.linalg.LinAlgError) as exc:
             raise NewtonError(f"singular Jacobian at iteration {it}: {exc}") from None
         if not np.all(np.isfinite(dy)):
