@@ -357,7 +357,7 @@ def _correct_at_frequency(res: NNMResidual, guess: np.ndarray, w_t: float) -> np
         R, jac = res.lazy(z)  # dR/dy only for the points Newton takes (the same numbers)
         e = np.zeros(z.size)
         e[i_w] = 1.0
-        return np.concatenate([R, [z[i_w] - w_t]]), lambda: np.vstack([jac(), e])
+        return np.concatenate([R, [z[i_w] - w_t]]), lambda: jac(below=e)
 
     try:
         return newton(fixed, guess, max_iter=STEP_OVER_MAX_ITER, max_step=5.0, final_jacobian=False,
@@ -663,7 +663,7 @@ def hb_point_at_energy(
         # refuses trial points on R alone), the energy from the samples and forces R was made from
         R, jac, x, f = res._lazy(y)
         E, dE = res._energy_lazy(y, x, f)
-        return np.concatenate([R, [(E - energy_J) / energy_J]]), lambda: np.vstack([jac(), dE() / energy_J])
+        return np.concatenate([R, [(E - energy_J) / energy_J]]), lambda: jac(below=dE() / energy_J)
 
     with single_thread_blas():
         return newton(fun, y_guess, tol=tol, max_iter=30, final_jacobian=False, solve=res.bordered_solver).y

@@ -349,6 +349,8 @@ def _advance(fun, y: np.ndarray, t: np.ndarray, ds: float, opt: ContinuationOpti
         def corrector(z, yp=yp, t=t):
             if lazy is not None:
                 R, Jz = lazy(z)
+                if getattr(Jz, "stacks_below", False):  # Jz(below=t): the same matrix, made with its last row
+                    return np.concatenate([R, [t @ (z - yp)]]), lambda: Jz(below=t)
                 return np.concatenate([R, [t @ (z - yp)]]), lambda: np.vstack([Jz(), t])
             R, Jz = fun(z)
             return np.concatenate([R, [t @ (z - yp)]]), np.vstack([Jz, t])

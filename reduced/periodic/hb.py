@@ -611,7 +611,8 @@ class NNMResidual:
         F0 = free.copy()
         c0 = np.concatenate([np.arange(nt), border])
         Fk = np.array([np.concatenate([(2 * k - 1) * n + free, 2 * k * n + free]) for k in range(1, H + 1)])
-        ck = np.array([np.concatenate([np.arange((2 * k - 1) * nt, (2 * k + 1) * nt), border]) for k in range(1, H + 1)])
+        ck = np.array([np.concatenate([np.arange((2 * k - 1) * nt, (2 * k + 1) * nt), border])
+                       for k in range(1, H + 1)])
         C = np.concatenate([(r * n + tips) for r in range(2 * H + 1)] + [np.arange(nX, nX + 3)])
         return F0, c0, Fk, ck, C, np.concatenate([F0, Fk.ravel()])
 
@@ -688,8 +689,9 @@ class NNMResidual:
             return A, dA, self._operators[2]
         return hb.linear_operator(omega), hb._linear_operator_domega(omega), np.kron(hb.Nab, hb.M)
 
-    def lazy(self, y: np.ndarray) -> tuple[np.ndarray, Callable[[], np.ndarray]]:
-        """(R (size+2,), a callable giving dR/dy (size+2, size+3)): the AFT forces now, their Jacobian and
+    def lazy(self, y: np.ndarray) -> tuple[np.ndarray, Callable[..., np.ndarray]]:
+        """(R (size+2,), a callable giving dR/dy (size+2, size+3), or with ``below=row`` that with the row
+        appended (size+3, size+3)): the AFT forces now, their Jacobian and
         the rest of dR/dy only when it is called (Newton's halving refuses many trial points on R alone:
         :func:`reduced.periodic.continuation.continue_branch` asks through this). The same numbers as
         ``self(y)``: the same operations, deferred (A and dA/domega made again from omega, which gives
@@ -716,10 +718,12 @@ class NNMResidual:
         c1, s1 = Psi[n : 2 * n], Psi[2 * n : 3 * n]
         R[nX + 1] = c1 @ hb.M @ c1 + s1 @ hb.M @ s1 - 1.0
 
-        def jacobian() -> np.ndarray:
+        def jacobian(below: np.ndarray | None = None) -> np.ndarray:
+            # ``below``: a row (size + 3,) appended, as np.vstack([jacobian(), below]) would (a corrector's
+            # arclength or energy row) without copying the matrix again
             dF = self._force_jacobian(w)
             A, dA, _ = self._linear(omega)
-            J = np.empty((nX + 2, nX + 3))  # every entry written below (the last two rows zeroed first)
+            J = np.empty((nX + 2 + (below is not None), nX + 3))  # every entry written below
             Jx = J[:nX, :nX]
             np.add(A, dF, out=Jx)  # (A + dF - delta omega DM) / wr^2, in place
             if delta != 0.0:
@@ -730,12 +734,15 @@ class NNMResidual:
             J[:nX, nX] = (dA @ Psi - delta * DMPsi) / wr
             J[:nX, nX + 1] = -omega * DMPsi / wr
             J[:nX, nX + 2] = np.log(10.0) * (dF @ Psi - Fa) / wr**2
-            J[nX:] = 0.0
+            J[nX : nX + 2] = 0.0
             J[nX, i_s1] = 1.0
             J[nX + 1, n : 2 * n] = 2.0 * hb.M @ c1
             J[nX + 1, 2 * n : 3 * n] = 2.0 * hb.M @ s1
+            if below is not None:
+                J[nX + 2] = below
             return J
 
+        jacobian.stacks_below = True  # continue_branch's corrector appends its row through ``below``
         return R, jacobian, x, f
 
     def start(self, phi: np.ndarray, omega: float, log10a: float) -> np.ndarray:
