@@ -99,21 +99,21 @@ def number(name: str, value, *, lo: float | None = None, hi: float | None = None
     InvalidArgument
         Not a real number, not finite, or outside the interval.
     """
-    parts = []
-    if lo is not None:
-        parts.append(f"{'>' if lo_open else '>='} {lo:g}")
-    if hi is not None:
-        parts.append(f"{'<' if hi_open else '<='} {hi:g}")
-    allowed = "a finite number" + (" " + " and ".join(parts) if parts else "") + (f" ({unit})" if unit else "")
-    if not _is_number(value):
-        raise InvalidArgument(f"{name} must be {allowed}, got {show(value)}")
-    v = float(value)
-    ok = math.isfinite(v)
-    if ok and lo is not None:
-        ok = v > lo if lo_open else v >= lo
-    if ok and hi is not None:
-        ok = v < hi if hi_open else v <= hi
-    if not ok:
+    ok = _is_number(value)
+    if ok:
+        v = float(value)
+        ok = math.isfinite(v)
+        if ok and lo is not None:
+            ok = v > lo if lo_open else v >= lo
+        if ok and hi is not None:
+            ok = v < hi if hi_open else v <= hi
+    if not ok:  # the message is made only here: the checks run on every call of hot paths (Flow.__call__)
+        parts = []
+        if lo is not None:
+            parts.append(f"{'>' if lo_open else '>='} {lo:g}")
+        if hi is not None:
+            parts.append(f"{'<' if hi_open else '<='} {hi:g}")
+        allowed = "a finite number" + (" " + " and ".join(parts) if parts else "") + (f" ({unit})" if unit else "")
         raise InvalidArgument(f"{name} must be {allowed}, got {show(value)}")
     return v
 

@@ -286,21 +286,28 @@ def _branches(fm: FEPModel, spec, jobs: list, bar) -> dict:
     for mode, H, N in jobs:
         first.setdefault((mode, H, N or default_samples(H)), (mode, H, N))
     bar.set_postfix_str(f"{len(first)} HB branches")
-    keys = sorted(first, key=lambda k: -k[1])  # the highest H first: the longest pieces start first on a cluster
-    pieces = [("branch", fm, spec, *first[k]) for k in keys]
-    done = dict(zip(keys, fan_out(_piece, pieces), strict=True))
+    # the one-harmonic branches first: the others' step-overs past a tongue predict from them (nnm_branch's
+    # backbone1: the points it would otherwise continue again at each branch's first tongue)
+    ones = [k for k in first if k[1] == 1 and k[2] == default_samples(1)]
+    done = dict(zip(ones, fan_out(_piece, [("branch", fm, spec, *first[k], None) for k in ones]), strict=True))
+    backbone1 = {k[0]: done[k].branches[0].y for k in ones}
+    keys = sorted((k for k in first if k not in done), key=lambda k: -k[1])  # the highest H first: the longest
+    pieces = [("branch", fm, spec, *first[k], backbone1.get(k[0])) for k in keys]  # pieces start first
+    done.update(zip(keys, fan_out(_piece, pieces), strict=True))
     bar.update(len(jobs))
     return {(mode, H, N): done[(mode, H, N or default_samples(H))] for mode, H, N in jobs}
 
 
 def _piece(job: tuple):
-    """One independent piece of the study: ``("branch", fm, spec, nnm, H, N)`` an HB branch,
+    """One independent piece of the study: ``("branch", fm, spec, nnm, H, N, backbone1)`` an HB branch (the
+    points of its one-harmonic branch, or None),
     ``("shooting", fm, spec, nnm, guides)`` the shooting orbits of one NNM (energies, orbits, wall_s), or
     ``("hill", fm, spec, nnm, branch)`` Hill's method at every point of one branch."""
     kind, fm, spec, mode = job[:4]
     if kind == "branch":
-        H, N = job[4:]
-        return nnm_branch(fm.system, fm.modes[mode], H=H, N=N, energy_max_J=spec.energy_max_J, **fm.branch)
+        H, N, backbone1 = job[4:]
+        return nnm_branch(fm.system, fm.modes[mode], H=H, N=N, energy_max_J=spec.energy_max_J, backbone1=backbone1,
+                          **fm.branch)
     if kind == "shooting":
         guides = job[4]
         E0 = guides[-1].energy_J[0]

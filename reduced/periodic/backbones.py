@@ -206,12 +206,21 @@ class _TongueWatch:
     entered_by: int | None = None  # the harmonic whose velocity ratio entered the tongue (velocity_watch)
     ys: list = field(default_factory=list)  # this piece's points (velocity_watch)
     Es: list = field(default_factory=list)  # J, their energies
+    ratios: dict = field(default_factory=dict)  # harmonic k: its velocity ratio at each of ys so far (stalled)
+    last: tuple = (None, 0.0)  # (y, its energy [J]) of the last call of energy()
 
     def reset(self) -> None:
         """Start a new piece: not in a tongue, no bend, no points."""
         self.in_tongue = False
         self.w_max, self.E_prev, self.count, self.bend_at, self.bend = -np.inf, -np.inf, 0, None, None
-        self.entered_by, self.ys, self.Es = None, [], []
+        self.entered_by, self.ys, self.Es, self.ratios = None, [], [], {}
+
+    def energy(self, y: np.ndarray) -> float:
+        """J, the residual's energy at y, kept for the stop test of the same point (continue_branch calls its
+        callback, then its stop, with each point)."""
+        E = self.res.energy(y)
+        self.last = (y, E)
+        return E
 
     def stalled(self, k: int) -> bool:
         """Whether the frequency has stalled since harmonic k's velocity ratio was last below
@@ -220,7 +229,9 @@ class _TongueWatch:
         plateau, as opposed to the backbone's steady rise or its flattening at high energy,
         where no harmonic grows)."""
         hb, i_w = self.res.hb, self.res.hb.size
-        r = np.array([harmonic_ratio(hb, y[: hb.size], k)[0] for y in self.ys])
+        done = self.ratios.setdefault(k, [])  # the ratios of the points before, computed once
+        done.extend(harmonic_ratio(hb, y[: hb.size], k)[0] for y in self.ys[len(done):])
+        r = np.array(done)
         quiet = np.flatnonzero(r < self.tongue_ratio / 3.0)
         if not quiet.size or quiet[-1] == len(self.ys) - 1:
             return False
@@ -240,7 +251,7 @@ class _TongueWatch:
         hb = self.res.hb
         i_w = hb.size
         self.count += 1
-        E = self.res.energy(y)
+        E = self.last[1] if self.last[0] is y else self.res.energy(y)
         if E >= self.energy_max_J:
             return True
         if hb.H > 1:
@@ -346,10 +357,11 @@ def _correct_at_frequency(res: NNMResidual, guess: np.ndarray, w_t: float) -> np
         R, jac = res.lazy(z)  # dR/dy only for the points Newton takes (the same numbers)
         e = np.zeros(z.size)
         e[i_w] = 1.0
-        return np.concatenate([R, [z[i_w] - w_t]]), lambda: np.vstack([jac(), e])
+        return np.concatenate([R, [z[i_w] - w_t]]), lambda: jac(below=e)
 
     try:
-        return newton(fixed, guess, max_iter=STEP_OVER_MAX_ITER, max_step=5.0).y
+        return newton(fixed, guess, max_iter=STEP_OVER_MAX_ITER, max_step=5.0, final_jacobian=False,
+                      solve=res.bordered_solver).y
     except NewtonError:
         return None
 
@@ -391,6 +403,7 @@ def _nnm_branch(
     follow_steps: int = 100,
     tongue_measure: str = "displacement",
     progress=None,
+    backbone1: np.ndarray | None = None,
 ) -> NNMBranch:
     """Continue NNM ``mode`` (0-based) by HB with H harmonics until energy >= energy_max_J.
 
@@ -426,6 +439,10 @@ def _nnm_branch(
     followed as if it were the backbone (seen: NNM 2 of rom-fep at H = 15 held 827 Hz from
     12 to 99 J on its 11:1 resonance with the 9.1 kHz mode). The default "displacement"
     is the 3-DOF model's (results/discrete-fep).
+
+    The step-overs predict from the one-harmonic backbone of the same NNM (same start and
+    ``energy_max_J``), continued here at the first tongue unless ``backbone1`` gives its points
+    (``branches[0].y`` of that :class:`NNMBranch`, e.g. the H = 1 branch a study computes anyway).
     """
     t0 = time.perf_counter()
     res, ystart, omega0 = _nnm_start(system, mode, H, N, energy_start_J)
@@ -438,7 +455,7 @@ def _nnm_branch(
     for _ in range(max_tongues + 1):
         watch.reset()
         br = continue_branch(res, ystart, param=i_a, direction=1.0, options=continuation, max_steps=steps_left,
-                             stop=watch, monitor=(i_w,), callback=res.energy, progress=progress)
+                             stop=watch, monitor=(i_w,), callback=watch.energy, progress=progress)
         steps_left -= len(br.y)
         if not watch.in_tongue:
             pieces.append((br, np.arange(len(br.y))))
@@ -450,7 +467,7 @@ def _nnm_branch(
         k = watch.entered_by or harmonic_ratio(hb, br.y[-1][: hb.size])[1]
         anchor, E_a = br.y[last], float(br.data[last])
         f_a = anchor[i_w] * omega0 / (2 * np.pi)
-        if backbone1 is None:
+        if backbone1 is None:  # given or computed once: the same points either way
             one = _nnm_branch(system, mode, H=1, energy_max_J=energy_max_J, energy_start_J=energy_start_J)
             backbone1 = one.branches[0].y
         landed = _step_over(res, anchor, E_a, backbone1, system.n * 3, tongue_ratio)  # n * 3: H = 1 size
@@ -522,7 +539,7 @@ def _check_branch_options(system: GapSystem, mode: int, options: dict) -> dict:
     _check.gap_system(system)
     _check.integer("mode", mode, lo=0, hi=system.n - 1)
     known = ("H", "N", "energy_max_J", "energy_start_J", "continuation", "tongue_ratio", "max_tongues",
-             "follow_steps", "tongue_measure", "progress", *STEP_FIELDS)
+             "follow_steps", "tongue_measure", "progress", "backbone1", *STEP_FIELDS)
     for key in options:
         if key not in known:
             raise _check.InvalidArgument(f"unknown option {key!r} (known: {', '.join(known)})")
@@ -547,6 +564,13 @@ def _check_branch_options(system: GapSystem, mode: int, options: dict) -> dict:
         raise _check.InvalidArgument(f"tongue_measure must be one of {', '.join(TONGUE_MEASURES)}, "
                                      f"got {options['tongue_measure']!r}")
     _check.callback("progress", options.get("progress"))
+    if options.get("backbone1") is not None:
+        b1 = options["backbone1"]
+        width = system.n * 3 + 3  # y of the one-harmonic NNMResidual: n (2 + 1) coefficients, w, d, log10 a
+        if not (isinstance(b1, np.ndarray) and b1.ndim == 2 and b1.shape[1] == width and b1.shape[0] >= 2
+                and np.all(np.isfinite(b1))):
+            raise _check.InvalidArgument(f"backbone1 must be the points (k >= 2, {width}) of the one-harmonic "
+                                         f"branch (NNMBranch.branches[0].y), got {_check.show(b1)}")
     return out
 
 
@@ -635,11 +659,11 @@ def hb_point_at_energy(
     """
 
     def fun(y):
-        # dR/dy only for the points Newton takes (NNMResidual.lazy: the same numbers; its halving refuses
-        # trial points on R alone)
-        R, jac = res.lazy(y)
-        E, dE = res.energy_and_gradient(y)
-        return np.concatenate([R, [(E - energy_J) / energy_J]]), lambda: np.vstack([jac(), dE / energy_J])
+        # dR/dy and dE/dy only for the points Newton takes (NNMResidual.lazy: the same numbers; its halving
+        # refuses trial points on R alone), the energy from the samples and forces R was made from
+        R, jac, x, f = res._lazy(y)
+        E, dE = res._energy_lazy(y, x, f)
+        return np.concatenate([R, [(E - energy_J) / energy_J]]), lambda: jac(below=dE() / energy_J)
 
     with single_thread_blas():
-        return newton(fun, y_guess, tol=tol, max_iter=30).y
+        return newton(fun, y_guess, tol=tol, max_iter=30, final_jacobian=False, solve=res.bordered_solver).y

@@ -116,6 +116,26 @@ def tangent(J: np.ndarray, t_prev: np.ndarray | None = None) -> np.ndarray:
     return t
 
 
+def _corrector_tangent(Jb: np.ndarray, t_prev: np.ndarray, solve=None) -> np.ndarray:
+    """``tangent(Jb[:-1], t_prev)`` for a corrector's Jacobian ``Jb`` = [dR/dy; t_prev]: the matrix that
+    :func:`tangent` would stack is ``Jb`` itself, so it is solved as it stands (the same numbers, one copy
+    of an HB Jacobian fewer each step); by ``solve(Jb, b)`` if given (the residual's own solver)."""
+    if not np.array_equal(Jb[-1], t_prev):
+        return tangent(Jb[:-1], t_prev)
+    b = np.zeros(Jb.shape[1])
+    b[-1] = 1.0
+    try:
+        t = np.linalg.solve(Jb, b) if solve is None else solve(Jb, b)
+        if not np.all(np.isfinite(t)):
+            raise np.linalg.LinAlgError("singular")
+    except np.linalg.LinAlgError:
+        t = np.linalg.svd(Jb[:-1])[2][-1]
+    t = t / np.linalg.norm(t)
+    if t @ t_prev < 0.0:
+        t = -t
+    return t
+
+
 @dataclass(frozen=True, slots=True)
 class ContinuationOptions:
     """Step control of a pseudo-arclength continuation (module docstring), in the scaled unknowns.
@@ -210,7 +230,9 @@ def continue_branch(
     Parameters
     ----------
     fun : y (p+1,) -> (R (p,), dR/dy (p, p+1)); with a ``lazy`` method, y -> (R, a callable giving dR/dy),
-        the correctors ask for dR/dy only at the points Newton takes (the same numbers)
+        the correctors ask for dR/dy only at the points Newton takes (the same numbers); with a
+        ``bordered_solver`` (None, or a callable (J, r) -> J^-1 r), the correctors and tangents solve
+        [dR/dy; t] z = r by it
     y0 : initial guess; corrected with coordinate ``param`` held fixed
     param : the coordinate that starts the branch (its tangent component has the sign
         of ``direction`` at the start) and whose folds are always reported
@@ -320,19 +342,23 @@ def _advance(fun, y: np.ndarray, t: np.ndarray, ds: float, opt: ContinuationOpti
     cos_max = math.cos(math.radians(opt.max_angle_deg))
     n_rej = 0
     lazy = getattr(fun, "lazy", None)  # fun.lazy(y) -> (R, callable giving dR/dy): the Jacobian only when taken
+    solve = getattr(fun, "bordered_solver", None)  # fun.bordered_solver(J, r): its own solver of [dR/dy; t] z = r
     while True:
         yp = y + ds * t
 
         def corrector(z, yp=yp, t=t):
             if lazy is not None:
                 R, Jz = lazy(z)
+                if getattr(Jz, "stacks_below", False):  # Jz(below=t): the same matrix, made with its last row
+                    return np.concatenate([R, [t @ (z - yp)]]), lambda: Jz(below=t)
                 return np.concatenate([R, [t @ (z - yp)]]), lambda: np.vstack([Jz(), t])
             R, Jz = fun(z)
             return np.concatenate([R, [t @ (z - yp)]]), np.vstack([Jz, t])
 
         try:
-            res = newton(corrector, yp, tol=opt.tol, max_iter=opt.max_iter, max_step=_max_jump(ds, opt.corner_ds))
-            tn = tangent(res.jacobian[:-1], t)  # newton's Jacobian is at res.y: the arclength row dropped
+            res = newton(corrector, yp, tol=opt.tol, max_iter=opt.max_iter, max_step=_max_jump(ds, opt.corner_ds),
+                         solve=solve)
+            tn = _corrector_tangent(res.jacobian, t, solve)  # newton's Jacobian is at res.y: [dR/dy; t]
             # a corner (the square-root onset of contact at grazing) turns the tangent by
             # up to 90 degrees however short the step: accept it once the step is short
             turn_ok = tn @ t >= cos_max or (ds <= opt.corner_ds and tn @ t > 0.0)

@@ -57,6 +57,13 @@ from reduced.models.gaps import GapSystem
 
 SAMPLES_PER_COEFFICIENT = 32  # AFT samples per Fourier coefficient (gap forces need >> 2)
 NEWTON_HALVINGS = 6  # trial steps of a Newton iteration: dy, dy/2, ..., dy/32
+BLOCK_SOLVE_MIN_H = 15  # NNMResidual.solve_bordered from this H on. Measured on rom-fep's 12-coordinate model (CPU
+# a branch): H = 25 12.5 -> 5.2 s, H = 15 6.7 -> 3.8 s (NNM 1) and 3.5 -> 2.0 s (NNM 2); at H = 9 a solve is 1.5x
+# faster too, but the branches of H = 9 are drawn (fep.png), guide the shooting and give the stability, and a
+# continuation path follows the last bits of its solves (results/rom-fep: from H = 15 on only the convergence
+# study's branches change, at round-off, their tongue anchors with them)
+BLOCK_SOLVE_TOL = 1e-12  # NNMResidual.solve_bordered: a residual |J z - r| above this times |J| |z| + |r| takes
+# the dense LU instead (a dense LU's is ~1e-16 of it; an ill-conditioned harmonic block would show here)
 
 
 class NewtonError(RuntimeError):
@@ -509,15 +516,165 @@ class NNMResidual:
             buf.A = KI + 1.0 * NM2
             buf.dA = (NM2neg if neg else NM2).copy()
             buf.neg = neg
+            n = self.hb.n  # the views of the diagonal blocks, made once (as_strided costs ~10 us a call)
+            buf.Ab, buf.dAb = _diagonal_blocks(buf.A, n), _diagonal_blocks(buf.dA, n)
+            buf.omega = None
         elif neg != buf.neg:
             np.copyto(buf.dA, NM2neg if neg else NM2)
             buf.neg = neg
-        n = self.hb.n
-        Ab, dAb = _diagonal_blocks(buf.A, n), _diagonal_blocks(buf.dA, n)
+            buf.omega = None
+        if buf.omega == omega:  # the buffers hold this omega already (lazy() then its jacobian(): the same bits)
+            return buf.A, buf.dA
+        Ab, dAb = buf.Ab, buf.dAb
         np.multiply(NM2b, w2, out=Ab)
         np.add(KIb, Ab, out=Ab)
         np.multiply(NM2b, s, out=dAb)
+        buf.omega = omega
         return buf.A, buf.dA
+
+    @functools.cached_property
+    def _dm_blocks(self) -> tuple[tuple[slice, slice], ...]:
+        """(rows, columns) of the n x n blocks of kron(Nab, M) that are not zero (Nab[p, q] != 0)."""
+        n = self.hb.n
+        return tuple((slice(p * n, (p + 1) * n), slice(q * n, (q + 1) * n))
+                     for p, q in zip(*np.nonzero(self.hb.Nab), strict=True))
+
+    @functools.cached_property
+    def _force_pattern(self) -> tuple[tuple[int, int, tuple[int, ...]], ...] | None:
+        """(i, j, the stops r with Q_r[i, j] != 0) of each entry (i, j) that some Q_r fills, when every Q_r
+        holds only zeros and ones and no entry is filled by more than two stops (a gap system whose stops act
+        on single coordinates: B_j a unit row); else None.
+
+        Then dF/dX = sum_r kron(G_r, Q_r) is G_r, or G_r + G_r', on those entries of each block and zero
+        elsewhere, exactly the numbers the contraction of :meth:`HarmonicBalance._aft_jacobian` gives (a
+        product by 1 is exact, a sum of two terms rounds once whatever the order, added zeros change
+        nothing), without its (h h', n n) product and transposed copy.
+        """
+        Q = self.hb.Qr
+        if Q.ndim != 3 or not np.all((Q == 0.0) | (Q == 1.0)):
+            return None
+        out = []
+        for i, j in zip(*np.nonzero(np.any(Q != 0.0, axis=0)), strict=True):
+            stops = tuple(int(r) for r in np.flatnonzero(Q[:, i, j]))
+            if len(stops) > 2:
+                return None
+            out.append((int(i), int(j), stops))
+        return tuple(out)
+
+    def _force_jacobian(self, w: np.ndarray) -> np.ndarray:
+        """dF/dX (size, size) from the force weights w (N, r): :meth:`HarmonicBalance._aft_jacobian`'s numbers
+        (up to the sign of its zeros), written into a per-thread buffer whose other entries stay zero when
+        :attr:`_force_pattern` allows (valid until the next call in this thread)."""
+        hb = self.hb
+        pattern = self._force_pattern
+        if pattern is None:
+            return hb._aft_jacobian(w)
+        buf = self._scratch
+        if getattr(buf, "dF", None) is None:
+            buf.dF = np.zeros((hb.size, hb.size))
+        h, n = 2 * hb.H + 1, hb.n
+        dF4 = buf.dF.reshape(h, n, h, n)
+        if not w.any():
+            for i, j, _ in pattern:
+                dF4[:, i, :, j] = 0.0
+            return buf.dF
+        G = hb.weighted_gram(w)  # (r, h, h')
+        for i, j, stops in pattern:
+            if len(stops) == 1:
+                dF4[:, i, :, j] = G[stops[0]]
+            else:
+                np.add(G[stops[0]], G[stops[1]], out=dF4[:, i, :, j])
+        return buf.dF
+
+    @functools.cached_property
+    def _block_plan(self) -> tuple | None:
+        """Index sets of :meth:`solve_bordered`'s elimination, or None (dense LU).
+
+        F: the coefficients of the coordinates no stop acts on (nf of the n), by harmonic group (g = 0 the
+        constant term, g = k the pair cos k, sin k); C: the coefficients of the coordinates the stops act
+        on (nc), then the three last unknowns (w, d, log10 a); c_g: the C unknowns the rows of group g's F
+        touch (its own stop coordinates and the three last), as positions in C. Returns (F0, c0, Fk (H,
+        2 nf), ck (H, 2 nc + 3), C, F). Taken only where the stops act on few coordinates (nf >= 2 nc: a
+        reduced model's two tips among its 12 coordinates; not the 3-DOF model) and H >= BLOCK_SOLVE_MIN_H.
+        """
+        pattern = self._force_pattern
+        hb = self.hb
+        if pattern is None or hb.H < BLOCK_SOLVE_MIN_H:
+            return None
+        n, nX, H = hb.n, hb.size, hb.H
+        tips = np.array(sorted({i for i, _, _ in pattern} | {j for _, j, _ in pattern}))
+        free = np.array([d for d in range(n) if d not in set(tips.tolist())])
+        nt = tips.size
+        if free.size < 2 * nt:
+            return None
+        border = np.arange((2 * H + 1) * nt, (2 * H + 1) * nt + 3)  # positions of w, d, log10 a in C
+        F0 = free.copy()
+        c0 = np.concatenate([np.arange(nt), border])
+        Fk = np.array([np.concatenate([(2 * k - 1) * n + free, 2 * k * n + free]) for k in range(1, H + 1)])
+        ck = np.array([np.concatenate([np.arange((2 * k - 1) * nt, (2 * k + 1) * nt), border])
+                       for k in range(1, H + 1)])
+        C = np.concatenate([(r * n + tips) for r in range(2 * H + 1)] + [np.arange(nX, nX + 3)])
+        return F0, c0, Fk, ck, C, np.concatenate([F0, Fk.ravel()])
+
+    @property
+    def bordered_solver(self) -> Callable[[np.ndarray, np.ndarray], np.ndarray] | None:
+        """:meth:`solve_bordered` where this model has its structure (:attr:`_block_plan`), else None (the
+        callers' dense LU, as before)."""
+        return self.solve_bordered if self._block_plan is not None else None
+
+    def solve_bordered(self, J: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """J^-1 r for a square J (size, size) whose first hb.size rows are dR/dy's HB rows (any three rows
+        below: the phase, the normalisation, and an arclength, energy or fixed-coordinate row).
+
+        Those rows couple the coefficients of the coordinates no stop acts on only within one harmonic
+        (A(omega) is block diagonal, kron(Nab, M) pairs cos k with sin k, dF/dX is zero there), and only
+        to the stop coordinates of that harmonic and the three last unknowns. They are eliminated group
+        by group (a small LU per harmonic, with pivoting inside it), leaving a dense LU on the stops'
+        coordinates and the three last unknowns (:attr:`_block_plan`): at H = 25 on a 12-coordinate
+        reduced model, 105 rows instead of 615. The same solution up to round-off; where the blocks are
+        too ill-conditioned for that (a residual |J z - r| above BLOCK_SOLVE_TOL of |J| |z| + |r|), or the
+        model has no such structure, the dense LU (:func:`_lu_solve`).
+
+        Parameters
+        ----------
+        J : (size, size) ndarray of float
+            The bordered Jacobian.
+        r : (size,) ndarray of float
+            Right-hand side.
+
+        Returns
+        -------
+        (size,) ndarray of float
+        """
+        plan = self._block_plan
+        if plan is None or J.shape != (self.size, self.size) or r.shape != (self.size,):
+            return _lu_solve(J, r)
+        F0, c0, Fk, ck, C, F = plan
+        nC = C.size
+        with np.errstate(all="ignore"):
+            try:
+                S = np.concatenate([J[np.ix_(C, C)], r[C, None]], axis=1)  # [J_CC, r_C], then its Schur complement
+                # group 0: W0 = A_00^-1 [J_(F0, c0), r_F0]; S[c0, (c0, r)] -= J_(c0, F0) W0
+                W0 = np.linalg.solve(J[np.ix_(F0, F0)], np.concatenate([J[np.ix_(F0, C[c0])], r[F0, None]], axis=1))
+                cols0 = np.append(c0, nC)
+                S[np.ix_(c0, cols0)] -= J[np.ix_(C[c0], F0)] @ W0
+                # groups 1..H at once
+                Ck = C[ck]  # (H, 2 nc + 3) unknowns
+                Wk = np.linalg.solve(J[Fk[:, :, None], Fk[:, None, :]],
+                                     np.concatenate([J[Fk[:, :, None], Ck[:, None, :]], r[Fk][:, :, None]], axis=2))
+                U = J[Ck[:, :, None], Fk[:, None, :]] @ Wk  # (H, 2 nc + 3, 2 nc + 4)
+                colsk = np.concatenate([ck, np.full((ck.shape[0], 1), nC)], axis=1)
+                np.add.at(S, (ck[:, :, None], colsk[:, None, :]), -U)  # the three last rows and columns: summed
+                zC = np.linalg.solve(S[:, :nC], S[:, nC])
+            except np.linalg.LinAlgError:
+                return _lu_solve(J, r)
+            z = np.empty(self.size)
+            z[C] = zC
+            z[F0] = W0[:, -1] - W0[:, :-1] @ zC[c0]
+            z[Fk] = Wk[:, :, -1] - np.einsum("hij,hj->hi", Wk[:, :, :-1], zC[ck])
+            scale = max(float(np.max(J)), -float(np.min(J))) * float(np.max(np.abs(z))) + float(np.max(np.abs(r)))
+            ok = bool(np.all(np.isfinite(z))) and float(np.max(np.abs(J @ z - r))) <= BLOCK_SOLVE_TOL * scale
+        return z if ok else _lu_solve(J, r)
 
     def __call__(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """R (size+2,) and dR/dy (size+2, size+3)."""
@@ -532,16 +689,23 @@ class NNMResidual:
             return A, dA, self._operators[2]
         return hb.linear_operator(omega), hb._linear_operator_domega(omega), np.kron(hb.Nab, hb.M)
 
-    def lazy(self, y: np.ndarray) -> tuple[np.ndarray, Callable[[], np.ndarray]]:
-        """(R (size+2,), a callable giving dR/dy (size+2, size+3)): the AFT forces now, their Jacobian and
+    def lazy(self, y: np.ndarray) -> tuple[np.ndarray, Callable[..., np.ndarray]]:
+        """(R (size+2,), a callable giving dR/dy (size+2, size+3), or with ``below=row`` that with the row
+        appended (size+3, size+3)): the AFT forces now, their Jacobian and
         the rest of dR/dy only when it is called (Newton's halving refuses many trial points on R alone:
         :func:`reduced.periodic.continuation.continue_branch` asks through this). The same numbers as
         ``self(y)``: the same operations, deferred (A and dA/domega made again from omega, which gives
         the same bits: :meth:`_linear_parts` reuses its buffers from call to call)."""
+        R, jacobian, _, _ = self._lazy(y)
+        return R, jacobian
+
+    def _lazy(self, y: np.ndarray) -> tuple[np.ndarray, Callable[[], np.ndarray], np.ndarray, np.ndarray]:
+        """:meth:`lazy`'s (R, dR/dy callable) and the samples x (N, n) and forces f (N, n) it synthesised."""
         hb, wr = self.hb, self.omega_ref
         n, nX = hb.n, hb.size
         Psi, omega, delta, a = self.split(y)
-        f, w = hb.force(hb.E @ hb.unpack(a * Psi))  # HarmonicBalance.aft, its Jacobian deferred
+        x = hb.E @ hb.unpack(a * Psi)
+        f, w = hb.force(x)  # HarmonicBalance.aft, its Jacobian deferred
         F = (hb.P @ f).ravel()
         A, _, DM = self._linear(omega)
         R = np.empty(nX + 2)
@@ -554,25 +718,32 @@ class NNMResidual:
         c1, s1 = Psi[n : 2 * n], Psi[2 * n : 3 * n]
         R[nX + 1] = c1 @ hb.M @ c1 + s1 @ hb.M @ s1 - 1.0
 
-        def jacobian() -> np.ndarray:
-            dF = hb._aft_jacobian(w)
+        def jacobian(below: np.ndarray | None = None) -> np.ndarray:
+            # ``below``: a row (size + 3,) appended, as np.vstack([jacobian(), below]) would (a corrector's
+            # arclength or energy row) without copying the matrix again
+            dF = self._force_jacobian(w)
             A, dA, _ = self._linear(omega)
-            J = np.empty((nX + 2, nX + 3))  # every entry written below (the last two rows zeroed first)
+            J = np.empty((nX + 2 + (below is not None), nX + 3))  # every entry written below
             Jx = J[:nX, :nX]
             np.add(A, dF, out=Jx)  # (A + dF - delta omega DM) / wr^2, in place
             if delta != 0.0:
-                Jx -= delta * omega * DM
+                c = delta * omega
+                for rows, cols in self._dm_blocks:  # DM = kron(Nab, M): elsewhere c DM is a zero (no change)
+                    Jx[rows, cols] -= c * DM[rows, cols]
             Jx /= wr**2
             J[:nX, nX] = (dA @ Psi - delta * DMPsi) / wr
             J[:nX, nX + 1] = -omega * DMPsi / wr
             J[:nX, nX + 2] = np.log(10.0) * (dF @ Psi - Fa) / wr**2
-            J[nX:] = 0.0
+            J[nX : nX + 2] = 0.0
             J[nX, i_s1] = 1.0
             J[nX + 1, n : 2 * n] = 2.0 * hb.M @ c1
             J[nX + 1, 2 * n : 3 * n] = 2.0 * hb.M @ s1
+            if below is not None:
+                J[nX + 2] = below
             return J
 
-        return R, jacobian
+        jacobian.stacks_below = True  # continue_branch's corrector appends its row through ``below``
+        return R, jacobian, x, f
 
     def start(self, phi: np.ndarray, omega: float, log10a: float) -> np.ndarray:
         """Initial y from a mass-normalised linear mode shape phi and its omega."""
@@ -596,25 +767,38 @@ class NNMResidual:
         E = mean_i [v_i^T M v_i / 2 + x_i^T K x_i / 2 + U(x_i)] and
         dE/dX_h = mean_i [E[i,h] (K x_i + f(x_i)) + omega (E Nab)[i,h] M v_i].
         """
+        E, gradient = self._energy_lazy(y)
+        return E, gradient()
+
+    def _energy_lazy(self, y: np.ndarray, x: np.ndarray | None = None, f: np.ndarray | None = None
+                     ) -> tuple[float, Callable[[], np.ndarray]]:
+        """(E, a callable giving dE/dy) of :meth:`energy_and_gradient`, the gradient made only when called;
+        ``x`` and ``f``, the samples and forces :meth:`_lazy` synthesised at the same y (the same numbers),
+        are not made again."""
         hb = self.hb
         nX = hb.size
         Psi, omega, _, a = self.split(y)
         Xm = hb.unpack(a * Psi)
-        x = hb.E @ Xm
+        if x is None:
+            x = hb.E @ Xm
         G = hb.synthesis_derivative
         v = omega * (G @ Xm)
-        f, _ = hb.force(x)
         N = x.shape[0]
         Kx, Mv = x @ hb.K, v @ hb.M
         kin2 = np.vdot(Mv, v) / N  # mean of v_i^T M v_i
         potential = getattr(hb.force, "potential", None)
         E = float(0.5 * kin2 + 0.5 * np.vdot(Kx, x) / N + (0.0 if potential is None else np.mean(potential(x))))
-        dX = (hb.E.T @ (Kx + f) + omega * (G.T @ Mv)) / N
-        g = np.zeros(nX + 3)
-        g[:nX] = a * dX.ravel()
-        g[nX] = float(kin2) / omega * self.omega_ref
-        g[nX + 2] = np.log(10.0) * float(dX.ravel() @ (a * Psi))
-        return E, g
+
+        def gradient() -> np.ndarray:
+            fx = hb.force(x)[0] if f is None else f
+            dX = (hb.E.T @ (Kx + fx) + omega * (G.T @ Mv)) / N
+            g = np.zeros(nX + 3)
+            g[:nX] = a * dX.ravel()
+            g[nX] = float(kin2) / omega * self.omega_ref
+            g[nX + 2] = np.log(10.0) * float(dX.ravel() @ (a * Psi))
+            return g
+
+        return E, gradient
 
 
 # -- Newton ---------------------------------------------------------------------------------
@@ -630,14 +814,14 @@ class NewtonResult:
         ||R(y)||_inf.
     n_iter : int
         Newton iterations made.
-    jacobian : ndarray of float
-        dR/dy at y (square, as solved).
+    jacobian : ndarray of float or None
+        dR/dy at y (square, as solved); None if :func:`newton` was told not to make it.
     """
 
     y: np.ndarray
     residual_norm: float
     n_iter: int
-    jacobian: np.ndarray  # at y (square, as solved)
+    jacobian: np.ndarray | None  # at y (square, as solved)
 
 
 _DGETRF, _DGETRS = get_lapack_funcs(("getrf", "getrs"), (np.zeros((1, 1)),))
@@ -669,7 +853,8 @@ def _jacobian(J):
 
 
 def newton(
-    fun, y0: np.ndarray, *, tol: float = 1e-10, max_iter: int = 20, max_step: float | None = None
+    fun, y0: np.ndarray, *, tol: float = 1e-10, max_iter: int = 20, max_step: float | None = None,
+    final_jacobian: bool = True, solve: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
 ) -> NewtonResult:
     """Solve fun(y) = 0, ``fun(y) -> (R, dR/dy)`` square, by Newton's method.
 
@@ -694,6 +879,11 @@ def newton(
         Most iterations.
     max_step : float, optional
         Largest ||dy||_inf allowed (None: any).
+    final_jacobian : bool
+        Make dR/dy at the solution for ``NewtonResult.jacobian`` (False: None there, for a caller that
+        needs the point alone; the iterations are the same).
+    solve : callable, optional
+        ``solve(J, R) -> J^-1 R`` (e.g. :meth:`NNMResidual.solve_bordered`); default: the dense LU.
 
     Returns
     -------
@@ -715,7 +905,7 @@ def newton(
         if not np.all(np.isfinite(R)) or not np.all(np.isfinite(J)):
             raise NewtonError(f"non-finite residual or Jacobian at iteration {it}")
         try:
-            dy = -_lu_solve(J, R)
+            dy = -(_lu_solve if solve is None else solve)(J, R)
         except (ValueError, np.linalg.LinAlgError) as exc:
             raise NewtonError(f"singular Jacobian at iteration {it}: {exc}") from None
         if not np.all(np.isfinite(dy)):
@@ -736,7 +926,7 @@ def newton(
         if rn <= rtiny or (lam == 1.0 and step <= tol * (1.0 + float(np.max(np.abs(y))))):
             if rn > 1e-6 * max(r0, 1.0) and rn > 1e-8:
                 raise NewtonError(f"step converged but residual {rn:.3g} is not small")
-            return NewtonResult(y, rn, it, _jacobian(J))
+            return NewtonResult(y, rn, it, _jacobian(J) if final_jacobian else None)
     raise NewtonError(
         f"no convergence in {max_iter} iterations: |R| = {float(np.max(np.abs(R))):.3g}, last step {step:.3g}"
     )

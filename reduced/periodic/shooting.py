@@ -237,7 +237,7 @@ def _shoot(flow, x0, v0, period_s, energy_J, *, ref, tol, max_iter, stall=None, 
     rs = np.concatenate([np.full(n, xs), np.full(n, w * xs)])
 
     def evaluate(x, v, T):
-        fl = flow(x, v, T, jacobian=True)
+        fl = flow(x, v, T)  # the Jacobian only for the iterates taken (flow.jacobian_of below)
         if max_events is not None and fl.n_events > max_events:
             raise ExactIntegratorError(f"{fl.n_events} contact events in one period (more than {max_events})")
         y0 = np.concatenate([x, v])
@@ -253,6 +253,7 @@ def _shoot(flow, x0, v0, period_s, energy_J, *, ref, tol, max_iter, stall=None, 
     best = None
     history = []
     for it in range(1, max_iter + 1):
+        fl = replace(fl, jacobian=flow.jacobian_of(fl))
         J = np.zeros((2 * n + 2, 2 * n + 1))
         J[: 2 * n, : 2 * n] = (fl.jacobian - np.eye(2 * n)) / rs[:, None]
         J[: 2 * n, 2 * n] = flow.vector_field(fl.y) / rs

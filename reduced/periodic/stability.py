@@ -31,7 +31,7 @@ import scipy.linalg
 from scipy.linalg import eig
 from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigs
 
-from reduced.periodic.hb import HarmonicBalance
+from reduced.periodic.hb import _DGETRS, HarmonicBalance
 
 HILL_TOL = 1e-3  # max |mu| - 1 above this is unstable for Hill (truncation and AFT errors
 # of the exponents, ~1e-4 T^-1 on the converged branches, set this floor)
@@ -183,10 +183,18 @@ def _nearest_exponents(J0: np.ndarray, J1: np.ndarray, J2: np.ndarray, n: int, o
     except (ValueError, np.linalg.LinAlgError):
         return None
     J1s = J1 + sigma * J2
+    lu_, piv = lu
 
     def solve(z: np.ndarray) -> np.ndarray:
+        # scipy.linalg.lu_solve(lu, b)'s LAPACK call (getrs, the same numbers) without its wrappers, which
+        # cost as much as the solve here (ARPACK asks ~60 times a point)
         f, g = z[:nX], z[nX:]
-        u = scipy.linalg.lu_solve(lu, -(J2 @ g) - J1s @ f)
+        b = -(J2 @ g) - J1s @ f
+        if not np.all(np.isfinite(b)):
+            raise ValueError("array must not contain infs or NaNs")
+        u, info = _DGETRS(lu_, piv, b)
+        if info != 0:
+            raise ValueError(f"illegal value in {-info}th argument of internal getrs")
         return np.concatenate([u, f + sigma * u])
 
     op = LinearOperator((2 * nX, 2 * nX), matvec=solve, dtype=float)

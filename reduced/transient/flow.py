@@ -299,6 +299,32 @@ class Flow:
                 J = self.segment_exponential(int(s), float(tau)) @ J
         return FlowResult(y, active, J, n_seg - 1, seg)
 
+    def jacobian_of(self, result: FlowResult) -> np.ndarray:
+        """dy(T)/dy(0) of a flow this Flow computed without it: the product of the recorded segments'
+        exponentials, the numbers ``jacobian=True`` gives (the same kernel on the same segments), for a caller
+        that needs the Jacobian of some of its flows only (e.g. of the Gauss-Newton steps it takes).
+
+        Parameters
+        ----------
+        result : FlowResult
+            A result of this Flow.
+
+        Returns
+        -------
+        (2n, 2n) ndarray of float
+            ``result.jacobian`` if it has one, else the product.
+        """
+        if result.jacobian is not None:
+            return result.jacobian
+        states, taus = result.segments
+        J = np.eye(2 * self.system.n)
+        if self.loads is not None:
+            for s, tau in zip(states, taus, strict=True):
+                J = self.segment_exponential(int(s), float(tau)) @ J
+            return J
+        call_numba_kernel(_modal.flow_jacobian, self._modal, states, taus, states.size, J)
+        return J
+
     def _free(self, y: np.ndarray, active: np.ndarray, T: float, jacobian: bool) -> FlowResult:
         """The autonomous flow by the exact integrator's free kernel (:mod:`reduced.transient._modal`:
         one march for all stops, no rest floor), each segment's state and length recorded, and the
