@@ -42,6 +42,7 @@ import numpy as np  # noqa: E402
 
 from bearingshaft.output import staged_output, write_rows  # noqa: E402
 from bearingshaft.scenes import load_scene  # noqa: E402
+from bearingshaft.stages.frc_friction import load_vector  # noqa: E402
 from bearingshaft.stages.frc_map import contact_bands  # noqa: E402
 from bearingshaft.stages.frc_map_files import MAP_FIELDS, _sweep_rows  # noqa: E402
 from bearingshaft.systems import model_system  # noqa: E402
@@ -104,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     spec = scene.frc
     system, rows = model_system(scene.model)
     names = tuple(scene.model.point_names)
-    b = rows[names.index(spec.point)]
+    b = load_vector(spec, rows, names)  # as the stage forms it (with [frc] also_points)
     levels = args.levels or list(spec.levels_N)
     timing, maps, summary = [], [], []
     with staged_output(args.out, "response-map-speed", scene.source, "response_map_speed") as w:
