@@ -266,10 +266,10 @@ def test_nnm_newtons_asking_lazily_are_the_eager_ones(monkeypatch):
     lazy = both()
     lazily = NNMResidual.lazy
 
-    def eager(self, y):
+    def eager(self, y):  # dR/dy made at once; ``below`` (a corrector's row) stacked as np.vstack would
         R, jac = lazily(self, y)
         J = jac()
-        return R, lambda: J
+        return R, lambda below=None: J if below is None else np.vstack([J, below])
 
     monkeypatch.setattr(NNMResidual, "lazy", eager)
     ref = both()
