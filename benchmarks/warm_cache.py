@@ -1,5 +1,7 @@
 """Fill the reduced-model cache for every built-in scene with a reduced model: its reduction and the full 3-D
-model's open- and closed-gap modes (what ``reduce`` and ``verify`` load), so that a timed ``bearingshaft run``
+model's open- and closed-gap modes (what ``reduce`` and ``verify`` load), and with ``[hammer] linear_check`` the
+full model's modes of that check (:func:`bearingshaft.stages.hammer_linear.full_modes`), and with ``[frf]`` the
+3-D model's MAC reference (:func:`bearingshaft.stages.frf.fe_reference`), so that a timed ``bearingshaft run``
 measures the job with its reductions cached, as ``benchmarks/job_times.py`` reports it.
 
     PYTHONPATH=. python benchmarks/warm_cache.py
@@ -21,10 +23,13 @@ def main() -> int:
     import bearingshaft.scenes as scenes
     from bearingshaft.gap_modes import full_gap_modes
     from bearingshaft.scenes import load_scene
+    from bearingshaft.stages.frf import fe_reference
+    from bearingshaft.stages.hammer_linear import full_modes
     from reduced.models.rom import RomSpec, from_cache, reduction, store_in_cache
 
     for path in sorted(Path(scenes.__file__).parent.glob("*.toml")):
-        spec = load_scene(path.stem).model
+        scene = load_scene(path.stem)
+        spec = scene.model
         if not isinstance(spec, RomSpec) or spec.rom_file:
             continue
         t0 = time.perf_counter()
@@ -33,6 +38,10 @@ def main() -> int:
         if not had:
             store_in_cache(rom, spec)
         full_gap_modes(fe, spec, Psi=rom.Psi)
+        if scene.hammer is not None and scene.hammer.linear_check:
+            full_modes(fe, scene.hammer.linear_check_max_hz, progress=False)
+        if scene.frf is not None and scene.frf.mac_reference == "fe":
+            fe_reference(spec.fe_model(), scene.frf.fe_modes)
         print(f"{path.stem}: {'cached' if had else 'built'} in {time.perf_counter() - t0:.1f} s", flush=True)
     return 0
 

@@ -578,3 +578,28 @@ def test_recorded_blows_equal_the_daq_on_the_fine_samples(small):
         last = acq.oversample * (n_out - 1) + 1  # the fine samples of the record (the filter's tail runs past it)
         assert np.all(pen_max <= pen[:, :last].max(axis=1) + 1e-12 * np.abs(pen).max())
         assert np.all(pen_max >= pen[:, :last:acq.oversample].max(axis=1) - 1e-12 * np.abs(pen).max())
+
+
+def test_fe_reference_from_the_cache_is_the_solve(monkeypatch, tmp_path):
+    """The frf stage's MAC reference (:func:`bearingshaft.stages.frf.fe_reference`): the six labelled
+    pseudo-rigid modes of the 3-D model at the accelerometers, as :func:`fem.analysis.analyse` gives them; a
+    second call loads them from the cache bit for bit without solving, another mode count is another entry.
+    The hex8 apparatus (4,185 DOFs), 20 modes: about 2 s. (The slow Table 3 test checks the shapes.)"""
+    import fem.analysis
+    from bearingshaft.stages.frf import ACC_DOFS, fe_reference
+    from fem.model import AssemblyModel
+
+    monkeypatch.setenv("BEARINGSHAFT_CACHE", str(tmp_path))
+    model = AssemblyModel(layout="assembly", element="hex8")
+    freq, shapes, n_dofs = fe_reference(model, 20)
+    assert freq.size == 6 and shapes.shape == (len(ACC_DOFS), 6) and n_dofs == 4185
+    assert np.all(np.diff(np.sort(freq)) > 0) and 5.0 < freq.min() and freq.max() < 60.0  # Table 2: 10.9-33.7 Hz
+
+    def solve_again(*args, **kwargs):
+        raise AssertionError("solved again: the cache was not read")
+
+    monkeypatch.setattr(fem.analysis, "analyse", solve_again)
+    f2, s2, n2 = fe_reference(model, 20)
+    assert np.array_equal(f2, freq) and np.array_equal(s2, shapes) and n2 == n_dofs
+    with pytest.raises(AssertionError, match="solved again"):
+        fe_reference(model, 24)

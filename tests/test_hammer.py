@@ -571,7 +571,7 @@ def _full_against_reduced(rom, scene):
     return e, full.names
 
 
-def test_full_reference_agrees_with_the_reduced_apparatus_on_a_small_mesh(monkeypatch):
+def test_full_reference_agrees_with_the_reduced_apparatus_on_a_small_mesh(monkeypatch, tmp_path):
     """Fast variant of the slow test below, the same comparison on a smaller model: the hex8 mesh
     (4,185 DOFs against hex20's 15,087; Craig-Bampton and the full modes in ~2 s each) and a
     50 ms record. The 20 fixed-interface modes reach 4.9 kHz, the full modes 3.5 kHz; each
@@ -583,6 +583,7 @@ def test_full_reference_agrees_with_the_reduced_apparatus_on_a_small_mesh(monkey
     import fem.model
     from bearingshaft.scenes import parse_scene
 
+    monkeypatch.setenv("BEARINGSHAFT_CACHE", str(tmp_path))  # full_reference keeps its full modes there
     spec = RomSpec(layout="assembly", planar=False, n_modes=N_MODES, element="hex8", gap=1.0)
     rom, fe = build_rom(spec)
     text = SCENE.format(n_modes=N_MODES, gap=1.0).replace("planar = false", 'planar = false\nelement = "hex8"')
@@ -596,6 +597,37 @@ def test_full_reference_agrees_with_the_reduced_apparatus_on_a_small_mesh(monkey
     assert cells.sum() == 4
     assert e[~cells].max() < 1.5e-3, e[~cells].max()
     assert e[cells].max() < 1e-2, e[cells].max()
+
+
+def test_full_modes_from_the_cache_are_the_bits_of_one_direct_solve(monkeypatch, tmp_path):
+    """The linear check's full modes (:func:`full_modes`): the search (24, 48, ... modes until the top passes
+    max_hz) returns the first count that passes, its modes those of one direct solve of that count bit for bit
+    (seeded ARPACK start, SuperLU); a second call loads them from the cache, bit for bit, without solving.
+    The hex8 apparatus (4,185 DOFs) with max_hz = 5 kHz (24 modes reach 4.4 kHz): 48
+    modes, about 1 s a solve."""
+    from bearingshaft.stages import hammer_linear
+    from fem.modal import modal_analysis
+    from fem.model import AssemblyModel, build_system
+
+    monkeypatch.setenv("BEARINGSHAFT_CACHE", str(tmp_path))
+    fe = build_system(AssemblyModel(layout="assembly", element="hex8", gap=1.0))
+    max_hz = 5000.0
+    solved = hammer_linear.full_modes(fe, max_hz, False)
+    k = solved.freq_hz.size
+    assert k >= 48 and solved.freq_hz[-1] > max_hz >= solved.freq_hz[k // 2 - 1], (k, solved.freq_hz)  # it doubled
+    direct = modal_analysis(fe.K, fe.M, n_modes=k, shift_hz=0.1, method="lanczos", solver="superlu")
+    assert np.array_equal(solved.phi, direct.phi) and np.array_equal(solved.freq_hz, direct.freq_hz)
+    assert len(list(tmp_path.glob("fullmodes-*.npz"))) == 1
+
+    def solve_again(*args):
+        raise AssertionError("solved again: the cache was not read")
+
+    monkeypatch.setattr(hammer_linear, "_search_full_modes", solve_again)
+    loaded = hammer_linear.full_modes(fe, max_hz, False)
+    assert np.array_equal(loaded.phi, direct.phi) and np.array_equal(loaded.freq_hz, direct.freq_hz)
+    assert np.array_equal(loaded.omega2, direct.omega2)
+    with pytest.raises(AssertionError, match="solved again"):  # another max_hz is another entry
+        hammer_linear.full_modes(fe, 2 * max_hz, False)
 
 
 @pytest.mark.slow

@@ -172,20 +172,68 @@ def model_modes(scene: Scene, rom, band_hz) -> ModelModes:
     freq, zeta = f[keep], -poles[keep].real / np.abs(poles[keep])
     spec = scene.frf
     if spec.mac_reference == "fe":
-        from fem.analysis import analyse
         from fem.labels import TABLE2_ORDER
 
-        a = analyse(scene.model.fe_model(), n_modes=spec.fe_modes)
-        idx = a.labelled_indices()
-        shapes = a.sensor_shapes([*BEAM_SENSORS, *TUBE_SENSORS], idx)
-        return ModelModes(freq, zeta, tuple(TABLE2_ORDER), np.asarray(a.modes.freq_hz)[idx], shapes, ACC_DOFS,
-                          f"3-D FE model ({a.system.n_dofs} DOFs, {spec.fe_modes} modes; the modal stage's solve), "
+        fe_freq, shapes, n_dofs = fe_reference(scene.model.fe_model(), spec.fe_modes)
+        return ModelModes(freq, zeta, tuple(TABLE2_ORDER), fe_freq, shapes, ACC_DOFS,
+                          f"3-D FE model ({n_dofs} DOFs, {spec.fe_modes} modes; the modal stage's solve), "
                           "its six pseudo-rigid modes (Table 2 labels)")
     rows = np.vstack([rom.output(n) for n in ACC_DOFS])
     band = np.flatnonzero((lm.freq_hz >= band_hz[0]) & (lm.freq_hz <= band_hz[1]))
     names = tuple(f"mode {k + 1} ({lm.freq_hz[k]:.2f} Hz)" for k in band)
     return ModelModes(freq, zeta, names, lm.freq_hz[band], rows @ lm.phi[:, band], ACC_DOFS,
                       f"reduced rig ({system.n} DOFs), its open-gap modes in the band")
+
+
+def fe_reference(fe_model, n_modes: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """The MAC reference of the 3-D model (:func:`fem.analysis.analyse`: mesh, assembly, ``n_modes`` modes,
+    labels): its labelled pseudo-rigid modes' frequencies and shapes at the accelerometers, kept in the
+    reduced-model cache (``frfref-<key>.npz``; solved, it was 4.0 s of the stage's 7.1 s of compute CPU,
+    provenance ``cpu_s``). The key is what the
+    solve depends on, as a cached reduction's (:func:`reduced.models.rom.source_hash`): the model's parameters,
+    ``n_modes``, the code of geometry/ and fem/, the thread count asked for (``BEARINGSHAFT_THREADS``); a loaded
+    entry holds the bits of the solve (the factorization's thread count is fixed, :mod:`fem._pardiso`).
+
+    Parameters
+    ----------
+    fe_model : fem.model.AssemblyModel
+        The 3-D model (the scene's ``[model]`` ``fe_model()``).
+    n_modes : int
+        Modes solved ([frf] fe_modes).
+
+    Returns
+    -------
+    freq_hz, shapes, n_dofs : (6,) ndarray (Hz, Table 2 order), (len(ACC_DOFS), 6) ndarray (mass-normalised
+        shapes at ACC_DOFS), int (the model's DOFs)
+    """
+    import contextlib
+    import hashlib
+    import os
+
+    from reduced.cache import load_entry, write_entry
+    from reduced.models.rom import cache_dir, source_hash
+
+    sensors = [*BEAM_SENSORS, *TUBE_SENSORS]
+    key = hashlib.sha256(f"frf fe_reference {fe_model!r} {n_modes} {sensors} {source_hash()} "
+                         f"{os.environ.get('BEARINGSHAFT_THREADS', '')}".encode()).hexdigest()
+    path = cache_dir() / f"frfref-{key[:20]}.npz"
+    hit = load_entry(path, key, _load_fe_reference)
+    if hit is not None:
+        return hit
+    from fem.analysis import analyse
+
+    a = analyse(fe_model, n_modes=n_modes)
+    idx = a.labelled_indices()
+    out = (np.asarray(a.modes.freq_hz)[idx], a.sensor_shapes(sensors, idx), int(a.system.n_dofs))
+    with contextlib.suppress(OSError):  # a read-only cache: solved again next time
+        write_entry(path, lambda f: np.savez(f, freq_hz=out[0], shapes=out[1], n_dofs=out[2]), key,
+                    info={"kind": "frf stage's MAC reference", "model": repr(fe_model), "n_modes": n_modes})
+    return out
+
+
+def _load_fe_reference(f) -> tuple[np.ndarray, np.ndarray, int]:
+    with np.load(f) as z:
+        return z["freq_hz"], z["shapes"], int(z["n_dofs"])
 
 
 def test_geometry(scene: Scene, rom, ref_locations) -> SensorGeometry:
