@@ -259,3 +259,34 @@ def test_skipping_the_first_check_of_a_large_model_changes_no_bit(apparatus, mon
     assert c0.all() and c1.all()
     assert (nop0, st0) == (nop1, st1)
     assert np.array_equal(lam0, lam1) and np.array_equal(Y0, Y1)
+
+
+def test_factorizing_beside_the_krylov_start_changes_no_bit(apparatus, monkeypatch):
+    """With PARDISO the factorization runs on a second thread while the start block is prepared
+    (fem.modal.OVERLAP): the same operations in the same order, so frequencies, shapes, residuals and
+    floors must be bit-identical to factorizing first; and it must really run on the other thread."""
+    if not has_pardiso():
+        pytest.skip("PARDISO not installed")
+    import threading
+
+    import fem.modal as fm
+
+    threads = []
+    factorize = fm._factorize
+
+    def spy(*args, **kwargs):
+        threads.append(threading.current_thread() is threading.main_thread())
+        return factorize(*args, **kwargs)
+
+    monkeypatch.setattr(fm, "_factorize", spy)
+    out = []
+    for overlap in (False, True):
+        monkeypatch.setattr(fm, "OVERLAP", overlap)
+        out.append(modal_analysis(apparatus.K, apparatus.M, n_modes=16, solver="pardiso"))
+    assert threads == [True, False]  # factorized on the main thread, then on the worker
+    a, b = out
+    assert a.converged.all() and b.converged.all()
+    assert (a.n_op, a.n_iter) == (b.n_op, b.n_iter)
+    for name in ("omega2", "phi", "residuals", "floors"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert 0.0 < b.timing["factorize_s"] and 0.0 < b.timing["iterate_s"]
