@@ -36,6 +36,28 @@ def test_circle_folds_are_detected_and_points_stay_on_it():
     assert len(fold_x) == 2 and fold_x[0] > 0.95 and fold_x[1] < -0.95
 
 
+def test_reject_that_takes_the_tangent_gets_the_unit_tangent_of_the_new_point():
+    # on the unit circle the tangent at (x, y) is +-(-y, x) in closed form: the tangent handed to a
+    # reject with ``takes_tangent`` is that, to round-off (1e-14: a 3 x 3 solve of entries O(1)),
+    # and the path is the one a plain reject (which accepts every step) gives, to the bit
+    seen = []
+
+    def reject(yo, yn, tn=None):
+        seen.append((yn.copy(), None if tn is None else tn.copy()))
+        return False
+
+    reject.takes_tangent = True
+    kw = dict(param=0, ds=0.1, ds_max=0.2, max_steps=40)
+    br = continue_branch(circle, np.array([0.0, 1.0]), reject=reject, **kw)
+    plain = continue_branch(circle, np.array([0.0, 1.0]), reject=lambda yo, yn: False, **kw)
+    assert np.array_equal(br.y, plain.y)
+    assert len(seen) == len(br.y) - 1 and all(tn is not None for _, tn in seen)
+    for (yn, tn), t_branch in zip(seen, br.tangent[1:], strict=True):
+        exact = np.array([-yn[1], yn[0]]) / np.hypot(*yn)
+        assert abs(abs(float(tn @ exact)) - 1.0) < 1e-14
+        assert np.allclose(tn, t_branch, rtol=0, atol=1e-15)  # the one the branch records
+
+
 @pytest.mark.parametrize("kind, c", [("sqrt", 0.1), ("kink", 10.0)])
 def test_corners_are_passed(kind, c):
     # y1 = c sqrt(y0 - 1) (a vertical tangent, like a backbone at grazing) or

@@ -242,7 +242,10 @@ def continue_branch(
     monitor : further coordinates whose folds are reported
     callback : y -> object stored in ``Branch.data`` for each point
     reject : (y_old, y_new) -> bool; a true answer rejects the step (halved), e.g. a
-        jump in a physical quantity that the tangent angle does not see
+        jump in a physical quantity that the tangent angle does not see; a ``reject`` with a true attribute
+        ``takes_tangent`` is called as reject(y_old, y_new, t_new) after a corrector, t_new the unit tangent
+        at y_new oriented along the last one (so it need not solve for it again), and as before after a
+        corner step
     progress : callable(y) after every accepted point
     corner_coords : None, or (y, t) -> coordinates a corner step may fix, in the order tried
         (default: the monitored ones). On a curve with corners where it also turns back in
@@ -362,7 +365,8 @@ def _advance(fun, y: np.ndarray, t: np.ndarray, ds: float, opt: ContinuationOpti
             # a corner (the square-root onset of contact at grazing) turns the tangent by
             # up to 90 degrees however short the step: accept it once the step is short
             turn_ok = tn @ t >= cos_max or (ds <= opt.corner_ds and tn @ t > 0.0)
-            if turn_ok and (reject is None or not reject(y, res.y)):
+            if turn_ok and (reject is None or not (reject(y, res.y, tn) if getattr(reject, "takes_tangent", False)
+                                                   else reject(y, res.y))):
                 return res, tn, ds, n_rej, False
         except NewtonError:
             pass

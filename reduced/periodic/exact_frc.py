@@ -485,12 +485,14 @@ class _Analyser:
                 G = -Phi
         return Phi, G
 
-    def signs(self, Js: np.ndarray, maps: tuple | None = None) -> np.ndarray:
-        """The test signs of the channels from the segments' monodromies (``maps``: their :meth:`maps`, if made)."""
+    def signs(self, Js: np.ndarray, maps: tuple | None = None, mu: np.ndarray | None = None) -> np.ndarray:
+        """The test signs of the channels from the segments' monodromies (``maps``: their :meth:`maps`, if made;
+        ``mu``: the eigenvalues of their Phi, if found, in any order)."""
         Phi, G = self.maps(Js) if maps is None else maps
         out = []
-        for _, Q in self.blocks:
-            lamP = np.linalg.eigvals(Q.T @ Phi @ Q)
+        for name, Q in self.blocks:
+            # the whole space: Q = I, Q^T Phi Q is Phi to the bit (products by 1 and sums of zeros)
+            lamP = mu if mu is not None and name == "all" else np.linalg.eigvals(Q.T @ Phi @ Q)
             if self.half_sym:
                 lamG = np.linalg.eigvals(Q.T @ G @ Q)
                 out += [_real_signs(lamG, 1.0), _real_signs(lamG, -1.0)]
@@ -527,7 +529,7 @@ class _Analyser:
         mu = mu[np.argsort(-np.abs(mu), kind="stable")]
         pmax, pmin = res.peaks(Y, self.rows)
         a, hw = self.measures(res.nodes(Y)[0])
-        return mu, self.signs(Js, maps), res.events(Y), a, hw, np.maximum(pmax, -pmin)
+        return mu, self.signs(Js, maps, mu), res.events(Y), a, hw, np.maximum(pmax, -pmin)
 
 
 # -- continuation of one family -------------------------------------------------------------------
@@ -605,14 +607,19 @@ def _follow(res: ShootingResidual, y0: np.ndarray, param: int, direction: float,
             return True
         return (not lo - 1e-12 <= y[i_w] <= hi + 1e-12) or (stop_extra is not None and stop_extra(y))
 
-    def reject(yo, yn):
+    def reject(yo, yn, tn=None):
         d = yn - yo
         dn = float(np.linalg.norm(d))
         if dn == 0.0:
             return False
-        t = tangent(res(yn)[1], d / dn)
+        if tn is None:
+            t = tangent(res(yn)[1], d / dn)
+        else:  # the corrector's tangent at yn (the same null vector of dR/dY), oriented along the step
+            t = tn if float(tn @ d) >= 0.0 else -tn
         last["y"], last["t"] = yn, t
         return abs(float(t @ d)) < cos_max * dn  # landed on a neighbouring sheet
+
+    reject.takes_tangent = True
 
     def corner_coords(y, t):
         return [int(c) for c in np.argsort(-np.abs(t))[:3]]
