@@ -58,7 +58,6 @@ from reduced.periodic.friction_shooting import (
     STABLE_TOL,
     FrictionShootingResult,
     _Residual,
-    flow,
 )
 from reduced.transient.exact import ExactIntegratorError
 from reduced.transient.friction import FrictionFlow

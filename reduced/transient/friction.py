@@ -538,6 +538,8 @@ class FrictionFlow:
 
         Raises
         ------
+        reduced._checks.InvalidArgument
+            y not finite or not of 2n + p values.
         ExactIntegratorError
             As :func:`integrate_exact_friction`, or where the grid is not samples + 1 points.
         """
@@ -549,6 +551,9 @@ class FrictionFlow:
         N = sample_count(duration_s, fs)
         if N != samples + 1:
             raise ExactIntegratorError(f"{N} samples where {samples + 1} were asked")
+        y = np.asarray(y, float)
+        if y.shape != (2 * n + self.system.p,) or not np.all(np.isfinite(y)):
+            raise _check.InvalidArgument(f"y must be finite, of shape ({2 * n + self.system.p},), got {y.shape}")
         x0, v0, w0 = (np.array(y[:n], float), np.array(y[n:2 * n], float), np.array(y[2 * n:], float))
         st = self._stepper
         if st is None:
