@@ -204,6 +204,20 @@ def _unloaded(system: GapSystem, x0: np.ndarray, w0) -> np.ndarray:
     return w
 
 
+def _start_state(system: GapSystem, table: FrictionTable, x0: np.ndarray, w0) -> tuple[np.ndarray, int]:
+    """(w (p,) m, s): ``_unloaded(system, x0, w0)`` and :func:`initial_friction_state` at it, the start's states
+    (:func:`_initial_states`) found once where no slider is put on its cone (w unchanged: the same states again)."""
+    if w0 is None:
+        w = system.friction.Bt @ x0
+        return w, table.states.index(*_initial_states(system, x0, w))
+    w = np.array(w0, float)
+    closed, slip = _initial_states(system, x0, w)
+    if np.any(slip):
+        w = _unloaded(system, x0, w0)
+        closed, slip = _initial_states(system, x0, w)
+    return w, table.states.index(closed, slip)
+
+
 def initial_friction_state(system: GapSystem, table: FrictionTable, x0: np.ndarray, w0: np.ndarray) -> int:
     """The friction state at the start: the stops that penetrate closed (the deepest of a tip), a slider of
     a closed tip sticking when its spring force is inside the cone (|kt (t - w)| <= mu N), else slipping the
@@ -303,9 +317,9 @@ class FrictionExactStepper(_stepper.Stepper):
         fr, table = system.friction, self.table
         t0 = time.perf_counter()
         with single_thread_blas():
-            w0 = _unloaded(system, x0, w0)
+            w0, self.s = _start_state(system, table, x0, w0)
+            self.s0 = self.s
             self.y = np.concatenate([x0, v0, w0])
-            self.s = self.s0 = initial_friction_state(system, table, x0, w0)
             self.lazy.ensure(self.s)
             if self.forced:
                 self.forced_table.ensure(0)  # the open state's static deflections: the scales of the round-off
