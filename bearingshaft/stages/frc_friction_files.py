@@ -145,7 +145,7 @@ def shooting_markdown(result) -> list[str]:
              "closes over the period: the open-gap orbit, linear, where HB is exact), meets a branch continued "
              "before it (within 2e-2 of its amplitudes; a start on such a branch is not continued again), turns back "
              "onto its own path or its own down half past a fold, its corrector fails, or after [frc] "
-             "shooting_steps / 2 points (the CPU budget: about 0.3 s a point in contact); each end is stated with "
+             "shooting_steps / 2 points (the CPU budget: about 0.13 s a point in contact); each end is stated with "
              "its reason. Jacobian and monodromy exact "
              "(reduced.periodic.friction_sensitivity: "
              "the state transition matrices of the states visited and the saltation matrix at every stick, slip and "

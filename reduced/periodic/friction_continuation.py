@@ -51,16 +51,16 @@ import numpy as np
 from reduced import _checks as _check
 from reduced._blas import single_thread_blas
 from reduced.models.gaps import GapSystem
-from reduced.periodic.friction_sensitivity import FlowSensitivity
+from reduced.periodic.friction_sensitivity import LOG_EVENTS, FlowSensitivity
 from reduced.periodic.friction_shooting import (
     FD_STEP,
     RANK_RTOL,
     STABLE_TOL,
     FrictionShootingResult,
     _Residual,
-    flow,
 )
 from reduced.transient.exact import ExactIntegratorError
+from reduced.transient.friction import FrictionFlow
 
 JACOBIAN = "exact"  # dG/dz: "exact" (state transition and saltation matrices) or "fd" (forward differences)
 FD_FREQ = 1e-7  # x f: the forward-difference step of dG/df (as FD_STEP in z: truncation ~1e-7 of the column)
@@ -121,9 +121,11 @@ class _Continuation:
     def __init__(self, system, b, P, phase_deg, S, D):
         self.system, self.b, self.P, self.phase, self.S, self.D = system, b, P, phase_deg, S, D
         self.N = D.size
+        self.flows = FrictionFlow(system, b, P)  # the lean flow, set up once for the branch (the same bits)
+        self.logged = FrictionFlow(system, b, P, log_events=LOG_EVENTS)  # with the event log, for the sensitivity
 
     def res(self, f: float) -> _Residual:
-        return _Residual(self.system, self.b, self.P, f, self.phase, self.S, self.D)
+        return _Residual(self.system, self.b, self.P, f, self.phase, self.S, self.D, self.flows)
 
     def G(self, u: np.ndarray) -> tuple[np.ndarray, _Residual, np.ndarray, np.ndarray]:
         """(G, residual object, Y, ends) at u = [z / D; f]."""
@@ -135,7 +137,7 @@ class _Continuation:
     def blocks(self, f: float, Y: np.ndarray) -> np.ndarray:
         """(S, N, N) the segments' monodromies in z, units of D, exact (:mod:`reduced.periodic.friction_sensitivity`:
         state transition matrices and saltation matrices along the integrator's events)."""
-        sens = FlowSensitivity(self.system, self.b, self.P, f, self.phase)
+        sens = FlowSensitivity(self.system, self.b, self.P, f, self.phase, flows=self.logged)
         h = 1.0 / f / self.S
         n = self.system.n
         Tm = np.eye(self.N)
@@ -354,8 +356,8 @@ def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_ma
 
     def amplitudes(Y: np.ndarray, f: float) -> np.ndarray:
         h = 1.0 / f / S
-        xs = np.vstack([flow(system, start.b, start.amplitude_N, f, Y[k], k * h, h, SAMPLES_PER_SEGMENT,
-                             start.phase_deg)[:, :n] for k in range(S)])
+        xs = np.vstack([cont.flows(f, Y[k], k * h, h, SAMPLES_PER_SEGMENT, start.phase_deg)[:, :n]
+                        for k in range(S)])
         touching.append(bool(system.m) and bool(np.any(system.side * (xs @ system.B.T - system.offset) > 0.0)))
         return np.max(np.abs(xs @ rows.T), axis=0)
 

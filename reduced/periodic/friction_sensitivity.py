@@ -31,7 +31,7 @@ from scipy.linalg import expm
 from reduced.models.gaps import GapSystem
 from reduced.periodic.friction_shooting import _load
 from reduced.transient.exact import ExactIntegratorError
-from reduced.transient.friction import _physics, initial_friction_state, integrate_exact_friction
+from reduced.transient.friction import FrictionFlow, _physics, initial_friction_state
 
 LOG_EVENTS = 100_000  # events logged a segment (a segment of T / 8 in contact has tens)
 
@@ -46,11 +46,15 @@ class FlowSensitivity:
     amplitude_N : N, P
     freq_hz : Hz, f
     phase_deg : degrees, phi
+    flows : the lean flow of this system, load direction and amplitude with LOG_EVENTS events logged
+        (:class:`reduced.transient.friction.FrictionFlow`; default: one of its own)
     """
 
-    def __init__(self, system: GapSystem, b, amplitude_N: float, freq_hz: float, phase_deg: float = 0.0):
+    def __init__(self, system: GapSystem, b, amplitude_N: float, freq_hz: float, phase_deg: float = 0.0,
+                 flows: FrictionFlow | None = None):
         self.system, self.b = system, np.asarray(b, float)
         self.P, self.f, self.phase = float(amplitude_N), float(freq_hz), float(phase_deg)
+        self.flows = FrictionFlow(system, b, amplitude_N, log_events=LOG_EVENTS) if flows is None else flows
         self.n, self.p = system.n, system.friction.p
         self.N = 2 * self.n + self.p
         self.Minv = np.linalg.inv(system.M)
@@ -119,9 +123,8 @@ class FlowSensitivity:
         """
         n, sy = self.n, self.system
         loads = _load(self.b, self.P, self.f, self.phase + 360.0 * self.f * t0)
-        r = integrate_exact_friction(sy, y0[:n], y0[n:2 * n], h, 1.0 / h, w0=y0[2 * n:], loads=loads, chunks=1,
-                                     log_events=LOG_EVENTS)
-        ev = r.events
+        y1 = self.flows(self.f, y0, t0, h, 1, self.phase)[-1].copy()  # integrate_exact_friction's bits, lean
+        ev = self.flows.events
         if ev.n_total > len(ev):
             raise ExactIntegratorError(f"{ev.n_total} events in a segment: the log keeps {len(ev)}")
         table = ev.table
@@ -147,7 +150,7 @@ class FlowSensitivity:
             Phi = Sal @ Phi
             s, t_prev = s_new, te
         Phi = expm(self.affine(table, s)[0] * (h - t_prev)) @ Phi
-        return np.concatenate([r.x[-1], r.v[-1], r.w[-1]]), Phi
+        return y1, Phi
 
 
 __all__ = ["LOG_EVENTS", "FlowSensitivity"]

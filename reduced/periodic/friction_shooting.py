@@ -71,7 +71,7 @@ from reduced.periodic.forced_shooting import SEGMENTS
 from reduced.periodic.friction_aft import FrictionBalance, jenkins_loop
 from reduced.periodic.hb import _derivative_matrix, _phases, _synthesis_matrix
 from reduced.transient.exact import ExactIntegratorError
-from reduced.transient.friction import integrate_exact_friction
+from reduced.transient.friction import FrictionFlow, integrate_exact_friction
 
 FD_STEP = 1e-7  # x D: forward differences in Newton (truncation ~1e-7 of the Jacobian, round-off ~eps / 1e-7)
 FD_STEP_CENTRAL = 1e-6  # x D: central differences for the multipliers (truncation ~1e-12, round-off ~1e-10;
@@ -305,11 +305,13 @@ class _Residual:
     """R(Y) and its finite-difference Jacobian for the multiple-shooting equations, in the coordinates
     z = [x; v; d], d = Bt x - w the sliders' stretches (module docstring)."""
 
-    def __init__(self, system, b, P, f, phase_deg, S, D):
+    def __init__(self, system, b, P, f, phase_deg, S, D, flows: FrictionFlow | None = None):
         self.args = (system, b, P, f)
         self.phase, self.S, self.D = phase_deg, S, D
         self.h = 1.0 / f / S
         self.n, self.Bt = system.n, system.friction.Bt
+        # the lean flow (its set-up once for all the runs of the system and load; the same bits as flow())
+        self.flows = FrictionFlow(system, b, P) if flows is None else flows
 
     def z_of(self, Y: np.ndarray) -> np.ndarray:
         """[x; v; Bt x - w] of states [x; v; w] (..., N)."""
@@ -325,8 +327,7 @@ class _Residual:
 
     def end(self, y: np.ndarray, k: int) -> np.ndarray:
         """z of phi(y; t_k, h)."""
-        s, b, P, f = self.args
-        return self.z_of(flow(s, b, P, f, y, k * self.h, self.h, 1, self.phase)[-1])
+        return self.z_of(self.flows(self.args[3], y, k * self.h, self.h, 1, self.phase)[-1])
 
     def ends(self, Y: np.ndarray) -> np.ndarray:
         """(S, N) z of phi(y_k; t_k, h)."""

@@ -204,6 +204,20 @@ def _unloaded(system: GapSystem, x0: np.ndarray, w0) -> np.ndarray:
     return w
 
 
+def _start_state(system: GapSystem, table: FrictionTable, x0: np.ndarray, w0) -> tuple[np.ndarray, int]:
+    """(w (p,) m, s): ``_unloaded(system, x0, w0)`` and :func:`initial_friction_state` at it, the start's states
+    (:func:`_initial_states`) found once where no slider is put on its cone (w unchanged: the same states again)."""
+    if w0 is None:
+        w = system.friction.Bt @ x0
+        return w, table.states.index(*_initial_states(system, x0, w))
+    w = np.array(w0, float)
+    closed, slip = _initial_states(system, x0, w)
+    if np.any(slip):
+        w = _unloaded(system, x0, w0)
+        closed, slip = _initial_states(system, x0, w)
+    return w, table.states.index(closed, slip)
+
+
 def initial_friction_state(system: GapSystem, table: FrictionTable, x0: np.ndarray, w0: np.ndarray) -> int:
     """The friction state at the start: the stops that penetrate closed (the deepest of a tip), a slider of
     a closed tip sticking when its spring force is inside the cone (|kt (t - w)| <= mu N), else slipping the
@@ -276,37 +290,51 @@ class FrictionExactStepper(_stepper.Stepper):
         fr = system.friction
         self.p = fr.p
         with single_thread_blas():
-            omega_max = system.omega_max()
+            self.omega_max = omega_max = system.omega_max()
             t0 = time.perf_counter()
-            self.lazy, cached = friction_tables(system, omega_max)
+            self.lazy, self.cached = friction_tables(system, omega_max)
             self.table = table = self.lazy.table
             self.forced_table = LazyForcedTable(self.lazy, loads) if self.forced else None
             self.ft = self.forced_table.table if self.forced else None
-            w0 = _unloaded(system, x0, options.w0)
-            self.y = np.concatenate([x0, v0, w0])
-            self.s = self.s0 = initial_friction_state(system, table, x0, w0)
-            self.lazy.ensure(self.s)
-            if self.forced:
-                self.forced_table.ensure(0)  # the open state's static deflections: the scales of the round-off
+        self.table_s = time.perf_counter() - t0
         self.hmin = HMIN_PERIODS / omega_max
         stop_tip = np.concatenate([system.tip, np.full(2 * fr.p, -1)]).astype(np.int64)  # the tip of each event slot
         c = np.ascontiguousarray
         self.fric = (c(fr.Bt), c(fr.tip), stop_tip, c(fr.stop), c(table.ekind), c(table.states.stop_of), c(system.B),
                      c(system.k), c(system.offset), c(system.side), c(fr.mu), c(fr.k_t))
-        self.floor, self.load_scale = self._scales(omega_max)
+        self.offset_max = float(np.max(np.abs(system.offset), initial=0.0))
+        self.damped = not system.undamped
+        self._start(x0, v0, options.w0, duration_s, n_samples, sample_rate_hz, loads)
+
+    def _start(self, x0: np.ndarray, v0: np.ndarray, w0, duration_s: float, n_samples: int, sample_rate_hz: float,
+               loads) -> None:
+        """The run's own state from (x0 m, v0 m/s, w0 m or None: unloaded) under ``loads`` over ``duration_s`` s,
+        ``n_samples`` at ``sample_rate_hz`` Hz: everything of the set-up but the system's tables (:meth:`__init__`;
+        :class:`FrictionFlow` calls it again for each of its runs, under loads of the same directions and
+        frequencies, whose forced table it keeps)."""
+        self.n_samples, self.sample_rate_hz, self.loads = n_samples, sample_rate_hz, loads
+        system, options = self.run_system, self.options
+        fr, table = system.friction, self.table
+        t0 = time.perf_counter()
+        with single_thread_blas():
+            w0, self.s = _start_state(system, table, x0, w0)
+            self.s0 = self.s
+            self.y = np.concatenate([x0, v0, w0])
+            self.lazy.ensure(self.s)
+            if self.forced:
+                self.forced_table.ensure(0)  # the open state's static deflections: the scales of the round-off
+        self.floor, self.load_scale = self._scales(self.omega_max)
         t_end = max(duration_s, (n_samples - 1) / sample_rate_hz)
         self.n_pieces = n_pieces = max(options.chunks, math.ceil(t_end / MAX_PIECE_S))
         self.breakpoints = loads.breakpoints(t_end) if self.forced else np.zeros(0)
         self.stats.update({"n_events": 0, "n_steps": 1, "n_march": 0, "n_states": int(table.states.S),
-                           "n_pieces": n_pieces, "n_sliders": fr.p, "tables_reused": cached})
-        self.table_s = time.perf_counter() - t0
+                           "n_pieces": n_pieces, "n_sliders": fr.p, "tables_reused": self.cached})
+        self.table_s += time.perf_counter() - t0
         self._table_stats()
         if self.forced:
             self.stats.update(n_loads=loads.n_loads, n_breakpoints=int(self.breakpoints.size))
-        self.offset_max = float(np.max(np.abs(system.offset), initial=0.0))
-        self.damped = not system.undamped
         bounds = np.array([t_end if c == n_pieces - 1 else (c + 1) * (t_end / n_pieces) for c in range(n_pieces)])
-        self.groups = [bounds] if not self.forced and not report else [bounds[c:c + 1] for c in range(n_pieces)]
+        self.groups = [bounds] if not self.forced and not self.report else [bounds[c:c + 1] for c in range(n_pieces)]
         self.t, self.W, self.Wf, self.E, self.n_events, self.n_iter = 0.0, 0.0, 0.0, 0.0, 0, 0
         self.n_stuck = 0
         self.g = 0
@@ -315,10 +343,13 @@ class FrictionExactStepper(_stepper.Stepper):
         self.fargs: tuple = ()
         cap = options.log_events
         N = self.y.size
-        self.log = (np.zeros(cap), np.zeros(cap, np.int64), np.zeros(cap, np.int64), np.zeros((cap, N)))
+        if getattr(self, "log", None) is None or self.log[0].shape[0] != cap:  # a restart's (_start) is reused:
+            # the kernels write it from n_log = 0 on, and :attr:`events` copies what they wrote
+            self.log = (np.zeros(cap), np.zeros(cap, np.int64), np.zeros(cap, np.int64), np.zeros((cap, N)))
         self.n_log = 0
         self.carry = np.zeros(5, np.int64)  # the kernels' memory of the last switch, kept over a NEW_STATE return
         self.rows: SampleRows | None = None
+        self.finished = False
 
     def sample_rows(self, every: int, R: np.ndarray) -> None:
         """As :meth:`reduced.transient.exact.ExactStepper.sample_rows`, R (r, 2n + p) on y = [x; v; w]: the
@@ -468,6 +499,107 @@ class FrictionExactStepper(_stepper.Stepper):
 
 
 _stepper.FRICTION_STEPPERS["exact"] = FrictionExactStepper
+
+
+class FrictionFlow:
+    """The exact friction flow of one system under harmonic loads b P cos(2 pi f t + phi) of one direction and
+    amplitude, for many short runs: the lean entry point of the shooting methods
+    (:mod:`reduced.periodic.friction_shooting`, :mod:`reduced.periodic.friction_continuation`), which run it
+    thousands of times over a fraction of a period from states and at frequencies that change between calls.
+
+    Each call is :func:`integrate_exact_friction` from y = [x; v; w] at t0 with the load's phase phi + 360 f t0
+    and ``chunks=1``, to the bit (tests/test_friction_flow.py): the same stepper (:class:`FrictionExactStepper`)
+    and kernels, but the system is checked and folded, omega_max computed and the friction tables looked up once
+    (in the first call), and the loads' forced table (which depends on b and f, not on P, the phase or the start)
+    once a frequency, the last ``FORCED_KEPT`` frequencies' kept; a call sets up only the run's own state
+    (:meth:`FrictionExactStepper._start`) and drives the stepper on one buffer, with no stream, result object or
+    event-log copies. A forced table keeps the states it built from call to call (a state's data never changes once
+    built), so later calls do not stop to build them. The public ringdown API (:func:`integrate_exact_friction`)
+    keeps its checks on every call; this one checks the system, the load and the grid.
+
+    Parameters
+    ----------
+    system : GapSystem
+        With friction.
+    b : (n,) the load direction
+    amplitude_N : N, P
+    log_events : events kept in the log of each call (:attr:`events`), 0 for none
+    """
+
+    FORCED_KEPT = 4  # frequencies whose forced tables are kept (a continuation point: the corrector's, f and f + df)
+
+    def __init__(self, system: GapSystem, b, amplitude_N: float, *, log_events: int = 0) -> None:
+        from reduced.models.loads import Harmonic, Loads
+
+        _check.gap_system(system)
+        if system.friction is None:
+            raise _check.InvalidArgument("system has no friction: use reduced.transient.exact.integrate_exact")
+        self.system, self.n = system, system.n
+        self.b = np.atleast_2d(_check.vector("b", b, system.n))
+        self.amplitude_N = _check.number("amplitude_N", amplitude_N)
+        self._loads = lambda f, phase: Loads(self.b, (Harmonic(self.amplitude_N, f, phase),))
+        _check.loads(self._loads(1.0, 0.0), self.n)
+        self.options = ExactFrictionOptions(1, MAX_EVENTS, None, log_events).checked(system)
+        self._stepper: FrictionExactStepper | None = None
+        self._forced: OrderedDict = OrderedDict()  # freq_hz -> LazyForcedTable
+        self.calls = 0
+
+    def __call__(self, freq_hz: float, y: np.ndarray, t0: float, duration_s: float, samples: int = 1,
+                 phase_deg: float = 0.0) -> np.ndarray:
+        """(samples + 1, 2n + p) [x, v, w] at t0 + j duration_s / samples, j = 0..samples, from y (2n + p,) m, m/s,
+        m at t0 s over ``duration_s`` s under b P cos(2 pi f t + phi), f = ``freq_hz`` Hz, phi = ``phase_deg``
+        degrees (as :func:`reduced.periodic.friction_shooting.flow`).
+
+        Raises
+        ------
+        reduced._checks.InvalidArgument
+            y not finite or not of 2n + p values.
+        ExactIntegratorError
+            As :func:`integrate_exact_friction`, or where the grid is not samples + 1 points.
+        """
+        from reduced.transient.result import sample_count
+
+        n = self.n
+        loads = self._loads(freq_hz, phase_deg + 360.0 * freq_hz * t0)
+        fs = samples / duration_s
+        N = sample_count(duration_s, fs)
+        if N != samples + 1:
+            raise ExactIntegratorError(f"{N} samples where {samples + 1} were asked")
+        y = np.asarray(y, float)
+        if y.shape != (2 * n + self.system.p,) or not np.all(np.isfinite(y)):
+            raise _check.InvalidArgument(f"y must be finite, of shape ({2 * n + self.system.p},), got {y.shape}")
+        x0, v0, w0 = (np.array(y[:n], float), np.array(y[n:2 * n], float), np.array(y[2 * n:], float))
+        st = self._stepper
+        if st is None:
+            st = self._stepper = FrictionExactStepper(self.system, x0, v0, duration_s, N, fs,
+                                                      ExactFrictionOptions(1, self.options.max_events, tuple(w0),
+                                                                           self.options.log_events), loads, False)
+            self._forced[freq_hz] = st.forced_table
+        else:
+            ft = self._forced.get(freq_hz)
+            if ft is None:
+                ft = self._forced[freq_hz] = LazyForcedTable(st.lazy, loads)
+                while len(self._forced) > self.FORCED_KEPT:
+                    self._forced.popitem(last=False)
+            else:
+                self._forced.move_to_end(freq_hz)
+            st.forced_table, st.ft = ft, ft.table
+            st._start(x0, v0, w0, duration_s, N, fs, loads)
+        self.calls += 1
+        buf = _stepper.Buffer(0, N, N, fs, st.arrays(N))
+        while not st.finished:
+            st.step(buf)
+        if not buf.full:
+            raise RuntimeError(f"internal: {N - buf.filled} exact samples not filled")
+        out = buf.arrays[0]
+        if not np.all(np.isfinite(out)):
+            raise ExactIntegratorError("non-finite state: the friction states are ill-conditioned")
+        return out
+
+    @property
+    def events(self) -> FrictionEvents | None:
+        """The last call's event log (None before a call or without ``log_events``)."""
+        return None if self._stepper is None else self._stepper.events
 
 
 def stream_exact_friction(system: GapSystem, x0, v0, duration_s: float, sample_rate_hz: float, *, w0=None,

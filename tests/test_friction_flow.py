@@ -1,0 +1,73 @@
+"""The lean entry point of the exact friction flow (reduced.transient.friction.FrictionFlow, issue 27): the runs
+of the shooting methods, set up once, against the public ringdown API (integrate_exact_friction) bit for bit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from reduced import _checks as _check
+from reduced.models.discrete import DiscreteFrictionParams
+from reduced.models.loads import Harmonic, Loads
+from reduced.periodic.friction_shooting import flow
+from reduced.transient.friction import FrictionFlow, integrate_exact_friction
+
+B = np.array([0.0, 0.0, 1.0, 0.5])  # the discrete-friction-frc scene's slanted load: x3 and half of it along u
+P = 20.0  # N: ten times the scene's level, so that the tips close, stick and slip within a few periods
+
+
+def _states(system, f: float, count: int) -> np.ndarray:
+    """(count, 2n + p) states [x; v; w] of a forced run from rest at f Hz, in contact, one every 1/7 period."""
+    loads = Loads(np.atleast_2d(B), (Harmonic(P, f, 0.0),))
+    r = integrate_exact_friction(system, np.zeros(4), np.zeros(4), 0.4, 7.0 * f, loads=loads)
+    y = np.hstack([r.x, r.v, r.w])
+    return y[-count:]
+
+
+def test_the_lean_flow_is_the_public_runs_bits():
+    # Every call of the lean flow against integrate_exact_friction (via flow(), the shooting's public form: a
+    # fresh stepper, the loads' phase phi + 360 f t0, chunks=1): the same kernels from the same state and tables,
+    # so equal to the bit (np.array_equal, no tolerance), over starts in contact, frequencies revisited after
+    # more than FORCED_KEPT others (a forced table evicted and rebuilt), one and several samples, and a
+    # logged run's events. A wrong reuse between calls (a stale forced table of another frequency, a state's
+    # leftover event memory, an unreset work sum) changes bits.
+    system = DiscreteFrictionParams(mu=0.3).system()
+    ys = _states(system, 17.4, 4)
+    lean = FrictionFlow(system, B, P)
+    logged = FrictionFlow(system, B, P, log_events=1000)
+    freqs = [17.4, 20.5, 17.4, 14.3, 26.9, 31.0, 17.4]  # 17.4 Hz again after four others: evicted, rebuilt
+    events = 0
+    for f in freqs:
+        h = 1.0 / f / 8
+        for k, y in enumerate(ys):
+            for samples in (1, 5):
+                ref = flow(system, B, P, f, y, k * h, h, samples, 30.0)
+                assert np.array_equal(lean(f, y, k * h, h, samples, 30.0), ref), (f, k, samples)
+            loads = Loads(np.atleast_2d(B), (Harmonic(P, f, 30.0 + 360.0 * f * (k * h)),))
+            r = integrate_exact_friction(system, y[:4], y[4:8], h, 1.0 / h, w0=y[8:], loads=loads, chunks=1,
+                                         log_events=1000)
+            out = logged(f, y, k * h, h, 1, 30.0)
+            assert np.array_equal(out, np.hstack([r.x, r.v, r.w]))
+            a, b = r.events, logged.events
+            assert a.n_total == b.n_total
+            for name in ("t", "slot", "kind", "state", "y"):
+                assert np.array_equal(getattr(a, name), getattr(b, name)), name
+            events += a.n_total
+    assert events > 40  # the runs cross events (gaps, stick -> slip, slip -> stick): measured 83
+    assert lean.calls == len(freqs) * len(ys) * 2
+
+
+def test_the_lean_flow_refuses_what_the_public_one_does():
+    system = DiscreteFrictionParams(mu=0.3).system()
+    with pytest.raises(_check.InvalidArgument):
+        FrictionFlow(system, [1.0, 0.0], P)  # b of the wrong length
+    with pytest.raises(_check.InvalidArgument):
+        FrictionFlow(DiscreteFrictionParams(mu=0.0).system(), B, P)  # no friction
+    lean = FrictionFlow(system, B, P)
+    y = np.zeros(2 * system.n + system.p)
+    for _ in range(2):  # the first call (which sets the stepper up) and a later one (which only restarts it)
+        with pytest.raises(_check.InvalidArgument):
+            lean(17.4, np.full_like(y, np.nan), 0.0, 1e-3)
+        with pytest.raises(_check.InvalidArgument):
+            lean(17.4, y[:-1], 0.0, 1e-3)
+        assert np.array_equal(lean(17.4, y, 0.0, 1e-3)[-1], flow(system, B, P, 17.4, y, 0.0, 1e-3)[-1])
