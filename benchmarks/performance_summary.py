@@ -85,23 +85,36 @@ LIMITS = (
      "0/2/3, VBSR settings, RCM or random input orderings and the classic two-level factorization tried: none "
      "faster, the improved two-level one fails), 68 solves in 10 block calls 2.3-2.4 s (0.09 s a call + 0.018 s a "
      "right-hand side, no refinement steps), the Krylov products and dense work 2.5 s, assembly 1.1-1.3 s. 10x needs "
-     "about 1 s more; PARDISO on more threads would change the results' bits (fem._pardiso.solver_threads)"),
+     "about 1 s more; PARDISO on more threads would change the results' bits (fem._pardiso.solver_threads). "
+     "Tried on 2026-11-27 (not re-measured on a quiet machine since): a single-precision factorization of K - sigma "
+     "M as an inexact shift-invert (PARDISO iparm(28) = 1) stops in every setting (error -4, not positive definite, "
+     "at 1-100 Hz shifts; -13 without the two-level factorization): K - sigma M's condition number is about 1e10, "
+     "beyond float32's 1/eps of 1.7e7; more guard vectors cut the steps to 8-9 but raise the solves to 82-124 (more "
+     "CPU). Kept: the factorization runs on a second thread while the Krylov start block is built (the same bits, "
+     "about 0.3 s of wall time, CPU unchanged)"),
     ("main job, bearingshaft run",
-     "measured on a quiet machine after warming the reduced-model cache (2026-11-26 23:26 UTC, load 1.2 at the "
-     "start): 448 s wall, 854 s CPU on 2 workers (452 s, 883 s at 22:00 before that session's merges); the "
-     "stages' own walls sum to 804 s (main_job.csv). 360 s on 2 cores needs about 700 s of CPU. The longest chain "
-     "is rom-frc's frc stage, 265 s wall beside the other worker's stages (about 296 s CPU alone without numba's "
-     "compilation, cProfile): its converged curves (exact families by shooting) 179 s, the response map 68 s, the "
-     "backbone check 26 s, the stepped sines 23 s, the uncovered orbits 23 s; nothing is integrated twice "
-     "(11,037 marches on 11,035 distinct inputs). The shooting marches, LU and segment Jacobians inside are "
-     "kernels whose bits the files depend on; block solves of the cyclic shooting Jacobian would change round-off "
-     "and so the continuation paths. Running the levels as Dask tasks (`run --fan-out`) was slower on 2 cores"),
+     "measured on a quiet machine after warming the reduced-model cache (2026-11-27 02:36 UTC, load 0.3 at the "
+     "start): 451 s wall, 833 s CPU on 2 workers; a run just before it (load 1.0 at the start) 474 s, 879 s; the "
+     "session's start 448 s, 854 s. The stages' own walls sum to 779 s (main_job.csv); the wall is about CPU / 2 + "
+     "35 s, so 360 s needs about 650 s of CPU. Cut this session, science files identical: rom-fep's NNM stage "
+     "103 -> 52 s (block elimination of the bordered HB systems from H = 15, work not repeated), hammer-test's "
+     "hammer 50 -> 25 s (the linear check's full 3-D modes kept in the reduced-model cache, warm_cache.py fills "
+     "it). The frc stages are the rest: rom-frc 282 s, discrete-frc 136 s, discrete-friction-frc 72 s beside the "
+     "other worker's stages; of rom-frc's converged curve at 10 N (cProfile, 138 s CPU): marches 66 s (9.6 a "
+     "point), dense LU of the 193 x 193 cyclic shooting Jacobian 23 s, peaks 20 s, segment Jacobians 19 s. A "
+     "block-cyclic LU in numba was as accurate as LAPACK's (residual <= 5e-14 with segment gains 1e5-1e10) but only "
+     "1.16x faster, not worth a change of round-off everywhere; about 20 % of the marches go to failed correctors, "
+     "whose early abort would change the continuation paths. Running the levels as Dask tasks (`run --fan-out`) "
+     "was slower on 2 cores"),
     ("test suite, python -m pytest",
-     "measured on a quiet machine (2026-11-26 23:39 UTC, load 1.4): 272 s wall, 532 s CPU for 1337 tests (265 s, "
-     "515 s for 1288 at the session's start: the new tests cost more than the cuts saved). The files go to the "
-     "two xdist workers longest first (tests/conftest.py, tests/file_seconds.csv), so both finish together; the "
-     "slowest tests run a stage twice (byte-for-byte reruns), start processes (kills, 8 writers, a LocalCluster) "
-     "or compare full and reduced models, each the only check of its claim. 240 s needs about 470 s of CPU"),
+     "measured on a quiet machine (2026-11-27 02:44 UTC, load 0.7): 247 s wall, 483 s CPU for 1357 tests; a run "
+     "before it at load 1.5 took 221 s, 431 s (it failed only the README's timing claims, which the main job's "
+     "run just before had changed); the session's start 272 s, 532 s. Cut this session: the reduced model's friction "
+     "reference (DOP853 restarted at every state change) evaluates each state's affine vector field as one product "
+     "(10.8 -> 5.2 s CPU), the exhaustive scene-mutation grid parses each scene once and reuses one folder, scene "
+     "type hints cached (21 -> 6 s); faster NNM and hammer code. The files go to the two xdist workers longest first "
+     "(tests/conftest.py, tests/file_seconds.csv). The wall varies by 10 % between quiet runs: 240 s is at the "
+     "edge"),
     ("FE modal, 112,629 DOFs: relative residual",
      "the twelve soft-spring modes (0.4-34 Hz) stop at 1-3x their round-off floor eps |||K| |phi||| / ||K phi||, "
      "above 1e-8 in double precision; the elastic modes reach 4-8e-10"),
