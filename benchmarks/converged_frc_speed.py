@@ -39,6 +39,7 @@ import numpy as np  # noqa: E402
 from bearingshaft.output import staged_output, write_rows  # noqa: E402
 from bearingshaft.scenes import load_scene  # noqa: E402
 from bearingshaft.stages.frc import _curve, converged_curve  # noqa: E402
+from bearingshaft.stages.frc_friction import load_vector  # noqa: E402
 from bearingshaft.systems import model_system  # noqa: E402
 from reduced._blas import single_thread_blas  # noqa: E402
 
@@ -73,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
     spec = scene.frc
     system, rows = model_system(scene.model)
     names = tuple(scene.model.point_names)
-    b = rows[names.index(spec.point)]
+    b = load_vector(spec, rows, names)  # as the stage forms it (with [frc] also_points)
     levels = args.levels or list(spec.levels_N)
     timing, summary, families = [], [], []
     with staged_output(args.out, "converged-frc-speed", scene.source, "converged_frc_speed") as w, \
