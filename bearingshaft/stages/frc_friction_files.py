@@ -443,7 +443,7 @@ def _plot(path, result) -> None:
 
     cols = [result.names.index(result.scene.frc.point)]
     cols += [result.names.index(p) for p in result.scene.frc.also_points if result.names.index(p) not in cols]
-    fig, axes = plt.subplots(len(cols) + 1, 1, figsize=(8, 3.2 * (len(cols) + 1)), sharex=True,
+    fig, axes = plt.subplots(len(cols) + 1, 1, figsize=(11, 3.2 * (len(cols) + 1)), sharex=True,
                              constrained_layout=True)
     for ax, col in zip(axes, cols, strict=False):
         for k, (P, br) in enumerate(result.curves.items()):
@@ -488,7 +488,8 @@ def _plot(path, result) -> None:
                         label=f"exact periodic orbit by shooting, {P:g} N")
         ax.set_yscale("log")
         ax.set_ylabel(f"max |{result.names[col]}| [mm]")
-        ax.legend(fontsize=7)
+    # the amplitude panels share their entries: one legend, beside the first panel, not over the curves
+    axes[0].legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     ax = axes[-1]
     for k, (P, br) in enumerate(result.curves.items()):
         if isinstance(br, Exception):
