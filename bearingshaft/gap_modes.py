@@ -9,7 +9,6 @@ rule and why it does not depend on where its threshold sits.
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import os
 from dataclasses import dataclass
@@ -54,40 +53,34 @@ def _modes_key(fe, pairs, state: str, n_modes: int) -> str:
     the state, the number of modes, the code that builds and solves the model
     (:func:`reduced.models.rom.source_hash`) and the thread count asked for (``BEARINGSHAFT_THREADS``)."""
     from fem.contact import contact_rows
+    from reduced.cache import hash_sparse
     from reduced.models.rom import source_hash
 
     h = hashlib.sha256(f"{state} {n_modes} {source_hash()} {os.environ.get('BEARINGSHAFT_THREADS', '')}".encode())
-    for A in (fe.K.tocsr(), fe.M.tocsr()):
-        for a in (A.indptr, A.indices, A.data):
-            h.update(np.ascontiguousarray(a).tobytes())
+    hash_sparse(h, fe.K, fe.M)
     if state == "closed":  # the tied tips' stiffness k_g r r^T; the open state's K holds no contact
         h.update(np.ascontiguousarray(contact_rows(pairs)).tobytes())
         h.update(np.array([p.k_g for p in pairs], float).tobytes())
     return h.hexdigest()
 
 
-def _load_modes(f) -> tuple[np.ndarray, np.ndarray]:
-    with np.load(f) as z:
-        return z["freq_hz"], z["phi"]
-
-
 def _state_modes(fe, pairs, state: str, n_modes: int, Psi):
     """:func:`fem.contact.gap_modes` of one state, its eigensolution kept in the reduced-model cache
-    (``gapmodes-<key>.npz``): the scenes of one 3-D model (four reductions of the apparatus) share it, and a
-    loaded one is the bits a solve would give (the factorization is single-threaded, :func:`_modes_key`)."""
+    (``gapmodes-<key>.npz``, :func:`reduced.cache.cached_arrays`): the scenes of one 3-D model (four reductions
+    of the apparatus) share it, and the result is built from the stored frequencies and shapes on a miss as on
+    a hit, so both give the same bits (the factorization is single-threaded, :func:`_modes_key`)."""
     from fem.contact import gap_modes
-    from reduced.cache import load_entry, write_entry
+    from reduced.cache import cached_arrays
     from reduced.models.rom import cache_dir
 
+    def solve() -> dict:
+        gm = gap_modes(fe, pairs, state, n_modes, Psi=Psi)
+        return {"freq_hz": gm.freq_hz, "phi": gm.phi}
+
     key = _modes_key(fe, pairs, state, n_modes)
-    path = cache_dir() / f"gapmodes-{key[:20]}.npz"
-    modes = load_entry(path, key, _load_modes)
-    gm = gap_modes(fe, pairs, state, n_modes, Psi=Psi, modes=modes)
-    if modes is None:
-        with contextlib.suppress(OSError):  # a read-only cache: solved again next time
-            write_entry(path, lambda f: np.savez(f, freq_hz=gm.freq_hz, phi=gm.phi), key,
-                        info={"kind": "full model's gap modes", "state": state, "n_modes": n_modes})
-    return gm
+    z = cached_arrays(cache_dir() / f"gapmodes-{key[:20]}.npz", key, solve,
+                      info={"kind": "full model's gap modes", "state": state, "n_modes": n_modes})
+    return gap_modes(fe, pairs, state, n_modes, Psi=Psi, modes=(z["freq_hz"], z["phi"]))
 
 
 def expand(rom: ReducedModel, q: np.ndarray) -> np.ndarray:

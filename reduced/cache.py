@@ -45,6 +45,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import BinaryIO, TypeVar
 
+import numpy as np
+
 from reduced._checks import one_line
 
 try:
@@ -302,6 +304,66 @@ def load_entry(path: str | Path, inputs_sha256: str, load: Callable[[BinaryIO], 
     return None
 
 
+# -- arrays computed once: an npz entry -------------------------------------------------------
+def hash_sparse(h, *matrices) -> None:
+    """Feed the CSR arrays (indptr, indices, data) of each sparse matrix to the hash object ``h``.
+
+    Parameters
+    ----------
+    h : hashlib hash object
+        Updated in place.
+    *matrices : scipy.sparse matrices or arrays
+        Each is converted to CSR; two matrices hash alike only if their CSR arrays are equal bit for bit.
+
+    Returns
+    -------
+    None
+    """
+    for A in matrices:
+        A = A.tocsr()
+        for a in (A.indptr, A.indices, A.data):
+            h.update(np.ascontiguousarray(a).tobytes())
+
+
+def _load_arrays(f) -> dict[str, np.ndarray]:
+    with np.load(f) as z:
+        return {k: z[k] for k in z.files}
+
+
+def cached_arrays(path: str | Path, inputs_sha256: str, compute: Callable[[], dict[str, np.ndarray]],
+                  info: dict | None = None) -> dict[str, np.ndarray]:
+    """The named arrays of the ``.npz`` entry at ``path`` made from ``inputs_sha256``; else ``compute()``'s,
+    stored there (:func:`write_entry`) and returned.
+
+    A loaded entry holds the bits ``compute()`` returned when it was made (``np.savez`` stores them
+    unchanged), so a caller that builds its result from the arrays alone gets the same result from a
+    hit as from a miss. A folder that cannot be written costs a solve next time, nothing else.
+
+    Parameters
+    ----------
+    path : str or Path
+        The entry's data file (``<folder>/<prefix>-<key>.npz``).
+    inputs_sha256 : str
+        Hash of everything ``compute`` depends on.
+    compute : callable
+        ``compute() -> {name: array}`` on a miss.
+    info : dict, optional
+        JSON-serialisable description kept in the manifest.
+
+    Returns
+    -------
+    dict of str to ndarray
+        From the entry, or from ``compute()`` (values as it returned them).
+    """
+    hit = load_entry(path, inputs_sha256, _load_arrays)
+    if hit is not None:
+        return hit
+    arrays = compute()
+    with contextlib.suppress(OSError):  # a read-only cache: solved again next time
+        write_entry(path, lambda f: np.savez(f, **arrays), inputs_sha256, info)
+    return arrays
+
+
 # -- numba's own on-disk cache ---------------------------------------------------------------
 def _raised_by_numba_cache(exc: BaseException) -> bool:
     """Whether an exception came out of numba's cache loader (numba/core/caching.py)."""
@@ -357,4 +419,4 @@ def call_numba_kernel(kernel, *args):
 
 
 __all__ = ["current_umask", "atomic_write", "write_entry", "load_entry", "remove_entry", "manifest_path",
-           "call_numba_kernel"]
+           "call_numba_kernel", "cached_arrays", "hash_sparse"]

@@ -15,7 +15,7 @@ import pytest
 
 import reduced.models.rom as rom_module
 from bearingshaft.cli import main
-from reduced.cache import load_entry, manifest_path, write_entry
+from reduced.cache import cached_arrays, hash_sparse, load_entry, manifest_path, write_entry
 from reduced.models.rom import ReducedModel, RomSpec, build_rom, cached_rom, store_in_cache
 
 # 729 DOFs (hex8, coarse), 2 fixed-interface modes: built in about 0.5 s
@@ -171,6 +171,53 @@ def test_decoder_errors_of_every_kind_count_as_corrupt(tmp_path, caplog):
         assert not entry.exists() and not manifest_path(entry).exists()
     assert load_entry(tmp_path / "absent.bin", "inputs", bytes) is None  # a miss is not reported
     assert not _corrupt_reports(caplog)[1:]
+
+
+def test_cached_arrays_compute_once_then_load_the_same_bits(tmp_path, monkeypatch):
+    """cached_arrays: a miss computes and stores, a hit returns the stored bits without computing, another
+    input hash is another entry, a damaged entry is computed again, and a folder that cannot be written only
+    costs a computation."""
+    calls = []
+    rng = np.random.default_rng(3)
+    made = {"phi": rng.standard_normal((5, 3)), "n": np.int64(7)}
+
+    def compute():
+        calls.append(1)
+        return {k: np.copy(v) for k, v in made.items()}
+
+    entry = tmp_path / "x-key.npz"
+    first = cached_arrays(entry, "key", compute, info={"kind": "test"})
+    again = cached_arrays(entry, "key", compute)
+    assert len(calls) == 1 and set(again) == {"phi", "n"}
+    assert np.array_equal(again["phi"], made["phi"]) and again["phi"].tobytes() == first["phi"].tobytes()
+    assert int(again["n"]) == 7 and json.loads(manifest_path(entry).read_text())["info"] == {"kind": "test"}
+    cached_arrays(entry, "other", compute)  # another input hash: computed again, the entry replaced
+    assert len(calls) == 2
+    entry.write_bytes(entry.read_bytes()[:-9])  # truncated: its sha256 no longer matches
+    assert np.array_equal(cached_arrays(entry, "other", compute)["phi"], made["phi"]) and len(calls) == 3
+
+    def refuse(*args, **kwargs):
+        raise PermissionError("read-only")
+
+    monkeypatch.setattr("reduced.cache.write_entry", refuse)
+    out = cached_arrays(tmp_path / "y.npz", "key", compute)
+    assert np.array_equal(out["phi"], made["phi"]) and len(calls) == 4 and not (tmp_path / "y.npz").exists()
+
+
+def test_hash_sparse_tells_matrices_apart_by_their_bits():
+    import scipy.sparse as sp
+
+    A = sp.random(30, 30, density=0.1, random_state=1, format="csr")
+
+    def digest(*ms):
+        h = hashlib.sha256()
+        hash_sparse(h, *ms)
+        return h.hexdigest()
+
+    assert digest(A, A.T) == digest(A.tocoo(), A.T.tocsc())  # the same matrices in other formats
+    B = A.copy()
+    B.data[0] = np.nextafter(B.data[0], 1.0)  # one ulp in one entry
+    assert digest(A, A.T) != digest(B, A.T) and digest(A, A.T) != digest(A.T, A)
 
 
 def test_the_corruption_report_is_one_line_on_stderr(tmp_path):

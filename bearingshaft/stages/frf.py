@@ -206,34 +206,27 @@ def fe_reference(fe_model, n_modes: int) -> tuple[np.ndarray, np.ndarray, int]:
     freq_hz, shapes, n_dofs : (6,) ndarray (Hz, Table 2 order), (len(ACC_DOFS), 6) ndarray (mass-normalised
         shapes at ACC_DOFS), int (the model's DOFs)
     """
-    import contextlib
     import hashlib
     import os
 
-    from reduced.cache import load_entry, write_entry
+    from reduced.cache import cached_arrays
     from reduced.models.rom import cache_dir, source_hash
 
     sensors = [*BEAM_SENSORS, *TUBE_SENSORS]
+
+    def solve() -> dict:
+        from fem.analysis import analyse
+
+        a = analyse(fe_model, n_modes=n_modes)
+        idx = a.labelled_indices()
+        return {"freq_hz": np.asarray(a.modes.freq_hz)[idx], "shapes": a.sensor_shapes(sensors, idx),
+                "n_dofs": np.int64(a.system.n_dofs)}
+
     key = hashlib.sha256(f"frf fe_reference {fe_model!r} {n_modes} {sensors} {source_hash()} "
                          f"{os.environ.get('BEARINGSHAFT_THREADS', '')}".encode()).hexdigest()
-    path = cache_dir() / f"frfref-{key[:20]}.npz"
-    hit = load_entry(path, key, _load_fe_reference)
-    if hit is not None:
-        return hit
-    from fem.analysis import analyse
-
-    a = analyse(fe_model, n_modes=n_modes)
-    idx = a.labelled_indices()
-    out = (np.asarray(a.modes.freq_hz)[idx], a.sensor_shapes(sensors, idx), int(a.system.n_dofs))
-    with contextlib.suppress(OSError):  # a read-only cache: solved again next time
-        write_entry(path, lambda f: np.savez(f, freq_hz=out[0], shapes=out[1], n_dofs=out[2]), key,
-                    info={"kind": "frf stage's MAC reference", "model": repr(fe_model), "n_modes": n_modes})
-    return out
-
-
-def _load_fe_reference(f) -> tuple[np.ndarray, np.ndarray, int]:
-    with np.load(f) as z:
-        return z["freq_hz"], z["shapes"], int(z["n_dofs"])
+    z = cached_arrays(cache_dir() / f"frfref-{key[:20]}.npz", key, solve,
+                      info={"kind": "frf stage's MAC reference", "model": repr(fe_model), "n_modes": n_modes})
+    return z["freq_hz"], z["shapes"], int(z["n_dofs"])
 
 
 def test_geometry(scene: Scene, rom, ref_locations) -> SensorGeometry:

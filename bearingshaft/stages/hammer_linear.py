@@ -68,30 +68,28 @@ def full_modes(fe, max_hz: float, progress: bool):
     Returns
     -------
     fem.modal.ModalResult with its lowest 24, 48, ... modes, the first count whose top passes
-    ``max_hz`` (or a quarter of the DOFs); from the cache, only ``freq_hz``, ``omega2`` and ``phi`` are
-    set (``n_op`` is -1)
+    ``max_hz`` (or a quarter of the DOFs); only ``freq_hz``, ``omega2`` and ``phi`` are kept in the
+    cache, so only they are set (``n_op`` is -1), whether solved or loaded
     """
-    import contextlib
-
     from fem.modal import ModalResult
-    from reduced.cache import load_entry, write_entry
+    from reduced.cache import cached_arrays
     from reduced.models.rom import cache_dir
 
+    solved = False
+
+    def solve() -> dict:
+        nonlocal solved
+        solved = True
+        res = _search_full_modes(fe, max_hz, progress)
+        return {"freq_hz": res.freq_hz, "omega2": res.omega2, "phi": res.phi}
+
     key = _full_modes_key(fe, max_hz)
-    path = cache_dir() / f"fullmodes-{key[:20]}.npz"
-    hit = load_entry(path, key, _load_full_modes)
-    if hit is not None:
-        freq, omega2, phi = hit
-        if progress:
-            print(f"  full 3-D modes: the lowest {freq.size} (cached)", flush=True)
-        return ModalResult(freq_hz=freq, phi=phi, omega2=omega2, solver="superlu/lanczos",
-                           shift_hz=FULL_MODES_SHIFT_HZ, n_op=-1, n_iter=0)
-    res = _search_full_modes(fe, max_hz, progress)
-    with contextlib.suppress(OSError):  # a read-only cache: solved again next time
-        write_entry(path, lambda f: np.savez(f, freq_hz=res.freq_hz, omega2=res.omega2, phi=res.phi), key,
-                    info={"kind": "full model's modes of the hammer linear check", "max_hz": max_hz,
-                          "n_modes": int(res.freq_hz.size)})
-    return res
+    z = cached_arrays(cache_dir() / f"fullmodes-{key[:20]}.npz", key, solve,
+                      info={"kind": "full model's modes of the hammer linear check", "max_hz": max_hz})
+    if progress and not solved:
+        print(f"  full 3-D modes: the lowest {z['freq_hz'].size} (cached)", flush=True)
+    return ModalResult(freq_hz=z["freq_hz"], phi=z["phi"], omega2=z["omega2"], solver="superlu/lanczos",
+                       shift_hz=FULL_MODES_SHIFT_HZ, n_op=-1, n_iter=0)
 
 
 def _search_full_modes(fe, max_hz: float, progress: bool):
@@ -114,19 +112,13 @@ def _full_modes_key(fe, max_hz: float) -> str:
     solver, and the code that builds and solves the model (:func:`reduced.models.rom.source_hash`)."""
     import hashlib
 
+    from reduced.cache import hash_sparse
     from reduced.models.rom import source_hash
 
     h = hashlib.sha256(f"full_modes {max_hz!r} {FULL_MODES_FIRST} {FULL_MODES_SHIFT_HZ!r} superlu lanczos "
                        f"{source_hash()}".encode())
-    for A in (fe.K.tocsr(), fe.M.tocsr()):
-        for a in (A.indptr, A.indices, A.data):
-            h.update(np.ascontiguousarray(a).tobytes())
+    hash_sparse(h, fe.K, fe.M)
     return h.hexdigest()
-
-
-def _load_full_modes(f) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    with np.load(f) as z:
-        return z["freq_hz"], z["omega2"], z["phi"]
 
 
 @dataclass(frozen=True, eq=False)
