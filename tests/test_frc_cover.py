@@ -133,3 +133,60 @@ def test_a_guess_on_a_known_family_starts_no_family():
 class _Budget:
     def left(self) -> bool:
         return True
+
+
+@functools.cache
+def _found_with_switching(max_new: int):
+    """The isolated family from the guess at F_ISO (60 points each way) as a family found late is: with its
+    own allowance of ``max_new`` switched families (``_switch_all(max_new=)``, 40 points each way), the main
+    family (20 points) having no switches at all."""
+    from dataclasses import replace
+
+    from reduced.periodic.exact_frc import _Budget as Budget
+    from reduced.periodic.uncovered import _residuals
+
+    s = DiscreteParams().system()
+    with single_thread_blas():
+        ex = exact_frc(s, B, P, *BAND, [(F_MAIN, SEED_MAIN)], x_ref=X_REF,
+                       options=ExactFRCOptions(branch_switching=False, cover_families=0, max_steps=20))
+        res, residuals, band, _ = _residuals(ex, ForcedFlow(s, B, P), BAND)
+        opts = replace(ex.options, cover_steps=60, family_steps=40, period_doubling_steps=40)
+        note = _isolated(ex.families, ex.switches, residuals, (F_ISO, SEED_ISO), res, opts, band, ex.point_rows,
+                         ex.symmetry, Budget(math.inf), True, max_new)
+    assert note == "", note
+    return s, ex
+
+
+def test_a_family_found_late_switches_within_its_own_allowance():
+    # the main family's switching is off, so the level's max_families plays no part: the isolated family's
+    # first pitchfork in path order (its 30th point, near 21.7 Hz, breaking the mirror symmetry x1 = x3 of
+    # a half-wave symmetric orbit) gets the one family allowed; every later one is listed, not followed
+    from reduced.periodic.exact_frc import SWITCHED
+
+    s, ex = _found_with_switching(1)
+    iso, child = ex.families[1], ex.families[2]
+    assert [f.kind for f in ex.families] == ["main", "isolated", "asymmetric_half_wave"]
+    recs = [r for r in ex.switches if r["family"] == 1]
+    assert len(recs) == sum(k in SWITCHED for _, k in iso.bifurcations) >= 5  # each branch point has its record
+    first, rest = recs[0], recs[1:]
+    assert first["child"] == 2 and child.parent == (1, first["index"], first["kind"]) and not first["note"]
+    assert SWITCHED[first["kind"]] == child.kind and 21.5 < first["freq_hz"] < 22.0, first
+    assert all(r["child"] == -1 and "the 1 switched family allowed from family 1" in r["note"] for r in rest)
+    # the switched family's orbits: fixed points of the library integrator's map over T (as the isolated
+    # family's, same tolerance and reason), and not mirror symmetric (x1 != x3 by far more than round-off)
+    fl_scale = np.concatenate([np.full(3, X_REF), np.full(3, 2 * math.pi * 22.0 * X_REF)])
+    asym = []
+    for j in np.linspace(1, len(child.freq_hz) - 1, 4).astype(int):
+        f, y0 = float(child.freq_hz[j]), child.nodes[j][0]
+        fl = Flow(s, loads=Loads(B[None, :], (Harmonic(P, f),)))
+        d1 = float(np.max(np.abs(fl(y0[:3], y0[3:], 1.0 / f).y - y0) / fl_scale))
+        assert d1 < 1e-7 * max(1.0, float(np.abs(child.multipliers[j, 0])) / 1e3), (f, d1)
+        asym.append(float(np.max(np.abs(child.nodes[j][:, 0] - child.nodes[j][:, 2]))) / X_REF)
+    assert max(asym) > 0.05, asym  # measured 0.02-0.17 along the 40 points; the parent has 0 (round-off)
+
+
+def test_an_allowance_of_none_lists_the_branch_points_and_follows_none():
+    _, ex = _found_with_switching(0)
+    assert [f.kind for f in ex.families] == ["main", "isolated"]
+    recs = [r for r in ex.switches if r["family"] == 1]
+    assert len(recs) >= 5 and all(r["child"] == -1 and "the 0 switched families allowed" in r["note"] for r in recs)

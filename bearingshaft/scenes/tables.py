@@ -499,7 +499,12 @@ class FRCSpec:
     close_return_tries : int
         Close returns shot per level at most.
     close_return_steps : int
-        Points of such a family (and of a family started by a verdict) at most, each way.
+        Points of such a family (and of a family started by a verdict, or switched onto from either) at most,
+        each way.
+    found_family_switches : int
+        Families switched onto at the pitchforks and period doublings of each family started by a verdict or a
+        close return (and of its children) at most: an allowance of its own, as ``max_families`` is mostly
+        spent on the main curve's switches by then; 0: their branch points are listed, not followed.
     switching_max_s : float
         s of wall time per level after which no new family is started; 0 (the default): no such limit, so the
         families found do not depend on the machine or its load.
@@ -553,6 +558,7 @@ class FRCSpec:
     close_return_families: int = 2  # families from close returns of chaotic Poincare samples per level (0: none)
     close_return_tries: int = 6  # close returns shot per level at most
     close_return_steps: int = 200  # points of such a family (or one from a verdict) at most, each way
+    found_family_switches: int = 1  # families switched onto from each family of a verdict or close return
     switching_max_s: float = 0.0  # s, wall time per level after which no new family is started (0: none, reproducible)
     shooting_steps: int = 30000  # points of the main exact family at most
 
@@ -582,7 +588,7 @@ class FRCSpec:
         tolerance(self, "hb_converged_tol")
         check(self.switching_max_s >= 0, f"switching_max_s must be >= 0 s, got {self.switching_max_s!r}")
         for key in ("period_doubling_families", "period_doubling_depth", "cover_families", "verdict_points",
-                    "close_return_families", "close_return_tries"):
+                    "close_return_families", "close_return_tries", "found_family_switches"):
             check(getattr(self, key) >= 0, f"{key} must be >= 0, got {getattr(self, key)!r}")
         for key in ("max_families", "family_steps", "shooting_steps", "period_doubling_steps", "close_return_steps"):
             check(getattr(self, key) >= (0 if key == "max_families" else 1),

@@ -402,7 +402,8 @@ def uncovered_orbits(system: GapSystem, b: np.ndarray, rows: np.ndarray, names: 
     a verdict at ``[frc] verdict_points`` HB points in contact per uncovered band
     (:func:`reduced.periodic.uncovered.cover_verdicts`), then up to ``[frc] close_return_families``
     families of unstable periodic orbits seeded by close returns of the response map's chaotic Poincare
-    samples (:func:`reduced.periodic.uncovered.close_return_families`).
+    samples (:func:`reduced.periodic.uncovered.close_return_families`); at the branch points of each family
+    found so, up to ``[frc] found_family_switches`` families switched onto.
 
     Parameters
     ----------
@@ -429,7 +430,8 @@ def uncovered_orbits(system: GapSystem, b: np.ndarray, rows: np.ndarray, names: 
                   functools.partial(hb_states, br.X[i], float(br.omega[i])))
                  for i in np.flatnonzero(_in_contact(system, br)) if band[0] <= br.freq_hz[i] <= band[1]]
             ex.verdicts = cover_verdicts(ex, system, b, g, points_per_band=spec.verdict_points, f_band=band,
-                                         family_steps=spec.close_return_steps)
+                                         family_steps=spec.close_return_steps,
+                                         switch_families=spec.found_family_switches)
             ex.cpu_s["verdicts"] = time.process_time() - t0
         lvl = maps.get(P)
         if spec.close_return_families > 0 and lvl is not None:
@@ -439,7 +441,8 @@ def uncovered_orbits(system: GapSystem, b: np.ndarray, rows: np.ndarray, names: 
             ex.close_returns = close_return_families(ex, system, b, samples, f_band=band,
                                                      families=spec.close_return_families,
                                                      tries=spec.close_return_tries,
-                                                     family_steps=spec.close_return_steps)
+                                                     family_steps=spec.close_return_steps,
+                                                     switch_families=spec.found_family_switches)
             ex.cpu_s["close_returns"] = time.process_time() - t0
 
 

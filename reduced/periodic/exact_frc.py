@@ -1182,7 +1182,8 @@ def _join(parts: list) -> tuple:
     return Y, data, sorted(folds), seg, st, notes
 
 
-def _switch_all(families, switches, residuals, opts, band, rows, sym, budget, root: int = 0) -> None:
+def _switch_all(families, switches, residuals, opts, band, rows, sym, budget, root: int = 0,
+                max_new: int | None = None) -> None:
     """Branch switching at the pitchforks and period doublings of the families, within the budget
     (module docstring). Pitchforks first, family by family in the order found, on families of
     generation <= ``opts.depth`` (the main one is generation 1), up to ``opts.max_families``; then
@@ -1195,7 +1196,10 @@ def _switch_all(families, switches, residuals, opts, band, rows, sym, budget, ro
     family off the eigenvector). A family whose first orbit is one of a family already found (or its
     image under a symmetry, or shifted by a load period) is not followed again: a period-doubled
     family is born at both ends of its bubble, and on the symmetric images of its parent. ``root``: the
-    family whose switches are made (with those of its children): the main one, or an isolated one."""
+    family whose switches are made (with those of its children): the main one, or an isolated one.
+    ``max_new``: families switched onto from ``root``'s tree at most, in place of the level's caps
+    (:func:`_used_up`: a family found late, by a verdict or a close return, has its own)."""
+    start = len(families)
     covered = set()  # (family, point) of branch points reached by a switched family's far end
     pending = []  # (rank, record, family, point) of the period doublings, followed after the pitchforks
 
@@ -1233,14 +1237,13 @@ def _switch_all(families, switches, residuals, opts, band, rows, sym, budget, ro
                 else:
                     pending.append((_pd_rank(fam, i), len(pending), rec, fi, i))
                 continue
-            n_sw = sum(f.kind in SWITCHED.values() and f.kind != "period_doubled" for f in families)
             if (fi, i) in covered:
                 rec["note"] = "reached by a family switched onto before"
             elif gen > opts.depth or fam.kind == "period_doubled":
                 rec["note"] = (f"not followed: depth = {opts.depth} reached" if gen > opts.depth else
                                "not followed: the pitchforks of a period-doubled family are not followed")
-            elif n_sw >= opts.max_families:
-                rec["note"] = f"not followed: max_families = {opts.max_families} reached"
+            elif full := _used_up(families, start, max_new, root, opts, False):
+                rec["note"] = full
             else:
                 k = attempt(rec, fi, i, kind, fam, res, an)
                 if k is not None:
@@ -1260,8 +1263,8 @@ def _switch_all(families, switches, residuals, opts, band, rows, sym, budget, ro
         if (fi, i) in covered:
             rec["note"] = "reached by a family switched onto before"
             continue
-        if sum(f.kind == "period_doubled" for f in families) >= opts.period_doubling_families:
-            rec["note"] = f"not followed: period_doubling_families = {opts.period_doubling_families} reached"
+        if full := _used_up(families, start, max_new, root, opts, True):
+            rec["note"] = full
             continue
         chans = an.channels
         c = next((c for c in range(len(chans)) if chans[c][1] == "Phi" and chans[c][2] < 0
@@ -1278,6 +1281,23 @@ def _switch_all(families, switches, residuals, opts, band, rows, sym, budget, ro
         if k is not None:
             gens[k] = gens.get(fi, 1) + 1
             scan(k, gens[k])
+
+
+def _used_up(families: list, start: int, max_new: int | None, root: int, opts: ExactFRCOptions, pd: bool) -> str:
+    """'' if one more switched family may be followed (:func:`_switch_all`), else the note that says which
+    allowance is used up: ``max_new`` families since ``start`` (the families of ``root``'s tree), or the
+    level's ``max_families`` (pitchforks) or ``period_doubling_families`` (``pd``)."""
+    if max_new is not None:
+        return "" if len(families) - start < max_new else (
+            f"not followed: the {max_new} switched famil{'y' if max_new == 1 else 'ies'} allowed from family {root} "
+            "(found from a verdict or a close return) reached")
+    if pd:
+        n, cap, key = sum(f.kind == "period_doubled" for f in families), opts.period_doubling_families, \
+            "period_doubling_families"
+    else:
+        n, cap, key = sum(f.kind in SWITCHED.values() and f.kind != "period_doubled" for f in families), \
+            opts.max_families, "max_families"
+    return "" if n < cap else f"not followed: {key} = {cap} reached"
 
 
 def _pd_rank(fam: OrbitFamily, i: int) -> float:
@@ -1489,9 +1509,11 @@ def _cover(families, switches, residuals, cover, res, opts, band, rows, sym, bud
     return out
 
 
-def _isolated(families, switches, residuals, guess, res, opts, band, rows, sym, budget, switching) -> str:
+def _isolated(families, switches, residuals, guess, res, opts, band, rows, sym, budget, switching,
+              max_new: int | None = None) -> str:
     """Shoot the orbit of one cover guess (freq_hz, nodes) and follow it as an isolated family
-    (appended to ``families``, its switches made); '' if done, else why not."""
+    (appended to ``families``, its switches made with ``switching``, up to ``max_new`` families:
+    :func:`_switch_all`); '' if done, else why not."""
     t0 = time.perf_counter()
     fq, nodes = guess
     w = 2 * math.pi * fq
@@ -1530,7 +1552,8 @@ def _isolated(families, switches, residuals, guess, res, opts, band, rows, sym, 
     families.append(fam)
     residuals[len(families) - 1] = (res, an)
     if switching:
-        _switch_all(families, switches, residuals, opts, band, rows, sym, budget, root=len(families) - 1)
+        _switch_all(families, switches, residuals, opts, band, rows, sym, budget, root=len(families) - 1,
+                    max_new=max_new)
     return ""
 
 

@@ -52,6 +52,7 @@ from reduced.periodic.exact_frc import (
     _Joined,
     _known,
     _runs,
+    _switch_all,
     covered,
 )
 from reduced.periodic.forced_shooting import ForcedFlow, ShootingResidual, shoot_at
@@ -189,14 +190,15 @@ def _shoot(res: ShootingResidual, nodes: np.ndarray, omega: float, known: list, 
 
 def cover_verdicts(ex: ExactFRC, system, load: np.ndarray, guesses: list, *, points_per_band: int,
                    f_band: tuple[float, float], multiples: tuple = VERDICT_MULTIPLES, max_iter: int = VERDICT_ITER,
-                   family_steps: int = 300) -> list[Verdict]:
+                   family_steps: int = 300, switch_families: int = 0) -> list[Verdict]:
     """Verdicts at the HB points in contact no family of ``ex`` covers (module docstring), adding the
-    families found to ``ex.families``.
+    families found to ``ex.families``, and the families switched onto at their branch points.
 
     Parameters
     ----------
     ex : ExactFRC
-        The families of the level (mutated: new ``isolated`` families appended, their switches not made).
+        The families of the level (mutated: new ``isolated`` families appended, then those switched onto from
+        them; every branch point of theirs gets a record in ``ex.switches``).
     system : GapSystem
         The system ``ex`` was computed on.
     load : (n,) the force direction b
@@ -208,7 +210,11 @@ def cover_verdicts(ex: ExactFRC, system, load: np.ndarray, guesses: list, *, poi
     f_band : (Hz, Hz) the band ``ex`` was computed over
     multiples : nodes per period tried, as multiples of the families' S
     max_iter : Newton steps per try at most
-    family_steps : points of a new family at most, each way
+    family_steps : points of a new family at most, each way (and of a family switched onto from it)
+    switch_families : int
+        Families switched onto at the branch points of each new family (and its children) at most
+        (:func:`reduced.periodic.exact_frc._switch_all` with ``max_new``): its own allowance, beside the level's
+        ``max_families`` that the main curve's switches use; 0 records the branch points without following them.
 
     Returns
     -------
@@ -218,7 +224,8 @@ def cover_verdicts(ex: ExactFRC, system, load: np.ndarray, guesses: list, *, poi
     with single_thread_blas():
         flow = ForcedFlow(system, load, ex.amplitude_N)
         res, residuals, band, omega_v = _residuals(ex, flow, f_band)
-        opts = replace(ex.options, cover_steps=family_steps)
+        opts = replace(ex.options, cover_steps=family_steps, family_steps=family_steps,
+                       period_doubling_steps=family_steps)
         f = np.array([g[0] for g in guesses], float)
         order = np.argsort(f, kind="stable")
         runs = [order[r] for r in _runs(~covered(ex.families, f[order]))]  # the uncovered bands
@@ -231,7 +238,8 @@ def cover_verdicts(ex: ExactFRC, system, load: np.ndarray, guesses: list, *, poi
             if cov >= 0:
                 judged[j] = ("covered", math.nan, 0, 0, cov, f"in the range of family {cov}")
                 continue
-            judged[j] = _judge(ex, flow, res, residuals, band, omega_v, opts, fq, nodes_of, multiples, max_iter)
+            judged[j] = _judge(ex, flow, res, residuals, band, omega_v, opts, fq, nodes_of, multiples, max_iter,
+                               switch_families)
         out = []
         for j in sorted(band_of, key=lambda j: f[j]):
             fq, amp, _ = guesses[j]
@@ -251,7 +259,8 @@ def _covering(ex: ExactFRC, freq_hz: float) -> int:
     return next((k for k, fam in enumerate(ex.families) if covered([fam], [freq_hz])[0]), -1)
 
 
-def _judge(ex, flow, res, residuals, band, omega_v, opts, fq, nodes_of, multiples, max_iter) -> tuple:
+def _judge(ex, flow, res, residuals, band, omega_v, opts, fq, nodes_of, multiples, max_iter,
+           switch_families: int) -> tuple:
     """(verdict, defect, segments, residuals spent, family, note) at one uncovered HB point (module docstring)."""
     S = res.segments
     w = 2 * math.pi * fq
@@ -271,8 +280,9 @@ def _judge(ex, flow, res, residuals, band, omega_v, opts, fq, nodes_of, multiple
         return ("no_orbit", best, seg, n_ev, -1, f"no orbit of the exact flow near this HB point (best defect "
                 f"{best:.2g} after {n_ev} Newton residuals on {', '.join(str(S * m) for m in multiples)} nodes)")
     nodes_S = r_m.nodes(Y)[0][:: seg // S]  # the exact orbit's states at the families' S nodes
+    k = len(ex.families)  # the new family's index (those switched onto from it follow it)
     note = _isolated(ex.families, ex.switches, residuals, (fq, nodes_S), res, opts, band, ex.point_rows,
-                     ex.symmetry, _Budget(math.inf), False)
+                     ex.symmetry, _Budget(math.inf), True, switch_families)
     if "one of family" in note:  # a known orbit: once more with it deflated
         Y2, d2, n = _shoot(r_m, nodes_of(seg), w, [Y], max_iter)
         n_ev += n
@@ -280,10 +290,9 @@ def _judge(ex, flow, res, residuals, band, omega_v, opts, fq, nodes_of, multiple
             d = d2
             nodes_S = r_m.nodes(Y2)[0][:: seg // S]
             note = _isolated(ex.families, ex.switches, residuals, (fq, nodes_S), res, opts, band, ex.point_rows,
-                             ex.symmetry, _Budget(math.inf), False)
+                             ex.symmetry, _Budget(math.inf), True, switch_families)
     if note:
         return ("known" if "one of family" in note else "orbit_not_followed", d, seg, n_ev, -1, note)
-    k = len(ex.families) - 1
     ex.families[k].notes.insert(0, f"started from the verdict at the HB point {fq:.6g} Hz ({seg} nodes)")
     return ("orbit", d, seg, n_ev, k, f"an orbit of the exact flow (defect {d:.2g}, {seg} nodes): family {k}")
 
@@ -326,7 +335,7 @@ def _residuals(ex: ExactFRC, flow: ForcedFlow, f_band: tuple[float, float]):
 def close_return_families(ex: ExactFRC, system, load: np.ndarray, samples: list, *, f_band: tuple[float, float],
                           families: int, tries: int, family_steps: int = 200, periods: tuple = CLOSE_PERIODS,
                           tol: float = CLOSE_TOL, max_iter: int = CLOSE_ITER,
-                          nodes_multiple: int = CLOSE_MULTIPLE) -> list[CloseReturn]:
+                          nodes_multiple: int = CLOSE_MULTIPLE, switch_families: int = 0) -> list[CloseReturn]:
     """Unstable periodic orbits from the close returns of chaotic Poincare samples (module docstring),
     appended to ``ex.families`` as families of kind ``close_return``.
 
@@ -348,6 +357,9 @@ def close_return_families(ex: ExactFRC, system, load: np.ndarray, samples: list,
     max_iter : Newton steps per seed at most
     nodes_multiple : nodes per load period, as a multiple of the families' S (the orbit is then continued
         on S k nodes, as the families are)
+    switch_families : int
+        Families switched onto at the branch points of each new family (and its children) at most, each of
+        ``family_steps`` points each way (as :func:`cover_verdicts`); 0 records the branch points only.
 
     Returns
     -------
@@ -394,26 +406,28 @@ def close_return_families(ex: ExactFRC, system, load: np.ndarray, samples: list,
                                        f"Newton residuals on {S * k * m} nodes)", d))
                 continue
             rk = ShootingResidual(flow, S * k, k, ex.x_ref, res1.omega_ref, omega_v)
+            idx = len(ex.families)  # the new family's index (those switched onto from it follow it)
             first = (f"started from a close return (k = {k}, distance {dist:.2g}) of the {direction} stepped sine "
                      f"at {fq:.6g} Hz")
-            note = _new_family(ex, residuals, rk, rm.nodes(Y)[0][::m], w, band, opts, family_steps, first, t0)
+            note = _new_family(ex, residuals, rk, rm.nodes(Y)[0][::m], w, band, opts, family_steps, first, t0,
+                               switch_families)
             if note.startswith(("the orbit has period", "the orbit is one of")):  # once more, that orbit deflated
                 Y2, d2, n2 = _shoot(rm, nodes, w, [Y], max_iter)
                 if Y2 is not None:
                     d = d2
                     note = _new_family(ex, residuals, rk, rm.nodes(Y2)[0][::m], w, band, opts, family_steps,
-                                       first + " (with the orbit first found deflated)", t0)
+                                       first + " (with the orbit first found deflated)", t0, switch_families)
             made += not note
-            out.append(CloseReturn(fq, direction, k, n, dist, -1 if note else len(ex.families) - 1,
-                                   note or f"family {len(ex.families) - 1} ({k} T)", d))
+            out.append(CloseReturn(fq, direction, k, n, dist, -1 if note else idx,
+                                   note or f"family {idx} ({k} T)", d))
     return out
 
 
 def _new_family(ex: ExactFRC, residuals: dict, rk: ShootingResidual, nodes: np.ndarray, w: float, band, opts,
-                family_steps: int, first_note: str, t0: float) -> str:
+                family_steps: int, first_note: str, t0: float, switch_families: int = 0) -> str:
     """Shoot the k T orbit on rk (S k nodes) from ``nodes`` (exact: Newton converges at once) and, if it has
-    period k and is new, follow it both ways as a ``close_return`` family appended to ``ex`` ('' done, else why
-    not)."""
+    period k and is new, follow it both ways as a ``close_return`` family appended to ``ex``, then switch at its
+    branch points (up to ``switch_families`` families, :func:`cover_verdicts`) ('' done, else why not)."""
     k = rk.periods
     try:
         Y = shoot_at(rk, nodes, w)
@@ -447,6 +461,9 @@ def _new_family(ex: ExactFRC, residuals: dict, rk: ShootingResidual, nodes: np.n
     fam.start_hz = w / (2 * math.pi)
     ex.families.append(fam)
     residuals[len(ex.families) - 1] = (rk, an)
+    sw_opts = replace(opts, family_steps=family_steps, period_doubling_steps=family_steps)
+    _switch_all(ex.families, ex.switches, residuals, sw_opts, band, ex.point_rows, ex.symmetry,
+                _Budget(opts.deadline_s), root=len(ex.families) - 1, max_new=switch_families)
     return ""
 
 
