@@ -39,7 +39,7 @@ from scipy.linalg import eigh
 from reduced import _checks as _check
 from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
-from reduced.transient import _cd, _cd_modal
+from reduced.transient import _cd, _cd_block, _cd_modal
 from reduced.transient import stepper as _stepper
 from reduced.transient.result import RingdownResult, RingdownStream
 
@@ -275,7 +275,7 @@ def _damping_factor(C: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(U[:, keep] * np.sqrt(lam[keep]))
 
 
-COORDINATES = ("physical", "modal")  # ExplicitOptions.coordinates
+COORDINATES = ("physical", "modal", "blocked")  # ExplicitOptions.coordinates
 
 
 @dataclass(frozen=True, slots=True)
@@ -360,12 +360,17 @@ class ExplicitStepper(_stepper.Stepper):
         if self.forced:
             self.stats["n_loads"] = loads.n_loads
         self.modal = None  # the open-gap modal form (reduced.transient._cd_modal) when it runs
-        if getattr(options, "coordinates", "physical") == "modal" and not self.friction and self.n > _cd.SMALL_N:
+        self.jump = None  # the block form (reduced.transient._cd_block) when it runs
+        coordinates = getattr(options, "coordinates", "physical")
+        if coordinates in ("modal", "blocked") and not self.friction and self.n > _cd.SMALL_N:
             self.modal = _cd_modal.modal_form(system.M, system.K, system.C, system.B,
                                               loads.b if self.forced else np.zeros((0, self.n)), dt)
+        mb = _cd_block.block_steps(self.every)
+        if coordinates == "blocked" and self.modal is not None and not self.forced and mb:
+            self.jump = _cd_block.block_form(self.modal["mats"], system.offset, system.side, system.k, dt, mb)
         self._matrices()
         self._first_state(x0, v0)
-        self.stats["coordinates"] = "physical" if self.modal is None else "modal"
+        self.stats["coordinates"] = "physical" if self.modal is None else "modal" if self.jump is None else "blocked"
         # samples between progress reports (without them a buffer is filled in one kernel call)
         self.per_piece = max(1, (N - 1) // options.chunks) if report else max(1, N - 1)
         self.done = 0  # samples filled after the first
@@ -406,7 +411,11 @@ class ExplicitStepper(_stepper.Stepper):
         b = np.ascontiguousarray(self.loads.b) if self.forced else np.zeros((0, n))
         dtGbT = np.ascontiguousarray((dt * (G @ b.T)).T)
         self.small = n <= _cd.SMALL_N  # state in registers (reduced.transient._cd), zero-padded to SMALL_N DOFs
-        if self.modal is not None:
+        if self.jump is not None:
+            self.kernel = _cd_block.cd_block
+            self.mats = (*self.modal["mats"], self.jump["T"], self.jump["LH"], self.jump["lut"], self.jump["mb"])
+            self.dtGbT, self.b = None, self.modal["bm"]
+        elif self.modal is not None:
             self.kernel = _cd_modal.cd_modal
             self.mats = self.modal["mats"]
             self.dtGbT, self.b = None, self.modal["bm"]  # the kernel's a (set by _first_state) and the loads' rows
