@@ -35,6 +35,7 @@ from reduced.transient._cd_modal import cd_modal
 BLOCK_MAX = 25  # steps a block at most: mb is the largest divisor of the steps between samples up to this
 BLOCK_MIN = 4  # fewer steps a block than this save nothing; such runs step
 MAX_STATES = 32  # contact states (products of each stop row's) a form holds at most
+_FORMS: dict = {}  # the last block form, keyed by its model, stops, step and block
 
 
 def block_steps(every: int) -> int:
@@ -125,176 +126,292 @@ def step_map(mats: tuple, offset: np.ndarray, k: np.ndarray, dt: float, mask: in
     return np.vstack([z1, zd1, one])
 
 
-def block_form(mats: tuple, offset: np.ndarray, side: np.ndarray, k: np.ndarray, dt: float, mb: int) -> dict | None:
-    """The block kernel's arrays for the modal form ``mats`` (``modal_form(...)["mats"]``), the stops and mb steps a
-    block; None when the stop rows can show more than ``MAX_STATES`` contact states together.
+def block_lengths(mb: int) -> np.ndarray:
+    """The block lengths a kernel tries, longest first: mb and the powers of two below it (steps)."""
+    return np.array([mb] + [1 << i for i in range(mb.bit_length() - 1, -1, -1) if 1 << i < mb], np.int64)
+
+
+def block_form(mats: tuple, om2: np.ndarray, offset: np.ndarray, side: np.ndarray, k: np.ndarray, dt: float,
+               mb: int) -> dict | None:
+    """The block kernel's arrays for the modal form ``mats`` (``modal_form(...)["mats"]``, ``om2`` its squared
+    frequencies), the stops and mb steps the longest block; None when the stop rows can show more than
+    ``MAX_STATES`` contact states together. Kept for the last (mats, stops, dt, mb) asked for.
 
     Parameters
     ----------
     mats : tuple
         The modal kernel's arrays.
+    om2 : ndarray
+        rad^2/s^2, the open-gap modes' squared frequencies.
     offset, side, k : ndarray
         The stops: m, +1 / -1, N/m.
     dt : float
         s, the step.
     mb : int
-        Steps a block.
+        Steps of the longest block.
 
     Returns
     -------
     dict or None
-        ``T`` (n_states, 2n + 1, R8): per contact state the block's R rows (the stop rows of each step,
-        nu mb; the end state, 2n; its mean velocity, n; H s, 2n + 1; zero rows up to R8, a multiple of 8),
-        stored column by column; ``lut`` (2^m,) the state
-        of a closed-stop mask (-1 where none); ``masks`` (n_states,); ``mb``.
+        ``Ls`` the block lengths (:func:`block_lengths`); ``TG`` (n_lengths, n_states, 2n + 1, RG): per length L
+        and contact state the stop rows of each step (nu L of them, row u L + t the row u at step t + 1, zero
+        rows up to ``RGL[length]``, a multiple of 8), stored column by column; ``TS`` (n_lengths, n_states,
+        2n + 1, 3n) the end state and its mean velocity, likewise;
+        ``LH`` (n_states, nu, 2) each state's bounds of each stop row; ``lut`` (2^m,) the state of a closed-stop
+        mask (-1 where none); ``masks`` (n_states,); ``om2``.
     """
-    dtgom2, _alpha, _dtg, d, UT, *_rest, Bu, _dtGBu, umap = mats
+    key = (tuple(np.asarray(x).tobytes() for x in mats), offset.tobytes(), side.tobytes(), k.tobytes(), dt, mb)
+    if key in _FORMS:
+        return _FORMS[key]
+    dtgom2, _alpha, _dtg, _d, _UT, *_rest, Bu, _dtGBu, umap = mats
     n, nu, m = dtgom2.shape[0], Bu.shape[0], offset.shape[0]
-    per_row = [_row_states(offset, side, np.flatnonzero(umap == u)) for u in range(nu)]
+    rows_of = [np.flatnonzero(umap == u) for u in range(nu)]
+    per_row = [_row_states(offset, side, rows_of[u]) for u in range(nu)]
     if m > 16 or np.prod([len(r) for r in per_row]) > MAX_STATES:
         return None
     masks = [sum(c) for c in itertools.product(*per_row)]
-    Cm = np.diag(d) + UT.T @ UT
     ns = 2 * n + 1
-    R = nu * mb + 3 * n + ns
-    R8 = -(-R // 8) * 8
-    T = np.zeros((len(masks), ns, R8))
+    Ls = block_lengths(mb)
+    RGL = np.array([-(-(nu * L) // 8) * 8 for L in Ls], np.int64)
+    TG = np.zeros((len(Ls), len(masks), ns, RGL.max()))
+    TS = np.zeros((len(Ls), len(masks), ns, 3 * n))
     for ic, mask in enumerate(masks):
         A = step_map(mats, offset, k, dt, mask)
-        rows = np.empty((R, ns))
-        H = np.zeros((ns, ns))
-        P = np.eye(ns)
-        for j in range(1, mb + 1):
-            Pn = A @ P
-            rows[np.arange(nu) * mb + j - 1] = Bu @ Pn[:n]
-            V = 0.5 * (P[n:2 * n] + Pn[n:2 * n])
-            H += (dt if j < mb else 0.5 * dt) * (V.T @ Cm @ V)
-            P = Pn
-        g0 = nu * mb
-        rows[g0:g0 + 2 * n] = P[:2 * n]
-        rows[g0 + 2 * n:g0 + 3 * n] = V
-        rows[g0 + 3 * n:] = 0.5 * (H + H.T)
-        T[ic, :, :R] = rows.T
-    rows_of = [np.flatnonzero(umap == u) for u in range(nu)]
+        for il, L in enumerate(Ls):
+            P = np.eye(ns)
+            for j in range(1, L + 1):
+                Pn = A @ P
+                TG[il, ic, :, np.arange(nu) * L + j - 1] = Bu @ Pn[:n]
+                V = 0.5 * (P[n:2 * n] + Pn[n:2 * n])
+                P = Pn
+            TS[il, ic] = np.vstack([P[:2 * n], V]).T
     LH = np.array([[_bounds(offset, side, rows_of[u], mask) for u in range(nu)] for mask in masks])
     lut = np.full(1 << m, -1, np.int64)
     lut[masks] = np.arange(len(masks))
-    return {"T": np.ascontiguousarray(T), "LH": LH, "lut": lut, "masks": np.array(masks, np.int64), "mb": mb}
+    form = {"Ls": Ls, "RGL": RGL, "TG": TG, "TS": TS, "LH": LH, "lut": lut,
+            "masks": np.array(masks, np.int64), "om2": np.ascontiguousarray(om2, dtype=float), "mb": mb}
+    _FORMS.clear()
+    _FORMS[key] = form
+    return form
+
+
+KEYS = ("Ls", "RGL", "TG", "TS", "LH", "lut", "masks", "om2")  # the form's arrays cd_block takes, in order
 
 
 @nb.njit(cache=True, fastmath={"reassoc", "contract"})
-def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, T, LH, lut, mb, offset, side, k, z, zd, dt,
-             n_steps, every, out_x, out_v, out_W, W, pw_old, i0, a, bm, P, out_E, E, pe_old):
+def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, RGL, TG, TS, LH, lut, masks, om2,
+             offset, side, k, z, zd, dt, n_steps, every, out_x, out_v, out_W, W, pw_old, i0, a, bm, P, out_E, E,
+             pe_old):
     """Advance n_steps as :func:`reduced.transient._cd_modal.cd_modal` (same arguments and returns, with the block
-    form T, LH, lut, mb of :func:`block_form` after the modal arrays), mb steps at a time where the contact state
-    holds, by ``cd_modal`` where it does not. Needs every % mb == 0 and n_steps % every == 0 (else, and with
-    loads, it steps); ``a`` is set from zd before each stepped block.
+    form's arrays ``KEYS`` after the modal arrays) in blocks where the contact state holds. Each output interval
+    (``every`` steps) is covered greedily: the longest length of Ls that fits, the contact state that of its first
+    step; when a stop leaves that state at a block's step t + 1, the t steps before it are known to hold and are
+    jumped without a check (longest lengths first); when at its first step (a switch there), that step is one step
+    of ``cd_modal``. Needs n_steps % every == 0 and no loads (else it steps throughout); ``a`` = U^T zd on exit.
+
+    The work is carried as Wp = W + dt p_n / 2: over L steps in one contact state it grows by
+    dt (p_{k+1} + ... + p_{k+L}) = E(s_k) - E(s_{k+L}), the scheme's discrete energy balance (exact for the
+    recurrence: multiply its step by the mean velocity) with E(s) = (|zd|^2 + z^T om2 (z + dt zd)
+    + sum over closed stops k (g(z + dt zd) - offset) (g(z) - offset)) / 2, g the stop's row. The mean velocity and
+    p_n are formed at a sample and before a step of ``cd_modal``, from the last block's start.
 
     Parameters
     ----------
     dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap : ndarray or float
         The modal kernel's arrays.
-    T, LH, lut : ndarray
-        The block form.
-    mb : int
-        Steps a block.
+    Ls, RGL, TG, TS, LH, lut, masks, om2 : ndarray
+        The block form (om2 in rad^2/s^2).
     offset, side, k, z, zd, dt, n_steps, every, out_x, out_v, out_W, W, pw_old, i0, a, bm, P, out_E, E, pe_old
         As ``cd_modal`` (dt in s, W in J).
     """
     n = z.shape[0]
-    nl = bm.shape[0]
-    if nl or mb == 0 or every % mb or n_steps % every:
+    if bm.shape[0] or n_steps % every:
         return cd_modal(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, offset, side, k, z, zd, dt,
                         n_steps, every, out_x, out_v, out_W, W, pw_old, i0, a, bm, P, out_E, E, pe_old)
     nu = Bu.shape[0]
     m = offset.shape[0]
     p = UT.shape[0]
-    R8 = T.shape[2]
-    g0 = nu * mb
-    h0 = g0 + 3 * n
-    y = np.empty(R8)
-    st = np.empty(2 * n + 1)
-    st[2 * n] = 1.0
-    sB = np.empty(nu)
+    n2 = 2 * n
+    y = np.empty(TG.shape[3])
+    st = np.empty(n2 + 1)
+    nxt = np.empty(3 * n)  # the block's end state and its mean velocity
+    for i in range(n):
+        st[i] = z[i]
+        st[n + i] = zd[i]
+    st[n2] = 1.0
+    zs = st[:n]
+    zds = st[n:n2]
+    Wp = W + 0.5 * dt * pw_old  # W + dt p_n / 2
+    jumped = False  # the last advance was a block (p_n not formed yet)
+    guess = -1  # the last block's contact state, tried first for the next
+    e_end = 0.0  # E of the state in contact state guess (when guess >= 0)
+    known = 0  # steps ahead known to stay in contact state ck
+    ck = 0
     io = i0
-    left = every
-    for _ in range(n_steps // mb):
-        for u in range(nu):  # the stop rows at the first step: the block's contact state
-            s = 0.0
+    for _ in range(n_steps // every):
+        pos = 0
+        while pos < every:
+            lim = every - pos
+            if known:
+                c = ck
+                lim = min(lim, known)
+            elif guess >= 0:
+                c = guess
+            else:
+                c = _state(st, dt, Bu, umap, offset, side, lut)
+            li = 0
+            while Ls[li] > lim:
+                li += 1
+            L = Ls[li]
+            held = L
+            if not known:
+                held = 0
+                if c >= 0:
+                    R = RGL[li]
+                    _matvec(TG[li, c], st, y, R, n2)
+                    ok = True
+                    for u in range(nu):  # every stop as in the state at every step: the rows within [lo, hi]
+                        lo = LH[c, u, 0]
+                        hi = LH[c, u, 1]
+                        for t in range(L):
+                            g = y[u * L + t]
+                            ok &= (g >= lo) & (g <= hi)
+                    held = L
+                    if not ok:  # the steps before the first that leaves the state
+                        for u in range(nu):
+                            lo = LH[c, u, 0]
+                            hi = LH[c, u, 1]
+                            for t in range(held):
+                                g = y[u * L + t]
+                                if g < lo or g > hi:
+                                    held = t
+                                    break
+                if held == 0 and guess >= 0:  # not the last block's state at the first step: find it
+                    guess = -1
+                    continue
+                if 0 < held < L:  # jump the steps that hold first
+                    known = held
+                    ck = c
+                    continue
+            if held:  # the block holds: jump
+                _matvec(TS[li, c], st, nxt, 3 * n, n2)
+                mk = masks[c]
+                e0 = e_end if guess == c else _energy(st, om2, dt, Bu, umap, offset, k, mk)
+                e_end = _energy(nxt, om2, dt, Bu, umap, offset, k, mk)
+                Wp += e0 - e_end
+                for col in range(n2):
+                    st[col] = nxt[col]
+                jumped = True
+                guess = c
+                pos += L
+                if known:
+                    known -= L
+            else:  # the switch is at the first step: one step of cd_modal
+                if jumped:
+                    W, pw_old = _work(nxt, d, UT, Wp, dt)
+                    jumped = False
+                for q in range(p):
+                    s = 0.0
+                    for i in range(n):
+                        s += UT[q, i] * zds[i]
+                    a[q] = s
+                pos += 1
+                store = 2  # no sample at this step ...
+                if pos == every:
+                    store = 1  # ... or one
+                W, pw_old, io, E, pe_old = cd_modal(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap,
+                                                    offset, side, k, zs, zds, dt, 1, store, out_x, out_v, out_W, W,
+                                                    pw_old, io, a, bm, P, out_E, E, pe_old)
+                Wp = W + 0.5 * dt * pw_old
+                guess = -1
+        if jumped:  # the sample: the last block's end
+            W, pw_old = _work(nxt, d, UT, Wp, dt)
+            jumped = False
             for i in range(n):
-                s += Bu[u, i] * (z[i] + dt * zd[i])
-            sB[u] = s
-        mask = 0
-        for j in range(m):
-            if side[j] * (sB[umap[j]] - offset[j]) > 0.0:
-                mask |= 1 << j
-        c = lut[mask]
-        ok = c >= 0
-        if ok:
-            for i in range(n):
-                st[i] = z[i]
-                st[n + i] = zd[i]
-            Tc = T[c]
-            for r in range(R8):
-                y[r] = Tc[2 * n, r]
-            for col in range(0, 2 * n - 3, 4):  # y = T_c s, four columns a pass (SIMD over the rows)
-                s0, s1, s2, s3 = st[col], st[col + 1], st[col + 2], st[col + 3]
-                for r in range(R8):
-                    y[r] += Tc[col, r] * s0 + Tc[col + 1, r] * s1 + Tc[col + 2, r] * s2 + Tc[col + 3, r] * s3
-            for col in range(2 * n - (2 * n) % 4, 2 * n):
-                sc = st[col]
-                for r in range(R8):
-                    y[r] += Tc[col, r] * sc
-            for u in range(nu):  # every stop as in the state at every step: the rows within [lo, hi]
-                lo = LH[c, u, 0]
-                hi = LH[c, u, 1]
-                for t in range(mb):
-                    g = y[u * mb + t]
-                    ok &= (g >= lo) & (g <= hi)
-        if ok:
-            wq = y[h0 + 2 * n]
-            for i in range(n):
-                wq += z[i] * y[h0 + i] + zd[i] * y[h0 + n + i]
-            pw_new = 0.0
-            for i in range(n):
-                v = y[g0 + 2 * n + i]
-                pw_new += d[i] * (v * v)
-            for q in range(p):
-                s = 0.0
-                for i in range(n):
-                    s += UT[q, i] * y[g0 + 2 * n + i]
-                pw_new += s * s
-            W += 0.5 * dt * pw_old + wq
-            pw_old = pw_new
-            for i in range(n):
-                z[i] = y[g0 + i]
-                zd[i] = y[g0 + n + i]
-            left -= mb
-            if left == 0:
-                left = every
-                for i in range(n):
-                    out_x[io, i] = z[i]
-                    out_v[io, i] = y[g0 + 2 * n + i]
-                out_W[io] = W
-                io += 1
-        else:  # a stop switches within the block: its steps one by one
-            for q in range(p):
-                s = 0.0
-                for i in range(n):
-                    s += UT[q, i] * zd[i]
-                a[q] = s
-            left -= mb
-            store = mb + 1  # no sample within the block ...
-            if left == 0:
-                store = mb  # ... or one at its end
-            W, pw_old, io, E, pe_old = cd_modal(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, offset,
-                                                side, k, z, zd, dt, mb, store, out_x, out_v, out_W, W, pw_old, io, a,
-                                                bm, P, out_E, E, pe_old)
-            if left == 0:
-                left = every
+                out_x[io, i] = st[i]
+                out_v[io, i] = nxt[n2 + i]
+            out_W[io] = W
+            io += 1
+    for i in range(n):
+        z[i] = st[i]
+        zd[i] = st[n + i]
     for q in range(p):  # a = U^T zd on exit, as cd_modal leaves it
         s = 0.0
         for i in range(n):
             s += UT[q, i] * zd[i]
         a[q] = s
     return W, pw_old, io, E, pe_old
+
+
+@nb.njit(cache=True, fastmath={"reassoc", "contract"})
+def _matvec(Tc, st, y, R, n2):
+    """y[:R] = Tc[:, :R]^T st (Tc (n2 + 1, >= R) column by column, st[n2] = 1), four columns a pass (SIMD over
+    the rows)."""
+    for r in range(R):
+        y[r] = Tc[n2, r]
+    for col in range(0, n2 - 3, 4):
+        s0, s1, s2, s3 = st[col], st[col + 1], st[col + 2], st[col + 3]
+        for r in range(R):
+            y[r] += Tc[col, r] * s0 + Tc[col + 1, r] * s1 + Tc[col + 2, r] * s2 + Tc[col + 3, r] * s3
+    for col in range(n2 - n2 % 4, n2):
+        sc = st[col]
+        for r in range(R):
+            y[r] += Tc[col, r] * sc
+
+
+@nb.njit(cache=True, fastmath={"reassoc", "contract"})
+def _energy(st, om2, dt, Bu, umap, offset, k, mask):
+    """The scheme's discrete energy E(s) of the state st = (z, zd) with the stops of ``mask`` closed (J per unit
+    modal mass: :func:`cd_block`)."""
+    n = om2.shape[0]
+    e = 0.0
+    for i in range(n):
+        zi = st[i]
+        zdi = st[n + i]
+        e += zdi * zdi + om2[i] * zi * (zi + dt * zdi)
+    j = 0
+    while mask:
+        if mask & 1:
+            u = umap[j]
+            g0 = 0.0
+            g1 = 0.0
+            for i in range(n):
+                g0 += Bu[u, i] * st[i]
+                g1 += Bu[u, i] * st[n + i]
+            g1 = g0 + dt * g1
+            e += k[j] * (g1 - offset[j]) * (g0 - offset[j])
+        mask >>= 1
+        j += 1
+    return 0.5 * e
+
+
+@nb.njit(cache=True, fastmath={"reassoc", "contract"})
+def _state(st, dt, Bu, umap, offset, side, lut):
+    """The contact state of the stop rows at the next step, g = Bu (z + dt zd), by the kernel's rule (-1: none)."""
+    n = Bu.shape[1]
+    mask = 0
+    for j in range(offset.shape[0]):
+        u = umap[j]
+        s = 0.0
+        for i in range(n):
+            s += Bu[u, i] * (st[i] + dt * st[n + i])
+        if side[j] * (s - offset[j]) > 0.0:
+            mask |= 1 << j
+    return lut[mask]
+
+
+@nb.njit(cache=True, fastmath={"reassoc", "contract"})
+def _work(nxt, d, UT, Wp, dt):
+    """(W, p_n) at the end of a block: v = nxt[2n:] its mean velocity, p_n = v^T (diag(d) + U U^T) v,
+    W = Wp - dt p_n / 2 (J)."""
+    n = d.shape[0]
+    pw = 0.0
+    for i in range(n):
+        v = nxt[2 * n + i]
+        pw += d[i] * (v * v)
+    for q in range(UT.shape[0]):
+        s = 0.0
+        for i in range(n):
+            s += UT[q, i] * nxt[2 * n + i]
+        pw += s * s
+    return Wp - 0.5 * dt * pw, pw

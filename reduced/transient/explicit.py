@@ -367,7 +367,7 @@ class ExplicitStepper(_stepper.Stepper):
                                               loads.b if self.forced else np.zeros((0, self.n)), dt)
         mb = _cd_block.block_steps(self.every)
         if coordinates == "blocked" and self.modal is not None and not self.forced and mb:
-            self.jump = _cd_block.block_form(self.modal["mats"], system.offset, system.side, system.k, dt, mb)
+            self.jump = _cd_block.block_form(self.modal["mats"], self.modal["om2"], system.offset, system.side, system.k, dt, mb)
         self._matrices()
         self._first_state(x0, v0)
         self.stats["coordinates"] = "physical" if self.modal is None else "modal" if self.jump is None else "blocked"
@@ -413,7 +413,7 @@ class ExplicitStepper(_stepper.Stepper):
         self.small = n <= _cd.SMALL_N  # state in registers (reduced.transient._cd), zero-padded to SMALL_N DOFs
         if self.jump is not None:
             self.kernel = _cd_block.cd_block
-            self.mats = (*self.modal["mats"], self.jump["T"], self.jump["LH"], self.jump["lut"], self.jump["mb"])
+            self.mats = (*self.modal["mats"], *(self.jump[key] for key in _cd_block.KEYS))
             self.dtGbT, self.b = None, self.modal["bm"]
         elif self.modal is not None:
             self.kernel = _cd_modal.cd_modal
