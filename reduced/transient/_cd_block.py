@@ -1,24 +1,24 @@
 """The central-difference ringdown in blocks of steps: the modal recurrence of :mod:`reduced.transient._cd_modal`
-jumped ``mb`` steps at a time while no stop opens or closes (free, frictionless systems).
+jumped up to ``BLOCK_MAX`` steps at a time while no stop opens or closes (free, frictionless systems; issue 28).
 
 Between two switches of the stops the step of :func:`reduced.transient._cd_modal.cd_modal` is affine in its state:
 with s = (z_n, zd_{n+1/2}, 1) and the closed stops fixed (each adding k (B x - offset) to the force),
-s_{n+1} = A_c s_n, A_c the one-step map of contact state c (one (2n + 1) x (2n + 1) matrix a state: a closed
-stop adds its constant through the last column). So from s_k, with P_j = A_c^j, every quantity of the next mb
-steps is one row of a matrix applied to s_k, all independent dot products (no chain of sums waiting for each
-other, which is what bounds the step-by-step kernel: results/performance/README.md, the roofline):
+s_{n+1} = A_c s_n, A_c the one-step map of contact state c (a (2n + 1) x (2n + 1) matrix a state; a closed stop's
+constant enters through the last column). So from s_k, with P_j = A_c^j, what the next mb steps need is one row of
+a matrix applied to s_k each, all independent dot products: no chain of sums each waiting for the last, which is
+what bounds the step-by-step kernel (results/performance/README.md, the roofline):
 
-- the stops' rows at steps k+1 .. k+mb, Bu P_j[:n] (nu mb rows): the block holds iff every stop is closed or
-  open at each of those steps as in c, the rule of the stepping kernel (side (B x - offset) > 0 closes);
-- the state at the block's end, P_mb[:2n], and its mean velocity v_{k+mb} = (P_{mb-1} + P_mb)[n:2n] / 2;
-- the dissipated work of the block's steps, the trapezoidal sum dt (p_{k+1} + ... + p_{k+mb-1} + p_{k+mb} / 2)
-  with p_{k+j} = v_{k+j}^T Cm v_{k+j} (Cm = diag(d) + U U^T), a quadratic form s^T H s of the block's start
-  (one more matrix-vector product), to which 0.5 dt p_k is added as by the stepping kernel.
+- the stop rows at steps k+1 .. k+mb, Bu P_j[:n] (nu mb rows): the block holds while every stop is closed or open
+  as in c, by the stepping kernel's rule side (B x - offset) > 0 (as bounds lo <= g <= hi, the same rule exactly);
+- the state after L steps, P_L[:2n], and its mean velocity (P_{L-1} + P_L)[n:2n] / 2, for the lengths L the held
+  steps are jumped in (mb and the powers of two below it);
+- the dissipated work from the scheme's discrete energy balance (:func:`cd_block`), two short sums a block.
 
-The contact state c is the one of the first step's stop rows; when a block does not hold (a stop switches
-within it), its mb steps are taken by ``cd_modal`` itself (the same rules and the same code). The block ends on
-output samples (mb divides the steps between samples), so a sample is the block's end state. The products
-A_c^j are rounded differently from j steps, so a run equals the stepping kernel's to round-off, not bit for bit
+The contact state tried is the last block's (else the first step's); when a stop leaves it at step t + 1 of the
+block, the t steps that held are jumped and the next block starts at the switch; a switch at the first step is one
+step of ``cd_modal`` itself (the same rules, the same code). Blocks end on output samples (an interval of
+``every`` steps is covered by blocks of at most mb), so a sample is a block's end state. The products A_c^j are
+rounded differently from j steps, so a run equals the stepping kernel's to round-off, not bit for bit
 (tests/test_explicit_block.py): on the chaotic reduced beam the two part after a while, as the modal and the
 physical kernels do. The stability limit is the stepping scheme's: it is the same recurrence.
 """
@@ -32,14 +32,15 @@ import numpy as np
 
 from reduced.transient._cd_modal import cd_modal
 
-BLOCK_MAX = 25  # steps a block at most: mb is the largest divisor of the steps between samples up to this
+BLOCK_MAX = 25  # steps a block at most (the rom-impulse run's steps between samples; longer blocks fail more)
 BLOCK_MIN = 4  # fewer steps a block than this save nothing; such runs step
 MAX_STATES = 32  # contact states (products of each stop row's) a form holds at most
 _FORMS: dict = {}  # the last block form, keyed by its model, stops, step and block
 
 
 def block_steps(every: int) -> int:
-    """Steps a block: the largest divisor of ``every`` (steps between samples) in [BLOCK_MIN, BLOCK_MAX], or 0.
+    """Steps of the longest block: min(every, BLOCK_MAX), or 0 when ``every`` (steps between samples) is below
+    BLOCK_MIN.
 
     Parameters
     ----------
@@ -49,12 +50,9 @@ def block_steps(every: int) -> int:
     Returns
     -------
     int
-        The block's steps, 0 when no divisor is in range.
+        The longest block's steps, 0 for none.
     """
-    for mb in range(min(every, BLOCK_MAX), BLOCK_MIN - 1, -1):
-        if every % mb == 0:
-            return mb
-    return 0
+    return min(every, BLOCK_MAX) if every >= BLOCK_MIN else 0
 
 
 def _bounds(offset: np.ndarray, side: np.ndarray, stops: np.ndarray, mask: int) -> tuple[float, float]:
@@ -229,7 +227,6 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
         return cd_modal(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, offset, side, k, z, zd, dt,
                         n_steps, every, out_x, out_v, out_W, W, pw_old, i0, a, bm, P, out_E, E, pe_old)
     nu = Bu.shape[0]
-    m = offset.shape[0]
     p = UT.shape[0]
     n2 = 2 * n
     y = np.empty(TG.shape[3])

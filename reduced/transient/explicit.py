@@ -367,7 +367,8 @@ class ExplicitStepper(_stepper.Stepper):
                                               loads.b if self.forced else np.zeros((0, self.n)), dt)
         mb = _cd_block.block_steps(self.every)
         if coordinates == "blocked" and self.modal is not None and not self.forced and mb:
-            self.jump = _cd_block.block_form(self.modal["mats"], self.modal["om2"], system.offset, system.side, system.k, dt, mb)
+            self.jump = _cd_block.block_form(self.modal["mats"], self.modal["om2"], system.offset, system.side,
+                                             system.k, dt, mb)
         self._matrices()
         self._first_state(x0, v0)
         self.stats["coordinates"] = "physical" if self.modal is None else "modal" if self.jump is None else "blocked"
