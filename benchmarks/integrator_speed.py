@@ -197,7 +197,10 @@ def exact_rows(base: dict, repeats: int, commit: str) -> tuple[list[dict], list[
                               "baseline_s": b_t["median_s"] if b_t else "",
                               "ratio": b_t["median_s"] / t["median_s"] if b_t else "",
                               "error": "bit for bit as before" if same else
-                              ("differs from before" if b_res is not None else ""),
+                              (f"the default {res.stats.get('coordinates', '')} kernel: first {WINDOW_S:g} s differs "
+                               f"from before by {head_diff(res, b_res, FS):.2g} of max |x| (round-off; the runs part "
+                               f"later as the motion is chaotic); energy balance {res.energy_balance_error:.3g} "
+                               f"(before: {b_res.energy_balance_error:.3g})" if b_res is not None else ""),
                               "target": f">= {rate:.0e} steps/s (<= {steps / rate:.3g} s)",
                               "met": steps / t["median_s"] >= rate})
             print(heads[-1], flush=True)

@@ -112,7 +112,7 @@ def test_linear_damped_run_equals_the_stepping_kernels_to_round_off():
     # recurrence: only rounding differs).
     s = _beam_like(gap=1.0)
     x0, v0 = _start()
-    ph = integrate_explicit(s, x0, v0, 0.5, FS)
+    ph = integrate_explicit(s, x0, v0, 0.5, FS, coordinates="physical")
     bl = integrate_explicit(s, x0, v0, 0.5, FS, coordinates="blocked")
     assert bl.stats["coordinates"] == "blocked" and bl.stats["n_steps"] == ph.stats["n_steps"]
     assert np.abs(bl.x - ph.x).max() <= 1e-11 * np.abs(ph.x).max()
@@ -128,7 +128,7 @@ def test_impacting_run_equals_the_stepping_kernels_before_round_off_grows():
     # 1e-9 of it; the energy balance of the whole run is the scheme's (1e-6 of it).
     s = _beam_like()
     x0, v0 = _start()
-    ph = integrate_explicit(s, x0, v0, 0.2, FS)
+    ph = integrate_explicit(s, x0, v0, 0.2, FS, coordinates="physical")
     mo = integrate_explicit(s, x0, v0, 0.2, FS, coordinates="modal")
     bl = integrate_explicit(s, x0, v0, 0.2, FS, coordinates="blocked")
     g = ph.x[:, :2]
@@ -177,7 +177,7 @@ def test_rom_impulse_equals_the_physical_kernel_over_the_predictable_window():
     sc = load_scene("rom-impulse")
     system, P = model_system(sc.model)
     x0, v0 = scene_initial_state(sc, system, P)
-    ph = integrate_explicit(system, x0, v0, 2.0, FS, step_basis="contact")
+    ph = integrate_explicit(system, x0, v0, 2.0, FS, step_basis="contact", coordinates="physical")
     mo = integrate_explicit(system, x0, v0, 2.0, FS, step_basis="contact", coordinates="modal")
     bl = integrate_explicit(system, x0, v0, 2.0, FS, step_basis="contact", coordinates="blocked")
     assert bl.stats["coordinates"] == "blocked"
