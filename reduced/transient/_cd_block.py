@@ -125,7 +125,18 @@ def step_map(mats: tuple, offset: np.ndarray, k: np.ndarray, dt: float, mask: in
 
 
 def block_lengths(mb: int) -> np.ndarray:
-    """The block lengths a kernel tries, longest first: mb and the powers of two below it (steps)."""
+    """The block lengths a kernel tries, longest first: mb and the powers of two below it (steps).
+
+    Parameters
+    ----------
+    mb : int
+        Steps of the longest block.
+
+    Returns
+    -------
+    ndarray
+        The lengths (int64).
+    """
     return np.array([mb] + [1 << i for i in range(mb.bit_length() - 1, -1, -1) if 1 << i < mb], np.int64)
 
 
@@ -206,6 +217,9 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
     step; when a stop leaves that state at a block's step t + 1, the t steps before it are known to hold and are
     jumped without a check (longest lengths first); when at its first step (a switch there), that step is one step
     of ``cd_modal``. Needs n_steps % every == 0 and no loads (else it steps throughout); ``a`` = U^T zd on exit.
+
+    Long because it is one numba loop over blocks whose branches (check, jump, one step) share the carried state;
+    the matrix-vector products and the energy sums are helpers, called once a block, not a step.
 
     The work is carried as Wp = W + dt p_n / 2: over L steps in one contact state it grows by
     dt (p_{k+1} + ... + p_{k+L}) = E(s_k) - E(s_{k+L}), the scheme's discrete energy balance (exact for the
