@@ -154,7 +154,8 @@ def test_samples_do_not_depend_on_how_the_run_is_cut():
 
 
 def test_forced_and_short_interval_runs_step():
-    # Under loads, or with fewer than BLOCK_MIN steps between samples, the modal kernel runs (bit for bit).
+    # Asked for blocks under loads, the modal kernel runs (bit for bit); fewer than BLOCK_MIN steps between
+    # samples make no block.
     s = _beam_like(gap=1.0)
     b = np.zeros((1, N))
     b[0, 3] = 1.0
@@ -162,6 +163,11 @@ def test_forced_and_short_interval_runs_step():
     bl = integrate_explicit(s, np.zeros(N), np.zeros(N), 0.02, FS, loads=loads, coordinates="blocked")
     mo = integrate_explicit(s, np.zeros(N), np.zeros(N), 0.02, FS, loads=loads, coordinates="modal")
     assert bl.stats["coordinates"] == "modal" and np.array_equal(bl.x, mo.x)
+    # the default ("auto"): the block kernel on a free run, the physical kernel, bit for bit, on a forced one
+    auto = integrate_explicit(s, np.zeros(N), np.zeros(N), 0.02, FS, loads=loads)
+    ph = integrate_explicit(s, np.zeros(N), np.zeros(N), 0.02, FS, loads=loads, coordinates="physical")
+    assert auto.stats["coordinates"] == "physical" and np.array_equal(auto.x, ph.x)
+    assert integrate_explicit(s, *_start(), 0.01, FS).stats["coordinates"] == "blocked"
     assert _cd_block.block_steps(3) == 0 and _cd_block.block_steps(25) == 25 and _cd_block.block_steps(60) == 25
 
 
