@@ -86,7 +86,7 @@ def test_linear_damped_run_equals_the_physical_kernel_to_round_off():
     # amplifying it; 1e-11 of max |x| is ~1e5 x eps, the accumulated rounding of 1e5 steps.
     s = _beam_like(gap=1.0)
     x0, v0 = _start(s)
-    ph = integrate_explicit(s, x0, v0, 0.5, FS)
+    ph = integrate_explicit(s, x0, v0, 0.5, FS, coordinates="physical")
     mo = integrate_explicit(s, x0, v0, 0.5, FS, coordinates="modal")
     assert mo.stats["coordinates"] == "modal" and ph.stats["coordinates"] == "physical"
     assert mo.stats["n_steps"] == ph.stats["n_steps"]
@@ -102,7 +102,7 @@ def test_impacting_run_equals_the_physical_kernel_before_round_off_grows():
     # whole run is the scheme's, equal in both to 1e-6 of it.
     s = _beam_like()
     x0, v0 = _start(s)
-    ph = integrate_explicit(s, x0, v0, 0.2, FS)
+    ph = integrate_explicit(s, x0, v0, 0.2, FS, coordinates="physical")
     mo = integrate_explicit(s, x0, v0, 0.2, FS, coordinates="modal")
     assert np.abs(ph.x[:, 0]).max() > 2e-4 and np.abs(ph.x[:, 1]).max() > 2e-4  # the stops are hit
     k = int(0.02 * FS) + 1
@@ -116,7 +116,7 @@ def test_forced_run_equals_the_physical_kernel():
     b = np.zeros((1, N))
     b[0, 3] = 1.0
     loads = Loads(b, (Harmonic(50.0, 300.0),), ("q3",))
-    ph = integrate_explicit(s, np.zeros(N), np.zeros(N), 0.1, FS, loads=loads)
+    ph = integrate_explicit(s, np.zeros(N), np.zeros(N), 0.1, FS, loads=loads, coordinates="physical")
     mo = integrate_explicit(s, np.zeros(N), np.zeros(N), 0.1, FS, loads=loads, coordinates="modal")
     assert np.abs(mo.x - ph.x).max() <= 1e-12 * np.abs(ph.x).max()
     assert abs(mo.external[-1] - ph.external[-1]) <= 1e-11 * np.abs(ph.external).max()
@@ -139,7 +139,7 @@ def test_falls_back_to_the_physical_kernel():
     s = _beam_like(c_full=True)
     x0, v0 = _start(s)
     mo = integrate_explicit(s, x0, v0, 0.01, FS, coordinates="modal")
-    ph = integrate_explicit(s, x0, v0, 0.01, FS)
+    ph = integrate_explicit(s, x0, v0, 0.01, FS, coordinates="physical")
     assert mo.stats["coordinates"] == "physical"
     assert np.array_equal(mo.x, ph.x)
     K3 = 1e4 * np.array([[2.0, -1, 0], [-1, 2, -1], [0, -1, 1]])
@@ -150,4 +150,4 @@ def test_falls_back_to_the_physical_kernel():
     v3 = np.array([0.5, 0.0, 0.0])
     mo = integrate_explicit(three, np.zeros(3), v3, 0.05, FS, coordinates="modal")
     assert mo.stats["coordinates"] == "physical"
-    assert np.array_equal(mo.x, integrate_explicit(three, np.zeros(3), v3, 0.05, FS).x)
+    assert np.array_equal(mo.x, integrate_explicit(three, np.zeros(3), v3, 0.05, FS, coordinates="physical").x)

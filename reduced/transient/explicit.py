@@ -39,7 +39,7 @@ from scipy.linalg import eigh
 from reduced import _checks as _check
 from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
-from reduced.transient import _cd, _cd_modal
+from reduced.transient import _cd, _cd_block, _cd_modal
 from reduced.transient import stepper as _stepper
 from reduced.transient.result import RingdownResult, RingdownStream
 
@@ -275,7 +275,7 @@ def _damping_factor(C: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(U[:, keep] * np.sqrt(lam[keep]))
 
 
-COORDINATES = ("physical", "modal")  # ExplicitOptions.coordinates
+COORDINATES = ("auto", "physical", "modal", "blocked")  # ExplicitOptions.coordinates
 
 
 @dataclass(frozen=True, slots=True)
@@ -288,17 +288,20 @@ class ExplicitOptions:
     omega_dt : rad, the step as omega_ref dt when ``dt`` is None, in (0, 2 SWITCHING_SAFETY]
     step_basis : omega_ref, "top" (omega_max) or "contact" (:func:`contact_omega`)
     chunks : progress is reported this many times a run
-    coordinates : "physical" (the kernel of n x n products, the reference) or "modal" (the same scheme in the
+    coordinates : "physical" (the kernel of n x n products, the reference), "modal" (the same scheme in the
         open-gap modes, :mod:`reduced.transient._cd_modal`: equal to round-off, not bit for bit; a system
         with friction, of at most ``_cd.SMALL_N`` DOFs or whose modal damping is no diagonal plus low rank
-        runs the physical kernel, ``stats["coordinates"]`` says which ran)
+        runs the physical kernel), "blocked" (the modal scheme jumped in blocks of steps while the contact
+        state holds, :mod:`reduced.transient._cd_block`, equal to round-off; a forced run, or one with fewer
+        than ``_cd_block.BLOCK_MIN`` steps between samples, runs the modal kernel) or "auto" (the default:
+        "blocked" where the block kernel applies, else "physical"); ``stats["coordinates"]`` says which ran
     """
 
     dt: float | None = None
     omega_dt: float = DEFAULT_OMEGA_DT
     step_basis: str = "top"
     chunks: int = PIECES
-    coordinates: str = "physical"
+    coordinates: str = "auto"
 
     def checked(self, system: GapSystem) -> ExplicitOptions:
         """These options validated (ValueError naming the first bad one)."""
@@ -318,7 +321,10 @@ class ExplicitStepper(_stepper.Stepper):
     the loads' work and power), so the samples are the same bits however the calls are cut. A
     call stops at the buffer's end, at the next progress mark (when progress is reported) and,
     under loads, after ``LOAD_BLOCK_STEPS`` steps (the loads at each step are tabulated a call).
-    Models of at most ``_cd.SMALL_N`` DOFs run the register kernel :func:`reduced.transient._cd._cd_small`.
+    Models of at most ``_cd.SMALL_N`` DOFs run the register kernel :func:`reduced.transient._cd._cd_small`;
+    free frictionless larger ones, by default, the block kernel :func:`reduced.transient._cd_block.cd_block`
+    (``ExplicitOptions.coordinates``), whose calls also start and end on samples, so its samples do not
+    depend on the cuts either.
 
     Parameters
     ----------
@@ -360,12 +366,22 @@ class ExplicitStepper(_stepper.Stepper):
         if self.forced:
             self.stats["n_loads"] = loads.n_loads
         self.modal = None  # the open-gap modal form (reduced.transient._cd_modal) when it runs
-        if getattr(options, "coordinates", "physical") == "modal" and not self.friction and self.n > _cd.SMALL_N:
+        self.jump = None  # the block form (reduced.transient._cd_block) when it runs
+        coordinates = getattr(options, "coordinates", "physical")
+        mb = _cd_block.block_steps(self.every)
+        blocks = not self.forced and mb > 0  # the block kernel applies (given the modal form)
+        if (coordinates in ("modal", "blocked") or (coordinates == "auto" and blocks)) and not self.friction \
+                and self.n > _cd.SMALL_N:
             self.modal = _cd_modal.modal_form(system.M, system.K, system.C, system.B,
                                               loads.b if self.forced else np.zeros((0, self.n)), dt)
+        if coordinates in ("blocked", "auto") and self.modal is not None and blocks:
+            self.jump = _cd_block.block_form(self.modal["mats"], self.modal["om2"], system.offset, system.side,
+                                             system.k, dt, mb)
+        if coordinates == "auto" and self.jump is None:
+            self.modal = None  # "auto" runs the block kernel or the physical one
         self._matrices()
         self._first_state(x0, v0)
-        self.stats["coordinates"] = "physical" if self.modal is None else "modal"
+        self.stats["coordinates"] = "physical" if self.modal is None else "modal" if self.jump is None else "blocked"
         # samples between progress reports (without them a buffer is filled in one kernel call)
         self.per_piece = max(1, (N - 1) // options.chunks) if report else max(1, N - 1)
         self.done = 0  # samples filled after the first
@@ -406,7 +422,11 @@ class ExplicitStepper(_stepper.Stepper):
         b = np.ascontiguousarray(self.loads.b) if self.forced else np.zeros((0, n))
         dtGbT = np.ascontiguousarray((dt * (G @ b.T)).T)
         self.small = n <= _cd.SMALL_N  # state in registers (reduced.transient._cd), zero-padded to SMALL_N DOFs
-        if self.modal is not None:
+        if self.jump is not None:
+            self.kernel = _cd_block.cd_block
+            self.mats = (*self.modal["mats"], *(self.jump[key] for key in _cd_block.KEYS))
+            self.dtGbT, self.b = None, self.modal["bm"]
+        elif self.modal is not None:
             self.kernel = _cd_modal.cd_modal
             self.mats = self.modal["mats"]
             self.dtGbT, self.b = None, self.modal["bm"]  # the kernel's a (set by _first_state) and the loads' rows
@@ -508,7 +528,7 @@ def stream_explicit(
     chunks: int = PIECES,
     chunk_samples: int | None = None,
     progress=None,
-    coordinates: str = "physical",
+    coordinates: str = "auto",
 ) -> RingdownStream:
     """Central-difference response, free or forced, chunk by chunk.
 
@@ -544,7 +564,7 @@ def integrate_explicit(
     loads=None,
     chunks: int = PIECES,
     progress=None,
-    coordinates: str = "physical",
+    coordinates: str = "auto",
 ) -> RingdownResult:
     """Central-difference response of ``system`` from (x0, v0), free or under ``loads``.
 
@@ -579,7 +599,7 @@ def integrate_explicit(
     loads : None or a :class:`~reduced.models.loads.Loads` (above)
     chunks : progress reports a run
     progress : None or a callable taking the fraction done
-    coordinates : "physical" (default) or "modal": :class:`ExplicitOptions`
+    coordinates : "auto" (default), "physical", "modal" or "blocked": :class:`ExplicitOptions`
 
     Returns
     -------
