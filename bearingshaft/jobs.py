@@ -14,9 +14,9 @@ The client does the list scheduling (:func:`list_schedule`): it keeps as many st
 has worker threads and, whenever one finishes, submits the ready stage of the highest bottom level. Handing
 Dask the whole graph at once with these priorities did not keep that order: tasks submitted first were
 dispatched before the later, longer ones were known, and a worker started the task it already held rather
-than the more urgent one its last stage had just made ready (the main job's graph with each stage a sleep of
-its main_job.csv time: 438 s on LocalCluster(2), rom-frc's 282 s stage started at 156 s; list scheduling:
-about 390 s, half the stages' sum).
+than the more urgent one its last stage had just made ready (``benchmarks/job_schedule.py``: the main job's graph
+with each stage a sleep of its main_job.csv time, on LocalCluster(2): 438-443 s, rom-frc's 282 s stage started
+at 156-162 s; by the client 402-404 s at 1/20 scale, whose round trips count 20 times; ideal 390 s).
 
 The cluster is the sweep's (:func:`bearingshaft.sweep.run.dask_client`): a
 :class:`distributed.LocalCluster` of single-threaded worker processes, as many as the cores and the
