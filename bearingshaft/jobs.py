@@ -10,6 +10,14 @@ must come first:
 - independent chains run side by side, the longest first: a task's priority is the longest path of
   work from it to the end of the graph (list scheduling by "bottom level"), sized by ``STAGE_SECONDS``.
 
+The client does the list scheduling (:func:`list_schedule`): it keeps as many stages in flight as the cluster
+has worker threads and, whenever one finishes, submits the ready stage of the highest bottom level. Handing
+Dask the whole graph at once with these priorities did not keep that order: tasks submitted first were
+dispatched before the later, longer ones were known, and a worker started the task it already held rather
+than the more urgent one its last stage had just made ready (``benchmarks/job_schedule.py``: the main job's graph
+with each stage a sleep of its main_job.csv time, on LocalCluster(2): 438-443 s, rom-frc's 282 s stage started
+at 156-162 s; by the client 402-404 s at 1/20 scale, whose round trips count 20 times; ideal 390 s).
+
 The cluster is the sweep's (:func:`bearingshaft.sweep.run.dask_client`): a
 :class:`distributed.LocalCluster` of single-threaded worker processes, as many as the cores and the
 memory allow (:func:`default_workers`: the available memory over the largest stage estimate), or a
@@ -25,6 +33,7 @@ import resource
 import sys
 import time
 import uuid
+from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -269,7 +278,8 @@ def run_task(task: StageTask, *after: StageRun) -> StageRun:
     task : StageTask
         The stage.
     *after : StageRun
-        The reports of the tasks it waited for (Dask passes them): if one failed, this one is skipped.
+        The reports of the tasks it waited for: if one failed, this one is skipped (:func:`list_schedule`
+        does not submit such a task at all, and passes none).
 
     Returns
     -------
@@ -325,6 +335,60 @@ def _cluster_map(level: float):
             return client.gather(futures)
 
     return cluster_map
+
+
+def list_schedule(client, tasks: list[StageTask], run) -> Iterator[StageRun]:
+    """Run a job's graph on ``client``'s cluster by list scheduling on the client.
+
+    As many tasks are in flight as the cluster has worker threads (read again as each one finishes); each
+    time one finishes, the ready tasks (every ``after`` key done) are submitted in decreasing bottom level
+    (``task.level``, :func:`priorities`; graph order among equals) until the slots are full. A task whose
+    predecessor failed or was skipped is not submitted: it is reported skipped, naming that predecessor.
+
+    Parameters
+    ----------
+    client : distributed.Client
+        The cluster's client.
+    tasks : list of StageTask
+        The graph with each task's level set (a task's ``after`` keys are earlier in the list).
+    run : callable
+        ``run(task) -> StageRun``, run on a worker (:func:`run_task`).
+
+    Yields
+    ------
+    StageRun
+        Each task's report as it finishes (the skipped ones when their predecessor's failure is known).
+    """
+    from distributed import as_completed
+
+    waiting = {t.key: t for t in tasks}
+    done: dict[str, StageRun] = {}
+    running = as_completed()
+    in_flight = 0
+    while waiting or in_flight:
+        ready = [t for t in waiting.values() if all(k in done for k in t.after)]
+        n_skipped = 0
+        for t in ready:
+            failed = next((done[k] for k in t.after if done[k].error), None)
+            if failed is not None:
+                del waiting[t.key]
+                done[t.key] = StageRun(t.key, 0.0, "", f"not run: {failed.key} failed", skipped=True)
+                n_skipped += 1
+                yield done[t.key]
+        ready = sorted((t for t in ready if t.key in waiting), key=lambda t: -t.level)
+        slots = max(1, sum(client.nthreads().values()))
+        for t in ready[:max(0, slots - in_flight)]:
+            del waiting[t.key]
+            running.add(client.submit(run, t, key=f"stage-{t.key}", priority=int(round(t.level)), pure=False))
+            in_flight += 1
+        if not in_flight:
+            if waiting and not n_skipped:  # a task waits for a key no task has: a malformed graph
+                raise ValueError(f"tasks wait for keys that are not in the job: {sorted(waiting)}")
+            continue  # the skipped ones may have made others ready
+        r: StageRun = next(running).result()
+        in_flight -= 1
+        done[r.key] = r
+        yield r
 
 
 def default_workers(scenes: list[Scene], cores: int, available: int) -> int:
@@ -395,19 +459,11 @@ def run_job(runs: list[tuple[str, Scene, Path]], stages_of, *, workers: int | No
     t0 = time.perf_counter()
     done: list[StageRun] = []
     with dask_client(scheduler, workers) as (client, where):
-        from distributed import as_completed
-
         client.run(warm_up)
-        futures = {}
-        for t in tasks:  # the order of the graph: a task's predecessors are submitted before it
-            task = replace(t, level=level[t.key], fan_out=fan_out)
-            futures[t.key] = client.submit(run_task, task, *(futures[k] for k in t.after),
-                                           key=f"stage-{t.key}",
-                                           priority=int(round(level[t.key])), pure=False)
         pbar = bar(total=len(tasks), desc="run", unit="stage", enabled=progress)
         try:
-            for future in as_completed(list(futures.values())):
-                r: StageRun = future.result()
+            for r in list_schedule(client, [replace(t, level=level[t.key], fan_out=fan_out) for t in tasks],
+                                   run_task):
                 done.append(r)
                 if r.error:
                     scene, stage = r.key.split("/", 1)
@@ -421,4 +477,4 @@ def run_job(runs: list[tuple[str, Scene, Path]], stages_of, *, workers: int | No
 
 
 __all__ = ["SCENE_SECONDS", "STAGE_SECONDS", "JobResult", "StageRun", "StageTask", "default_workers", "job_tasks",
-           "priorities", "run_job", "run_task", "scene_arg", "stage_seconds"]
+           "list_schedule", "priorities", "run_job", "run_task", "scene_arg", "stage_seconds"]

@@ -11,8 +11,11 @@ from bearingshaft.output import check_out_dir, staged_output
 from bearingshaft.registry import BY_NAME, stages_of
 from bearingshaft.scenes import Scene
 
-MESH_STAGES = ("modal", "verify")  # stages that mesh the 3-D model: gmsh needs the main thread (signals)
-MAIN_THREAD_ERROR = "signal only works in main thread"
+# stages sent straight to a child process off the main thread: none since gmsh meshes in any thread
+# (geometry.build.gmsh_session); a child process cost each modal, reduce and verify stage of the main job 3-4 s of
+# CPU in imports and start-up, and the reduce stages, which mesh too, first failed in the worker thread
+MESH_STAGES: tuple[str, ...] = ()
+MAIN_THREAD_ERROR = "signal only works in main thread"  # what a library that needs the main thread raises
 
 
 class StageUnavailable(Exception):
@@ -85,10 +88,11 @@ def run_scene(scene: Scene, out_dir: str | Path, progress: bool = True) -> None:
 
 
 def run_stage_anywhere(scene: Scene, stage: str, out_dir: str | Path, scene_arg: str) -> None:
-    """:func:`run_stage` without progress, from any thread: in a worker thread (a Dask task) a stage
-    that meshes cannot start gmsh, which installs a signal handler; such a stage (``MESH_STAGES``, or
-    one that finds it must build a reduced model) runs as ``python -m bearingshaft.cli STAGE --scene
-    SCENE_ARG --out OUT_DIR --no-progress`` in a child process instead, whose line is printed here.
+    """:func:`run_stage` without progress, from any thread: a stage that raises "signal only works in main
+    thread" in a worker thread (a Dask task; a library that installs a signal handler), or one listed in
+    ``MESH_STAGES``, runs as ``python -m bearingshaft.cli STAGE --scene SCENE_ARG --out OUT_DIR --no-progress``
+    in a child process instead, whose line is printed here. gmsh meshes in any thread
+    (:func:`geometry.build.gmsh_session`), so the stages that mesh run in the worker.
 
     Parameters
     ----------

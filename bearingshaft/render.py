@@ -5,10 +5,16 @@ outline in black lines and an axis triad, rendered by pyvista off screen; matplo
 panels out with their titles and one colour bar. Each shape is drawn at its own scale
 (:func:`drawing_scale`): a translation shows as a visible shift of the part that moves, a
 rotation is not exaggerated past a small angle.
+
+A rendered figure is kept in the reduced-model cache folder (``shapes-<key>.png``, :mod:`reduced.cache`) under
+the hash of everything it is drawn from (:func:`figure_key`), and copied from there when the same figure is asked
+for again: the scenes that share a reduction draw the same ``gap_modes.png``, and rendering one (pyvista and
+matplotlib) takes 2-3 s of CPU. A figure drawn by the matplotlib fallback is not kept.
 """
 
 from __future__ import annotations
 
+import hashlib
 from itertools import combinations
 from pathlib import Path
 
@@ -96,6 +102,15 @@ def render_shapes(fe, shapes: list[tuple[str, np.ndarray]], path: str | Path, co
     str
         'pyvista', or 'matplotlib (pyvista failed: <why>)' when the fallback drew point clouds.
     """
+    from reduced.cache import load_entry, write_entry
+    from reduced.models.rom import cache_dir
+
+    key = figure_key(fe, shapes, columns)
+    entry = cache_dir() / f"shapes-{key[:20]}.png"
+    png = load_entry(entry, key, lambda f: f.read())
+    if png is not None:  # drawn before from the same inputs: the same bytes
+        Path(path).write_bytes(png)
+        return "pyvista"
     mesh = fe.mesh
     dofs = fe.solid.nodal_dofs  # (3, n_nodes)
     fields = [(title, np.asarray(u)[dofs].T) for title, u in shapes]
@@ -111,7 +126,65 @@ def render_shapes(fe, shapes: list[tuple[str, np.ndarray]], path: str | Path, co
     import matplotlib.pyplot as plt
 
     plt.close(fig)
+    if images is not None:
+        try:  # a cache that cannot be written: rendered again next time
+            write_entry(entry, lambda f: f.write(Path(path).read_bytes()), key, info={"kind": "mode shapes figure"})
+        except OSError:
+            pass
     return renderer
+
+
+def _hash_array(h, a) -> None:
+    a = np.ascontiguousarray(a)
+    h.update(f"{a.dtype.str}{a.shape}".encode())
+    h.update(a.tobytes())
+
+
+def figure_key(fe, shapes: list[tuple[str, np.ndarray]], columns: int = 3) -> str:
+    """sha256 (hex) of everything :func:`render_shapes` draws from: the mesh's nodes and cells, each part's cells
+    and nodes, the nodal DOF map, every shape's title and values (bit for bit), the panels a row, this module's
+    source (the drawing, its sizes and dpi) and the versions of the libraries that draw (pyvista, VTK,
+    matplotlib, Pillow, NumPy) with matplotlib's settings (but the backend's: every figure is drawn by Agg).
+
+    Parameters
+    ----------
+    fe : FESystem
+        The assembled model (mesh, nodal DOF map).
+    shapes : list of (str, ndarray)
+        (title, (n_dofs,) displacement vector) per panel.
+    columns : int
+        Panels a row.
+
+    Returns
+    -------
+    str
+        64 hex digits.
+    """
+    import importlib.metadata as md
+
+    import matplotlib
+
+    h = hashlib.sha256(Path(__file__).read_bytes())
+    mesh = fe.mesh
+    _hash_array(h, mesh.points)
+    _hash_array(h, mesh.hexes)
+    _hash_array(h, fe.solid.nodal_dofs)
+    for p in mesh.part_names:
+        h.update(repr(p).encode())
+        _hash_array(h, mesh.part_cells(p))
+        _hash_array(h, mesh.part_nodes(p))
+    for title, u in shapes:
+        h.update(repr(title).encode())
+        _hash_array(h, np.asarray(u, dtype=float))
+    h.update(repr(columns).encode())
+    for lib in ("pyvista", "vtk", "matplotlib", "pillow", "numpy"):
+        try:
+            h.update(f"{lib} {md.version(lib)}".encode())
+        except md.PackageNotFoundError:
+            h.update(f"{lib} absent".encode())
+    settings = {k: v for k, v in matplotlib.rcParams.items() if not k.startswith("backend") and k != "interactive"}
+    h.update(repr(sorted(settings.items())).encode())
+    return h.hexdigest()
 
 
 def panel(mesh, title: str, u: np.ndarray) -> dict:

@@ -10,6 +10,7 @@ the tube wall. The result is a :class:`MeshData` with named node sets, independe
 from __future__ import annotations
 
 import math
+import threading
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,6 +21,7 @@ from geometry.params import AssemblyGeometry
 
 BBOX_TOL = 1e-5  # m, entity selection tolerance; gmsh pads bounding boxes by ~1e-7 m
 GMSH_HEX8 = 5  # gmsh element type of the 8-node hexahedron
+_GMSH_LOCK = threading.Lock()  # gmsh is one global state per process: one session at a time, whichever thread
 
 
 @contextmanager
@@ -38,16 +40,24 @@ def gmsh_session(name: str = "model", verbose: bool = False):
     gmsh.model
         The ``gmsh.model`` namespace, with a fresh model ``name`` current; ``gmsh.finalize()`` runs on
         leaving the block, also on an exception.
+
+    Notes
+    -----
+    Sessions of several threads take turns (gmsh is one state per process). Off the main thread
+    (a Dask worker's task) gmsh starts without its Ctrl-C handler (``interruptible=False``), which only
+    the main thread may install: the stage then meshes in the worker instead of in a child process.
     """
     import gmsh
 
-    gmsh.initialize(["-noenv"] if hasattr(gmsh, "initialize") else [], readConfigFiles=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 1 if verbose else 0)
-        gmsh.model.add(name)
-        yield gmsh.model
-    finally:
-        gmsh.finalize()
+    main = threading.current_thread() is threading.main_thread()
+    with _GMSH_LOCK:
+        gmsh.initialize(["-noenv"], readConfigFiles=False, **({} if main else {"interruptible": False}))
+        try:
+            gmsh.option.setNumber("General.Terminal", 1 if verbose else 0)
+            gmsh.model.add(name)
+            yield gmsh.model
+        finally:
+            gmsh.finalize()
 
 
 @dataclass(frozen=True, eq=False)

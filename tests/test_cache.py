@@ -397,3 +397,93 @@ def test_atomic_write_gives_the_mode_of_a_plain_open(tmp_path):
     finally:
         os.umask(old)
     assert (tmp_path / "a.bin").stat().st_mode & 0o777 == plain.stat().st_mode & 0o777 == 0o640
+
+
+# -- the mode-shape figure cache (bearingshaft.render) -------------------------------------------
+def _two_cell_model():
+    """Two hexahedra along x, 'beam' and 'tube', 12 nodes of 3 DOFs, and two shapes."""
+    from types import SimpleNamespace
+
+    from geometry.build import MeshData
+
+    pts = np.array([[x, y, z] for x in (0.0, 1.0, 2.0) for y in (0.0, 0.2) for z in (0.0, 0.2)])
+    idx = {tuple(p): i for i, p in enumerate(pts.tolist())}
+
+    def hexa(x0, x1):
+        return [idx[(x, y, z)] for x, y, z in ((x0, 0, 0), (x1, 0, 0), (x1, 0.2, 0), (x0, 0.2, 0),
+                                               (x0, 0, 0.2), (x1, 0, 0.2), (x1, 0.2, 0.2), (x0, 0.2, 0.2))]
+
+    mesh = MeshData(points=pts, hexes=np.array([hexa(0.0, 1.0), hexa(1.0, 2.0)]), cell_part=np.array([0, 1]),
+                    part_names=("beam", "tube"), node_sets={})
+    fe = SimpleNamespace(mesh=mesh, solid=SimpleNamespace(nodal_dofs=np.arange(3 * len(pts)).reshape(-1, 3).T))
+    u = np.zeros(3 * len(pts))
+    u[2::3] = 1.0
+    return fe, [("up", u), ("tilt", u * np.repeat(pts[:, 0], 3))]
+
+
+def test_the_figure_key_changes_with_every_input_it_draws_from(monkeypatch):
+    """figure_key: the same inputs (copies) give the same key; one ulp of a shape or a node, a title, a cell moved
+    to the other part, the DOF map, the panels a row, the renderer's source, a drawing library's version or a
+    matplotlib setting each give another (a key that missed one would hand back a stale figure)."""
+    from dataclasses import replace
+    from types import SimpleNamespace
+
+    import matplotlib
+
+    import bearingshaft.render as render
+
+    fe, shapes = _two_cell_model()
+    key = render.figure_key(fe, shapes)
+    assert render.figure_key(fe, [(t, u.copy()) for t, u in shapes]) == key
+    u = shapes[1][1].copy()
+    u[5] = np.nextafter(u[5], 2.0)
+    pts = fe.mesh.points.copy()
+    pts[3, 1] = np.nextafter(pts[3, 1], 1.0)
+    other = [render.figure_key(fe, [shapes[0], ("tilt", u)]),
+             render.figure_key(fe, [shapes[0], ("tilted", shapes[1][1])]),
+             render.figure_key(fe, shapes[::-1]),
+             render.figure_key(SimpleNamespace(mesh=replace(fe.mesh, points=pts), solid=fe.solid), shapes),
+             render.figure_key(SimpleNamespace(mesh=replace(fe.mesh, cell_part=np.array([0, 0])), solid=fe.solid),
+                               shapes),
+             render.figure_key(SimpleNamespace(mesh=fe.mesh, solid=SimpleNamespace(
+                 nodal_dofs=fe.solid.nodal_dofs[::-1])), shapes),
+             render.figure_key(fe, shapes, columns=2)]
+    with matplotlib.rc_context({"font.size": matplotlib.rcParams["font.size"] + 1}):
+        other.append(render.figure_key(fe, shapes))
+    import importlib.metadata as md
+
+    real = md.version
+    monkeypatch.setattr(md, "version", lambda lib: "0.0.1" if lib == "vtk" else real(lib))
+    other.append(render.figure_key(fe, shapes))
+    monkeypatch.setattr(md, "version", real)
+    monkeypatch.setattr(render, "__file__", str(render.__file__).replace("render.py", "plots.py"))
+    other.append(render.figure_key(fe, shapes))
+    assert len({key, *other}) == len(other) + 1
+
+
+def test_a_figure_drawn_before_is_copied_bit_for_bit_and_a_fallback_one_is_not_kept(tmp_path, monkeypatch):
+    """render_shapes keeps a pyvista figure in the cache folder and, asked for it again, writes the same bytes
+    without drawing (pyvista broken by then); a figure drawn by the matplotlib fallback is not kept."""
+    import bearingshaft.render as render
+
+    monkeypatch.setenv("BEARINGSHAFT_CACHE", str(tmp_path / "cache"))
+    fe, shapes = _two_cell_model()
+    drawn = []
+
+    def fake_images(mesh, panels):  # stands in for pyvista: a flat image per panel, counted
+        drawn.append(len(panels))
+        return [np.full((20, 30, 3), 40 * i, np.uint8) for i in range(len(panels))]
+
+    monkeypatch.setattr(render, "_pyvista_images", fake_images)
+    assert render.render_shapes(fe, shapes, tmp_path / "a.png") == "pyvista" and drawn == [2]
+    assert len(list((tmp_path / "cache").glob("shapes-*.png"))) == 1
+
+    def broken(mesh, panels):
+        raise RuntimeError("no OpenGL")
+
+    monkeypatch.setattr(render, "_pyvista_images", broken)
+    assert render.render_shapes(fe, shapes, tmp_path / "b.png") == "pyvista"
+    assert (tmp_path / "b.png").read_bytes() == (tmp_path / "a.png").read_bytes()
+    used = render.render_shapes(fe, shapes[:1], tmp_path / "c.png")  # another figure: drawn, by the fallback
+    assert used.startswith("matplotlib (pyvista failed") and (tmp_path / "c.png").stat().st_size > 0
+    assert len(list((tmp_path / "cache").glob("shapes-*.png"))) == 1

@@ -62,6 +62,34 @@ def test_only_the_parts_asked_for_are_built():
     assert not any(k.startswith("tube") for k in m.node_sets)
 
 
+def test_a_mesh_built_in_a_worker_thread_is_the_main_threads():
+    """gmsh starts off the main thread too (a Dask task's thread: no Ctrl-C handler there), and two threads
+    meshing at once take turns (one gmsh state per process): each mesh is bit for bit the main thread's."""
+    import threading
+
+    beam = geometry(parts=("beam",))  # the beam alone: cheaper, and gmsh's state is the same
+    mesh = build_mesh(beam)
+    built, errors = [], []
+
+    def work() -> None:
+        try:
+            built.append(build_mesh(beam))
+        except Exception as exc:  # reported below, in the test's thread
+            errors.append(exc)
+
+    threads = [threading.Thread(target=work) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors, errors
+    assert len(built) == 2
+    for m in built:
+        assert np.array_equal(m.points, mesh.points) and np.array_equal(m.hexes, mesh.hexes)
+        assert m.node_sets.keys() == mesh.node_sets.keys()
+        assert all(np.array_equal(m.node_sets[k], v) for k, v in mesh.node_sets.items())
+
+
 def test_mesh_is_meshio_readable_with_tags(tmp_path, mesh):
     import meshio
 

@@ -4,6 +4,9 @@ run of one scene after the other."""
 from __future__ import annotations
 
 import json
+import threading
+import time
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -99,3 +102,62 @@ def test_run_on_two_workers_writes_the_files_of_a_run_in_order(tmp_path, capsys)
             assert set(a["stages"]) == set(b["stages"]) == {"ringdown", "nnm"}
         else:
             assert (par / f).read_bytes() == (seq / f).read_bytes(), f
+
+
+_RUNS: dict = {"started": [], "now": 0, "most": 0, "fail": ""}  # what the stand-in stages saw (in-process cluster)
+_LOCK = threading.Lock()
+
+
+def _stand_in(task: StageTask) -> StageRun:
+    """A stage that records when it starts and how many run at once; ``_RUNS["fail"]`` fails."""
+    with _LOCK:
+        _RUNS["now"] += 1
+        _RUNS["most"] = max(_RUNS["most"], _RUNS["now"])
+        _RUNS["started"].append(task.key)
+    time.sleep(0.02)  # long enough for every free thread to get a stage
+    with _LOCK:
+        _RUNS["now"] -= 1
+    return StageRun(task.key, 0.02, "", "boom" if task.key == _RUNS["fail"] else "")
+
+
+def _chain(scene: str, seconds: list[float]) -> list[StageTask]:
+    tasks = []
+    for i, s in enumerate(seconds):
+        key = f"{scene}/s{i}"
+        tasks.append(StageTask(key, scene, scene, f"s{i}", Path("."), (tasks[-1].key,) if tasks else (), s))
+    return tasks
+
+
+def _schedule(tasks, n_threads, fail=""):
+    from distributed import Client, LocalCluster
+
+    _RUNS.update(started=[], now=0, most=0, fail=fail)
+    level = priorities(tasks)
+    with LocalCluster(n_workers=n_threads, threads_per_worker=1, processes=False, dashboard_address=":0") as lc, \
+            Client(lc) as client:
+        return list(jobs.list_schedule(client, [replace(t, level=level[t.key]) for t in tasks], _stand_in))
+
+
+def test_the_ready_task_of_the_highest_level_runs_first_whatever_the_submission_order():
+    """List scheduling on the client, one worker thread: a short chain listed first waits while the long chain's
+    stages run, each as soon as the one before it is done (Dask given the whole graph ran the first-listed
+    task first and let a worker start a task it held before the more urgent one just made ready)."""
+    tasks = [*_chain("short", [1.0, 1.0]), *_chain("long", [2.0, 50.0]), *_chain("mid", [10.0])]
+    # levels: long/s0 52, long/s1 50, mid/s0 10, short/s0 2, short/s1 1
+    runs = _schedule(tasks, 1)
+    assert _RUNS["started"] == ["long/s0", "long/s1", "mid/s0", "short/s0", "short/s1"]
+    assert [r.key for r in runs] == _RUNS["started"] and not any(r.error for r in runs)
+
+
+def test_a_failed_stage_skips_what_waits_for_it_and_at_most_one_stage_a_thread_runs():
+    """Two worker threads: two stages at once, never more; a failed stage's successors (and theirs) are
+    reported skipped, naming the failed one, and never reach a worker; the other chains run."""
+    tasks = [*_chain("a", [5.0, 1.0, 1.0]), *_chain("b", [1.0, 1.0]), *_chain("c", [1.0]), *_chain("d", [2.0])]
+    runs = {r.key: r for r in _schedule(tasks, 2, fail="a/s0")}
+    assert set(runs) == {t.key for t in tasks}
+    assert runs["a/s0"].error == "boom" and not runs["a/s0"].skipped
+    assert runs["a/s1"].skipped and runs["a/s1"].error == "not run: a/s0 failed"
+    assert runs["a/s2"].skipped and runs["a/s2"].error == "not run: a/s1 failed"
+    assert "a/s1" not in _RUNS["started"] and "a/s2" not in _RUNS["started"]
+    assert not any(runs[k].error for k in ("b/s0", "b/s1", "c/s0", "d/s0"))
+    assert _RUNS["most"] == 2
