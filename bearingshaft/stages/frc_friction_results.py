@@ -114,11 +114,17 @@ class ShootingCurve:
     hb_m : (k, p) m, the HB curve's solution at each point's frequency nearest its amplitude at the first
         output point, any stability (NaN where none)
     hb_stable : [bool or None] Hill's verdict there (None: none, or the bracketing points disagree)
+    switches : [BranchSwitch] the branch switching tried at its folds and branch points
+        (:func:`reduced.periodic.friction_continuation.switch_branch`)
+    origin : "" for a branch continued from a shot orbit; where a new family was switched onto, from which branch
+        and bifurcation
     """
 
     branch: object
     hb_m: np.ndarray
     hb_stable: list
+    switches: list = field(default_factory=list)
+    origin: str = ""
 
     @property
     def rel_error(self) -> np.ndarray:

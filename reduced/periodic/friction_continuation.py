@@ -44,9 +44,10 @@ such points by their neighbours' verdicts.
 **Bifurcations** between two consecutive points, from the multipliers counted outside the unit circle
 (|mu| > 1 + STABLE_TOL; a free slider's multiplier 1 is on it): a real one through +1 with a sign change of
 df/ds is a ``fold``, without it a ``branch_point``; a real one through -1 a ``period_doubling``; a complex pair
-a ``neimark_sacker``; where a slider's tip opens or closes for the whole
-period between the two points (the rank of dG/dz changes) a ``grazing``, a non-smooth transition where the
-multipliers jump. (A branch point where no multiplier crosses, e.g. a symmetric pitchfork of a stable orbit, is
+a ``neimark_sacker``; two real ones meeting outside the circle and becoming a pair (or the reverse) nothing;
+where a slider's tip opens or closes for the whole period between the two points (the rank of dG/dz changes) a
+``grazing``, a non-smooth transition where the multipliers jump. Branch switching at folds and branch points:
+:func:`switch_branch`. (A branch point where no multiplier crosses, e.g. a symmetric pitchfork of a stable orbit, is
 not detected: the bordered determinant is zero along free-slider directions and cannot be used.)
 """
 
@@ -212,7 +213,10 @@ def bifurcations(multipliers: np.ndarray, tangent_f: np.ndarray,
     """[(i, kind)]: the changes of the counts of multipliers outside the unit circle between points i - 1 and i
     (module docstring: fold, branch_point, period_doubling, neimark_sacker); where the rank of dG/dz changes
     between the two points (a slider's tip opens or closes for the whole period) the change is a ``grazing``
-    (a non-smooth transition: the multipliers jump, they do not cross).
+    (a non-smooth transition: the multipliers jump, they do not cross). Where two real multipliers outside the
+    circle meet and leave the real axis as a complex pair outside it (or the reverse), no multiplier crosses the
+    circle and nothing is reported (measured on discrete-friction-frc: the "branch points" at 20.42 and 20.72 Hz
+    were such collisions, a real 4.9 and a pair -3.0 +- 1.2j beside 20.72 Hz, every multiplier beyond 3 in modulus).
 
     Parameters
     ----------
@@ -229,6 +233,8 @@ def bifurcations(multipliers: np.ndarray, tangent_f: np.ndarray,
     >>> mu = np.array([[0.5, 0.2], [1.5, 0.2], [1.5, -1.2]], complex)
     >>> bifurcations(mu, np.array([1.0, -1.0, -1.0]))
     [(1, 'fold'), (2, 'period_doubling')]
+    >>> bifurcations(np.array([[2.0, 3.0], [2.5 + 1j, 2.5 - 1j]]), np.array([1.0, 1.0]))   # a collision outside
+    []
     """
     out = []
     c = [_counts(m) for m in np.asarray(multipliers)]
@@ -237,6 +243,10 @@ def bifurcations(multipliers: np.ndarray, tangent_f: np.ndarray,
             if c[i] != c[i - 1]:
                 out.append((i, "grazing"))
             continue
+        dp, dm, dc = (c[i][j] - c[i - 1][j] for j in range(3))
+        if abs(dc) == 2 and ((dp == -dc and dm == 0) or (dm == -dc and dp == 0)):
+            continue  # two real multipliers outside the circle met and left the axis as a pair (or a pair landed on
+            # it and split): the number outside did not change, nothing crossed the circle
         if c[i][0] != c[i - 1][0]:
             out.append((i, "fold" if tangent_f[i] * tangent_f[i - 1] < 0 else "branch_point"))
         if c[i][1] != c[i - 1][1]:
@@ -474,4 +484,157 @@ def joined(down: FrictionShootingBranch, up: FrictionShootingBranch) -> Friction
                                   f"down: {down.status}; up: {up.status}", down.wall_s + up.wall_s)
 
 
-__all__ = ["FD_FREQ", "FrictionShootingBranch", "bifurcations", "continue_friction", "joined", "on_branch"]
+SWITCH_EPS = 1e-2  # the perturbation along the critical eigenvector, in units of D (its largest x or v component):
+# large enough that Newton at fixed f does not fall back onto the orbit it starts beside (the new family's orbits
+# are O(sqrt(distance to the branch point)) away), small enough to stay in the branch point's basin
+SWITCH_EPS_RETRY = 10.0  # x SWITCH_EPS: the second try where both signs return to the orbit they started beside
+SWITCH_SAME = 1e-6  # max |z - z_0| / D below which the orbit shot from a perturbed start is the one it started from
+SWITCH_ON_BRANCH = 1e-3  # its amplitudes within this of the branch's (interpolated) at its frequency: the same branch
+
+
+@dataclass(eq=False)
+class BranchSwitch:
+    """Branch switching at a bifurcation of a continued branch (:func:`switch_branch`).
+
+    Attributes
+    ----------
+    index : the bifurcation's point on the branch (between points index - 1 and index)
+    kind : its kind (:func:`bifurcations`)
+    at : the point the switch starts from (index - 1 or index: the critical multiplier nearer +-1)
+    freq_hz : Hz, that point's frequency
+    multiplier : the critical multiplier there (complex)
+    outcome : "new family", "same orbit", "same branch", "no orbit" (Newton did not converge) or "not run: why"
+    distance : max |z - z_at| / D of the orbit shot from the perturbed start (either sign), NaN if none converged
+    orbit : the new family's orbit (FrictionShootingResult) or None
+    branch : the new family continued (FrictionShootingBranch) or None
+    """
+
+    index: int
+    kind: str
+    at: int
+    freq_hz: float
+    multiplier: complex
+    outcome: str
+    distance: float = math.nan
+    orbit: object = None
+    branch: FrictionShootingBranch | None = None
+
+
+def switch_branch(start: FrictionShootingResult, branch: FrictionShootingBranch, index: int, kind: str, *,
+                  eps: float = SWITCH_EPS, continue_kw: dict | None = None) -> BranchSwitch:
+    """Switch branches at the bifurcation ``(index, kind)`` of ``branch`` (continued from ``start``) by direct
+    shooting from a perturbed orbit, and continue the new family where one is found.
+
+    At the point beside the bifurcation whose critical real multiplier (the one through +1 for a ``branch_point`` or a
+    ``fold``, through -1 for a ``period_doubling``; outside the circle, nearest it) is nearer +-1: its monodromy (exact,
+    as along the branch), the critical eigenvector e (the free sliders' multipliers 1, whose eigenvectors move w alone,
+    left out), propagated to the nodes by the segments' state transition matrices, y_k +- eps D_max e_k (e scaled to its
+    largest x or v component in units of D); Newton at the point's frequency on the shooting equations
+    (:func:`reduced.periodic.friction_shooting.shoot_friction`) from each sign, again with ``SWITCH_EPS_RETRY`` eps
+    where both return to the orbit they started beside. The outcome: ``same orbit`` where both return to the orbit they
+    started beside (within ``SWITCH_SAME``), ``same branch`` where an orbit lies on ``branch`` (within
+    ``SWITCH_ON_BRANCH`` of its amplitudes: the other side of a fold), ``new family`` otherwise (then continued both
+    ways by :func:`continue_friction` with ``continue_kw``), ``no orbit`` where Newton does not converge from either
+    sign. A period doubling needs the orbit of period 2T, which the one-period nodes of shoot_friction do not hold:
+    ``not run``.
+
+    Parameters
+    ----------
+    start : FrictionShootingResult, the branch's start (its system, load and scale D)
+    branch : FrictionShootingBranch, continued from ``start``
+    index, kind : one of ``branch.bifurcations``
+    eps : the perturbation, units of D
+    continue_kw : keywords of :func:`continue_friction` for the new family (its band, budget, point_rows, stop)
+
+    Returns
+    -------
+    BranchSwitch
+    """
+    from reduced.periodic.friction_shooting import shoot_friction
+
+    kw = dict(continue_kw or {})
+    band = kw.pop("band", (0.5 * float(np.min(branch.freq_hz)), 2.0 * float(np.max(branch.freq_hz))))
+    if kind == "period_doubling":
+        target = -1.0
+    elif kind in ("branch_point", "fold"):
+        target = 1.0
+    else:
+        return BranchSwitch(index, kind, index, float(branch.freq_hz[index]), complex(math.nan), f"not run: {kind}")
+    system = start.system
+    n = system.n
+    S, N = branch.nodes.shape[1:]
+    D = start.scale
+    cont = _Continuation(system, start.b, start.amplitude_N, start.phase_deg, S, D)
+
+    def critical(j: int) -> tuple[float, complex, np.ndarray]:
+        """(|mu - target| + 1 if mu is inside the circle, mu, its eigenvector) of the critical multiplier at point j:
+        the real one of the target's sign outside the circle nearest it (else the one inside nearest it)."""
+        Y = branch.nodes[j]
+        f = float(branch.freq_hz[j])
+        Phi = cont.monodromy(cont.res(f), cont.blocks(f, Y))
+        mu, V = np.linalg.eig(Phi)
+        real = np.abs(mu.imag) <= REAL_TOL * np.abs(mu)
+        moves = np.max(np.abs(V[:2 * n]) / D[:2 * n, None], axis=0) > 1e-6 * np.max(np.abs(V) / D[:, None], axis=0)
+        ok = real & moves & (np.sign(mu.real) == target)
+        if not np.any(ok):
+            return math.inf, complex(math.nan), np.zeros(N)
+        score = np.abs(mu - target) + (np.abs(mu) <= 1.0 + STABLE_TOL)
+        k = int(np.argmin(np.where(ok, score, math.inf)))
+        return float(score[k]), complex(mu[k]), V[:, k].real
+
+    c0, c1 = critical(index - 1), critical(index)
+    at, (_, mu_c, e) = (index - 1, c0) if c0[0] <= c1[0] else (index, c1)
+    f = float(branch.freq_hz[at])
+    out = BranchSwitch(index, kind, at, f, mu_c, "")
+    if not np.all(np.isfinite(e)) or not np.any(e):
+        out.outcome = "not run: no real multiplier of that sign beside the bifurcation"
+        return out
+    if target < 0:
+        out.outcome = "not run: a period doubling needs the orbit of period 2T (shoot_friction holds one period)"
+        return out
+    Y0 = branch.nodes[at]
+    sens = FlowSensitivity(system, start.b, start.amplitude_N, f, start.phase_deg, flows=cont.logged)
+    h = 1.0 / f / S
+    E = np.empty((S, N))
+    E[0] = e
+    for k in range(1, S):
+        E[k] = sens.segment(Y0[k - 1], (k - 1) * h, h)[1] @ E[k - 1]
+    E /= np.max(np.abs(E[:, :2 * n]) / D[:2 * n])
+    res = cont.res(f)
+    z0 = res.z_of(Y0) / D
+    rows = kw.get("point_rows")
+    rows = np.eye(n) if rows is None else np.asarray(rows, float)
+    found, dist = [], []
+    for size in (eps, SWITCH_EPS_RETRY * eps):  # the larger one where the first returns to the same orbit
+        for sign in (1.0, -1.0):
+            r = shoot_friction(system, start.b, start.amplitude_N, f, Y0 + sign * size * E * D,
+                               phase_deg=start.phase_deg, x_ref=float(D[0]), multipliers=False)
+            if not r.converged:
+                continue
+            d = float(np.max(np.abs(res.z_of(r.nodes) / D - z0)))
+            dist.append(d)
+            if d <= SWITCH_SAME:
+                continue
+            a = np.max(np.abs(r.orbit(SAMPLES_PER_SEGMENT)[1][:, :n] @ rows.T), axis=0)
+            found.append((on_branch(branch.freq_hz, branch.amplitude_m, f, a, SWITCH_ON_BRANCH), d, r))
+        if found:
+            break
+    out.distance = max(dist) if dist else math.nan
+    new = [(d, r) for on, d, r in found if not on]
+    if new:
+        out.outcome = "new family"
+        out.distance, out.orbit = new[0]
+        down = continue_friction(out.orbit, *band, direction=-1.0, **kw)
+        up = continue_friction(out.orbit, *band, direction=1.0, **kw)
+        out.branch = joined(down, up)
+    elif found:
+        out.outcome = "same branch"
+    elif dist:
+        out.outcome = "same orbit"
+    else:
+        out.outcome = "no orbit"
+    return out
+
+
+__all__ = ["FD_FREQ", "BranchSwitch", "FrictionShootingBranch", "bifurcations", "continue_friction", "joined",
+           "on_branch", "switch_branch"]
