@@ -140,12 +140,13 @@ def shooting_markdown(result) -> list[str]:
     lines = ["", "## Exact orbits continued by shooting (frc_friction_shooting.csv)", "",
              "From every orbit shot at an unsettled point (in frequency order), the exact friction orbits are "
              "continued both ways in frequency (reduced.periodic.friction_continuation.continue_friction: "
-             "pseudo-arclength on the 8-node shooting equations with the frequency as unknown, a chord/Broyden "
-             "corrector with minimum-norm steps), each way until it leaves the band, leaves the contact (no stop "
+             "pseudo-arclength on the 8-node shooting equations with the frequency as unknown, a predictor with the "
+             "curvature of the last two tangents, a chord corrector with Broyden's update and minimum-norm steps), "
+             "each way until it leaves the band, leaves the contact (no stop "
              "closes over the period: the open-gap orbit, linear, where HB is exact), meets a branch continued "
              "before it (within 2e-2 of its amplitudes; a start on such a branch is not continued again), turns back "
              "onto its own path or its own down half past a fold, its corrector fails, or after [frc] "
-             "shooting_steps / 2 points (the CPU budget: about 0.13 s a point in contact); each end is stated with "
+             "shooting_steps / 2 points (the CPU budget: about 0.08 s a point in contact); each end is stated with "
              "its reason. Jacobian and monodromy exact "
              "(reduced.periodic.friction_sensitivity: "
              "the state transition matrices of the states visited and the saltation matrix at every stick, slip and "
@@ -197,7 +198,7 @@ def _switch_lines(P: float, curves: list, labels: dict) -> list[str]:
              ""]
     for m, sw in tried:
         at = labels.get((P, m + 1, int(sw.index)))
-        what = {"new family": "a new family (the next branch listed with this origin)",
+        what = {"new family": "a new family (listed above as a branch with this origin)",
                 "same orbit": "both signs return to the orbit it started beside (no other orbit found within 1e-1 D)",
                 "same branch": "an orbit of the same branch (the other side of a fold)",
                 "no orbit": "Newton does not converge from either sign"}.get(sw.outcome, sw.outcome)
