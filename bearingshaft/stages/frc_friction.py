@@ -238,6 +238,10 @@ def _switched(spec, br, start, curve, number: int, done: list, kw: dict) -> list
             continue
         sw = switch_branch(start, curve.branch, int(i), kind, continue_kw=cont_kw)
         curve.switches.append(sw)
+        if sw.branch is not None and all("met a branch" in w for w in sw.branch.status.split("; up: ")):
+            # off the branch's interpolated amplitudes (near a fold they are far from linear in f), but met a
+            # branch continued before both ways at once: a stretch of it, not a new family
+            sw.outcome, sw.branch = f"same branch: its continuation met a branch both ways ({sw.branch.status})", None
         if sw.branch is not None:
             done.append(sw.branch)
             new = _against_hb(sw.branch, br)

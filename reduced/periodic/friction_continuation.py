@@ -488,6 +488,7 @@ SWITCH_EPS = 1e-2  # the perturbation along the critical eigenvector, in units o
 # large enough that Newton at fixed f does not fall back onto the orbit it starts beside (the new family's orbits
 # are O(sqrt(distance to the branch point)) away), small enough to stay in the branch point's basin
 SWITCH_EPS_RETRY = 10.0  # x SWITCH_EPS: the second try where both signs return to the orbit they started beside
+INSIDE_PENALTY = 1e6  # added to |mu -+ 1| of a multiplier inside the circle: any real one outside comes first
 SWITCH_SAME = 1e-6  # max |z - z_0| / D below which the orbit shot from a perturbed start is the one it started from
 SWITCH_ON_BRANCH = 1e-3  # its amplitudes within this of the branch's (interpolated) at its frequency: the same branch
 
@@ -520,6 +521,53 @@ class BranchSwitch:
     branch: FrictionShootingBranch | None = None
 
 
+def _critical(cont: _Continuation, Y: np.ndarray, f: float, target: float) -> tuple[float, complex, np.ndarray]:
+    """(|mu - target| (+ INSIDE_PENALTY if mu is inside the circle), mu, its eigenvector in [x; v; w]) of the
+    critical multiplier of the orbit of nodes Y at f Hz: the real one of the target's sign (+-1) outside the circle
+    nearest it (else the one inside nearest it); the free sliders' multipliers 1, whose eigenvectors move w alone,
+    left out."""
+    n, D, N = cont.system.n, cont.D, cont.N
+    Phi = cont.monodromy(cont.res(f), cont.blocks(f, Y))
+    mu, V = np.linalg.eig(Phi)
+    real = np.abs(mu.imag) <= REAL_TOL * np.abs(mu)
+    moves = np.max(np.abs(V[:2 * n]) / D[:2 * n, None], axis=0) > 1e-6 * np.max(np.abs(V) / D[:, None], axis=0)
+    ok = real & moves & (np.sign(mu.real) == target)
+    if not np.any(ok):
+        return math.inf, complex(math.nan), np.zeros(N)
+    score = np.abs(mu - target) + INSIDE_PENALTY * (np.abs(mu) <= 1.0 + STABLE_TOL)  # outside first
+    k = int(np.argmin(np.where(ok, score, math.inf)))
+    return float(score[k]), complex(mu[k]), V[:, k].real
+
+
+def _shoot_beside(start: FrictionShootingResult, branch: FrictionShootingBranch, at: int, E: np.ndarray,
+                  eps: float, rows: np.ndarray) -> tuple[list, list]:
+    """([(on the branch, distance, orbit)] of the orbits off the one at point ``at``, [distance of every orbit
+    found]): Newton at its frequency from its nodes + sign x size x E D, sign +-1, size eps then
+    SWITCH_EPS_RETRY eps while none is off it (:func:`switch_branch`); distances max |z - z_at| / D."""
+    from reduced.periodic.friction_shooting import shoot_friction
+
+    system, D, n = start.system, start.scale, start.system.n
+    f, Y0 = float(branch.freq_hz[at]), branch.nodes[at]
+    res = _Residual(system, start.b, start.amplitude_N, f, start.phase_deg, Y0.shape[0], D)
+    z0 = res.z_of(Y0) / D
+    found, dist = [], []
+    for size in (eps, SWITCH_EPS_RETRY * eps):  # the larger one where the first returns to the same orbit
+        for sign in (1.0, -1.0):
+            r = shoot_friction(system, start.b, start.amplitude_N, f, Y0 + sign * size * E * D,
+                               phase_deg=start.phase_deg, x_ref=float(D[0]), multipliers=False)
+            if not r.converged:
+                continue
+            d = float(np.max(np.abs(res.z_of(r.nodes) / D - z0)))
+            dist.append(d)
+            if d <= SWITCH_SAME:
+                continue
+            a = np.max(np.abs(r.orbit(SAMPLES_PER_SEGMENT)[1][:, :n] @ rows.T), axis=0)
+            found.append((on_branch(branch.freq_hz, branch.amplitude_m, f, a, SWITCH_ON_BRANCH), d, r))
+        if found:
+            break
+    return found, dist
+
+
 def switch_branch(start: FrictionShootingResult, branch: FrictionShootingBranch, index: int, kind: str, *,
                   eps: float = SWITCH_EPS, continue_kw: dict | None = None) -> BranchSwitch:
     """Switch branches at the bifurcation ``(index, kind)`` of ``branch`` (continued from ``start``) by direct
@@ -550,8 +598,6 @@ def switch_branch(start: FrictionShootingResult, branch: FrictionShootingBranch,
     -------
     BranchSwitch
     """
-    from reduced.periodic.friction_shooting import shoot_friction
-
     kw = dict(continue_kw or {})
     band = kw.pop("band", (0.5 * float(np.min(branch.freq_hz)), 2.0 * float(np.max(branch.freq_hz))))
     if kind == "period_doubling":
@@ -566,23 +612,7 @@ def switch_branch(start: FrictionShootingResult, branch: FrictionShootingBranch,
     D = start.scale
     cont = _Continuation(system, start.b, start.amplitude_N, start.phase_deg, S, D)
 
-    def critical(j: int) -> tuple[float, complex, np.ndarray]:
-        """(|mu - target| + 1 if mu is inside the circle, mu, its eigenvector) of the critical multiplier at point j:
-        the real one of the target's sign outside the circle nearest it (else the one inside nearest it)."""
-        Y = branch.nodes[j]
-        f = float(branch.freq_hz[j])
-        Phi = cont.monodromy(cont.res(f), cont.blocks(f, Y))
-        mu, V = np.linalg.eig(Phi)
-        real = np.abs(mu.imag) <= REAL_TOL * np.abs(mu)
-        moves = np.max(np.abs(V[:2 * n]) / D[:2 * n, None], axis=0) > 1e-6 * np.max(np.abs(V) / D[:, None], axis=0)
-        ok = real & moves & (np.sign(mu.real) == target)
-        if not np.any(ok):
-            return math.inf, complex(math.nan), np.zeros(N)
-        score = np.abs(mu - target) + (np.abs(mu) <= 1.0 + STABLE_TOL)
-        k = int(np.argmin(np.where(ok, score, math.inf)))
-        return float(score[k]), complex(mu[k]), V[:, k].real
-
-    c0, c1 = critical(index - 1), critical(index)
+    c0, c1 = (_critical(cont, branch.nodes[j], float(branch.freq_hz[j]), target) for j in (index - 1, index))
     at, (_, mu_c, e) = (index - 1, c0) if c0[0] <= c1[0] else (index, c1)
     f = float(branch.freq_hz[at])
     out = BranchSwitch(index, kind, at, f, mu_c, "")
@@ -600,25 +630,8 @@ def switch_branch(start: FrictionShootingResult, branch: FrictionShootingBranch,
     for k in range(1, S):
         E[k] = sens.segment(Y0[k - 1], (k - 1) * h, h)[1] @ E[k - 1]
     E /= np.max(np.abs(E[:, :2 * n]) / D[:2 * n])
-    res = cont.res(f)
-    z0 = res.z_of(Y0) / D
     rows = kw.get("point_rows")
-    rows = np.eye(n) if rows is None else np.asarray(rows, float)
-    found, dist = [], []
-    for size in (eps, SWITCH_EPS_RETRY * eps):  # the larger one where the first returns to the same orbit
-        for sign in (1.0, -1.0):
-            r = shoot_friction(system, start.b, start.amplitude_N, f, Y0 + sign * size * E * D,
-                               phase_deg=start.phase_deg, x_ref=float(D[0]), multipliers=False)
-            if not r.converged:
-                continue
-            d = float(np.max(np.abs(res.z_of(r.nodes) / D - z0)))
-            dist.append(d)
-            if d <= SWITCH_SAME:
-                continue
-            a = np.max(np.abs(r.orbit(SAMPLES_PER_SEGMENT)[1][:, :n] @ rows.T), axis=0)
-            found.append((on_branch(branch.freq_hz, branch.amplitude_m, f, a, SWITCH_ON_BRANCH), d, r))
-        if found:
-            break
+    found, dist = _shoot_beside(start, branch, at, E, eps, np.eye(n) if rows is None else np.asarray(rows, float))
     out.distance = max(dist) if dist else math.nan
     new = [(d, r) for on, d, r in found if not on]
     if new:
