@@ -136,6 +136,31 @@ def test_the_continued_shooting_table_says_where_hb_agrees():
     assert rows[0]["hb_vs_shoot_rel"] == pytest.approx(1e-5) and math.isnan(rows[4]["hb_vs_shoot_rel"])
 
 
+def test_the_branch_switching_is_listed_with_each_outcome_and_the_new_family_with_its_origin():
+    # the files' part only (no solver): a branch with a fold at point 2 where switching found a new family, which
+    # is listed as the next branch with its origin, and a branch point where both signs returned to the orbit
+    from reduced.periodic.friction_continuation import BranchSwitch
+
+    f = np.array([13.0, 13.5, 14.0])
+    A = np.full((3, 2), 1e-4)
+    mu = np.array([[0.5, 1.0], [1.5, 1.0], [1.5, 1.0]], complex)
+
+    def branch(bif):
+        return FrictionShootingBranch(f, np.zeros((3, 8, 5)), A, mu, np.array([True, False, False]),
+                                      np.full(3, 1e-12), np.full(3, 9), np.ones(3), bif, np.array([0, 3, 4]),
+                                      "down: 1 step; up: 1 step", 1.0)
+
+    new = ShootingCurve(branch([]), A.copy(), [None] * 3, origin="switched at branch 1's fold near 13.5 Hz")
+    sc = ShootingCurve(branch([(1, "fold"), (2, "branch_point")]), A.copy(), [None] * 3,
+                       switches=[BranchSwitch(1, "fold", 1, 13.5, 1.02 + 0j, "new family", 0.04, None, new.branch),
+                                 BranchSwitch(2, "branch_point", 2, 14.0, 1.8 + 0j, "same orbit", 3e-11)])
+    md = "\n".join(shooting_markdown(SimpleNamespace(names=("x1", "u"), shooting={2.0: [sc, new]})))
+    assert "- 2 N, branch 2 (switched at branch 1's fold near 13.5 Hz): 3 orbits" in md, md
+    assert "- branch 1, [1] fold near 13.5 Hz (multiplier 1.02): a new family" in md, md
+    assert "- branch 1, [2] branch_point near 14 Hz (multiplier 1.8): both signs return" in md, md
+    assert "max |z - z0| / D 3e-11" in md
+
+
 def test_a_continued_orbit_meets_a_branch_only_on_it():
     # _meets interpolates a branch's amplitudes linearly in frequency: an orbit 1e-3 off the interpolant at a
     # frequency between two points meets it (MEET_REL = 2e-2); 5e-2 off, or outside its frequencies, it does not

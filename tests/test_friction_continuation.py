@@ -10,7 +10,13 @@ import numpy as np
 from test_friction import K_X, M_X, N_REST, Z_REST, coulomb, den_hartog
 
 from reduced.models.loads import Harmonic, Loads
-from reduced.periodic.friction_continuation import bifurcations, continue_friction, joined
+from reduced.periodic.friction_continuation import (
+    SWITCH_SAME,
+    bifurcations,
+    continue_friction,
+    joined,
+    switch_branch,
+)
 from reduced.periodic.friction_shooting import shoot_friction
 from reduced.transient.friction import integrate_exact_friction
 
@@ -93,6 +99,15 @@ def test_the_bifurcations_are_read_from_the_multipliers():
     got = bifurcations(mu, tf, rank)
     assert got == [(1, "fold"), (3, "branch_point"), (4, "branch_point"), (4, "period_doubling"),
                    (5, "period_doubling"), (5, "neimark_sacker"), (6, "grazing")], got
+    # two real multipliers outside the circle meeting and leaving the axis as a pair outside it (and back): the
+    # number outside does not change, nothing crosses: no bifurcation (on discrete-friction-frc such collisions
+    # near 20.42 and 20.72 Hz were read as branch points before)
+    pair = np.array([[3.0, 2.0, 0.1], [2.5 + 1j, 2.5 - 1j, 0.1], [3.0, 2.0, 0.1], [-3.0, -2.0, 0.1],
+                     [-2.5 + 1j, -2.5 - 1j, 0.1]], complex)
+    assert bifurcations(pair[:3], np.ones(3)) == [] and bifurcations(pair[3:], np.ones(2)) == []
+    # a real one outside and one inside forming a pair outside: the number outside changes, reported
+    assert bifurcations(np.array([[3.0, 0.5, 0.1], [2.5 + 1j, 2.5 - 1j, 0.1]]), np.ones(2)) == [
+        (1, "branch_point"), (1, "neimark_sacker")]
 
 
 def test_a_branch_that_turns_back_onto_its_own_path_ends_there():
@@ -108,3 +123,45 @@ def test_a_branch_that_turns_back_onto_its_own_path_ends_there():
     # the last RETRACE_SKIP points are its own neighbours: no retrace on them
     near = np.array([0.0, 5.0 + 0.1])
     assert RETRACE_SKIP >= 2 and _retrace(path + [near], near, 1.0) is None
+
+
+def test_branch_switching_finds_the_stuck_contact_s_other_orbits_and_none_beside_a_unique_one():
+    # switch_branch: direct shooting at a point's frequency from the orbit perturbed along the critical eigenvector.
+    # (1) A contact stuck the whole period (P = 0.05 mu N, far below the slip force) has a continuum of periodic
+    # orbits: the stuck position w is set by the history, and each w is an orbit offset by
+    # x - x0 = kt / (k + kt) (w - w0), constant over the period (closed form: the stuck system is linear), the
+    # normal coordinate unchanged; its multiplier 1 (eigenvector moving x and w together) is the direction. The
+    # switch must find an orbit off the branch (a "new family"), exact (defect at round-off) and offset as above:
+    # measured spread of x - x0 over the period 1e-22 m against an offset 1e-9 m; 1e-6 of the offset allowed (the
+    # exact flow's round-off on a 1e-10 m motion riding on a 1e-4 m normal coordinate). (2) Continuous slip (Den
+    # Hartog) of a damped oscillator has one orbit at each frequency and no real multiplier through +1 or -1: the
+    # switch is not run; a Neimark-Sacker point is not one to switch at.
+    import dataclasses
+
+    s = coulomb(MU, 1e9, c=2.0)
+    g = np.zeros((8, 5))
+    g[:, 1] = Z_REST
+    stuck = shoot_friction(s, [1.0, 0.0], 0.05 * F, 0.6 * FN, g)
+    assert stuck.converged and stuck.rank == stuck.size - 1
+    br = continue_friction(stuck, 0.5 * FN, 0.8 * FN, ds=0.5, max_steps=2)
+    sw = switch_branch(stuck, br, 1, "branch_point", continue_kw=dict(max_steps=1))
+    assert sw.outcome == "new family", sw.outcome
+    assert abs(sw.multiplier - 1.0) < 1e-9 and sw.distance > SWITCH_SAME
+    assert sw.orbit.converged and sw.orbit.defect < 1e-12
+    assert sw.branch is not None and len(sw.branch.freq_hz) == 3 and np.max(sw.branch.defect) < 1e-10
+    prim = dataclasses.replace(stuck, nodes=br.nodes[sw.at], freq_hz=float(br.freq_hz[sw.at]))
+    _, ya = sw.orbit.orbit(50)
+    _, yb = prim.orbit(50)
+    dx, dw = ya[:, 0] - yb[:, 0], ya[:, 4] - yb[:, 4]
+    offset = float(np.mean(dx))
+    assert abs(offset) > 1e-3 * np.max(np.abs(yb[:, 0])), offset  # a distinct orbit, not round-off
+    assert np.ptp(dx) < 1e-6 * abs(offset) and np.ptp(dw) < 1e-6 * abs(offset)
+    kt, k = 1e9, K_X
+    assert abs(offset / float(np.mean(dw)) - kt / (k + kt)) < 1e-6
+    assert np.max(np.abs(ya[:, 1] - yb[:, 1])) < 1e-6 * abs(offset)
+
+    r = start(s)
+    slip = continue_friction(r, 0.5 * FN, 0.8 * FN, ds=0.5, max_steps=2)
+    for kind in ("fold", "period_doubling"):
+        assert switch_branch(r, slip, 1, kind).outcome.startswith("not run: no real multiplier"), kind
+    assert switch_branch(r, slip, 1, "neimark_sacker").outcome.startswith("not run")

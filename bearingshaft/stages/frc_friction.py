@@ -47,7 +47,7 @@ from reduced.models.loads import Harmonic, Loads
 from reduced.periodic.continuation import ContinuationError
 from reduced.periodic.frc import FRC_STEPS, linear_frf, solution_at_frequency
 from reduced.periodic.friction_aft import friction_frc
-from reduced.periodic.friction_continuation import continue_friction, joined, on_branch
+from reduced.periodic.friction_continuation import continue_friction, joined, on_branch, switch_branch
 from reduced.periodic.friction_shooting import flow, hb_at_frequency, hb_displacements, hb_nodes, shoot_friction
 from reduced.periodic.hb import NewtonError, _phases, _projection_matrix
 from reduced.transient.friction import integrate_exact_friction, reference_dop853
@@ -67,6 +67,9 @@ START_HARMONICS = 41  # of the shot orbit, HB's second start where Newton does n
 VERDICT_SAMPLES = 64  # a segment, where the shot orbit is compared with DOP853 and HB (512 a period at S = 8)
 HB_MAX_ITER = 30  # Newton steps of each: from the H before it converges in 5-30 (measured; the AFT residual has kinks)
 # a start that needs more is not near an HB solution (60 steps that fail cost 1-4 s of CPU at H = 25)
+SWITCH_KINDS = ("fold", "branch_point", "period_doubling")  # the bifurcations branch switching is tried at
+SWITCH_STEPS = 6  # points each way of a family switched onto (measured on the scene: 0.4-0.9 s of CPU a switch
+# that finds none, 2.3-2.8 s one that finds and continues a family 5 points each way, load 8)
 MEET_REL = 2e-2  # a continued orbit within this of a branch before it (interpolated linearly between its points)
 # is on it: the interpolation's own error between points ~0.1 Hz apart is below 1e-2 off the folds
 def load_vector(spec, rows: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
@@ -174,8 +177,10 @@ def compute(scene: Scene, progress: bool = False) -> FrictionFRCResult:
         st["continued_shooting"] = {"wall_s": time.perf_counter() - t2, "cpu_s": time.process_time() - c2}
         if isinstance(shooting[P], list):
             st["continued_shooting"]["branches"] = [
-                {"points": len(c.branch.freq_hz), "status": c.branch.status,
-                 "bifurcations": [[int(i), k] for i, k in c.branch.bifurcations]} for c in shooting[P]]
+                {"points": len(c.branch.freq_hz), "status": c.branch.status, "origin": c.origin,
+                 "bifurcations": [[int(i), k] for i, k in c.branch.bifurcations],
+                 "switches": [[int(w.index), w.kind, w.freq_hz, w.outcome] for w in c.switches]}
+                for c in shooting[P]]
         stats["levels"][str(P)] = st
     return FrictionFRCResult(scene, names, b, curves, checks, linear, stats, shooting, verdicts)
 
@@ -197,7 +202,7 @@ def _continued(spec, br, checks: list, rows: np.ndarray, verdicts: list | None =
     if not starts:
         return "not run: no orbit was shot at an unsettled point of the stepped sine"
     done: list = []
-    out = []
+    out, switched = [], []
     for start in starts:
         a0 = np.max(np.abs(start.orbit(SHOOT_SAMPLES // 10)[1][:, :rows.shape[1]] @ rows.T), axis=0)
         if _meets(done, start.freq_hz, a0):
@@ -213,6 +218,35 @@ def _continued(spec, br, checks: list, rows: np.ndarray, verdicts: list | None =
         out.append(_against_hb(branch, br))
         if verdicts is not None:
             verdicts.append(_verdict(start, br, rows))
+        switched += _switched(spec, br, start, out[-1], len(out), done, kw)
+    return out + switched  # the families switched onto after the continued branches: those keep their numbers
+
+
+def _switched(spec, br, start, curve, number: int, done: list, kw: dict) -> list:
+    """Branch switching at each fold and branch point of a continued branch (``curve``, number ``number``)
+    (:func:`reduced.periodic.friction_continuation.switch_branch`: direct shooting at the point's frequency from
+    the orbit perturbed along the critical eigenvector), the attempts kept in ``curve.switches``; each new family
+    continued both ways for at most ``SWITCH_STEPS`` points (until it leaves the contact or meets a branch
+    continued before it, the one it left included: then it is that branch's other side, not a new family), added
+    to ``done``; returns the new families' ShootingCurves. A new family's own bifurcations are not switched at
+    (the CPU budget)."""
+    cont_kw = dict(kw, max_steps=SWITCH_STEPS, band=(spec.freq_min_hz, spec.freq_max_hz),
+                   stop=lambda f, a: _met(done, [], f, a))
+    out = []
+    for i, kind in curve.branch.bifurcations:
+        if kind not in SWITCH_KINDS:
+            continue
+        sw = switch_branch(start, curve.branch, int(i), kind, continue_kw=cont_kw)
+        curve.switches.append(sw)
+        if sw.branch is not None and all("met a branch" in w for w in sw.branch.status.split("; up: ")):
+            # off the branch's interpolated amplitudes (near a fold they are far from linear in f), but met a
+            # branch continued before both ways at once: a stretch of it, not a new family
+            sw.outcome, sw.branch = f"same branch: its continuation met a branch both ways ({sw.branch.status})", None
+        if sw.branch is not None:
+            done.append(sw.branch)
+            new = _against_hb(sw.branch, br)
+            new.origin = f"switched at branch {number}'s {kind} near {sw.freq_hz:.5g} Hz"
+            out.append(new)
     return out
 
 

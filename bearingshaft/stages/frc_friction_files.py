@@ -140,12 +140,13 @@ def shooting_markdown(result) -> list[str]:
     lines = ["", "## Exact orbits continued by shooting (frc_friction_shooting.csv)", "",
              "From every orbit shot at an unsettled point (in frequency order), the exact friction orbits are "
              "continued both ways in frequency (reduced.periodic.friction_continuation.continue_friction: "
-             "pseudo-arclength on the 8-node shooting equations with the frequency as unknown, a chord/Broyden "
-             "corrector with minimum-norm steps), each way until it leaves the band, leaves the contact (no stop "
+             "pseudo-arclength on the 8-node shooting equations with the frequency as unknown, a predictor with the "
+             "curvature of the last two tangents, a chord corrector with Broyden's update and minimum-norm steps), "
+             "each way until it leaves the band, leaves the contact (no stop "
              "closes over the period: the open-gap orbit, linear, where HB is exact), meets a branch continued "
              "before it (within 2e-2 of its amplitudes; a start on such a branch is not continued again), turns back "
              "onto its own path or its own down half past a fold, its corrector fails, or after [frc] "
-             "shooting_steps / 2 points (the CPU budget: about 0.13 s a point in contact); each end is stated with "
+             "shooting_steps / 2 points (the CPU budget: about 0.08 s a point in contact); each end is stated with "
              "its reason. Jacobian and monodromy exact "
              "(reduced.periodic.friction_sensitivity: "
              "the state transition matrices of the states visited and the saltation matrix at every stick, slip and "
@@ -163,7 +164,8 @@ def shooting_markdown(result) -> list[str]:
             br = sc.branch
             bif = ", ".join(f"[{labels[(PP, mm, i)]}] {k} near {f:.5g} Hz"
                             for PP, mm, i, f, k in _bifurcation_labels(result) if (PP, mm) == (P, m + 1)) or "none"
-            lines += [f"- {P:g} N, branch {m + 1}: {len(br.freq_hz)} orbits, {br.freq_hz.min():.5g}-"
+            origin = f" ({sc.origin})" if sc.origin else ""
+            lines += [f"- {P:g} N, branch {m + 1}{origin}: {len(br.freq_hz)} orbits, {br.freq_hz.min():.5g}-"
                       f"{br.freq_hz.max():.5g} Hz (start {br.freq_hz[np.argmax(br.n_corrector == 0)]:.5g} Hz; "
                       f"{br.status}); {int(np.sum(br.stable))} stable; worst defect {float(np.max(br.defect)):.2g}; "
                       f"bifurcations (numbered as in frc.png): {bif}."]
@@ -179,6 +181,31 @@ def shooting_markdown(result) -> list[str]:
                 lines.append(f"| {P:g} | {m + 1} | {br.freq_hz[a]:.5g} | {br.freq_hz[b - 1]:.5g} | {b - a} | {label} | "
                              f"{'yes' if st.all() else ('no' if not st.any() else 'mixed')} | {hill} |")
         lines.append("")
+        lines += _switch_lines(P, _curves(scs), labels)
+    return lines
+
+
+def _switch_lines(P: float, curves: list, labels: dict) -> list[str]:
+    """frc.md's list of the branch switching tried at one level's folds and branch points, with each outcome."""
+    tried = [(m, sw) for m, sc in enumerate(curves) for sw in sc.switches]
+    if not tried:
+        return []
+    lines = [f"Branch switching at {P:g} N (reduced.periodic.friction_continuation.switch_branch: at the point beside "
+             "each fold and branch point whose real multiplier outside the circle is nearest +1, the orbit perturbed "
+             "by 1e-2 D along its eigenvector (then 1e-1 D where both signs return), propagated to the 8 nodes by the "
+             "exact state transition matrices, and Newton at that frequency from either sign; an orbit off the branch "
+             "is a new family, continued both ways; a period doubling would need the 2T orbit: not run):",
+             ""]
+    for m, sw in tried:
+        at = labels.get((P, m + 1, int(sw.index)))
+        what = {"new family": "a new family (listed above as a branch with this origin)",
+                "same orbit": "both signs return to the orbit it started beside (no other orbit found within 1e-1 D)",
+                "same branch": "an orbit of the same branch (the other side of a fold)",
+                "no orbit": "Newton does not converge from either sign"}.get(sw.outcome, sw.outcome)
+        dist = f", max |z - z0| / D {sw.distance:.2g}" if math.isfinite(sw.distance) else ""
+        lines.append(f"- branch {m + 1}, [{at}] {sw.kind} near {sw.freq_hz:.5g} Hz (multiplier "
+                     f"{sw.multiplier.real:.4g}): {what}{dist}.")
+    lines.append("")
     return lines
 
 

@@ -14,11 +14,13 @@ from bearingshaft.scenes import Scene
 SKIPPED = (
     ("converged curve by shooting", "the exact orbits are continued by shooting with the sliders "
      "(reduced.periodic.friction_continuation, exact Jacobians) from every orbit shot at an unsettled point, each way "
-     "for at most [frc] shooting_steps / 2 points (about 0.13 s of CPU a point in contact, on the lean flow "
+     "for at most [frc] shooting_steps / 2 points (about 0.08 s of CPU a point in contact with the curvature "
+     "predictor and Broyden's corrector, 0.15 s before them, on the lean flow "
      "reduced.transient.friction.FrictionFlow), not over the whole contact band: in contact the exact branch advances "
      "0.02-0.04 Hz a point and folds back (measured on this scene: 0.65-0.85 Hz in 20 points, 0.75-0.97 Hz in 40; "
      "folds at 14.29, 26.12 and 27.09 Hz here, at 18.03 Hz in a run of 60 points), so 14.3-30 Hz would take 400-800 "
-     "points, 50-100 s of CPU; Hill's method gives the stability along the whole HB curve"),
+     "points, 30-65 s of CPU (the stage's whole budget is about 70 s); Hill's method gives the stability along the "
+     "whole HB curve"),
     ("response map", "its classifier (periodic, subharmonic, chaotic, Lyapunov exponent) runs the exact flow "
      "without sliders"),
     ("convergence in H of the whole curve", "each H's curve is a continuation with AFT (tens of seconds a curve): "
@@ -114,11 +116,17 @@ class ShootingCurve:
     hb_m : (k, p) m, the HB curve's solution at each point's frequency nearest its amplitude at the first
         output point, any stability (NaN where none)
     hb_stable : [bool or None] Hill's verdict there (None: none, or the bracketing points disagree)
+    switches : [BranchSwitch] the branch switching tried at its folds and branch points
+        (:func:`reduced.periodic.friction_continuation.switch_branch`)
+    origin : "" for a branch continued from a shot orbit; where a new family was switched onto, from which branch
+        and bifurcation
     """
 
     branch: object
     hb_m: np.ndarray
     hb_stable: list
+    switches: list = field(default_factory=list)
+    origin: str = ""
 
     @property
     def rel_error(self) -> np.ndarray:
