@@ -122,3 +122,27 @@ def test_the_tabulated_phase_grid_is_the_series_own(H):
     a[1] = 1.0  # cos t: extrema at 0 and pi
     ext = exact_hb.series_extrema(a, Nab, N)
     assert np.allclose(np.sort(np.mod(ext + 1e-9, 2 * np.pi)) - 1e-9, [0.0, math.pi], atol=1e-12)
+
+
+def test_the_kept_parts_keep_no_table_alive_and_large_ones_are_not_kept(monkeypatch):
+    """The parts hold their table by weak reference (run_tables drops a large table: it must go), and parts
+    above LOAD_PARTS_ENTRY_BYTES are worked out at each call (still the same bits)."""
+    import gc
+    import weakref
+
+    from reduced.transient import exact_tables
+
+    loads = Loads(LOAD[None, :], (Harmonic(1.0, 20.0),))
+    table = state_table(SYSTEM)
+    forced_table(SYSTEM, table, loads)
+    gone = weakref.ref(table)
+    del table
+    gc.collect()
+    assert gone() is None
+    monkeypatch.setattr(exact_tables, "LOAD_PARTS_ENTRY_BYTES", 0)
+    exact_tables._LOAD_PARTS.clear()
+    table = state_table(SYSTEM)
+    ft = forced_table(SYSTEM, table, loads)
+    assert len(exact_tables._LOAD_PARTS) == 0
+    Y, U, Sb = _forced_table_before(SYSTEM, table, loads)
+    assert _same(ft.Y, Y) and _same(ft.U, U) and _same(ft.Sb, Sb)

@@ -18,6 +18,7 @@ from __future__ import annotations
 import hashlib
 import math
 import threading
+import weakref
 from collections import OrderedDict
 from dataclasses import dataclass
 
@@ -369,7 +370,8 @@ def forced_table(system: GapSystem, table: StateTable, loads) -> ForcedTable:
 
 
 LOAD_PARTS_SIZE = 8  # (table, load directions) whose frequency-independent parts forced_table keeps
-_LOAD_PARTS: OrderedDict = OrderedDict()  # (id(table), id(system), b bytes) -> (table, system, parts)
+LOAD_PARTS_ENTRY_BYTES = 4 * 2**20  # parts larger than this (a large model's many states) are not kept
+_LOAD_PARTS: OrderedDict = OrderedDict()  # (id(table), id(system), b bytes) -> (weakref table, weakref system, parts)
 _LOAD_PARTS_LOCK = threading.Lock()
 
 
@@ -378,11 +380,13 @@ def _load_parts(system: GapSystem, table: StateTable, b: np.ndarray) -> list:
     LOAD_PARTS_SIZE (table, b): per distinct stiffness K_s of the feasible states (in their order), (K_s, its
     eigenvalues, [(s, state name)] of the states that have it, the rigid-body refusal or None, the modal loads
     V^-1 [0; M^-1 b^T], K_s^-1 b^T). Worked out as forced_table did at every call (the same calls, the same
-    bits); a stepped sine builds a table per frequency with the same system and load directions."""
+    bits); a stepped sine builds a table per frequency with the same system and load directions. The entries
+    hold the table and the system by weak reference (a table run_tables lets go of is not kept alive here), and
+    parts above LOAD_PARTS_ENTRY_BYTES are not kept."""
     key = (id(table), id(system), b.shape, b.tobytes())
     with _LOAD_PARTS_LOCK:
         hit = _LOAD_PARTS.get(key)
-        if hit is not None and hit[0] is table and hit[1] is system:
+        if hit is not None and hit[0]() is table and hit[1]() is system:
             _LOAD_PARTS.move_to_end(key)
             return hit[2]
     Minv_b = np.linalg.solve(system.M, b.T)
@@ -404,10 +408,12 @@ def _load_parts(system: GapSystem, table: StateTable, b: np.ndarray) -> list:
             parts.append((Ks, lam, [(s, _state_name(system, active))], None, table.Vinv[s][:, system.n:] @ Minv_b,
                           solve(Ks, b.T)))
         index[k] = len(parts) - 1
-    with _LOAD_PARTS_LOCK:
-        _LOAD_PARTS[key] = (table, system, parts)
-        while len(_LOAD_PARTS) > LOAD_PARTS_SIZE:
-            _LOAD_PARTS.popitem(last=False)
+    size = sum(a.nbytes for part in parts for a in (part[0], part[1], part[4], part[5]) if a is not None)
+    if size <= LOAD_PARTS_ENTRY_BYTES:
+        with _LOAD_PARTS_LOCK:
+            _LOAD_PARTS[key] = (weakref.ref(table), weakref.ref(system), parts)
+            while len(_LOAD_PARTS) > LOAD_PARTS_SIZE:
+                _LOAD_PARTS.popitem(last=False)
     return parts
 
 
