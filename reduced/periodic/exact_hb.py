@@ -32,6 +32,7 @@ in small numba kernels (one stop: a few microseconds).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -109,8 +110,56 @@ def _root(a, da, lo, hi):
 
 
 @nb.njit(cache=True)
-def _extrema(da, dda, samples, out):
-    """Extrema of the series whose derivative is da (roots of da) into ``out``, sorted in [0, 2 pi); count."""
+def _grid_basis(H, samples, out):
+    """out[i, k - 1] = (cos k t, sin k t) at t = (i + 1) 2 pi / samples, i < samples - 1, k = 1..H: the values
+    :func:`_series` builds at those phases (the same cos, sin and recurrence: the same bits)."""
+    h = 2.0 * math.pi / samples
+    for i in range(samples - 1):
+        t = (i + 1) * h
+        c1, s1 = math.cos(t), math.sin(t)
+        ck, sk = 1.0, 0.0
+        for k in range(1, H + 1):
+            ck, sk = ck * c1 - sk * s1, sk * c1 + ck * s1
+            out[i, k - 1, 0] = ck
+            out[i, k - 1, 1] = sk
+
+
+@functools.lru_cache(maxsize=32)
+def grid_basis(H: int, samples: int) -> np.ndarray:
+    """(samples - 1, H, 2) (cos k t, sin k t) on the phase grid of :func:`series_extrema` (cached, read-only).
+
+    Parameters
+    ----------
+    H : int
+        Harmonics.
+    samples : int
+        Phases per period.
+
+    Returns
+    -------
+    ndarray
+        Dimensionless, (samples - 1, H, 2).
+    """
+    out = np.empty((max(samples - 1, 0), H, 2))
+    call_numba_kernel(_grid_basis, H, samples, out)
+    out.flags.writeable = False
+    return out
+
+
+@nb.njit(cache=True)
+def _series_on_grid(a, basis, i):
+    """:func:`_series` of a at the grid phase (i + 1) 2 pi / samples from its tabulated basis: the same sum."""
+    v = a[0]
+    for k in range(1, basis.shape[1] + 1):
+        v += a[2 * k - 1] * basis[i, k - 1, 0] + a[2 * k] * basis[i, k - 1, 1]
+    return v
+
+
+@nb.njit(cache=True)
+def _extrema(da, dda, samples, basis, out):
+    """Extrema of the series whose derivative is da (roots of da) into ``out``, sorted in [0, 2 pi); count.
+    ``basis``: :func:`grid_basis` of (H, samples), the series at the grid phases (the values of :func:`_series`
+    there)."""
     two_pi = 2.0 * math.pi
     h = two_pi / samples
     n = 0
@@ -118,7 +167,7 @@ def _extrema(da, dda, samples, out):
     fprev = f0
     for i in range(samples):
         t1 = (i + 1) * h
-        f1 = f0 if i == samples - 1 else _series(da, t1)
+        f1 = f0 if i == samples - 1 else _series_on_grid(da, basis, i)
         if (fprev > 0.0) != (f1 > 0.0):
             r = _root(da, dda, i * h, t1)
             if r >= two_pi:
@@ -188,7 +237,8 @@ def series_extrema(a: np.ndarray, Nab: np.ndarray, samples: int) -> np.ndarray:
     """
     da = np.ascontiguousarray(Nab @ a)
     out = np.empty(samples + 1)
-    n = call_numba_kernel(_extrema, da, np.ascontiguousarray(Nab @ da), int(samples), out)
+    n = call_numba_kernel(_extrema, da, np.ascontiguousarray(Nab @ da), int(samples),
+                          grid_basis((a.shape[0] - 1) // 2, int(samples)), out)
     return out[:n].copy()
 
 

@@ -48,7 +48,7 @@ from reduced import _checks as _check
 from reduced.models.gaps import GapSystem
 from reduced.periodic.stepped_sine import slowest_decay_rate
 from reduced.transient.exact_tables import ExactIntegratorError, modal_table, state_table
-from reduced.transient.lyapunov import PeriodMap
+from reduced.transient.lyapunov import PeriodMap, energy_norm_matrix
 
 REGIMES = ("periodic", "subharmonic", "quasi_periodic", "chaotic")
 SPECTRAL_LINES = 5  # strongest lines of the Poincare spectrum counted as lines (their +-2 bins)
@@ -491,7 +491,7 @@ def classify(pm: PeriodMap, y0: np.ndarray, sigma: float, opts: MapOptions, mirr
     """
     rng = rng if rng is not None else np.random.default_rng(opts.seed)
     N = y0.size
-    Dinv = np.linalg.inv(pm.norm_matrix)
+    Dinv = pm.norm_inverse  # np.linalg.inv(pm.norm_matrix), worked out once by the period map
     y = np.array(y0, float)
     if opts.kick > 0.0:
         u = Dinv @ rng.standard_normal(N)
@@ -542,6 +542,29 @@ def classify(pm: PeriodMap, y0: np.ndarray, sigma: float, opts: MapOptions, mirr
 
 
 # -- the sweep --------------------------------------------------------------------------------------------
+def _fixed_norm(system: GapSystem, freq_hz: float) -> tuple | None:
+    """(D, D^-1) of :func:`reduced.transient.lyapunov.energy_norm_matrix` when it does not depend on the
+    frequency (K positive definite: the PeriodMap of every frequency works out the same two matrices), else
+    None (a free structure: D at each frequency's omega).
+
+    Parameters
+    ----------
+    system : the gap system
+    freq_hz : Hz, any frequency of the sweep (unused when K is positive definite)
+
+    Returns
+    -------
+    tuple or None
+        (D, D^-1), each (2n, 2n).
+    """
+    try:
+        np.linalg.cholesky(system.K)
+    except np.linalg.LinAlgError:
+        return None
+    D = energy_norm_matrix(system, 2.0 * np.pi * freq_hz)
+    return D, np.linalg.inv(D)
+
+
 def jumps(freq_hz: np.ndarray, points: list, max_step_hz: float) -> np.ndarray:
     """(k,) bool: the response jumped on arriving at frequency k from k - 1, a step of at most
     1.5 ``max_step_hz`` (coarse steps change the response anyway): its regime or period changed, or the
@@ -615,6 +638,7 @@ def response_map(system: GapSystem, load, amplitude_N: float, freq_hz, *, direct
         pair = (a, c, rows.shape[0] - 1)
     table = state_table(system)
     modal = modal_table(system, table)
+    norm = _fixed_norm(system, float(freqs[0]))
     sigma = slowest_decay_rate(system, b)
     y = np.zeros(2 * system.n) if y0 is None else _check.vector("y0", y0, 2 * system.n)
     rng = np.random.default_rng(opts.seed)
@@ -625,7 +649,7 @@ def response_map(system: GapSystem, load, amplitude_N: float, freq_hz, *, direct
         f = todo.pop(0)
         t0 = time.perf_counter()
         try:
-            pm = PeriodMap(system, b, P, f, rows=rows, table=table, modal=modal)
+            pm = PeriodMap(system, b, P, f, rows=rows, table=table, modal=modal, norm=norm)
             pt = classify(pm, y, sigma, opts, pair, rng)
         except ExactIntegratorError as exc:
             raise RuntimeError(f"response map at {f:.6g} Hz, {P:g} N: {exc}") from None

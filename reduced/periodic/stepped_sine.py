@@ -17,6 +17,7 @@ from reduced import _checks as _check
 from reduced.models.gaps import GapSystem
 from reduced.models.loads import Harmonic, Loads
 from reduced.transient.exact import ExactIntegratorError, integrate_exact
+from reduced.transient.exact_tables import state_table
 from reduced.transient.flow import Flow
 
 SETTLE_ROUNDOFF = 1e-10  # relative change over a period below which the exact flow's round-off dominates
@@ -169,10 +170,11 @@ def stepped_sine(system: GapSystem, load: np.ndarray, amplitude_N: float, freq_h
     pair = [names.index(m) for m in mirror] if all(m in names for m in mirror) else None
     t_min = min(math.log(1.0 / settle_tol) / slowest_decay_rate(system, b), max_settle_s)
     out = {k: [] for k in ("amp", "resp", "err", "settle", "asym", "wall")}
+    table = state_table(system)  # decomposed once for the sweep (each Flow would decompose it again: the same bits)
     for i, f in enumerate(freqs):
         t0 = time.perf_counter()
         loads = Loads(b[None, :], (Harmonic(P, float(f)),))
-        flow = Flow(system, loads=loads)
+        flow = Flow(system, table=table, loads=loads)
         try:
             y, resp, err, t_sim = _settle(flow, y, f, t_min, settle_tol, max_settle_s)
             xp, y = _last_periods(system, loads, y, f, resp, samples_per_period, rows)

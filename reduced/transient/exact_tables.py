@@ -18,6 +18,7 @@ from __future__ import annotations
 import hashlib
 import math
 import threading
+import weakref
 from collections import OrderedDict
 from dataclasses import dataclass
 
@@ -346,35 +347,74 @@ def forced_table(system: GapSystem, table: StateTable, loads) -> ForcedTable:
     Y = np.zeros((S, 2 * n, L), complex)
     U = np.zeros((S, 2 * n, L), complex)
     Sb = np.zeros((S, n, L))
+    for Ks, lam, states, rigid, u, sb in _load_parts(system, table, b):
+        if rigid is not None:
+            raise ExactIntegratorError(rigid)
+        for l in range(L):
+            if omega[l] > 0.0:
+                i = int(np.argmin(np.abs(1j * omega[l] - lam)))
+                if abs(1j * omega[l] - lam[i]) <= RESONANCE_REL * omega[l]:
+                    raise ExactIntegratorError(
+                        f"load {l + 1} ({loads.points[l]}) at {omega[l] / (2 * math.pi):.6g} Hz is at an undamped "
+                        f"resonance of contact state {states[0][1]} (natural frequency "
+                        f"{abs(lam[i].imag) / (2 * math.pi):.6g} Hz): the exact closed form has no bounded "
+                        "particular solution there; use method 'dop853' or 'explicit'")
+        y = np.zeros((2 * n, L), complex)
+        for l in range(L):
+            if omega[l] > 0.0:
+                h = solve(Ks - omega[l] ** 2 * system.M + 1j * omega[l] * system.C, b[l].astype(complex))
+                y[:n, l], y[n:, l] = h, 1j * omega[l] * h
+        for s, _ in states:
+            Y[s], U[s], Sb[s] = y, u, sb
+    return ForcedTable(omega, Y, U, Sb, b)
+
+
+LOAD_PARTS_SIZE = 8  # (table, load directions) whose frequency-independent parts forced_table keeps
+LOAD_PARTS_ENTRY_BYTES = 4 * 2**20  # parts larger than this (a large model's many states) are not kept
+_LOAD_PARTS: OrderedDict = OrderedDict()  # (id(table), id(system), b bytes) -> (weakref table, weakref system, parts)
+_LOAD_PARTS_LOCK = threading.Lock()
+
+
+def _load_parts(system: GapSystem, table: StateTable, b: np.ndarray) -> list:
+    """The parts of :func:`forced_table` that do not depend on the loads' frequencies, kept for the last
+    LOAD_PARTS_SIZE (table, b): per distinct stiffness K_s of the feasible states (in their order), (K_s, its
+    eigenvalues, [(s, state name)] of the states that have it, the rigid-body refusal or None, the modal loads
+    V^-1 [0; M^-1 b^T], K_s^-1 b^T). Worked out as forced_table did at every call (the same calls, the same
+    bits); a stepped sine builds a table per frequency with the same system and load directions. The entries
+    hold the table and the system by weak reference (a table run_tables lets go of is not kept alive here), and
+    parts above LOAD_PARTS_ENTRY_BYTES are not kept."""
+    key = (id(table), id(system), b.shape, b.tobytes())
+    with _LOAD_PARTS_LOCK:
+        hit = _LOAD_PARTS.get(key)
+        if hit is not None and hit[0]() is table and hit[1]() is system:
+            _LOAD_PARTS.move_to_end(key)
+            return hit[2]
     Minv_b = np.linalg.solve(system.M, b.T)
-    cache: dict[bytes, tuple] = {}
+    parts, index = [], {}
     for active in system.feasible_states():
         s = int(np.sum(active * (1 << np.arange(system.m))))
         Ks, _ = system.state_matrices(active)
-        key = Ks.tobytes()
-        if key not in cache:
-            lam = table.lam[s]
-            if np.min(np.abs(lam)) <= 1e-9 * np.max(np.abs(lam)):
-                raise ExactIntegratorError(
-                    f"contact state {_state_name(system, active)} has a rigid-body mode: a load on it has no "
-                    "bounded particular solution; use method 'dop853' or 'explicit'")
-            for l in range(L):
-                if omega[l] > 0.0:
-                    i = int(np.argmin(np.abs(1j * omega[l] - lam)))
-                    if abs(1j * omega[l] - lam[i]) <= RESONANCE_REL * omega[l]:
-                        raise ExactIntegratorError(
-                            f"load {l + 1} ({loads.points[l]}) at {omega[l] / (2 * math.pi):.6g} Hz is at an undamped "
-                            f"resonance of contact state {_state_name(system, active)} (natural frequency "
-                            f"{abs(lam[i].imag) / (2 * math.pi):.6g} Hz): the exact closed form has no bounded "
-                            "particular solution there; use method 'dop853' or 'explicit'")
-            y = np.zeros((2 * n, L), complex)
-            for l in range(L):
-                if omega[l] > 0.0:
-                    h = solve(Ks - omega[l] ** 2 * system.M + 1j * omega[l] * system.C, b[l].astype(complex))
-                    y[:n, l], y[n:, l] = h, 1j * omega[l] * h
-            cache[key] = (y, table.Vinv[s][:, n:] @ Minv_b, solve(Ks, b.T))
-        Y[s], U[s], Sb[s] = cache[key]
-    return ForcedTable(omega, Y, U, Sb, b)
+        k = Ks.tobytes()
+        if k in index:
+            parts[index[k]][2].append((s, _state_name(system, active)))
+            continue
+        lam = table.lam[s]
+        rigid = None
+        if np.min(np.abs(lam)) <= 1e-9 * np.max(np.abs(lam)):
+            rigid = (f"contact state {_state_name(system, active)} has a rigid-body mode: a load on it has no "
+                     "bounded particular solution; use method 'dop853' or 'explicit'")
+            parts.append((Ks, lam, [(s, _state_name(system, active))], rigid, None, None))
+        else:
+            parts.append((Ks, lam, [(s, _state_name(system, active))], None, table.Vinv[s][:, system.n:] @ Minv_b,
+                          solve(Ks, b.T)))
+        index[k] = len(parts) - 1
+    size = sum(a.nbytes for part in parts for a in (part[0], part[1], part[4], part[5]) if a is not None)
+    if size <= LOAD_PARTS_ENTRY_BYTES:
+        with _LOAD_PARTS_LOCK:
+            _LOAD_PARTS[key] = (weakref.ref(table), weakref.ref(system), parts)
+            while len(_LOAD_PARTS) > LOAD_PARTS_SIZE:
+                _LOAD_PARTS.popitem(last=False)
+    return parts
 
 
 def _state_name(system: GapSystem, active: np.ndarray) -> str:

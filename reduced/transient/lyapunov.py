@@ -450,6 +450,9 @@ class PeriodMap:
         The system's state table, if already decomposed.
     modal : tuple, optional
         Its modal table (:func:`reduced.transient.exact_tables.modal_table`), if already built.
+    norm : tuple, optional
+        (D, D^-1): :func:`energy_norm_matrix` at this frequency and its inverse, if already worked out
+        (they do not depend on the frequency when K is positive definite: a sweep works them out once).
 
     Raises
     ------
@@ -460,7 +463,7 @@ class PeriodMap:
     """
 
     def __init__(self, system: GapSystem, load, amplitude_N: float, freq_hz: float, *, rows=None,
-                 table: StateTable | None = None, modal: tuple | None = None) -> None:
+                 table: StateTable | None = None, modal: tuple | None = None, norm: tuple | None = None) -> None:
         _check.gap_system(system)
         b = _check.vector("load", load, system.n)
         P = _check.positive("amplitude_N", amplitude_N, "N")
@@ -478,8 +481,15 @@ class PeriodMap:
         self._fargs = forced_arrays(self.flow._forced, self.loads.pieces_at(np.array([0.0])))
         self._seg_state = np.empty(MAX_SEGMENTS, np.int64)
         self._seg_tau = np.empty(MAX_SEGMENTS)
-        self.norm_matrix = energy_norm_matrix(system, 2.0 * np.pi * self.freq_hz)
-        self._norm_inv = np.linalg.inv(self.norm_matrix)
+        if norm is None:
+            D = energy_norm_matrix(system, 2.0 * np.pi * self.freq_hz)
+            norm = (D, np.linalg.inv(D))
+        self.norm_matrix, self._norm_inv = norm
+
+    @property
+    def norm_inverse(self) -> np.ndarray:
+        """(2n, 2n) D^-1, the inverse of :attr:`norm_matrix` (np.linalg.inv of it)."""
+        return self._norm_inv
 
     def norm(self, dy: np.ndarray) -> float:
         """The energy norm |D dy| of a state difference (J^(1/2)): :func:`energy_norm_matrix`."""
