@@ -63,11 +63,18 @@ def libmkl() -> ctypes.CDLL:
 
 
 def has_pardiso() -> bool:
-    try:
-        import pypardiso  # noqa: F401  (the dependency that brings MKL)
+    """MKL PARDISO can be used: pypardiso (the dependency that brings MKL) is installed and mkl_rt loads.
 
+    pypardiso is looked up, not imported: its import builds a solver, which globs the whole Python
+    prefix for mkl_rt (1.1-1.5 s per process here), although :func:`libmkl` finds it in ``<prefix>/lib``.
+    """
+    import importlib.util
+
+    try:
+        if importlib.util.find_spec("pypardiso") is None:
+            return False
         libmkl()
-    except (ImportError, OSError):
+    except (ImportError, OSError, ValueError):
         return False
     return True
 
