@@ -291,7 +291,8 @@ def _add(ap, ai, ax, bp, bi, bx, n):
 
 
 def add(A, B):
-    """A + B for two sparse matrices of one shape: the CSR matrix scipy's ``A + B`` gives, bit for bit.
+    """A + B for two sparse matrices of one shape: the pattern and values of scipy's ``A + B``, bit for bit
+    (with int32 indices when they fit, as scipy's own for int32 inputs).
 
     Rows merged in parallel in numba when both are canonical float64 CSR (sorted columns, no duplicates),
     scipy's own sum otherwise. scipy's canonical sum (csr_plus_csr) leaves out every entry whose sum is
