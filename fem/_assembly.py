@@ -13,6 +13,9 @@ sums 1.2 -> 0.43 CPU s, the same arrays bit for bit.
 
 :func:`product_and_abs` is the product the modal residual test needs, K X and |K| |X| in one
 pass over K (the round-off floor of K x without a copy of K's values made positive).
+
+:func:`add` is scipy's canonical sparse sum A + B, bit for bit, with the rows merged in parallel:
+the springs', seats' and bungees' entries added to the solid's K (fem.model.build_system).
 """
 
 from __future__ import annotations
@@ -242,6 +245,83 @@ def upper_sum(A, B, s: float):
     return _upper_sum(A.indptr.astype(np.int64, copy=False), A.indices.astype(np.int32, copy=False),
                       A.data.astype(np.float64, copy=False), B.indptr.astype(np.int64, copy=False),
                       B.indices.astype(np.int32, copy=False), B.data.astype(np.float64, copy=False), float(s), n)
+
+
+@njit(cache=True)
+def _merge_row(r, ap, ai, ax, bp, bi, bx, out_i, out_x, write):
+    """Row r of A + B, both rows sorted without duplicates, as scipy's canonical csr_plus_csr makes it:
+    a + b where both hold the column, a + 0 or 0 + b where one does, and a zero sum left out. Written from
+    position 0 of out_i / out_x when ``write``; returns the count."""
+    i, ie = ap[r], ap[r + 1]
+    j, je = bp[r], bp[r + 1]
+    k = 0
+    while i < ie or j < je:
+        if j >= je or (i < ie and ai[i] < bi[j]):
+            c, v = ai[i], ax[i] + 0.0
+            i += 1
+        elif i >= ie or bi[j] < ai[i]:
+            c, v = bi[j], 0.0 + bx[j]
+            j += 1
+        else:
+            c, v = ai[i], ax[i] + bx[j]
+            i += 1
+            j += 1
+        if v != 0.0:
+            if write:
+                out_i[k] = c
+                out_x[k] = v
+            k += 1
+    return k
+
+
+@njit(cache=True, parallel=True)
+def _add(ap, ai, ax, bp, bi, bx, n):
+    counts = np.zeros(n + 1, np.int64)
+    dummy_i = np.empty(0, ai.dtype)
+    dummy_x = np.empty(0)
+    for r in prange(n):
+        counts[r + 1] = _merge_row(r, ap, ai, ax, bp, bi, bx, dummy_i, dummy_x, False)
+    indptr = np.cumsum(counts)
+    indices = np.empty(indptr[-1], ai.dtype)
+    data = np.empty(indptr[-1])
+    for r in prange(n):
+        lo = indptr[r]
+        _merge_row(r, ap, ai, ax, bp, bi, bx, indices[lo:], data[lo:], True)
+    return indptr, indices, data
+
+
+def add(A, B):
+    """A + B for two sparse matrices of one shape: the pattern and values of scipy's ``A + B``, bit for bit
+    (with int32 indices when they fit, as scipy's own for int32 inputs).
+
+    Rows merged in parallel in numba when both are canonical float64 CSR (sorted columns, no duplicates),
+    scipy's own sum otherwise. scipy's canonical sum (csr_plus_csr) leaves out every entry whose sum is
+    exactly zero, explicit zeros of A or B included; so does this. 112,629-DOF apparatus, the solid's K
+    plus the springs' entries: 0.3-0.5 CPU s in scipy (the merge and a copy of the pruned arrays).
+
+    Parameters
+    ----------
+    A, B : (n, m) scipy.sparse matrix
+        Any units, the same for both.
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix
+        A + B in canonical CSR.
+    """
+    import scipy.sparse as sp
+
+    A, B = sp.csr_matrix(A), sp.csr_matrix(B)
+    if (A.shape != B.shape or A.dtype != np.float64 or B.dtype != np.float64
+            or not (A.has_canonical_format and B.has_canonical_format)):
+        return (A + B).tocsr()
+    idx = np.int64 if max(A.indices.dtype.itemsize, B.indices.dtype.itemsize) > 4 else np.int32
+    indptr, indices, data = _add(A.indptr.astype(np.int64, copy=False), A.indices.astype(idx, copy=False), A.data,
+                                 B.indptr.astype(np.int64, copy=False), B.indices.astype(idx, copy=False), B.data,
+                                 A.shape[0])
+    C = sp.csr_matrix((data, indices, indptr), shape=A.shape)
+    C.has_canonical_format = True
+    return C
 
 
 @njit(cache=True, parallel=True)

@@ -3,7 +3,9 @@
 - the scatter by places (a node's three DOFs share their rows' columns) gives, bit for bit, the
   matrices of the scatter DOF by DOF (forced by numbering the DOFs so that they form no places);
 - K X and |K| |X| in one pass, and K X alone, give scipy's K @ X and |K| @ |X| bit for bit (the same
-  sums in the same order), on both sides of the register kernel's width.
+  sums in the same order), on both sides of the register kernel's width;
+- the row merge A + B gives scipy's A + B bit for bit: pattern, values, index types, and the entries
+  whose sum is exactly zero (cancellations, explicit zeros of either) left out as scipy leaves them.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from fem._assembly import NARROW, _block_size, product, product_and_abs, scatter_pair
+from fem._assembly import NARROW, _block_size, add, product, product_and_abs, scatter_pair
 
 
 def _mesh_dofs(nx=3, ny=2, nz=2, bs=3):
@@ -69,3 +71,31 @@ def test_products_are_scipys_product_and_the_absolute_product(b):
     assert np.array_equal(product(K, np.asfortranarray(X)), K @ X)
     absK = sp.csr_matrix((np.abs(K.data), K.indices, K.indptr), shape=K.shape)
     assert np.array_equal(AX, absK @ np.abs(X))
+
+
+def test_row_merge_is_scipys_sum_bit_for_bit_zero_sums_dropped():
+    rng = np.random.default_rng(6)
+    n = 400
+    A = sp.random(n, n, density=0.03, random_state=7, format="csr")
+    A.data[::7] = 0.0  # explicit zeros, as the solid's K holds them (exactly zero couplings)
+    A.data[1::11] = -0.0
+    rows, cols = rng.integers(0, n, 900), rng.integers(0, n, 900)
+    vals = rng.standard_normal(900)
+    B = sp.coo_matrix((vals, (rows, cols)), shape=(n, n)).tocsr()  # duplicates summed, as build_system's
+    # entries of B that cancel entries of A exactly: a zero sum, which scipy leaves out
+    Bl = B.tolil()
+    r, c = A.nonzero()
+    for i in range(0, len(r), 5):
+        Bl[r[i], c[i]] = -A[r[i], c[i]]
+    B = Bl.tocsr()
+    assert A.has_canonical_format and B.has_canonical_format
+    C, R = add(A, B), (A + B).tocsr()
+    assert C.nnz < A.nnz + B.nnz - 50  # the cancellations and zeros did leave entries out
+    for name in ("indptr", "indices", "data"):
+        a, b = getattr(C, name), getattr(R, name)
+        assert a.dtype == b.dtype and np.array_equal(a, b), name
+    assert np.array_equal(np.signbit(C.data), np.signbit(R.data))
+    # a matrix that is not canonical goes to scipy's own sum: still its result
+    D = sp.csr_matrix((np.ones(3), np.array([2, 1, 2]), np.array([0, 3] + [3] * (n - 1))), shape=(n, n))
+    assert not D.has_canonical_format
+    assert np.array_equal(add(D, B).toarray(), (D + B).toarray())

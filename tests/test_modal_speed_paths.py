@@ -290,3 +290,32 @@ def test_factorizing_beside_the_krylov_start_changes_no_bit(apparatus, monkeypat
     for name in ("omega2", "phi", "residuals", "floors"):
         assert np.array_equal(getattr(a, name), getattr(b, name)), name
     assert 0.0 < b.timing["factorize_s"] and 0.0 < b.timing["iterate_s"]
+
+
+def test_numba_row_merge_of_the_springs_gives_the_matrices_of_scipys_sum(apparatus, monkeypatch):
+    """build_system adds the springs', seats' and bungees' entries to the solid's K (and the tip masses
+    to M) with fem._assembly.add instead of scipy's ``+``: K and M of the apparatus must be bit-identical
+    (pattern, values, index types), so every mode, residual and floor of the modal analysis is too."""
+    import fem.model as fmod
+
+    monkeypatch.setattr(fmod, "csr_add", lambda A, B: (A + B).tocsr())
+    old = build_system(apparatus.model, mesh=apparatus.mesh)
+    for name in ("K", "M"):
+        a, b = getattr(apparatus, name), getattr(old, name)
+        for part in ("indptr", "indices", "data"):
+            x, y = getattr(a, part), getattr(b, part)
+            assert x.dtype == y.dtype and np.array_equal(x, y), (name, part)
+
+
+def test_has_pardiso_does_not_import_pypardiso():
+    """pypardiso's import globs the whole Python prefix for mkl_rt (1.1-1.5 s a process); has_pardiso
+    finds the package without importing it, and fem._pardiso.libmkl loads mkl_rt from <prefix>/lib."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from fem._pardiso import has_pardiso; ok = has_pardiso(); "
+            "print(ok, 'pypardiso' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=Path(__file__).resolve().parents[1]).stdout.split()
+    assert out[1] == "False"
+    assert out[0] == str(has_pardiso())
