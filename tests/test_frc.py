@@ -314,8 +314,13 @@ def _quick_scene() -> str:
                         "convergence_harmonics": [1, 3], "hill_points": 3, "shooting_points": 2,
                         "stepped_sine_points": 6, "stepped_sine_max_s": 9.0, "backbone_scales": [1.0],
                         "map_step_hz": 0.0,  # the response map: tests/test_response_map.py
-                        "verdict_points": 0, "close_return_families": 0})  # tests/test_cover_verdicts.py and
-    # tests/test_close_returns.py judge uncovered HB points and shoot close returns
+                        "verdict_points": 0, "close_return_families": 0,  # tests/test_cover_verdicts.py and
+                        # tests/test_close_returns.py judge uncovered HB points and shoot close returns
+                        # three switched families and one period-doubled (of the 12 + 4 the defaults follow here:
+                        # half the stage's CPU, issue 28) still take two pitchfork kinds and a doubling into the
+                        # files and the rerun (asserted below); the families themselves are checked by
+                        # tests/test_exact_frc.py and tests/test_period_doubling.py
+                        "max_families": 3, "period_doubling_families": 1})
     return tomli_w.dumps(data)
 
 
@@ -339,6 +344,8 @@ def test_frc_stage_writes_its_files_and_reruns_byte_for_byte(tmp_path, monkeypat
         if name == "provenance.json" or name.rsplit(".", 1)[0].endswith("_timing"):
             continue
         assert (outs[0] / name).read_bytes() == (outs[1] / name).read_bytes(), name
+    families = list(csv.DictReader(open(outs[0] / "frc_families.csv")))
+    assert {"pitchfork_mirror_half_wave", "pitchfork_half_wave", "period_doubling"} <= {r["born_at"] for r in families}
     rows = list(csv.DictReader(open(outs[0] / "frc.csv")))
     assert list(rows[0])[:8] == ["level", "method", "harmonics", "freq_hz", "point", "amplitude_m", "stable",
                                  "bifurcation"]

@@ -21,6 +21,7 @@ SHORT = """
 description = "short impulse {n}"
 [model]
 kind = "discrete"
+gap = 0.0
 [initial]
 x0_m = [0.0, 0.0, 0.0]
 v0_m_s = [0.0, 0.0, {v}]
@@ -30,6 +31,11 @@ sample_rate_hz = 20000.0
 [nnm]
 n_energy = 20
 """
+
+
+# gap = 0: the nnm stage then skips the NNM 2 periods integrated near grazing (~2.3 s of DOP853 per run, four runs
+# here, two of them in Dask workers a monkeypatch cannot reach; issue 28): the job's order and files are what is
+# checked, not the physics
 
 
 def _runs(names):

@@ -17,6 +17,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 from scipy.linalg import eigh
+from skfem import ElementVector
+from skfem.assembly import Dofs
 
 from fem._modal_cost import count_dofs, factor_bytes, modal_bytes
 from fem.modal import (
@@ -29,6 +31,8 @@ from fem.modal import (
     residual_test,
 )
 from fem.model import AssemblyModel, build_system
+from fem.solid import ELEMENTS, skfem_mesh
+from geometry.build import build_mesh
 
 EPS = np.finfo(float).eps
 
@@ -129,9 +133,13 @@ def test_the_subspace_and_lanczos_paths_are_kept():
         modal_analysis(K, M, n_modes=5, method="power")
 
 
-@pytest.mark.parametrize("element", ["hex8", "hex20", "hex27"])
-def test_shape_cached_scatter_gives_scikit_fem_matrices(element):
-    model = AssemblyModel(element=element, element_size=0.3)
+# hex8 on the apparatus: beam and tube, two materials (the scatter's per-material pass); hex20 and hex27 on the
+# grounded beam: the same scatter per element type on a sixth of the DOFs (the apparatus's hex27 scikit-fem
+# assembly alone took ~5 s of CPU, issue 28)
+@pytest.mark.parametrize(("element", "layout"), [("hex8", "assembly"), ("hex20", "beam-grounded"),
+                                                  ("hex27", "beam-grounded")])
+def test_shape_cached_scatter_gives_scikit_fem_matrices(element, layout):
+    model = AssemblyModel(layout=layout, element=element, element_size=0.3)
     a = build_system(model, method="cached")
     b = build_system(model, method="skfem", mesh=a.mesh)
     for A, B in ((a.K, b.K), (a.M, b.M)):
@@ -140,11 +148,24 @@ def test_shape_cached_scatter_gives_scikit_fem_matrices(element):
         assert A.has_sorted_indices
 
 
+def _mesh_dofs(mesh, element: str) -> int:
+    """The DOFs of a system built on ``mesh``: its solid's, as fem.solid.assemble_solid numbers them (the springs,
+    seats and bungees of fem.model.build_system add none)."""
+    return Dofs(skfem_mesh(mesh.points, mesh.hexes), ElementVector(ELEMENTS[element]())).N
+
+
+def test_the_mesh_dofs_are_the_systems(tiny):
+    assert _mesh_dofs(tiny.mesh, "hex20") == tiny.n_dofs
+
+
 @pytest.mark.parametrize("layout", ["assembly", "beam-grounded", "beam-free"])
-@pytest.mark.parametrize("element", ["hex8", "hex20", "hex27"])
-def test_dofs_counted_before_meshing_are_the_mesh_dofs(layout, element):
-    model = AssemblyModel(layout=layout, element=element, element_size=0.05)
-    assert count_dofs(model.geometry(), element) == build_system(model).n_dofs
+def test_dofs_counted_before_meshing_are_the_mesh_dofs(layout):
+    # one gmsh mesh per layout (the element type does not change it), its DOFs counted for each element without
+    # assembling K and M (~8 s of CPU for the nine systems, issue 28)
+    g = AssemblyModel(layout=layout, element_size=0.05).geometry()
+    mesh = build_mesh(g)
+    for element in ("hex8", "hex20", "hex27"):
+        assert count_dofs(g, element) == _mesh_dofs(mesh, element), element
 
 
 def test_budget_refuses_a_mesh_that_will_not_fit_before_meshing(monkeypatch):

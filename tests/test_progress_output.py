@@ -87,9 +87,12 @@ def test_terminal_gets_tqdm_and_no_progress_gets_nothing(monkeypatch, capsys):
     assert capsys.readouterr().err == ""
 
 
+# gap = 0: the nnm stage then skips the NNM 2 periods integrated near grazing (~2.3 s of DOP853 in a Dask worker a
+# monkeypatch cannot reach; issue 28): the output is what is checked, not the physics
 SCENE = """
 [model]
 kind = "discrete"
+gap = 0.0
 [initial]
 v0_m_s = [0.0, 0.0, 20.0]
 [ringdown]
