@@ -112,3 +112,63 @@ def test_gap_oscillator_families_are_those_before_the_change():
     res = ShootingResidual(ForcedFlow(s, b, LOAD), fam.nodes.shape[1], 1, GAP, 2 * np.pi * 40.0)
     i = len(fam.freq_hz) // 2
     assert np.max(np.abs(res(res.point(fam.nodes[i], fam.omega[i]))[0])) < 1e-9
+
+
+def _gap_residual():
+    s = GapSystem(M=np.eye(1), C=2 * ZETA * math.sqrt(K) * np.eye(1), K=K * np.eye(1), dof_names=("x",),
+                  **two_sided_stops(np.eye(1), RATIO * K, GAP, ("x",)))
+    return ShootingResidual(ForcedFlow(s, np.ones(1), LOAD), 8, 1, GAP, 2 * np.pi * 40.0)
+
+
+def test_jacobian_made_in_the_bordered_matrix_is_the_stacked_one():
+    # the corrector's [dR/dY; t] made in place (stacks_below) has the bits of np.vstack([dR/dY, t]), and the
+    # memoised dR/dY (its top rows) is the one a plain call gives
+    res = _gap_residual()
+    rng = np.random.default_rng(3)
+    Y = np.append(rng.standard_normal(res.size) * 0.3, math.log(0.5))  # 20 Hz, orbits through the stops
+    t = rng.standard_normal(res.size + 1)
+    ref = _gap_residual()(Y)[1]
+    R, jac = res.lazy(Y)
+    assert jac.stacks_below
+    Jb = jac(below=t)
+    assert Jb.shape == (res.size + 1, res.size + 1)
+    assert np.array_equal(Jb, np.vstack([ref, t]))
+    assert np.array_equal(res(Y)[1], ref)  # memoised: the top rows, unchanged
+    hit = res.lazy(Y)[1]  # memo hit: dR/dY alone, which the corrector stacks itself as before
+    assert not getattr(hit, "stacks_below", False) and np.array_equal(hit(), ref)
+    assert np.any(ref[:, :-1] != 0.0) and np.all(np.isfinite(ref))  # a real Jacobian, not an empty buffer
+
+
+def _retrace_brute(Y, T, s, y, t, s_y):
+    """The retrace test of _Retrace.add over every earlier point (no tree, no prefilter)."""
+    from reduced.periodic.exact_frc import RETRACE_ARC, RETRACE_DIST
+
+    far = s_y - s > RETRACE_ARC
+    return bool(np.any(far & (np.linalg.norm(Y - y, axis=1) < RETRACE_DIST) & (T @ t > 0.9)))
+
+
+def test_retrace_prefilter_finds_what_the_full_distances_find():
+    # a path in 49 dimensions that goes out, turns and comes back over itself, then runs along its start again:
+    # the unit-projection prefilter may only drop points the full distance would drop, so every answer is the
+    # brute-force answer (the tree's random projections are the same as before: only the direct check changed)
+    from reduced.periodic.exact_frc import _Retrace
+
+    rng = np.random.default_rng(5)
+    dim = 49
+    u = rng.standard_normal(dim)
+    u /= np.linalg.norm(u)
+    w = rng.standard_normal(dim)
+    w -= (w @ u) * u
+    w /= np.linalg.norm(w)
+    ang = np.linspace(0.0, 2.2 * np.pi, 1400)  # a circle of radius 2 (arclength ~27.6), passed over again
+    Y = 2.0 * (np.cos(ang)[:, None] * u + np.sin(ang)[:, None] * w) + 1e-3 * rng.standard_normal((ang.size, dim))
+    T = -np.sin(ang)[:, None] * u + np.cos(ang)[:, None] * w
+    r = _Retrace(dim)
+    s = np.zeros(len(Y))
+    got, want = [], []
+    for i, (y, t) in enumerate(zip(Y, T, strict=True)):
+        s[i] = s[i - 1] + float(np.linalg.norm(y - Y[i - 1])) if i else 0.0
+        want.append(_retrace_brute(Y[:i], T[:i], s[:i], y, t, s[i]))
+        got.append(r.add(y, t))
+    assert got == want
+    assert sum(want) > 50 and not any(want[:1200])  # the second pass is seen, the first is not

@@ -82,6 +82,7 @@ SYMMETRY_TOL = 1e-7  # relative: an orbit whose symmetry-breaking part is below 
 REAL_TOL = 1e-6  # relative imaginary part below which an eigenvalue is real
 CORRECTOR_TOL = 1e-8  # last Newton step of a corrector, relative (the point is then within ~1e-16 of the curve)
 RETRACE_DIST, RETRACE_ARC, RETRACE_BATCH = 0.03, 1.0, 500  # _Retrace: distance, arclength, tree rebuilds
+RETRACE_MARGIN = 1e-9  # _Retrace: slack of the projections' prefilter, far above their round-off (~1e-14)
 CLOSE_STEPS, CLOSE_DIST = 20, 1e-3  # a family back within CLOSE_DIST of its first point after CLOSE_STEPS is closed
 LOAD_STEPS = 400  # continuation steps in the load of the first orbit at most
 LOAD_DIFF = 1e-7  # forward-difference step of dR/d ln P in the load continuation of the first orbit
@@ -558,8 +559,11 @@ class _Retrace:
     def __init__(self, dim: int) -> None:
         rng = np.random.default_rng(0)
         self.Pm = rng.standard_normal((dim, 6)) / math.sqrt(dim)
+        # the same directions, unit: |u . (y - Y_c)| <= |y - Y_c| rules a candidate out before its full distance
+        self.U = self.Pm / np.linalg.norm(self.Pm, axis=0)
         self.Y = np.empty((1024, dim))
         self.T = np.empty((1024, dim))
+        self.Yu = np.empty((1024, 6))
         self.s = np.empty(1024)
         self.k = 0
         self.tree, self.n_tree = None, 0
@@ -570,16 +574,22 @@ class _Retrace:
 
         k = self.k
         s = self.s[k - 1] + float(np.linalg.norm(y - self.Y[k - 1])) if k else 0.0
+        yu = y @ self.U
         cand = np.arange(self.n_tree, k)
         if self.tree is not None:
             cand = np.concatenate([cand, np.array(self.tree.query_ball_point(y @ self.Pm, RETRACE_DIST), int)])
         cand = cand[s - self.s[cand] > RETRACE_ARC]
+        if cand.size:
+            # a candidate farther than RETRACE_DIST along a unit direction is farther in full: dropped before
+            # the full distances (the margin covers the projections' round-off; the test itself is unchanged)
+            cand = cand[np.max(np.abs(self.Yu[cand] - yu), axis=1) < RETRACE_DIST + RETRACE_MARGIN]
         hit = bool(cand.size) and bool(np.any((np.linalg.norm(self.Y[cand] - y, axis=1) < RETRACE_DIST)
                                               & (self.T[cand] @ t > 0.9)))
         if k == self.Y.shape[0]:
             self.Y, self.T = np.vstack([self.Y, np.empty_like(self.Y)]), np.vstack([self.T, np.empty_like(self.T)])
+            self.Yu = np.vstack([self.Yu, np.empty_like(self.Yu)])
             self.s = np.concatenate([self.s, np.empty_like(self.s)])
-        self.Y[k], self.T[k], self.s[k] = y, t, s
+        self.Y[k], self.T[k], self.Yu[k], self.s[k] = y, t, yu, s
         self.k = k + 1
         if self.k - self.n_tree >= RETRACE_BATCH:
             self.tree, self.n_tree = cKDTree(self.Y[: self.k] @ self.Pm), self.k

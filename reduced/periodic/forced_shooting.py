@@ -688,13 +688,15 @@ class ForcedFlow:
                                 f"{_STATUS.get(status, status)}")
         return _Shot(Yv, d, float(h), float(omega), float(self.amplitude_N), R, Yend, n_ev, stretches)
 
-    def shot_jacobian(self, shot: _Shot, dv: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    def shot_jacobian(self, shot: _Shot, dv: float = 1.0, out: np.ndarray | None = None
+                      ) -> tuple[np.ndarray, np.ndarray]:
         """(dR/dY (2nS, 2nS + 1), segment monodromies (S, 2n, 2n)) of a :meth:`shoot` (its load amplitude,
         whatever the flow's is now), by :func:`_jacobian_kernel`: the numbers the marches and the Jacobian
-        made together give."""
+        made together give. ``out``: a C-contiguous (2nS, 2nS + 1) array to write dR/dY into (e.g. the
+        top rows of a bordered matrix), returned."""
         tb, sy = self.table, self.system
         S, N = shot.Yv.shape
-        J = np.empty((S * N, S * N + 1))
+        J = np.empty((S * N, S * N + 1)) if out is None else out
         Js = np.empty((S, N, N))
         status, k = call_numba_kernel(_jacobian_kernel, tb.lam, tb.V, tb.Vinv, tb.yp, tb.valid, sy.B, sy.offset,
                                       sy.side, sy.k, self._Minv, sy.K, sy.C, self.b, shot.amplitude_N, self.phase,
@@ -899,17 +901,22 @@ class ShootingResidual:
         dv = 1.0 if self.omega_v is None else 0.0
         gen = self._gen
 
-        def jacobian() -> np.ndarray:
+        def jacobian(below: np.ndarray | None = None) -> np.ndarray:
             hit = self._memo.get(key)
             if hit is not None and gen == self._gen:
-                return hit[1]
-            J, Js = self.flow.shot_jacobian(shot, dv)
+                return hit[1] if below is None else np.vstack([hit[1], below])
+            # with ``below``: dR/dY made in the top rows of [dR/dY; below] (a corrector's matrix, not copied)
+            Jb = None if below is None else np.empty((self.size + 1, self.size + 1))
+            J, Js = self.flow.shot_jacobian(shot, dv, None if Jb is None else Jb[:-1])
+            if Jb is not None:
+                Jb[-1] = below
             if gen == self._gen:  # not after forget(): the flow's load has changed since
                 self._memo.clear()
                 self._memo[key] = (shot.R, J)
                 self._segments = (key, Js, shot.stretches)
-            return J
+            return J if Jb is None else Jb
 
+        jacobian.stacks_below = True  # continue_branch's corrector asks for jacobian(below=t)
         return shot.R, jacobian
 
     def value(self, Y: np.ndarray) -> np.ndarray:

@@ -902,13 +902,13 @@ def newton(
     step = np.inf
     for it in range(1, max_iter + 1):
         J = _jacobian(J)
-        if not np.all(np.isfinite(R)) or not np.all(np.isfinite(J)):
+        if not np.isfinite(R).all() or not np.isfinite(J).all():  # the methods: no wrapper overhead
             raise NewtonError(f"non-finite residual or Jacobian at iteration {it}")
         try:
             dy = -(_lu_solve if solve is None else solve)(J, R)
         except (ValueError, np.linalg.LinAlgError) as exc:
             raise NewtonError(f"singular Jacobian at iteration {it}: {exc}") from None
-        if not np.all(np.isfinite(dy)):
+        if not np.isfinite(dy).all():
             raise NewtonError(f"singular Jacobian at iteration {it}")
         step = float(np.max(np.abs(dy)))
         if max_step is not None and step > max_step:
@@ -917,7 +917,7 @@ def newton(
         lam = 1.0
         for k in range(NEWTON_HALVINGS):
             Rn, Jn = fun(y + lam * dy)
-            if (np.all(np.isfinite(Rn)) and float(Rn @ Rn) < r2) or k == NEWTON_HALVINGS - 1:
+            if (np.isfinite(Rn).all() and float(Rn @ Rn) < r2) or k == NEWTON_HALVINGS - 1:
                 break  # the last trial is taken even if it did not lower ||R||: (R, J) are its own
             lam *= 0.5
         y = y + lam * dy
