@@ -621,7 +621,7 @@ def frc_markdown(result: FRCResult, regimes: list[dict]) -> str:
                   + (" (" + "; ".join(sorted({r['note'].split(':')[0] for r in skipped if r['note']})) + ")"
                      if skipped else "") + ". Each is a row of frc_bifurcations.csv.",
                   _period_doubled_line(ex, spec), _cover_line(ex, spec),
-                  _close_return_line(ex, spec),
+                  _close_return_line(ex, spec), *filter(None, [_found_switches_line(ex, spec)]),
                   "Run times: frc_convergence_timing.csv.", ""]
         for note in [n for f in ex.families for n in f.notes][:10]:
             lines.append(f"- {note}")
@@ -672,6 +672,22 @@ def _close_return_line(ex, spec) -> str:
             + ("; not followed: " + "; ".join(f"{n} {w}" for w, n in sorted(why.items())) if why else "") + ".")
 
 
+def _found_switches_line(ex, spec) -> str:
+    """frc.md: the families switched onto from the families found by verdicts and close returns (their own
+    allowance, ``[frc] found_family_switches`` a family), and what their branch points gave."""
+    found = {k for k, f in enumerate(ex.families)
+             if f.kind == "close_return" or any(n.startswith("started from the verdict") for n in f.notes)}
+    recs = [r for r in ex.switches if r["family"] in found]
+    if not found:
+        return ""
+    made = [f"{r['child']} ({ex.families[r['child']].kind}, {r['kind']} of family {r['family']} at "
+            f"{r['freq_hz']:.5g} Hz)" for r in recs if r["child"] >= 0]
+    return (f"Branch switching on the families found by verdicts and close returns "
+            f"({', '.join(map(str, sorted(found)))}; `[frc] found_family_switches = {spec.found_family_switches}` a "
+            f"family): {len(recs)} branch points met; "
+            + (f"switched onto {', '.join(made)}" if made else "none switched onto") + ".")
+
+
 def _period_doubled_line(ex, spec) -> str:
     """frc.md: the period-doubled families of a level and the period doublings not followed, by reason."""
     pd = [k for k, f in enumerate(ex.families) if f.kind == "period_doubled"]
@@ -681,7 +697,8 @@ def _period_doubled_line(ex, spec) -> str:
             why = r["note"].split(" (")[0].split(" is ")[0] or "no family found"
             rest[why] = rest.get(why, 0) + 1
     return (f"Period-doubled families (2 T, drawn with the others; `[frc] period_doubling = "
-            f"{str(spec.period_doubling).lower()}`, at most {spec.period_doubling_families}): "
+            f"{str(spec.period_doubling).lower()}`, at most {spec.period_doubling_families} off the main and "
+            f"isolated families' trees, besides those of `[frc] found_family_switches`): "
             + (", ".join(str(k) for k in pd) if pd else "none")
             + ("; period doublings not switched at: " + "; ".join(f"{n} {w}" for w, n in sorted(rest.items()))
                if rest else "") + ".")
