@@ -419,7 +419,11 @@ def check_budget(scene: Scene, out_dir: str | Path | None = None, available: int
             own = [e for e in ests if e.stage == p.stage]
             e = max(own, key=lambda e: e.bytes) if own else None
             fix = (e.advice or "lower " + e.key.split("] ")[1]) if e else "free memory"
-            raise SceneError(f"{scene.origin or scene.name}{' ' + e.key if e else ''}: the {p.stage} stage's "
+            key = e.key if e else ""
+            if p.model > p.data and hasattr(scene.model, "element_size"):  # the 3-D model is most of it
+                key, fix = "[model] element_size", (f"the 3-D model's share is about {human(p.model)}: raise "
+                                                    "element_size (a coarser mesh)")
+            raise SceneError(f"{scene.origin or scene.name}{' ' + key if key else ''}: the {p.stage} stage's "
                              f"process would peak at about {human(p.bytes)}, more than the "
                              f"{human(HEADROOM * avail)} it may use of {human(avail)} available; {fix}")
     return ests
