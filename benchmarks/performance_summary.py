@@ -49,10 +49,10 @@ LIMITS = (
      "last one's result (x, stop forces, v, x), so steps cannot overlap, and the results are kept bit for bit"),
     ("explicit (central difference) ringdown, rom-impulse",
      "the default kernel is the block kernel (reduced.transient._cd_block, the row in blocks of steps below): "
-     "at load 8-9 on 2 cores (2026-11-27 03:37 UTC) it ran 3.64e7 steps/s in CPU time, 2.35x the step-by-step "
-     "modal kernel's CPU time, while the wall times were 2.5x the CPU times; a quiet machine decides. The "
-     "physical kernel it replaced as the default (coordinates=\"physical\") computes each step's velocity as "
-     "12 sums over the coordinates in a fixed order, a chain of dependent adds (8.3e6 steps/s)"),
+     "on a quiet machine (2026-11-27 05:01 UTC, load 1-2) the default row ran 3.23e7 steps/s in wall time, the "
+     "block kernel's own row 3.6e7 (CPU 2.4x the step-by-step modal kernel's); under load 8-9 the wall times were "
+     "2.5x the CPU times. The physical kernel it replaced as the default (coordinates=\"physical\") computes each "
+     "step's velocity as 12 sums over the coordinates in a fixed order, a chain of dependent adds (8.3e6 steps/s)"),
     ("explicit (central difference) ringdown in the open-gap modal coordinates, jumped in blocks",
      "measured at load 8-9 on 2 cores (2026-11-27 03:37 UTC): 3.64e7 steps/s in CPU time (27.5 ms; the modal "
      "kernel 1.55e7 in the same process, the physical 8e6), the wall times 2.5x the CPU times under that load. "
@@ -61,13 +61,14 @@ LIMITS = (
      "dependent sums) and two short energy sums; the rom-impulse run changes contact state ~7000 times, so "
      "1.7 blocks an output interval (40000 intervals, 67000 blocks), ~400 ns a block in CPU time"),
     ("explicit (central difference) ringdown in the open-gap modal coordinates",
-     "measured at load 0.9-1.0 on 2 cores (2026-11-26 15:24 UTC): 1.53e7 steps/s in CPU time, the fastest run "
-     "1.64e7, 1.8x the physical kernel in the same process. The roofline in the accuracy column: the step "
-     "uses 11 % of the core's multiply-add peak and a fraction of its L1 bandwidth; it is latency-bound, its "
-     "sums over the coordinates (the tip rows, U^T y, the new velocity) each waiting for the last (a step "
-     "is about 4 x the measured latency of one dependent 12-term sum feeding a 12-term update). Two "
-     "restructurings that take every sum at the step's start (one link of latency a step instead of about "
-     "four) were slower under load (more flops on a shared core), and were not kept"),
+     "this is the step-by-step modal kernel, kept as the block kernel's reference (the default is the block "
+     "kernel, the row below it, which meets the target). Measured at load 0.9-1.0 on 2 cores (2026-11-26 15:24 "
+     "UTC): 1.53e7 steps/s in CPU time, the fastest run 1.64e7, 1.8x the physical kernel in the same process. The "
+     "roofline in the accuracy column: the step uses 11 % of the core's multiply-add peak and a fraction of its L1 "
+     "bandwidth; it is latency-bound, its sums over the coordinates (the tip rows, U^T y, the new velocity) each "
+     "waiting for the last (a step is about 4 x the measured latency of one dependent 12-term sum feeding a 12-term "
+     "update). The block kernel breaks that chain: while the contact state holds it jumps up to 25 steps from the "
+     "block's start state with independent products"),
     ("exact vs DOP853 restarted at every crossing",
      "the exact run's kernel (perf, issue 28) spends about a quarter of its time in libm (sincos, exp, expm1 of "
      "the terms e^{lam tau} at each march step) and most of the rest in the march's chains of dependent sqrt "
@@ -84,42 +85,39 @@ LIMITS = (
      "the machine's load (integrator_machine.csv: 10-16 on 2 cores during the issue-28 runs; this row was met "
      "at load ~1 with the same per-sample code)"),
     ("FE modal, 112,629 DOFs, 16 modes: mesh",
-     "measured at load 0.5-1.1 on 2 cores (2026-11-26 22:11 UTC): 9.0x in wall time (11.9 s against 107 s), "
-     "9.4x in CPU (11.9 s against 111 s); earlier at load 1.9-3.3: 9.2x wall, 8.8x CPU. Of ours, in CPU on one "
-     "thread: PARDISO's analysis and factorization 0.65-0.75 + 4.0-4.9 s (about 108 GFLOP at 25 GFLOP/s; orderings "
-     "0/2/3, VBSR settings, RCM or random input orderings and the classic two-level factorization tried: none "
-     "faster, the improved two-level one fails), 68 solves in 10 block calls 2.3-2.4 s (0.09 s a call + 0.018 s a "
-     "right-hand side, no refinement steps), the Krylov products and dense work 2.5 s, assembly 1.1-1.3 s. 10x needs "
-     "about 1 s more; PARDISO on more threads would change the results' bits (fem._pardiso.solver_threads). "
-     "Tried on 2026-11-27 (not re-measured on a quiet machine since): a single-precision factorization of K - sigma "
-     "M as an inexact shift-invert (PARDISO iparm(28) = 1) stops in every setting (error -4, not positive definite, "
-     "at 1-100 Hz shifts; -13 without the two-level factorization): K - sigma M's condition number is about 1e10, "
-     "beyond float32's 1/eps of 1.7e7; more guard vectors cut the steps to 8-9 but raise the solves to 82-124 (more "
-     "CPU). Kept: the factorization runs on a second thread while the Krylov start block is built (the same bits, "
-     "about 0.3 s of wall time, CPU unchanged)"),
+     "measured on a quiet machine (2026-11-27 05:05 UTC, load 1.0-1.1): 8.9x in wall time (11.6 s against 103 s), "
+     "9.0x in CPU (11.9 s against 107 s); 2026-11-26 22:11 UTC (load 0.5-1.1): 9.0x wall, 9.4x CPU. Of ours, in CPU "
+     "on one thread: PARDISO's analysis and factorization 0.65-0.75 + 4.0-4.9 s (about 108 GFLOP at 25 GFLOP/s), 68 "
+     "solves in 10 block calls 2.3-2.5 s (16, 16, 10, then 4 x 6, then 2 right-hand sides; 0.094 s for 1 column, 0.35 "
+     "s for 16), sparse products ~1.5 s, dense work ~1.2 s, assembly 0.8-1.0 s. The twelve modes below 34 Hz converge "
+     "by step 3; the four at 703-998 Hz gain only 20-50x a step, which forces the 10 steps. Tried and not faster "
+     "(2026-11-26/27): orderings 0/2/3, VBSR settings, RCM or random input orderings, two-level factorizations (the "
+     "improved one fails); single-precision factorization (PARDISO stops: K - sigma M's condition number ~1e10 is "
+     "beyond float32); more guard vectors (8 steps but 124-180 solves), a larger start block (10 steps), topping up "
+     "late blocks (9 steps, 90-144 solves), one Gram-Schmidt pass (fails the orthogonality check), PARDISO solves on "
+     "2 threads (other bits), MKL's code paths (its generic kernels load on this AMD EPYC; its dgemm 35-44 GFLOP/s "
+     "against OpenBLAS's 46), factorizing beam and tube apart (77.1M against 80.0M factor entries: no gain). Kept: "
+     "the factorization beside the Krylov start (same bits, 0.3 s wall), the springs' and tip masses' entries merged "
+     "into K and M by a numba CSR merge (same bits, 0.2-0.5 s CPU), has_pardiso without importing pypardiso (0.5-0.9 "
+     "s CPU a process). Left untried: a start block from a coarse-mesh solution (changes the bits)"),
     ("main job, bearingshaft run",
-     "measured on a quiet machine after warming the reduced-model cache (2026-11-27 02:36 UTC, load 0.3 at the "
-     "start): 451 s wall, 833 s CPU on 2 workers; a run just before it (load 1.0 at the start) 474 s, 879 s; the "
-     "session's start 448 s, 854 s. The stages' own walls sum to 779 s (main_job.csv); the wall is about CPU / 2 + "
-     "35 s, so 360 s needs about 650 s of CPU. Cut this session, science files identical: rom-fep's NNM stage "
-     "103 -> 52 s (block elimination of the bordered HB systems from H = 15, work not repeated), hammer-test's "
-     "hammer 50 -> 25 s (the linear check's full 3-D modes kept in the reduced-model cache, warm_cache.py fills "
-     "it). The frc stages are the rest: rom-frc 282 s, discrete-frc 136 s, discrete-friction-frc 72 s beside the "
-     "other worker's stages; of rom-frc's converged curve at 10 N (cProfile, 138 s CPU): marches 66 s (9.6 a "
-     "point), dense LU of the 193 x 193 cyclic shooting Jacobian 23 s, peaks 20 s, segment Jacobians 19 s. A "
-     "block-cyclic LU in numba was as accurate as LAPACK's (residual <= 5e-14 with segment gains 1e5-1e10) but only "
-     "1.16x faster, not worth a change of round-off everywhere; about 20 % of the marches go to failed correctors, "
-     "whose early abort would change the continuation paths. Running the levels as Dask tasks (`run --fan-out`) "
-     "was slower on 2 cores"),
+     "measured on a quiet machine after warming the reduced-model cache (2026-11-27 04:43 UTC, load 0.9 at the "
+     "start): 359 s wall, 705 s CPU on 2 workers; the session before: 451 s, 833 s. Cut this session: the meshing "
+     "stages (modal, reduce, verify) run in their Dask worker (gmsh sessions off the main thread, under a lock) "
+     "instead of a child process each (3.5-4 s of imports a stage); the client schedules the stages itself, the "
+     "longest remaining chain first, one stage a worker thread (rom-frc's frc starts at once, not at 156 s); "
+     "pyvista figures kept in the cache folder and copied; the frc stages' repeated set-ups (forced tables, energy "
+     "norms, the stepped sine's decomposition, HB extrema) worked out once, the same bits. The frc stages remain "
+     "most of it (rom-frc 272 s, discrete-frc 124 s wall); their continuation paths change with any change of "
+     "round-off (discrete-frc 10 N's main family 26.8-953 Hz becomes 17.1-38.2 Hz when the corrector stops one "
+     "Newton step earlier), so the step control (23 % of converged correctors discarded by the 15 deg angle test) "
+     "is left as it is"),
     ("test suite, python -m pytest",
-     "measured on a quiet machine (2026-11-27 02:44 UTC, load 0.7): 247 s wall, 483 s CPU for 1357 tests; a run "
-     "before it at load 1.5 took 221 s, 431 s (it failed only the README's timing claims, which the main job's "
-     "run just before had changed); the session's start 272 s, 532 s. Cut this session: the reduced model's friction "
-     "reference (DOP853 restarted at every state change) evaluates each state's affine vector field as one product "
-     "(10.8 -> 5.2 s CPU), the exhaustive scene-mutation grid parses each scene once and reuses one folder, scene "
-     "type hints cached (21 -> 6 s); faster NNM and hammer code. The files go to the two xdist workers longest first "
-     "(tests/conftest.py, tests/file_seconds.csv). The wall varies by 10 % between quiet runs: 240 s is at the "
-     "edge"),
+     "measured on a quiet machine (2026-11-27 04:58 UTC, load 1.3): 180 s wall, 354 s CPU; the session before: 247 s, "
+     "483 s. Cut this session: the results-folder tests fork their 23 CLI children from a server that imported "
+     "bearingshaft once, their random kills at fractions of a measured run; the frc stage test follows 3 + 1 switched "
+     "families (it checks both pitchfork kinds and a doubling); smaller equivalent inputs in the modal speed paths; "
+     "nnm stages of job tests with gap = 0 (no near-grazing NNM 2 integration)"),
     ("FE modal, 112,629 DOFs: relative residual",
      "the twelve soft-spring modes (0.4-34 Hz) stop at 1-3x their round-off floor eps |||K| |phi||| / ||K phi||, "
      "above 1e-8 in double precision; the elastic modes reach 4-8e-10"),
