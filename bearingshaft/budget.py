@@ -421,8 +421,9 @@ def check_budget(scene: Scene, out_dir: str | Path | None = None, available: int
             fix = (e.advice or "lower " + e.key.split("] ")[1]) if e else "free memory"
             key = e.key if e else ""
             if p.model > p.data and hasattr(scene.model, "element_size"):  # the 3-D model is most of it
-                key, fix = "[model] element_size", (f"the 3-D model's share is about {human(p.model)}: raise "
-                                                    "element_size (a coarser mesh)")
+                key = "[model] element_size" + (f" or {key}" if key else "")
+                fix = (f"the 3-D model's share is about {human(p.model)}: raise element_size (a coarser mesh)"
+                       + (f", or {fix}" if e else ""))
             raise SceneError(f"{scene.origin or scene.name}{' ' + key if key else ''}: the {p.stage} stage's "
                              f"process would peak at about {human(p.bytes)}, more than the "
                              f"{human(HEADROOM * avail)} it may use of {human(avail)} available; {fix}")

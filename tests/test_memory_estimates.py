@@ -155,6 +155,9 @@ def test_a_process_peak_made_by_the_3d_model_is_refused_naming_element_size():
     fine = replace(s, model=replace(s.model, element_size=0.00390625))
     p = stage_peak(fine, "hammer", cached=True)
     assert p.model > p.data, (p.model, p.data)  # the model is what grew
-    with pytest.raises(SceneError, match=r"\[model\] element_size: the hammer stage's process would peak"):
+    # it names element_size first, then the stage's own largest estimate (a key that made the model large,
+    # such as n_modes, may be the one a mutation changed), and says how much of the peak the model is
+    with pytest.raises(SceneError, match=r"\[model\] element_size or \[.*: the hammer stage's process would peak"
+                                         r".*the 3-D model's share is about .*raise element_size"):
         budget.check_budget(fine, available=int(p.bytes), stage="hammer")  # 80 % of the peak may be used
     budget.check_budget(s, available=int(4 * stage_peak(s, "hammer", cached=True).bytes), stage="hammer")
