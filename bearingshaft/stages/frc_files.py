@@ -675,8 +675,8 @@ def _close_return_line(ex, spec) -> str:
 def _found_switches_line(ex, spec) -> str:
     """frc.md: the families switched onto from the families found by verdicts and close returns (their own
     allowance, ``[frc] found_family_switches`` a family), and what their branch points gave."""
-    found = {k for k, f in enumerate(ex.families)
-             if f.kind == "close_return" or any(n.startswith("started from the verdict") for n in f.notes)}
+    found = ({v.family for v in ex.verdicts if v.verdict == "orbit"}
+             | {c.family for c in ex.close_returns if c.family >= 0})
     recs = [r for r in ex.switches if r["family"] in found]
     if not found:
         return ""
