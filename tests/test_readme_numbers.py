@@ -75,6 +75,15 @@ def _table2() -> dict[str, str]:
     return {"pct": f"{max(abs(float(r['error_pct'])) for r in _rows('assembly-modal/frequencies.csv')):.2f}"}
 
 
+def _suite() -> dict[str, str]:
+    """The suite's test count, wall and CPU seconds and verdict, as job_times.py recorded them."""
+    row = next(r for r in _rows("performance/job_headline.csv") if r["what"].startswith("test suite"))
+    machine = {r["key"]: r["value"] for r in _rows("performance/job_machine.csv")}
+    cpu = re.search(r"CPU ([\d.]+) s", machine["suite ours"])[1]
+    return {"passed": re.search(r"\((\d+) passed", row["what"])[1], "wall": f"{float(row['ours_s']):.0f}",
+            "cpu": f"{float(cpu):.0f}", "met": "met" if row["met"] == "True" else "not met"}
+
+
 def _modal_speed() -> dict[str, str]:
     wall, cpu = _rows("performance/modal_headline.csv")[:2]
     dofs = re.search(r"([\d,]+) DOFs", wall["what"])[1]
@@ -134,6 +143,8 @@ CLAIMS = [
     Claim("other stages", r"Every other stage takes (?P<lo>\d+)-(?P<hi>\d+) s", _others),
     Claim("discrete-hammer", r"puts (?P<work>[\d.]+) J into the model, (?P<events>\d+) contact events follow in the "
           r"1 s\s+run, and the balance holds to (?P<balance>[\d.e+-]+) of the largest energy", _hammer),
+    Claim("suite time", r"The default suite \((?P<passed>\d+) tests passed, [^)]*\) took (?P<wall>\d+) s "
+          r"\((?P<cpu>\d+) s of CPU\) on a quiet 2-core machine: the 4-minute target is (?P<met>met|not met)", _suite),
     Claim("Table 2", r"Calibrated defaults put all six modes within (?P<pct>[\d.]+) % of\s+Table 2", _table2),
     Claim("modal speed", r"(?P<dofs>[\d,]+) DOFs, 16 modes, in (?P<ours>[\d.]+) s on a (?:quiet|loaded)"
           r"\s+2-core machine[^,]*, "
