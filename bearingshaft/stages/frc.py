@@ -52,6 +52,7 @@ from bearingshaft.stages.frc_results import ConvergedCurve, ConvergenceRun, FRCR
 from bearingshaft.systems import model_system
 from reduced._blas import single_thread_blas
 from reduced.models.gaps import GapSystem
+from reduced.models.symmetry import symmetrized, tip_mirror
 from reduced.models.loads import Harmonic, Loads
 from reduced.models.modes import linear_modes
 from reduced.periodic.backbones import NNM_STEPS, nnm_branch
@@ -127,6 +128,7 @@ def _compute(scene: Scene, progress: bool) -> FRCResult:
     names = tuple(scene.model.point_names)
     load_col = names.index(spec.point)
     b = load_vector(spec, rows, names)  # the point's row, plus [frc] also_points (a slanted load)
+    system, b, mirror_note = mirror_symmetric(system, b)
     levels = list(spec.levels_N)
     n_tasks = 4 * len(levels) + len(spec.convergence_harmonics) + len(levels) * len(spec.backbone_scales) + 1
     n_tasks += len(levels) if spec.map_step_hz > 0 else 0  # the response map (frc_map)
@@ -156,7 +158,25 @@ def _compute(scene: Scene, progress: bool) -> FRCResult:
     uncovered_orbits(system, b, rows, names, spec, curves, converged, maps)  # needs a level's curve and map together
     bar.close()
     return FRCResult(scene.name, spec, names, load_col, curves, {P: _events(br, load_col) for P, br in curves.items()},
-                     checks, sweeps, sweep_hb, convergence, *backbone, converged=converged, response_maps=maps)
+                     checks, sweeps, sweep_hb, convergence, *backbone, converged=converged, response_maps=maps,
+                     mirror_note=mirror_note)
+
+
+def mirror_symmetric(system: GapSystem, b: np.ndarray) -> tuple[GapSystem, np.ndarray, str]:
+    """(system, b, note): the system averaged over its tip mirror x1 <-> x3 when it is symmetric only to the
+    round-off of its reduction (:mod:`reduced.models.symmetry`, equation (2)), else as it is; the note says
+    which (empty: no tip mirror, or an exact one)."""
+    R, err = tip_mirror(system, b)
+    if R is None:
+        return system, b, ""
+    if err == 0.0:
+        return system, b, ""
+    flipped = [system.dof_names[k] for k in range(system.n) if R[k, k] < 0]
+    system, b = symmetrized(system, b, R)
+    return system, b, (f"The model is mirror symmetric (x1 <-> x3{', with ' + ', '.join(flipped) + ' -> minus itself' if flipped else ''}) "
+                       f"to {err:.2g} of its largest entries (the round-off of the reduction); the forced response "
+                       "uses it averaged over the mirror, so that the pitchforks breaking x1 = x3 are found and "
+                       "followed (asymmetric families).")
 
 
 LEVEL_PARTS = ("converged", "map", "sweeps", "checks")  # what _level_part computes from a level's HB curve
@@ -335,7 +355,7 @@ def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: 
             x_ref = float(np.max(np.abs(start[:, : system.n])))
             cover = []
         ex = exact_frc(system, b, P, spec.freq_min_hz, spec.freq_max_hz, start, point_rows=rows, point_names=names,
-                       x_ref=x_ref, options=opts, cover=cover)
+                       x_ref=x_ref, options=opts, cover=cover, mirror=tip_mirror(system, b)[0])
     except (ShootingError, ContinuationError, NewtonError, RuntimeError) as exc:
         err = " ".join(str(exc).split())[:200]
         why = f"shooting failed ({err}): the HB curve at H = {spec.harmonics} is drawn and is NOT converged"

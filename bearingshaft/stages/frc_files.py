@@ -590,6 +590,7 @@ def frc_markdown(result: FRCResult, regimes: list[dict]) -> str:
              f"move by at most {spec.hb_converged_tol:g} from the next lower H, else the periodic orbits of the exact "
              "flow continued by multiple shooting (no harmonics), with their Floquet multipliers (frc.csv: `drawn`, "
              "`method`, `family`).", ""]
+    lines += [result.mirror_note, ""] if result.mirror_note else []
     for P in spec.levels_N:
         cc = result.converged.get(P)
         if cc is None:

@@ -227,6 +227,9 @@ class FRCResult:
         P -> ConvergedCurve, the drawn curve of each level.
     response_maps : dict
         P -> MapLevel, the response map (empty when ``[frc] map_step_hz = 0``).
+    mirror_note : str
+        How the model was averaged over its tip mirror (:func:`bearingshaft.stages.frc.mirror_symmetric`;
+        empty: its mirror was exact, or it has none).
     """
 
     scene_name: str
@@ -245,3 +248,4 @@ class FRCResult:
     nearest: dict  # (P, scale) -> (mode, log distance) of the nearest backbone to that peak
     converged: dict = field(default_factory=dict)  # P -> ConvergedCurve, the drawn curve of each level
     response_maps: dict = field(default_factory=dict)  # P -> MapLevel (bearingshaft.stages.frc_map)
+    mirror_note: str = ""  # how the model's tip mirror was made exact (empty: it was, or there is none)
