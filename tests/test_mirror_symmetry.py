@@ -17,12 +17,12 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from test_frc_cover import BAND, F_ISO, P, SEED_ISO, X_REF  # noqa: E402
+from test_frc_cover import BAND, F_ISO, SEED_ISO, X_REF, P  # noqa: E402
 
 from reduced._blas import single_thread_blas  # noqa: E402
 from reduced.models.discrete import DiscreteParams  # noqa: E402
 from reduced.models.gaps import GapSystem, two_sided_stops  # noqa: E402
-from reduced.models.symmetry import mirror_error, signed_mirror, symmetrized, tip_mirror  # noqa: E402
+from reduced.models.symmetry import mirror_error, symmetrized, tip_mirror  # noqa: E402
 from reduced.periodic.exact_frc import ExactFRCOptions, exact_frc, find_symmetry  # noqa: E402
 
 B = np.array([0.0, 1.0, 0.0])

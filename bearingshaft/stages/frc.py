@@ -52,9 +52,9 @@ from bearingshaft.stages.frc_results import ConvergedCurve, ConvergenceRun, FRCR
 from bearingshaft.systems import model_system
 from reduced._blas import single_thread_blas
 from reduced.models.gaps import GapSystem
-from reduced.models.symmetry import symmetrized, tip_mirror
 from reduced.models.loads import Harmonic, Loads
 from reduced.models.modes import linear_modes
+from reduced.models.symmetry import symmetrized, tip_mirror
 from reduced.periodic.backbones import NNM_STEPS, nnm_branch
 from reduced.periodic.continuation import ContinuationError
 from reduced.periodic.exact_frc import ExactFRCOptions, exact_frc, hb_start
@@ -173,7 +173,8 @@ def mirror_symmetric(system: GapSystem, b: np.ndarray) -> tuple[GapSystem, np.nd
         return system, b, ""
     flipped = [system.dof_names[k] for k in range(system.n) if R[k, k] < 0]
     system, b = symmetrized(system, b, R)
-    return system, b, (f"The model is mirror symmetric (x1 <-> x3{', with ' + ', '.join(flipped) + ' -> minus itself' if flipped else ''}) "
+    signs = f", with {', '.join(flipped)} -> minus itself" if flipped else ""
+    return system, b, (f"The model is mirror symmetric (x1 <-> x3{signs}) "
                        f"to {err:.2g} of its largest entries (the round-off of the reduction); the forced response "
                        "uses it averaged over the mirror, so that the pitchforks breaking x1 = x3 are found and "
                        "followed (asymmetric families).")
