@@ -597,7 +597,7 @@ def frc_markdown(result: FRCResult, regimes: list[dict]) -> str:
             continue
         lines += [f"## {P:g} N: {'exact flow (shooting)' if cc.method == 'shooting' else f'HB, H = {cc.hb_H}'}", "",
                   cc.reason + "." + _contact(cc, result.response_maps.get(P), spec), *frc_regimes.markdown(regimes, P),
-                  ""]
+                  "", *filter(None, [_stability_line(result.checks.get(P, []), spec.harmonics)])]
         ex = cc.exact
         if ex is None:
             continue
@@ -628,6 +628,29 @@ def frc_markdown(result: FRCResult, regimes: list[dict]) -> str:
             lines.append(f"- {note}")
         lines.append("")
     return "\n".join(lines)
+
+
+def _stability_line(checks: list, H: int) -> str:
+    """frc.md: how the HB curve's stability by Hill's method compares with its orbits' monodromy (and shooting's
+    exact orbits) at the checked points of frc_stability.csv, naming every point where the verdicts differ
+    ('' without checks)."""
+    hill = [c for c in checks if c.hill_stable is not None]
+    if not hill:
+        return ""
+    off = [c for c in hill if c.hill_stable != c.mono_stable]
+    far = [c for c in hill if abs(c.hill / c.mono - 1.0) > HILL_MATCH]
+    shot = [c for c in checks if c.shoot_stable is not None]
+    shot_off = [c for c in shot if c.shoot_stable != c.mono_stable]
+    text = (f"Stability of the HB curve (H = {H}) at {len(checks)} checked points (frc_stability.csv): Hill's method "
+            f"at {len(hill)} gives the monodromy's verdict at {len(hill) - len(off)}, its max |mu| within "
+            f"{HILL_MATCH:g} (relative) of the monodromy's at {len(hill) - len(far)}")
+    if off:
+        text += "; the verdicts differ at " + ", ".join(
+            f"{c.freq_hz:.5g} Hz (Hill {c.hill:.3g}, monodromy {c.mono:.3g})" for c in off[:6]) + (
+            f" and {len(off) - 6} more" if len(off) > 6 else "")
+    text += (f". Shooting found the exact orbit at {len(shot)} of them; its verdict differs from the HB "
+             f"monodromy's at {len(shot_off)} (where the truncated HB orbit is not the exact one).")
+    return text + "\n"
 
 
 def _contact(cc, lvl, spec) -> str:
