@@ -272,6 +272,33 @@ def test_period_doubling_family_is_the_period_2_attractor():
     assert abs(ss.amplitude_m[0, 0] / max(x.max(), -x.min()) - 1.0) < 1e-4
 
 
+def test_the_response_map_classifies_the_period_2_attractor_as_subharmonic():
+    # the response map's classifier (reduced.periodic.response_map.classify: Poincare returns, Newton on the
+    # period-p map, the largest Lyapunov exponent) started where the long integration above settles on the
+    # period-2 motion: a subharmonic of period 2 load periods, with a negative exponent and the amplitude of
+    # the period-2 family's orbit (the maps of discrete-frc and rom-frc meet no such attractor on their grids)
+    from reduced.periodic.response_map import MapOptions, classify
+    from reduced.transient.lyapunov import PeriodMap
+
+    out = _families()
+    pd = [r for r in out.switches if r["kind"] == "period_doubling" and r["child"] >= 0]
+    fam2 = out.families[pd[0]["child"]]
+    i = int(np.flatnonzero(fam2.stable)[len(np.flatnonzero(fam2.stable)) // 2])
+    f = float(fam2.freq_hz[i])
+    fam1 = out.families[1]
+    res1 = _residual(fam1)
+    y0 = res1.nodes(_at(res1, fam1, f))[0][0].copy()
+    y0[0] += 1e-4 * GAP
+    s = impact_oscillator()
+    sigma = ZETA * math.sqrt(K)  # the open system's decay rate, 1/s
+    pm = PeriodMap(s, B1, LOAD, f, rows=np.eye(1))
+    pt = classify(pm, y0, sigma, MapOptions())
+    assert pt.regime == "subharmonic" and pt.period_k == 2, (pt.regime, pt.period_k)
+    assert pt.lyapunov_per_s < 0.0 and pt.contact
+    mu = float(np.max(np.abs(fam2.multipliers[i])))
+    assert math.isclose(pt.lyapunov_per_s, f * math.log(mu) / 2, rel_tol=1e-3), (pt.lyapunov_per_s, mu)
+
+
 # -- the three-mass model ------------------------------------------------------------------------------
 def test_three_mass_family_holds_the_orbit_shooting_finds_from_hb():
     # 1 N, 17 Hz (tests/test_frc_contact.py): the symmetric contact orbit shot from the H = 15 curve by
