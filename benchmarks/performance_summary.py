@@ -146,6 +146,90 @@ EARLIER_MACHINE = (
 COLUMNS = ("what", "ours_s", "baseline", "baseline_s", "ratio", "error", "target", "met")
 
 
+# -- headline rows of the benchmarks that write only their own tables (issues 25 and 27) ----------------------
+def _median(values: list[float]) -> float:
+    v = sorted(values)
+    return 0.5 * (v[(len(v) - 1) // 2] + v[len(v) // 2])
+
+
+def _response_map_rows(results: Path) -> list[dict]:
+    """The response map of the highest level (both directions, regimes and exponents): median wall and CPU of
+    the serial runs, target 60 s (issue 25)."""
+    rows = [r for r in _read(results / "response-map-speed" / "response_map_speed_timing.csv") if r["way"] == "serial"]
+    top = max(float(r["level"]) for r in rows)
+    runs = [r for r in rows if float(r["level"]) == top]
+    wall, cpu = _median([float(r["wall_s"]) for r in runs]), _median([float(r["cpu_s"]) for r in runs])
+    n = int(runs[0]["frequencies_up"]) + int(runs[0]["frequencies_down"])
+    return [{"what": f"response map of one level, discrete-frc {top:g} N: up and down, {n} frequencies "
+                     f"({runs[0]['fine_step_hz']} Hz steps over {runs[0]['bands_hz']} Hz), regimes and Lyapunov "
+                     f"exponents, one process; median of {len(runs)} runs (CPU {cpu:.3g} s)",
+             "ours_s": f"{wall:.4g}", "baseline": "", "baseline_s": "", "ratio": "", "error": "",
+             "target": "<= 60 s", "met": str(wall <= 60.0)}]
+
+
+def _converged_curve_rows(results: Path) -> list[dict]:
+    """The converged curve with its stability, per level of discrete-frc: median wall (HB curve and drawn
+    curve) of each way the benchmark times, target 10 s (issue 25)."""
+    rows = _read(results / "converged-frc-speed" / "converged_frc_speed_timing.csv")
+    out = []
+    for key in dict.fromkeys((r["scene"], r["level"], r["way"]) for r in rows):
+        runs = [r for r in rows if (r["scene"], r["level"], r["way"]) == key]
+        wall = _median([float(r["total_wall_s"]) for r in runs])
+        cpu = _median([float(r["total_cpu_s"]) for r in runs])
+        load = _median([float(r["load_before"]) for r in runs])
+        out.append({"what": f"converged curve with stability, {key[0]} {float(key[1]):g} N, {key[2]} "
+                            f"({runs[0]['method']}): HB curve and drawn curve; median of {len(runs)} (CPU {cpu:.3g} s, "
+                            f"load {load:.3g})",
+                    "ours_s": f"{wall:.4g}", "baseline": "", "baseline_s": "", "ratio": "", "error": "",
+                    "target": "<= 10 s", "met": str(wall <= 10.0)})
+    return out
+
+
+COLD = " (its friction tables built in the run)"
+
+
+def _hammer_friction_rows(results: Path) -> list[dict]:
+    """The hammer-test record with friction against the frictionless one, per level: cold (tables built in the
+    run) and warm, target 2x (issue 27)."""
+    rows = _read(results / "hammer-friction-speed" / "hammer_friction_speed.csv")
+    base = {r["level_N"]: r for r in rows if r["model"] == "frictionless"}
+    out = []
+    for r in (r for r in rows if r["model"] == "friction"):
+        b = base[r["level_N"]]
+        for how in ("cold", "warm"):
+            ours, ref = float(r[f"{how}_wall_s"]), float(b[f"{how}_wall_s"])
+            out.append({"what": f"hammer-test record with friction (mu = 0.3, axial + lateral), "
+                                f"{float(r['level_N']):g} N blow, {how}" + COLD * (how == "cold"),
+                        "ours_s": f"{ours:.4g}", "baseline": f"the frictionless record, {how}, same process",
+                        "baseline_s": f"{ref:.4g}", "ratio": f"{ours / ref:.3g}",
+                        "error": f"energy balance {r['energy_balance_error']}", "target": "<= 2x the frictionless",
+                        "met": str(ours / ref <= 2.0)})
+    return out
+
+
+def _friction_ringdown_rows(results: Path) -> list[dict]:
+    """The discrete friction model's 2 s exact ringdown, target 0.1 s (issue 27)."""
+    rows = _read(results / "friction-speed" / "friction_speed.csv")
+    r = next(r for r in rows if r["case"] == "scene" and r["method"] == "exact" and float(r["mu"]) > 0)
+    return [{"what": f"discrete friction model, 2 s exact ringdown (mu = {r['mu']}, {r['n_events']} events), median",
+             "ours_s": r["median_s"], "baseline": "", "baseline_s": "", "ratio": "",
+             "error": f"energy balance {r['energy_balance_error']}", "target": "<= 0.1 s",
+             "met": str(float(r["median_s"]) <= 0.1)}]
+
+
+# (benchmark folder under results/, what it measures, command, rows from its own tables)
+OWN_TABLES = (
+    ("response-map-speed", "response map (issue 25)",
+     "PYTHONPATH=. python benchmarks/response_map_speed.py --levels 10", _response_map_rows),
+    ("converged-frc-speed", "converged forced-response curve (issue 25)",
+     "PYTHONPATH=. python benchmarks/converged_frc_speed.py", _converged_curve_rows),
+    ("hammer-friction-speed", "hammer test with friction (issue 27)",
+     "PYTHONPATH=. python benchmarks/hammer_friction_speed.py", _hammer_friction_rows),
+    ("friction-speed", "friction ringdown (issue 27)",
+     "PYTHONPATH=. python benchmarks/friction_speed.py", _friction_ringdown_rows),
+)
+
+
 def _read(path: Path) -> list[dict]:
     with open(path, newline="") as f:
         return list(csv.DictReader(f))
@@ -184,6 +268,14 @@ def main() -> None:
                 row["error"] = f"{meaning}: {_num(row['error'])}"
             rows.append(row)
         machines.append((topic, _machine(folder, machine)))
+    for sub, topic, command, read in OWN_TABLES:
+        try:
+            got = read(folder.parent)
+        except (OSError, KeyError, StopIteration, ValueError) as exc:
+            missing.append((f"results/{sub} ({type(exc).__name__}: {exc})", command))
+            continue
+        rows += [{"benchmark": topic, **r, "command": command} for r in got]
+        machines.append((topic, f"recorded in results/{sub}/"))
     write_rows(folder / "summary.csv", rows)
 
     lines = ["# Performance", "",
@@ -206,7 +298,7 @@ def main() -> None:
     said = set()
     for r in unmet:
         why = next((text for start, text in LIMITS if r["what"].startswith(start)), "not analysed")
-        said_why = "as in the row above" if why in said else why
+        said_why = "as in the row above" if why in said and why != "not analysed" else why
         said.add(why)
         lines.append(f"- {r['what']}: {_num(r['ours_s'])} s against {r['target']}. What limits it: {said_why}.")
     if not unmet:
@@ -218,6 +310,7 @@ def main() -> None:
     lines += [f"- {text}" for text in EARLIER_MACHINE]
     lines += ["", "## How each was measured", ""]
     lines += [f"- {topic}: `{command}`" for _, _, topic, command, _ in SOURCES]
+    lines += [f"- {topic}: `{command}`" for _, topic, command, _ in OWN_TABLES]
     lines += ["", "## Machines", ""]
     lines += [f"- {topic}: {m}" for topic, m in machines]
     if missing:
