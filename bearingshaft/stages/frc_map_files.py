@@ -162,17 +162,27 @@ def _plot_curves(ax, result: FRCResult, P: float, col: int, curve) -> None:
                     label="exact orbit (shooting)")
 
 
-def _plot_unstable_families(axs, result: FRCResult, P: float, col: int) -> None:
-    """The families of unstable periodic orbits found from the chaotic stepped sine's close returns (kind
-    ``close_return``, :mod:`reduced.periodic.uncovered`): their amplitude (top) and their Poincare samples, x at
-    t = j T for j < k of a k T orbit (bottom), over the bifurcation diagram."""
+def _plot_families(axs, result: FRCResult, P: float, col: int) -> None:
+    """The level's exact families over the bifurcation diagram (bottom): their Poincare samples, x at t = j T for
+    j < k of a k T orbit (the nodes at those times), stable solid black, unstable thin grey; and the families of
+    unstable periodic orbits found from the chaotic stepped sine's close returns (kind ``close_return``,
+    :mod:`reduced.periodic.uncovered`) in magenta, their amplitude on the top panel too."""
     cc = result.converged.get(P)
     ex = cc.exact if cc is not None else None
     for fam in (ex.families if ex is not None else ()):
-        if fam.kind != "close_return":
-            continue
         S = fam.nodes.shape[1] // fam.periods
         n = fam.nodes.shape[2] // 2
+        if fam.kind != "close_return":  # every other family's Poincare samples, stable ones solid
+            for piece in fam.pieces():
+                for j in range(fam.periods):
+                    x = fam.nodes[piece, j * S, :n] @ ex.point_rows[col]
+                    for keep, style in ((~fam.stable[piece], dict(color="0.35", lw=0.6,
+                                                                  label="unstable periodic orbits (families)")),
+                                        (fam.stable[piece], dict(color="k", lw=1.4,
+                                                                 label="stable periodic orbits (families)"))):
+                        if keep.any():
+                            axs[1].plot(fam.freq_hz[piece], np.where(keep, x, np.nan), "-", zorder=5, **style)
+            continue
         lab = f"unstable {fam.periods} T orbits (close returns)"
         axs[0].plot(fam.freq_hz, fam.amplitude_m[:, col], "-", color="m", lw=1.8, label=lab, zorder=6)
         for j in range(fam.periods):  # on top of the chaotic samples they are embedded in
@@ -185,7 +195,7 @@ def _plot_level(axs, result: FRCResult, P: float, lvl, col: int, curve) -> None:
     samples."""
     top, bot = axs
     _plot_curves(top, result, P, col, curve)
-    _plot_unstable_families(axs, result, P, col)
+    _plot_families(axs, result, P, col)
     for d, rm in lvl.sweeps.items():
         st = rm.peak_stats(col)
         order = np.argsort(rm.freq_hz)
