@@ -161,3 +161,19 @@ def test_a_process_peak_made_by_the_3d_model_is_refused_naming_element_size():
                                          r".*the 3-D model's share is about .*raise element_size"):
         budget.check_budget(fine, available=int(p.bytes), stage="hammer")  # 80 % of the peak may be used
     budget.check_budget(s, available=int(4 * stage_peak(s, "hammer", cached=True).bytes), stage="hammer")
+
+
+def test_hammer_records_too_large_for_memory_name_n_modes():
+    from dataclasses import replace
+
+    from bearingshaft.scenes import SceneError
+
+    # the records hold every DOF of the reduced model, so n_modes sizes them as much as their length: a scene
+    # whose n_modes was raised (hammer-friction-oblique at 479 modes: records of 489 DOFs) is refused naming it
+    # (the hypothesis test of scene keys mutates n_modes and asks that the refusal name it)
+    s = load_scene("hammer-friction-oblique")
+    big = replace(s, model=replace(s.model, n_modes=479))
+    est = next(e for e in budget.estimates(big) if e.stage == "hammer")
+    assert "x 489 DOFs" in est.what and est.key.endswith(", or [model] n_modes")
+    with pytest.raises(SceneError, match=r"\[model\] n_modes: the hammer stage would hold"):
+        budget.check_budget(big, available=int(0.9 * est.bytes))

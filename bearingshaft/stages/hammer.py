@@ -874,7 +874,8 @@ def estimate(scene: Scene) -> list[Estimate]:
         levels *= 2
     return [Estimate("hammer", int(MATPLOTLIB_BYTES + COPIES * samples * per + levels * samples * per + exact),
                      f"{levels} records of {samples:.3g} samples x {n} DOFs",
-                     "[ringdown] duration_s or sample_rate_hz, or [hammer] levels_N")]
+                     "[ringdown] duration_s or sample_rate_hz, or [hammer] levels_N"
+                     + (", or [model] n_modes" if hasattr(scene.model, "element_size") else ""))]  # rom: n ~ modes
 
 
 __all__ = ["compute", "estimate", "DESCRIPTION", "run_record", "blow", "Record", "pseudo_rigid",
