@@ -389,9 +389,9 @@ def _wide(indptr, indices, data, X):
     return KX
 
 
-WIDE = 12  # columns from which :func:`_wide` replaces scipy's product: 112,629 DOFs at load 7 on 2 cores, CPU s
-# (scipy -> _wide) 0.149 -> 0.106 at 24 columns, 0.112 -> 0.079 at 16, 0.083 -> 0.081 at 10, 0.062 -> 0.076 at 5;
-# on a quiet machine its two numba threads also halve the wall time
+WIDE = 6  # columns from which :func:`_wide` replaces scipy's product: 112,629 DOFs on 2 busy cores (load 7-10), CPU s
+# (scipy -> _wide) 0.149 -> 0.106 at 24 columns, 0.112 -> 0.079 at 16, 0.092 -> 0.074 at 12, 0.094 -> 0.067 at 8,
+# 0.112 -> 0.101 at 6, 0.062 -> 0.076 at 5; its two numba threads cut the wall time further when a core is free
 
 
 def _narrow_call(K, X, with_abs):
