@@ -99,7 +99,16 @@ LIMITS = (
      "against OpenBLAS's 46), factorizing beam and tube apart (77.1M against 80.0M factor entries: no gain). Kept: "
      "the factorization beside the Krylov start (same bits, 0.3 s wall), the springs' and tip masses' entries merged "
      "into K and M by a numba CSR merge (same bits, 0.2-0.5 s CPU), has_pardiso without importing pypardiso (0.5-0.9 "
-     "s CPU a process). Left untried: a start block from a coarse-mesh solution (changes the bits)"),
+     "s CPU a process). Session 12 (2026-11-27, load 7-12 on a host reporting GenuineIntel family 6 model 207, where "
+     "MKL loads its AVX-512 kernels): kept the blocks' fragment with OCC's full glue (the same mesh bit for bit, "
+     "build_mesh 1.34 -> 1.00 CPU s) and a row-parallel numba product from 6 columns (the same bits; 24 columns "
+     "0.149 -> 0.106 CPU s). Measured and dropped: a start block near the modes (the converged modes plus a relative "
+     "error 1e-1, 1e-2, 1e-3, standing in for a coarse-mesh solution: 8, 8, 7 steps and 57, 55, 50 solves against "
+     "10 and 66-68) saves at most 2-3 of the slow steps, while any other start block moves the soft-spring modes' "
+     "frequencies by up to 3e-4 (their residual floor is ~1e-3 relative), so agreement to 1e-9 cannot be had; a "
+     "Chebyshev filter before the first solve needs ~1e4 products with K (lambda_max ~4e13 rad^2/s^2, 1 MHz, "
+     "against the 1368 Hz seventeenth mode) where one block solve does it; a better shift: with a Cholesky factor "
+     "the shift stays below the first mode, and the slow modes' rate is fixed by (998 / 1368)^2 = 0.53 whatever it is"),
     ("main job, bearingshaft run",
      "measured on a quiet machine after warming the reduced-model cache (2026-11-27 04:43 UTC, load 0.9 at the "
      "start): 359 s wall, 705 s CPU on 2 workers; the session before: 451 s, 833 s. Cut this session: the meshing "

@@ -374,6 +374,26 @@ NARROW = 4  # columns up to which the register kernel (fewer padded with zero co
 # faster for one column, and at 16 it takes 0.077 s where four passes of the register kernel take 0.15)
 
 
+@njit(cache=True, parallel=True)
+def _wide(indptr, indices, data, X):
+    """K X for a C-order X of many columns: rows in parallel, each row's sums over its entries in
+    storage order, column by column, as scipy's csr_matvecs (the same bits), which runs on one thread."""
+    n, b = len(indptr) - 1, X.shape[1]
+    KX = np.zeros((n, b))
+    for r in prange(n):
+        for p in range(indptr[r], indptr[r + 1]):
+            a = data[p]
+            c = indices[p]
+            for j in range(b):
+                KX[r, j] += a * X[c, j]
+    return KX
+
+
+WIDE = 6  # columns from which :func:`_wide` replaces scipy's product: 112,629 DOFs on 2 busy cores (load 7-10), CPU s
+# (scipy -> _wide) 0.149 -> 0.106 at 24 columns, 0.112 -> 0.079 at 16, 0.092 -> 0.074 at 12, 0.094 -> 0.067 at 8,
+# 0.112 -> 0.101 at 6, 0.062 -> 0.076 at 5; its two numba threads cut the wall time further when a core is free
+
+
 def _narrow_call(K, X, with_abs):
     b = X.shape[1]
     X4 = np.zeros((X.shape[0], NARROW))
@@ -383,8 +403,9 @@ def _narrow_call(K, X, with_abs):
 
 
 def product(K, X: np.ndarray) -> np.ndarray:
-    """K X for a CSR matrix K: the numba register kernel for 2 to :data:`NARROW` columns, scipy's
-    product otherwise (the same sums in the same order: the same bits either way).
+    """K X for a CSR matrix K: the numba register kernel for 2 to :data:`NARROW` columns, the numba
+    row-parallel kernel :func:`_wide` from :data:`WIDE` columns, scipy's product otherwise (the same
+    sums in the same order: the same bits either way).
 
     Parameters
     ----------
@@ -398,7 +419,10 @@ def product(K, X: np.ndarray) -> np.ndarray:
     (n, b) ndarray of float
         K X, in the units of K times those of X.
     """
-    if not 2 <= X.shape[1] <= NARROW:
+    b = X.shape[1]
+    if b >= WIDE and K.dtype == np.float64 and X.ndim == 2:
+        return _wide(K.indptr, K.indices, K.data, np.ascontiguousarray(X, dtype=np.float64))
+    if not 2 <= b <= NARROW:
         return K @ X
     return _narrow_call(K, X, False)[0]
 

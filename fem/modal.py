@@ -463,7 +463,7 @@ def _modal_analysis(K, M, n_modes, shift_hz, solver, method, tol, max_iter, seed
     t2 = time.perf_counter()
     order = np.argsort(lam)
     lam, phi = lam[order], phi[:, order]
-    mnorm = np.sqrt(np.einsum("ij,ij->j", phi, M @ phi))
+    mnorm = np.sqrt(np.einsum("ij,ij->j", phi, product(M, phi)))  # the same bits as M @ phi
     phi = _fix_signs(phi / mnorm)
     if conv is not None:  # the Krylov solver's own final test, on these vectors (both ratios scale-free)
         conv, res, floors = conv[order], info["residuals"][order], info["floors"][order]

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from fem._assembly import NARROW, _block_size, add, product, product_and_abs, scatter_pair
+from fem._assembly import NARROW, WIDE, _block_size, add, product, product_and_abs, scatter_pair
 
 
 def _mesh_dofs(nx=3, ny=2, nz=2, bs=3):
@@ -57,9 +57,10 @@ def test_scatter_by_places_equals_the_scatter_dof_by_dof_bit_for_bit():
     assert np.abs(sp.csr_matrix((kd, ix, ip), shape=(n, n)).toarray() - D).max() <= 1e-13 * np.abs(D).max()
 
 
-@pytest.mark.parametrize("b", [1, 2, 3, NARROW, NARROW + 1])
+@pytest.mark.parametrize("b", [1, 2, 3, NARROW, NARROW + 1, WIDE - 1, WIDE, 24])
 def test_products_are_scipys_product_and_the_absolute_product(b):
-    # widths on both sides of NARROW: the register kernel (zero-padded to NARROW columns) and the loops
+    # widths on both sides of NARROW and WIDE: the register kernel (zero-padded to NARROW columns), scipy's
+    # product and the row-parallel kernel
     rng = np.random.default_rng(4)
     K = sp.random(300, 300, density=0.05, random_state=5, format="csr") - sp.eye(300, format="csr")
     K = (K + K.T).tocsr()

@@ -140,3 +140,20 @@ def test_the_mesh_has_the_dimensions_of_the_model_that_asked_for_it():
     np.testing.assert_allclose(np.ptp(p, axis=0), [m.beam_length, b, h], rtol=1e-9)
     with pytest.raises(TypeError, match="required keyword-only"):
         AssemblyGeometry(element_size=0.1)  # no dimensions of its own to fall back on
+
+
+@pytest.mark.parametrize("kwargs", [dict(), dict(parts=("beam",))])
+def test_the_glued_fragment_gives_the_general_fragments_mesh_bit_for_bit(monkeypatch, kwargs):
+    """geometry.build.OCC_GLUE (OCC's full glue, for blocks that only share whole faces) changes the time of the
+    fragment, never the mesh: points, hexahedra, parts and every named node set as the general fragment's."""
+    import geometry.build as gb
+
+    g = geometry(**kwargs)
+    glued = build_mesh(g)
+    monkeypatch.setattr(gb, "OCC_GLUE", 0)
+    plain = build_mesh(g)
+    assert gb.OCC_GLUE == 0 and glued.points.shape == plain.points.shape
+    assert np.array_equal(glued.points, plain.points) and np.array_equal(glued.hexes, plain.hexes)
+    assert np.array_equal(glued.cell_part, plain.cell_part) and glued.part_names == plain.part_names
+    assert glued.node_sets.keys() == plain.node_sets.keys()
+    assert all(np.array_equal(glued.node_sets[k], v) for k, v in plain.node_sets.items())
