@@ -149,6 +149,10 @@ class ExactFRCOptions:
         With Omega the ringing of a fast mode between impacts, whose phase at the nodes spins
         as Omega changes, dominates a step's length (its velocity is Omega_mode / Omega times its
         displacement): the curve takes several times more points for the same resolution.
+    angle_step : bool
+        The step also from the tangent's turn (:class:`reduced.periodic.continuation.ContinuationOptions`
+        ``angle_step``); off by default: the paths through the clusters of grazings at the tongues'
+        folds depend on the step sequence, so a different step control follows other sheets there.
     """
 
     segments: int = SEGMENTS
@@ -171,6 +175,7 @@ class ExactFRCOptions:
     cover_steps: int = 1000
     deadline_s: float = math.inf
     velocity_scale: str = "fastest"
+    angle_step: bool = False
 
     def __post_init__(self) -> None:
         _check.integer("segments", self.segments, lo=2)
@@ -190,11 +195,13 @@ class ExactFRCOptions:
         _check.flag("branch_switching", self.branch_switching)
         _check.flag("period_doubling", self.period_doubling)
         _check.choice("velocity_scale", self.velocity_scale, ("fastest", "omega"))
+        _check.flag("angle_step", self.angle_step)
 
     def continuation(self, max_steps: int) -> ContinuationOptions:
         # tol bounds the last Newton step: the error after it is ~ its square (quadratic convergence)
         return ContinuationOptions(ds=self.ds, ds_max=self.ds_max, ds_min=self.ds_min, max_steps=max_steps,
-                                   max_iter=self.max_iter, max_angle_deg=self.max_angle_deg, tol=CORRECTOR_TOL)
+                                   max_iter=self.max_iter, max_angle_deg=self.max_angle_deg, tol=CORRECTOR_TOL,
+                                   angle_step=self.angle_step)
 
 
 # -- symmetries ----------------------------------------------------------------------------------
