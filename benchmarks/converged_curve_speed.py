@@ -109,7 +109,8 @@ def main(argv: list[str] | None = None) -> int:
         head.append({"what": f"converged main curve with stability, {scene.name} {P:g} N ({r0['method']}: HB guesses "
                              f"{np.median([r['hb_cpu_s'] for r in mine]):.1f} s + main family "
                              f"{np.median([r['main_cpu_s'] for r in mine]):.1f} s, {r0['points']} points over "
-                             f"{r0['freq_min_hz']}-{r0['freq_max_hz']} Hz), CPU seconds (median of {args.repeats}; "
+                             f"{r0['freq_min_hz']}-{r0['freq_max_hz']} Hz, ended: {r0['status']}), CPU seconds "
+                             f"(median of {args.repeats}; "
                              f"wall {wall:.1f} s)",
                      "ours_s": round(cpu, 2), "baseline": "", "baseline_s": "", "ratio": "", "error": "",
                      "target": f"<= {TARGET_S:g} s CPU", "met": bool(cpu <= TARGET_S)})

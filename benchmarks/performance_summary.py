@@ -39,6 +39,9 @@ SOURCES = (
      "largest residual over its round-off floor, over all sizes and modes"),
     ("fep_headline.csv", "fep_machine.csv", "frequency-energy study (NNMs by HB and shooting)",
      "python benchmarks/fep_speed.py --repeats 3", ""),
+    ("converged_curve_headline.csv", "converged_curve_machine.csv",
+     "converged main curve with stability per level (issue 25)",
+     "PYTHONPATH=. python benchmarks/converged_curve_speed.py --repeats 2", ""),
     ("job_headline.csv", "job_machine.csv", "the main job and the test suite, whole",
      "PYTHONPATH=. python benchmarks/job_times.py", ""),
 )
@@ -100,6 +103,13 @@ LIMITS = (
      "the factorization beside the Krylov start (same bits, 0.3 s wall), the springs' and tip masses' entries merged "
      "into K and M by a numba CSR merge (same bits, 0.2-0.5 s CPU), has_pardiso without importing pypardiso (0.5-0.9 "
      "s CPU a process). Left untried: a start block from a coarse-mesh solution (changes the bits)"),
+    ("converged main curve with stability, discrete-frc 10 N",
+     "measured under load 8-10 (2026-11-27 06:35 UTC): 18 s CPU, half of it the HB curve at H = 15 that only supplies "
+     "the first orbit's guesses, half the main exact family (2696 points, 26.8-953 Hz, each with its monodromy). "
+     "The main family's path is not robust to round-off at the tongues' lower folds (clusters of grazings: the "
+     "contact events per period go 12, 14, 12, 14, 6 within 1e-4 of arclength, and a step of up to grazing_ds = "
+     "2e-2 may cross several at once); with grazing_ds = 1e-3 the family is the same under a corrector stopped one "
+     "Newton step earlier (17.13-956 Hz, 36 folds, 13 stability changes) but costs 32-38 s CPU"),
     ("main job, bearingshaft run",
      "measured on a quiet machine after warming the reduced-model cache (2026-11-27 04:43 UTC, load 0.9 at the "
      "start): 359 s wall, 705 s CPU on 2 workers; the session before: 451 s, 833 s. Cut this session: the meshing "
