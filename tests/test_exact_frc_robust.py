@@ -30,22 +30,23 @@ def test_corrector_tol_reaches_the_continuation():
         ef.ExactFRCOptions(corrector_tol=0.0)
 
 
-def _main_family(monkeypatch, P, **opts):
+def _main_family(monkeypatch, P, grazing_ds, **opts):
+    """The stage's main family of discrete-frc at P N (its HB guesses, no switching) with these options."""
     scene = load_scene("discrete-frc")
     spec = replace(scene.frc, branch_switching=False, cover_families=0)
     system, rows = model_system(scene.model)
     names = tuple(scene.model.point_names)
     b = load_vector(spec, rows, names)
     br = sf._curve(system, b, P, spec, spec.harmonics, rows, names, hill_points=0)
-    monkeypatch.setattr(sf, "ExactFRCOptions", functools.partial(ef.ExactFRCOptions, **opts))
+    monkeypatch.setattr(sf, "ExactFRCOptions", functools.partial(ef.ExactFRCOptions, grazing_ds=grazing_ds, **opts))
     return sf.converged_curve(system, b, P, spec, br, rows, names).exact.families[0]
 
 
 @pytest.mark.slow
 @pytest.mark.filterwarnings("ignore")
 def test_main_family_at_10N_does_not_move_with_the_corrector_tolerance(monkeypatch):
-    a = _main_family(monkeypatch, 10.0, grazing_ds=1e-3)
-    b = _main_family(monkeypatch, 10.0, grazing_ds=1e-3, corrector_tol=10 * ef.CORRECTOR_TOL)
+    a = _main_family(monkeypatch, 10.0, 1e-3)
+    b = _main_family(monkeypatch, 10.0, 1e-3, corrector_tol=10 * ef.CORRECTOR_TOL)
     for f in (a, b):  # the whole main family: from the lowest tongue to past the band's top
         assert f.freq_hz.min() == pytest.approx(17.1333, abs=1e-4)
         assert f.freq_hz.max() > 900.0

@@ -510,12 +510,6 @@ class FRCSpec:
         families found do not depend on the machine or its load.
     shooting_steps : int
         Points of the main exact family at most.
-    shooting_grazing_ds : float
-        Longest continuation step of the exact families allowed to change the number of contact events
-        per period (:class:`reduced.periodic.exact_frc.ExactFRCOptions` ``grazing_ds``). At the lower folds
-        of the tongues in contact several grazings follow within 1e-4 of arclength: with the default 2e-2
-        the path through them depends on round-off; 1e-3 makes the main family the same under a perturbed
-        corrector (tests/test_exact_frc_robust.py) at 3-4x its CPU time.
     map_step_hz : float
         Hz, the response map's step over the contact band (issue 25; 0: no map).
     map_coarse_points : int
@@ -567,7 +561,6 @@ class FRCSpec:
     found_family_switches: int = 1  # families switched onto from each family of a verdict or close return
     switching_max_s: float = 0.0  # s, wall time per level after which no new family is started (0: none, reproducible)
     shooting_steps: int = 30000  # points of the main exact family at most
-    shooting_grazing_ds: float = 2e-2  # longest exact-family step that may change the contact events (1e-3: robust)
 
     def __post_init__(self) -> None:
         each(self, "levels_N", lambda v: v > 0, "> 0 N")
@@ -594,7 +587,6 @@ class FRCSpec:
         check(self.curve in FRC_CURVES, f"curve must be one of {', '.join(FRC_CURVES)}, got {self.curve!r}")
         tolerance(self, "hb_converged_tol")
         check(self.switching_max_s >= 0, f"switching_max_s must be >= 0 s, got {self.switching_max_s!r}")
-        positive(self, "shooting_grazing_ds")
         for key in ("period_doubling_families", "period_doubling_depth", "cover_families", "verdict_points",
                     "close_return_families", "close_return_tries", "found_family_switches"):
             check(getattr(self, key) >= 0, f"{key} must be >= 0, got {getattr(self, key)!r}")

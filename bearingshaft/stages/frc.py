@@ -319,7 +319,7 @@ def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: 
                            period_doubling_families=spec.period_doubling_families,
                            period_doubling_depth=spec.period_doubling_depth,
                            period_doubling_steps=spec.period_doubling_steps, cover_families=spec.cover_families,
-                           deadline_s=spec.switching_max_s or math.inf, grazing_ds=spec.shooting_grazing_ds)
+                           deadline_s=spec.switching_max_s or math.inf)
     in_contact = _in_contact(system, br) if ok else np.zeros(0, bool)
     try:
         if ok:  # the HB orbits at f_min, then at points spread over the curve (where HB is far from exact)
