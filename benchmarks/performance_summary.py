@@ -108,8 +108,9 @@ LIMITS = (
      "the first orbit's guesses, half the main exact family (2696 points, 26.8-953 Hz, each with its monodromy). "
      "The main family's path is not robust to round-off at the tongues' lower folds (clusters of grazings: the "
      "contact events per period go 12, 14, 12, 14, 6 within 1e-4 of arclength, and a step of up to grazing_ds = "
-     "2e-2 may cross several at once); with grazing_ds = 1e-3 the family is the same under a corrector stopped one "
-     "Newton step earlier (17.13-956 Hz, 36 folds, 13 stability changes) but costs 32-38 s CPU"),
+     "2e-2 may cross several at once); with grazing_ds = 1e-3 (ExactFRCOptions) the family is the same under a corrector "
+     "stopped one Newton step earlier or later or with its tolerance x10 (17.13 Hz to past 900 Hz, the same 36 folds, "
+     "stable from 26.82 Hz up) but costs 24-38 s CPU (tests/test_exact_frc_robust.py, slow)"),
     ("main job, bearingshaft run",
      "measured on a quiet machine after warming the reduced-model cache (2026-11-27 04:43 UTC, load 0.9 at the "
      "start): 359 s wall, 705 s CPU on 2 workers; the session before: 451 s, 833 s. Cut this session: the meshing "
