@@ -168,6 +168,13 @@ class ContinuationOptions:
         At or below this step a larger turn is a corner of the branch: accepted.
     tol : float
         Newton tolerance of the start point and the correctors.
+    angle_step : bool
+        Step control from the tangent's turn as well (False: by the Newton iterations alone, the rule
+        above). A step that turned the tangent by theta (a converged corrector) is followed by
+        ``ds * min(growth, 0.8 max_angle / theta)`` (also when it needs a shorter one), and one refused
+        because theta > max_angle is retried at ``ds * min(0.5, max(0.1, 0.8 max_angle / theta))``:
+        the turn of a smooth stretch grows like its step (theta ~ kappa ds), so the next step aims
+        at 0.8 ``max_angle`` instead of being halved until it fits.
 
     Raises
     ------
@@ -195,12 +202,14 @@ class ContinuationOptions:
     max_angle_deg: float = 15.0  # deg, largest turn of the tangent over one step (above corner_ds)
     corner_ds: float = 1e-3  # at or below this step a larger turn is a corner of the branch: accepted
     tol: float = 1e-10  # Newton tolerance of the start point and the correctors
+    angle_step: bool = False  # the step also from the tangent's turn (ds * 0.8 max_angle / theta)
 
     def __post_init__(self) -> None:
         for key in ("ds", "ds_min", "ds_max", "growth", "max_angle_deg", "corner_ds", "tol"):
             _check.positive(key, getattr(self, key))
         for key in ("max_steps", "max_iter", "good_iter"):
             _check.integer(key, getattr(self, key))
+        _check.flag("angle_step", self.angle_step)
 
     def replace(self, **changes) -> ContinuationOptions:
         """These options with the fields ``changes`` replaced (checked again); ``self`` if none."""
@@ -288,7 +297,7 @@ def continue_branch(
         for c in watch:
             if t[c] * tn[c] < 0.0:
                 folds.append((len(ys), c))
-        y, t = res.y, tn
+        y, t, t_old = res.y, tn, t
         ys.append(y)
         ts.append(t)
         dss.append(ds)
@@ -300,7 +309,11 @@ def continue_branch(
         if stop is not None and stop(y):
             status = "stop"
             break
-        if res.n_iter <= opt.good_iter:
+        if opt.angle_step and not corner:
+            ds = min(ds * _angle_factor(float(t_old @ t), opt), opt.ds_max)
+            if res.n_iter > opt.good_iter:
+                ds = min(ds, dss[-1])
+        elif res.n_iter <= opt.good_iter:
             ds = min(ds * opt.growth, opt.ds_max)
     return Branch(np.array(ys), np.array(ts), np.array(dss), np.array(its), folds, status, n_rej,
                   time.perf_counter() - t_wall, data, corners)
@@ -326,6 +339,13 @@ def _start_point(fun, y0: np.ndarray, param: int, direction: float, tol: float) 
     if t[param] * direction < 0.0:
         t = -t
     return start.y, t, start.n_iter
+
+
+def _angle_factor(cos_turn: float, opt: ContinuationOptions) -> float:
+    """Factor of the next step after a step that turned the tangent by arccos(cos_turn): the step whose
+    turn would be 0.8 ``max_angle_deg`` on a stretch of constant curvature, at most ``growth``."""
+    theta = math.degrees(math.acos(min(max(cos_turn, -1.0), 1.0)))
+    return opt.growth if theta <= 0.0 else min(opt.growth, 0.8 * opt.max_angle_deg / theta)
 
 
 def _max_jump(h: float, corner_ds: float) -> float:
@@ -368,10 +388,12 @@ def _advance(fun, y: np.ndarray, t: np.ndarray, ds: float, opt: ContinuationOpti
             if turn_ok and (reject is None or not (reject(y, res.y, tn) if getattr(reject, "takes_tangent", False)
                                                    else reject(y, res.y))):
                 return res, tn, ds, n_rej, False
+            # a turn beyond max_angle (angle_step): aim at 0.8 max_angle, not merely half the step
+            cut = 0.5 if turn_ok or not opt.angle_step else min(0.5, max(0.1, _angle_factor(float(tn @ t), opt)))
         except NewtonError:
-            pass
+            cut = 0.5
         n_rej += 1
-        ds *= 0.5
+        ds *= cut
         if ds < opt.ds_min:
             corner = _corner_step(fun, y, t, watch, param, opt.corner_ds, opt.tol, opt.max_iter, reject)
             if corner is None:

@@ -19,6 +19,15 @@ sheet:
   1e-5 in the scaled unknowns), and a corner step fixes the coordinates of the largest tangent
   components (:func:`reduced.periodic.continuation.continue_branch`'s ``corner_coords``).
 
+**Round-off.** At the lower folds of the tongues the contact events per period change several times
+within 1e-4 of arclength (discrete-frc 10 N at 37.027 Hz: 12, 14, 12, 14, 6 events); a step up to
+``grazing_ds`` = 2e-2 may cross several of these grazings at once, and the sheet it lands on then
+depends on round-off (a corrector stopped one Newton step earlier turns that level's main family
+from 26.8-953 Hz into 17.1-38.2 Hz; both paths are smooth, symmetric to 1e-11, and part where they
+leave the fold at 37.026996 Hz). With ``grazing_ds`` = 1e-3 the family is the same under the corrector
+perturbed (one Newton step fewer or more, ``corrector_tol`` x 10): 17.13-956 Hz, the same 36 folds,
+the same stable stretches, at 3-4x the points and CPU time (tests/test_exact_frc_robust.py).
+
 **Stability** of each point: the Floquet multipliers, eigenvalues of the monodromy (the product
 of the segments' monodromies, exact for the exact orbit). **Symmetry.** The three-mass model
 driven at x2 is invariant under the mirror x1 <-> x3 (a signed permutation R of the DOFs:
@@ -149,6 +158,13 @@ class ExactFRCOptions:
         With Omega the ringing of a fast mode between impacts, whose phase at the nodes spins
         as Omega changes, dominates a step's length (its velocity is Omega_mode / Omega times its
         displacement): the curve takes several times more points for the same resolution.
+    corrector_tol : float
+        Relative size of a corrector's last Newton step (the point is then within about its square
+        of the curve).
+    angle_step : bool
+        The step also from the tangent's turn (:class:`reduced.periodic.continuation.ContinuationOptions`
+        ``angle_step``); off by default: the paths through the clusters of grazings at the tongues'
+        folds depend on the step sequence, so a different step control follows other sheets there.
     """
 
     segments: int = SEGMENTS
@@ -171,12 +187,14 @@ class ExactFRCOptions:
     cover_steps: int = 1000
     deadline_s: float = math.inf
     velocity_scale: str = "fastest"
+    corrector_tol: float = CORRECTOR_TOL
+    angle_step: bool = False
 
     def __post_init__(self) -> None:
         _check.integer("segments", self.segments, lo=2)
         if self.segments % 2:
             raise _check.InvalidArgument(f"segments must be even, got {self.segments}")
-        for key in ("ds", "ds_max", "ds_min", "max_angle_deg", "grazing_ds"):
+        for key in ("ds", "ds_max", "ds_min", "max_angle_deg", "grazing_ds", "corrector_tol"):
             _check.positive(key, getattr(self, key))
         if not self.deadline_s > 0.0:
             raise _check.InvalidArgument(f"deadline_s must be > 0 s, got {self.deadline_s!r}")
@@ -190,11 +208,13 @@ class ExactFRCOptions:
         _check.flag("branch_switching", self.branch_switching)
         _check.flag("period_doubling", self.period_doubling)
         _check.choice("velocity_scale", self.velocity_scale, ("fastest", "omega"))
+        _check.flag("angle_step", self.angle_step)
 
     def continuation(self, max_steps: int) -> ContinuationOptions:
         # tol bounds the last Newton step: the error after it is ~ its square (quadratic convergence)
         return ContinuationOptions(ds=self.ds, ds_max=self.ds_max, ds_min=self.ds_min, max_steps=max_steps,
-                                   max_iter=self.max_iter, max_angle_deg=self.max_angle_deg, tol=CORRECTOR_TOL)
+                                   max_iter=self.max_iter, max_angle_deg=self.max_angle_deg, tol=self.corrector_tol,
+                                   angle_step=self.angle_step)
 
 
 # -- symmetries ----------------------------------------------------------------------------------
