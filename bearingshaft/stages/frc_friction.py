@@ -205,14 +205,14 @@ def _continued(spec, br, checks: list, rows: np.ndarray, verdicts: list | None =
     out, switched = [], []
     for start in starts:
         a0 = np.max(np.abs(start.orbit(SHOOT_SAMPLES // 10)[1][:, :rows.shape[1]] @ rows.T), axis=0)
-        if _meets(done, start.freq_hz, a0):
+        if _meets(_of_period(done, 1), start.freq_hz, a0):
             continue
         kw = dict(max_steps=half, point_rows=rows, ds=SHOOT_CONTINUATION_DS, ds_max=SHOOT_CONTINUATION_DS_MAX,
                   leave_contact=True)
         down = continue_friction(start, spec.freq_min_hz, spec.freq_max_hz, direction=-1.0,
-                                 stop=lambda f, a: _met(done, [], f, a), **kw)
+                                 stop=lambda f, a: _met(_of_period(done, 1), [], f, a), **kw)
         up = continue_friction(start, spec.freq_min_hz, spec.freq_max_hz, direction=1.0,
-                               stop=lambda f, a, down=down: _met(done, [down], f, a), **kw)
+                               stop=lambda f, a, down=down: _met(_of_period(done, 1), [down], f, a), **kw)
         branch = joined(down, up)
         done.append(branch)
         out.append(_against_hb(branch, br))
@@ -230,12 +230,13 @@ def _switched(spec, br, start, curve, number: int, done: list, kw: dict) -> list
     continued before it, the one it left included: then it is that branch's other side, not a new family), added
     to ``done``; returns the new families' ShootingCurves. A new family's own bifurcations are not switched at
     (the CPU budget)."""
-    cont_kw = dict(kw, max_steps=SWITCH_STEPS, band=(spec.freq_min_hz, spec.freq_max_hz),
-                   stop=lambda f, a: _met(done, [], f, a))
     out = []
     for i, kind in curve.branch.bifurcations:
         if kind not in SWITCH_KINDS:
             continue
+        q = 2 * curve.branch.periods if kind == "period_doubling" else curve.branch.periods  # the new family's period
+        cont_kw = dict(kw, max_steps=SWITCH_STEPS, band=(spec.freq_min_hz, spec.freq_max_hz),
+                       stop=lambda f, a, q=q: _met(_of_period(done, q), [], f, a))
         sw = switch_branch(start, curve.branch, int(i), kind, continue_kw=cont_kw)
         curve.switches.append(sw)
         if sw.branch is not None and all("met a branch" in w for w in sw.branch.status.split("; up: ")):
@@ -248,6 +249,12 @@ def _switched(spec, br, start, curve, number: int, done: list, kw: dict) -> list
             new.origin = f"switched at branch {number}'s {kind} near {sw.freq_hz:.5g} Hz"
             out.append(new)
     return out
+
+
+def _of_period(branches: list, periods: int) -> list:
+    """The branches whose orbits have period ``periods`` T (a period-doubled family's amplitudes, over 2T, meet its
+    T branch's at the bifurcation: it is not that branch)."""
+    return [b for b in branches if b.periods == periods]
 
 
 def _met(done: list, own: list, f: float, a: np.ndarray) -> str | None:

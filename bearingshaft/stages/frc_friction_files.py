@@ -84,7 +84,8 @@ def check_rows(result) -> list[dict]:
 
 
 def shooting_rows(result) -> list[dict]:
-    """frc_friction_shooting.csv: per level and continued exact orbit, its frequency, the amplitudes shot and of the
+    """frc_friction_shooting.csv: per level and continued exact orbit, its period in forcing periods (2: a
+    period-doubled family), its frequency, the amplitudes shot (over its period) and of the
     HB curve nearest them, their largest relative difference, the largest |multiplier| and both verdicts, the
     defect, the rank and the corrector steps.
 
@@ -97,7 +98,7 @@ def shooting_rows(result) -> list[dict]:
         for m, sc in enumerate(_curves(scs)):
             br, err = sc.branch, sc.rel_error
             for i in range(len(br.freq_hz)):
-                row = {"level_N": P, "branch": m + 1, "freq_hz": float(br.freq_hz[i])}
+                row = {"level_N": P, "branch": m + 1, "periods": int(br.periods), "freq_hz": float(br.freq_hz[i])}
                 for k, n in enumerate(result.names):
                     row.update({f"{n}_shoot_m": float(br.amplitude_m[i, k]), f"{n}_hb_m": float(sc.hb_m[i, k])})
                 hs = sc.hb_stable[i]
@@ -165,11 +166,13 @@ def shooting_markdown(result) -> list[str]:
             bif = ", ".join(f"[{labels[(PP, mm, i)]}] {k} near {f:.5g} Hz"
                             for PP, mm, i, f, k in _bifurcation_labels(result) if (PP, mm) == (P, m + 1)) or "none"
             origin = f" ({sc.origin})" if sc.origin else ""
+            origin += " (period 2T: the period-doubled family)" if br.periods == 2 else ""
             lines += [f"- {P:g} N, branch {m + 1}{origin}: {len(br.freq_hz)} orbits, {br.freq_hz.min():.5g}-"
                       f"{br.freq_hz.max():.5g} Hz (start {br.freq_hz[np.argmax(br.n_corrector == 0)]:.5g} Hz; "
                       f"{br.status}); {int(np.sum(br.stable))} stable; worst defect {float(np.max(br.defect)):.2g}; "
                       f"bifurcations (numbered as in frc.png): {bif}."]
         lines.append("")
+        lines += coverage_lines(result, P)
         lines += ["| level [N] | branch | from [Hz] | to [Hz] | points | HB vs shooting | stable (shooting) | "
                   "stable (Hill on HB) |", "|---|---|---|---|---|---|---|---|"]
         for m, sc in enumerate(_curves(scs)):
@@ -185,6 +188,99 @@ def shooting_markdown(result) -> list[str]:
     return lines
 
 
+def intervals(pairs) -> list[tuple[float, float]]:
+    """The union of closed intervals [a, b] (a <= b or not), merged where they touch or overlap, in order.
+
+    Examples
+    --------
+    >>> intervals([(3.0, 4.0), (1.0, 2.0), (2.0, 1.5), (3.5, 5.0)])
+    [(1.0, 2.0), (3.0, 5.0)]
+    """
+    out: list = []
+    for a, b in sorted(tuple(sorted((float(a), float(b)))) for a, b in pairs):
+        if out and a <= out[-1][1]:
+            out[-1] = (out[-1][0], max(out[-1][1], b))
+        else:
+            out.append((a, b))
+    return out
+
+
+def clip(ivs, band) -> list[tuple[float, float]]:
+    """The intervals ``ivs`` (merged, :func:`intervals`) intersected with the union ``band``.
+
+    Examples
+    --------
+    >>> clip([(1.0, 3.0), (5.0, 6.0)], [(2.0, 5.5)])
+    [(2.0, 3.0), (5.0, 5.5)]
+    """
+    out = []
+    for a, b in intervals(ivs):
+        for c, d in band:
+            lo, hi = max(a, c), min(b, d)
+            if lo < hi:
+                out.append((lo, hi))
+    return intervals(out)
+
+
+def complement(ivs, band) -> list[tuple[float, float]]:
+    """The parts of the union ``band`` not in the intervals ``ivs``.
+
+    Examples
+    --------
+    >>> complement([(2.0, 3.0)], [(1.0, 4.0)])
+    [(1.0, 2.0), (3.0, 4.0)]
+    """
+    out = []
+    for c, d in band:
+        lo = c
+        for a, b in clip(ivs, [(c, d)]):
+            if a > lo:
+                out.append((lo, a))
+            lo = max(lo, b)
+        if lo < d:
+            out.append((lo, d))
+    return out
+
+
+def contact_band(br) -> list[tuple[float, float]]:
+    """The frequency intervals of the HB curve ``br`` where a slider's tip touches over part of the period at two
+    consecutive points (open fraction below 1: AFT's slider states), merged."""
+    touch = [bool(np.any(br.balance.slider_state(z)[:, 0] < 1.0)) for z in br.z]
+    return intervals((br.freq_hz[i - 1], br.freq_hz[i]) for i in range(1, len(touch)) if touch[i] and touch[i - 1])
+
+
+def coverage(result, P: float) -> tuple[list, list, list] | None:
+    """(contact band, covered, not covered) at level P: the HB curve's contact band (:func:`contact_band`), the parts
+    of it the continued exact orbits' branches span (each branch from its lowest to its highest frequency), and the
+    rest; None where there is no HB curve or no continued branch."""
+    br = result.curves.get(P)
+    curves = _curves(result.shooting.get(P, []))
+    if br is None or isinstance(br, Exception) or not curves:
+        return None
+    band = contact_band(br)
+    cov = clip([(float(c.branch.freq_hz.min()), float(c.branch.freq_hz.max())) for c in curves], band)
+    return band, cov, complement(cov, band)
+
+
+def coverage_lines(result, P: float) -> list[str]:
+    """frc.md's statement of what the continued exact orbits cover of level P's contact band, and what not."""
+    def hz(ivs):
+        return ", ".join(f"{a:.4g}-{b:.4g}" for a, b in ivs) or "none"
+
+    def width(ivs):
+        return sum(b - a for a, b in ivs)
+
+    c = coverage(result, P)
+    if c is None:
+        return []
+    band, cov, rest = c
+    return [f"**Coverage of the contact band at {P:g} N** (each branch from its lowest to its highest frequency): "
+            f"contact band (HB: a tip touches over part of the period) {hz(band)} Hz "
+            f"({width(band):.3g} Hz); covered by continued exact orbits {hz(cov)} Hz ({width(cov):.3g} Hz, "
+            f"{100 * width(cov) / max(width(band), 1e-300):.0f} %); not covered {hz(rest)} Hz ({width(rest):.3g} Hz: "
+            "there the drawn curve is HB's, faint where HB is not converged in H).", ""]
+
+
 def _switch_lines(P: float, curves: list, labels: dict) -> list[str]:
     """frc.md's list of the branch switching tried at one level's folds and branch points, with each outcome."""
     tried = [(m, sw) for m, sc in enumerate(curves) for sw in sc.switches]
@@ -194,7 +290,10 @@ def _switch_lines(P: float, curves: list, labels: dict) -> list[str]:
              "each fold and branch point whose real multiplier outside the circle is nearest +1, the orbit perturbed "
              "by 1e-2 D along its eigenvector (then 1e-1 D where both signs return), propagated to the 8 nodes by the "
              "exact state transition matrices, and Newton at that frequency from either sign; an orbit off the branch "
-             "is a new family, continued both ways; a period doubling would need the 2T orbit: not run):",
+             "is a new family, continued both ways; at a period doubling the same from the orbit taken twice, Newton "
+             "over two forcing periods (16 nodes), an orbit whose two halves differ being the period-doubled family, "
+             "continued both ways with its multipliers over 2T; no switch where the critical multiplier beside the "
+             "crossing is more than 1 from +-1: it jumped across the circle at a non-smooth transition):",
              ""]
     for m, sw in tried:
         at = labels.get((P, m + 1, int(sw.index)))

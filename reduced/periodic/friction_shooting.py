@@ -147,6 +147,8 @@ class FrictionShootingResult:
     history : max |R| at each Newton step
     message : how Newton ended
     wall_s : s
+    periods : the orbit's period in forcing periods (1: T; 2: the period-doubled orbit, nodes at t_k = k 2T / S,
+        ``period_defect`` and the multipliers over 2T)
     """
 
     system: GapSystem
@@ -167,6 +169,7 @@ class FrictionShootingResult:
     history: list = field(default_factory=list)
     message: str = ""
     wall_s: float = 0.0
+    periods: int = 1
 
     @property
     def max_abs_multiplier(self) -> float:
@@ -180,9 +183,10 @@ class FrictionShootingResult:
 
     def orbit(self, samples_per_segment: int = 200) -> tuple[np.ndarray, np.ndarray]:
         """(t (S m + 1,) s, y (S m + 1, 2n + p)): the orbit over one period, each segment run from its own node
-        (no growth of the defect along the period), m = ``samples_per_segment``; the first node again at T."""
+        (no growth of the defect along the period), m = ``samples_per_segment``; the first node again at T (over
+        ``periods`` T)."""
         S = self.nodes.shape[0]
-        h = 1.0 / self.freq_hz / S
+        h = self.periods / self.freq_hz / S
         m = int(samples_per_segment)
         y = np.empty((S * m + 1, self.nodes.shape[1]))
         for k in range(S):
@@ -305,10 +309,10 @@ class _Residual:
     """R(Y) and its finite-difference Jacobian for the multiple-shooting equations, in the coordinates
     z = [x; v; d], d = Bt x - w the sliders' stretches (module docstring)."""
 
-    def __init__(self, system, b, P, f, phase_deg, S, D, flows: FrictionFlow | None = None):
+    def __init__(self, system, b, P, f, phase_deg, S, D, flows: FrictionFlow | None = None, periods: int = 1):
         self.args = (system, b, P, f)
         self.phase, self.S, self.D = phase_deg, S, D
-        self.h = 1.0 / f / S
+        self.h = periods / f / S  # the orbit's period is ``periods`` forcing periods
         self.n, self.Bt = system.n, system.friction.Bt
         # the lean flow (its set-up once for all the runs of the system and load; the same bits as flow())
         self.flows = FrictionFlow(system, b, P) if flows is None else flows
@@ -427,7 +431,7 @@ def _newton(res: _Residual, Y: np.ndarray, tol: float, max_iter: int) -> tuple:
 
 def shoot_friction(system: GapSystem, load: np.ndarray, amplitude_N: float, freq_hz: float, nodes: np.ndarray, *,
                    phase_deg: float = 0.0, x_ref: float | None = None, tol: float = TOL, max_iter: int = MAX_ITER,
-                   multipliers: bool = True) -> FrictionShootingResult:
+                   multipliers: bool = True, periods: int = 1) -> FrictionShootingResult:
     """The forced periodic orbit with friction nearest the guessed nodes, by multiple shooting (module docstring).
 
     Solves R_k = (phi(y_k; t_k, T / S) - y_{k+1}) / D = 0 for the S nodes y_k = [x; v; w] at t_k = k T / S
@@ -449,6 +453,8 @@ def shoot_friction(system: GapSystem, load: np.ndarray, amplitude_N: float, freq
     tol : max |R| at convergence, in units of D
     max_iter : Newton steps at most
     multipliers : compute the monodromy and the multipliers at convergence
+    periods : the orbit's period in forcing periods, q T (q = 2: the period-doubled family; the nodes at
+        t_k = k q T / S, the residual R_k = (phi(y_k; t_k, q T / S) - y_{k+1}) / D, the multipliers over q T)
 
     Returns
     -------
@@ -479,24 +485,25 @@ def shoot_friction(system: GapSystem, load: np.ndarray, amplitude_N: float, freq
     if Y.ndim != 2 or Y.shape[1] != 2 * n + p or not np.all(np.isfinite(Y)):
         raise _check.InvalidArgument(f"nodes must be finite, of shape (S, {2 * n + p}), got {Y.shape}")
     max_iter = _check.integer("max_iter", max_iter, lo=0)
+    q = _check.integer("periods", periods, lo=1)
     if x_ref is None:
         x_ref = float(np.max(np.abs(Y[:, :n]))) or 1.0
     x_ref = _check.positive("x_ref", x_ref, "m")
     S = Y.shape[0]
     omega = 2.0 * math.pi * f
     D = np.concatenate([np.full(n, x_ref), np.full(n, omega * x_ref), np.full(p, x_ref)])
-    res = _Residual(system, b, P, f, float(phase_deg), S, D)
+    res = _Residual(system, b, P, f, float(phase_deg), S, D, periods=q)
     t0 = time.perf_counter()
     try:
         Y, ok, r, it, rank, history, msg = _newton(res, Y, float(tol), max_iter)
     except ExactIntegratorError as exc:
         return FrictionShootingResult(system, b, P, f, float(phase_deg), Y, D, False, math.nan, math.nan, 0, 0,
                                       S * (2 * n + p), message=f"the exact integrator failed: {exc}",
-                                      wall_s=time.perf_counter() - t0)
+                                      wall_s=time.perf_counter() - t0, periods=q)
     out = FrictionShootingResult(system, b, P, f, float(phase_deg), Y, D, ok, r, math.nan, it, int(rank),
-                                 S * (2 * n + p), history=history, message=msg)
+                                 S * (2 * n + p), history=history, message=msg, periods=q)
     if ok:
-        end = flow(system, b, P, f, Y[0], 0.0, 1.0 / f, 1, float(phase_deg))[-1]
+        end = flow(system, b, P, f, Y[0], 0.0, q / f, 1, float(phase_deg))[-1]
         out.period_defect = float(np.max(np.abs(end - Y[0]) / D))
         if multipliers:
             out.monodromy = res.monodromy(Y)
