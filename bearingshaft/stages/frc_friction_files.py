@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from bearingshaft.output import write_rows
+from bearingshaft.stages.frc_friction_bands import clip, complement, contact_band
 from bearingshaft.stages.frc_friction_results import SKIPPED, ShootingCurve
 
 AGREE = (1e-3, 1e-2, 1e-1)  # the bands of |HB / shooting - 1| the agreement table counts points in
@@ -26,6 +27,7 @@ def write(result, writer) -> None:
     write_rows(writer.path("frc.csv"), curve_rows(result))
     write_rows(writer.path("frc_friction_checks.csv"), check_rows(result))
     write_rows(writer.path("frc_friction_shooting.csv"), shooting_rows(result))
+    write_rows(writer.path("frc_friction_sweep.csv"), sweep_rows(result))
     writer.stats["frc"] = {"friction": True, **result.stats}
     writer.path("frc.md").write_text(markdown(result), encoding="utf-8")
     _plot(writer.path("frc.png"), result)
@@ -188,78 +190,118 @@ def shooting_markdown(result) -> list[str]:
     return lines
 
 
-def intervals(pairs) -> list[tuple[float, float]]:
-    """The union of closed intervals [a, b] (a <= b or not), merged where they touch or overlap, in order.
-
-    Examples
-    --------
-    >>> intervals([(3.0, 4.0), (1.0, 2.0), (2.0, 1.5), (3.5, 5.0)])
-    [(1.0, 2.0), (3.0, 5.0)]
-    """
-    out: list = []
-    for a, b in sorted(tuple(sorted((float(a), float(b)))) for a, b in pairs):
-        if out and a <= out[-1][1]:
-            out[-1] = (out[-1][0], max(out[-1][1], b))
-        else:
-            out.append((a, b))
-    return out
+def _sweeps(result, P: float) -> list:
+    """[(f_from, f_to, FrictionSweep)] of level P ([] where the grid did not run)."""
+    sw = (getattr(result, "sweeps", {}) or {}).get(P)
+    return sw if isinstance(sw, list) else []
 
 
-def clip(ivs, band) -> list[tuple[float, float]]:
-    """The intervals ``ivs`` (merged, :func:`intervals`) intersected with the union ``band``.
+def coverage(result, P: float) -> tuple[list, list, list, list] | None:
+    """(contact band, covered by the branches, covered by branches and grid, not covered) at level P: the HB curve's
+    contact band (:func:`contact_band`), the parts of it the continued exact orbits' branches span (each branch from
+    its lowest to its highest frequency), those and the grid's orbits (each converged grid frequency standing for
+    the half step either side of it), and the rest; None where there is no HB curve or no continued branch."""
+    from bearingshaft.stages.frc_friction import SWEEP_STEP_HZ
 
-    Examples
-    --------
-    >>> clip([(1.0, 3.0), (5.0, 6.0)], [(2.0, 5.5)])
-    [(2.0, 3.0), (5.0, 5.5)]
-    """
-    out = []
-    for a, b in intervals(ivs):
-        for c, d in band:
-            lo, hi = max(a, c), min(b, d)
-            if lo < hi:
-                out.append((lo, hi))
-    return intervals(out)
-
-
-def complement(ivs, band) -> list[tuple[float, float]]:
-    """The parts of the union ``band`` not in the intervals ``ivs``.
-
-    Examples
-    --------
-    >>> complement([(2.0, 3.0)], [(1.0, 4.0)])
-    [(1.0, 2.0), (3.0, 4.0)]
-    """
-    out = []
-    for c, d in band:
-        lo = c
-        for a, b in clip(ivs, [(c, d)]):
-            if a > lo:
-                out.append((lo, a))
-            lo = max(lo, b)
-        if lo < d:
-            out.append((lo, d))
-    return out
-
-
-def contact_band(br) -> list[tuple[float, float]]:
-    """The frequency intervals of the HB curve ``br`` where a slider's tip touches over part of the period at two
-    consecutive points (open fraction below 1: AFT's slider states), merged."""
-    touch = [bool(np.any(br.balance.slider_state(z)[:, 0] < 1.0)) for z in br.z]
-    return intervals((br.freq_hz[i - 1], br.freq_hz[i]) for i in range(1, len(touch)) if touch[i] and touch[i - 1])
-
-
-def coverage(result, P: float) -> tuple[list, list, list] | None:
-    """(contact band, covered, not covered) at level P: the HB curve's contact band (:func:`contact_band`), the parts
-    of it the continued exact orbits' branches span (each branch from its lowest to its highest frequency), and the
-    rest; None where there is no HB curve or no continued branch."""
     br = result.curves.get(P)
     curves = _curves(result.shooting.get(P, []))
     if br is None or isinstance(br, Exception) or not curves:
         return None
     band = contact_band(br)
-    cov = clip([(float(c.branch.freq_hz.min()), float(c.branch.freq_hz.max())) for c in curves], band)
-    return band, cov, complement(cov, band)
+    spans = [(float(c.branch.freq_hz.min()), float(c.branch.freq_hz.max())) for c in curves]
+    grid = [(f - 0.5 * SWEEP_STEP_HZ, f + 0.5 * SWEEP_STEP_HZ) for _, _, sw in _sweeps(result, P)
+            for f in sw.freq_hz[sw.converged]]
+    both = clip(spans + grid, band)
+    return band, clip(spans, band), both, complement(both, band)
+
+
+def sweep_rows(result) -> list[dict]:
+    """frc_friction_sweep.csv: per level and grid frequency of the sweeps (:func:`bearingshaft.stages.frc_friction.
+    _swept`), whether an exact orbit was found and from which start, its amplitudes and HB's nearest them, their
+    largest relative difference, the largest |multiplier|, the verdict, the defect and the Newton steps.
+
+    Parameters
+    ----------
+    result : FrictionFRCResult
+    """
+    from reduced.periodic.frc import solution_at_frequency
+    from reduced.periodic.hb import NewtonError
+
+    rows = []
+    for P in result.curves:
+        br = result.curves[P]
+        for m, (a, b, sw) in enumerate(_sweeps(result, P)):
+            for j, f in enumerate(sw.freq_hz):
+                row = {"level_N": P, "sweep": m + 1, "from_hz": a, "to_hz": b, "freq_hz": float(f),
+                       "converged": "true" if sw.converged[j] else "false", "start": sw.start[j]}
+                hb = np.full(len(result.names), math.nan)
+                if sw.converged[j] and not isinstance(br, Exception):
+                    try:
+                        amp, _, _ = solution_at_frequency(br, float(f), float(sw.amplitude_m[j, 0]), 0,
+                                                          stable_only=False)
+                    except NewtonError:
+                        amp = None
+                    if amp is not None:
+                        hb = np.asarray(amp, float)
+                for k, n in enumerate(result.names):
+                    row.update({f"{n}_shoot_m": float(sw.amplitude_m[j, k]), f"{n}_hb_m": float(hb[k])})
+                ok = bool(sw.converged[j])
+                row.update(hb_vs_shoot_rel=float(np.max(np.abs(hb / sw.amplitude_m[j] - 1.0))) if ok else math.nan,
+                           max_abs_multiplier=float(np.max(np.abs(sw.multipliers[j]))) if ok else math.nan,
+                           stable=("true" if sw.stable[j] else "false") if ok else "",
+                           defect=float(sw.defect[j]), newton_steps=int(sw.n_iter[j]))
+                rows.append(row)
+    return rows
+
+
+def sweep_markdown(result) -> list[str]:
+    """frc.md's section on the grid of exact orbits where the continued branches do not reach."""
+    from bearingshaft.stages.frc_friction import SWEEP_STEP_HZ
+    from reduced.periodic.friction_sweep import MAX_FAIL, MAX_ITER
+
+    lines = ["", "## Exact orbits on a grid where the continued branches do not reach (frc_friction_sweep.csv)", "",
+             f"Over each stretch of the contact band (HB) no continued branch spans, the exact orbits at fixed "
+             f"frequencies {SWEEP_STEP_HZ:g} Hz apart (reduced.periodic.friction_sweep.sweep_friction: Newton on the "
+             "8-node shooting equations at each frequency, the exact Jacobian (state transition and saltation "
+             "matrices), minimum-norm steps halved while the residual does not fall; from the previous frequency's "
+             f"orbit extrapolated linearly, else from HB's orbit there, {MAX_ITER} Newton steps from each), from each "
+             "end of the stretch inwards (from the continued orbit at that end where a branch ends there, else from "
+             "HB's); after a frequency without an orbit the next is twice as far (up to 4 steps), and a direction "
+             f"ends after {MAX_FAIL} in a row. One orbit a frequency: where several coexist, the one Newton reaches; "
+             "stability from its multipliers (exact monodromy).", ""]
+    for P in result.curves:
+        sws = (getattr(result, "sweeps", {}) or {}).get(P)
+        if isinstance(sws, str):
+            lines.append(f"- {P:g} N: {sws}")
+            continue
+        for a, b, sw in sws or []:
+            ok = sw.converged
+            n_prev = int(np.sum(ok & (sw.start == "previous")))
+            done = [f for f, c in zip(sw.freq_hz, ok, strict=True) if c]
+            miss = [f for f, c in zip(sw.freq_hz, ok, strict=True) if not c]
+            reached = f"{sw.freq_hz[-1]:.4g} Hz" if len(sw.freq_hz) else "none"
+            lines.append(f"- {P:g} N, {a:.4g} -> {b:.4g} Hz: {int(ok.sum())} of {len(ok)} frequencies with an exact "
+                         f"orbit ({n_prev} from the previous orbit, {int(ok.sum()) - n_prev} from HB), "
+                         f"{int(np.sum(sw.stable & ok))} stable; last tried {reached}"
+                         + (f"; orbits at {_hz_list(done)}" if done else "")
+                         + (f"; none at {_hz_list(miss)}" if miss else "")
+                         + f"; worst defect of the orbits {float(np.max(sw.defect[ok])):.2g}" * bool(ok.any())
+                         + f"; {sw.cpu_s:.2g} s CPU.")
+    lines.append("")
+    return lines
+
+
+def _hz_list(fs) -> str:
+    """Frequencies as runs 0.1 Hz apart: 'a-b Hz (k)' or single values."""
+    from bearingshaft.stages.frc_friction import SWEEP_STEP_HZ
+
+    fs = sorted(float(f) for f in fs)
+    runs, start = [], 0
+    for i in range(1, len(fs) + 1):
+        if i == len(fs) or abs(fs[i] - fs[i - 1]) > 1.01 * SWEEP_STEP_HZ:
+            runs.append(f"{fs[start]:.4g}-{fs[i - 1]:.4g} Hz ({i - start})" if i - start > 1 else f"{fs[start]:.4g} Hz")
+            start = i
+    return ", ".join(runs)
 
 
 def coverage_lines(result, P: float) -> list[str]:
@@ -273,12 +315,15 @@ def coverage_lines(result, P: float) -> list[str]:
     c = coverage(result, P)
     if c is None:
         return []
-    band, cov, rest = c
-    return [f"**Coverage of the contact band at {P:g} N** (each branch from its lowest to its highest frequency): "
-            f"contact band (HB: a tip touches over part of the period) {hz(band)} Hz "
-            f"({width(band):.3g} Hz); covered by continued exact orbits {hz(cov)} Hz ({width(cov):.3g} Hz, "
-            f"{100 * width(cov) / max(width(band), 1e-300):.0f} %); not covered {hz(rest)} Hz ({width(rest):.3g} Hz: "
-            "there the drawn curve is HB's, faint where HB is not converged in H).", ""]
+    band, cov, both, rest = c
+    pct = 100.0 / max(width(band), 1e-300)
+    return [f"**Coverage of the contact band at {P:g} N** (each branch from its lowest to its highest frequency; "
+            "each orbit of the grid below for half its step either side): "
+            f"contact band (HB: a tip touches over part of the period) {hz(band)} Hz ({width(band):.3g} Hz); covered "
+            f"by the continued exact orbits {hz(cov)} Hz ({width(cov):.3g} Hz, {pct * width(cov):.0f} %); with the "
+            f"grid of exact orbits {width(both):.3g} Hz ({pct * width(both):.0f} %); not covered {hz(rest)} Hz "
+            f"({width(rest):.3g} Hz: no exact orbit found there from the neighbouring orbits nor from HB's; there the "
+            "drawn curve is HB's, faint where HB is not converged in H).", ""]
 
 
 def _switch_lines(P: float, curves: list, labels: dict) -> list[str]:
@@ -419,6 +464,7 @@ def markdown(result) -> str:
                          f"{c.friction_work_per_period_J:.3g} |")
     lines += shoot_markdown(result)
     lines += shooting_markdown(result)
+    lines += sweep_markdown(result)
     lines += verdict_markdown(result)
     lines += ["", "## Skipped with friction, and why", ""]
     lines += [f"- **{what}**: {why}." for what, why in SKIPPED]
@@ -608,6 +654,12 @@ def _plot(path, result) -> None:
                 ax.annotate(str(j + 1), (f, ai), xytext=(0, (9, -14, 18, -23)[j % 4]), textcoords="offset points",
                             fontsize=7, color="r", ha="center",
                             bbox=dict(boxstyle="round,pad=0.1", fc="w", ec="none", alpha=0.8))
+            for m, (_, _, sw) in enumerate(_sweeps(result, P)):
+                ok = sw.converged
+                ax.plot(sw.freq_hz[ok & sw.stable], sw.amplitude_m[ok & sw.stable, col] * 1e3, "D", color="k", ms=3,
+                        label=f"exact orbits on a grid, stable, {P:g} N" if m == 0 else None)
+                ax.plot(sw.freq_hz[ok & ~sw.stable], sw.amplitude_m[ok & ~sw.stable, col] * 1e3, "d", mfc="none",
+                        color="k", ms=3, label=f"exact orbits on a grid, unstable, {P:g} N" if m == 0 else None)
             shot = [p for p in pts if p.shooting is not None and p.shooting.converged]
             if shot:
                 ax.plot([p.freq_hz for p in shot], [p.shooting.shoot_m[col] * 1e3 for p in shot], "x", color=c,
