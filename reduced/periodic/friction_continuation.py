@@ -46,8 +46,9 @@ such points by their neighbours' verdicts.
 df/ds is a ``fold``, without it a ``branch_point``; a real one through -1 a ``period_doubling``; a complex pair
 a ``neimark_sacker``; two real ones meeting outside the circle and becoming a pair (or the reverse) nothing;
 where a slider's tip opens or closes for the whole period between the two points (the rank of dG/dz changes) a
-``grazing``, a non-smooth transition where the multipliers jump. Branch switching at folds and branch points:
-:func:`switch_branch`. (A branch point where no multiplier crosses, e.g. a symmetric pitchfork of a stable orbit, is
+``grazing``, a non-smooth transition where the multipliers jump. Branch switching at folds, branch points and
+period doublings (onto the family of period 2T, shot over two forcing periods and continued with its multipliers over
+2T: ``periods`` = 2 of the start, :func:`switch_branch`). (A branch point where no multiplier crosses, e.g. a symmetric pitchfork of a stable orbit, is
 not detected: the bordered determinant is zero along free-slider directions and cannot be used.)
 """
 

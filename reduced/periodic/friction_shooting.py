@@ -50,6 +50,11 @@ directions, each with a multiplier 1, marginal, not unstable).
 **Start.** :func:`hb_nodes`: the HB orbit (x, v synthesised from its harmonics at t_k) and each slider's w
 from its stationary Jenkins loop by AFT on a fine grid (w = t - f / k_t; w = t where the tip is open).
 
+**Period q T.** With ``periods`` = q the orbit is sought over q forcing periods (the nodes at t_k = k q T / S, the
+residual as above with q T / S segments, the multipliers over q T): q = 2 is the period-doubled family born where a
+multiplier of the T orbit passes -1 (:func:`reduced.periodic.friction_continuation.switch_branch`); its orbit is a
+fixed point of the flow over 2T and not over T.
+
 Newton is damped (the step halved while ||R||_2 does not fall) and stops when max |R| <= ``tol``, or reports
 why not (:class:`FrictionShootingResult`, ``converged`` False with the defect reached): after ``max_iter``
 steps, when no halved step lowers ||R||, when the defect has not halved over ``STALL_STEPS`` steps, or when
