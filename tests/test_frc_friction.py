@@ -238,3 +238,7 @@ def test_the_grid_of_exact_orbits_is_listed_and_the_coverage_intervals_add_up():
     rest = complement(cov, band)
     width = sum(b - a for a, b in intervals(cov + rest))
     assert width == pytest.approx(sum(b - a for a, b in band))
+    none = FrictionSweep(f[2:], ok[2:], np.array(["", ""], dtype=object), np.zeros((2, 8, 5)), A[2:], mu[2:],
+                         ok[2:], np.array([0.1, 0.3]), np.array([16, 16]), 0.5)
+    md = "\n".join(sweep_markdown(SimpleNamespace(curves={2.0: None}, sweeps={2.0: [(14.6, 17.1, none)]})))
+    assert "0 of 2 frequencies" in md and "worst defect" not in md

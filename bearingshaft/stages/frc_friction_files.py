@@ -285,7 +285,7 @@ def sweep_markdown(result) -> list[str]:
                          f"{int(np.sum(sw.stable & ok))} stable; last tried {reached}"
                          + (f"; orbits at {_hz_list(done)}" if done else "")
                          + (f"; none at {_hz_list(miss)}" if miss else "")
-                         + f"; worst defect of the orbits {float(np.max(sw.defect[ok])):.2g}" * bool(ok.any())
+                         + (f"; worst defect of the orbits {float(np.max(sw.defect[ok])):.2g}" if ok.any() else "")
                          + f"; {sw.cpu_s:.2g} s CPU.")
     lines.append("")
     return lines
