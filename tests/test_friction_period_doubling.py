@@ -38,10 +38,10 @@ def loads(f: float) -> Loads:
     return Loads(np.atleast_2d(B), (Harmonic(P, f),))
 
 
-def settled(s: GapSystem, f: float, periods: int, S: int = 8) -> np.ndarray:
-    """(S, 5) the states [x; v; w] at t_k = k T / S of the last period of a run from rest."""
+def settled(s: GapSystem, f: float, periods: int, S: int = 8, q: int = 1) -> np.ndarray:
+    """(q S, 5) the states [x; v; w] at t_k = k T / S of the last q periods of a run from rest."""
     r = integrate_exact_friction(s, np.zeros(2), np.zeros(2), periods / f, S * f, loads=loads(f))
-    return np.hstack([r.x, r.v, r.w])[-S - 1:-1]
+    return np.hstack([r.x, r.v, r.w])[-q * S - 1:-1]
 
 
 def test_the_period_doubled_orbit_is_a_fixed_point_over_2T_not_over_T_and_a_long_run_settles_on_it():
@@ -90,3 +90,20 @@ def test_the_period_doubled_orbit_is_a_fixed_point_over_2T_not_over_T_and_a_long
     off = min(float(np.max(np.abs(end - o.nodes[j, :2 * n]) / o.scale[:2 * n])) for j in (0, S // 2)) / amp
     assert off < 1e-6, off
     assert float(np.max(np.abs(end - y_t[:2 * n]) / o.scale[:2 * n])) / amp > 1e-2  # it left the T orbit
+
+
+def test_the_exact_jacobian_shoots_the_same_orbit_as_the_differences():
+    # shoot_friction with jacobian="exact" (state transition and saltation matrices) against the forward
+    # differences on the integrator: the same orbit in contact (stick, slip and gap events on it) to 1e-10 of the
+    # amplitude, the same multipliers to 1e-6 (central differences' truncation ~1e-12, round-off ~1e-10, grown by
+    # the segments), in no more Newton steps; over one and over two periods
+    s = system()
+    for f, q in ((2.0, 1), (2.35, 2)):
+        g = settled(s, f, 150, q=q)  # at 2.35 Hz the run settles on the period-doubled motion
+        fd = shoot_friction(s, B, P, f, g, periods=q)
+        ex = shoot_friction(s, B, P, f, g, periods=q, jacobian="exact")
+        assert fd.converged and ex.converged and ex.n_iter <= fd.n_iter, (fd.message, ex.message)
+        assert np.max(np.abs(fd.nodes - ex.nodes) / fd.scale) < 1e-10
+        assert np.max(np.abs(np.sort_complex(fd.multipliers) - np.sort_complex(ex.multipliers))) < 1e-6
+        if q == 2:  # a genuine 2T orbit: its two halves differ
+            assert np.max(np.abs(ex.nodes[:8, :4] - ex.nodes[8:, :4]) / ex.scale[:4]) > 1e-2

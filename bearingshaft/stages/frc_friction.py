@@ -434,7 +434,7 @@ def _shoot(system, b: np.ndarray, P: float, f: float, br, amplitude_ref: float, 
             except NewtonError as exc:
                 tried.append(f"HB with H = {factor * H + 1} not found ({exc})")
                 break
-        r = shoot_friction(system, b, P, f, hb_nodes(fb, Xs, f))
+        r = shoot_friction(system, b, P, f, hb_nodes(fb, Xs, f), jacobian="exact")
         tried.append(f"from H = {fb.H}: {r.message}")
         if r.converged:
             break

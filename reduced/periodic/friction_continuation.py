@@ -564,7 +564,7 @@ def _shoot_beside(start: FrictionShootingResult, branch: FrictionShootingBranch,
         for sign in (1.0, -1.0):
             r = shoot_friction(system, start.b, start.amplitude_N, f, Y0 + sign * size * E * D,
                                phase_deg=start.phase_deg, x_ref=float(D[0]), multipliers=False,
-                               periods=branch.periods)
+                               periods=branch.periods, jacobian="exact")
             if not r.converged:
                 continue
             d = float(np.max(np.abs(res.z_of(r.nodes) / D - z0)))
@@ -686,7 +686,8 @@ def _doubled(start: FrictionShootingResult, branch: FrictionShootingBranch, out:
     for size in (eps, SWITCH_EPS_RETRY * eps):
         for sign in (1.0, -1.0):
             r = shoot_friction(system, start.b, start.amplitude_N, f, Yr + sign * size * E * D,
-                               phase_deg=start.phase_deg, x_ref=float(D[0]), multipliers=False, periods=2 * q)
+                               phase_deg=start.phase_deg, x_ref=float(D[0]), multipliers=False, periods=2 * q,
+                               jacobian="exact")
             if not r.converged:
                 continue
             z = res.z_of(r.nodes) / D

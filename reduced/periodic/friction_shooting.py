@@ -400,9 +400,9 @@ class _Residual:
         return Tm @ Phi @ Tm
 
 
-def _newton(res: _Residual, Y: np.ndarray, tol: float, max_iter: int) -> tuple:
+def _newton(res: _Residual, Y: np.ndarray, tol: float, max_iter: int, blocks=None) -> tuple:
     """(Y, converged, defect, n_iter, rank, history, message): damped Gauss-Newton with minimum-norm steps in
-    the scaled z / D."""
+    the scaled z / D; ``blocks(Y, ends)`` the segments' monodromies (default forward differences)."""
     S, N = Y.shape
     ends = res.ends(Y)
     R = res.residual(Y, ends)
@@ -416,7 +416,7 @@ def _newton(res: _Residual, Y: np.ndarray, tol: float, max_iter: int) -> tuple:
         if len(history) > STALL_STEPS and r > 0.5 * history[-1 - STALL_STEPS]:
             return Y, False, r, it, rank, history, (f"defect {r:.3g} after {it} Newton steps (stalled: not halved "
                                                     f"over {STALL_STEPS} steps)")
-        J = res.jacobian(res.blocks(Y, ends, FD_STEP))
+        J = res.jacobian(res.blocks(Y, ends, FD_STEP) if blocks is None else blocks(Y, ends))
         du, _, rank, _ = np.linalg.lstsq(J, -R, rcond=RANK_RTOL)
         lam, norm, Z = 1.0, float(np.linalg.norm(R)), res.z_of(Y)
         for _ in range(MAX_HALVINGS + 1):
@@ -436,7 +436,7 @@ def _newton(res: _Residual, Y: np.ndarray, tol: float, max_iter: int) -> tuple:
 
 def shoot_friction(system: GapSystem, load: np.ndarray, amplitude_N: float, freq_hz: float, nodes: np.ndarray, *,
                    phase_deg: float = 0.0, x_ref: float | None = None, tol: float = TOL, max_iter: int = MAX_ITER,
-                   multipliers: bool = True, periods: int = 1) -> FrictionShootingResult:
+                   multipliers: bool = True, periods: int = 1, jacobian: str = "fd") -> FrictionShootingResult:
     """The forced periodic orbit with friction nearest the guessed nodes, by multiple shooting (module docstring).
 
     Solves R_k = (phi(y_k; t_k, T / S) - y_{k+1}) / D = 0 for the S nodes y_k = [x; v; w] at t_k = k T / S
@@ -460,6 +460,10 @@ def shoot_friction(system: GapSystem, load: np.ndarray, amplitude_N: float, freq
     multipliers : compute the monodromy and the multipliers at convergence
     periods : the orbit's period in forcing periods, q T (q = 2: the period-doubled family; the nodes at
         t_k = k q T / S, the residual R_k = (phi(y_k; t_k, q T / S) - y_{k+1}) / D, the multipliers over q T)
+    jacobian : "fd" (the segments' monodromies by forward differences in Newton, central for the multipliers) or
+        "exact" (both from the state transition and saltation matrices along the integrator's events,
+        :mod:`reduced.periodic.friction_sensitivity`, as the continuation's: 8 runs a Newton step where the
+        differences take 8 (2n + p + 1))
 
     Returns
     -------
@@ -498,9 +502,20 @@ def shoot_friction(system: GapSystem, load: np.ndarray, amplitude_N: float, freq
     omega = 2.0 * math.pi * f
     D = np.concatenate([np.full(n, x_ref), np.full(n, omega * x_ref), np.full(p, x_ref)])
     res = _Residual(system, b, P, f, float(phase_deg), S, D, periods=q)
+    if jacobian not in ("fd", "exact"):
+        raise _check.InvalidArgument(f"jacobian must be 'fd' or 'exact', got {jacobian!r}")
+    exact = None
+    if jacobian == "exact":
+        from reduced.periodic.friction_continuation import _Continuation
+
+        cont = _Continuation(system, b, P, float(phase_deg), S, D, q)
+        cont.flows = res.flows
+
+        def exact(Yk, _ends):
+            return cont.blocks(f, Yk)
     t0 = time.perf_counter()
     try:
-        Y, ok, r, it, rank, history, msg = _newton(res, Y, float(tol), max_iter)
+        Y, ok, r, it, rank, history, msg = _newton(res, Y, float(tol), max_iter, exact)
     except ExactIntegratorError as exc:
         return FrictionShootingResult(system, b, P, f, float(phase_deg), Y, D, False, math.nan, math.nan, 0, 0,
                                       S * (2 * n + p), message=f"the exact integrator failed: {exc}",
@@ -511,7 +526,7 @@ def shoot_friction(system: GapSystem, load: np.ndarray, amplitude_N: float, freq
         end = flow(system, b, P, f, Y[0], 0.0, q / f, 1, float(phase_deg))[-1]
         out.period_defect = float(np.max(np.abs(end - Y[0]) / D))
         if multipliers:
-            out.monodromy = res.monodromy(Y)
+            out.monodromy = res.monodromy(Y) if exact is None else cont.monodromy(res, exact(Y, None))
             out.multipliers = np.linalg.eigvals(out.monodromy)
     out.wall_s = time.perf_counter() - t0
     return out
