@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 from test_friction import K_X, M_X, coulomb, den_hartog
-from test_friction_continuation import FN, F, MU, P, start
+from test_friction_continuation import FN, MU, F, P, start
 
 from reduced.periodic.friction_sweep import sweep_friction
 

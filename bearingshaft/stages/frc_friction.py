@@ -191,7 +191,7 @@ def compute(scene: Scene, progress: bool = False) -> FrictionFRCResult:
         st["sweep"] = {"wall_s": time.perf_counter() - t3, "cpu_s": time.process_time() - c3}
         if isinstance(sweeps[P], list):
             st["sweep"]["stretches"] = [[float(a), float(b_), int(sw.converged.sum()), len(sw.freq_hz)]
-                                        for a, b_, sw in sweeps[P]]
+                                        for a, b_, sw, _ in sweeps[P]]
         stats["levels"][str(P)] = st
     return FrictionFRCResult(scene, names, b, curves, checks, linear, stats, shooting, verdicts, sweeps)
 
@@ -239,7 +239,7 @@ def _swept(spec, br, checks: list, scs, rows: np.ndarray) -> list | str:
     exact Jacobian, from the previous frequency's orbit, else from HB's there): from each end of the stretch inwards,
     each from the continued orbit at that end where a branch ends there (else from HB's), the second towards the
     last frequency the first reached; each direction ends after ``MAX_FAIL`` frequencies in a row without an orbit.
-    [(f_from, f_to, FrictionSweep)] in the order swept, or why not (a str)."""
+    [(f_from, f_to, FrictionSweep, HB's amplitudes (k, q) nearest its orbits)] in the order swept, or why not."""
     curves = [c for c in scs if isinstance(c, ShootingCurve)] if isinstance(scs, list) else []
     if isinstance(br, Exception) or not curves:
         return "not run: no HB curve or no continued branch"
@@ -262,18 +262,31 @@ def _swept(spec, br, checks: list, scs, rows: np.ndarray) -> list | str:
                 return c.branch.nodes[j]
         return given(f)
 
+    def hb_at(sw):
+        """(k, q) HB's amplitudes nearest each grid orbit's (NaN where none)."""
+        hb = np.full(sw.amplitude_m.shape, math.nan)
+        for j in np.flatnonzero(sw.converged):
+            try:
+                amp, _, _ = solution_at_frequency(br, float(sw.freq_hz[j]), float(sw.amplitude_m[j, 0]), 0,
+                                                  stable_only=False)
+            except NewtonError:
+                continue
+            if amp is not None:
+                hb[j] = np.asarray(amp, float)
+        return hb
+
     out = []
     step = SWEEP_STEP_HZ
     for a, b in complement(cov, band):
         if b - a < step:
             continue
         up = sweep_friction(like, a + step, b, step, first=end_orbit(a), given=given, point_rows=rows)
-        out.append((a + step, b, up))
+        out.append((a + step, b, up, hb_at(up)))
         reached = float(up.freq_hz[-1]) if len(up.freq_hz) else a
         if b - step > reached + 0.5 * step:
             down = sweep_friction(like, b - step, reached + 0.5 * step, step, first=end_orbit(b), given=given,
                                   point_rows=rows)
-            out.append((b - step, reached + 0.5 * step, down))
+            out.append((b - step, reached + 0.5 * step, down, hb_at(down)))
     return out
 
 

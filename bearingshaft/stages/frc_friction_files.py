@@ -191,7 +191,7 @@ def shooting_markdown(result) -> list[str]:
 
 
 def _sweeps(result, P: float) -> list:
-    """[(f_from, f_to, FrictionSweep)] of level P ([] where the grid did not run)."""
+    """[(f_from, f_to, FrictionSweep, hb (k, q))] of level P ([] where the grid did not run)."""
     sw = (getattr(result, "sweeps", {}) or {}).get(P)
     return sw if isinstance(sw, list) else []
 
@@ -201,15 +201,13 @@ def coverage(result, P: float) -> tuple[list, list, list, list] | None:
     contact band (:func:`contact_band`), the parts of it the continued exact orbits' branches span (each branch from
     its lowest to its highest frequency), those and the grid's orbits (each converged grid frequency standing for
     the half step either side of it), and the rest; None where there is no HB curve or no continued branch."""
-    from bearingshaft.stages.frc_friction import SWEEP_STEP_HZ
-
     br = result.curves.get(P)
     curves = _curves(result.shooting.get(P, []))
     if br is None or isinstance(br, Exception) or not curves:
         return None
     band = contact_band(br)
     spans = [(float(c.branch.freq_hz.min()), float(c.branch.freq_hz.max())) for c in curves]
-    grid = [(f - 0.5 * SWEEP_STEP_HZ, f + 0.5 * SWEEP_STEP_HZ) for _, _, sw in _sweeps(result, P)
+    grid = [(f - 0.5 * sw.step_hz, f + 0.5 * sw.step_hz) for _, _, sw, _ in _sweeps(result, P)
             for f in sw.freq_hz[sw.converged]]
     both = clip(spans + grid, band)
     return band, clip(spans, band), both, complement(both, band)
@@ -224,25 +222,13 @@ def sweep_rows(result) -> list[dict]:
     ----------
     result : FrictionFRCResult
     """
-    from reduced.periodic.frc import solution_at_frequency
-    from reduced.periodic.hb import NewtonError
-
     rows = []
     for P in result.curves:
-        br = result.curves[P]
-        for m, (a, b, sw) in enumerate(_sweeps(result, P)):
+        for m, (a, b, sw, hbs) in enumerate(_sweeps(result, P)):
             for j, f in enumerate(sw.freq_hz):
                 row = {"level_N": P, "sweep": m + 1, "from_hz": a, "to_hz": b, "freq_hz": float(f),
                        "converged": "true" if sw.converged[j] else "false", "start": sw.start[j]}
-                hb = np.full(len(result.names), math.nan)
-                if sw.converged[j] and not isinstance(br, Exception):
-                    try:
-                        amp, _, _ = solution_at_frequency(br, float(f), float(sw.amplitude_m[j, 0]), 0,
-                                                          stable_only=False)
-                    except NewtonError:
-                        amp = None
-                    if amp is not None:
-                        hb = np.asarray(amp, float)
+                hb = hbs[j]
                 for k, n in enumerate(result.names):
                     row.update({f"{n}_shoot_m": float(sw.amplitude_m[j, k]), f"{n}_hb_m": float(hb[k])})
                 ok = bool(sw.converged[j])
@@ -256,25 +242,28 @@ def sweep_rows(result) -> list[dict]:
 
 def sweep_markdown(result) -> list[str]:
     """frc.md's section on the grid of exact orbits where the continued branches do not reach."""
-    from bearingshaft.stages.frc_friction import SWEEP_STEP_HZ
-    from reduced.periodic.friction_sweep import MAX_FAIL, MAX_ITER
-
-    lines = ["", "## Exact orbits on a grid where the continued branches do not reach (frc_friction_sweep.csv)", "",
+    sws = [sw for P in result.curves for _, _, sw, _ in _sweeps(result, P)]
+    lines = ["", "## Exact orbits on a grid where the continued branches do not reach (frc_friction_sweep.csv)", ""]
+    if not sws:
+        reasons = [(P, (getattr(result, "sweeps", {}) or {}).get(P)) for P in result.curves]
+        return lines + [f"- {P:g} N: {r}" for P, r in reasons if isinstance(r, str)] + [""]
+    step, max_iter, max_fail = sws[0].step_hz, sws[0].max_iter, sws[0].max_fail
+    lines += [
              f"Over each stretch of the contact band (HB) no continued branch spans, the exact orbits at fixed "
-             f"frequencies {SWEEP_STEP_HZ:g} Hz apart (reduced.periodic.friction_sweep.sweep_friction: Newton on the "
+             f"frequencies {step:g} Hz apart (reduced.periodic.friction_sweep.sweep_friction: Newton on the "
              "8-node shooting equations at each frequency, the exact Jacobian (state transition and saltation "
              "matrices), minimum-norm steps halved while the residual does not fall; from the previous frequency's "
-             f"orbit extrapolated linearly, else from HB's orbit there, {MAX_ITER} Newton steps from each), from each "
+             f"orbit extrapolated linearly, else from HB's orbit there, {max_iter} Newton steps from each), from each "
              "end of the stretch inwards (from the continued orbit at that end where a branch ends there, else from "
              "HB's); after a frequency without an orbit the next is twice as far (up to 4 steps), and a direction "
-             f"ends after {MAX_FAIL} in a row. One orbit a frequency: where several coexist, the one Newton reaches; "
+             f"ends after {max_fail} in a row. One orbit a frequency: where several coexist, the one Newton reaches; "
              "stability from its multipliers (exact monodromy).", ""]
     for P in result.curves:
         sws = (getattr(result, "sweeps", {}) or {}).get(P)
         if isinstance(sws, str):
             lines.append(f"- {P:g} N: {sws}")
             continue
-        for a, b, sw in sws or []:
+        for a, b, sw, _ in sws or []:
             ok = sw.converged
             n_prev = int(np.sum(ok & (sw.start == "previous")))
             done = [f for f, c in zip(sw.freq_hz, ok, strict=True) if c]
@@ -283,22 +272,20 @@ def sweep_markdown(result) -> list[str]:
             lines.append(f"- {P:g} N, {a:.4g} -> {b:.4g} Hz: {int(ok.sum())} of {len(ok)} frequencies with an exact "
                          f"orbit ({n_prev} from the previous orbit, {int(ok.sum()) - n_prev} from HB), "
                          f"{int(np.sum(sw.stable & ok))} stable; last tried {reached}"
-                         + (f"; orbits at {_hz_list(done)}" if done else "")
-                         + (f"; none at {_hz_list(miss)}" if miss else "")
+                         + (f"; orbits at {_hz_list(done, step)}" if done else "")
+                         + (f"; none at {_hz_list(miss, step)}" if miss else "")
                          + (f"; worst defect of the orbits {float(np.max(sw.defect[ok])):.2g}" if ok.any() else "")
                          + f"; {sw.cpu_s:.2g} s CPU.")
     lines.append("")
     return lines
 
 
-def _hz_list(fs) -> str:
-    """Frequencies as runs 0.1 Hz apart: 'a-b Hz (k)' or single values."""
-    from bearingshaft.stages.frc_friction import SWEEP_STEP_HZ
-
+def _hz_list(fs, step: float) -> str:
+    """Frequencies as runs ``step`` apart: 'a-b Hz (k)' or single values."""
     fs = sorted(float(f) for f in fs)
     runs, start = [], 0
     for i in range(1, len(fs) + 1):
-        if i == len(fs) or abs(fs[i] - fs[i - 1]) > 1.01 * SWEEP_STEP_HZ:
+        if i == len(fs) or abs(fs[i] - fs[i - 1]) > 1.01 * step:
             runs.append(f"{fs[start]:.4g}-{fs[i - 1]:.4g} Hz ({i - start})" if i - start > 1 else f"{fs[start]:.4g} Hz")
             start = i
     return ", ".join(runs)
@@ -654,7 +641,7 @@ def _plot(path, result) -> None:
                 ax.annotate(str(j + 1), (f, ai), xytext=(0, (9, -14, 18, -23)[j % 4]), textcoords="offset points",
                             fontsize=7, color="r", ha="center",
                             bbox=dict(boxstyle="round,pad=0.1", fc="w", ec="none", alpha=0.8))
-            for m, (_, _, sw) in enumerate(_sweeps(result, P)):
+            for m, (_, _, sw, _) in enumerate(_sweeps(result, P)):
                 ok = sw.converged
                 ax.plot(sw.freq_hz[ok & sw.stable], sw.amplitude_m[ok & sw.stable, col] * 1e3, "D", color="k", ms=3,
                         label=f"exact orbits on a grid, stable, {P:g} N" if m == 0 else None)

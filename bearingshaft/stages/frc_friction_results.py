@@ -184,8 +184,8 @@ class FrictionFRCResult:
     shooting : {P: ShootingCurve or str}, the exact orbits continued by shooting, or why not
     verdicts : {P: [BranchVerdict]}, one per continued branch (its start orbit): shooting checked independently, HB
         against it for H = HB_CONVERGENCE_H
-    sweeps : {P: [(f_from, f_to, FrictionSweep)] or why not}, the exact orbits on a grid where the continued branches
-        do not reach (:func:`bearingshaft.stages.frc_friction._swept`)
+    sweeps : {P: [(f_from, f_to, FrictionSweep, HB's amplitudes nearest its orbits (k, q))] or why not}, the exact
+        orbits on a grid where the continued branches do not reach (:func:`bearingshaft.stages.frc_friction._swept`)
     """
 
     scene: Scene
@@ -197,7 +197,7 @@ class FrictionFRCResult:
     stats: dict = field(default_factory=dict)
     shooting: dict = field(default_factory=dict)  # {P: ShootingCurve or str}
     verdicts: dict = field(default_factory=dict)  # {P: [BranchVerdict]}
-    sweeps: dict = field(default_factory=dict)  # {P: [(f_from, f_to, FrictionSweep)] or str}
+    sweeps: dict = field(default_factory=dict)  # {P: [(f_from, f_to, FrictionSweep, hb (k, q))] or str}
 
 
 __all__ = ["SKIPPED", "BranchVerdict", "FrictionCheck", "FrictionFRCResult", "ShootCheck", "ShootingCurve"]

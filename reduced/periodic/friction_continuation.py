@@ -48,8 +48,9 @@ a ``neimark_sacker``; two real ones meeting outside the circle and becoming a pa
 where a slider's tip opens or closes for the whole period between the two points (the rank of dG/dz changes) a
 ``grazing``, a non-smooth transition where the multipliers jump. Branch switching at folds, branch points and
 period doublings (onto the family of period 2T, shot over two forcing periods and continued with its multipliers over
-2T: ``periods`` = 2 of the start, :func:`switch_branch`). (A branch point where no multiplier crosses, e.g. a symmetric pitchfork of a stable orbit, is
-not detected: the bordered determinant is zero along free-slider directions and cannot be used.)
+2T: ``periods`` = 2 of the start, :func:`switch_branch`). (A branch point where no multiplier crosses, e.g. a
+symmetric pitchfork of a stable orbit, is not detected: the bordered determinant is zero along free-slider directions
+and cannot be used.)
 """
 
 from __future__ import annotations
@@ -61,15 +62,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from reduced import _checks as _check
-from reduced._blas import single_thread_blas
 from reduced.models.gaps import GapSystem
-from reduced.periodic.friction_sensitivity import LOG_EVENTS, FlowSensitivity
+from reduced.periodic.friction_sensitivity import LOG_EVENTS, FlowSensitivity, segment_blocks
 from reduced.periodic.friction_shooting import (
     FD_STEP,
     RANK_RTOL,
     STABLE_TOL,
     FrictionShootingResult,
     _Residual,
+    monodromy_of,
 )
 from reduced.transient.exact import ExactIntegratorError
 from reduced.transient.friction import FrictionFlow
@@ -156,15 +157,7 @@ class _Continuation:
     def blocks(self, f: float, Y: np.ndarray) -> np.ndarray:
         """(S, N, N) the segments' monodromies in z, units of D, exact (:mod:`reduced.periodic.friction_sensitivity`:
         state transition matrices and saltation matrices along the integrator's events)."""
-        sens = FlowSensitivity(self.system, self.b, self.P, f, self.phase, flows=self.logged)
-        h = self.periods / f / self.S
-        n = self.system.n
-        Tm = np.eye(self.N)
-        Tm[2 * n:, :n] = self.system.friction.Bt
-        Tm[2 * n:, 2 * n:] = -np.eye(self.system.friction.Bt.shape[0])
-        scale = self.D[None, :] / self.D[:, None]
-        with single_thread_blas():  # small matrices: threads only spin (measured 10 ms an expm at load 10, 20 us alone)
-            return np.array([Tm @ sens.segment(Y[k], k * h, h)[1] @ Tm * scale for k in range(self.S)])
+        return segment_blocks(self.system, self.b, self.P, f, self.phase, Y, self.D, self.periods, self.logged)
 
     def jacobian(self, u: np.ndarray, G: np.ndarray, res: _Residual, Y: np.ndarray,
                  ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -179,14 +172,7 @@ class _Continuation:
 
     def monodromy(self, res: _Residual, blocks: np.ndarray) -> np.ndarray:
         """(N, N) dy(T)/dy(0) in [x; v; w] from the blocks (as :meth:`_Residual.monodromy`)."""
-        Phi = np.eye(self.N)
-        for Jk in blocks:
-            Phi = Jk * (self.D[:, None] / self.D[None, :]) @ Phi
-        n = self.system.n
-        Tm = np.eye(self.N)
-        Tm[2 * n:, :n] = res.Bt
-        Tm[2 * n:, 2 * n:] = -np.eye(res.Bt.shape[0])
-        return Tm @ Phi @ Tm
+        return monodromy_of(blocks, self.D, res.Bt)
 
 
 def _rank(J: np.ndarray) -> int:
@@ -595,8 +581,9 @@ def switch_branch(start: FrictionShootingResult, branch: FrictionShootingBranch,
     ``SWITCH_ON_BRANCH`` of its amplitudes: the other side of a fold), ``new family`` otherwise (then continued both
     ways by :func:`continue_friction` with ``continue_kw``), ``no orbit`` where Newton does not converge from either
     sign; ``not run`` where the critical multiplier beside the crossing is more than ``max_jump`` from +-1 (it jumped
-    across the circle at a non-smooth transition: no smooth bifurcation whose family a small perturbation finds). A period doubling needs the orbit of period 2T, which the one-period nodes of shoot_friction do not hold:
-    ``not run``.
+    across the circle at a non-smooth transition: no smooth bifurcation whose family a small perturbation finds). At a
+    period doubling the new family has period 2T (:func:`_doubled`: Newton over two periods of the orbit from the orbit
+    taken twice, perturbed along the eigenvector of the multiplier through -1, which flips sign over one period).
 
     Parameters
     ----------
@@ -635,7 +622,8 @@ def switch_branch(start: FrictionShootingResult, branch: FrictionShootingBranch,
         return out
     if abs(mu_c - target) > max_jump:
         out.outcome = (f"not run: the critical multiplier beside it is {mu_c.real:.4g} (more than {max_jump:g} from "
-                       f"{target:+g}): it jumped across the circle at a non-smooth transition, it did not pass {target:+g}")
+                       f"{target:+g}): it jumped across the circle at a non-smooth transition, it did not pass "
+                       f"{target:+g}")
         return out
     Y0 = branch.nodes[at]
     sens = FlowSensitivity(system, start.b, start.amplitude_N, f, start.phase_deg, flows=cont.logged)

@@ -389,15 +389,22 @@ class _Residual:
 
     def monodromy(self, Y: np.ndarray) -> np.ndarray:
         """(N, N) dy(T)/dy(0) in [x; v; w] (central differences)."""
-        N = Y.shape[1]
-        Phi = np.eye(N)
-        for Jk in self.blocks(Y, None, FD_STEP_CENTRAL):
-            Phi = Jk * (self.D[:, None] / self.D[None, :]) @ Phi  # units of D back to physical
-        # z = T y with T = [[I, 0, 0], [0, I, 0], [Bt, 0, -I]] (T^-1 = T): Phi_y = T Phi_z T
-        Tm = np.eye(N)
-        Tm[2 * self.n:, :self.n] = self.Bt
-        Tm[2 * self.n:, 2 * self.n:] = -np.eye(self.Bt.shape[0])
-        return Tm @ Phi @ Tm
+        return monodromy_of(self.blocks(Y, None, FD_STEP_CENTRAL), self.D, self.Bt)
+
+
+def monodromy_of(blocks: np.ndarray, D: np.ndarray, Bt: np.ndarray) -> np.ndarray:
+    """(N, N) the orbit's monodromy dy(qT)/dy(0) in y = [x; v; w] from its segments' blocks (S, N, N) in
+    z = [x; v; Bt x - w] and units D: Phi_z = Phi_{S-1} ... Phi_0 back in physical units, then
+    Phi_y = T Phi_z T with T = [[I, 0, 0], [0, I, 0], [Bt, 0, -I]] (T^-1 = T)."""
+    N = D.size
+    n = (N - Bt.shape[0]) // 2
+    Phi = np.eye(N)
+    for Jk in blocks:
+        Phi = Jk * (D[:, None] / D[None, :]) @ Phi  # units of D back to physical
+    Tm = np.eye(N)
+    Tm[2 * n:, :n] = Bt
+    Tm[2 * n:, 2 * n:] = -np.eye(Bt.shape[0])
+    return Tm @ Phi @ Tm
 
 
 def _newton(res: _Residual, Y: np.ndarray, tol: float, max_iter: int, blocks=None) -> tuple:
@@ -506,13 +513,12 @@ def shoot_friction(system: GapSystem, load: np.ndarray, amplitude_N: float, freq
         raise _check.InvalidArgument(f"jacobian must be 'fd' or 'exact', got {jacobian!r}")
     exact = None
     if jacobian == "exact":
-        from reduced.periodic.friction_continuation import _Continuation
+        from reduced.periodic.friction_sensitivity import LOG_EVENTS, segment_blocks
 
-        cont = _Continuation(system, b, P, float(phase_deg), S, D, q)
-        cont.flows = res.flows
+        logged = FrictionFlow(system, b, P, log_events=LOG_EVENTS)  # the event log the sensitivity reads
 
         def exact(Yk, _ends):
-            return cont.blocks(f, Yk)
+            return segment_blocks(system, b, P, f, float(phase_deg), Yk, D, q, logged)
     t0 = time.perf_counter()
     try:
         Y, ok, r, it, rank, history, msg = _newton(res, Y, float(tol), max_iter, exact)
@@ -526,11 +532,11 @@ def shoot_friction(system: GapSystem, load: np.ndarray, amplitude_N: float, freq
         end = flow(system, b, P, f, Y[0], 0.0, q / f, 1, float(phase_deg))[-1]
         out.period_defect = float(np.max(np.abs(end - Y[0]) / D))
         if multipliers:
-            out.monodromy = res.monodromy(Y) if exact is None else cont.monodromy(res, exact(Y, None))
+            out.monodromy = res.monodromy(Y) if exact is None else monodromy_of(exact(Y, None), D, res.Bt)
             out.multipliers = np.linalg.eigvals(out.monodromy)
     out.wall_s = time.perf_counter() - t0
     return out
 
 
 __all__ = ["FD_STEP", "FD_STEP_CENTRAL", "RANK_RTOL", "FrictionShootingResult", "flow", "hb_at_frequency",
-           "hb_displacements", "hb_nodes", "shoot_friction"]
+           "hb_displacements", "hb_nodes", "monodromy_of", "shoot_friction"]

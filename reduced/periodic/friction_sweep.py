@@ -61,6 +61,7 @@ class FrictionSweep:
     defect : (k,) max |G| reached, units of D
     n_iter : (k,) Newton steps, both starts together
     cpu_s : s of CPU time of the sweep
+    step_hz, max_iter, max_fail : the sweep's rule (:func:`sweep_friction`)
     """
 
     freq_hz: np.ndarray
@@ -73,6 +74,9 @@ class FrictionSweep:
     defect: np.ndarray
     n_iter: np.ndarray
     cpu_s: float = 0.0
+    step_hz: float = math.nan
+    max_iter: int = MAX_ITER
+    max_fail: int = MAX_FAIL
 
 
 def newton_at(cont: _Continuation, z0: np.ndarray, f: float, tol: float = TOL,
@@ -182,7 +186,8 @@ def sweep_friction(like: FrictionShootingResult, f_from: float, f_to: float, ste
     out = FrictionSweep(np.array([w["f"] for w in rows_out]), np.array([w["ok"] for w in rows_out], bool),
                         np.array([w["start"] for w in rows_out], dtype=object), np.full((k, S, N), np.nan),
                         np.full((k, rows.shape[0]), np.nan), np.full((k, N), np.nan, complex), np.zeros(k, bool),
-                        np.array([w["defect"] for w in rows_out]), np.array([w["it"] for w in rows_out], int))
+                        np.array([w["defect"] for w in rows_out]), np.array([w["it"] for w in rows_out], int),
+                        step_hz=step, max_iter=max_iter, max_fail=max_fail)
     for j, w in enumerate(rows_out):
         if w["ok"]:
             out.nodes[j], out.multipliers[j], out.amplitude_m[j] = w["Y"], w["mu"], w["amp"]
