@@ -201,7 +201,7 @@ def coverage(result, P: float) -> tuple[list, list, list, list] | None:
     contact band (:func:`contact_band`), the parts of it the continued exact orbits' branches span (each branch from
     its lowest to its highest frequency), those and the grid's orbits (each converged grid frequency standing for
     the half step either side of it), and the rest; None where there is no HB curve or no continued branch."""
-    br = result.curves.get(P)
+    br = (getattr(result, "curves", None) or {}).get(P)
     curves = _curves(result.shooting.get(P, []))
     if br is None or isinstance(br, Exception) or not curves:
         return None
