@@ -275,7 +275,7 @@ def sweep_markdown(result) -> list[str]:
                          + (f"; orbits at {_hz_list(done, step)}" if done else "")
                          + (f"; none at {_hz_list(miss, step)}" if miss else "")
                          + (f"; worst defect of the orbits {float(np.max(sw.defect[ok])):.2g}" if ok.any() else "")
-                         + f"; {sw.cpu_s:.2g} s CPU.")
+                         + ".")  # its CPU time in provenance.json (stats), not here: the file must reproduce
     lines.append("")
     return lines
 
