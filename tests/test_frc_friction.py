@@ -207,3 +207,41 @@ def test_where_hb_and_shooting_disagree_the_shot_orbit_is_exact_and_hb_is_not_co
     a25 = v.hb[-1][1]
     assert np.all(np.abs(a25[:3]) < 2e-2) and abs(a25[3]) > 0.1, a25
     assert v.hb_moves()[3] > 1e-2 and hb_converged(v) is False
+
+
+def test_the_grid_of_exact_orbits_is_listed_and_the_coverage_intervals_add_up():
+    # the files' part only (no solver): a sweep of four grid frequencies, orbits at the first two (one stable) and
+    # none at the last two; frc.md's line counts them and names the runs, the csv has a row each with NaN where no
+    # orbit; the interval helpers: what is covered and what is not add up to the band
+    from bearingshaft.stages.frc_friction_bands import clip, complement, intervals
+    from bearingshaft.stages.frc_friction_files import sweep_markdown, sweep_rows
+    from reduced.periodic.friction_sweep import FrictionSweep
+
+    f = np.array([14.4, 14.5, 14.6, 14.8])
+    ok = np.array([True, True, False, False])
+    A = np.where(ok[:, None], 1e-4, np.nan) * np.ones((4, 2))
+    mu = np.where(ok[:, None], np.array([0.5, 3.0]), np.nan).astype(complex)
+    sw = FrictionSweep(f, ok, np.array(["previous", "given", "", ""], dtype=object), np.zeros((4, 8, 5)), A, mu,
+                       np.array([True, False, False, False]), np.array([1e-12, 2e-11, 0.1, 0.3]),
+                       np.array([3, 12, 16, 16]), 1.5, step_hz=0.1)
+    result = SimpleNamespace(names=("x1", "u"), curves={2.0: RuntimeError("no curve")},
+                             sweeps={2.0: [(14.4, 17.1, sw, A)], 5.0: "not run: no HB curve or no continued branch"})
+    md = "\n".join(sweep_markdown(result))
+    assert "- 2 N, 14.4 -> 17.1 Hz: 2 of 4 frequencies with an exact orbit (1 from the previous orbit, 1 from HB)" in md
+    assert "1 stable" in md and "orbits at 14.4-14.5 Hz (2)" in md and "none at 14.6 Hz, 14.8 Hz" in md, md
+    rows = sweep_rows(SimpleNamespace(names=("x1", "u"), curves=result.curves, sweeps={2.0: [(14.4, 17.1, sw, A)]}))
+    assert len(rows) == 4 and rows[0]["converged"] == "true" and rows[2]["stable"] == ""
+    assert rows[0]["hb_vs_shoot_rel"] == 0.0 and math.isnan(rows[2]["hb_vs_shoot_rel"])
+    assert rows[1]["max_abs_multiplier"] == 3.0 and math.isnan(rows[3]["x1_shoot_m"])
+    band = [(14.2, 20.0), (21.0, 30.0)]
+    cov = clip([(14.0, 14.3), (17.0, 18.0), (20.5, 21.5)], band)
+    assert cov == [(14.2, 14.3), (17.0, 18.0), (21.0, 21.5)]
+    rest = complement(cov, band)
+    width = sum(b - a for a, b in intervals(cov + rest))
+    assert width == pytest.approx(sum(b - a for a, b in band))
+    none = FrictionSweep(f[2:], ok[2:], np.array(["", ""], dtype=object), np.zeros((2, 8, 5)), A[2:], mu[2:],
+                         ok[2:], np.array([0.1, 0.3]), np.array([16, 16]), 0.5, step_hz=0.1)
+    md = "\n".join(sweep_markdown(SimpleNamespace(curves={2.0: None}, sweeps={2.0: [(14.6, 17.1, none, A[2:])]})))
+    assert "0 of 2 frequencies" in md and "worst defect" not in md
+    md = "\n".join(sweep_markdown(SimpleNamespace(curves={5.0: None}, sweeps={5.0: "not run: no HB curve"})))
+    assert "- 5 N: not run: no HB curve" in md

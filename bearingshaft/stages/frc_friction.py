@@ -34,6 +34,7 @@ import time
 import numpy as np
 
 from bearingshaft.scenes import Scene
+from bearingshaft.stages.frc_friction_bands import clip, complement, contact_band
 from bearingshaft.stages.frc_friction_results import (  # noqa: F401
     SKIPPED,
     BranchVerdict,
@@ -49,6 +50,7 @@ from reduced.periodic.frc import FRC_STEPS, linear_frf, solution_at_frequency
 from reduced.periodic.friction_aft import friction_frc
 from reduced.periodic.friction_continuation import continue_friction, joined, on_branch, switch_branch
 from reduced.periodic.friction_shooting import flow, hb_at_frequency, hb_displacements, hb_nodes, shoot_friction
+from reduced.periodic.friction_sweep import sweep_friction
 from reduced.periodic.hb import NewtonError, _phases, _projection_matrix
 from reduced.transient.friction import integrate_exact_friction, reference_dop853
 
@@ -70,6 +72,9 @@ HB_MAX_ITER = 30  # Newton steps of each: from the H before it converges in 5-30
 SWITCH_KINDS = ("fold", "branch_point", "period_doubling")  # the bifurcations branch switching is tried at
 SWITCH_STEPS = 6  # points each way of a family switched onto (measured on the scene: 0.4-0.9 s of CPU a switch
 # that finds none, 2.3-2.8 s one that finds and continues a family 5 points each way, load 8)
+SWEEP_STEP_HZ = 0.1  # the grid of exact orbits where the continued branches leave the contact band uncovered
+# (:func:`_swept`; measured on the scene: 14.3-17.1 Hz, 28 of 28 orbits in 3.8 s of CPU, 0.1 Hz apart from the
+# previous one in 2-6 Newton steps)
 MEET_REL = 2e-2  # a continued orbit within this of a branch before it (interpolated linearly between its points)
 # is on it: the interpolation's own error between points ~0.1 Hz apart is below 1e-2 off the folds
 def load_vector(spec, rows: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
@@ -148,7 +153,7 @@ def compute(scene: Scene, progress: bool = False) -> FrictionFRCResult:
     names = tuple(scene.model.point_names)
     b = load_vector(spec, rows, names)
     rows = np.asarray(rows, float)
-    curves, checks, linear, shooting, verdicts, stats = {}, {}, {}, {}, {}, {"levels": {}}
+    curves, checks, linear, shooting, verdicts, sweeps, stats = {}, {}, {}, {}, {}, {}, {"levels": {}}
     f_lin = np.geomspace(spec.freq_min_hz, spec.freq_max_hz, 400)
     for P in spec.levels_N:
         t0 = time.perf_counter()
@@ -181,8 +186,14 @@ def compute(scene: Scene, progress: bool = False) -> FrictionFRCResult:
                  "bifurcations": [[int(i), k] for i, k in c.branch.bifurcations],
                  "switches": [[int(w.index), w.kind, w.freq_hz, w.outcome] for w in c.switches]}
                 for c in shooting[P]]
+        t3, c3 = time.perf_counter(), time.process_time()
+        sweeps[P] = _swept(spec, br, checks[P], shooting[P], rows)
+        st["sweep"] = {"wall_s": time.perf_counter() - t3, "cpu_s": time.process_time() - c3}
+        if isinstance(sweeps[P], list):
+            st["sweep"]["stretches"] = [[float(a), float(b_), int(sw.converged.sum()), len(sw.freq_hz)]
+                                        for a, b_, sw, _ in sweeps[P]]
         stats["levels"][str(P)] = st
-    return FrictionFRCResult(scene, names, b, curves, checks, linear, stats, shooting, verdicts)
+    return FrictionFRCResult(scene, names, b, curves, checks, linear, stats, shooting, verdicts, sweeps)
 
 
 def _continued(spec, br, checks: list, rows: np.ndarray, verdicts: list | None = None) -> list | str:
@@ -205,14 +216,14 @@ def _continued(spec, br, checks: list, rows: np.ndarray, verdicts: list | None =
     out, switched = [], []
     for start in starts:
         a0 = np.max(np.abs(start.orbit(SHOOT_SAMPLES // 10)[1][:, :rows.shape[1]] @ rows.T), axis=0)
-        if _meets(done, start.freq_hz, a0):
+        if _meets(_of_period(done, 1), start.freq_hz, a0):
             continue
         kw = dict(max_steps=half, point_rows=rows, ds=SHOOT_CONTINUATION_DS, ds_max=SHOOT_CONTINUATION_DS_MAX,
                   leave_contact=True)
         down = continue_friction(start, spec.freq_min_hz, spec.freq_max_hz, direction=-1.0,
-                                 stop=lambda f, a: _met(done, [], f, a), **kw)
+                                 stop=lambda f, a: _met(_of_period(done, 1), [], f, a), **kw)
         up = continue_friction(start, spec.freq_min_hz, spec.freq_max_hz, direction=1.0,
-                               stop=lambda f, a, down=down: _met(done, [down], f, a), **kw)
+                               stop=lambda f, a, down=down: _met(_of_period(done, 1), [down], f, a), **kw)
         branch = joined(down, up)
         done.append(branch)
         out.append(_against_hb(branch, br))
@@ -220,6 +231,63 @@ def _continued(spec, br, checks: list, rows: np.ndarray, verdicts: list | None =
             verdicts.append(_verdict(start, br, rows))
         switched += _switched(spec, br, start, out[-1], len(out), done, kw)
     return out + switched  # the families switched onto after the continued branches: those keep their numbers
+
+
+def _swept(spec, br, checks: list, scs, rows: np.ndarray) -> list | str:
+    """Exact orbits on a grid (SWEEP_STEP_HZ) over each stretch of the HB curve's contact band the continued branches
+    do not reach (:func:`reduced.periodic.friction_sweep.sweep_friction`: Newton at each fixed frequency with the
+    exact Jacobian, from the previous frequency's orbit, else from HB's there): from each end of the stretch inwards,
+    each from the continued orbit at that end where a branch ends there (else from HB's), the second towards the
+    last frequency the first reached; each direction ends after ``MAX_FAIL`` frequencies in a row without an orbit.
+    [(f_from, f_to, FrictionSweep, HB's amplitudes (k, q) nearest its orbits)] in the order swept, or why not."""
+    curves = [c for c in scs if isinstance(c, ShootingCurve)] if isinstance(scs, list) else []
+    if isinstance(br, Exception) or not curves:
+        return "not run: no HB curve or no continued branch"
+    like = next(c.shooting.orbit for c in checks if c.shooting is not None and c.shooting.orbit is not None)
+    band = contact_band(br)
+    cov = clip([(float(c.branch.freq_hz.min()), float(c.branch.freq_hz.max())) for c in curves], band)
+    ref = float(np.nanmax([np.max(c.branch.amplitude_m[:, 0]) for c in curves]))
+
+    def given(f):
+        _, _, X = solution_at_frequency(br, f, ref, 0, stable_only=False)
+        return None if X is None else hb_nodes(br.balance, X, f)
+
+    def end_orbit(f):
+        """The continued orbit of period T at frequency f (a branch's end), or HB's there."""
+        for c in curves:
+            if c.branch.periods != 1:
+                continue
+            j = int(np.argmin(np.abs(c.branch.freq_hz - f)))
+            if abs(float(c.branch.freq_hz[j]) - f) <= 1e-9 * f:
+                return c.branch.nodes[j]
+        return given(f)
+
+    def hb_at(sw):
+        """(k, q) HB's amplitudes nearest each grid orbit's (NaN where none)."""
+        hb = np.full(sw.amplitude_m.shape, math.nan)
+        for j in np.flatnonzero(sw.converged):
+            try:
+                amp, _, _ = solution_at_frequency(br, float(sw.freq_hz[j]), float(sw.amplitude_m[j, 0]), 0,
+                                                  stable_only=False)
+            except NewtonError:
+                continue
+            if amp is not None:
+                hb[j] = np.asarray(amp, float)
+        return hb
+
+    out = []
+    step = SWEEP_STEP_HZ
+    for a, b in complement(cov, band):
+        if b - a < step:
+            continue
+        up = sweep_friction(like, a + step, b, step, first=end_orbit(a), given=given, point_rows=rows)
+        out.append((a + step, b, up, hb_at(up)))
+        reached = float(up.freq_hz[-1]) if len(up.freq_hz) else a
+        if b - step > reached + 0.5 * step:
+            down = sweep_friction(like, b - step, reached + 0.5 * step, step, first=end_orbit(b), given=given,
+                                  point_rows=rows)
+            out.append((b - step, reached + 0.5 * step, down, hb_at(down)))
+    return out
 
 
 def _switched(spec, br, start, curve, number: int, done: list, kw: dict) -> list:
@@ -230,12 +298,13 @@ def _switched(spec, br, start, curve, number: int, done: list, kw: dict) -> list
     continued before it, the one it left included: then it is that branch's other side, not a new family), added
     to ``done``; returns the new families' ShootingCurves. A new family's own bifurcations are not switched at
     (the CPU budget)."""
-    cont_kw = dict(kw, max_steps=SWITCH_STEPS, band=(spec.freq_min_hz, spec.freq_max_hz),
-                   stop=lambda f, a: _met(done, [], f, a))
     out = []
     for i, kind in curve.branch.bifurcations:
         if kind not in SWITCH_KINDS:
             continue
+        q = 2 * curve.branch.periods if kind == "period_doubling" else curve.branch.periods  # the new family's period
+        cont_kw = dict(kw, max_steps=SWITCH_STEPS, band=(spec.freq_min_hz, spec.freq_max_hz),
+                       stop=lambda f, a, q=q: _met(_of_period(done, q), [], f, a))
         sw = switch_branch(start, curve.branch, int(i), kind, continue_kw=cont_kw)
         curve.switches.append(sw)
         if sw.branch is not None and all("met a branch" in w for w in sw.branch.status.split("; up: ")):
@@ -248,6 +317,12 @@ def _switched(spec, br, start, curve, number: int, done: list, kw: dict) -> list
             new.origin = f"switched at branch {number}'s {kind} near {sw.freq_hz:.5g} Hz"
             out.append(new)
     return out
+
+
+def _of_period(branches: list, periods: int) -> list:
+    """The branches whose orbits have period ``periods`` T (a period-doubled family's amplitudes, over 2T, meet its
+    T branch's at the bifurcation: it is not that branch)."""
+    return [b for b in branches if b.periods == periods]
 
 
 def _met(done: list, own: list, f: float, a: np.ndarray) -> str | None:
@@ -372,7 +447,7 @@ def _shoot(system, b: np.ndarray, P: float, f: float, br, amplitude_ref: float, 
             except NewtonError as exc:
                 tried.append(f"HB with H = {factor * H + 1} not found ({exc})")
                 break
-        r = shoot_friction(system, b, P, f, hb_nodes(fb, Xs, f))
+        r = shoot_friction(system, b, P, f, hb_nodes(fb, Xs, f), jacobian="exact")
         tried.append(f"from H = {fb.H}: {r.message}")
         if r.converged:
             break

@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from bearingshaft.output import write_rows
+from bearingshaft.stages.frc_friction_bands import clip, complement, contact_band
 from bearingshaft.stages.frc_friction_results import SKIPPED, ShootingCurve
 
 AGREE = (1e-3, 1e-2, 1e-1)  # the bands of |HB / shooting - 1| the agreement table counts points in
@@ -26,6 +27,7 @@ def write(result, writer) -> None:
     write_rows(writer.path("frc.csv"), curve_rows(result))
     write_rows(writer.path("frc_friction_checks.csv"), check_rows(result))
     write_rows(writer.path("frc_friction_shooting.csv"), shooting_rows(result))
+    write_rows(writer.path("frc_friction_sweep.csv"), sweep_rows(result))
     writer.stats["frc"] = {"friction": True, **result.stats}
     writer.path("frc.md").write_text(markdown(result), encoding="utf-8")
     _plot(writer.path("frc.png"), result)
@@ -84,7 +86,8 @@ def check_rows(result) -> list[dict]:
 
 
 def shooting_rows(result) -> list[dict]:
-    """frc_friction_shooting.csv: per level and continued exact orbit, its frequency, the amplitudes shot and of the
+    """frc_friction_shooting.csv: per level and continued exact orbit, its period in forcing periods (2: a
+    period-doubled family), its frequency, the amplitudes shot (over its period) and of the
     HB curve nearest them, their largest relative difference, the largest |multiplier| and both verdicts, the
     defect, the rank and the corrector steps.
 
@@ -97,7 +100,7 @@ def shooting_rows(result) -> list[dict]:
         for m, sc in enumerate(_curves(scs)):
             br, err = sc.branch, sc.rel_error
             for i in range(len(br.freq_hz)):
-                row = {"level_N": P, "branch": m + 1, "freq_hz": float(br.freq_hz[i])}
+                row = {"level_N": P, "branch": m + 1, "periods": int(br.periods), "freq_hz": float(br.freq_hz[i])}
                 for k, n in enumerate(result.names):
                     row.update({f"{n}_shoot_m": float(br.amplitude_m[i, k]), f"{n}_hb_m": float(sc.hb_m[i, k])})
                 hs = sc.hb_stable[i]
@@ -165,11 +168,13 @@ def shooting_markdown(result) -> list[str]:
             bif = ", ".join(f"[{labels[(PP, mm, i)]}] {k} near {f:.5g} Hz"
                             for PP, mm, i, f, k in _bifurcation_labels(result) if (PP, mm) == (P, m + 1)) or "none"
             origin = f" ({sc.origin})" if sc.origin else ""
+            origin += " (period 2T: the period-doubled family)" if br.periods == 2 else ""
             lines += [f"- {P:g} N, branch {m + 1}{origin}: {len(br.freq_hz)} orbits, {br.freq_hz.min():.5g}-"
                       f"{br.freq_hz.max():.5g} Hz (start {br.freq_hz[np.argmax(br.n_corrector == 0)]:.5g} Hz; "
                       f"{br.status}); {int(np.sum(br.stable))} stable; worst defect {float(np.max(br.defect)):.2g}; "
                       f"bifurcations (numbered as in frc.png): {bif}."]
         lines.append("")
+        lines += coverage_lines(result, P)
         lines += ["| level [N] | branch | from [Hz] | to [Hz] | points | HB vs shooting | stable (shooting) | "
                   "stable (Hill on HB) |", "|---|---|---|---|---|---|---|---|"]
         for m, sc in enumerate(_curves(scs)):
@@ -185,6 +190,129 @@ def shooting_markdown(result) -> list[str]:
     return lines
 
 
+def _sweeps(result, P: float) -> list:
+    """[(f_from, f_to, FrictionSweep, hb (k, q))] of level P ([] where the grid did not run)."""
+    sw = (getattr(result, "sweeps", {}) or {}).get(P)
+    return sw if isinstance(sw, list) else []
+
+
+def coverage(result, P: float) -> tuple[list, list, list, list] | None:
+    """(contact band, covered by the branches, covered by branches and grid, not covered) at level P: the HB curve's
+    contact band (:func:`contact_band`), the parts of it the continued exact orbits' branches span (each branch from
+    its lowest to its highest frequency), those and the grid's orbits (each converged grid frequency standing for
+    the half step either side of it), and the rest; None where there is no HB curve or no continued branch."""
+    br = (getattr(result, "curves", None) or {}).get(P)
+    curves = _curves(result.shooting.get(P, []))
+    if br is None or isinstance(br, Exception) or not curves:
+        return None
+    band = contact_band(br)
+    spans = [(float(c.branch.freq_hz.min()), float(c.branch.freq_hz.max())) for c in curves]
+    grid = [(f - 0.5 * sw.step_hz, f + 0.5 * sw.step_hz) for _, _, sw, _ in _sweeps(result, P)
+            for f in sw.freq_hz[sw.converged]]
+    both = clip(spans + grid, band)
+    return band, clip(spans, band), both, complement(both, band)
+
+
+def sweep_rows(result) -> list[dict]:
+    """frc_friction_sweep.csv: per level and grid frequency of the sweeps (:func:`bearingshaft.stages.frc_friction.
+    _swept`), whether an exact orbit was found and from which start, its amplitudes and HB's nearest them, their
+    largest relative difference, the largest |multiplier|, the verdict, the defect and the Newton steps.
+
+    Parameters
+    ----------
+    result : FrictionFRCResult
+    """
+    rows = []
+    for P in result.curves:
+        for m, (a, b, sw, hbs) in enumerate(_sweeps(result, P)):
+            for j, f in enumerate(sw.freq_hz):
+                row = {"level_N": P, "sweep": m + 1, "from_hz": a, "to_hz": b, "freq_hz": float(f),
+                       "converged": "true" if sw.converged[j] else "false", "start": sw.start[j]}
+                hb = hbs[j]
+                for k, n in enumerate(result.names):
+                    row.update({f"{n}_shoot_m": float(sw.amplitude_m[j, k]), f"{n}_hb_m": float(hb[k])})
+                ok = bool(sw.converged[j])
+                row.update(hb_vs_shoot_rel=float(np.max(np.abs(hb / sw.amplitude_m[j] - 1.0))) if ok else math.nan,
+                           max_abs_multiplier=float(np.max(np.abs(sw.multipliers[j]))) if ok else math.nan,
+                           stable=("true" if sw.stable[j] else "false") if ok else "",
+                           defect=float(sw.defect[j]), newton_steps=int(sw.n_iter[j]))
+                rows.append(row)
+    return rows
+
+
+def sweep_markdown(result) -> list[str]:
+    """frc.md's section on the grid of exact orbits where the continued branches do not reach."""
+    sws = [sw for P in result.curves for _, _, sw, _ in _sweeps(result, P)]
+    lines = ["", "## Exact orbits on a grid where the continued branches do not reach (frc_friction_sweep.csv)", ""]
+    if not sws:
+        reasons = [(P, (getattr(result, "sweeps", {}) or {}).get(P)) for P in result.curves]
+        return lines + [f"- {P:g} N: {r}" for P, r in reasons if isinstance(r, str)] + [""]
+    step, max_iter, max_fail = sws[0].step_hz, sws[0].max_iter, sws[0].max_fail
+    lines += [
+             f"Over each stretch of the contact band (HB) no continued branch spans, the exact orbits at fixed "
+             f"frequencies {step:g} Hz apart (reduced.periodic.friction_sweep.sweep_friction: Newton on the "
+             "8-node shooting equations at each frequency, the exact Jacobian (state transition and saltation "
+             "matrices), minimum-norm steps halved while the residual does not fall; from the previous frequency's "
+             f"orbit extrapolated linearly, else from HB's orbit there, {max_iter} Newton steps from each), from each "
+             "end of the stretch inwards (from the continued orbit at that end where a branch ends there, else from "
+             "HB's); after a frequency without an orbit the next is twice as far (up to 4 steps), and a direction "
+             f"ends after {max_fail} in a row. One orbit a frequency: where several coexist, the one Newton reaches; "
+             "stability from its multipliers (exact monodromy).", ""]
+    for P in result.curves:
+        sws = (getattr(result, "sweeps", {}) or {}).get(P)
+        if isinstance(sws, str):
+            lines.append(f"- {P:g} N: {sws}")
+            continue
+        for a, b, sw, _ in sws or []:
+            ok = sw.converged
+            n_prev = int(np.sum(ok & (sw.start == "previous")))
+            done = [f for f, c in zip(sw.freq_hz, ok, strict=True) if c]
+            miss = [f for f, c in zip(sw.freq_hz, ok, strict=True) if not c]
+            reached = f"{sw.freq_hz[-1]:.4g} Hz" if len(sw.freq_hz) else "none"
+            lines.append(f"- {P:g} N, {a:.4g} -> {b:.4g} Hz: {int(ok.sum())} of {len(ok)} frequencies with an exact "
+                         f"orbit ({n_prev} from the previous orbit, {int(ok.sum()) - n_prev} from HB), "
+                         f"{int(np.sum(sw.stable & ok))} stable; last tried {reached}"
+                         + (f"; orbits at {_hz_list(done, step)}" if done else "")
+                         + (f"; none at {_hz_list(miss, step)}" if miss else "")
+                         + (f"; worst defect of the orbits {float(np.max(sw.defect[ok])):.2g}" if ok.any() else "")
+                         + ".")  # its CPU time in provenance.json (stats), not here: the file must reproduce
+    lines.append("")
+    return lines
+
+
+def _hz_list(fs, step: float) -> str:
+    """Frequencies as runs ``step`` apart: 'a-b Hz (k)' or single values."""
+    fs = sorted(float(f) for f in fs)
+    runs, start = [], 0
+    for i in range(1, len(fs) + 1):
+        if i == len(fs) or abs(fs[i] - fs[i - 1]) > 1.01 * step:
+            runs.append(f"{fs[start]:.4g}-{fs[i - 1]:.4g} Hz ({i - start})" if i - start > 1 else f"{fs[start]:.4g} Hz")
+            start = i
+    return ", ".join(runs)
+
+
+def coverage_lines(result, P: float) -> list[str]:
+    """frc.md's statement of what the continued exact orbits cover of level P's contact band, and what not."""
+    def hz(ivs):
+        return ", ".join(f"{a:.4g}-{b:.4g}" for a, b in ivs) or "none"
+
+    def width(ivs):
+        return sum(b - a for a, b in ivs)
+
+    c = coverage(result, P)
+    if c is None:
+        return []
+    band, cov, both, rest = c
+    pct = 100.0 / max(width(band), 1e-300)
+    return [f"**Coverage of the contact band at {P:g} N** (each branch from its lowest to its highest frequency; "
+            "each orbit of the grid below for half its step either side): "
+            f"contact band (HB: a tip touches over part of the period) {hz(band)} Hz ({width(band):.3g} Hz); covered "
+            f"by the continued exact orbits {hz(cov)} Hz ({width(cov):.3g} Hz, {pct * width(cov):.0f} %); with the "
+            f"grid of exact orbits {width(both):.3g} Hz ({pct * width(both):.0f} %); not covered {hz(rest)} Hz "
+            f"({width(rest):.3g} Hz: no exact orbit found there from the neighbouring orbits nor from HB's; there the "
+            "drawn curve is HB's, faint where HB is not converged in H).", ""]
+
+
 def _switch_lines(P: float, curves: list, labels: dict) -> list[str]:
     """frc.md's list of the branch switching tried at one level's folds and branch points, with each outcome."""
     tried = [(m, sw) for m, sc in enumerate(curves) for sw in sc.switches]
@@ -194,7 +322,10 @@ def _switch_lines(P: float, curves: list, labels: dict) -> list[str]:
              "each fold and branch point whose real multiplier outside the circle is nearest +1, the orbit perturbed "
              "by 1e-2 D along its eigenvector (then 1e-1 D where both signs return), propagated to the 8 nodes by the "
              "exact state transition matrices, and Newton at that frequency from either sign; an orbit off the branch "
-             "is a new family, continued both ways; a period doubling would need the 2T orbit: not run):",
+             "is a new family, continued both ways; at a period doubling the same from the orbit taken twice, Newton "
+             "over two forcing periods (16 nodes), an orbit whose two halves differ being the period-doubled family, "
+             "continued both ways with its multipliers over 2T; no switch where the critical multiplier beside the "
+             "crossing is more than 1 from +-1: it jumped across the circle at a non-smooth transition):",
              ""]
     for m, sw in tried:
         at = labels.get((P, m + 1, int(sw.index)))
@@ -320,6 +451,7 @@ def markdown(result) -> str:
                          f"{c.friction_work_per_period_J:.3g} |")
     lines += shoot_markdown(result)
     lines += shooting_markdown(result)
+    lines += sweep_markdown(result)
     lines += verdict_markdown(result)
     lines += ["", "## Skipped with friction, and why", ""]
     lines += [f"- **{what}**: {why}." for what, why in SKIPPED]
@@ -509,6 +641,12 @@ def _plot(path, result) -> None:
                 ax.annotate(str(j + 1), (f, ai), xytext=(0, (9, -14, 18, -23)[j % 4]), textcoords="offset points",
                             fontsize=7, color="r", ha="center",
                             bbox=dict(boxstyle="round,pad=0.1", fc="w", ec="none", alpha=0.8))
+            for m, (_, _, sw, _) in enumerate(_sweeps(result, P)):
+                ok = sw.converged
+                ax.plot(sw.freq_hz[ok & sw.stable], sw.amplitude_m[ok & sw.stable, col] * 1e3, "D", color="k", ms=3,
+                        label=f"exact orbits on a grid, stable, {P:g} N" if m == 0 else None)
+                ax.plot(sw.freq_hz[ok & ~sw.stable], sw.amplitude_m[ok & ~sw.stable, col] * 1e3, "d", mfc="none",
+                        color="k", ms=3, label=f"exact orbits on a grid, unstable, {P:g} N" if m == 0 else None)
             shot = [p for p in pts if p.shooting is not None and p.shooting.converged]
             if shot:
                 ax.plot([p.freq_hz for p in shot], [p.shooting.shoot_m[col] * 1e3 for p in shot], "x", color=c,

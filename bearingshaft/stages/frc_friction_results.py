@@ -14,13 +14,13 @@ from bearingshaft.scenes import Scene
 SKIPPED = (
     ("converged curve by shooting", "the exact orbits are continued by shooting with the sliders "
      "(reduced.periodic.friction_continuation, exact Jacobians) from every orbit shot at an unsettled point, each way "
-     "for at most [frc] shooting_steps / 2 points (about 0.08 s of CPU a point in contact with the curvature "
-     "predictor and Broyden's corrector, 0.15 s before them, on the lean flow "
-     "reduced.transient.friction.FrictionFlow), not over the whole contact band: in contact the exact branch advances "
-     "0.02-0.04 Hz a point and folds back (measured on this scene: 0.65-0.85 Hz in 20 points, 0.75-0.97 Hz in 40; "
-     "folds at 14.29, 26.12 and 27.09 Hz here, at 18.03 Hz in a run of 60 points), so 14.3-30 Hz would take 400-800 "
-     "points, 30-65 s of CPU (the stage's whole budget is about 70 s); Hill's method gives the stability along the "
-     "whole HB curve"),
+     "for at most [frc] shooting_steps / 2 points (about 0.08 s of CPU a point in contact), and shot on a 0.1 Hz grid "
+     "(reduced.periodic.friction_sweep) over the stretches of the contact band they leave, not continued over the "
+     "whole band: in contact the exact branch advances 0.02-0.04 Hz a point and folds back (measured on this scene: "
+     "0.65-0.85 Hz in 20 points, 0.75-0.97 Hz in 40), so 14.3-30 Hz would take 400-800 points, 30-65 s of CPU (the "
+     "stage's whole budget is about 70 s); where neither the grid's previous orbit nor HB's converges (HB not "
+     "converged in H there) no exact orbit is found: frc.md's coverage says where; Hill's method gives the "
+     "stability along the whole HB curve"),
     ("response map", "its classifier (periodic, subharmonic, chaotic, Lyapunov exponent) runs the exact flow "
      "without sliders"),
     ("convergence in H of the whole curve", "each H's curve is a continuation with AFT (tens of seconds a curve): "
@@ -184,6 +184,8 @@ class FrictionFRCResult:
     shooting : {P: ShootingCurve or str}, the exact orbits continued by shooting, or why not
     verdicts : {P: [BranchVerdict]}, one per continued branch (its start orbit): shooting checked independently, HB
         against it for H = HB_CONVERGENCE_H
+    sweeps : {P: [(f_from, f_to, FrictionSweep, HB's amplitudes nearest its orbits (k, q))] or why not}, the exact
+        orbits on a grid where the continued branches do not reach (:func:`bearingshaft.stages.frc_friction._swept`)
     """
 
     scene: Scene
@@ -195,6 +197,7 @@ class FrictionFRCResult:
     stats: dict = field(default_factory=dict)
     shooting: dict = field(default_factory=dict)  # {P: ShootingCurve or str}
     verdicts: dict = field(default_factory=dict)  # {P: [BranchVerdict]}
+    sweeps: dict = field(default_factory=dict)  # {P: [(f_from, f_to, FrictionSweep, hb (k, q))] or str}
 
 
 __all__ = ["SKIPPED", "BranchVerdict", "FrictionCheck", "FrictionFRCResult", "ShootCheck", "ShootingCurve"]

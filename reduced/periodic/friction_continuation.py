@@ -46,9 +46,11 @@ such points by their neighbours' verdicts.
 df/ds is a ``fold``, without it a ``branch_point``; a real one through -1 a ``period_doubling``; a complex pair
 a ``neimark_sacker``; two real ones meeting outside the circle and becoming a pair (or the reverse) nothing;
 where a slider's tip opens or closes for the whole period between the two points (the rank of dG/dz changes) a
-``grazing``, a non-smooth transition where the multipliers jump. Branch switching at folds and branch points:
-:func:`switch_branch`. (A branch point where no multiplier crosses, e.g. a symmetric pitchfork of a stable orbit, is
-not detected: the bordered determinant is zero along free-slider directions and cannot be used.)
+``grazing``, a non-smooth transition where the multipliers jump. Branch switching at folds, branch points and
+period doublings (onto the family of period 2T, shot over two forcing periods and continued with its multipliers over
+2T: ``periods`` = 2 of the start, :func:`switch_branch`). (A branch point where no multiplier crosses, e.g. a
+symmetric pitchfork of a stable orbit, is not detected: the bordered determinant is zero along free-slider directions
+and cannot be used.)
 """
 
 from __future__ import annotations
@@ -60,15 +62,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from reduced import _checks as _check
-from reduced._blas import single_thread_blas
 from reduced.models.gaps import GapSystem
-from reduced.periodic.friction_sensitivity import LOG_EVENTS, FlowSensitivity
+from reduced.periodic.friction_sensitivity import LOG_EVENTS, FlowSensitivity, segment_blocks
 from reduced.periodic.friction_shooting import (
     FD_STEP,
     RANK_RTOL,
     STABLE_TOL,
     FrictionShootingResult,
     _Residual,
+    monodromy_of,
 )
 from reduced.transient.exact import ExactIntegratorError
 from reduced.transient.friction import FrictionFlow
@@ -109,6 +111,7 @@ class FrictionShootingBranch:
     n_corrector : (k,) corrector steps of each point (0 for the start)
     status : why the branch ended
     wall_s : s
+    periods : the orbits' period in forcing periods (2: a period-doubled family, :func:`switch_branch`)
     """
 
     freq_hz: np.ndarray
@@ -123,6 +126,7 @@ class FrictionShootingBranch:
     n_corrector: np.ndarray | None = None
     status: str = ""
     wall_s: float = 0.0
+    periods: int = 1
 
     @property
     def max_abs_multiplier(self) -> np.ndarray:
@@ -133,14 +137,15 @@ class FrictionShootingBranch:
 class _Continuation:
     """G(u), its Jacobian and the monodromy at fixed D, S and load (module docstring)."""
 
-    def __init__(self, system, b, P, phase_deg, S, D):
+    def __init__(self, system, b, P, phase_deg, S, D, periods: int = 1):
         self.system, self.b, self.P, self.phase, self.S, self.D = system, b, P, phase_deg, S, D
+        self.periods = periods  # the orbits' period in forcing periods
         self.N = D.size
         self.flows = FrictionFlow(system, b, P)  # the lean flow, set up once for the branch (the same bits)
         self.logged = FrictionFlow(system, b, P, log_events=LOG_EVENTS)  # with the event log, for the sensitivity
 
     def res(self, f: float) -> _Residual:
-        return _Residual(self.system, self.b, self.P, f, self.phase, self.S, self.D, self.flows)
+        return _Residual(self.system, self.b, self.P, f, self.phase, self.S, self.D, self.flows, self.periods)
 
     def G(self, u: np.ndarray) -> tuple[np.ndarray, _Residual, np.ndarray, np.ndarray]:
         """(G, residual object, Y, ends) at u = [z / D; f]."""
@@ -152,15 +157,7 @@ class _Continuation:
     def blocks(self, f: float, Y: np.ndarray) -> np.ndarray:
         """(S, N, N) the segments' monodromies in z, units of D, exact (:mod:`reduced.periodic.friction_sensitivity`:
         state transition matrices and saltation matrices along the integrator's events)."""
-        sens = FlowSensitivity(self.system, self.b, self.P, f, self.phase, flows=self.logged)
-        h = 1.0 / f / self.S
-        n = self.system.n
-        Tm = np.eye(self.N)
-        Tm[2 * n:, :n] = self.system.friction.Bt
-        Tm[2 * n:, 2 * n:] = -np.eye(self.system.friction.Bt.shape[0])
-        scale = self.D[None, :] / self.D[:, None]
-        with single_thread_blas():  # small matrices: threads only spin (measured 10 ms an expm at load 10, 20 us alone)
-            return np.array([Tm @ sens.segment(Y[k], k * h, h)[1] @ Tm * scale for k in range(self.S)])
+        return segment_blocks(self.system, self.b, self.P, f, self.phase, Y, self.D, self.periods, self.logged)
 
     def jacobian(self, u: np.ndarray, G: np.ndarray, res: _Residual, Y: np.ndarray,
                  ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -175,14 +172,7 @@ class _Continuation:
 
     def monodromy(self, res: _Residual, blocks: np.ndarray) -> np.ndarray:
         """(N, N) dy(T)/dy(0) in [x; v; w] from the blocks (as :meth:`_Residual.monodromy`)."""
-        Phi = np.eye(self.N)
-        for Jk in blocks:
-            Phi = Jk * (self.D[:, None] / self.D[None, :]) @ Phi
-        n = self.system.n
-        Tm = np.eye(self.N)
-        Tm[2 * n:, :n] = res.Bt
-        Tm[2 * n:, 2 * n:] = -np.eye(res.Bt.shape[0])
-        return Tm @ Phi @ Tm
+        return monodromy_of(blocks, self.D, res.Bt)
 
 
 def _rank(J: np.ndarray) -> int:
@@ -384,13 +374,13 @@ def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_ma
     rows = np.eye(n) if point_rows is None else np.asarray(point_rows, float)
     S, N = start.nodes.shape
     D = start.scale
-    cont = _Continuation(system, start.b, start.amplitude_N, start.phase_deg, S, D)
+    cont = _Continuation(system, start.b, start.amplitude_N, start.phase_deg, S, D, start.periods)
     t_clock = time.perf_counter()
 
     touching = []  # whether a stop closes somewhere on each point's orbit (sampled as the amplitudes)
 
     def amplitudes(Y: np.ndarray, f: float) -> np.ndarray:
-        h = 1.0 / f / S
+        h = start.periods / f / S
         xs = np.vstack([cont.flows(f, Y[k], k * h, h, SAMPLES_PER_SEGMENT, start.phase_deg)[:, :n]
                         for k in range(S)])
         touching.append(bool(system.m) and bool(np.any(system.side * (xs @ system.B.T - system.offset) > 0.0)))
@@ -452,7 +442,7 @@ def continue_friction(start: FrictionShootingResult, freq_min_hz: float, freq_ma
     f, Ys, A, mu, dfc, rk, tf, kc = (np.array(c) for c in zip(*pts, strict=True))
     stable = np.max(np.abs(mu), axis=1) <= 1.0 + STABLE_TOL
     return FrictionShootingBranch(f, Ys, A, mu, stable, dfc, rk, tf, bifurcations(mu, tf, rk), kc, status,
-                                  time.perf_counter() - t_clock)
+                                  time.perf_counter() - t_clock, start.periods)
 
 
 def joined(down: FrictionShootingBranch, up: FrictionShootingBranch) -> FrictionShootingBranch:
@@ -481,7 +471,7 @@ def joined(down: FrictionShootingBranch, up: FrictionShootingBranch) -> Friction
                                   cat(down.amplitude_m, up.amplitude_m), mu, cat(down.stable, up.stable),
                                   cat(down.defect, up.defect), rk, tf, bifurcations(mu, tf, rk),
                                   cat(down.n_corrector, up.n_corrector),
-                                  f"down: {down.status}; up: {up.status}", down.wall_s + up.wall_s)
+                                  f"down: {down.status}; up: {up.status}", down.wall_s + up.wall_s, up.periods)
 
 
 SWITCH_EPS = 1e-2  # the perturbation along the critical eigenvector, in units of D (its largest x or v component):
@@ -491,6 +481,11 @@ SWITCH_EPS_RETRY = 10.0  # x SWITCH_EPS: the second try where both signs return 
 INSIDE_PENALTY = 1e6  # added to |mu -+ 1| of a multiplier inside the circle: any real one outside comes first
 SWITCH_SAME = 1e-6  # max |z - z_0| / D below which the orbit shot from a perturbed start is the one it started from
 SWITCH_ON_BRANCH = 1e-3  # its amplitudes within this of the branch's (interpolated) at its frequency: the same branch
+SWITCH_JUMP = 1.0  # |mu - (+-1)| of the critical multiplier beside the crossing above which no switch is tried: the
+# multiplier jumped across the circle at a non-smooth transition (a stick, slip or gap event appearing on the orbit),
+# it did not pass +-1 (measured on discrete-friction-frc: 4.9, 9.7, 14, 42 and 45 beside such crossings, where both
+# signs returned to the orbit they started beside, 0.4-0.9 s of CPU each; 1.009-1.8 beside the folds and branch
+# points that were tried)
 
 
 @dataclass(eq=False)
@@ -548,13 +543,14 @@ def _shoot_beside(start: FrictionShootingResult, branch: FrictionShootingBranch,
 
     system, D, n = start.system, start.scale, start.system.n
     f, Y0 = float(branch.freq_hz[at]), branch.nodes[at]
-    res = _Residual(system, start.b, start.amplitude_N, f, start.phase_deg, Y0.shape[0], D)
+    res = _Residual(system, start.b, start.amplitude_N, f, start.phase_deg, Y0.shape[0], D, periods=branch.periods)
     z0 = res.z_of(Y0) / D
     found, dist = [], []
     for size in (eps, SWITCH_EPS_RETRY * eps):  # the larger one where the first returns to the same orbit
         for sign in (1.0, -1.0):
             r = shoot_friction(system, start.b, start.amplitude_N, f, Y0 + sign * size * E * D,
-                               phase_deg=start.phase_deg, x_ref=float(D[0]), multipliers=False)
+                               phase_deg=start.phase_deg, x_ref=float(D[0]), multipliers=False,
+                               periods=branch.periods, jacobian="exact")
             if not r.converged:
                 continue
             d = float(np.max(np.abs(res.z_of(r.nodes) / D - z0)))
@@ -569,7 +565,8 @@ def _shoot_beside(start: FrictionShootingResult, branch: FrictionShootingBranch,
 
 
 def switch_branch(start: FrictionShootingResult, branch: FrictionShootingBranch, index: int, kind: str, *,
-                  eps: float = SWITCH_EPS, continue_kw: dict | None = None) -> BranchSwitch:
+                  eps: float = SWITCH_EPS, continue_kw: dict | None = None,
+                  max_jump: float = SWITCH_JUMP) -> BranchSwitch:
     """Switch branches at the bifurcation ``(index, kind)`` of ``branch`` (continued from ``start``) by direct
     shooting from a perturbed orbit, and continue the new family where one is found.
 
@@ -583,8 +580,10 @@ def switch_branch(start: FrictionShootingResult, branch: FrictionShootingBranch,
     started beside (within ``SWITCH_SAME``), ``same branch`` where an orbit lies on ``branch`` (within
     ``SWITCH_ON_BRANCH`` of its amplitudes: the other side of a fold), ``new family`` otherwise (then continued both
     ways by :func:`continue_friction` with ``continue_kw``), ``no orbit`` where Newton does not converge from either
-    sign. A period doubling needs the orbit of period 2T, which the one-period nodes of shoot_friction do not hold:
-    ``not run``.
+    sign; ``not run`` where the critical multiplier beside the crossing is more than ``max_jump`` from +-1 (it jumped
+    across the circle at a non-smooth transition: no smooth bifurcation whose family a small perturbation finds). At a
+    period doubling the new family has period 2T (:func:`_doubled`: Newton over two periods of the orbit from the orbit
+    taken twice, perturbed along the eigenvector of the multiplier through -1, which flips sign over one period).
 
     Parameters
     ----------
@@ -593,6 +592,7 @@ def switch_branch(start: FrictionShootingResult, branch: FrictionShootingBranch,
     index, kind : one of ``branch.bifurcations``
     eps : the perturbation, units of D
     continue_kw : keywords of :func:`continue_friction` for the new family (its band, budget, point_rows, stop)
+    max_jump : the largest |mu - (+-1)| of the critical multiplier at which the switch is tried
 
     Returns
     -------
@@ -610,7 +610,8 @@ def switch_branch(start: FrictionShootingResult, branch: FrictionShootingBranch,
     n = system.n
     S, N = branch.nodes.shape[1:]
     D = start.scale
-    cont = _Continuation(system, start.b, start.amplitude_N, start.phase_deg, S, D)
+    q = branch.periods
+    cont = _Continuation(system, start.b, start.amplitude_N, start.phase_deg, S, D, q)
 
     c0, c1 = (_critical(cont, branch.nodes[j], float(branch.freq_hz[j]), target) for j in (index - 1, index))
     at, (_, mu_c, e) = (index - 1, c0) if c0[0] <= c1[0] else (index, c1)
@@ -619,18 +620,24 @@ def switch_branch(start: FrictionShootingResult, branch: FrictionShootingBranch,
     if not np.all(np.isfinite(e)) or not np.any(e):
         out.outcome = "not run: no real multiplier of that sign beside the bifurcation"
         return out
-    if target < 0:
-        out.outcome = "not run: a period doubling needs the orbit of period 2T (shoot_friction holds one period)"
+    if abs(mu_c - target) > max_jump:
+        out.outcome = (f"not run: the critical multiplier beside it is {mu_c.real:.4g} (more than {max_jump:g} from "
+                       f"{target:+g}): it jumped across the circle at a non-smooth transition, it did not pass "
+                       f"{target:+g}")
         return out
     Y0 = branch.nodes[at]
     sens = FlowSensitivity(system, start.b, start.amplitude_N, f, start.phase_deg, flows=cont.logged)
-    h = 1.0 / f / S
-    E = np.empty((S, N))
+    h = q / f / S
+    m = 2 if target < 0 else 1  # a period doubling: the eigenvector over two periods of the orbit (it flips sign)
+    Yr = np.vstack([Y0] * m)
+    E = np.empty((m * S, N))
     E[0] = e
-    for k in range(1, S):
-        E[k] = sens.segment(Y0[k - 1], (k - 1) * h, h)[1] @ E[k - 1]
+    for k in range(1, m * S):
+        E[k] = sens.segment(Yr[k - 1], (k - 1) * h, h)[1] @ E[k - 1]
     E /= np.max(np.abs(E[:, :2 * n]) / D[:2 * n])
     rows = kw.get("point_rows")
+    if target < 0:
+        return _doubled(start, branch, out, Yr, E, eps, kw, band)
     found, dist = _shoot_beside(start, branch, at, E, eps, np.eye(n) if rows is None else np.asarray(rows, float))
     out.distance = max(dist) if dist else math.nan
     new = [(d, r) for on, d, r in found if not on]
@@ -646,6 +653,42 @@ def switch_branch(start: FrictionShootingResult, branch: FrictionShootingBranch,
         out.outcome = "same orbit"
     else:
         out.outcome = "no orbit"
+    return out
+
+
+def _doubled(start: FrictionShootingResult, branch: FrictionShootingBranch, out: BranchSwitch, Yr: np.ndarray,
+             E: np.ndarray, eps: float, kw: dict, band: tuple) -> BranchSwitch:
+    """The period-doubled family at a period doubling (:func:`switch_branch`): Newton on the shooting equations over
+    two periods of the orbit, 2 q T (``periods`` 2 q, 2 S nodes: the orbit's S nodes twice, ``Yr``), from
+    Yr +- size E D (E the critical eigenvector along the 2 S nodes: over one period it is multiplied by the critical
+    multiplier ~ -1, so the perturbation has period 2 q T, not q T), size eps then SWITCH_EPS_RETRY eps while both
+    signs return to the q T orbit; an orbit whose two halves differ by more than SWITCH_SAME (max |z_k - z_{k+S}| / D)
+    is the new family, continued both ways (its multipliers over 2 q T: its stability)."""
+    from reduced.periodic.friction_shooting import shoot_friction
+
+    system, D, S = start.system, start.scale, branch.nodes.shape[1]
+    q, f = branch.periods, out.freq_hz
+    res = _Residual(system, start.b, start.amplitude_N, f, start.phase_deg, 2 * S, D, periods=2 * q)
+    z0 = res.z_of(Yr) / D
+    dist = []
+    for size in (eps, SWITCH_EPS_RETRY * eps):
+        for sign in (1.0, -1.0):
+            r = shoot_friction(system, start.b, start.amplitude_N, f, Yr + sign * size * E * D,
+                               phase_deg=start.phase_deg, x_ref=float(D[0]), multipliers=False, periods=2 * q,
+                               jacobian="exact")
+            if not r.converged:
+                continue
+            z = res.z_of(r.nodes) / D
+            halves = float(np.max(np.abs(z[:S] - z[S:])))
+            dist.append(float(np.max(np.abs(z - z0))))
+            if halves > SWITCH_SAME:
+                out.outcome, out.distance, out.orbit = "new family", dist[-1], r
+                down = continue_friction(r, *band, direction=-1.0, **kw)
+                up = continue_friction(r, *band, direction=1.0, **kw)
+                out.branch = joined(down, up)
+                return out
+    out.distance = max(dist) if dist else math.nan
+    out.outcome = "same orbit" if dist else "no orbit"
     return out
 
 

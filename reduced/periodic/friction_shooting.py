@@ -50,6 +50,11 @@ directions, each with a multiplier 1, marginal, not unstable).
 **Start.** :func:`hb_nodes`: the HB orbit (x, v synthesised from its harmonics at t_k) and each slider's w
 from its stationary Jenkins loop by AFT on a fine grid (w = t - f / k_t; w = t where the tip is open).
 
+**Period q T.** With ``periods`` = q the orbit is sought over q forcing periods (the nodes at t_k = k q T / S, the
+residual as above with q T / S segments, the multipliers over q T): q = 2 is the period-doubled family born where a
+multiplier of the T orbit passes -1 (:func:`reduced.periodic.friction_continuation.switch_branch`); its orbit is a
+fixed point of the flow over 2T and not over T.
+
 Newton is damped (the step halved while ||R||_2 does not fall) and stops when max |R| <= ``tol``, or reports
 why not (:class:`FrictionShootingResult`, ``converged`` False with the defect reached): after ``max_iter``
 steps, when no halved step lowers ||R||, when the defect has not halved over ``STALL_STEPS`` steps, or when
@@ -147,6 +152,8 @@ class FrictionShootingResult:
     history : max |R| at each Newton step
     message : how Newton ended
     wall_s : s
+    periods : the orbit's period in forcing periods (1: T; 2: the period-doubled orbit, nodes at t_k = k 2T / S,
+        ``period_defect`` and the multipliers over 2T)
     """
 
     system: GapSystem
@@ -167,6 +174,7 @@ class FrictionShootingResult:
     history: list = field(default_factory=list)
     message: str = ""
     wall_s: float = 0.0
+    periods: int = 1
 
     @property
     def max_abs_multiplier(self) -> float:
@@ -180,9 +188,10 @@ class FrictionShootingResult:
 
     def orbit(self, samples_per_segment: int = 200) -> tuple[np.ndarray, np.ndarray]:
         """(t (S m + 1,) s, y (S m + 1, 2n + p)): the orbit over one period, each segment run from its own node
-        (no growth of the defect along the period), m = ``samples_per_segment``; the first node again at T."""
+        (no growth of the defect along the period), m = ``samples_per_segment``; the first node again at T (over
+        ``periods`` T)."""
         S = self.nodes.shape[0]
-        h = 1.0 / self.freq_hz / S
+        h = self.periods / self.freq_hz / S
         m = int(samples_per_segment)
         y = np.empty((S * m + 1, self.nodes.shape[1]))
         for k in range(S):
@@ -305,10 +314,10 @@ class _Residual:
     """R(Y) and its finite-difference Jacobian for the multiple-shooting equations, in the coordinates
     z = [x; v; d], d = Bt x - w the sliders' stretches (module docstring)."""
 
-    def __init__(self, system, b, P, f, phase_deg, S, D, flows: FrictionFlow | None = None):
+    def __init__(self, system, b, P, f, phase_deg, S, D, flows: FrictionFlow | None = None, periods: int = 1):
         self.args = (system, b, P, f)
         self.phase, self.S, self.D = phase_deg, S, D
-        self.h = 1.0 / f / S
+        self.h = periods / f / S  # the orbit's period is ``periods`` forcing periods
         self.n, self.Bt = system.n, system.friction.Bt
         # the lean flow (its set-up once for all the runs of the system and load; the same bits as flow())
         self.flows = FrictionFlow(system, b, P) if flows is None else flows
@@ -380,20 +389,27 @@ class _Residual:
 
     def monodromy(self, Y: np.ndarray) -> np.ndarray:
         """(N, N) dy(T)/dy(0) in [x; v; w] (central differences)."""
-        N = Y.shape[1]
-        Phi = np.eye(N)
-        for Jk in self.blocks(Y, None, FD_STEP_CENTRAL):
-            Phi = Jk * (self.D[:, None] / self.D[None, :]) @ Phi  # units of D back to physical
-        # z = T y with T = [[I, 0, 0], [0, I, 0], [Bt, 0, -I]] (T^-1 = T): Phi_y = T Phi_z T
-        Tm = np.eye(N)
-        Tm[2 * self.n:, :self.n] = self.Bt
-        Tm[2 * self.n:, 2 * self.n:] = -np.eye(self.Bt.shape[0])
-        return Tm @ Phi @ Tm
+        return monodromy_of(self.blocks(Y, None, FD_STEP_CENTRAL), self.D, self.Bt)
 
 
-def _newton(res: _Residual, Y: np.ndarray, tol: float, max_iter: int) -> tuple:
+def monodromy_of(blocks: np.ndarray, D: np.ndarray, Bt: np.ndarray) -> np.ndarray:
+    """(N, N) the orbit's monodromy dy(qT)/dy(0) in y = [x; v; w] from its segments' blocks (S, N, N) in
+    z = [x; v; Bt x - w] and units D: Phi_z = Phi_{S-1} ... Phi_0 back in physical units, then
+    Phi_y = T Phi_z T with T = [[I, 0, 0], [0, I, 0], [Bt, 0, -I]] (T^-1 = T)."""
+    N = D.size
+    n = (N - Bt.shape[0]) // 2
+    Phi = np.eye(N)
+    for Jk in blocks:
+        Phi = Jk * (D[:, None] / D[None, :]) @ Phi  # units of D back to physical
+    Tm = np.eye(N)
+    Tm[2 * n:, :n] = Bt
+    Tm[2 * n:, 2 * n:] = -np.eye(Bt.shape[0])
+    return Tm @ Phi @ Tm
+
+
+def _newton(res: _Residual, Y: np.ndarray, tol: float, max_iter: int, blocks=None) -> tuple:
     """(Y, converged, defect, n_iter, rank, history, message): damped Gauss-Newton with minimum-norm steps in
-    the scaled z / D."""
+    the scaled z / D; ``blocks(Y, ends)`` the segments' monodromies (default forward differences)."""
     S, N = Y.shape
     ends = res.ends(Y)
     R = res.residual(Y, ends)
@@ -407,7 +423,7 @@ def _newton(res: _Residual, Y: np.ndarray, tol: float, max_iter: int) -> tuple:
         if len(history) > STALL_STEPS and r > 0.5 * history[-1 - STALL_STEPS]:
             return Y, False, r, it, rank, history, (f"defect {r:.3g} after {it} Newton steps (stalled: not halved "
                                                     f"over {STALL_STEPS} steps)")
-        J = res.jacobian(res.blocks(Y, ends, FD_STEP))
+        J = res.jacobian(res.blocks(Y, ends, FD_STEP) if blocks is None else blocks(Y, ends))
         du, _, rank, _ = np.linalg.lstsq(J, -R, rcond=RANK_RTOL)
         lam, norm, Z = 1.0, float(np.linalg.norm(R)), res.z_of(Y)
         for _ in range(MAX_HALVINGS + 1):
@@ -427,7 +443,7 @@ def _newton(res: _Residual, Y: np.ndarray, tol: float, max_iter: int) -> tuple:
 
 def shoot_friction(system: GapSystem, load: np.ndarray, amplitude_N: float, freq_hz: float, nodes: np.ndarray, *,
                    phase_deg: float = 0.0, x_ref: float | None = None, tol: float = TOL, max_iter: int = MAX_ITER,
-                   multipliers: bool = True) -> FrictionShootingResult:
+                   multipliers: bool = True, periods: int = 1, jacobian: str = "fd") -> FrictionShootingResult:
     """The forced periodic orbit with friction nearest the guessed nodes, by multiple shooting (module docstring).
 
     Solves R_k = (phi(y_k; t_k, T / S) - y_{k+1}) / D = 0 for the S nodes y_k = [x; v; w] at t_k = k T / S
@@ -449,6 +465,12 @@ def shoot_friction(system: GapSystem, load: np.ndarray, amplitude_N: float, freq
     tol : max |R| at convergence, in units of D
     max_iter : Newton steps at most
     multipliers : compute the monodromy and the multipliers at convergence
+    periods : the orbit's period in forcing periods, q T (q = 2: the period-doubled family; the nodes at
+        t_k = k q T / S, the residual R_k = (phi(y_k; t_k, q T / S) - y_{k+1}) / D, the multipliers over q T)
+    jacobian : "fd" (the segments' monodromies by forward differences in Newton, central for the multipliers) or
+        "exact" (both from the state transition and saltation matrices along the integrator's events,
+        :mod:`reduced.periodic.friction_sensitivity`, as the continuation's: 8 runs a Newton step where the
+        differences take 8 (2n + p + 1))
 
     Returns
     -------
@@ -479,31 +501,42 @@ def shoot_friction(system: GapSystem, load: np.ndarray, amplitude_N: float, freq
     if Y.ndim != 2 or Y.shape[1] != 2 * n + p or not np.all(np.isfinite(Y)):
         raise _check.InvalidArgument(f"nodes must be finite, of shape (S, {2 * n + p}), got {Y.shape}")
     max_iter = _check.integer("max_iter", max_iter, lo=0)
+    q = _check.integer("periods", periods, lo=1)
     if x_ref is None:
         x_ref = float(np.max(np.abs(Y[:, :n]))) or 1.0
     x_ref = _check.positive("x_ref", x_ref, "m")
     S = Y.shape[0]
     omega = 2.0 * math.pi * f
     D = np.concatenate([np.full(n, x_ref), np.full(n, omega * x_ref), np.full(p, x_ref)])
-    res = _Residual(system, b, P, f, float(phase_deg), S, D)
+    res = _Residual(system, b, P, f, float(phase_deg), S, D, periods=q)
+    if jacobian not in ("fd", "exact"):
+        raise _check.InvalidArgument(f"jacobian must be 'fd' or 'exact', got {jacobian!r}")
+    exact = None
+    if jacobian == "exact":
+        from reduced.periodic.friction_sensitivity import LOG_EVENTS, segment_blocks
+
+        logged = FrictionFlow(system, b, P, log_events=LOG_EVENTS)  # the event log the sensitivity reads
+
+        def exact(Yk, _ends):
+            return segment_blocks(system, b, P, f, float(phase_deg), Yk, D, q, logged)
     t0 = time.perf_counter()
     try:
-        Y, ok, r, it, rank, history, msg = _newton(res, Y, float(tol), max_iter)
+        Y, ok, r, it, rank, history, msg = _newton(res, Y, float(tol), max_iter, exact)
     except ExactIntegratorError as exc:
         return FrictionShootingResult(system, b, P, f, float(phase_deg), Y, D, False, math.nan, math.nan, 0, 0,
                                       S * (2 * n + p), message=f"the exact integrator failed: {exc}",
-                                      wall_s=time.perf_counter() - t0)
+                                      wall_s=time.perf_counter() - t0, periods=q)
     out = FrictionShootingResult(system, b, P, f, float(phase_deg), Y, D, ok, r, math.nan, it, int(rank),
-                                 S * (2 * n + p), history=history, message=msg)
+                                 S * (2 * n + p), history=history, message=msg, periods=q)
     if ok:
-        end = flow(system, b, P, f, Y[0], 0.0, 1.0 / f, 1, float(phase_deg))[-1]
+        end = flow(system, b, P, f, Y[0], 0.0, q / f, 1, float(phase_deg))[-1]
         out.period_defect = float(np.max(np.abs(end - Y[0]) / D))
         if multipliers:
-            out.monodromy = res.monodromy(Y)
+            out.monodromy = res.monodromy(Y) if exact is None else monodromy_of(exact(Y, None), D, res.Bt)
             out.multipliers = np.linalg.eigvals(out.monodromy)
     out.wall_s = time.perf_counter() - t0
     return out
 
 
 __all__ = ["FD_STEP", "FD_STEP_CENTRAL", "RANK_RTOL", "FrictionShootingResult", "flow", "hb_at_frequency",
-           "hb_displacements", "hb_nodes", "shoot_friction"]
+           "hb_displacements", "hb_nodes", "monodromy_of", "shoot_friction"]
