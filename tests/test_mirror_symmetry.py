@@ -141,3 +141,19 @@ def test_continuation_in_craig_bampton_coordinates_sees_the_mirror_pitchforks(wi
     hp = np.array([fp.freq_hz[i] for i, _ in fp.bifurcations])
     hq = np.array([fq.freq_hz[i] for i, _ in fq.bifurcations])
     assert np.max(np.abs(hp - hq)) < 0.04, np.abs(hp - hq)
+
+
+def test_committed_rom_frc_has_families_breaking_the_mirror():
+    # results/rom-frc (the reduced beam, averaged over its tip mirror): pitchforks breaking x1 = x3 are classified
+    # and followed at both contact levels, and frc.md says how the model was made exactly symmetric
+    import csv
+
+    root = Path(__file__).resolve().parents[1] / "results" / "rom-frc"
+    fams = list(csv.DictReader(open(root / "frc_families.csv")))
+    for level in ("1.0", "10.0"):
+        kinds = {r["kind"] for r in fams if r["level"] == level}
+        assert {"asymmetric", "asymmetric_half_wave"} <= kinds, (level, kinds)
+    bif = {r["kind"] for r in csv.DictReader(open(root / "frc_bifurcations.csv"))}
+    assert {"pitchfork_mirror", "pitchfork_mirror_half_wave"} <= bif
+    assert "The model is mirror symmetric (x1 <-> x3, with eta2, eta4, eta6, eta8, eta10 -> minus itself)" in (
+        root / "frc.md").read_text("utf-8")
