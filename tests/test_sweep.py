@@ -459,3 +459,21 @@ def test_hammer_and_frc_rows_are_the_stages_own_numbers():
     for r in ones:
         assert frc[f"frc_peak_hz_{float(r['level']):g}N"] == float(r["peak_freq_hz"])
         assert frc[f"frc_peak_m_{float(r['level']):g}N"] == float(r["peak_amplitude_m"])
+
+
+def test_local_cluster_runs_with_dask_monitoring_slowed(client):
+    """The cluster of ``run`` and ``sweep`` starts its workers with QUIET_CLUSTER (no 10 ms stack sampler, memory
+    polled every 500 ms), and the client's own Dask configuration is left as it was."""
+    import dask
+
+    from bearingshaft.sweep.run import QUIET_CLUSTER
+
+    seen = client.run(lambda dask_worker: ("profile" in dask_worker.periodic_callbacks,
+                                           dask.config.get("distributed.worker.memory.monitor-interval"),
+                                           dask.config.get("distributed.admin.tick.interval")))
+    assert len(seen) == 2
+    for profiled, memory, tick in seen.values():
+        assert not profiled
+        assert memory == QUIET_CLUSTER["distributed.worker.memory.monitor-interval"]
+        assert tick == QUIET_CLUSTER["distributed.admin.tick.interval"]
+    assert dask.config.get("distributed.worker.profile.enabled") is True  # not left set in this process
