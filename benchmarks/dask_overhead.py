@@ -67,12 +67,13 @@ with run.dask_client(workers=2) as (client, _):
 """
 
 
-def tree(argv: list[str]) -> tuple[float, float, int]:
-    """(wall s, CPU s of the process tree, exit code) of ``argv`` run from the checkout."""
+def tree(argv: list[str], log: Path) -> tuple[float, float, int]:
+    """(wall s, CPU s of the process tree, exit code) of ``argv`` run from the checkout, its output in ``log``."""
     t0 = time.perf_counter()
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    _, status, usage = os.wait4(proc.pid, 0)
+    with open(log, "wb") as fh:
+        proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=fh, stderr=subprocess.STDOUT)
+        _, status, usage = os.wait4(proc.pid, 0)
     return time.perf_counter() - t0, usage.ru_utime + usage.ru_stime, os.waitstatus_to_exitcode(status)
 
 
@@ -103,9 +104,13 @@ def main(argv: list[str] | None = None) -> int:
                     folder = Path(tmp) / f"{variant}-{rep}"
                     extra = [str(folder), *args.job] if what == "job" else [arg]
                     load = os.getloadavg()[0]
-                    wall, cpu, code = tree([sys.executable, "-c", CHILD, variant, what, *extra])
+                    log = Path(tmp) / f"{what}-{variant}-{rep}.log"
+                    wall, cpu, code = tree([sys.executable, "-c", CHILD, variant, what, *extra], log)
                     row = {"what": what, "variant": variant, "repeat": rep, "wall_s": round(wall, 2),
                            "cpu_s": round(cpu, 2), "exit_code": code, "load_1min": round(load, 2)}
+                    if what == "job":  # the run's own check against the committed results/
+                        row["reproduction"] = next((line for line in log.read_text().splitlines()
+                                                    if line.startswith("reproduction:")), "")
                     if what == "job" and variant == "quiet":
                         row["files_differing"] = len(differing(Path(tmp) / f"default-{rep}", folder))
                     print(row, flush=True)
