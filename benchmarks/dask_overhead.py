@@ -11,7 +11,7 @@ Each variant runs as its own process; the CPU time of its process tree (client, 
 - ``busy``: four tasks of fixed pure-Python work at a stack 40 frames deep (the statistical profiler's cost
   grows with the depth of the running task's stack);
 - ``job``: ``bearingshaft run SCENE ... --out DIR --no-progress`` (the real stages on LocalCluster(2)); the files
-  of the two variants are compared byte for byte (provenance.json and ``*_timing*`` files, which hold times, left
+  of the two variants are compared byte for byte (``TIMESTAMPED`` and ``*_timing*`` files, which hold times, left
   out): the configuration must not change a result.
 
 Prints one line a run and the medians; writes ``dask_overhead.csv`` under ``--out``.
@@ -77,11 +77,16 @@ def tree(argv: list[str], log: Path) -> tuple[float, float, int]:
     return time.perf_counter() - t0, usage.ru_utime + usage.ru_stime, os.waitstatus_to_exitcode(status)
 
 
+# files that hold the time they were written: provenance.json, the report (its run's folder and time) and rom.npz
+# (the model with its provenance, in a zip whose members are stamped; git ignores it)
+TIMESTAMPED = ("provenance.json", "reproduction.md", "rom.npz")
+
+
 def differing(a: Path, b: Path) -> list[str]:
-    """Files of two runs that differ or exist in one only (provenance.json and timing files left out)."""
+    """Files of two runs that differ or exist in one only (:data:`TIMESTAMPED` and timing files left out)."""
     names = {p.relative_to(a) for p in a.rglob("*") if p.is_file()} | \
             {p.relative_to(b) for p in b.rglob("*") if p.is_file()}
-    names = {n for n in names if n.name != "provenance.json" and "_timing" not in n.name}
+    names = {n for n in names if n.name not in TIMESTAMPED and "_timing" not in n.name}
     return [str(n) for n in sorted(names) if not ((a / n).is_file() and (b / n).is_file()
                                                    and filecmp.cmp(a / n, b / n, shallow=False))]
 
