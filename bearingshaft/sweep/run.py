@@ -152,10 +152,12 @@ def local_cores() -> int:
 # worker's statistical profiler walks the running task's stack every 10 ms (for the dashboard's profile page),
 # each server samples CPU and memory every 500 ms, every nanny and worker polls its memory every 100 ms and each
 # event loop ticks every 20 ms. On 2 cores under the main job these cost CPU the stages then lack
-# (benchmarks/dask_overhead.py: the process tree of LocalCluster(2) idle for 40 s used 6.0-6.4 s of CPU with
-# Dask's defaults against 2.7-3.2 s with these, start and close included; with a task of a deep Python stack on
-# each worker, 34.7 and 38.4 s against 29.0 and 32.2 s for the same work). The memory is still watched twice a
-# second (a worker past 95 % of its limit is restarted); `bearingshaft check` sizes the job before it starts.
+# (benchmarks/dask_overhead.py, 2 cores at load 6-10: the process tree of LocalCluster(2) idle for 40 s used 6.0-6.4 s
+# of CPU with Dask's defaults against 2.7-3.2 s with these, start and close included; with a task of a deep Python
+# stack on each worker, 34.7 and 38.4 s against 29.0 and 32.2 s for the same work; `bearingshaft run
+# discrete-impulse rom-impulse discrete-symmetric hammer-test`, 140.0 and 150.4 s against 128.7 and 126.9 s, the
+# same files). The memory is still watched twice a second (a worker past 95 % of its limit is restarted);
+# `bearingshaft check` sizes the job before it starts.
 QUIET_CLUSTER = {"distributed.worker.profile.enabled": False,
                  "distributed.admin.system-monitor.interval": "2s",
                  "distributed.worker.memory.monitor-interval": "500ms",
