@@ -194,16 +194,17 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
             client.close()
         return
     n = workers or local_cores()
-    # read as the scheduler, nannies and workers start (a nanny keeps its copy for a worker it restarts)
+    # read as the scheduler, nannies and workers start, and as a nanny restarts a worker that died: so set for the
+    # cluster's life (in this process, which runs the scheduler and the nannies)
     with dask.config.set(QUIET_CLUSTER):
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                                silence_logs=logging.ERROR)
         client = Client(cluster)
-    try:
-        yield client, f"LocalCluster({n})"
-    finally:
-        client.close()
-        cluster.close()
+        try:
+            yield client, f"LocalCluster({n})"
+        finally:
+            client.close()
+            cluster.close()
 
 
 # -- the sweep ---------------------------------------------------------------------------------
