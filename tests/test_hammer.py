@@ -581,6 +581,7 @@ def test_full_reference_agrees_with_the_reduced_apparatus_on_a_small_mesh(monkey
     1e-2; 2.8e-5 with 80 modes, so it is the reduced model's truncation). A wrong load, mass or
     damping in either model gives errors of order one."""
     import fem.model
+    import reduced.models.mesh_cache
     from bearingshaft.scenes import parse_scene
 
     monkeypatch.setenv("BEARINGSHAFT_CACHE", str(tmp_path))  # full_reference keeps its full modes there
@@ -591,7 +592,8 @@ def test_full_reference_agrees_with_the_reduced_apparatus_on_a_small_mesh(monkey
     scene = parse_scene(text.replace("duration_s = 0.15", "duration_s = 0.05"), "t", "test")
     # full_reference assembles the scene's 3-D model again: it is the one just built (2 s saved)
     assert scene.model.fe_model() == spec.fe_model()
-    monkeypatch.setattr(fem.model, "build_system", lambda model: fe if model == spec.fe_model() else None)
+    monkeypatch.setattr(reduced.models.mesh_cache, "cached_mesh", lambda g: None)  # not meshed again either
+    monkeypatch.setattr(fem.model, "build_system", lambda model, mesh=None: fe if model == spec.fe_model() else None)
     e, names = _full_against_reduced(rom, scene)
     cells = np.array([n.startswith("tip_") for n in names])
     assert cells.sum() == 4

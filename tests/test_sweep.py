@@ -459,3 +459,50 @@ def test_hammer_and_frc_rows_are_the_stages_own_numbers():
     for r in ones:
         assert frc[f"frc_peak_hz_{float(r['level']):g}N"] == float(r["peak_freq_hz"])
         assert frc[f"frc_peak_m_{float(r['level']):g}N"] == float(r["peak_amplitude_m"])
+
+
+def test_local_cluster_runs_with_dask_monitoring_slowed(client):
+    """The cluster of ``run`` and ``sweep`` runs its workers with QUIET_CLUSTER (no 10 ms stack sampler, memory
+    polled every 500 ms), also a worker its nanny restarted (test_worker_killed_mid_sweep_loses_and_doubles_no_case
+    kills one, earlier in this module)."""
+    import dask
+
+    from bearingshaft.sweep.run import QUIET_CLUSTER
+
+    seen = client.run(lambda dask_worker: ("profile" in dask_worker.periodic_callbacks,
+                                           dask.config.get("distributed.worker.memory.monitor-interval"),
+                                           dask.config.get("distributed.admin.tick.interval")))
+    assert len(seen) == 2
+    for profiled, memory, tick in seen.values():
+        assert not profiled
+        assert memory == QUIET_CLUSTER["distributed.worker.memory.monitor-interval"]
+        assert tick == QUIET_CLUSTER["distributed.admin.tick.interval"]
+
+
+def test_the_quiet_settings_last_as_long_as_the_local_cluster(monkeypatch):
+    """QUIET_CLUSTER is in force while the cluster lives (a nanny reads it again to restart a worker) and the
+    caller's Dask configuration is back as it was after (no cluster started: stand-ins record the setting)."""
+    import dask
+    import distributed
+
+    from bearingshaft.sweep.run import dask_client
+
+    before = dask.config.get("distributed.worker.profile.enabled")  # False while this module's cluster is open
+    seen = []
+
+    class Stub:
+        def __init__(self, *a, **k):
+            seen.append(dask.config.get("distributed.worker.profile.enabled"))
+
+        def close(self):
+            seen.append(dask.config.get("distributed.worker.profile.enabled"))
+
+    monkeypatch.setattr(distributed, "LocalCluster", Stub)
+    monkeypatch.setattr(distributed, "Client", Stub)
+    with dask_client(workers=2) as (_, where):
+        assert where == "LocalCluster(2)" and dask.config.get("distributed.worker.profile.enabled") is False
+    assert seen == [False, False, False, False]  # cluster and client made and closed under it
+    assert dask.config.get("distributed.worker.profile.enabled") is before
+    with dask.config.set({"distributed.worker.profile.enabled": True}), dask_client(workers=1):
+        pass
+    assert seen[-4:] == [False, False, False, False]

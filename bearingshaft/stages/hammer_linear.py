@@ -177,11 +177,13 @@ def full_reference(scene: Scene, rig: VirtualRig, level_N: float, n_out: int, pr
     from fem.model import build_system
     from fem.rig import point_load_vector, seat_rows, sensor_rows
     from reduced.models.daq import Acquisition, oversampling
+    from reduced.models.mesh_cache import cached_mesh
 
     spec, model = scene.hammer, scene.model
     if progress:
         print(f"[{scene.name}] linear check: building the full 3-D model", flush=True)
-    fe = build_system(model.fe_model())
+    fem_model = model.fe_model()
+    fe = build_system(fem_model, mesh=cached_mesh(fem_model.geometry()))  # the mesh gmsh gives, cached
     modes = full_modes(fe, spec.linear_check_max_hz, progress)
     keep = modes.freq_hz <= spec.linear_check_max_hz
     phi, omega = modes.phi[:, keep], 2 * np.pi * modes.freq_hz[keep]

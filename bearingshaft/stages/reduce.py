@@ -34,8 +34,9 @@ from bearingshaft.gap_modes import STATES, GapModeComparison, compare_all, expan
 from bearingshaft.reproduction import Reproduction, roundoff, within
 from bearingshaft.scenes import Scene
 from bearingshaft.stages.reduce_results import ReduceResult
+from reduced.models.mesh_cache import build_fe
 from reduced.models.modes import gap_moving_modes, linear_modes
-from reduced.models.rom import ReducedModel, reduction
+from reduced.models.rom import ReducedModel, build_rom, from_cache
 
 __all__ = ["DESCRIPTION", "ReduceResult", "compute", "estimate"]
 
@@ -96,7 +97,8 @@ def compute(scene: Scene, progress: bool, workdir) -> ReduceResult:
         and the expanded modes.
     """
     spec = scene.model
-    rom, fe = reduction(spec, progress)  # from the cache if it holds it: the bits of a rebuild
+    rom = from_cache(spec)  # from the cache if it holds it: the bits of a rebuild (reduced.models.rom.reduction)
+    rom, fe = build_rom(spec, progress=progress) if rom is None else (rom, build_fe(spec))  # the mesh cached
     comps = compare_all(rom, fe, spec)
     fields, shapes = _mode_shapes(rom)
     bound = _upper_bound_check(comps["open"])  # a cached entry written by this stage holds it already

@@ -118,10 +118,12 @@ def _rom_convergence(scene: Scene, progress: bool) -> tuple[list[dict], int]:
     """(rows, DOFs of the 3-D model) of the scene's [rom_convergence]: the model reduced with each
     mode count, against the full model's coupled frequencies and the largest count's ringdown."""
     from fem.model import build_system
+    from reduced.models.mesh_cache import cached_mesh
     from reduced.models.rom import build_rom
 
     rc, spec = scene.rom_convergence, scene.model
-    fe = build_system(spec.fe_model())
+    fem_model = spec.fe_model()
+    fe = build_system(fem_model, mesh=cached_mesh(fem_model.geometry()))  # gmsh's mesh, cached
     full = full_gap_modes(fe, spec)
     full_hz = {s: g.freq_hz[g.coupled] for s, g in full.items()}
     bar = ProgressBar(f"{scene.name}: reduced model vs modes", progress)

@@ -148,6 +148,22 @@ def local_cores() -> int:
         return os.cpu_count() or 1
 
 
+# Dask's own monitoring, slowed or off on the local cluster (none of it changes what a task computes): every
+# worker's statistical profiler walks the running task's stack every 10 ms (for the dashboard's profile page),
+# each server samples CPU and memory every 500 ms, every nanny and worker polls its memory every 100 ms and each
+# event loop ticks every 20 ms. On 2 cores under the main job these cost CPU the stages then lack
+# (benchmarks/dask_overhead.py, 2 cores at load 6-10: the process tree of LocalCluster(2) idle for 40 s used 6.0-6.4 s
+# of CPU with Dask's defaults against 2.7-3.2 s with these, start and close included; with a task of a deep Python
+# stack on each worker, 34.7 and 38.4 s against 29.0 and 32.2 s for the same work; `bearingshaft run
+# discrete-impulse rom-impulse discrete-symmetric hammer-test`, 140.0 and 150.4 s against 128.7 and 126.9 s, the
+# same files). The memory is still watched twice a second (a worker past 95 % of its limit is restarted);
+# `bearingshaft check` sizes the job before it starts.
+QUIET_CLUSTER = {"distributed.worker.profile.enabled": False,
+                 "distributed.admin.system-monitor.interval": "2s",
+                 "distributed.worker.memory.monitor-interval": "500ms",
+                 "distributed.admin.tick.interval": "500ms"}
+
+
 @contextlib.contextmanager
 def dask_client(scheduler: str | None = None, workers: int | None = None):
     """A Dask client for the sweep, closed (with its LocalCluster) on exit.
@@ -157,7 +173,8 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
     scheduler : address of a running scheduler; the wait for it is Dask's own
         ``distributed.comm.timeouts.connect`` (30 s unless set, e.g.
         ``DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT=2min`` for a scheduler still starting)
-    workers : without ``scheduler``, single-threaded worker processes of a LocalCluster (default: one per core)
+    workers : without ``scheduler``, single-threaded worker processes of a LocalCluster (default: one per core),
+        started with Dask's monitoring slowed (:data:`QUIET_CLUSTER`)
 
     Returns
     -------
@@ -177,14 +194,17 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
             client.close()
         return
     n = workers or local_cores()
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                           silence_logs=logging.ERROR)
-    client = Client(cluster)
-    try:
-        yield client, f"LocalCluster({n})"
-    finally:
-        client.close()
-        cluster.close()
+    # read as the scheduler, nannies and workers start, and as a nanny restarts a worker that died: so set for the
+    # cluster's life (in this process, which runs the scheduler and the nannies)
+    with dask.config.set(QUIET_CLUSTER):
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
+                               silence_logs=logging.ERROR)
+        client = Client(cluster)
+        try:
+            yield client, f"LocalCluster({n})"
+        finally:
+            client.close()
+            cluster.close()
 
 
 # -- the sweep ---------------------------------------------------------------------------------
