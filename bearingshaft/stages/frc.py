@@ -165,7 +165,13 @@ def _compute(scene: Scene, progress: bool) -> FRCResult:
 def mirror_symmetric(system: GapSystem, b: np.ndarray) -> tuple[GapSystem, np.ndarray, str]:
     """(system, b, note): the system averaged over its tip mirror x1 <-> x3 when it is symmetric only to the
     round-off of its reduction (:mod:`reduced.models.symmetry`, equation (2)), else as it is; the note says
-    which (empty: no tip mirror, or an exact one)."""
+    which (empty: no tip mirror, or an exact one).
+
+    Parameters
+    ----------
+    system : the model's gap system
+    b : (n,) load direction
+    """
     R, err = tip_mirror(system, b)
     if R is None:
         return system, b, ""

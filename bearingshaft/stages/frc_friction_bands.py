@@ -14,6 +14,10 @@ def intervals(pairs) -> list[tuple[float, float]]:
     --------
     >>> intervals([(3.0, 4.0), (1.0, 2.0), (2.0, 1.5), (3.5, 5.0)])
     [(1.0, 2.0), (3.0, 5.0)]
+
+    Parameters
+    ----------
+    pairs : iterable of (a, b) Hz, in any order
     """
     out: list = []
     for a, b in sorted(tuple(sorted((float(a), float(b)))) for a, b in pairs):
@@ -31,6 +35,11 @@ def clip(ivs, band) -> list[tuple[float, float]]:
     --------
     >>> clip([(1.0, 3.0), (5.0, 6.0)], [(2.0, 5.5)])
     [(2.0, 3.0), (5.0, 5.5)]
+
+    Parameters
+    ----------
+    ivs : list of (a, b) Hz
+    band : list of (c, d) Hz, merged
     """
     out = []
     for a, b in intervals(ivs):
@@ -48,6 +57,11 @@ def complement(ivs, band) -> list[tuple[float, float]]:
     --------
     >>> complement([(2.0, 3.0)], [(1.0, 4.0)])
     [(1.0, 2.0), (3.0, 4.0)]
+
+    Parameters
+    ----------
+    ivs : list of (a, b) Hz
+    band : list of (c, d) Hz, merged
     """
     out = []
     for c, d in band:
@@ -63,7 +77,12 @@ def complement(ivs, band) -> list[tuple[float, float]]:
 
 def contact_band(br) -> list[tuple[float, float]]:
     """The frequency intervals of the HB curve ``br`` where a slider's tip touches over part of the period at two
-    consecutive points (open fraction below 1: AFT's slider states), merged."""
+    consecutive points (open fraction below 1: AFT's slider states), merged.
+
+    Parameters
+    ----------
+    br : the HB curve with friction (its balance's slider states)
+    """
     touch = [bool(np.any(br.balance.slider_state(z)[:, 0] < 1.0)) for z in br.z]
     return intervals((br.freq_hz[i - 1], br.freq_hz[i]) for i in range(1, len(touch)) if touch[i] and touch[i - 1])
 

@@ -200,7 +200,13 @@ def coverage(result, P: float) -> tuple[list, list, list, list] | None:
     """(contact band, covered by the branches, covered by branches and grid, not covered) at level P: the HB curve's
     contact band (:func:`contact_band`), the parts of it the continued exact orbits' branches span (each branch from
     its lowest to its highest frequency), those and the grid's orbits (each converged grid frequency standing for
-    the half step either side of it), and the rest; None where there is no HB curve or no continued branch."""
+    the half step either side of it), and the rest; None where there is no HB curve or no continued branch.
+
+    Parameters
+    ----------
+    result : the friction frc stage's result
+    P : N, the level
+    """
     br = (getattr(result, "curves", None) or {}).get(P)
     curves = _curves(result.shooting.get(P, []))
     if br is None or isinstance(br, Exception) or not curves:
@@ -241,7 +247,12 @@ def sweep_rows(result) -> list[dict]:
 
 
 def sweep_markdown(result) -> list[str]:
-    """frc.md's section on the grid of exact orbits where the continued branches do not reach."""
+    """frc.md's section on the grid of exact orbits where the continued branches do not reach.
+
+    Parameters
+    ----------
+    result : the friction frc stage's result
+    """
     sws = [sw for P in result.curves for _, _, sw, _ in _sweeps(result, P)]
     lines = ["", "## Exact orbits on a grid where the continued branches do not reach (frc_friction_sweep.csv)", ""]
     if not sws:
@@ -292,7 +303,13 @@ def _hz_list(fs, step: float) -> str:
 
 
 def coverage_lines(result, P: float) -> list[str]:
-    """frc.md's statement of what the continued exact orbits cover of level P's contact band, and what not."""
+    """frc.md's statement of what the continued exact orbits cover of level P's contact band, and what not.
+
+    Parameters
+    ----------
+    result : the friction frc stage's result
+    P : N, the level
+    """
     def hz(ivs):
         return ", ".join(f"{a:.4g}-{b:.4g}" for a, b in ivs) or "none"
 

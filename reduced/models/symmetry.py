@@ -70,7 +70,14 @@ def signed_mirror(system: GapSystem, b: np.ndarray, pair: tuple[int, int], rtol:
 
 
 def mirror_error(system: GapSystem, b: np.ndarray, R: np.ndarray) -> float:
-    """max over M, K, C, b of max|R A R^T - A| / max|A| (inf if R does not map the stops onto each other)."""
+    """max over M, K, C, b of max|R A R^T - A| / max|A| (inf if R does not map the stops onto each other).
+
+    Parameters
+    ----------
+    system : the gap system
+    b : (n,) load direction
+    R : (n, n) the signed permutation
+    """
     err = 0.0
     for A in (system.M, system.K, system.C):
         top = np.max(np.abs(A), initial=0.0)
@@ -84,7 +91,14 @@ def mirror_error(system: GapSystem, b: np.ndarray, R: np.ndarray) -> float:
 
 def tip_mirror(system: GapSystem, b: np.ndarray, rtol: float = MIRROR_RTOL) -> tuple[np.ndarray | None, float]:
     """(R, error): :func:`signed_mirror` swapping the DOFs named x1 and x3 (None, inf when the system has no
-    such pair or no such mirror), and its :func:`mirror_error`."""
+    such pair or no such mirror), and its :func:`mirror_error`.
+
+    Parameters
+    ----------
+    system : the gap system (its DOFs named x1 and x3 are the tips)
+    b : (n,) load direction
+    rtol : accepted relative asymmetry (:data:`MIRROR_RTOL`)
+    """
     names = tuple(system.dof_names)
     if "x1" not in names or "x3" not in names:
         return None, np.inf
@@ -94,7 +108,14 @@ def tip_mirror(system: GapSystem, b: np.ndarray, rtol: float = MIRROR_RTOL) -> t
 
 def symmetrized(system: GapSystem, b: np.ndarray, R: np.ndarray) -> tuple[GapSystem, np.ndarray]:
     """The system and load averaged over the mirror R, equation (2) (the stops and friction unchanged:
-    :func:`signed_mirror` has checked that R maps them onto each other)."""
+    :func:`signed_mirror` has checked that R maps them onto each other).
+
+    Parameters
+    ----------
+    system : the gap system
+    b : (n,) load direction
+    R : (n, n) its mirror (:func:`signed_mirror`)
+    """
     def avg(A):
         return 0.5 * (A + R @ A @ R.T)
 

@@ -395,7 +395,14 @@ class _Residual:
 def monodromy_of(blocks: np.ndarray, D: np.ndarray, Bt: np.ndarray) -> np.ndarray:
     """(N, N) the orbit's monodromy dy(qT)/dy(0) in y = [x; v; w] from its segments' blocks (S, N, N) in
     z = [x; v; Bt x - w] and units D: Phi_z = Phi_{S-1} ... Phi_0 back in physical units, then
-    Phi_y = T Phi_z T with T = [[I, 0, 0], [0, I, 0], [Bt, 0, -I]] (T^-1 = T)."""
+    Phi_y = T Phi_z T with T = [[I, 0, 0], [0, I, 0], [Bt, 0, -I]] (T^-1 = T).
+
+    Parameters
+    ----------
+    blocks : (S, N, N) the segments' state transition matrices in z and units D
+    D : (N,) the units of z
+    Bt : (p, n) the sliders' tangential rows
+    """
     N = D.size
     n = (N - Bt.shape[0]) // 2
     Phi = np.eye(N)

@@ -82,7 +82,16 @@ class FrictionSweep:
 def newton_at(cont: _Continuation, z0: np.ndarray, f: float, tol: float = TOL,
               max_iter: int = MAX_ITER) -> tuple[bool, np.ndarray, float, int, tuple]:
     """(converged, z / D, max |G|, steps, (res, Y, blocks at z)): Newton at fixed f from z0 / D (module docstring);
-    ``blocks`` None unless converged."""
+    ``blocks`` None unless converged.
+
+    Parameters
+    ----------
+    cont : the friction continuation's residual (its G at [z; f])
+    z0 : (N,) the start, in units D
+    f : Hz, the fixed load frequency
+    tol : max |G| at convergence
+    max_iter : Newton steps at most
+    """
     z = np.asarray(z0, float).copy()
     it = 0
     try:
