@@ -122,23 +122,24 @@ LIMITS = (
      "stopped one Newton step earlier or later or with its tolerance x10 (17.13 Hz to past 900 Hz, the same 36 folds, "
      "stable from 26.82 Hz up) but costs 24-38 s CPU (tests/test_exact_frc_robust.py, slow)"),
     ("main job, bearingshaft run",
-     "measured on a quiet machine after warming the reduced-model cache (2026-11-27 04:43 UTC, load 0.9 at the "
-     "start): 359 s wall, 705 s CPU on 2 workers; the session before: 451 s, 833 s. Cut this session: the meshing "
-     "stages (modal, reduce, verify) run in their Dask worker (gmsh sessions off the main thread, under a lock) "
-     "instead of a child process each (3.5-4 s of imports a stage); the client schedules the stages itself, the "
-     "longest remaining chain first, one stage a worker thread (rom-frc's frc starts at once, not at 156 s); "
-     "pyvista figures kept in the cache folder and copied; the frc stages' repeated set-ups (forced tables, energy "
-     "norms, the stepped sine's decomposition, HB extrema) worked out once, the same bits. The frc stages remain "
-     "most of it (rom-frc 272 s, discrete-frc 124 s wall); their continuation paths change with any change of "
-     "round-off (discrete-frc 10 N's main family 26.8-953 Hz becomes 17.1-38.2 Hz when the corrector stops one "
-     "Newton step earlier), so the step control (23 % of converged correctors discarded by the 15 deg angle test) "
-     "is left as it is"),
+     "the machine changed on 2026-11-27 (an Intel Xeon at 2.1 GHz, sum(range(10**6)) 18.3 ms; before, an AMD EPYC): "
+     "measured on it, quiet, after warming the reduced-model cache (2026-11-27 07:50 UTC, load 0.4 at the start): "
+     "440 s wall, 870 s CPU. The same job on the EPYC before this session's changes: 359 s, 705 s. Stages whose code "
+     "did not change run 1.2-1.6x as long here (discrete-fep's nnm 29.7 -> 46.8 s; alone, 48.4 s against 23 s in "
+     "fep_headline.csv; rom-fep 49 -> 62 s; hammer-test's hammer 25 -> 32 s), so the machine, not the code, moved "
+     "the job past 360 s. Cut this session: Dask's own monitoring turned down on the local cluster (no 10 ms stack "
+     "sampler: 128 against 145 s CPU on four scenes, load 6-10), a mesh cache (9 CPU-s a job), the reduced beam's "
+     "forced response averaged over its mirror (rom-frc 286 -> 277 s wall on the slower machine, with asymmetric "
+     "families it did not have). Added: the friction stage's grid of exact orbits (+5 % of that stage). The frc "
+     "stages remain most of it (rom-frc 277 s, discrete-frc 196 s, discrete-friction-frc 101 s); their continuation "
+     "paths change with round-off at clusters of grazings, where grazing_ds = 1e-3 makes them robust at 3-4x the "
+     "cost (reduced.periodic.exact_frc's docstring)"),
     ("test suite, python -m pytest",
-     "measured on a quiet machine (2026-11-27 04:58 UTC, load 1.3): 180 s wall, 354 s CPU; the session before: 247 s, "
-     "483 s. Cut this session: the results-folder tests fork their 23 CLI children from a server that imported "
-     "bearingshaft once, their random kills at fractions of a measured run; the frc stage test follows 3 + 1 switched "
-     "families (it checks both pitchfork kinds and a doubling); smaller equivalent inputs in the modal speed paths; "
-     "nnm stages of job tests with gap = 0 (no near-grazing NNM 2 integration)"),
+     "measured on this session's machine (an Intel Xeon at 2.1 GHz, 2026-11-27 08:00 UTC, load 0.7): 311 s wall, "
+     "607 s CPU, 1422 tests. On the AMD EPYC of the session before: 180 s, 354 s, 1387 tests; the stages the suite "
+     "runs take 1.2-1.6x as long on this machine (the main job's row), and this session added 35 tests (the tip "
+     "mirror, the friction grid and period doubling, the subharmonic classifier, the memory refusals). No test takes "
+     "more than 23 s (results/performance/job_durations.csv); the suite's time is spread over ~100 files"),
     ("FE modal, 112,629 DOFs: relative residual",
      "the twelve soft-spring modes (0.4-34 Hz) stop at 1-3x their round-off floor eps |||K| |phi||| / ||K phi||, "
      "above 1e-8 in double precision; the elastic modes reach 4-8e-10"),
