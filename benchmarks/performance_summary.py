@@ -45,19 +45,21 @@ SOURCES = (
     ("job_headline.csv", "job_machine.csv", "the main job and the test suite, whole",
      "PYTHONPATH=. python benchmarks/job_times.py", ""),
 )
+XEON = ("on this session's machine, an Intel Xeon at 2.1 GHz (2026-11-27 08:30 UTC, quiet), slower than the AMD "
+        "EPYC of the sessions before, where this row met its target; what follows was measured on the EPYC: ")
 # what limits each target not met, from the profiles (a row matches by the start of its ``what``)
 LIMITS = (
     ("explicit (central difference) ringdown, discrete-impulse",
-     "the step is already a numba kernel with the state in registers (25 ns a step); each step needs the "
+     XEON + "the step is already a numba kernel with the state in registers (25 ns a step); each step needs the "
      "last one's result (x, stop forces, v, x), so steps cannot overlap, and the results are kept bit for bit"),
     ("explicit (central difference) ringdown, rom-impulse",
-     "the default kernel is the block kernel (reduced.transient._cd_block, the row in blocks of steps below): "
+     XEON + "the default kernel is the block kernel (reduced.transient._cd_block, the row in blocks of steps below): "
      "on a quiet machine (2026-11-27 05:01 UTC, load 1-2) the default row ran 3.23e7 steps/s in wall time, the "
      "block kernel's own row 3.6e7 (CPU 2.4x the step-by-step modal kernel's); under load 8-9 the wall times were "
      "2.5x the CPU times. The physical kernel it replaced as the default (coordinates=\"physical\") computes each "
      "step's velocity as 12 sums over the coordinates in a fixed order, a chain of dependent adds (8.3e6 steps/s)"),
     ("explicit (central difference) ringdown in the open-gap modal coordinates, jumped in blocks",
-     "measured at load 8-9 on 2 cores (2026-11-27 03:37 UTC): 3.64e7 steps/s in CPU time (27.5 ms; the modal "
+     XEON + "measured at load 8-9 on 2 cores (2026-11-27 03:37 UTC): 3.64e7 steps/s in CPU time (27.5 ms; the modal "
      "kernel 1.55e7 in the same process, the physical 8e6), the wall times 2.5x the CPU times under that load. "
      "A block costs two matrix-vector products from the block's start state (the stop rows of its 25 steps, "
      "the end state and its mean velocity: 56 + 36 rows of 25 columns, SIMD over the rows, no chain of "
@@ -73,7 +75,7 @@ LIMITS = (
      "update). The block kernel breaks that chain: while the contact state holds it jumps up to 25 steps from the "
      "block's start state with independent products"),
     ("exact vs DOP853 restarted at every crossing",
-     "the exact run's kernel (perf, issue 28) spends about a quarter of its time in libm (sincos, exp, expm1 of "
+     XEON + "the exact run's kernel (perf, issue 28) spends about a quarter of its time in libm (sincos, exp, expm1 of "
      "the terms e^{lam tau} at each march step) and most of the rest in the march's chains of dependent sqrt "
      "and divisions (the safe steps); its set-up (eigen-decompositions and modal tables, ~1 ms at load 1) is "
      "kept across runs of one system, so a first run is slower (the row's second figure); DOP853 at the "
