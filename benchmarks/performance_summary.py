@@ -137,11 +137,11 @@ LIMITS = (
      "paths change with round-off at clusters of grazings, where grazing_ds = 1e-3 makes them robust at 3-4x the "
      "cost (reduced.periodic.exact_frc's docstring)"),
     ("test suite, python -m pytest",
-     "measured on this session's machine (an Intel Xeon at 2.1 GHz, 2026-11-27 08:00 UTC, load 0.7): 311 s wall, "
-     "607 s CPU, 1422 tests. On the AMD EPYC of the session before: 180 s, 354 s, 1387 tests; the stages the suite "
-     "runs take 1.2-1.6x as long on this machine (the main job's row), and this session added 35 tests (the tip "
-     "mirror, the friction grid and period doubling, the subharmonic classifier, the memory refusals). No test takes "
-     "more than 23 s (results/performance/job_durations.csv); the suite's time is spread over ~100 files"),
+     "measured on this session's machine (an Intel Xeon at 2.1 GHz, 2026-11-27 08:36 UTC, load 2.0 at the start): "
+     "238 s wall, 469 s CPU, 1422 tests, after tests/file_seconds.csv was rewritten on it; a run just after edits to "
+     "three files holding numba kernels took 311 s (their compilations are cached per source file). On the AMD EPYC "
+     "of the session before: 180 s, 354 s, 1387 tests. No test takes more than 23 s "
+     "(results/performance/job_durations.csv); the suite's time is spread over ~100 files"),
     ("FE modal, 112,629 DOFs: relative residual",
      "the twelve soft-spring modes (0.4-34 Hz) stop at 1-3x their round-off floor eps |||K| |phi||| / ||K phi||, "
      "above 1e-8 in double precision; the elastic modes reach 4-8e-10"),
