@@ -32,7 +32,6 @@ import argparse
 import functools
 import os
 import sys
-import time
 import warnings
 from dataclasses import replace
 from pathlib import Path
@@ -50,14 +49,10 @@ from bearingshaft.systems import model_system  # noqa: E402
 from reduced._blas import single_thread_blas  # noqa: E402
 from reduced.periodic.exact_frc import ExactFRCOptions  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from converged_frc_speed import _timed  # noqa: E402  (one timing helper for both benchmarks)
+
 TARGET_S = 10.0  # the issue's target, CPU seconds of one level
-
-
-def _timed(fn, *args, **kw):
-    """(result, wall s, CPU s) of one call."""
-    t0, c0 = time.perf_counter(), time.process_time()
-    out = fn(*args, **kw)
-    return out, time.perf_counter() - t0, time.process_time() - c0
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -173,9 +173,7 @@ def mirror_symmetric(system: GapSystem, b: np.ndarray) -> tuple[GapSystem, np.nd
     b : (n,) load direction
     """
     R, err = tip_mirror(system, b)
-    if R is None:
-        return system, b, ""
-    if err == 0.0:
+    if R is None or err == 0.0:  # no tip mirror, or an exact one: the system as it is
         return system, b, ""
     flipped = [system.dof_names[k] for k in range(system.n) if R[k, k] < 0]
     system, b = symmetrized(system, b, R)

@@ -55,10 +55,11 @@ def signed_mirror(system: GapSystem, b: np.ndarray, pair: tuple[int, int], rtol:
     if i == j or not (0 <= i < n and 0 <= j < n):
         raise ValueError(f"pair must be two different DOFs of 0..{n - 1}, got {pair!r}")
     s = np.ones(n)
+    tops = [(A, np.max(np.abs(A))) for A in (system.M, system.K)]
     for k in range(n):
         if k in pair:
             continue
-        col = [(A[i, k], A[j, k], np.max(np.abs(A))) for A in (system.M, system.K)]
+        col = [(A[i, k], A[j, k], top) for A, top in tops]
         minus = all(abs(a + c) <= rtol * top for a, c, top in col)
         plus = all(abs(a - c) <= rtol * top for a, c, top in col)
         s[k] = -1.0 if minus and not plus else 1.0
