@@ -34,6 +34,7 @@ import time
 import numpy as np
 
 from bearingshaft.scenes import Scene
+from bearingshaft.stages import frc_friction_map
 from bearingshaft.stages.frc_friction_bands import clip, complement, contact_band
 from bearingshaft.stages.frc_friction_results import (  # noqa: F401
     SKIPPED,
@@ -154,6 +155,7 @@ def compute(scene: Scene, progress: bool = False) -> FrictionFRCResult:
     b = load_vector(spec, rows, names)
     rows = np.asarray(rows, float)
     curves, checks, linear, shooting, verdicts, sweeps, stats = {}, {}, {}, {}, {}, {}, {"levels": {}}
+    maps = {}
     f_lin = np.geomspace(spec.freq_min_hz, spec.freq_max_hz, 400)
     for P in spec.levels_N:
         t0 = time.perf_counter()
@@ -166,9 +168,12 @@ def compute(scene: Scene, progress: bool = False) -> FrictionFRCResult:
         wall = time.perf_counter() - t0
         curves[P] = br
         linear[P] = (f_lin, linear_frf(system.with_friction(None), b, P, f_lin, rows))
+        tm, cm = time.perf_counter(), time.process_time()
+        maps[P] = frc_friction_map.compute_map(system, b, P, spec, br, rows, names, check_frequencies(spec))
+        map_st = {"wall_s": time.perf_counter() - tm, "cpu_s": time.process_time() - cm}
         t1 = time.perf_counter()
-        checks[P] = _checks(system, b, P, spec, br, rows)
-        st = {"hb_wall_s": wall, "check_wall_s": time.perf_counter() - t1,
+        checks[P] = _checks(system, b, P, spec, br, rows, maps[P])
+        st = {"hb_wall_s": wall, "map": map_st, "check_wall_s": time.perf_counter() - t1,
               "shooting": [{"freq_hz": c.freq_hz, "converged": c.shooting.converged, "start_H": c.shooting.start_H,
                             "wall_s": c.shooting.wall_s} for c in checks[P] if c.shooting is not None]}
         if not isinstance(br, Exception):
@@ -193,7 +198,8 @@ def compute(scene: Scene, progress: bool = False) -> FrictionFRCResult:
             st["sweep"]["stretches"] = [[float(a), float(b_), int(sw.converged.sum()), len(sw.freq_hz)]
                                         for a, b_, sw, _ in sweeps[P]]
         stats["levels"][str(P)] = st
-    return FrictionFRCResult(scene, names, b, curves, checks, linear, stats, shooting, verdicts, sweeps)
+    return FrictionFRCResult(scene, names, b, curves, checks, linear, stats, shooting, verdicts, sweeps,
+                             response_maps=maps)
 
 
 def _continued(spec, br, checks: list, rows: np.ndarray, verdicts: list | None = None) -> list | str:
@@ -405,18 +411,33 @@ def _against_hb(branch, br) -> ShootingCurve:
     return ShootingCurve(branch, hb, hb_stable)
 
 
-def _checks(system, b: np.ndarray, P: float, spec, br, rows: np.ndarray) -> list[FrictionCheck]:
-    """The stepped sine up over ``stepped_sine_points`` frequencies (linear in the band, its ends excluded)."""
+def check_frequencies(spec) -> np.ndarray:
+    """Hz, the ``stepped_sine_points`` frequencies HB is checked at: linear in the band, its ends excluded."""
     k = spec.stepped_sine_points
-    if k <= 0:
-        return []
-    freqs = np.linspace(spec.freq_min_hz, spec.freq_max_hz, k + 2)[1:-1]
+    return np.linspace(spec.freq_min_hz, spec.freq_max_hz, k + 2)[1:-1] if k > 0 else np.zeros(0)
+
+
+def _checks(system, b: np.ndarray, P: float, spec, br, rows: np.ndarray, level=None) -> list[FrictionCheck]:
+    """HB checked at each of :func:`check_frequencies`: with a response map (``level``, whose grid holds them), from
+    the state its up sweep ended in there, SETTLE_CHUNK periods twice (:func:`settle`: the last period's amplitudes
+    and friction work), settled where the map found a periodic response (periodic or subharmonic, settled);
+    without one, a stepped sine of its own (:func:`settle` until ``stepped_sine_tol`` or ``stepped_sine_max_s``).
+    A settled point against the HB solution at its frequency on the stable piece nearest it; elsewhere the orbit is
+    shot for (:func:`_shoot`)."""
     n = system.n
     state = (np.zeros(n), np.zeros(n), None)
     out = []
-    for f in freqs:
-        last, work, change, ok, t, state = settle(system, b, P, float(f), state, spec.stepped_sine_tol,
-                                                  spec.stepped_sine_max_s)
+    for f in check_frequencies(spec):
+        got = frc_friction_map.state_at(level, float(f))
+        if got is None:
+            last, work, change, ok, t, state = settle(system, b, P, float(f), state, spec.stepped_sine_tol,
+                                                      spec.stepped_sine_max_s)
+        else:
+            pt, y = got
+            last, work, change, _, t, _ = settle(system, b, P, float(f), (y[:n], y[n:2 * n], y[2 * n:]), 0.0,
+                                                 1.5 * SETTLE_CHUNK / f)
+            t += pt.n_periods / f
+            ok = pt.settled and pt.regime in ("periodic", "subharmonic")
         exact = np.max(np.abs(last @ rows.T), axis=0)
         hb = np.full(len(rows), math.nan)
         if not isinstance(br, Exception):
@@ -468,5 +489,5 @@ def _shoot(system, b: np.ndarray, P: float, f: float, br, amplitude_ref: float, 
 
 
 
-__all__ = ["SKIPPED", "BranchVerdict", "FrictionCheck", "FrictionFRCResult", "ShootCheck", "ShootingCurve", "compute",
-           "load_vector", "settle"]
+__all__ = ["SKIPPED", "BranchVerdict", "FrictionCheck", "FrictionFRCResult", "ShootCheck", "ShootingCurve",
+           "check_frequencies", "compute", "load_vector", "settle"]
