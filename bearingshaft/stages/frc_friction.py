@@ -6,13 +6,16 @@ stage to :func:`compute` here. For each level of ``[frc] levels_N`` the load P c
 resists while they touch) is continued in frequency by :func:`reduced.periodic.friction_aft.friction_frc`
 (condensed HB, the stops projected exactly, each slider by AFT, H = ``harmonics``), its stability by Hill's
 method on the consistent AFT Jacobian at every point (stick-slip included), its bifurcations from the
-multipliers. The check: a stepped sine up by the exact friction integrator
-(:func:`reduced.transient.friction.integrate_exact_friction`, stick, slip and gaps as events) at
-``stepped_sine_points`` frequencies spread over the band, each settled (the state, sliders included, carried
-from one frequency to the next) until its last period's amplitudes move by less than ``stepped_sine_tol``
-from the one before, or ``stepped_sine_max_s`` of simulated time; every settled point against the HB solution
-at its frequency on the stable piece nearest it. Where the stepped sine does not settle (in contact, where the
-response it runs into is not periodic or the periodic orbit not attracting), the periodic orbit is shot for on
+multipliers. The response map (:mod:`bearingshaft.stages.frc_friction_map`): a stepped sine up and down by the
+exact friction flow, 0.1 Hz steps over the contact band, each frequency classified (periodic, subharmonic,
+quasi-periodic, chaotic) with its largest Lyapunov exponent by the exact tangent. The check: at
+``stepped_sine_points`` frequencies spread over the band (on the map's grid), from the state the map's up sweep
+ended in there, 20 periods by the exact friction integrator
+(:func:`reduced.transient.friction.integrate_exact_friction`, stick, slip and gaps as events); settled where the
+map found a periodic response, and then against the HB solution at its frequency on the stable piece nearest it
+(without a map, ``[frc] map_step_hz = 0``: a stepped sine of its own, each frequency settled until its last
+period's amplitudes move by less than ``stepped_sine_tol`` or ``stepped_sine_max_s``). Where it is not settled (in
+contact, where the response is not periodic or the periodic orbit not attracting), the periodic orbit is shot for on
 the exact friction flow with the sliders' positions among the unknowns
 (:func:`reduced.periodic.friction_shooting.shoot_friction`, 8 nodes, Newton from the HB orbit at that
 frequency, then from HB with 2H + 1 and 4H + 1 harmonics there while it does not converge): its distance to
@@ -21,9 +24,8 @@ settle), or the defect reached where Newton stops short.
 
 What the frictionless stage does and this one does not (frc.md says so too): the converged curve by multiple
 shooting continued in frequency (the continued shooting runs the exact flow without sliders), the Floquet
-multipliers and monodromy along the curve (Hill's method instead), the response map (its classifier runs the
-exact flow without sliders), the convergence study in H and the backbone check (NNMs of a system with friction
-are not conservative; and each H's curve costs a continuation with AFT).
+multipliers and monodromy along the curve (Hill's method instead), the convergence study in H and the backbone
+check (NNMs of a system with friction are not conservative; and each H's curve costs a continuation with AFT).
 """
 
 from __future__ import annotations
