@@ -53,7 +53,8 @@ def bands(system, b: np.ndarray, P: float, spec, br) -> list[tuple[float, float]
     return [(max(lo, spec.freq_min_hz), min(hi, spec.freq_max_hz)) for lo, hi in merge_bands(raw, BAND_MARGIN_HZ)]
 
 
-def compute_map(system, b: np.ndarray, P: float, spec, br, rows: np.ndarray, names: tuple, extra_hz=()) -> MapLevel | None:
+def compute_map(system, b: np.ndarray, P: float, spec, br, rows: np.ndarray, names: tuple,
+                extra_hz=()) -> MapLevel | None:
     """The response map at level P (module docstring), or None with ``[frc] map_step_hz = 0``.
 
     Parameters
