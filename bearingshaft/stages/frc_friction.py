@@ -414,7 +414,12 @@ def _against_hb(branch, br) -> ShootingCurve:
 
 
 def check_frequencies(spec) -> np.ndarray:
-    """Hz, the ``stepped_sine_points`` frequencies HB is checked at: linear in the band, its ends excluded."""
+    """Hz, the ``stepped_sine_points`` frequencies HB is checked at: linear in the band, its ends excluded.
+
+    Parameters
+    ----------
+    spec : the [frc] table
+    """
     k = spec.stepped_sine_points
     return np.linspace(spec.freq_min_hz, spec.freq_max_hz, k + 2)[1:-1] if k > 0 else np.zeros(0)
 

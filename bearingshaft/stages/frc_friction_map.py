@@ -85,7 +85,14 @@ def compute_map(system, b: np.ndarray, P: float, spec, br, rows: np.ndarray, nam
 
 
 def state_at(level: MapLevel | None, freq_hz: float, direction: str = "up"):
-    """(the point's PointResponse, its end state (x, v, w)) of a sweep at ``freq_hz`` (within 1e-9 Hz), or None."""
+    """(the point's PointResponse, its end state [x; v; w]) of a sweep at ``freq_hz`` (within 1e-9 Hz), or None.
+
+    Parameters
+    ----------
+    level : the level's map (or None: none)
+    freq_hz : Hz
+    direction : the sweep, ``up`` or ``down``
+    """
     if level is None:
         return None
     rm = level.sweeps[direction]
@@ -102,7 +109,13 @@ def _col(names: tuple) -> int:
 
 def write(result, writer) -> None:
     """response_map.csv, response_map_jumps.csv and response_map.png (nothing without a map); the statistics in
-    ``writer.stats["frc"]["response_map"]``."""
+    ``writer.stats["frc"]["response_map"]``.
+
+    Parameters
+    ----------
+    result : FrictionFRCResult
+    writer : StageWriter
+    """
     maps = {P: lvl for P, lvl in (getattr(result, "response_maps", {}) or {}).items() if lvl is not None}
     if not maps:
         return
@@ -122,7 +135,13 @@ def write(result, writer) -> None:
 
 def stretches(rm, col: int) -> list[tuple[float, float, str, np.ndarray, np.ndarray]]:
     """[(f_from, f_to, label, exponents (k,), per-period max |x1| min and max (k, 2))]: the runs of consecutive
-    frequencies of a sweep (in sweep order) with the same regime (and period)."""
+    frequencies of a sweep (in sweep order) with the same regime (and period).
+
+    Parameters
+    ----------
+    rm : the sweep (ResponseMap)
+    col : the column of x1 among the monitored points
+    """
     out, cur = [], None
     for f, pt in zip(rm.freq_hz, rm.points, strict=True):
         lab = _label(pt) if pt.settled else f"{_label(pt)} (not settled)"
@@ -137,7 +156,12 @@ def stretches(rm, col: int) -> list[tuple[float, float, str, np.ndarray, np.ndar
 
 
 def markdown(result) -> list[str]:
-    """frc.md's section on the response map (empty without one)."""
+    """frc.md's section on the response map (empty without one).
+
+    Parameters
+    ----------
+    result : FrictionFRCResult
+    """
     maps = {P: lvl for P, lvl in (getattr(result, "response_maps", {}) or {}).items() if lvl is not None}
     if not maps:
         return []

@@ -342,6 +342,28 @@ def friction_response_map(system: GapSystem, load, amplitude_N: float, freq_hz, 
     :func:`reduced.periodic.response_map.response_map`; y0 and each point's ``state`` of N = 2n + p values, the
     sliders' positions carried from one frequency to the next). sigma (the scale of the exponent's tolerance) is
     the slowest linear decay rate of the structure without its sliders.
+
+    Parameters
+    ----------
+    system : the gap system with friction, damped
+    load : (n,) the force direction b
+    amplitude_N : N, P > 0
+    freq_hz : Hz, the frequencies in sweep order
+    direction : ``up`` or ``down`` (a label)
+    point_rows, point_names : (p, n) the monitored points (default the DOFs); the first is the one the envelope,
+        spectrum and jumps are read at
+    mirror : two point names whose asymmetry is reported (skipped if either is missing)
+    options : MapOptions
+    jump_step_hz : Hz, neighbours up to 1.5 times this apart can show a jump (0: ``extend_step_hz``, else the
+        smallest step)
+    extend_step_hz : Hz; > 0: a response in contact before a wider step is followed by steps of this size
+    y0 : (2n + p,) the state the sweep starts from (default rest, the sliders unloaded)
+    progress : None or a callable taking the fraction done
+
+    Returns
+    -------
+    ResponseMap
+        A failure of the exact flow is a RuntimeError naming the frequency.
     """
     _check.gap_system(system)
     if system.friction is None:
