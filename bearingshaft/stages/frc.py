@@ -970,6 +970,10 @@ REPRODUCTION = Reproduction(rules=(
     sensitive("frc.md", r"^\| [0-9.]+ \| [0-9.]+ \|", r"^- [0-9.]+ N, branch [0-9]+:",
               why="the friction stepped sine and the exact friction orbits (frc_friction_checks.csv, "
               "frc_friction_shooting.csv): " + CONTINUATION),
+    # with friction, the response map's lines (frc_friction_map.markdown): a chaotic stretch's exponents and envelope
+    # chaotic; each sweep's counts and jumps, and where its stretches end, set by the state chaos leaves (MAP_AFTER)
+    chaotic("frc.md", r"^  - [^:]*: (?:chaotic|quasi_periodic)", why=MAP_CHAOS),
+    sensitive("frc.md", r"^- [0-9.]+ N, sweep (?:up|down): ", r"^  - [0-9.]+(?: -> [0-9.]+)? Hz: ", why=MAP_AFTER),
     sensitive("frc_stability.csv", why=CONTINUATION + " (stability at those points)"),
     sensitive("frc_convergence.csv", why=CONTINUATION + " (points, reach, folds and errors at the points)"),
     sensitive("stepped_sine.csv", why="the stepped sine at the HB curve's points, compared with HB there: "

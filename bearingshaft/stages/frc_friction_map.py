@@ -191,7 +191,7 @@ def markdown(result) -> list[str]:
             jumps = ", ".join(f"{f:.4g}" for f in rm.jump_hz) or "none"
             lines.append(f"- {P:g} N, sweep {d}: {rm.freq_hz.size} frequencies, "
                          + ", ".join(f"{v} {k}" for k, v in counts.items() if v)
-                         + f"; jumps at {jumps} Hz; {float(np.sum(rm.wall_s)):.1f} s.")
+                         + f"; jumps at {jumps} Hz.")  # run times: provenance.json (frc.md is compared digit by digit)
             for a, b, lab, lam, env in stretches(rm, col):
                 span = f"{a:.4g} Hz" if a == b else f"{a:.4g} -> {b:.4g} Hz"
                 lines.append(f"  - {span}: {lab}, exponent {lam.min():.3g} .. {lam.max():.3g} 1/s, per-period max "
