@@ -50,7 +50,6 @@ Bifurcations of Non-Smooth Mechanical Systems* (Springer, 2004), ch. 7.
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 from scipy.linalg import expm
@@ -58,7 +57,7 @@ from scipy.linalg import expm
 from reduced import _checks as _check
 from reduced.models.gaps import GapSystem
 from reduced.periodic.friction_sensitivity import LOG_EVENTS, FlowSensitivity
-from reduced.periodic.response_map import MapOptions, ResponseMap, classify, jumps
+from reduced.periodic.response_map import MapOptions, ResponseMap, sweep
 from reduced.periodic.stepped_sine import slowest_decay_rate
 from reduced.transient.exact import ExactIntegratorError
 from reduced.transient.friction import FrictionFlow, initial_friction_state
@@ -392,29 +391,9 @@ def friction_response_map(system: GapSystem, load, amplitude_N: float, freq_hz, 
         norm = None
     sigma = slowest_decay_rate(system.with_friction(None), b)
     y = np.zeros(N) if y0 is None else _check.vector("y0", y0, N)
-    rng = np.random.default_rng(opts.seed)
-    points, wall, done = [], [], []
-    todo = list(freqs.astype(float))
-    sign = 1.0 if direction == "up" else -1.0
-    while todo:
-        f = todo.pop(0)
-        t0 = time.perf_counter()
-        try:
-            pm = FrictionPeriodMap(system, b, P, f, rows=rows, states=states, norm=norm)
-            pt = classify(pm, y, sigma, opts, pair, rng)
-        except ExactIntegratorError as exc:
-            raise RuntimeError(f"friction response map at {f:.6g} Hz, {P:g} N: {exc}") from None
-        y = pt.state
-        points.append(pt)
-        done.append(f)
-        wall.append(time.perf_counter() - t0)
-        if extend_step_hz > 0.0 and pt.contact and todo and abs(todo[0] - f) > 1.5 * extend_step_hz:
-            todo.insert(0, round(f + sign * extend_step_hz, 9))
-        if progress is not None:
-            progress(len(done) / (len(done) + len(todo)))
-    freqs = np.array(done)
-    step = jump_step_hz or extend_step_hz or (float(np.min(np.abs(np.diff(freqs)))) if freqs.size > 1 else 0.0)
-    return ResponseMap(P, direction, freqs, names, points, jumps(freqs, points, step), np.array(wall), opts)
+    return sweep(lambda f: FrictionPeriodMap(system, b, P, f, rows=rows, states=states, norm=norm), y, P, freqs,
+                 sigma, opts, direction=direction, names=names, mirror=pair, jump_step_hz=jump_step_hz,
+                 extend_step_hz=extend_step_hz, progress=progress, label="friction response map")
 
 
 __all__ = ["EIG_RTOL", "FrictionPeriodMap", "friction_norm_matrix", "friction_response_map"]
