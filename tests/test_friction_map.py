@@ -39,11 +39,11 @@ def scene_system():
 def test_the_tangent_matches_central_differences_of_the_flow_through_stick_slip_and_gap_events():
     # At 22 Hz in contact (the tips close, their sliders stick, slip and reopen about 10 times a period; the
     # response chaotic, lambda ~ 80 1/s, a growth of ~40 a period), 1 and 2 periods from a state of the run from
-    # rest. A perturbation consistent with the start's state (a slider open or
-    # slipping has its w slaved to x: P_s d) by central differences of the flow, step 1e-7 of |y| in the norm D:
-    # the flow is affine within a state and each event time moves by O(step), so the difference is exact to
-    # O(step) + round-off; measured 5e-10 .. 2e-8 of |dF d|. A wrong saltation (the identity in its place) or a
-    # missed projection gives 1e-2 .. 1. Compared after P_end (the slaved w at the end do not act).
+    # rest. A perturbation consistent with the start's state (a slider open or slipping has its w slaved to x: P_s d)
+    # by central differences of the flow, step 1e-7 of |y| in the norm D: the flow is affine within a state and each
+    # event time moves by O(step), so the difference is exact to O(step) + round-off times the growth (|dF d| 270-4700
+    # here); measured 7e-9 .. 2.4e-8 of |dF d| over 1 period, 7e-8 .. 7.3e-7 over 2. The saltation left out (Sal = DR)
+    # gives 0.07 and 0.14. Compared after P_end (the slaved w at the end do not act).
     system, b, rows, _ = scene_system()
     pm = FrictionPeriodMap(system, b, P, 22.0, rows=rows)
     N = 2 * system.n + system.p
@@ -64,7 +64,7 @@ def test_the_tangent_matches_central_differences_of_the_flow_through_stick_slip_
             h = 1e-7 * pm.norm(y)
             fd = (pm.run(y + h * d, K, samples_per_period=0).y - pm.run(y - h * d, K, samples_per_period=0).y) / (2 * h)
             exact = run.tangent @ d
-            assert pm.norm(P1 @ fd - exact) <= 1e-6 * pm.norm(exact)
+            assert pm.norm(P1 @ fd - exact) <= 1e-5 * pm.norm(exact)
     assert kinds == {"gap", "stick", "slip+", "slip-"}, kinds  # every kind of event crossed
 
 
