@@ -78,7 +78,9 @@ def test_the_stage_writes_its_files_and_says_what_it_skips(tmp_path):
     assert "Shooting with the sliders at the unsettled points" in md
     assert "shoot_status" in (tmp_path / "out" / "frc_friction_checks.csv").read_text().splitlines()[0]
     assert "Exact orbits continued by shooting" in md
-    for name in ("frc.csv", "frc_friction_checks.csv", "frc_friction_shooting.csv", "frc.png"):
+    assert "The response map: what a stepped-sine test sees" in md and "response map" not in md.split("Skipped")[1]
+    assert (tmp_path / "out" / "response_map.csv").read_text().startswith("level,direction,freq_hz,regime,period_k")
+    for name in ("frc.csv", "frc_friction_checks.csv", "frc_friction_shooting.csv", "frc.png", "response_map.png"):
         assert (tmp_path / "out" / name).exists(), name
 
 

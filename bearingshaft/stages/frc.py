@@ -878,8 +878,10 @@ stepped_sine.csv, frc_convergence.csv, frc_convergence_timing.csv and .png, frc_
 and frc_backbone.png; the response map (each frequency of a dense stepped sine periodic, subharmonic,
 quasi-periodic or chaotic, with its Lyapunov exponent): response_map.csv, response_map_jumps.csv,
 response_map.png and response_map_spectra.png. With friction at the tips ([model] mu > 0): HB by AFT with the
-Jenkins sliders, Hill's stability through stick-slip and a stepped sine by the exact friction integrator only
-(frc.csv, frc_friction_checks.csv, frc_friction_shooting.csv, frc.png, frc.md; frc.md says what is skipped and why)."""
+Jenkins sliders, Hill's stability through stick-slip, the exact orbits by shooting with the sliders, and the
+response map by the exact friction flow (frc.csv, frc_friction_checks.csv, frc_friction_shooting.csv,
+frc_friction_sweep.csv, response_map.csv, response_map_jumps.csv, frc.png, response_map.png, frc.md; frc.md says
+what is skipped and why)."""
 
 
 def frc_stage(scene: Scene, writer: StageWriter, progress: bool) -> None:
@@ -968,6 +970,10 @@ REPRODUCTION = Reproduction(rules=(
     sensitive("frc.md", r"^\| [0-9.]+ \| [0-9.]+ \|", r"^- [0-9.]+ N, branch [0-9]+:",
               why="the friction stepped sine and the exact friction orbits (frc_friction_checks.csv, "
               "frc_friction_shooting.csv): " + CONTINUATION),
+    # with friction, the response map's lines (frc_friction_map.markdown): a chaotic stretch's exponents and envelope
+    # chaotic; each sweep's counts and jumps, and where its stretches end, set by the state chaos leaves (MAP_AFTER)
+    chaotic("frc.md", r"^  - [^:]*: (?:chaotic|quasi_periodic)", why=MAP_CHAOS),
+    sensitive("frc.md", r"^- [0-9.]+ N, sweep (?:up|down): ", r"^  - [0-9.]+(?: -> [0-9.]+)? Hz: ", why=MAP_AFTER),
     sensitive("frc_stability.csv", why=CONTINUATION + " (stability at those points)"),
     sensitive("frc_convergence.csv", why=CONTINUATION + " (points, reach, folds and errors at the points)"),
     sensitive("stepped_sine.csv", why="the stepped sine at the HB curve's points, compared with HB there: "

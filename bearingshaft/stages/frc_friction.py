@@ -6,13 +6,16 @@ stage to :func:`compute` here. For each level of ``[frc] levels_N`` the load P c
 resists while they touch) is continued in frequency by :func:`reduced.periodic.friction_aft.friction_frc`
 (condensed HB, the stops projected exactly, each slider by AFT, H = ``harmonics``), its stability by Hill's
 method on the consistent AFT Jacobian at every point (stick-slip included), its bifurcations from the
-multipliers. The check: a stepped sine up by the exact friction integrator
-(:func:`reduced.transient.friction.integrate_exact_friction`, stick, slip and gaps as events) at
-``stepped_sine_points`` frequencies spread over the band, each settled (the state, sliders included, carried
-from one frequency to the next) until its last period's amplitudes move by less than ``stepped_sine_tol``
-from the one before, or ``stepped_sine_max_s`` of simulated time; every settled point against the HB solution
-at its frequency on the stable piece nearest it. Where the stepped sine does not settle (in contact, where the
-response it runs into is not periodic or the periodic orbit not attracting), the periodic orbit is shot for on
+multipliers. The response map (:mod:`bearingshaft.stages.frc_friction_map`): a stepped sine up and down by the
+exact friction flow, 0.1 Hz steps over the contact band, each frequency classified (periodic, subharmonic,
+quasi-periodic, chaotic) with its largest Lyapunov exponent by the exact tangent. The check: at
+``stepped_sine_points`` frequencies spread over the band (on the map's grid), from the state the map's up sweep
+ended in there, 20 periods by the exact friction integrator
+(:func:`reduced.transient.friction.integrate_exact_friction`, stick, slip and gaps as events); settled where the
+map found a periodic response, and then against the HB solution at its frequency on the stable piece nearest it
+(without a map, ``[frc] map_step_hz = 0``: a stepped sine of its own, each frequency settled until its last
+period's amplitudes move by less than ``stepped_sine_tol`` or ``stepped_sine_max_s``). Where it is not settled (in
+contact, where the response is not periodic or the periodic orbit not attracting), the periodic orbit is shot for on
 the exact friction flow with the sliders' positions among the unknowns
 (:func:`reduced.periodic.friction_shooting.shoot_friction`, 8 nodes, Newton from the HB orbit at that
 frequency, then from HB with 2H + 1 and 4H + 1 harmonics there while it does not converge): its distance to
@@ -21,9 +24,8 @@ settle), or the defect reached where Newton stops short.
 
 What the frictionless stage does and this one does not (frc.md says so too): the converged curve by multiple
 shooting continued in frequency (the continued shooting runs the exact flow without sliders), the Floquet
-multipliers and monodromy along the curve (Hill's method instead), the response map (its classifier runs the
-exact flow without sliders), the convergence study in H and the backbone check (NNMs of a system with friction
-are not conservative; and each H's curve costs a continuation with AFT).
+multipliers and monodromy along the curve (Hill's method instead), the convergence study in H and the backbone
+check (NNMs of a system with friction are not conservative; and each H's curve costs a continuation with AFT).
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ import time
 import numpy as np
 
 from bearingshaft.scenes import Scene
+from bearingshaft.stages import frc_friction_map
 from bearingshaft.stages.frc_friction_bands import clip, complement, contact_band
 from bearingshaft.stages.frc_friction_results import (  # noqa: F401
     SKIPPED,
@@ -154,6 +157,7 @@ def compute(scene: Scene, progress: bool = False) -> FrictionFRCResult:
     b = load_vector(spec, rows, names)
     rows = np.asarray(rows, float)
     curves, checks, linear, shooting, verdicts, sweeps, stats = {}, {}, {}, {}, {}, {}, {"levels": {}}
+    maps = {}
     f_lin = np.geomspace(spec.freq_min_hz, spec.freq_max_hz, 400)
     for P in spec.levels_N:
         t0 = time.perf_counter()
@@ -166,9 +170,12 @@ def compute(scene: Scene, progress: bool = False) -> FrictionFRCResult:
         wall = time.perf_counter() - t0
         curves[P] = br
         linear[P] = (f_lin, linear_frf(system.with_friction(None), b, P, f_lin, rows))
+        tm, cm = time.perf_counter(), time.process_time()
+        maps[P] = frc_friction_map.compute_map(system, b, P, spec, br, rows, names, check_frequencies(spec))
+        map_st = {"wall_s": time.perf_counter() - tm, "cpu_s": time.process_time() - cm}
         t1 = time.perf_counter()
-        checks[P] = _checks(system, b, P, spec, br, rows)
-        st = {"hb_wall_s": wall, "check_wall_s": time.perf_counter() - t1,
+        checks[P] = _checks(system, b, P, spec, br, rows, maps[P])
+        st = {"hb_wall_s": wall, "map": map_st, "check_wall_s": time.perf_counter() - t1,
               "shooting": [{"freq_hz": c.freq_hz, "converged": c.shooting.converged, "start_H": c.shooting.start_H,
                             "wall_s": c.shooting.wall_s} for c in checks[P] if c.shooting is not None]}
         if not isinstance(br, Exception):
@@ -193,7 +200,8 @@ def compute(scene: Scene, progress: bool = False) -> FrictionFRCResult:
             st["sweep"]["stretches"] = [[float(a), float(b_), int(sw.converged.sum()), len(sw.freq_hz)]
                                         for a, b_, sw, _ in sweeps[P]]
         stats["levels"][str(P)] = st
-    return FrictionFRCResult(scene, names, b, curves, checks, linear, stats, shooting, verdicts, sweeps)
+    return FrictionFRCResult(scene, names, b, curves, checks, linear, stats, shooting, verdicts, sweeps,
+                             response_maps=maps)
 
 
 def _continued(spec, br, checks: list, rows: np.ndarray, verdicts: list | None = None) -> list | str:
@@ -405,18 +413,38 @@ def _against_hb(branch, br) -> ShootingCurve:
     return ShootingCurve(branch, hb, hb_stable)
 
 
-def _checks(system, b: np.ndarray, P: float, spec, br, rows: np.ndarray) -> list[FrictionCheck]:
-    """The stepped sine up over ``stepped_sine_points`` frequencies (linear in the band, its ends excluded)."""
+def check_frequencies(spec) -> np.ndarray:
+    """Hz, the ``stepped_sine_points`` frequencies HB is checked at: linear in the band, its ends excluded.
+
+    Parameters
+    ----------
+    spec : the [frc] table
+    """
     k = spec.stepped_sine_points
-    if k <= 0:
-        return []
-    freqs = np.linspace(spec.freq_min_hz, spec.freq_max_hz, k + 2)[1:-1]
+    return np.linspace(spec.freq_min_hz, spec.freq_max_hz, k + 2)[1:-1] if k > 0 else np.zeros(0)
+
+
+def _checks(system, b: np.ndarray, P: float, spec, br, rows: np.ndarray, level=None) -> list[FrictionCheck]:
+    """HB checked at each of :func:`check_frequencies`: with a response map (``level``, whose grid holds them), from
+    the state its up sweep ended in there, SETTLE_CHUNK periods twice (:func:`settle`: the last period's amplitudes
+    and friction work), settled where the map found a periodic response (periodic or subharmonic, settled);
+    without one, a stepped sine of its own (:func:`settle` until ``stepped_sine_tol`` or ``stepped_sine_max_s``).
+    A settled point against the HB solution at its frequency on the stable piece nearest it; elsewhere the orbit is
+    shot for (:func:`_shoot`)."""
     n = system.n
     state = (np.zeros(n), np.zeros(n), None)
     out = []
-    for f in freqs:
-        last, work, change, ok, t, state = settle(system, b, P, float(f), state, spec.stepped_sine_tol,
-                                                  spec.stepped_sine_max_s)
+    for f in check_frequencies(spec):
+        got = frc_friction_map.state_at(level, float(f))
+        if got is None:
+            last, work, change, ok, t, state = settle(system, b, P, float(f), state, spec.stepped_sine_tol,
+                                                      spec.stepped_sine_max_s)
+        else:
+            pt, y = got
+            last, work, change, _, t, _ = settle(system, b, P, float(f), (y[:n], y[n:2 * n], y[2 * n:]), 0.0,
+                                                 1.5 * SETTLE_CHUNK / f)
+            t += pt.n_periods / f
+            ok = pt.settled and pt.regime in ("periodic", "subharmonic")
         exact = np.max(np.abs(last @ rows.T), axis=0)
         hb = np.full(len(rows), math.nan)
         if not isinstance(br, Exception):
@@ -468,5 +496,5 @@ def _shoot(system, b: np.ndarray, P: float, f: float, br, amplitude_ref: float, 
 
 
 
-__all__ = ["SKIPPED", "BranchVerdict", "FrictionCheck", "FrictionFRCResult", "ShootCheck", "ShootingCurve", "compute",
-           "load_vector", "settle"]
+__all__ = ["SKIPPED", "BranchVerdict", "FrictionCheck", "FrictionFRCResult", "ShootCheck", "ShootingCurve",
+           "check_frequencies", "compute", "load_vector", "settle"]

@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from bearingshaft.output import write_rows
+from bearingshaft.stages import frc_friction_map
 from bearingshaft.stages.frc_friction_bands import clip, complement, contact_band
 from bearingshaft.stages.frc_friction_results import SKIPPED, ShootingCurve
 
@@ -29,6 +30,7 @@ def write(result, writer) -> None:
     write_rows(writer.path("frc_friction_shooting.csv"), shooting_rows(result))
     write_rows(writer.path("frc_friction_sweep.csv"), sweep_rows(result))
     writer.stats["frc"] = {"friction": True, **result.stats}
+    frc_friction_map.write(result, writer)  # response_map.csv, response_map_jumps.csv, response_map.png
     writer.path("frc.md").write_text(markdown(result), encoding="utf-8")
     _plot(writer.path("frc.png"), result)
 
@@ -451,21 +453,32 @@ def markdown(result) -> str:
         bif = ", ".join(f"{v} {k}" for k, v in kinds.items()) or "none"
         lines.append(f"| {P:g} | {len(br.freq_hz)} | {int(np.sum(br.stable))} | {stick_slip} | "
                      f"{bif} | {len(ok)}/{len(result.checks[P])} | {worst} | {shot} |")
-    lines += ["", "## The stepped sine by the exact friction integrator (frc_friction_checks.csv)", "",
-              f"Up the band at {spec.stepped_sine_points} frequencies, the state (sliders included) carried from one "
-              f"to the next; each settled until its last period's amplitudes move by less than "
-              f"{spec.stepped_sine_tol:g} (relative) over {10} periods, or {spec.stepped_sine_max_s:g} s; compared "
-              "with the HB solution at its frequency on the stable piece nearest it (the largest relative error over "
-              f"the points {', '.join(names)}).", "",
-              "| level [N] | f [Hz] | " + " | ".join(f"{n} exact / HB [m]" for n in names)
+    lines += ["", *frc_friction_map.markdown(result)]
+    mapped = any(lvl is not None for lvl in (getattr(result, "response_maps", {}) or {}).values())
+    if mapped:
+        lines += ["## HB checked at frequencies of the response map (frc_friction_checks.csv)", "",
+                  f"At {spec.stepped_sine_points} frequencies spread over the band (on the map's grid), from the state "
+                  "the map's up sweep ended in there, 20 periods more by the exact friction integrator (the last "
+                  "period's amplitudes and friction work); settled where the map found a periodic response; a settled "
+                  "point compared with the HB solution at its frequency on the stable piece nearest it (the largest "
+                  f"relative error over the points {', '.join(names)}); elsewhere the map's regime."]
+    else:
+        lines += ["## The stepped sine by the exact friction integrator (frc_friction_checks.csv)", "",
+                  f"Up the band at {spec.stepped_sine_points} frequencies, the state (sliders included) carried from "
+                  f"one to the next; each settled until its last period's amplitudes move by less than "
+                  f"{spec.stepped_sine_tol:g} (relative) over {10} periods, or {spec.stepped_sine_max_s:g} s; compared "
+                  "with the HB solution at its frequency on the stable piece nearest it (the largest relative error "
+                  f"over the points {', '.join(names)})."]
+    lines += ["", "| level [N] | f [Hz] | " + " | ".join(f"{n} exact / HB [m]" for n in names)
               + " | error | settled | friction work a period [J] |",
               "|---" * (len(names) + 5) + "|"]
     for P, checks in result.checks.items():
         for c in checks:
             amps = " | ".join(f"{e:.4g} / {h:.4g}" for e, h in zip(c.exact_m, c.hb_m, strict=True))
+            got = frc_friction_map.state_at((getattr(result, "response_maps", {}) or {}).get(P), c.freq_hz)
+            why = f"no: {got[0].regime}" if got is not None else f"no ({c.settled_change:.2g})"
             lines.append(f"| {P:g} | {c.freq_hz:.4g} | {amps} | {c.rel_error:.3g} | "
-                         f"{'yes' if c.settled else f'no ({c.settled_change:.2g})'} | "
-                         f"{c.friction_work_per_period_J:.3g} |")
+                         f"{'yes' if c.settled else why} | {c.friction_work_per_period_J:.3g} |")
     lines += shoot_markdown(result)
     lines += shooting_markdown(result)
     lines += sweep_markdown(result)

@@ -21,8 +21,6 @@ SKIPPED = (
      "stage's whole budget is about 70 s); where neither the grid's previous orbit nor HB's converges (HB not "
      "converged in H there) no exact orbit is found: frc.md's coverage says where; Hill's method gives the "
      "stability along the whole HB curve"),
-    ("response map", "its classifier (periodic, subharmonic, chaotic, Lyapunov exponent) runs the exact flow "
-     "without sliders"),
     ("convergence in H of the whole curve", "each H's curve is a continuation with AFT (tens of seconds a curve): "
      "HB's convergence in H is measured at each continued branch's start instead (its section above)"),
     ("backbone check", "with friction the free motion is not conservative: no NNM backbone to approach"),
@@ -186,6 +184,8 @@ class FrictionFRCResult:
         against it for H = HB_CONVERGENCE_H
     sweeps : {P: [(f_from, f_to, FrictionSweep, HB's amplitudes nearest its orbits (k, q))] or why not}, the exact
         orbits on a grid where the continued branches do not reach (:func:`bearingshaft.stages.frc_friction._swept`)
+    response_maps : {P: MapLevel or None}, the stepped sine up and down classified at every frequency
+        (:mod:`bearingshaft.stages.frc_friction_map`)
     """
 
     scene: Scene
@@ -198,6 +198,7 @@ class FrictionFRCResult:
     shooting: dict = field(default_factory=dict)  # {P: ShootingCurve or str}
     verdicts: dict = field(default_factory=dict)  # {P: [BranchVerdict]}
     sweeps: dict = field(default_factory=dict)  # {P: [(f_from, f_to, FrictionSweep, hb (k, q))] or str}
+    response_maps: dict = field(default_factory=dict)  # {P: MapLevel or None} (bearingshaft.stages.frc_friction_map)
 
 
 __all__ = ["SKIPPED", "BranchVerdict", "FrictionCheck", "FrictionFRCResult", "ShootCheck", "ShootingCurve"]

@@ -641,18 +641,49 @@ def response_map(system: GapSystem, load, amplitude_N: float, freq_hz, *, direct
     norm = _fixed_norm(system, float(freqs[0]))
     sigma = slowest_decay_rate(system, b)
     y = np.zeros(2 * system.n) if y0 is None else _check.vector("y0", y0, 2 * system.n)
+    return sweep(lambda f: PeriodMap(system, b, P, f, rows=rows, table=table, modal=modal, norm=norm), y, P, freqs,
+                 sigma, opts, direction=direction, names=names, mirror=pair, jump_step_hz=jump_step_hz,
+                 extend_step_hz=extend_step_hz, progress=progress)
+
+
+def sweep(period_map, y0: np.ndarray, amplitude_N: float, freq_hz: np.ndarray, sigma: float, opts: MapOptions, *,
+          direction: str, names: tuple, mirror=None, jump_step_hz: float = 0.0, extend_step_hz: float = 0.0,
+          progress=None, label: str = "response map") -> ResponseMap:
+    """The stepped sine of :func:`response_map` on any period map: at each frequency, in order, ``period_map(f)``
+    classified (:func:`classify`) from the state the previous frequency ended in, with the seeded kicks of one
+    generator (``opts.seed``); a response in contact before a step wider than 1.5 ``extend_step_hz`` followed by
+    steps of that size; the jumps (:func:`jumps`).
+
+    Parameters
+    ----------
+    period_map : callable f (Hz) -> a period map with :class:`reduced.transient.lyapunov.PeriodMap`'s interface
+    y0 : the start state
+    amplitude_N : N, P (the result's label)
+    freq_hz : Hz, in sweep order
+    sigma : 1/s, the scale of the exponent's tolerance (:func:`classify`)
+    opts : MapOptions
+    direction : ``up`` or ``down``
+    names : the monitored rows' names
+    mirror : (a, b, a - b) row indices of the mirror pair, or None
+    jump_step_hz, extend_step_hz, progress : as :func:`response_map`
+    label : names the map in the error of a failed frequency
+
+    Returns
+    -------
+    ResponseMap
+    """
+    y = y0
     rng = np.random.default_rng(opts.seed)
     points, wall, done = [], [], []
-    todo = list(freqs.astype(float))
+    todo = list(np.asarray(freq_hz, float))
     sign = 1.0 if direction == "up" else -1.0
     while todo:
         f = todo.pop(0)
         t0 = time.perf_counter()
         try:
-            pm = PeriodMap(system, b, P, f, rows=rows, table=table, modal=modal, norm=norm)
-            pt = classify(pm, y, sigma, opts, pair, rng)
+            pt = classify(period_map(f), y, sigma, opts, mirror, rng)
         except ExactIntegratorError as exc:
-            raise RuntimeError(f"response map at {f:.6g} Hz, {P:g} N: {exc}") from None
+            raise RuntimeError(f"{label} at {f:.6g} Hz, {amplitude_N:g} N: {exc}") from None
         y = pt.state
         points.append(pt)
         done.append(f)
@@ -663,9 +694,9 @@ def response_map(system: GapSystem, load, amplitude_N: float, freq_hz, *, direct
             progress(len(done) / (len(done) + len(todo)))
     freqs = np.array(done)
     step = jump_step_hz or extend_step_hz or (float(np.min(np.abs(np.diff(freqs)))) if freqs.size > 1 else 0.0)
-    return ResponseMap(P, direction, freqs, names, points, jumps(freqs, points, step), np.array(wall), opts)
+    return ResponseMap(amplitude_N, direction, freqs, names, points, jumps(freqs, points, step), np.array(wall), opts)
 
 
 __all__ = ["REGIMES", "SPECTRUM_BINS_PER_ORDER", "SPECTRUM_ORDERS", "MapOptions", "PointResponse", "ResponseMap",
            "classify", "jumps", "linear_contact_bands", "map_frequencies", "merge_bands", "order_spectrum",
-           "response_map"]
+           "response_map", "sweep"]
