@@ -49,6 +49,53 @@ def solve(fb: FrictionBalance, omega: float, x_ref: float = 1e-4) -> np.ndarray:
 
 
 # -- the element in time ---------------------------------------------------------------------------
+def _jenkins_loop_python(t, N, k_t, mu):
+    """The Python loop jenkins_loop ran before its numba kernel (session 13), kept as the bit-for-bit reference."""
+    OPEN_, STICK_, SLIP_ = 0, 1, 2
+    Ns = t.size
+    tt, NN = [float(v) for v in t], [float(v) for v in N]
+    f_out, state, anchor, sign = np.zeros(Ns), np.zeros(Ns, np.int64), np.arange(Ns), np.zeros(Ns)
+    f, a, s_a = 0.0, 0, 0.0
+    for n in range(2 * Ns):
+        i = n % Ns
+        limit = mu * NN[i]
+        if limit <= 0.0:
+            f, a, s_a, st, s = 0.0, i, 0.0, OPEN_, 0.0
+        else:
+            trial = f + k_t * (tt[i] - tt[i - 1]) if n > 0 else 0.0
+            if abs(trial) < limit:
+                f, st, s = trial, STICK_, s_a
+            else:
+                s = 1.0 if trial > 0.0 else -1.0
+                f, a, s_a, st = s * limit, i, s, SLIP_
+        if n >= Ns:
+            f_out[i], state[i], sign[i] = f, st, s
+            anchor[i] = a if st == STICK_ else i
+    return f_out, state, anchor, sign
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_jenkins_loop_kernel_is_the_python_loop_bit_for_bit(seed):
+    """The numba return map gives the Python loop's force, states, anchors and signs to the bit: random
+    harmonic inputs whose normal force opens part of the period (open, stick and slip all visited), on a
+    strided column as the balance passes it."""
+    rng = np.random.default_rng(seed)
+    Ns = int(rng.choice([16, 64, 256]))
+    tau = 2 * np.pi * np.arange(Ns) / Ns
+    H = 5
+    c = rng.standard_normal((2 * H + 1, 2)) / (1.0 + np.arange(2 * H + 1))[:, None]
+    E = np.column_stack([np.ones(Ns)] + [f(k * tau) for k in range(1, H + 1) for f in (np.cos, np.sin)])
+    qs = E @ c  # (Ns, 2): column 0 the tangential motion, column 1 the normal one
+    k_t, mu = float(rng.uniform(5.0, 50.0)), float(rng.uniform(0.1, 0.6))
+    N = 20.0 * (qs[:, 1] - 0.2 * float(seed % 3))
+    loop = jenkins_loop(qs[:, 0], N, k_t, mu)
+    ref = _jenkins_loop_python(qs[:, 0], N, k_t, mu)
+    assert {int(v) for v in loop.state} >= ({1, 2} if seed % 3 == 0 else {2})  # the cases are visited
+    for got, want in zip((loop.f, loop.state, loop.anchor, loop.sign), ref, strict=True):
+        assert got.dtype == want.dtype and np.array_equal(got, want)
+        assert got.tobytes() == want.tobytes()
+
+
 @pytest.mark.parametrize("a", [0.02, 0.05, 0.08, 0.3, 3.0])
 def test_jenkins_loop_fundamental_is_the_describing_function(a):
     # t = a cos(tau) under a constant slip force: the fundamental of the AFT loop against the closed form

@@ -47,10 +47,12 @@ import time
 import warnings
 from dataclasses import dataclass, field
 
+import numba as nb
 import numpy as np
 
 from reduced import _checks as _check
 from reduced._blas import single_thread_blas
+from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
 from reduced.periodic import MAX_HARMONICS
 from reduced.periodic.continuation import ContinuationOptions
@@ -130,19 +132,29 @@ def jenkins_loop(t: np.ndarray, N: np.ndarray, k_t: float, mu: float) -> Jenkins
     [0.5, -0.5, -0.5, -0.5, -0.5, 0.5, 0.5, 0.5]
     """
     Ns = t.size
-    tt, NN = [float(v) for v in t], [float(v) for v in N]
     f_out = np.zeros(Ns)
     state = np.zeros(Ns, np.int64)
     anchor = np.arange(Ns)
     sign = np.zeros(Ns)
+    call_numba_kernel(_jenkins_march, np.ascontiguousarray(t, dtype=float), np.ascontiguousarray(N, dtype=float),
+                      float(k_t), float(mu), f_out, state, anchor, sign)
+    return JenkinsLoop(f_out, state, anchor, sign)
+
+
+@nb.njit(cache=True)
+def _jenkins_march(t, N, k_t, mu, f_out, state, anchor, sign):
+    """:func:`jenkins_loop`'s return map marched over two periods from f = 0, the second period written into
+    f_out, state, anchor and sign (anchor holds arange(Ns) on entry). The same scalar operations in the same
+    order as the Python loop it replaced (tests/test_friction_aft.py holds that loop: the same bits)."""
+    Ns = t.shape[0]
     f, a, s_a = 0.0, 0, 0.0  # force, anchor sample, sign of the anchor's slip (0: opening or start)
     for n in range(2 * Ns):
         i = n % Ns
-        limit = mu * NN[i]
+        limit = mu * N[i]
         if limit <= 0.0:
             f, a, s_a, st, s = 0.0, i, 0.0, OPEN, 0.0
         else:
-            trial = f + k_t * (tt[i] - tt[i - 1]) if n > 0 else 0.0
+            trial = f + k_t * (t[i] - t[i - 1]) if n > 0 else 0.0
             if abs(trial) < limit:
                 f, st, s = trial, STICK, s_a
             else:
@@ -151,7 +163,6 @@ def jenkins_loop(t: np.ndarray, N: np.ndarray, k_t: float, mu: float) -> Jenkins
         if n >= Ns:
             f_out[i], state[i], sign[i] = f, st, s
             anchor[i] = a if st == STICK else i
-    return JenkinsLoop(f_out, state, anchor, sign)
 
 
 def jenkins_describing_function(a: float, k_t: float, f_s: float) -> tuple[float, float]:
