@@ -39,7 +39,7 @@ from scipy.linalg import eigh
 from reduced import _checks as _check
 from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
-from reduced.transient import _cd, _cd_block, _cd_modal
+from reduced.transient import _cd, _cd_block, _cd_lumped, _cd_modal
 from reduced.transient import stepper as _stepper
 from reduced.transient.result import RingdownResult, RingdownStream
 
@@ -51,6 +51,7 @@ STEP_BASES = ("top", "contact")
 MAX_STEPS = 2_000_000_000  # refuse runs that would take more steps than this
 LOAD_BLOCK_STEPS = 1 << 16  # steps per kernel call of a forced run: the loads' values are tabulated per call
 PIECES = 50  # progress is reported this many times a run
+LUMPED = True  # lumped small models run reduced.transient._cd_lumped (False: the register kernel, for tests)
 
 
 class StepTooLargeError(ValueError):
@@ -435,6 +436,9 @@ class ExplicitStepper(_stepper.Stepper):
             self.kernel = _cd._cd_small
             self.mats = (_cd.pad(AT, S, S), _cd.pad(dtGKT, S, S), _cd.pad(dtGBT, None, S), _cd.pad(L, S, None),
                          _cd.pad(system.B, None, S))
+            lumped = _cd_lumped.lumped_form(*self.mats, system.offset, system.side, system.k) if LUMPED else None
+            if lumped is not None:  # diagonal M and C, one coordinate a stop: the zero terms left out, same bits
+                self.kernel, self.mats = _cd_lumped.cd_lumped, lumped
             self.dtGbT, self.b = _cd.pad(dtGbT, None, S), _cd.pad(b, None, S)
         else:
             self.kernel = _cd_kernel
