@@ -209,7 +209,7 @@ KEYS = ("Ls", "RGL", "TG", "TS", "LH", "lut", "masks", "om2")  # the form's arra
 
 @nb.njit(cache=True, fastmath={"reassoc", "contract"})
 def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, RGL, TG, TS, LH, lut, masks, om2,
-             offset, side, k, z, zd, dt, n_steps, every, out_x, out_v, out_W, W, pw_old, i0, a, bm, P, out_E, E,
+             PhiT, offset, side, k, z, zd, dt, n_steps, every, out_x, out_v, out_W, W, pw_old, i0, a, bm, P, out_E, E,
              pe_old):
     """Advance n_steps as :func:`reduced.transient._cd_modal.cd_modal` (same arguments and returns, with the block
     form's arrays ``KEYS`` after the modal arrays) in blocks where the contact state holds. Each output interval
@@ -217,6 +217,8 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
     step; when a stop leaves that state at a block's step t + 1, the t steps before it are known to hold and are
     jumped without a check (longest lengths first); when at its first step (a switch there), that step is one step
     of ``cd_modal``. Needs n_steps % every == 0 and no loads (else it steps throughout); ``a`` = U^T zd on exit.
+    Unlike ``cd_modal`` it stores the samples in physical coordinates, x = Phi z and v = Phi zd (PhiT = Phi^T,
+    :func:`_physical_rows`): in the kernel, a sample's two products cost less than a pass over the buffers after.
 
     Long because it is one numba loop over blocks whose branches (check, jump, one step) share the carried state;
     the matrix-vector products and the energy sums are helpers, called once a block, not a step.
@@ -233,13 +235,19 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
         The modal kernel's arrays.
     Ls, RGL, TG, TS, LH, lut, masks, om2 : ndarray
         The block form (om2 in rad^2/s^2).
+    PhiT : ndarray
+        (n, n) Phi^T, the open-gap modes transposed (C-contiguous).
     offset, side, k, z, zd, dt, n_steps, every, out_x, out_v, out_W, W, pw_old, i0, a, bm, P, out_E, E, pe_old
         As ``cd_modal`` (dt in s, W in J).
     """
     n = z.shape[0]
     if bm.shape[0] or n_steps % every:
-        return cd_modal(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, offset, side, k, z, zd, dt,
-                        n_steps, every, out_x, out_v, out_W, W, pw_old, i0, a, bm, P, out_E, E, pe_old)
+        W, pw_old, io, E, pe_old = cd_modal(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, offset,
+                                            side, k, z, zd, dt, n_steps, every, out_x, out_v, out_W, W, pw_old, i0,
+                                            a, bm, P, out_E, E, pe_old)
+        for r in range(i0, io):
+            _physical_rows(PhiT, out_x, out_v, r)
+        return W, pw_old, io, E, pe_old
     nu = Bu.shape[0]
     p = UT.shape[0]
     n2 = 2 * n
@@ -333,14 +341,22 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
                 W, pw_old, io, E, pe_old = cd_modal(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap,
                                                     offset, side, k, zs, zds, dt, 1, store, out_x, out_v, out_W, W,
                                                     pw_old, io, a, bm, P, out_E, E, pe_old)
+                if store == 1:  # the sample cd_modal stored, in modal coordinates
+                    _physical_rows(PhiT, out_x, out_v, io - 1)
                 Wp = W + 0.5 * dt * pw_old
                 guess = -1
         if jumped:  # the sample: the last block's end
             W, pw_old = _work(nxt, d, UT, Wp, dt)
             jumped = False
-            for i in range(n):
-                out_x[io, i] = st[i]
-                out_v[io, i] = nxt[n2 + i]
+            for r in range(n):
+                out_x[io, r] = 0.0
+                out_v[io, r] = 0.0
+            for i in range(n):  # x = Phi z, v = Phi (mean velocity), column by column
+                zi = st[i]
+                vi = nxt[n2 + i]
+                for r in range(n):
+                    out_x[io, r] += PhiT[i, r] * zi
+                    out_v[io, r] += PhiT[i, r] * vi
             out_W[io] = W
             io += 1
     for i in range(n):
@@ -352,6 +368,21 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
             s += UT[q, i] * zd[i]
         a[q] = s
     return W, pw_old, io, E, pe_old
+
+
+@nb.njit(cache=True, fastmath={"reassoc", "contract"})
+def _physical_rows(PhiT, out_x, out_v, r):
+    """Row r of out_x and out_v from modal to physical coordinates in place: x = Phi z (PhiT = Phi^T), likewise v."""
+    n = PhiT.shape[0]
+    zx = out_x[r].copy()
+    zv = out_v[r].copy()
+    for c in range(n):
+        out_x[r, c] = 0.0
+        out_v[r, c] = 0.0
+    for i in range(n):
+        for c in range(n):
+            out_x[r, c] += PhiT[i, c] * zx[i]
+            out_v[r, c] += PhiT[i, c] * zv[i]
 
 
 @nb.njit(cache=True, fastmath={"reassoc", "contract"})

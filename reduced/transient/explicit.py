@@ -425,7 +425,8 @@ class ExplicitStepper(_stepper.Stepper):
         self.small = n <= _cd.SMALL_N  # state in registers (reduced.transient._cd), zero-padded to SMALL_N DOFs
         if self.jump is not None:
             self.kernel = _cd_block.cd_block
-            self.mats = (*self.modal["mats"], *(self.jump[key] for key in _cd_block.KEYS))
+            self.mats = (*self.modal["mats"], *(self.jump[key] for key in _cd_block.KEYS),
+                         np.ascontiguousarray(self.modal["Phi"].T))  # the kernel stores physical samples
             self.dtGbT, self.b = None, self.modal["bm"]
         elif self.modal is not None:
             self.kernel = _cd_modal.cd_modal
@@ -497,7 +498,7 @@ class ExplicitStepper(_stepper.Stepper):
             self.kernel, *self.mats, sy.offset, sy.side, sy.k, self.x, self.vh, self.dt, nout * self.every,
             self.every, out_x, out_v, out_W, self.W, self.pw, buf.filled, self.dtGbT, self.b, P, out_E, self.E,
             self.pe)
-        if self.modal is not None:  # the samples of this call from modal to physical coordinates
+        if self.modal is not None and self.jump is None:  # the samples of this call from modal to physical
             for out in (out_x, out_v):
                 _cd_modal.to_physical(self.modal["Phi"], out, lo, buf.filled)
         self.done += nout
