@@ -58,6 +58,7 @@ def _both(monkeypatch, *args, **kw):
 
     with monkeypatch.context() as m:
         m.setattr(_cd_lumped, "cd_lumped", spy)
+        m.setattr(explicit, "_SETUP", {})  # no kernel kept from another run
         lumped = integrate_explicit(*args, **kw)
     with monkeypatch.context() as m:
         m.setattr(explicit, "LUMPED", False)

@@ -276,6 +276,53 @@ def _damping_factor(C: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(U[:, keep] * np.sqrt(lam[keep]))
 
 
+def _physical_arrays(system: GapSystem, dt: float, b: np.ndarray, small: bool) -> tuple:
+    """(kernel, its leading arrays, L, dt G b^T (transposed), b) of the physical kernels: A^T, (dt G K)^T,
+    (dt G B^T)^T, the damping factor L (C = L L^T), the stops' rows, G = (M + dt/2 C)^-1, A = G (M - dt/2 C);
+    for ``small`` models zero-padded to ``_cd.SMALL_N`` DOFs (the register kernel, or the lumped one where it
+    applies)."""
+    M, C, K = system.M, system.C, system.K
+    G = np.linalg.inv(M + 0.5 * dt * C)
+    A = G @ (M - 0.5 * dt * C)
+    dtGK = dt * (G @ K)
+    AT, dtGKT = np.ascontiguousarray(A.T), np.ascontiguousarray(dtGK.T)
+    dtGBT = np.ascontiguousarray((dt * (G @ system.B.T)).T)
+    L = _damping_factor(C)
+    dtGbT = np.ascontiguousarray((dt * (G @ b.T)).T)
+    if not small:
+        return _cd_kernel, (AT, dtGKT, dtGBT, np.ascontiguousarray(L.T), *_sparse_rows(system.B)), L, dtGbT, b
+    S = _cd.SMALL_N
+    mats = (_cd.pad(AT, S, S), _cd.pad(dtGKT, S, S), _cd.pad(dtGBT, None, S), _cd.pad(L, S, None),
+            _cd.pad(system.B, None, S))
+    kernel = _cd._cd_small
+    lumped = _cd_lumped.lumped_form(*mats, system.offset, system.side, system.k) if LUMPED else None
+    if lumped is not None:  # diagonal M and C, one coordinate a stop: the zero terms left out, same bits
+        kernel, mats = _cd_lumped.cd_lumped, lumped
+    return kernel, mats, L, _cd.pad(dtGbT, None, S), _cd.pad(b, None, S)
+
+
+_SETUP: dict = {}  # a run's set-up worked out from the model alone (a few entries): see _cached
+SETUP_KEPT = 8  # entries _SETUP keeps
+
+
+def _system_key(system: GapSystem) -> tuple:
+    """The bytes of a system's arrays: a key that changes with any of them."""
+    return tuple((a.tobytes(), a.shape) for a in (system.M, system.C, system.K, system.B, system.k, system.offset,
+                                                  system.side, system.tip))
+
+
+def _cached(key: tuple, make):
+    """make() the first time ``key`` is asked for, then the same object (kept for the last ``SETUP_KEPT`` keys):
+    a run's set-up (the stability limit, the step's reference frequency, the kernel's matrices) costs more than
+    the kernel on a short run. The objects are read, never changed, by the runs."""
+    if key in _SETUP:
+        return _SETUP[key]
+    if len(_SETUP) >= SETUP_KEPT:
+        _SETUP.pop(next(iter(_SETUP)))
+    _SETUP[key] = out = make()
+    return out
+
+
 COORDINATES = ("auto", "physical", "modal", "blocked")  # ExplicitOptions.coordinates
 
 
@@ -373,8 +420,9 @@ class ExplicitStepper(_stepper.Stepper):
         blocks = not self.forced and mb > 0  # the block kernel applies (given the modal form)
         if (coordinates in ("modal", "blocked") or (coordinates == "auto" and blocks)) and not self.friction \
                 and self.n > _cd.SMALL_N:
-            self.modal = _cd_modal.modal_form(system.M, system.K, system.C, system.B,
-                                              loads.b if self.forced else np.zeros((0, self.n)), dt)
+            b = np.ascontiguousarray(loads.b) if self.forced else np.zeros((0, self.n))
+            self.modal = _cached(("modal", _system_key(system), b.tobytes(), b.shape, dt),
+                                 lambda: _cd_modal.modal_form(system.M, system.K, system.C, system.B, b, dt))
         if coordinates in ("blocked", "auto") and self.modal is not None and blocks:
             self.jump = _cd_block.block_form(self.modal["mats"], self.modal["om2"], system.offset, system.side,
                                              system.k, dt, mb)
@@ -392,7 +440,7 @@ class ExplicitStepper(_stepper.Stepper):
         interval is ``every`` steps."""
         system = self.system
         if options.dt is not None:
-            omega, dt_crit = stability_limit(system)
+            omega, dt_crit = _cached(("limit", _system_key(system)), lambda: stability_limit(system))
             omega_ref, limit = omega, SWITCHING_SAFETY * dt_crit
             if options.dt > limit:
                 raise StepTooLargeError(
@@ -402,7 +450,9 @@ class ExplicitStepper(_stepper.Stepper):
                 )
             dt_target = options.dt
         else:
-            dt_target, omega, omega_ref, limit = default_step(system, options.omega_dt, options.step_basis)
+            dt_target, omega, omega_ref, limit = _cached(
+                ("step", _system_key(system), options.omega_dt, options.step_basis),
+                lambda: default_step(system, options.omega_dt, options.step_basis))
             if omega <= 0:
                 dt_target = 1.0 / self.sample_rate_hz
         h_out = 1.0 / self.sample_rate_hz
@@ -410,41 +460,27 @@ class ExplicitStepper(_stepper.Stepper):
         return h_out / every, every, omega, omega_ref, limit
 
     def _matrices(self) -> None:
-        """The kernel and its matrices, formed once: A^T, (dt G K)^T, (dt G B^T)^T, the damping factor,
-        the stops' rows (and dt G b^T, b of the loads), G = (M + dt/2 C)^-1, A = G (M - dt/2 C)."""
+        """The kernel and its matrices (:func:`_physical_arrays` for the physical kernels, the modal and block
+        forms for theirs) and the damping factor L (C = L L^T)."""
         system, n, dt = self.system, self.n, self.dt
-        M, C, K = system.M, system.C, system.K
-        G = np.linalg.inv(M + 0.5 * dt * C)
-        A = G @ (M - 0.5 * dt * C)
-        dtGK = dt * (G @ K)
-        AT, dtGKT = np.ascontiguousarray(A.T), np.ascontiguousarray(dtGK.T)
-        dtGBT = np.ascontiguousarray((dt * (G @ system.B.T)).T)
-        self.L = L = _damping_factor(C)
         b = np.ascontiguousarray(self.loads.b) if self.forced else np.zeros((0, n))
-        dtGbT = np.ascontiguousarray((dt * (G @ b.T)).T)
         self.small = n <= _cd.SMALL_N  # state in registers (reduced.transient._cd), zero-padded to SMALL_N DOFs
         if self.jump is not None:
+            self.L = _cached(("L", system.C.tobytes()), lambda: _damping_factor(system.C))
             self.kernel = _cd_block.cd_block
             self.mats = (*self.modal["mats"], *(self.jump[key] for key in _cd_block.KEYS),
                          np.ascontiguousarray(self.modal["Phi"].T))  # the kernel stores physical samples
             self.dtGbT, self.b = None, self.modal["bm"]
         elif self.modal is not None:
+            self.L = _cached(("L", system.C.tobytes()), lambda: _damping_factor(system.C))
             self.kernel = _cd_modal.cd_modal
             self.mats = self.modal["mats"]
             self.dtGbT, self.b = None, self.modal["bm"]  # the kernel's a (set by _first_state) and the loads' rows
-        elif self.small:
-            S = _cd.SMALL_N
-            self.kernel = _cd._cd_small
-            self.mats = (_cd.pad(AT, S, S), _cd.pad(dtGKT, S, S), _cd.pad(dtGBT, None, S), _cd.pad(L, S, None),
-                         _cd.pad(system.B, None, S))
-            lumped = _cd_lumped.lumped_form(*self.mats, system.offset, system.side, system.k) if LUMPED else None
-            if lumped is not None:  # diagonal M and C, one coordinate a stop: the zero terms left out, same bits
-                self.kernel, self.mats = _cd_lumped.cd_lumped, lumped
-            self.dtGbT, self.b = _cd.pad(dtGbT, None, S), _cd.pad(b, None, S)
         else:
-            self.kernel = _cd_kernel
-            self.mats = (AT, dtGKT, dtGBT, np.ascontiguousarray(L.T), *_sparse_rows(system.B))
-            self.dtGbT, self.b = dtGbT, b
+            key = ("physical", _system_key(system), dt, b.tobytes(), b.shape, self.small, LUMPED)
+            self.kernel, self.mats, self.L, self.dtGbT, self.b = _cached(
+                key, lambda: _physical_arrays(system, dt, b, self.small))
+
 
     def _first_state(self, x0: np.ndarray, v0: np.ndarray) -> None:
         """x_0, v_{1/2} = v_0 + dt/2 a_0, and the work sums' first terms (p_0 = v_0^T C v_0, v_0^T f_ext(0))."""
