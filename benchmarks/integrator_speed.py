@@ -11,7 +11,9 @@ machine may be shared), in one process:
    fixed-interface modes; a 20 N, 1 ms blow at 10 ms that closes no gap; the marginal cost of a
    sample = (t(0.22 s) - t(0.02 s)) / 4000) beside one numpy N x K complex matrix-vector product
    (what a sample must at least cost);
-2. the central-difference integrator on the same 2 s ringdowns (steps per second), and on rom-impulse
+2. the central-difference integrator on the same 2 s ringdowns (steps per second; on discrete-impulse the lumped
+   kernel against the register kernel it replaced, alternating, and the latency of its dependent path), and on
+   rom-impulse
    in the open-gap modal coordinates (issue 28), step by step and jumped in blocks while the contact state
    holds, against the physical-coordinate kernel, alternating (``--modal-explicit-only`` measures just those
    rows and replaces them in the tables);
@@ -253,6 +255,74 @@ def roofline(n: int, p: int, nu: int, steps_per_cpu_s: float) -> dict:
             "attained_flops_per_s": flops * steps_per_cpu_s, "fraction_of_peak": flops * steps_per_cpu_s / peak,
             "link_latency_s": link, "links_per_step": 1.0 / (steps_per_cpu_s * link),
             "l1_bytes_per_s": 8 * words * steps_per_cpu_s, "steps_per_cpu_s": steps_per_cpu_s}
+
+
+def _lumped_chain():
+    """A numba loop of R rounds of the lumped kernel's dependent path, x += dt v, v = ((0.0 + a v) - g x) - g1 x
+    - g2 x (six dependent floating-point operations, as x_{n+1} to v_{n+3/2} in reduced.transient._cd_lumped):
+    the latency a step cannot beat."""
+    import numba as nb
+
+    @nb.njit
+    def chain(x, v, dt, a, g, g1, g2, R):
+        for _ in range(R):
+            x += dt * v
+            v = ((0.0 + a * v) - g * x) - g1 * x - g2 * x
+        return x + v
+
+    return chain
+
+
+def lumped_rows(repeats: int) -> tuple[str, list[dict]]:
+    """The lumped kernel (reduced.transient._cd_lumped, issue 28) against the register kernel it replaces on the
+    discrete model (``explicit.LUMPED`` False), alternating in the same process on the 2 s discrete-impulse
+    ringdown, and the latency of its dependent path per step (:func:`_lumped_chain`): (text for the headline row,
+    detail rows)."""
+    from reduced.transient import explicit
+
+    system, x0, v0 = scene_model("discrete-impulse")
+    runs, walls, cpus = {}, {True: [], False: []}, {True: [], False: []}
+    load0 = os.getloadavg()[0]
+    try:
+        for flag in (True, False):
+            explicit.LUMPED = flag
+            integrate_explicit(system, x0, v0, LONG_S, FS)
+        for _ in range(repeats):
+            for flag in (True, False):
+                explicit.LUMPED = flag
+                c0, t0 = time.process_time(), time.perf_counter()
+                runs[flag] = integrate_explicit(system, x0, v0, LONG_S, FS)
+                walls[flag].append(time.perf_counter() - t0)
+                cpus[flag].append(time.process_time() - c0)
+    finally:
+        explicit.LUMPED = True
+    load1 = os.getloadavg()[0]
+    same = all(np.array_equal(getattr(runs[True], k), getattr(runs[False], k)) for k in ("x", "v", "dissipated"))
+    steps = runs[True].stats["n_steps"]
+    chain = _lumped_chain()
+    chain(0.0, 1.0, 1e-6, 0.99, 1e-3, 1e-4, 1e-4, 10)
+    t = []
+    R = 5_000_000
+    for _ in range(5):
+        c0 = time.process_time()
+        chain(0.0, 1.0, 1e-6, 0.99, 1e-3, 1e-4, 1e-4, R)
+        t.append(time.process_time() - c0)
+    link = min(t) / R
+    med = {f: float(np.median(walls[f])) for f in walls}
+    cpu = {f: float(np.median(cpus[f])) for f in cpus}
+    details = [{"scene": "discrete-impulse", "method": "explicit", "code": f"ours, {name} kernel", "median_s": med[f],
+                "min_s": float(np.min(walls[f])), "max_s": float(np.max(walls[f])), "cpu_median_s": cpu[f],
+                "repeats": repeats, "n_steps": steps, "energy_balance_error": runs[f].energy_balance_error}
+               for f, name in ((True, "lumped"), (False, "register"))]
+    details.append({"scene": "discrete-impulse", "method": "explicit", "code": "latency of the lumped kernel's "
+                    "dependent path (6 floating-point operations) a step", "median_s": link})
+    text = (f"the lumped kernel: {med[False] / med[True]:.2f}x the register kernel's wall time, "
+            f"{cpu[False] / cpu[True]:.2f}x its CPU time (same process, alternating; "
+            f"{'the same bits' if same else 'NOT the same bits'}); CPU time {steps / cpu[True]:.3g} steps/s, "
+            f"a step {cpu[True] / steps * 1e9:.3g} ns = {cpu[True] / steps / link:.2g} x the latency of its dependent "
+            f"path ({link * 1e9:.3g} ns measured); machine load (1 min) {load0:.1f} before, {load1:.1f} after")
+    print(text, flush=True)
+    return text, details
 
 
 def modal_explicit_rows(repeats: int) -> tuple[list[dict], list[dict]]:
@@ -609,6 +679,11 @@ def read_rows(path: Path) -> list[dict]:
 
 def run_all(base: dict, args) -> tuple[list[dict], list[dict], list[dict]]:
     heads, details = exact_rows(base, args.repeats, args.baseline_commit)
+    text, d = lumped_rows(args.repeats)
+    details += d
+    for h in heads:
+        if h["what"].startswith("explicit (central difference) ringdown, discrete-impulse"):
+            h["error"] = f"{h['error']}; {text}"
     h, d = modal_explicit_rows(args.repeats)
     heads += h
     details += d
