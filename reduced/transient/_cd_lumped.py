@@ -27,13 +27,15 @@ import numpy as np
 
 from reduced.transient._cd import SMALL_N
 
+SLOTS = 2  # stops a column at most (two: an upper and a lower); a model with more runs the register kernel
+
 
 def lumped_form(AT: np.ndarray, dtGKT: np.ndarray, dtGBT: np.ndarray, L: np.ndarray, B: np.ndarray,
                 offset: np.ndarray, side: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, ...] | None:
     """The leading arguments of :func:`cd_lumped` from those of ``_cd_small`` (zero-padded to ``SMALL_N``
     columns) and the stops, or None when the model is not lumped: A or L with an off-diagonal entry, L with more
     columns than the padded state, a stop row (of B or dt G B^T) with more than one nonzero entry or their entries
-    in different columns, or a side other than +-1.
+    in different columns, more than ``SLOTS`` stops on a column, or a side other than +-1.
 
     Parameters
     ----------
@@ -51,9 +53,9 @@ def lumped_form(AT: np.ndarray, dtGKT: np.ndarray, dtGBT: np.ndarray, L: np.ndar
     Returns
     -------
     tuple or None
-        ``(a, dtGKT, cs, bs, ts, os, ks, gs, l)``: a (3,) the diagonal of A; the stops sorted by their column c
-        (stably: a column's stops in their order), cs (4,) int64 where each column's stops start (and the end);
-        per stop bs = side B_jc, ts = side offset (the row side (B_j x - offset) > 0 iff bs x_c > ts),
+        ``(a, dtGKT, bs, ts, os, ks, gs, l)``: a (3,) the diagonal of A; (3, SLOTS) tables of the stops by
+        column c and slot (a column's stops in their order, empty slots never closed: ts = +inf):
+        bs = side B_jc, ts = side offset (the row side (B_j x - offset) > 0 iff bs x_c > ts),
         os = -side offset, ks = k, gs = side (dt G B^T)_jc; l (3,) the diagonal of L (zero-padded).
     """
     S = SMALL_N
@@ -72,22 +74,31 @@ def lumped_form(AT: np.ndarray, dtGKT: np.ndarray, dtGBT: np.ndarray, L: np.ndar
             return None
         col[j] = nz[0] if nz.size else 0
     order = np.argsort(col, kind="stable")
-    c, sd = col[order], np.asarray(side, float)[order]
-    cs = np.searchsorted(c, np.arange(S + 1)).astype(np.int64)
+    if np.bincount(col, minlength=S).max(initial=0) > SLOTS:
+        return None
+    # (column, slot) tables: each column's stops in their order, empty slots never closed (ts = +inf)
+    bs, ts, os_, ks, gs = np.zeros((S, SLOTS)), np.full((S, SLOTS), np.inf), *np.zeros((3, S, SLOTS))
+    used = np.zeros(S, np.int64)
+    for j in order:
+        c, sd = col[j], float(side[j])
+        t = used[c]
+        used[c] += 1
+        bs[c, t], ts[c, t], os_[c, t] = sd * B[j, c], sd * offset[j], -(sd * offset[j])
+        ks[c, t], gs[c, t] = k[j], sd * dtGBT[j, c]
     f = np.ascontiguousarray
-    return (f(np.diag(AT)), f(dtGKT), cs, f(sd * B[order, c]), f(sd * offset[order]), f(-(sd * offset[order])),
-            f(np.asarray(k, float)[order]), f(sd * dtGBT[order, c]), f(np.diag(Lp)))
+    return (f(np.diag(AT)), f(dtGKT), bs, ts, os_, ks, gs, f(np.diag(Lp)))
 
 
 @nb.njit(cache=True)
-def cd_lumped(a, dtGKT, cs, bs, ts, os, ks, gs, l, offset, side, k, x, vh, dt, n_steps, every, out_x, out_v,
+def cd_lumped(a, dtGKT, bs, ts, os, ks, gs, l, offset, side, k, x, vh, dt, n_steps, every, out_x, out_v,
               out_W, W, pw_old, i0, dtGbT, b, P, out_E, E, pe_old):
     """:func:`reduced.transient._cd._cd_small` (same arguments after the leading ones, which replace the stops'
     offset, side and k, same returns, same bits) for a lumped model (module docstring): row i of v_{n+3/2} is
     0.0 + (a_0 v_0 - (dt G K)_00 x_0) - ... in the register kernel's order with the zero terms of A left out; a
     stop on column c is closed when bs x_c > ts (side s > 0 for s = -offset + B_jc x_c: fl(u + w) > 0 iff
     u + w > 0, and side s = os + bs x_c exactly, side being +-1), its force then enters row c alone,
-    gs (ks (os + bs x_c)) = (dt G B^T)_jc k s; and p_n = sum_q (l_q w_q)^2.
+    gs (ks (os + bs x_c)) = (dt G B^T)_jc k s; and p_n = sum_q (l_q w_q)^2. The stops sit in (column, slot)
+    tables, two slots a column in their order, an empty one never closed (ts = +inf).
 
     Long for the register kernel's reason: the state and the matrices live in scalar variables for the whole
     step loop, written out term by term."""
@@ -100,7 +111,8 @@ def cd_lumped(a, dtGKT, cs, bs, ts, os, ks, gs, l, offset, side, k, x, vh, dt, n
     g00, g01, g02 = dtGKT[0, 0], dtGKT[1, 0], dtGKT[2, 0]
     g10, g11, g12 = dtGKT[0, 1], dtGKT[1, 1], dtGKT[2, 1]
     g20, g21, g22 = dtGKT[0, 2], dtGKT[1, 2], dtGKT[2, 2]
-    c0, c1, c2, c3 = cs[0], cs[1], cs[2], cs[3]
+    b00, b01, b10, b11, b20, b21 = bs[0, 0], bs[0, 1], bs[1, 0], bs[1, 1], bs[2, 0], bs[2, 1]
+    t00, t01, t10, t11, t20, t21 = ts[0, 0], ts[0, 1], ts[1, 0], ts[1, 1], ts[2, 0], ts[2, 1]
     io = i0
     left = every
     for step in range(n_steps):
@@ -116,18 +128,24 @@ def cd_lumped(a, dtGKT, cs, bs, ts, os, ks, gs, l, offset, side, k, x, vh, dt, n
         n2 = 0.0 - g20 * x0
         n2 -= g21 * x1
         n2 += a2 * v2 - g22 * x2
-        for t in range(c0, c1):  # the stops on x_0, in their order (an open stop adds exactly 0)
-            bx = bs[t] * x0
-            if bx > ts[t]:
-                n0 -= gs[t] * (ks[t] * (os[t] + bx))
-        for t in range(c1, c2):
-            bx = bs[t] * x1
-            if bx > ts[t]:
-                n1 -= gs[t] * (ks[t] * (os[t] + bx))
-        for t in range(c2, c3):
-            bx = bs[t] * x2
-            if bx > ts[t]:
-                n2 -= gs[t] * (ks[t] * (os[t] + bx))
+        bx = b00 * x0  # the stops of each column in their order (an open stop adds exactly 0)
+        if bx > t00:
+            n0 -= gs[0, 0] * (ks[0, 0] * (os[0, 0] + bx))
+        bx = b01 * x0
+        if bx > t01:
+            n0 -= gs[0, 1] * (ks[0, 1] * (os[0, 1] + bx))
+        bx = b10 * x1
+        if bx > t10:
+            n1 -= gs[1, 0] * (ks[1, 0] * (os[1, 0] + bx))
+        bx = b11 * x1
+        if bx > t11:
+            n1 -= gs[1, 1] * (ks[1, 1] * (os[1, 1] + bx))
+        bx = b20 * x2
+        if bx > t20:
+            n2 -= gs[2, 0] * (ks[2, 0] * (os[2, 0] + bx))
+        bx = b21 * x2
+        if bx > t21:
+            n2 -= gs[2, 1] * (ks[2, 1] * (os[2, 1] + bx))
         for q in range(nl):
             pq = P[step, q]
             n0 += dtGbT[q, 0] * pq
