@@ -29,6 +29,7 @@ stability: omega_max dt = ``DEFAULT_OMEGA_DT``.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -306,9 +307,16 @@ SETUP_KEPT = 8  # entries _SETUP keeps
 
 
 def _system_key(system: GapSystem) -> tuple:
-    """The bytes of a system's arrays: a key that changes with any of them."""
-    return tuple((a.tobytes(), a.shape) for a in (system.M, system.C, system.K, system.B, system.k, system.offset,
-                                                  system.side, system.tip))
+    """The bytes of a system's arrays and of its friction's (its sliders stiffen the closed state): a key that
+    changes with any of them."""
+    arrays = [system.M, system.C, system.K, system.B, system.k, system.offset, system.side, system.tip]
+    fr = system.friction
+    unset = ()
+    if fr is not None:
+        values = {f.name: getattr(fr, f.name) for f in dataclasses.fields(fr)}
+        arrays += [v for v in values.values() if isinstance(v, np.ndarray)]
+        unset = tuple(name for name, v in values.items() if v is None)
+    return (fr is not None, unset, *((a.tobytes(), a.shape, a.dtype.str) for a in arrays))
 
 
 def _cached(key: tuple, make):
