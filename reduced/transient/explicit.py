@@ -377,8 +377,9 @@ class ExplicitStepper(_stepper.Stepper):
     the loads' work and power), so the samples are the same bits however the calls are cut. A
     call stops at the buffer's end, at the next progress mark (when progress is reported) and,
     under loads, after ``LOAD_BLOCK_STEPS`` steps (the loads at each step are tabulated a call).
-    Models of at most ``_cd.SMALL_N`` DOFs run the register kernel :func:`reduced.transient._cd._cd_small`;
-    free frictionless larger ones, by default, the block kernel :func:`reduced.transient._cd_block.cd_block`
+    Models of at most ``_cd.SMALL_N`` DOFs run the register kernel :func:`reduced.transient._cd._cd_small`, or,
+    lumped ones (diagonal M and C, each stop on one coordinate), :func:`reduced.transient._cd_lumped.cd_lumped`,
+    the same bits; free frictionless larger ones, by default, the block kernel :func:`reduced.transient._cd_block.cd_block`
     (``ExplicitOptions.coordinates``), whose calls also start and end on samples, so its samples do not
     depend on the cuts either.
 
