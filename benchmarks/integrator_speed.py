@@ -194,7 +194,9 @@ def exact_rows(base: dict, repeats: int, commit: str) -> tuple[list[dict], list[
                     and np.array_equal(res.dissipated, b_res.dissipated)
                 rate = rates[scene]
                 heads.append({"what": f"explicit (central difference) ringdown, {scene}, {LONG_S:g} s: {steps} steps, "
-                                      f"{steps / t['median_s']:.3g} steps/s",
+                                      f"{steps / t['median_s']:.3g} steps/s (CPU time: "
+                                      f"{steps / t['cpu_median_s']:.3g}; fastest run {steps / t['min_s']:.3g}; "
+                                      f"machine load (1 min) {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores)",
                               "ours_s": t["median_s"], "baseline": BASELINE.format(commit).replace("exact", "explicit"),
                               "baseline_s": b_t["median_s"] if b_t else "",
                               "ratio": b_t["median_s"] / t["median_s"] if b_t else "",
