@@ -1,7 +1,7 @@
 """Speed of the ringdown integrators (issue 14), every ratio against a named baseline in the same process.
 
     PYTHONPATH=. python benchmarks/integrator_speed.py [--repeats 5] [--baseline-commit fc521a5]
-        [--hammer-modes 60 120] [--no-dop853-2s] [--out results/performance]
+        [--hammer-modes 60 120] [--no-dop853-2s] [--out results/performance] [--explicit-only]
 
 Measures, each a median of ``--repeats`` wall times (perf_counter; CPU times beside them, as the
 machine may be shared), in one process:
@@ -146,15 +146,16 @@ def head_diff(a, b, fs: float) -> float:
     return float(np.max(np.abs(a.x[:k] - b.x[:k])) / np.max(np.abs(b.x[:k])))
 
 
-def exact_rows(base: dict, repeats: int, commit: str) -> tuple[list[dict], list[dict]]:
-    """Headline and detail rows of the exact and explicit 2 s ringdowns, ours against the baseline."""
+def exact_rows(base: dict, repeats: int, commit: str, methods=("exact", "explicit")) -> tuple[list[dict], list[dict]]:
+    """Headline and detail rows of the exact and explicit 2 s ringdowns (of ``methods``), ours against the
+    baseline."""
     heads, details = [], []
     targets = {("exact", "discrete-impulse"): 0.03, ("exact", "rom-impulse"): 0.4}
     rates = {"discrete-impulse": 5e7, "rom-impulse": 3e7}
     for scene in ("discrete-impulse", "rom-impulse"):
         system, x0, v0 = scene_model(scene)
         kw = {"step_basis": "contact"} if scene == "rom-impulse" else {}
-        for method in ("exact", "explicit"):
+        for method in methods:
             ours = integrate_exact if method == "exact" else integrate_explicit
             opts = {} if method == "exact" else kw
             res, t = timed(partial(ours, system, x0, v0, LONG_S, FS, **opts), repeats)
@@ -615,6 +616,9 @@ def main(argv=None) -> int:
     ap.add_argument("--figure-only", action="store_true", help="redraw integrator_speed.png from the CSV files")
     ap.add_argument("--modal-explicit-only", action="store_true",
                     help="measure only the modal-coordinate explicit row and replace it in integrator_headline.csv")
+    ap.add_argument("--explicit-only", action="store_true",
+                    help="measure only the explicit rows (both scenes, the lumped kernel, the modal and block "
+                         "kernels) and replace them in the tables; the exact and DOP853 rows are kept")
     args = ap.parse_args(argv)
     if args.repeats < 3:
         ap.error("--repeats must be >= 3")
@@ -626,6 +630,8 @@ def main(argv=None) -> int:
     info = machine_rows()
     if args.modal_explicit_only:
         return modal_explicit_only(out, args.repeats, info)
+    if args.explicit_only:
+        return explicit_only(out, args, info)
     base = load_baseline(args.baseline_commit)
     with single_thread_blas():
         heads, details, scans = run_all(base, args)
@@ -666,6 +672,52 @@ def modal_explicit_only(out: Path, repeats: int, info: list[dict]) -> int:
     write_rows(out / "integrator_machine.csv", m_old + [{"key": f"modal_explicit_{r['key']}", "value": r["value"]}
                                                         for r in info])
     print(f"updated {out}/integrator_{{headline,details,machine}}.csv")
+    return 0
+
+
+def explicit_only(out: Path, args, info: list[dict]) -> int:
+    """Measure the explicit rows alone (:func:`exact_rows` for the explicit method, :func:`lumped_rows`,
+    :func:`modal_explicit_rows`) and put them in place of the explicit rows of ``out``'s tables, in the same
+    order; the exact and DOP853 rows stay as measured before. The machine file gets this run's keys prefixed
+    ``explicit_``; the figure is redrawn."""
+    base = load_baseline(args.baseline_commit)
+    base = {"explicit": base["explicit"]} if "explicit" in base else {}
+    with single_thread_blas():
+        heads, details = exact_rows(base, args.repeats, args.baseline_commit, methods=("explicit",))
+        text, d = lumped_rows(args.repeats)
+        details += d
+        for h in heads:
+            if h["what"].startswith("explicit (central difference) ringdown, discrete-impulse"):
+                h["error"] = f"{h['error']}; {text}"
+        h, d = modal_explicit_rows(args.repeats)
+        heads += h
+        details += d
+    info.append({"key": "load_1min_end", "value": os.getloadavg()[0]})
+    fmt = {r["what"].split(",")[0] + r["what"].split(",")[1]: {k: (f"{v:.4g}" if isinstance(v, float) else v)
+                                                                for k, v in r.items()} for r in heads}
+    tag = "explicit (central difference) ringdown"
+    old = read_rows(out / "integrator_headline.csv")
+    rows, left = [], dict(fmt)
+    for r in old:
+        key = r["what"].split(",")[0] + r["what"].split(",")[1]
+        if r["what"].startswith(tag):
+            if key in left:
+                rows.append(left.pop(key))
+        else:
+            rows.append(r)
+    rows += list(left.values())
+    fields = ["what", "ours_s", "baseline", "baseline_s", "ratio", "error", "target", "met"]
+    write_rows(out / "integrator_headline.csv", rows, fields)
+    old_d = [r for r in read_rows(out / "integrator_details.csv") if r.get("method") != "explicit"]
+    dfields = list(old_d[0]) if old_d else []
+    dfields += sorted({k for r in details for k in r} - set(dfields))
+    write_rows(out / "integrator_details.csv", old_d + [{k: r.get(k, "") for k in dfields} for r in details], dfields,
+               float_format=".5g")
+    m_old = [r for r in read_rows(out / "integrator_machine.csv") if not r["key"].startswith("explicit_")]
+    write_rows(out / "integrator_machine.csv", m_old + [{"key": f"explicit_{r['key']}", "value": r["value"]}
+                                                        for r in info])
+    redraw(out)
+    print(f"updated {out}/integrator_{{headline,details,machine}}.csv and integrator_speed.png")
     return 0
 
 
