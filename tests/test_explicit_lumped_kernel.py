@@ -17,7 +17,8 @@ FS = 20000.0
 
 
 def _lumped(n: int, damped: bool = True, coupled_mass: bool = False) -> GapSystem:
-    """n masses in a ring (springs between neighbours, first to last and to ground), diagonal dashpots, stops above and below
+    """n masses in a ring (springs between neighbours, first to last and to ground), diagonal dashpots, stops above
+    and below
     the first and the last mass, the lower ones with their rows negated (B_j = -e_i, side +1: the same stop)."""
     M = np.diag(np.linspace(1.0, 2.0, n))
     if coupled_mass and n > 1:

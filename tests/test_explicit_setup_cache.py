@@ -5,9 +5,10 @@ friction's sliders) is a new key."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from reduced.models.gaps import Friction
 from reduced.models.discrete import DiscreteParams
+from reduced.models.gaps import Friction
 from reduced.transient import explicit
 from reduced.transient.explicit import integrate_explicit
 
@@ -39,3 +40,16 @@ def test_the_key_sees_the_friction():
     f2 = Friction(Bt=np.array([[1.0, 0.0, 0.0]]), tip=[0], k_t=2e7, mu=0.3, names=("t",))
     keys = {explicit._system_key(x) for x in (s, s.with_friction(f1), s.with_friction(f2))}
     assert len(keys) == 3
+
+
+def test_a_replaced_function_keeps_its_values_to_itself(monkeypatch):
+    # tests/test_integrators.py bypasses the stability refusal by replacing stability_limit: what the replacement
+    # gives is kept under its own key, so the original still refuses a step beyond the limit afterwards.
+    s = DiscreteParams().system()
+    _, dt_crit = explicit.stability_limit(s)
+    args = (s, np.zeros(3), np.array([0.0, 0.0, 1.0]), 0.001, 20000.0)
+    with monkeypatch.context() as m:
+        m.setattr(explicit, "stability_limit", lambda system: (1.0, np.inf))
+        integrate_explicit(*args, dt=0.9 * dt_crit)  # accepted: the limit is gone
+    with pytest.raises(explicit.StepTooLargeError):
+        integrate_explicit(*args, dt=0.9 * dt_crit)

@@ -230,7 +230,8 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
     step; when a stop leaves that state at a block's step t + 1, the t steps before it are known to hold and are
     jumped without a check (as one block when the form has every length, else longest lengths first), and the
     next block's state is found, not tried (it is not that one); when at its first step (a switch there), that
-    step is one step of ``cd_modal``. Needs n_steps % every == 0 and no loads (else it steps throughout); ``a`` = U^T zd on exit.
+    step is one step of ``cd_modal``. Needs n_steps % every == 0 and no loads (else it steps throughout);
+    ``a`` = U^T zd on exit.
     Unlike ``cd_modal`` it stores the samples in physical coordinates, x = Phi z and v = Phi zd (PhiT = Phi^T,
     :func:`_physical_rows`): in the kernel, a sample's two products cost less than a pass over the buffers after.
 

@@ -322,7 +322,9 @@ def _system_key(system: GapSystem) -> tuple:
 def _cached(key: tuple, make):
     """make() the first time ``key`` is asked for, then the same object (kept for the last ``SETUP_KEPT`` keys):
     a run's set-up (the stability limit, the step's reference frequency, the kernel's matrices) costs more than
-    the kernel on a short run. The objects are read, never changed, by the runs."""
+    the kernel on a short run. The objects are read, never changed, by the runs. The keys hold the functions
+    that make the values, as found when asked (so a function replaced, as tests replace stability_limit, makes
+    and keeps its own values, and never hands them to the original)."""
     if key in _SETUP:
         return _SETUP[key]
     if len(_SETUP) >= SETUP_KEPT:
@@ -379,7 +381,8 @@ class ExplicitStepper(_stepper.Stepper):
     under loads, after ``LOAD_BLOCK_STEPS`` steps (the loads at each step are tabulated a call).
     Models of at most ``_cd.SMALL_N`` DOFs run the register kernel :func:`reduced.transient._cd._cd_small`, or,
     lumped ones (diagonal M and C, each stop on one coordinate), :func:`reduced.transient._cd_lumped.cd_lumped`,
-    the same bits; free frictionless larger ones, by default, the block kernel :func:`reduced.transient._cd_block.cd_block`
+    the same bits; free frictionless larger ones, by default, the block kernel
+    :func:`reduced.transient._cd_block.cd_block`
     (``ExplicitOptions.coordinates``), whose calls also start and end on samples, so its samples do not
     depend on the cuts either.
 
@@ -430,7 +433,7 @@ class ExplicitStepper(_stepper.Stepper):
         if (coordinates in ("modal", "blocked") or (coordinates == "auto" and blocks)) and not self.friction \
                 and self.n > _cd.SMALL_N:
             b = np.ascontiguousarray(loads.b) if self.forced else np.zeros((0, self.n))
-            self.modal = _cached(("modal", _system_key(system), b.tobytes(), b.shape, dt),
+            self.modal = _cached(("modal", _cd_modal.modal_form, _system_key(system), b.tobytes(), b.shape, dt),
                                  lambda: _cd_modal.modal_form(system.M, system.K, system.C, system.B, b, dt))
         if coordinates in ("blocked", "auto") and self.modal is not None and blocks:
             self.jump = _cd_block.block_form(self.modal["mats"], self.modal["om2"], system.offset, system.side,
@@ -449,7 +452,7 @@ class ExplicitStepper(_stepper.Stepper):
         interval is ``every`` steps."""
         system = self.system
         if options.dt is not None:
-            omega, dt_crit = _cached(("limit", _system_key(system)), lambda: stability_limit(system))
+            omega, dt_crit = _cached(("limit", stability_limit, _system_key(system)), lambda: stability_limit(system))
             omega_ref, limit = omega, SWITCHING_SAFETY * dt_crit
             if options.dt > limit:
                 raise StepTooLargeError(
@@ -460,7 +463,8 @@ class ExplicitStepper(_stepper.Stepper):
             dt_target = options.dt
         else:
             dt_target, omega, omega_ref, limit = _cached(
-                ("step", _system_key(system), options.omega_dt, options.step_basis),
+                ("step", default_step, stability_limit, contact_omega, _system_key(system), options.omega_dt,
+                 options.step_basis),
                 lambda: default_step(system, options.omega_dt, options.step_basis))
             if omega <= 0:
                 dt_target = 1.0 / self.sample_rate_hz
@@ -475,18 +479,21 @@ class ExplicitStepper(_stepper.Stepper):
         b = np.ascontiguousarray(self.loads.b) if self.forced else np.zeros((0, n))
         self.small = n <= _cd.SMALL_N  # state in registers (reduced.transient._cd), zero-padded to SMALL_N DOFs
         if self.jump is not None:
-            self.L = _cached(("L", system.C.tobytes()), lambda: _damping_factor(system.C))
+            self.L = _cached(("L", _damping_factor, system.C.tobytes(), system.C.shape),
+                             lambda: _damping_factor(system.C))
             self.kernel = _cd_block.cd_block
             self.mats = (*self.modal["mats"], *(self.jump[key] for key in _cd_block.KEYS),
                          np.ascontiguousarray(self.modal["Phi"].T))  # the kernel stores physical samples
             self.dtGbT, self.b = None, self.modal["bm"]
         elif self.modal is not None:
-            self.L = _cached(("L", system.C.tobytes()), lambda: _damping_factor(system.C))
+            self.L = _cached(("L", _damping_factor, system.C.tobytes(), system.C.shape),
+                             lambda: _damping_factor(system.C))
             self.kernel = _cd_modal.cd_modal
             self.mats = self.modal["mats"]
             self.dtGbT, self.b = None, self.modal["bm"]  # the kernel's a (set by _first_state) and the loads' rows
         else:
-            key = ("physical", _system_key(system), dt, b.tobytes(), b.shape, self.small, LUMPED)
+            key = ("physical", _system_key(system), dt, b.tobytes(), b.shape, self.small, LUMPED, _damping_factor,
+                   _cd._cd_small, _cd_lumped.lumped_form, _cd_lumped.cd_lumped)
             self.kernel, self.mats, self.L, self.dtGbT, self.b = _cached(
                 key, lambda: _physical_arrays(system, dt, b, self.small))
 
