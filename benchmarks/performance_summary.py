@@ -56,7 +56,8 @@ LIMITS = (
      "tests/test_explicit_lumped_kernel.py), 1.7x the register kernel's CPU time in the same process "
      "(alternating, the row's accuracy column: 1.7-2.0x in five runs at load 2-10). The row was measured at load "
      "2.0 (10:08 UTC, another session's job on both cores): 5.25e7 steps/s; under load 8-10 the wall times were "
-     "2.5-4x the CPU times (5.5-6.6e7 steps/s in CPU time). A step is ~2.2x the latency of its dependent path x_{n+1} -> v_{n+3/2} -> x_{n+2} (six dependent floating-point "
+     "2.5-4x the CPU times (5.5-6.6e7 steps/s in CPU time). A step is ~2.2x the latency of its dependent path "
+     "x_{n+1} -> v_{n+3/2} -> x_{n+2} (six dependent floating-point "
      "operations, ~8 ns measured) and issues ~55 floating-point operations; each step needs the last one's "
      "result, so steps cannot overlap, and the results are kept bit for bit"),
     ("explicit (central difference) ringdown, rom-impulse",
@@ -76,7 +77,8 @@ LIMITS = (
      "are those of the rom-impulse row above (2.97e7 steps/s at load 2.1, the fastest run 3.08e7). "
      "A block costs two matrix-vector products from the block's start state (the stop rows of its steps and the "
      "end state with its mean velocity: up to 56 + 36 rows of 25 columns, SIMD over the rows, ~160 and ~110 ns "
-     "in CPU time at load 8; three other layouts of the product were 2-6x slower, measured) and two short energy sums; the rom-impulse run changes contact state ~10,000 "
+     "in CPU time at load 8; three other layouts of the product were 2-6x slower, measured) and two short "
+     "energy sums; the rom-impulse run changes contact state ~10,000 "
      "times, so 1.25 checks and 1.25 jumps an output interval (40000 intervals)"),
     ("explicit (central difference) ringdown in the open-gap modal coordinates",
      "this is the step-by-step modal kernel, kept as the block kernel's reference (the default is the block "
