@@ -101,8 +101,39 @@ def cd_lumped(a, dtGKT, bs, ts, os, ks, gs, l, offset, side, k, x, vh, dt, n_ste
     gs (ks (os + bs x_c)) = (dt G B^T)_jc k s; and p_n = sum_q (l_q w_q)^2. The stops sit in (column, slot)
     tables, two slots a column in their order, an empty one never closed (ts = +inf).
 
-    Long for the register kernel's reason: the state and the matrices live in scalar variables for the whole
-    step loop, written out term by term."""
+    Long because, as in the register kernel, the state, the matrices and the stops' thresholds live in scalar
+    variables for the whole step loop, written out term by term (a helper would pass them through memory).
+
+    Parameters
+    ----------
+    a, dtGKT, bs, ts, os, ks, gs, l : ndarray
+        :func:`lumped_form` of the model: diag(A) (3,), (dt G K)^T (3, 3), the stops' (3, SLOTS) tables
+        (bs, ts in m, os in m, ks in N/m, gs), diag(L) (3,).
+    offset, side, k : ndarray
+        The stops (not read: their values are in the tables; kept for ``_cd_small``'s argument list).
+    x, vh : ndarray
+        (3,) x_n in m and v_{n+1/2} in m/s, zero-padded, advanced in place.
+    dt : float
+        s, the step.
+    n_steps, every : int
+        Steps to take; a sample every ``every`` steps.
+    out_x, out_v, out_W : ndarray
+        Sample buffers (x, v_n, the dissipated work W in J).
+    W, pw_old : float
+        J and W, the work so far and the last dissipation rate p_n.
+    i0 : int
+        The first sample row to fill.
+    dtGbT, b, P : ndarray
+        The loads: (dt G b^T)^T and b (n_loads, 3) zero-padded, P the loads at each step's end.
+    out_E : ndarray
+        Sample buffer of the loads' work.
+    E, pe_old : float
+        J and W, the loads' work so far and their last power.
+
+    Returns
+    -------
+    tuple
+        (W, pw_old, io, E, pe_old): io the next sample row."""
     n = out_x.shape[1]
     nl = b.shape[0]
     x0, x1, x2 = x[0], x[1], x[2]
