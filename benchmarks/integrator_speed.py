@@ -1,7 +1,7 @@
 """Speed of the ringdown integrators (issue 14), every ratio against a named baseline in the same process.
 
     PYTHONPATH=. python benchmarks/integrator_speed.py [--repeats 5] [--baseline-commit fc521a5]
-        [--hammer-modes 60 120] [--no-dop853-2s] [--out results/performance]
+        [--hammer-modes 60 120] [--no-dop853-2s] [--out results/performance] [--explicit-only]
 
 Measures, each a median of ``--repeats`` wall times (perf_counter; CPU times beside them, as the
 machine may be shared), in one process:
@@ -11,7 +11,9 @@ machine may be shared), in one process:
    fixed-interface modes; a 20 N, 1 ms blow at 10 ms that closes no gap; the marginal cost of a
    sample = (t(0.22 s) - t(0.02 s)) / 4000) beside one numpy N x K complex matrix-vector product
    (what a sample must at least cost);
-2. the central-difference integrator on the same 2 s ringdowns (steps per second), and on rom-impulse
+2. the central-difference integrator on the same 2 s ringdowns (steps per second; on discrete-impulse the lumped
+   kernel against the register kernel it replaced, alternating, and the latency of its dependent path), and on
+   rom-impulse
    in the open-gap modal coordinates (issue 28), step by step and jumped in blocks while the contact state
    holds, against the physical-coordinate kernel, alternating (``--modal-explicit-only`` measures just those
    rows and replaces them in the tables);
@@ -144,15 +146,16 @@ def head_diff(a, b, fs: float) -> float:
     return float(np.max(np.abs(a.x[:k] - b.x[:k])) / np.max(np.abs(b.x[:k])))
 
 
-def exact_rows(base: dict, repeats: int, commit: str) -> tuple[list[dict], list[dict]]:
-    """Headline and detail rows of the exact and explicit 2 s ringdowns, ours against the baseline."""
+def exact_rows(base: dict, repeats: int, commit: str, methods=("exact", "explicit")) -> tuple[list[dict], list[dict]]:
+    """Headline and detail rows of the exact and explicit 2 s ringdowns (of ``methods``), ours against the
+    baseline."""
     heads, details = [], []
     targets = {("exact", "discrete-impulse"): 0.03, ("exact", "rom-impulse"): 0.4}
     rates = {"discrete-impulse": 5e7, "rom-impulse": 3e7}
     for scene in ("discrete-impulse", "rom-impulse"):
         system, x0, v0 = scene_model(scene)
         kw = {"step_basis": "contact"} if scene == "rom-impulse" else {}
-        for method in ("exact", "explicit"):
+        for method in methods:
             ours = integrate_exact if method == "exact" else integrate_explicit
             opts = {} if method == "exact" else kw
             res, t = timed(partial(ours, system, x0, v0, LONG_S, FS, **opts), repeats)
@@ -192,7 +195,9 @@ def exact_rows(base: dict, repeats: int, commit: str) -> tuple[list[dict], list[
                     and np.array_equal(res.dissipated, b_res.dissipated)
                 rate = rates[scene]
                 heads.append({"what": f"explicit (central difference) ringdown, {scene}, {LONG_S:g} s: {steps} steps, "
-                                      f"{steps / t['median_s']:.3g} steps/s",
+                                      f"{steps / t['median_s']:.3g} steps/s (CPU time: "
+                                      f"{steps / t['cpu_median_s']:.3g}; fastest run {steps / t['min_s']:.3g}; "
+                                      f"machine load (1 min) {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores)",
                               "ours_s": t["median_s"], "baseline": BASELINE.format(commit).replace("exact", "explicit"),
                               "baseline_s": b_t["median_s"] if b_t else "",
                               "ratio": b_t["median_s"] / t["median_s"] if b_t else "",
@@ -253,6 +258,74 @@ def roofline(n: int, p: int, nu: int, steps_per_cpu_s: float) -> dict:
             "attained_flops_per_s": flops * steps_per_cpu_s, "fraction_of_peak": flops * steps_per_cpu_s / peak,
             "link_latency_s": link, "links_per_step": 1.0 / (steps_per_cpu_s * link),
             "l1_bytes_per_s": 8 * words * steps_per_cpu_s, "steps_per_cpu_s": steps_per_cpu_s}
+
+
+def _lumped_chain():
+    """A numba loop of R rounds of the lumped kernel's dependent path, x += dt v, v = ((0.0 + a v) - g x) - g1 x
+    - g2 x (six dependent floating-point operations, as x_{n+1} to v_{n+3/2} in reduced.transient._cd_lumped):
+    the latency a step cannot beat."""
+    import numba as nb
+
+    @nb.njit
+    def chain(x, v, dt, a, g, g1, g2, R):
+        for _ in range(R):
+            x += dt * v
+            v = ((0.0 + a * v) - g * x) - g1 * x - g2 * x
+        return x + v
+
+    return chain
+
+
+def lumped_rows(repeats: int) -> tuple[str, list[dict]]:
+    """The lumped kernel (reduced.transient._cd_lumped, issue 28) against the register kernel it replaces on the
+    discrete model (``explicit.LUMPED`` False), alternating in the same process on the 2 s discrete-impulse
+    ringdown, and the latency of its dependent path per step (:func:`_lumped_chain`): (text for the headline row,
+    detail rows)."""
+    from reduced.transient import explicit
+
+    system, x0, v0 = scene_model("discrete-impulse")
+    runs, walls, cpus = {}, {True: [], False: []}, {True: [], False: []}
+    load0 = os.getloadavg()[0]
+    try:
+        for flag in (True, False):
+            explicit.LUMPED = flag
+            integrate_explicit(system, x0, v0, LONG_S, FS)
+        for _ in range(repeats):
+            for flag in (True, False):
+                explicit.LUMPED = flag
+                c0, t0 = time.process_time(), time.perf_counter()
+                runs[flag] = integrate_explicit(system, x0, v0, LONG_S, FS)
+                walls[flag].append(time.perf_counter() - t0)
+                cpus[flag].append(time.process_time() - c0)
+    finally:
+        explicit.LUMPED = True
+    load1 = os.getloadavg()[0]
+    same = all(np.array_equal(getattr(runs[True], k), getattr(runs[False], k)) for k in ("x", "v", "dissipated"))
+    steps = runs[True].stats["n_steps"]
+    chain = _lumped_chain()
+    chain(0.0, 1.0, 1e-6, 0.99, 1e-3, 1e-4, 1e-4, 10)
+    t = []
+    R = 5_000_000
+    for _ in range(5):
+        c0 = time.process_time()
+        chain(0.0, 1.0, 1e-6, 0.99, 1e-3, 1e-4, 1e-4, R)
+        t.append(time.process_time() - c0)
+    link = min(t) / R
+    med = {f: float(np.median(walls[f])) for f in walls}
+    cpu = {f: float(np.median(cpus[f])) for f in cpus}
+    details = [{"scene": "discrete-impulse", "method": "explicit", "code": f"ours, {name} kernel", "median_s": med[f],
+                "min_s": float(np.min(walls[f])), "max_s": float(np.max(walls[f])), "cpu_median_s": cpu[f],
+                "repeats": repeats, "n_steps": steps, "energy_balance_error": runs[f].energy_balance_error}
+               for f, name in ((True, "lumped"), (False, "register"))]
+    details.append({"scene": "discrete-impulse", "method": "explicit", "code": "latency of the lumped kernel's "
+                    "dependent path (6 floating-point operations) a step", "median_s": link})
+    text = (f"the lumped kernel: {med[False] / med[True]:.2f}x the register kernel's wall time, "
+            f"{cpu[False] / cpu[True]:.2f}x its CPU time (same process, alternating; "
+            f"{'the same bits' if same else 'NOT the same bits'}); CPU time {steps / cpu[True]:.3g} steps/s, "
+            f"a step {cpu[True] / steps * 1e9:.3g} ns = {cpu[True] / steps / link:.2g} x the latency of its dependent "
+            f"path ({link * 1e9:.3g} ns measured); machine load (1 min) {load0:.1f} before, {load1:.1f} after")
+    print(text, flush=True)
+    return text, details
 
 
 def modal_explicit_rows(repeats: int) -> tuple[list[dict], list[dict]]:
@@ -543,6 +616,9 @@ def main(argv=None) -> int:
     ap.add_argument("--figure-only", action="store_true", help="redraw integrator_speed.png from the CSV files")
     ap.add_argument("--modal-explicit-only", action="store_true",
                     help="measure only the modal-coordinate explicit row and replace it in integrator_headline.csv")
+    ap.add_argument("--explicit-only", action="store_true",
+                    help="measure only the explicit rows (both scenes, the lumped kernel, the modal and block "
+                         "kernels) and replace them in the tables; the exact and DOP853 rows are kept")
     args = ap.parse_args(argv)
     if args.repeats < 3:
         ap.error("--repeats must be >= 3")
@@ -554,6 +630,8 @@ def main(argv=None) -> int:
     info = machine_rows()
     if args.modal_explicit_only:
         return modal_explicit_only(out, args.repeats, info)
+    if args.explicit_only:
+        return explicit_only(out, args, info)
     base = load_baseline(args.baseline_commit)
     with single_thread_blas():
         heads, details, scans = run_all(base, args)
@@ -597,6 +675,52 @@ def modal_explicit_only(out: Path, repeats: int, info: list[dict]) -> int:
     return 0
 
 
+def explicit_only(out: Path, args, info: list[dict]) -> int:
+    """Measure the explicit rows alone (:func:`exact_rows` for the explicit method, :func:`lumped_rows`,
+    :func:`modal_explicit_rows`) and put them in place of the explicit rows of ``out``'s tables, in the same
+    order; the exact and DOP853 rows stay as measured before. The machine file gets this run's keys prefixed
+    ``explicit_``; the figure is redrawn."""
+    base = load_baseline(args.baseline_commit)
+    base = {"explicit": base["explicit"]} if "explicit" in base else {}
+    with single_thread_blas():
+        heads, details = exact_rows(base, args.repeats, args.baseline_commit, methods=("explicit",))
+        text, d = lumped_rows(args.repeats)
+        details += d
+        for h in heads:
+            if h["what"].startswith("explicit (central difference) ringdown, discrete-impulse"):
+                h["error"] = f"{h['error']}; {text}"
+        h, d = modal_explicit_rows(args.repeats)
+        heads += h
+        details += d
+    info.append({"key": "load_1min_end", "value": os.getloadavg()[0]})
+    fmt = {r["what"].split(",")[0] + r["what"].split(",")[1]: {k: (f"{v:.4g}" if isinstance(v, float) else v)
+                                                                for k, v in r.items()} for r in heads}
+    tag = "explicit (central difference) ringdown"
+    old = read_rows(out / "integrator_headline.csv")
+    rows, left = [], dict(fmt)
+    for r in old:
+        key = r["what"].split(",")[0] + r["what"].split(",")[1]
+        if r["what"].startswith(tag):
+            if key in left:
+                rows.append(left.pop(key))
+        else:
+            rows.append(r)
+    rows += list(left.values())
+    fields = ["what", "ours_s", "baseline", "baseline_s", "ratio", "error", "target", "met"]
+    write_rows(out / "integrator_headline.csv", rows, fields)
+    old_d = [r for r in read_rows(out / "integrator_details.csv") if r.get("method") != "explicit"]
+    dfields = list(old_d[0]) if old_d else []
+    dfields += sorted({k for r in details for k in r} - set(dfields))
+    write_rows(out / "integrator_details.csv", old_d + [{k: r.get(k, "") for k in dfields} for r in details], dfields,
+               float_format=".5g")
+    m_old = [r for r in read_rows(out / "integrator_machine.csv") if not r["key"].startswith("explicit_")]
+    write_rows(out / "integrator_machine.csv", m_old + [{"key": f"explicit_{r['key']}", "value": r["value"]}
+                                                        for r in info])
+    redraw(out)
+    print(f"updated {out}/integrator_{{headline,details,machine}}.csv and integrator_speed.png")
+    return 0
+
+
 def read_rows(path: Path) -> list[dict]:
     """The rows of a CSV file ([] when it does not exist)."""
     import csv
@@ -609,6 +733,11 @@ def read_rows(path: Path) -> list[dict]:
 
 def run_all(base: dict, args) -> tuple[list[dict], list[dict], list[dict]]:
     heads, details = exact_rows(base, args.repeats, args.baseline_commit)
+    text, d = lumped_rows(args.repeats)
+    details += d
+    for h in heads:
+        if h["what"].startswith("explicit (central difference) ringdown, discrete-impulse"):
+            h["error"] = f"{h['error']}; {text}"
     h, d = modal_explicit_rows(args.repeats)
     heads += h
     details += d

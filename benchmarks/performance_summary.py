@@ -50,24 +50,39 @@ XEON = ("on this session's machine, an Intel Xeon at 2.1 GHz (2026-11-27 08:30 U
 # what limits each target not met, from the profiles (a row matches by the start of its ``what``)
 LIMITS = (
     ("explicit (central difference) ringdown, discrete-impulse",
-     XEON + "the step is already a numba kernel with the state in registers (25 ns a step); each step needs the "
-     "last one's result (x, stop forces, v, x), so steps cannot overlap, and the results are kept bit for bit"),
+     "the step is the lumped kernel since session 13 (reduced.transient._cd_lumped, issue 28: diagonal M and C and "
+     "each stop on one coordinate, so the register kernel's zero terms are left out, the stops' thresholds sit in "
+     "registers and the first row's 0.0 + leaves the path from x to v; the same bits, "
+     "tests/test_explicit_lumped_kernel.py), 1.7x the register kernel's CPU time in the same process "
+     "(alternating, the row's accuracy column: 1.7-2.0x in five runs at load 2-10). The row was measured at load "
+     "2.0 (10:08 UTC, another session's job on both cores): 5.25e7 steps/s; under load 8-10 the wall times were "
+     "2.5-4x the CPU times (5.5-6.6e7 steps/s in CPU time). A step is ~2.2x the latency of its dependent path "
+     "x_{n+1} -> v_{n+3/2} -> x_{n+2} (six dependent floating-point "
+     "operations, ~8 ns measured) and issues ~55 floating-point operations; each step needs the last one's "
+     "result, so steps cannot overlap, and the results are kept bit for bit"),
     ("explicit (central difference) ringdown, rom-impulse",
-     XEON + "the default kernel is the block kernel (reduced.transient._cd_block, the row in blocks of steps below): "
-     "on a quiet machine (2026-11-27 05:01 UTC, load 1-2) the default row ran 3.23e7 steps/s in wall time, the "
-     "block kernel's own row 3.6e7 (CPU 2.4x the step-by-step modal kernel's); under load 8-9 the wall times were "
-     "2.5x the CPU times. The physical kernel it replaced as the default (coordinates=\"physical\") computes each "
-     "step's velocity as 12 sums over the coordinates in a fixed order, a chain of dependent adds (8.3e6 steps/s)"),
+     "the default kernel is the block kernel (reduced.transient._cd_block, the row in blocks of steps below). "
+     "Session 13 (issue 28): every block length up to 25, so the steps held before a switch and the rest of "
+     "the interval after it are one block each (100k matrix-vector products instead of 135k on this run), the "
+     "next contact state found instead of tried after a switch, the samples stored in physical coordinates "
+     "inside the kernel and a run's set-up kept across runs of one model: 1.29x the CPU time of the session's "
+     "start in the same process (alternating, load 7; the run differs from before by round-off, 4e-13 of max "
+     "|x| over 0.2 s). Measured at load 2.1 (10:08 UTC, another session's job on both cores): 2.53e7 steps/s, "
+     "the fastest of the five runs 2.93e7, the block kernel's own row (the same kernel, alternating) 2.97e7; on "
+     "the quiet machine at the session's start (08:30 UTC) this row ran 2.67e7 steps/s, and 1.29x that would "
+     "meet the target, but no quiet machine was had to measure it. What is left is the blocks' two "
+     "matrix-vector products (below)"),
     ("explicit (central difference) ringdown in the open-gap modal coordinates, jumped in blocks",
-     XEON + "measured at load 8-9 on 2 cores (2026-11-27 03:37 UTC): 3.64e7 steps/s in CPU time (27.5 ms; the modal "
-     "kernel 1.55e7 in the same process, the physical 8e6), the wall times 2.5x the CPU times under that load. "
-     "A block costs two matrix-vector products from the block's start state (the stop rows of its 25 steps, "
-     "the end state and its mean velocity: 56 + 36 rows of 25 columns, SIMD over the rows, no chain of "
-     "dependent sums) and two short energy sums; the rom-impulse run changes contact state ~7000 times, so "
-     "1.7 blocks an output interval (40000 intervals, 67000 blocks), ~400 ns a block in CPU time"),
+     "the block kernel's own row, alternating with the physical and modal kernels; its changes and the load "
+     "are those of the rom-impulse row above (2.97e7 steps/s at load 2.1, the fastest run 3.08e7). "
+     "A block costs two matrix-vector products from the block's start state (the stop rows of its steps and the "
+     "end state with its mean velocity: up to 56 + 36 rows of 25 columns, SIMD over the rows, ~160 and ~110 ns "
+     "in CPU time at load 8; three other layouts of the product were 2-6x slower, measured) and two short "
+     "energy sums; the rom-impulse run changes contact state ~10,000 "
+     "times, so 1.25 checks and 1.25 jumps an output interval (40000 intervals)"),
     ("explicit (central difference) ringdown in the open-gap modal coordinates",
      "this is the step-by-step modal kernel, kept as the block kernel's reference (the default is the block "
-     "kernel, the row below it, which meets the target). Measured at load 0.9-1.0 on 2 cores (2026-11-26 15:24 "
+     "kernel, the row below it). Measured at load 0.9-1.0 on 2 cores (2026-11-26 15:24 "
      "UTC): 1.53e7 steps/s in CPU time, the fastest run 1.64e7, 1.8x the physical kernel in the same process. The "
      "roofline in the accuracy column: the step uses 11 % of the core's multiply-add peak and a fraction of its L1 "
      "bandwidth; it is latency-bound, its sums over the coordinates (the tip rows, U^T y, the new velocity) each "
@@ -80,7 +95,12 @@ LIMITS = (
      "and divisions (the safe steps); its set-up (eigen-decompositions and modal tables, ~1 ms at load 1) is "
      "kept across runs of one system, so a first run is slower (the row's second figure); DOP853 at the "
      "loosest rtol that reaches the error asked is cheap (1e-10 for 1e-6 on the 0.2 s window), and its "
-     "relative speed moves with the machine and its load (below)"),
+     "relative speed moves with the machine and its load (below). The kernel is unchanged in session 13: a profile by "
+     "instruction (perf) put ~40 % of the kernel in the march's sqrt and division chains and ~10 % in its "
+     "per-stop sums; no change that keeps the bits and pays was found (numba's error_model='numpy', no "
+     "zero-division checks: no gain measured), and a change of the march moves the event times by round-off, "
+     "hence every exact science file. A full run at load 9 (2026-11-27 09:33 UTC) gave 1159x and 1981x on the "
+     "0.2 s window, 548x and 997x on the 2 s window: the row's ratio moves with the load"),
     ("exact ringdown, discrete-impulse",
      "the machine's load (integrator_machine.csv: 10-16 on 2 cores during the issue-28 runs, when the 3-DOF "
      "explicit kernel, 6.4e7 steps/s at load ~1, ran at 1e7); in alternating same-process runs the free "

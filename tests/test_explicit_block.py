@@ -191,3 +191,28 @@ def test_rom_impulse_equals_the_physical_kernel_over_the_predictable_window():
     assert np.abs(bl.x[:k] - mo.x[:k]).max() <= 1e-11 * np.abs(mo.x[:k]).max()
     assert np.abs(bl.x[:k] - ph.x[:k]).max() <= 3e-10 * np.abs(ph.x[:k]).max()
     assert abs(bl.energy_balance_error - ph.energy_balance_error) <= 1e-6 * abs(ph.energy_balance_error)
+
+
+def test_every_block_length_and_powers_of_two_agree_to_round_off(monkeypatch):
+    # Issue 28: a form with every length up to the longest jumps the steps held before a switch and the rest of
+    # the interval as one block each; past EVERY_LENGTH_BYTES the form keeps the powers of two. Both cover the
+    # same steps with the same recurrence, so through the impacts they agree with each other and with the modal
+    # kernel to round-off over the first 20 ms (1e-9 of max |x|, as above), and the every-length run needs fewer
+    # blocks (its form has every length).
+    s = _beam_like()
+    x0, v0 = _start()
+    mo = integrate_explicit(s, x0, v0, 0.05, FS, coordinates="modal")
+    every = integrate_explicit(s, x0, v0, 0.05, FS, coordinates="blocked")
+    form = next(iter(_cd_block._FORMS.values()))
+    mb = form["mb"]
+    assert list(form["Ls"]) == list(range(mb, 0, -1))
+    with monkeypatch.context() as m:
+        m.setattr(_cd_block, "EVERY_LENGTH_BYTES", 0)
+        m.setattr(_cd_block, "_FORMS", {})
+        pow2 = integrate_explicit(s, x0, v0, 0.05, FS, coordinates="blocked")
+        assert list(next(iter(_cd_block._FORMS.values()))["Ls"]) == list(_cd_block.block_lengths(mb))
+    assert not np.array_equal(every.x, pow2.x)  # the blocks differ around the switches: round-off apart
+    k = int(0.02 * FS) + 1
+    for a, b in ((every, pow2), (every, mo), (pow2, mo)):
+        assert np.abs(a.x[:k] - b.x[:k]).max() <= 1e-9 * np.abs(b.x[:k]).max()
+        assert abs(a.dissipated[k - 1] - b.dissipated[k - 1]) <= 1e-9 * b.dissipated[k - 1]

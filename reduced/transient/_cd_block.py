@@ -11,7 +11,7 @@ what bounds the step-by-step kernel (results/performance/README.md, the roofline
 - the stop rows at steps k+1 .. k+mb, Bu P_j[:n] (nu mb rows): the block holds while every stop is closed or open
   as in c, by the stepping kernel's rule side (B x - offset) > 0 (as bounds lo <= g <= hi, the same rule exactly);
 - the state after L steps, P_L[:2n], and its mean velocity (P_{L-1} + P_L)[n:2n] / 2, for the lengths L the held
-  steps are jumped in (mb and the powers of two below it);
+  steps are jumped in (every length up to mb, or mb and the powers of two below it for a large form);
 - the dissipated work from the scheme's discrete energy balance (:func:`cd_block`), two short sums a block.
 
 The contact state tried is the last block's (else the first step's); when a stop leaves it at step t + 1 of the
@@ -35,6 +35,7 @@ from reduced.transient._cd_modal import cd_modal
 BLOCK_MAX = 25  # steps a block at most (the rom-impulse run's steps between samples; longer blocks fail more)
 BLOCK_MIN = 4  # fewer steps a block than this save nothing; such runs step
 MAX_STATES = 32  # contact states (products of each stop row's) a form holds at most
+EVERY_LENGTH_BYTES = 16 << 20  # a form of every block length while its tables fit in this, else powers of two
 _FORMS: dict = {}  # the last block form, keyed by its model, stops, step and block
 
 
@@ -124,19 +125,28 @@ def step_map(mats: tuple, offset: np.ndarray, k: np.ndarray, dt: float, mask: in
     return np.vstack([z1, zd1, one])
 
 
-def block_lengths(mb: int) -> np.ndarray:
-    """The block lengths a kernel tries, longest first: mb and the powers of two below it (steps).
+def block_lengths(mb: int, every_length: bool = False) -> np.ndarray:
+    """The block lengths a kernel tries, longest first: mb and the powers of two below it (steps), or with
+    ``every_length`` all of mb, mb - 1, ..., 1.
+
+    Every length lets the kernel jump the t steps that held before a switch, and the rest of an output interval
+    after it, as one block each: the powers of two need one a set bit of t (a check and a jump each, for the
+    rest), issue 28.
 
     Parameters
     ----------
     mb : int
         Steps of the longest block.
+    every_length : bool
+        All lengths from mb down to 1.
 
     Returns
     -------
     ndarray
         The lengths (int64).
     """
+    if every_length:
+        return np.arange(mb, 0, -1, dtype=np.int64)
     return np.array([mb] + [1 << i for i in range(mb.bit_length() - 1, -1, -1) if 1 << i < mb], np.int64)
 
 
@@ -162,7 +172,8 @@ def block_form(mats: tuple, om2: np.ndarray, offset: np.ndarray, side: np.ndarra
     Returns
     -------
     dict or None
-        ``Ls`` the block lengths (:func:`block_lengths`); ``TG`` (n_lengths, n_states, 2n + 1, RG): per length L
+        ``Ls`` the block lengths (:func:`block_lengths`: every length while the tables take at most
+        ``EVERY_LENGTH_BYTES``, else the powers of two); ``TG`` (n_lengths, n_states, 2n + 1, RG): per length L
         and contact state the stop rows of each step (nu L of them, row u L + t the row u at step t + 1, zero
         rows up to ``RGL[length]``, a multiple of 8), stored column by column; ``TS`` (n_lengths, n_states,
         2n + 1, 3n) the end state and its mean velocity, likewise;
@@ -180,20 +191,22 @@ def block_form(mats: tuple, om2: np.ndarray, offset: np.ndarray, side: np.ndarra
         return None
     masks = [sum(c) for c in itertools.product(*per_row)]
     ns = 2 * n + 1
-    Ls = block_lengths(mb)
+    rg = -(-(nu * mb) // 8) * 8
+    every_length = mb * len(masks) * ns * (rg + 3 * n) * 8 <= EVERY_LENGTH_BYTES
+    Ls = block_lengths(mb, every_length)
     RGL = np.array([-(-(nu * L) // 8) * 8 for L in Ls], np.int64)
     TG = np.zeros((len(Ls), len(masks), ns, RGL.max()))
     TS = np.zeros((len(Ls), len(masks), ns, 3 * n))
     for ic, mask in enumerate(masks):
         A = step_map(mats, offset, k, dt, mask)
+        Ps = [np.eye(ns)]  # A^j, j = 0 .. mb, each the product of the one before (the same bits for any length)
+        for _ in range(mb):
+            Ps.append(A @ Ps[-1])
+        rows = [Bu @ P[:n] for P in Ps]
         for il, L in enumerate(Ls):
-            P = np.eye(ns)
             for j in range(1, L + 1):
-                Pn = A @ P
-                TG[il, ic, :, np.arange(nu) * L + j - 1] = Bu @ Pn[:n]
-                V = 0.5 * (P[n:2 * n] + Pn[n:2 * n])
-                P = Pn
-            TS[il, ic] = np.vstack([P[:2 * n], V]).T
+                TG[il, ic, :, np.arange(nu) * L + j - 1] = rows[j]
+            TS[il, ic] = np.vstack([Ps[L][:2 * n], 0.5 * (Ps[L - 1][n:2 * n] + Ps[L][n:2 * n])]).T
     LH = np.array([[_bounds(offset, side, rows_of[u], mask) for u in range(nu)] for mask in masks])
     lut = np.full(1 << m, -1, np.int64)
     lut[masks] = np.arange(len(masks))
@@ -209,14 +222,18 @@ KEYS = ("Ls", "RGL", "TG", "TS", "LH", "lut", "masks", "om2")  # the form's arra
 
 @nb.njit(cache=True, fastmath={"reassoc", "contract"})
 def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, RGL, TG, TS, LH, lut, masks, om2,
-             offset, side, k, z, zd, dt, n_steps, every, out_x, out_v, out_W, W, pw_old, i0, a, bm, P, out_E, E,
+             PhiT, offset, side, k, z, zd, dt, n_steps, every, out_x, out_v, out_W, W, pw_old, i0, a, bm, P, out_E, E,
              pe_old):
     """Advance n_steps as :func:`reduced.transient._cd_modal.cd_modal` (same arguments and returns, with the block
     form's arrays ``KEYS`` after the modal arrays) in blocks where the contact state holds. Each output interval
     (``every`` steps) is covered greedily: the longest length of Ls that fits, the contact state that of its first
     step; when a stop leaves that state at a block's step t + 1, the t steps before it are known to hold and are
-    jumped without a check (longest lengths first); when at its first step (a switch there), that step is one step
-    of ``cd_modal``. Needs n_steps % every == 0 and no loads (else it steps throughout); ``a`` = U^T zd on exit.
+    jumped without a check (as one block when the form has every length, else longest lengths first), and the
+    next block's state is found, not tried (it is not that one); when at its first step (a switch there), that
+    step is one step of ``cd_modal``. Needs n_steps % every == 0 and no loads (else it steps throughout);
+    ``a`` = U^T zd on exit.
+    Unlike ``cd_modal`` it stores the samples in physical coordinates, x = Phi z and v = Phi zd (PhiT = Phi^T,
+    :func:`_physical_rows`): in the kernel, a sample's two products cost less than a pass over the buffers after.
 
     Long because it is one numba loop over blocks whose branches (check, jump, one step) share the carried state;
     the matrix-vector products and the energy sums are helpers, called once a block, not a step.
@@ -233,13 +250,19 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
         The modal kernel's arrays.
     Ls, RGL, TG, TS, LH, lut, masks, om2 : ndarray
         The block form (om2 in rad^2/s^2).
+    PhiT : ndarray
+        (n, n) Phi^T, the open-gap modes transposed (C-contiguous).
     offset, side, k, z, zd, dt, n_steps, every, out_x, out_v, out_W, W, pw_old, i0, a, bm, P, out_E, E, pe_old
         As ``cd_modal`` (dt in s, W in J).
     """
     n = z.shape[0]
     if bm.shape[0] or n_steps % every:
-        return cd_modal(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, offset, side, k, z, zd, dt,
-                        n_steps, every, out_x, out_v, out_W, W, pw_old, i0, a, bm, P, out_E, E, pe_old)
+        W, pw_old, io, E, pe_old = cd_modal(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, offset,
+                                            side, k, z, zd, dt, n_steps, every, out_x, out_v, out_W, W, pw_old, i0,
+                                            a, bm, P, out_E, E, pe_old)
+        for r in range(i0, io):
+            _physical_rows(PhiT, out_x, out_v, r)
+        return W, pw_old, io, E, pe_old
     nu = Bu.shape[0]
     p = UT.shape[0]
     n2 = 2 * n
@@ -255,7 +278,8 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
     Wp = W + 0.5 * dt * pw_old  # W + dt p_n / 2
     jumped = False  # the last advance was a block (p_n not formed yet)
     guess = -1  # the last block's contact state, tried first for the next
-    e_end = 0.0  # E of the state in contact state guess (when guess >= 0)
+    last = -1  # the last block's contact state (-1 after a step of cd_modal)
+    e_end = 0.0  # E of the state in contact state last (when last >= 0)
     known = 0  # steps ahead known to stay in contact state ck
     ck = 0
     io = i0
@@ -307,16 +331,19 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
             if held:  # the block holds: jump
                 _matvec(TS[li, c], st, nxt, 3 * n, n2)
                 mk = masks[c]
-                e0 = e_end if guess == c else _energy(st, om2, dt, Bu, umap, offset, k, mk)
+                e0 = e_end if last == c else _energy(st, om2, dt, Bu, umap, offset, k, mk)
                 e_end = _energy(nxt, om2, dt, Bu, umap, offset, k, mk)
                 Wp += e0 - e_end
                 for col in range(n2):
                     st[col] = nxt[col]
                 jumped = True
                 guess = c
+                last = c
                 pos += L
                 if known:
                     known -= L
+                    if known == 0:  # the next step leaves c (the check saw it): find its state, not try c
+                        guess = -1
             else:  # the switch is at the first step: one step of cd_modal
                 if jumped:
                     W, pw_old = _work(nxt, d, UT, Wp, dt)
@@ -333,14 +360,23 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
                 W, pw_old, io, E, pe_old = cd_modal(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap,
                                                     offset, side, k, zs, zds, dt, 1, store, out_x, out_v, out_W, W,
                                                     pw_old, io, a, bm, P, out_E, E, pe_old)
+                if store == 1:  # the sample cd_modal stored, in modal coordinates
+                    _physical_rows(PhiT, out_x, out_v, io - 1)
                 Wp = W + 0.5 * dt * pw_old
                 guess = -1
+                last = -1
         if jumped:  # the sample: the last block's end
             W, pw_old = _work(nxt, d, UT, Wp, dt)
             jumped = False
-            for i in range(n):
-                out_x[io, i] = st[i]
-                out_v[io, i] = nxt[n2 + i]
+            for r in range(n):
+                out_x[io, r] = 0.0
+                out_v[io, r] = 0.0
+            for i in range(n):  # x = Phi z, v = Phi (mean velocity), column by column
+                zi = st[i]
+                vi = nxt[n2 + i]
+                for r in range(n):
+                    out_x[io, r] += PhiT[i, r] * zi
+                    out_v[io, r] += PhiT[i, r] * vi
             out_W[io] = W
             io += 1
     for i in range(n):
@@ -352,6 +388,21 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
             s += UT[q, i] * zd[i]
         a[q] = s
     return W, pw_old, io, E, pe_old
+
+
+@nb.njit(cache=True, fastmath={"reassoc", "contract"})
+def _physical_rows(PhiT, out_x, out_v, r):
+    """Row r of out_x and out_v from modal to physical coordinates in place: x = Phi z (PhiT = Phi^T), likewise v."""
+    n = PhiT.shape[0]
+    zx = out_x[r].copy()
+    zv = out_v[r].copy()
+    for c in range(n):
+        out_x[r, c] = 0.0
+        out_v[r, c] = 0.0
+    for i in range(n):
+        for c in range(n):
+            out_x[r, c] += PhiT[i, c] * zx[i]
+            out_v[r, c] += PhiT[i, c] * zv[i]
 
 
 @nb.njit(cache=True, fastmath={"reassoc", "contract"})

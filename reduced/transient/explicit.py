@@ -29,6 +29,7 @@ stability: omega_max dt = ``DEFAULT_OMEGA_DT``.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -39,7 +40,7 @@ from scipy.linalg import eigh
 from reduced import _checks as _check
 from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
-from reduced.transient import _cd, _cd_block, _cd_modal
+from reduced.transient import _cd, _cd_block, _cd_lumped, _cd_modal
 from reduced.transient import stepper as _stepper
 from reduced.transient.result import RingdownResult, RingdownStream
 
@@ -51,6 +52,7 @@ STEP_BASES = ("top", "contact")
 MAX_STEPS = 2_000_000_000  # refuse runs that would take more steps than this
 LOAD_BLOCK_STEPS = 1 << 16  # steps per kernel call of a forced run: the loads' values are tabulated per call
 PIECES = 50  # progress is reported this many times a run
+LUMPED = True  # lumped small models run reduced.transient._cd_lumped (False: the register kernel, for tests)
 
 
 class StepTooLargeError(ValueError):
@@ -275,6 +277,62 @@ def _damping_factor(C: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(U[:, keep] * np.sqrt(lam[keep]))
 
 
+def _physical_arrays(system: GapSystem, dt: float, b: np.ndarray, small: bool) -> tuple:
+    """(kernel, its leading arrays, L, dt G b^T (transposed), b) of the physical kernels: A^T, (dt G K)^T,
+    (dt G B^T)^T, the damping factor L (C = L L^T), the stops' rows, G = (M + dt/2 C)^-1, A = G (M - dt/2 C);
+    for ``small`` models zero-padded to ``_cd.SMALL_N`` DOFs (the register kernel, or the lumped one where it
+    applies)."""
+    M, C, K = system.M, system.C, system.K
+    G = np.linalg.inv(M + 0.5 * dt * C)
+    A = G @ (M - 0.5 * dt * C)
+    dtGK = dt * (G @ K)
+    AT, dtGKT = np.ascontiguousarray(A.T), np.ascontiguousarray(dtGK.T)
+    dtGBT = np.ascontiguousarray((dt * (G @ system.B.T)).T)
+    L = _damping_factor(C)
+    dtGbT = np.ascontiguousarray((dt * (G @ b.T)).T)
+    if not small:
+        return _cd_kernel, (AT, dtGKT, dtGBT, np.ascontiguousarray(L.T), *_sparse_rows(system.B)), L, dtGbT, b
+    S = _cd.SMALL_N
+    mats = (_cd.pad(AT, S, S), _cd.pad(dtGKT, S, S), _cd.pad(dtGBT, None, S), _cd.pad(L, S, None),
+            _cd.pad(system.B, None, S))
+    kernel = _cd._cd_small
+    lumped = _cd_lumped.lumped_form(*mats, system.offset, system.side, system.k) if LUMPED else None
+    if lumped is not None:  # diagonal M and C, one coordinate a stop: the zero terms left out, same bits
+        kernel, mats = _cd_lumped.cd_lumped, lumped
+    return kernel, mats, L, _cd.pad(dtGbT, None, S), _cd.pad(b, None, S)
+
+
+_SETUP: dict = {}  # a run's set-up worked out from the model alone (a few entries): see _cached
+SETUP_KEPT = 8  # entries _SETUP keeps
+
+
+def _system_key(system: GapSystem) -> tuple:
+    """The bytes of a system's arrays and of its friction's (its sliders stiffen the closed state): a key that
+    changes with any of them."""
+    arrays = [system.M, system.C, system.K, system.B, system.k, system.offset, system.side, system.tip]
+    fr = system.friction
+    unset = ()
+    if fr is not None:
+        values = {f.name: getattr(fr, f.name) for f in dataclasses.fields(fr)}
+        arrays += [v for v in values.values() if isinstance(v, np.ndarray)]
+        unset = tuple(name for name, v in values.items() if v is None)
+    return (fr is not None, unset, *((a.tobytes(), a.shape, a.dtype.str) for a in arrays))
+
+
+def _cached(key: tuple, make):
+    """make() the first time ``key`` is asked for, then the same object (kept for the last ``SETUP_KEPT`` keys):
+    a run's set-up (the stability limit, the step's reference frequency, the kernel's matrices) costs more than
+    the kernel on a short run. The objects are read, never changed, by the runs. The keys hold the functions
+    that make the values, as found when asked (so a function replaced, as tests replace stability_limit, makes
+    and keeps its own values, and never hands them to the original)."""
+    if key in _SETUP:
+        return _SETUP[key]
+    if len(_SETUP) >= SETUP_KEPT:
+        _SETUP.pop(next(iter(_SETUP)))
+    _SETUP[key] = out = make()
+    return out
+
+
 COORDINATES = ("auto", "physical", "modal", "blocked")  # ExplicitOptions.coordinates
 
 
@@ -321,8 +379,10 @@ class ExplicitStepper(_stepper.Stepper):
     the loads' work and power), so the samples are the same bits however the calls are cut. A
     call stops at the buffer's end, at the next progress mark (when progress is reported) and,
     under loads, after ``LOAD_BLOCK_STEPS`` steps (the loads at each step are tabulated a call).
-    Models of at most ``_cd.SMALL_N`` DOFs run the register kernel :func:`reduced.transient._cd._cd_small`;
-    free frictionless larger ones, by default, the block kernel :func:`reduced.transient._cd_block.cd_block`
+    Models of at most ``_cd.SMALL_N`` DOFs run the register kernel :func:`reduced.transient._cd._cd_small`, or,
+    lumped ones (diagonal M and C, each stop on one coordinate), :func:`reduced.transient._cd_lumped.cd_lumped`,
+    the same bits; free frictionless larger ones, by default, the block kernel
+    :func:`reduced.transient._cd_block.cd_block`
     (``ExplicitOptions.coordinates``), whose calls also start and end on samples, so its samples do not
     depend on the cuts either.
 
@@ -372,8 +432,9 @@ class ExplicitStepper(_stepper.Stepper):
         blocks = not self.forced and mb > 0  # the block kernel applies (given the modal form)
         if (coordinates in ("modal", "blocked") or (coordinates == "auto" and blocks)) and not self.friction \
                 and self.n > _cd.SMALL_N:
-            self.modal = _cd_modal.modal_form(system.M, system.K, system.C, system.B,
-                                              loads.b if self.forced else np.zeros((0, self.n)), dt)
+            b = np.ascontiguousarray(loads.b) if self.forced else np.zeros((0, self.n))
+            self.modal = _cached(("modal", _cd_modal.modal_form, _system_key(system), b.tobytes(), b.shape, dt),
+                                 lambda: _cd_modal.modal_form(system.M, system.K, system.C, system.B, b, dt))
         if coordinates in ("blocked", "auto") and self.modal is not None and blocks:
             self.jump = _cd_block.block_form(self.modal["mats"], self.modal["om2"], system.offset, system.side,
                                              system.k, dt, mb)
@@ -391,7 +452,7 @@ class ExplicitStepper(_stepper.Stepper):
         interval is ``every`` steps."""
         system = self.system
         if options.dt is not None:
-            omega, dt_crit = stability_limit(system)
+            omega, dt_crit = _cached(("limit", stability_limit, _system_key(system)), lambda: stability_limit(system))
             omega_ref, limit = omega, SWITCHING_SAFETY * dt_crit
             if options.dt > limit:
                 raise StepTooLargeError(
@@ -401,7 +462,10 @@ class ExplicitStepper(_stepper.Stepper):
                 )
             dt_target = options.dt
         else:
-            dt_target, omega, omega_ref, limit = default_step(system, options.omega_dt, options.step_basis)
+            dt_target, omega, omega_ref, limit = _cached(
+                ("step", default_step, stability_limit, contact_omega, _system_key(system), options.omega_dt,
+                 options.step_basis),
+                lambda: default_step(system, options.omega_dt, options.step_basis))
             if omega <= 0:
                 dt_target = 1.0 / self.sample_rate_hz
         h_out = 1.0 / self.sample_rate_hz
@@ -409,37 +473,30 @@ class ExplicitStepper(_stepper.Stepper):
         return h_out / every, every, omega, omega_ref, limit
 
     def _matrices(self) -> None:
-        """The kernel and its matrices, formed once: A^T, (dt G K)^T, (dt G B^T)^T, the damping factor,
-        the stops' rows (and dt G b^T, b of the loads), G = (M + dt/2 C)^-1, A = G (M - dt/2 C)."""
+        """The kernel and its matrices (:func:`_physical_arrays` for the physical kernels, the modal and block
+        forms for theirs) and the damping factor L (C = L L^T)."""
         system, n, dt = self.system, self.n, self.dt
-        M, C, K = system.M, system.C, system.K
-        G = np.linalg.inv(M + 0.5 * dt * C)
-        A = G @ (M - 0.5 * dt * C)
-        dtGK = dt * (G @ K)
-        AT, dtGKT = np.ascontiguousarray(A.T), np.ascontiguousarray(dtGK.T)
-        dtGBT = np.ascontiguousarray((dt * (G @ system.B.T)).T)
-        self.L = L = _damping_factor(C)
         b = np.ascontiguousarray(self.loads.b) if self.forced else np.zeros((0, n))
-        dtGbT = np.ascontiguousarray((dt * (G @ b.T)).T)
         self.small = n <= _cd.SMALL_N  # state in registers (reduced.transient._cd), zero-padded to SMALL_N DOFs
         if self.jump is not None:
+            self.L = _cached(("L", _damping_factor, system.C.tobytes(), system.C.shape),
+                             lambda: _damping_factor(system.C))
             self.kernel = _cd_block.cd_block
-            self.mats = (*self.modal["mats"], *(self.jump[key] for key in _cd_block.KEYS))
+            self.mats = (*self.modal["mats"], *(self.jump[key] for key in _cd_block.KEYS),
+                         np.ascontiguousarray(self.modal["Phi"].T))  # the kernel stores physical samples
             self.dtGbT, self.b = None, self.modal["bm"]
         elif self.modal is not None:
+            self.L = _cached(("L", _damping_factor, system.C.tobytes(), system.C.shape),
+                             lambda: _damping_factor(system.C))
             self.kernel = _cd_modal.cd_modal
             self.mats = self.modal["mats"]
             self.dtGbT, self.b = None, self.modal["bm"]  # the kernel's a (set by _first_state) and the loads' rows
-        elif self.small:
-            S = _cd.SMALL_N
-            self.kernel = _cd._cd_small
-            self.mats = (_cd.pad(AT, S, S), _cd.pad(dtGKT, S, S), _cd.pad(dtGBT, None, S), _cd.pad(L, S, None),
-                         _cd.pad(system.B, None, S))
-            self.dtGbT, self.b = _cd.pad(dtGbT, None, S), _cd.pad(b, None, S)
         else:
-            self.kernel = _cd_kernel
-            self.mats = (AT, dtGKT, dtGBT, np.ascontiguousarray(L.T), *_sparse_rows(system.B))
-            self.dtGbT, self.b = dtGbT, b
+            key = ("physical", _system_key(system), dt, b.tobytes(), b.shape, self.small, LUMPED, _damping_factor,
+                   _cd._cd_small, _cd_lumped.lumped_form, _cd_lumped.cd_lumped)
+            self.kernel, self.mats, self.L, self.dtGbT, self.b = _cached(
+                key, lambda: _physical_arrays(system, dt, b, self.small))
+
 
     def _first_state(self, x0: np.ndarray, v0: np.ndarray) -> None:
         """x_0, v_{1/2} = v_0 + dt/2 a_0, and the work sums' first terms (p_0 = v_0^T C v_0, v_0^T f_ext(0))."""
@@ -493,7 +550,7 @@ class ExplicitStepper(_stepper.Stepper):
             self.kernel, *self.mats, sy.offset, sy.side, sy.k, self.x, self.vh, self.dt, nout * self.every,
             self.every, out_x, out_v, out_W, self.W, self.pw, buf.filled, self.dtGbT, self.b, P, out_E, self.E,
             self.pe)
-        if self.modal is not None:  # the samples of this call from modal to physical coordinates
+        if self.modal is not None and self.jump is None:  # the samples of this call from modal to physical
             for out in (out_x, out_v):
                 _cd_modal.to_physical(self.modal["Phi"], out, lo, buf.filled)
         self.done += nout
