@@ -105,6 +105,7 @@ SWITCHED = {"pitchfork_mirror": "asymmetric", "pitchfork_half_wave": "half_wave_
 PD_CRITICAL_TOL = 0.05  # |mu + 1| of the located critical multiplier beyond which a period doubling is not switched at
 REJOIN_TOL = 1e-7  # symmetry-breaking part of a switched family, relative to its point, below which it has rejoined
 SAME_ORBIT_TOL = 1e-6  # relative: two orbits shot at the same frequency closer than this (nodes) are one orbit
+NEAR_ORBIT_TOL = 1e-2  # relative: a known family's point this close to a new first orbit is shot at its frequency too
 COVER_TRIES = 4  # guesses tried per family of cover_families at most (a guess may find no orbit)
 JOIN_DIST, JOIN_COS = 5e-3, 0.9  # an isolated family this close (scaled) to a known family's path, parallel: joined
 
@@ -189,12 +190,14 @@ class ExactFRCOptions:
     velocity_scale: str = "fastest"
     corrector_tol: float = CORRECTOR_TOL
     angle_step: bool = False
+    resume_after_guard: bool = False
+    multi_grazing_ds: float = 2e-2
 
     def __post_init__(self) -> None:
         _check.integer("segments", self.segments, lo=2)
         if self.segments % 2:
             raise _check.InvalidArgument(f"segments must be even, got {self.segments}")
-        for key in ("ds", "ds_max", "ds_min", "max_angle_deg", "grazing_ds", "corrector_tol"):
+        for key in ("ds", "ds_max", "ds_min", "max_angle_deg", "grazing_ds", "multi_grazing_ds", "corrector_tol"):
             _check.positive(key, getattr(self, key))
         if not self.deadline_s > 0.0:
             raise _check.InvalidArgument(f"deadline_s must be > 0 s, got {self.deadline_s!r}")
@@ -209,12 +212,13 @@ class ExactFRCOptions:
         _check.flag("period_doubling", self.period_doubling)
         _check.choice("velocity_scale", self.velocity_scale, ("fastest", "omega"))
         _check.flag("angle_step", self.angle_step)
+        _check.flag("resume_after_guard", self.resume_after_guard)
 
     def continuation(self, max_steps: int) -> ContinuationOptions:
         # tol bounds the last Newton step: the error after it is ~ its square (quadratic convergence)
         return ContinuationOptions(ds=self.ds, ds_max=self.ds_max, ds_min=self.ds_min, max_steps=max_steps,
                                    max_iter=self.max_iter, max_angle_deg=self.max_angle_deg, tol=self.corrector_tol,
-                                   angle_step=self.angle_step)
+                                   angle_step=self.angle_step, resume_after_guard=self.resume_after_guard)
 
 
 # -- symmetries ----------------------------------------------------------------------------------
@@ -655,7 +659,7 @@ def _follow(res: ShootingResidual, y0: np.ndarray, param: int, direction: float,
         return [int(c) for c in np.argsort(-np.abs(t))[:3]]
 
     def prog(y):
-        res.guard = (y, res.events(y), opts.grazing_ds)  # a grazing is crossed in a short step
+        res.guard = _guard(res, y, opts)  # a grazing is crossed in a short step
         if progress is not None:
             progress(y)
 
@@ -664,7 +668,7 @@ def _follow(res: ShootingResidual, y0: np.ndarray, param: int, direction: float,
     y_start, p_start, d_start = y0, param, direction
     k = 0
     while total < max_steps:
-        res.guard = (y_start, res.events(y_start), opts.grazing_ds)
+        res.guard = _guard(res, y_start, opts)
         try:
             br = continue_branch(res, y_start, param=p_start, direction=d_start,
                                  options=opts.continuation(max_steps - total), stop=stop, monitor=(i_w,),
@@ -693,6 +697,15 @@ def _follow(res: ShootingResidual, y0: np.ndarray, param: int, direction: float,
                      f" piece {k + 1} from {res.omega(y_start) / (2 * math.pi):.6g} Hz")
         k += 1
     return np.concatenate(Ys), data, folds, np.concatenate(seg), statuses, notes
+
+
+def _guard(res: ShootingResidual, y: np.ndarray, opts: ExactFRCOptions) -> tuple:
+    """The residual's guard from the point y (:meth:`ShootingResidual._check_guard`): a step that changes the
+    contact events per period is refused while longer than ``grazing_ds``, one that changes them by more than
+    one grazing while longer than ``multi_grazing_ds`` (if shorter)."""
+    if opts.multi_grazing_ds < opts.grazing_ds:
+        return (y, res.events(y), opts.grazing_ds, opts.multi_grazing_ds)
+    return (y, res.events(y), opts.grazing_ds)
 
 
 def _restart(res: ShootingResidual, y: np.ndarray, t: np.ndarray, y_back: np.ndarray):
@@ -1373,8 +1386,9 @@ def _image_points(res: ShootingResidual, nodes: np.ndarray, omega: np.ndarray, p
 
 def _known(families: list, residuals: dict, res_new: ShootingResidual, y_new: np.ndarray, sym: Symmetry):
     """The index of a family of the same period whose orbit at y_new's frequency (Newton at that
-    frequency from its nearest points on each side) is y_new's orbit or one of its images
-    (:data:`SAME_ORBIT_TOL`), else None."""
+    frequency from its nearest points on each side, and from its point nearest y_new's orbit or an image of
+    it if within :data:`NEAR_ORBIT_TOL`) is y_new's orbit or one of its images (:data:`SAME_ORBIT_TOL`),
+    else None."""
     nodes, w = res_new.nodes(y_new)
     f = w / (2 * math.pi)
     ims = _images(nodes, res_new.periods, sym)
@@ -1386,8 +1400,14 @@ def _known(families: list, residuals: dict, res_new: ShootingResidual, y_new: np
         res = residuals[k][0]
         d = fam.freq_hz - f
         cross = np.flatnonzero((d[:-1] * d[1:] <= 0) & (fam.segment[:-1] == fam.segment[1:]))
-        for i in cross:
-            j = i if abs(d[i]) <= abs(d[i + 1]) else i + 1
+        near = [i if abs(d[i]) <= abs(d[i + 1]) else i + 1 for i in cross]
+        # and its point nearest y_new (relative node distance, any image) if within NEAR_ORBIT_TOL: a family born
+        # at the same branch point as y_new's (a parent that retraces its path passes it twice) starts at a fold
+        # in frequency, its first points just beside y_new's frequency, where no crossing is
+        dist = np.min([np.max(np.abs((fam.nodes - x) * sc), axis=(1, 2)) for x in ims], axis=0) / scale
+        j = int(np.argmin(dist))
+        extra = [j] if dist[j] < NEAR_ORBIT_TOL and j not in near else []
+        for j in extra + near:
             try:
                 other = res.nodes(shoot_at(res, fam.nodes[j], w))[0]
             except ShootingError:
