@@ -12,7 +12,8 @@ k) make narrow tongues whose sheets lie close together. Three rules keep the pat
 sheet:
 
 - a step that changes the number of contact events per period is refused (and halved) while it
-  is longer than ``grazing_ds`` (a grazing is crossed in a short step);
+  is longer than ``grazing_ds`` (a grazing is crossed in a short step), and one that changes it by
+  more than one grazing (more than two events) while it is longer than ``multi_grazing_ds``;
 - a step whose secant leaves the new tangent by more than ``max_angle_deg`` is refused (it
   landed on a neighbouring sheet);
 - the step may fall to ``ds_min`` = 1e-9 (the hairpins of the tongues' folds have radii of
@@ -22,11 +23,17 @@ sheet:
 **Round-off.** At the lower folds of the tongues the contact events per period change several times
 within 1e-4 of arclength (discrete-frc 10 N at 37.027 Hz: 12, 14, 12, 14, 6 events); a step up to
 ``grazing_ds`` = 2e-2 may cross several of these grazings at once, and the sheet it lands on then
-depends on round-off (a corrector stopped one Newton step earlier turns that level's main family
-from 26.8-953 Hz into 17.1-38.2 Hz; both paths are smooth, symmetric to 1e-11, and part where they
-leave the fold at 37.026996 Hz). With ``grazing_ds`` = 1e-3 the family is the same under the corrector
-perturbed (one Newton step fewer or more, ``corrector_tol`` x 10): 17.13-956 Hz, the same 36 folds,
-the same stable stretches, at 3-4x the points and CPU time (tests/test_exact_frc_robust.py).
+depends on round-off (with ``multi_grazing_ds`` = ``grazing_ds``, the rule before session 13, a corrector
+stopped one Newton step earlier turns that level's main family from 26.8-953 Hz into 17.1-38.2 Hz; both
+paths are smooth, symmetric to 1e-11, and part where they leave the fold at 37.026996 Hz). Along that
+family a single grazing (the events change by 2, 1176 changes of the events in all) is 80 % of the
+changes; the changes by more than one grazing are where the clusters are. With ``multi_grazing_ds`` =
+1e-3 (the default) the family is the same under the corrector perturbed (``corrector_tol`` x 10) and from
+another start (the linear orbit at the band's top instead of an HB orbit at 34.9 Hz): 17.13 Hz to the
+band's top, the same 36 folds, the same stable stretches, in 5100 points, 1.9x the old rule's shorter,
+round-off-made path (tests/test_exact_frc_robust.py); ``grazing_ds`` = 1e-3 for every change gives the same
+family in 6700 points. Taking up the refused step after a short one (``resume_after_guard``) saves a fifth
+of the points but is not robust: from the HB orbit at 34.9 Hz it turned back at 38.2 Hz (47 folds).
 
 **Stability** of each point: the Floquet multipliers, eigenvalues of the monodromy (the product
 of the segments' monodromies, exact for the exact orbit). **Symmetry.** The three-mass model
@@ -125,6 +132,14 @@ class ExactFRCOptions:
         deg, largest turn of the tangent over a step, and of a step's secant from the new tangent.
     grazing_ds : float
         Longest step allowed to change the number of contact events per period.
+    multi_grazing_ds : float
+        Longest step allowed to change it by more than one grazing (more than two events; used if
+        below ``grazing_ds``): the clusters of grazings at the tongues' folds are crossed in short
+        steps, where the sheet a long step lands on depends on round-off (module docstring).
+    resume_after_guard : bool
+        After a step shortened by the grazing rules, the next step is the one refused
+        (:class:`reduced.periodic.continuation.ContinuationOptions` ``resume_after_guard``). Off: the
+        path then depends on the start again (module docstring).
     max_iter : int
         Newton iterations of a corrector.
     max_steps : int
@@ -191,7 +206,7 @@ class ExactFRCOptions:
     corrector_tol: float = CORRECTOR_TOL
     angle_step: bool = False
     resume_after_guard: bool = False
-    multi_grazing_ds: float = 2e-2
+    multi_grazing_ds: float = 1e-3
 
     def __post_init__(self) -> None:
         _check.integer("segments", self.segments, lo=2)
