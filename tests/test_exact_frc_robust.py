@@ -78,7 +78,7 @@ def test_main_family_at_10N_does_not_move_with_the_corrector_tolerance_or_the_st
             _from_the_top(10.0)]
     for f in fams:  # the whole main family: from the lowest tongue to the band's top
         assert f.freq_hz.min() == pytest.approx(17.1333, abs=1e-4)
-        assert f.freq_hz.max() >= 900.0
+        assert f.freq_hz.max() >= 900.0 - 1e-6
     folds = [f.freq_hz[f.folds] for f in fams]
     assert [len(x) for x in folds] == [36, 36, 36]
     for fb in folds[1:]:
