@@ -123,8 +123,8 @@ LIMITS = (
      "events by more than one grazing while longer than multi_grazing_ds = 1e-3 (ExactFRCOptions; one grazing: "
      "grazing_ds = 2e-2 as before): the same family from the HB start, under corrector_tol x10 and from the linear "
      "orbit at 900 Hz (no HB at all), tests/test_exact_frc_robust.py (slow). In one process, interleaved (load 10): "
-     "the old rule 8.7-9.6 s CPU for its 2696 points (3.2-3.6 ms a point), the new 14.5 s for 5099 (2.8 ms a "
-     "point); grazing_ds = 1e-3 for every change gives the same family in 6700 points. Cut: the first orbit's load "
+     "the old rule 8.7-9.6 s CPU for its 2696 points (3.2-3.6 ms a point), the new 14.5-16.5 s for 5099 (2.8-3.2 "
+     "ms a point; medians 9.1 and 15.5 s: 1.7x); grazing_ds = 1e-3 for every change gives the same family in 6700 points. Cut: the first orbit's load "
      "continuation from the HB guess at 10 Hz (400 steps that failed, ~2 s CPU) now runs only if Newton converges "
      "from no guess. What limits it: the path's length (1176 changes of the contact events along it; ~4 points "
      "between two) times ~2.8 ms a point (8 marches and 6 Jacobians of the 8-node shooting a point, its monodromy's "
@@ -142,7 +142,7 @@ LIMITS = (
      "families it did not have). Added: the friction stage's grid of exact orbits (+5 % of that stage). The frc "
      "stages remain most of it (rom-frc 277 s, discrete-frc 196 s, discrete-friction-frc 101 s); their continuation "
      "paths changed with round-off at clusters of grazings; session 13's multi_grazing_ds = 1e-3 makes them robust "
-     "(the 10 N main family of discrete-frc the whole curve, 1.6x the CPU of the old, shorter path: "
+     "(the 10 N main family of discrete-frc the whole curve, 1.7x the CPU of the old, shorter path: "
      "reduced.periodic.exact_frc's docstring); the job was not re-timed in session 13 (machine under load 8-13)"),
     ("test suite, python -m pytest",
      "measured on this session's machine (an Intel Xeon at 2.1 GHz, 2026-11-27 08:36 UTC, load 2.0 at the start): "
