@@ -115,19 +115,20 @@ LIMITS = (
      "against the 1368 Hz seventeenth mode) where one block solve does it; a better shift: with a Cholesky factor "
      "the shift stays below the first mode, and the slow modes' rate is fixed by (998 / 1368)^2 = 0.53 whatever it is"),
     ("converged main curve with stability, discrete-frc 10 N",
-     "measured under load 9-11 (2026-11-27 09:50 UTC, session 13): 23.9 s CPU, 7.9 s of it the HB curve at H = 15 "
-     "(the stage needs it for its other parts and for the first orbit's guess: the HB orbit at 34.9 Hz), 16.0 s the "
-     "main exact family, now the whole curve: 5099 points from 17.13 Hz to the band's top, 36 folds. Before, 18 s "
-     "(HB 8.1 + 10.0) bought a shorter path, 26.8-953 Hz, 2696 points, that round-off had made (clusters of "
-     "grazings at the tongues' lower folds crossed in one step). Session 13 refuses a step that changes the contact "
-     "events by more than one grazing while longer than multi_grazing_ds = 1e-3 (ExactFRCOptions; one grazing: "
-     "grazing_ds = 2e-2 as before): the same family from the HB start, under corrector_tol x10 and from the linear "
-     "orbit at 900 Hz (no HB at all), tests/test_exact_frc_robust.py (slow). In one process, interleaved (load 10): "
-     "the old rule 8.7-9.6 s CPU for its 2696 points (3.2-3.6 ms a point), the new 14.5-16.5 s for 5099 (2.8-3.2 "
-     "ms a point; medians 9.1 and 15.5 s: 1.7x); grazing_ds = 1e-3 for every change gives the same family in 6700 points. Cut: the first orbit's load "
+     "measured at load 3 (2026-11-27 10:05 UTC, session 13, median of 2; 23.9 s under load 10): 15.6 s CPU, 5.1 s "
+     "of it the HB curve at H = 15 (the stage needs it for its other parts and for the first orbit's guess: the HB "
+     "orbit at 34.9 Hz), 10.5 s the main exact family, now the whole curve: 5099 points from 17.13 Hz to the band's "
+     "top, 36 folds. Before, 18 s (HB 8.1 + 10.0, load 8-10) bought a shorter path, 26.8-953 Hz, 2696 points, that "
+     "round-off had made (clusters of grazings at the tongues' lower folds crossed in one step). Session 13 refuses "
+     "a step that changes the contact events by more than one grazing while longer than multi_grazing_ds = 1e-3 "
+     "(ExactFRCOptions; one grazing: grazing_ds = 2e-2 as before): the same family from the HB start, under "
+     "corrector_tol x10 and from the linear orbit at 900 Hz (no HB at all), tests/test_exact_frc_robust.py (slow). "
+     "In one process, interleaved (load 3): the old rule 5.8-7.4 s CPU for its 2696 points (2.1-2.7 ms a point), "
+     "the new 11.6-12.2 s for 5099 (2.3-2.4 ms a point; medians 6.6 and 11.9 s: 1.8x; at load 10, 9.1 and 15.5 s); "
+     "grazing_ds = 1e-3 for every change gives the same family in 6700 points. Cut: the first orbit's load "
      "continuation from the HB guess at 10 Hz (400 steps that failed, ~2 s CPU) now runs only if Newton converges "
      "from no guess. What limits it: the path's length (1176 changes of the contact events along it; ~4 points "
-     "between two) times ~2.8 ms a point (8 marches and 6 Jacobians of the 8-node shooting a point, its monodromy's "
+     "between two) times ~2.3 ms a point (8 marches and 6 Jacobians of the 8-node shooting a point, its monodromy's "
      "eigenvalues, its peaks); from the linear orbit at 900 Hz the curve needs no HB (the same family), which the "
      "stage does not use yet (its HB-first start is kept: the other levels' families start at f_min)"),
     ("main job, bearingshaft run",
@@ -142,7 +143,7 @@ LIMITS = (
      "families it did not have). Added: the friction stage's grid of exact orbits (+5 % of that stage). The frc "
      "stages remain most of it (rom-frc 277 s, discrete-frc 196 s, discrete-friction-frc 101 s); their continuation "
      "paths changed with round-off at clusters of grazings; session 13's multi_grazing_ds = 1e-3 makes them robust "
-     "(the 10 N main family of discrete-frc the whole curve, 1.7x the CPU of the old, shorter path: "
+     "(the 10 N main family of discrete-frc the whole curve, 1.8x the CPU of the old, shorter path: "
      "reduced.periodic.exact_frc's docstring); the job was not re-timed in session 13 (machine under load 8-13)"),
     ("test suite, python -m pytest",
      "measured on this session's machine (an Intel Xeon at 2.1 GHz, 2026-11-27 08:36 UTC, load 2.0 at the start): "
