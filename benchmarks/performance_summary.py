@@ -135,14 +135,22 @@ LIMITS = (
      "against the 1368 Hz seventeenth mode) where one block solve does it; a better shift: with a Cholesky factor "
      "the shift stays below the first mode, and the slow modes' rate is fixed by (998 / 1368)^2 = 0.53 whatever it is"),
     ("converged main curve with stability, discrete-frc 10 N",
-     "measured under load 8-10 (2026-11-27 06:35 UTC): 18 s CPU, half of it the HB curve at H = 15 that only supplies "
-     "the first orbit's guesses, half the main exact family (2696 points, 26.8-953 Hz, each with its monodromy). "
-     "The main family's path is not robust to round-off at the tongues' lower folds (clusters of grazings: the "
-     "contact events per period go 12, 14, 12, 14, 6 within 1e-4 of arclength, and a step of up to grazing_ds = "
-     "2e-2 may cross several at once); with grazing_ds = 1e-3 (ExactFRCOptions) the family is the same under a "
-     "corrector "
-     "stopped one Newton step earlier or later or with its tolerance x10 (17.13 Hz to past 900 Hz, the same 36 folds, "
-     "stable from 26.82 Hz up) but costs 24-38 s CPU (tests/test_exact_frc_robust.py, slow)"),
+     "measured at load 3 (2026-11-27 10:05 UTC, session 13, median of 2; 23.9 s under load 10): 15.6 s CPU, 5.1 s "
+     "of it the HB curve at H = 15 (the stage needs it for its other parts and for the first orbit's guess: the HB "
+     "orbit at 34.9 Hz), 10.5 s the main exact family, now the whole curve: 5099 points from 17.13 Hz to the band's "
+     "top, 36 folds. Before, 18 s (HB 8.1 + 10.0, load 8-10) bought a shorter path, 26.8-953 Hz, 2696 points, that "
+     "round-off had made (clusters of grazings at the tongues' lower folds crossed in one step). Session 13 refuses "
+     "a step that changes the contact events by more than one grazing while longer than multi_grazing_ds = 1e-3 "
+     "(ExactFRCOptions; one grazing: grazing_ds = 2e-2 as before): the same family from the HB start, under "
+     "corrector_tol x10 and from the linear orbit at 900 Hz (no HB at all), tests/test_exact_frc_robust.py (slow). "
+     "In one process, interleaved (load 3): the old rule 5.8-7.4 s CPU for its 2696 points (2.1-2.7 ms a point), "
+     "the new 11.6-12.2 s for 5099 (2.3-2.4 ms a point; medians 6.6 and 11.9 s: 1.8x; at load 10, 9.1 and 15.5 s); "
+     "grazing_ds = 1e-3 for every change gives the same family in 6700 points. Cut: the first orbit's load "
+     "continuation from the HB guess at 10 Hz (400 steps that failed, ~2 s CPU) now runs only if Newton converges "
+     "from no guess. What limits it: the path's length (1176 changes of the contact events along it; ~4 points "
+     "between two) times ~2.3 ms a point (8 marches and 6 Jacobians of the 8-node shooting a point, its monodromy's "
+     "eigenvalues, its peaks); from the linear orbit at 900 Hz the curve needs no HB (the same family), which the "
+     "stage does not use yet (its HB-first start is kept: the other levels' families start at f_min)"),
     ("main job, bearingshaft run",
      "the machine changed on 2026-11-27 (an Intel Xeon at 2.1 GHz, sum(range(10**6)) 18.3 ms; before, an AMD EPYC): "
      "measured on it, quiet, after warming the reduced-model cache (2026-11-27 07:50 UTC, load 0.4 at the start): "
@@ -154,8 +162,9 @@ LIMITS = (
      "forced response averaged over its mirror (rom-frc 286 -> 277 s wall on the slower machine, with asymmetric "
      "families it did not have). Added: the friction stage's grid of exact orbits (+5 % of that stage). The frc "
      "stages remain most of it (rom-frc 277 s, discrete-frc 196 s, discrete-friction-frc 101 s); their continuation "
-     "paths change with round-off at clusters of grazings, where grazing_ds = 1e-3 makes them robust at 3-4x the "
-     "cost (reduced.periodic.exact_frc's docstring)"),
+     "paths changed with round-off at clusters of grazings; session 13's multi_grazing_ds = 1e-3 makes them robust "
+     "(the 10 N main family of discrete-frc the whole curve, 1.8x the CPU of the old, shorter path: "
+     "reduced.periodic.exact_frc's docstring); the job was not re-timed in session 13 (machine under load 8-13)"),
     ("test suite, python -m pytest",
      "measured on this session's machine (an Intel Xeon at 2.1 GHz, 2026-11-27 08:36 UTC, load 2.0 at the start): "
      "238 s wall, 469 s CPU, 1422 tests, after tests/file_seconds.csv was rewritten on it; a run just after edits to "

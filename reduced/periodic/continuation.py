@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from reduced import _checks as _check
-from reduced.periodic.hb import NewtonError, newton
+from reduced.periodic.hb import GuardRefusal, NewtonError, newton
 
 
 class ContinuationError(RuntimeError):
@@ -175,6 +175,12 @@ class ContinuationOptions:
         because theta > max_angle is retried at ``ds * min(0.5, max(0.1, 0.8 max_angle / theta))``:
         the turn of a smooth stretch grows like its step (theta ~ kappa ds), so the next step aims
         at 0.8 ``max_angle`` instead of being halved until it fits.
+    resume_after_guard : bool
+        After a step that a guard of the residual shortened (a trial point refused by
+        :class:`reduced.periodic.hb.GuardRefusal`, e.g. a grazing crossed in a step longer than the
+        guard allows), the next step is the one first refused (at most ``ds_max``), not the short step
+        grown by ``growth``: the guard asks for a short step across a point of the path, not for short
+        steps after it (False: the rule above).
 
     Raises
     ------
@@ -203,6 +209,7 @@ class ContinuationOptions:
     corner_ds: float = 1e-3  # at or below this step a larger turn is a corner of the branch: accepted
     tol: float = 1e-10  # Newton tolerance of the start point and the correctors
     angle_step: bool = False  # the step also from the tangent's turn (ds * 0.8 max_angle / theta)
+    resume_after_guard: bool = False  # after a step a guard shortened, the step it refused (not the short one grown)
 
     def __post_init__(self) -> None:
         for key in ("ds", "ds_min", "ds_max", "growth", "max_angle_deg", "corner_ds", "tol"):
@@ -210,6 +217,7 @@ class ContinuationOptions:
         for key in ("max_steps", "max_iter", "good_iter"):
             _check.integer(key, getattr(self, key))
         _check.flag("angle_step", self.angle_step)
+        _check.flag("resume_after_guard", self.resume_after_guard)
 
     def replace(self, **changes) -> ContinuationOptions:
         """These options with the fields ``changes`` replaced (checked again); ``self`` if none."""
@@ -286,8 +294,8 @@ def continue_branch(
         max_steps = 0
     ds = opt.ds
     for _ in range(max_steps):
-        res, tn, ds, rejected, corner = _advance(fun, y, t, ds, opt, reject,
-                                                 watch if corner_coords is None else tuple(corner_coords(y, t)), param)
+        res, tn, ds, rejected, corner, ds_guard = _advance(
+            fun, y, t, ds, opt, reject, watch if corner_coords is None else tuple(corner_coords(y, t)), param)
         n_rej += rejected
         if res is None:
             status = "min_step"
@@ -315,6 +323,8 @@ def continue_branch(
                 ds = min(ds, dss[-1])
         elif res.n_iter <= opt.good_iter:
             ds = min(ds * opt.growth, opt.ds_max)
+        if opt.resume_after_guard and ds_guard is not None and not corner:
+            ds = min(max(ds, ds_guard), opt.ds_max)
     return Branch(np.array(ys), np.array(ts), np.array(dss), np.array(its), folds, status, n_rej,
                   time.perf_counter() - t_wall, data, corners)
 
@@ -359,11 +369,12 @@ def _advance(fun, y: np.ndarray, t: np.ndarray, ds: float, opt: ContinuationOpti
     """One accepted step from the point y with tangent t, trying ``ds`` first and halving it.
 
     Returns (NewtonResult, new tangent, the step that reached it, steps rejected, whether a
-    corner step reached it); the result and tangent are None when the step fell below
-    ``ds_min`` and no corner step was found.
+    corner step reached it, the first step a guard refused or None); the result and tangent are None
+    when the step fell below ``ds_min`` and no corner step was found.
     """
     cos_max = math.cos(math.radians(opt.max_angle_deg))
     n_rej = 0
+    ds_guard = None  # the first step a guard of the residual refused (GuardRefusal)
     lazy = getattr(fun, "lazy", None)  # fun.lazy(y) -> (R, callable giving dR/dy): the Jacobian only when taken
     solve = getattr(fun, "bordered_solver", None)  # fun.bordered_solver(J, r): its own solver of [dR/dy; t] z = r
     while True:
@@ -387,9 +398,13 @@ def _advance(fun, y: np.ndarray, t: np.ndarray, ds: float, opt: ContinuationOpti
             turn_ok = tn @ t >= cos_max or (ds <= opt.corner_ds and tn @ t > 0.0)
             if turn_ok and (reject is None or not (reject(y, res.y, tn) if getattr(reject, "takes_tangent", False)
                                                    else reject(y, res.y))):
-                return res, tn, ds, n_rej, False
+                return res, tn, ds, n_rej, False, ds_guard
             # a turn beyond max_angle (angle_step): aim at 0.8 max_angle, not merely half the step
             cut = 0.5 if turn_ok or not opt.angle_step else min(0.5, max(0.1, _angle_factor(float(tn @ t), opt)))
+        except GuardRefusal:
+            cut = 0.5
+            if ds_guard is None:
+                ds_guard = ds
         except NewtonError:
             cut = 0.5
         n_rej += 1
@@ -397,8 +412,8 @@ def _advance(fun, y: np.ndarray, t: np.ndarray, ds: float, opt: ContinuationOpti
         if ds < opt.ds_min:
             corner = _corner_step(fun, y, t, watch, param, opt.corner_ds, opt.tol, opt.max_iter, reject)
             if corner is None:
-                return None, None, ds, n_rej, False
-            return corner[0], corner[1], opt.corner_ds, n_rej, True
+                return None, None, ds, n_rej, False, ds_guard
+            return corner[0], corner[1], opt.corner_ds, n_rej, True, ds_guard
 
 
 def _corner_step(fun, y, t, coords, param, h, tol, max_iter, reject):

@@ -12,7 +12,8 @@ k) make narrow tongues whose sheets lie close together. Three rules keep the pat
 sheet:
 
 - a step that changes the number of contact events per period is refused (and halved) while it
-  is longer than ``grazing_ds`` (a grazing is crossed in a short step);
+  is longer than ``grazing_ds`` (a grazing is crossed in a short step), and one that changes it by
+  more than one grazing (more than two events) while it is longer than ``multi_grazing_ds``;
 - a step whose secant leaves the new tangent by more than ``max_angle_deg`` is refused (it
   landed on a neighbouring sheet);
 - the step may fall to ``ds_min`` = 1e-9 (the hairpins of the tongues' folds have radii of
@@ -22,11 +23,17 @@ sheet:
 **Round-off.** At the lower folds of the tongues the contact events per period change several times
 within 1e-4 of arclength (discrete-frc 10 N at 37.027 Hz: 12, 14, 12, 14, 6 events); a step up to
 ``grazing_ds`` = 2e-2 may cross several of these grazings at once, and the sheet it lands on then
-depends on round-off (a corrector stopped one Newton step earlier turns that level's main family
-from 26.8-953 Hz into 17.1-38.2 Hz; both paths are smooth, symmetric to 1e-11, and part where they
-leave the fold at 37.026996 Hz). With ``grazing_ds`` = 1e-3 the family is the same under the corrector
-perturbed (one Newton step fewer or more, ``corrector_tol`` x 10): 17.13-956 Hz, the same 36 folds,
-the same stable stretches, at 3-4x the points and CPU time (tests/test_exact_frc_robust.py).
+depends on round-off (with ``multi_grazing_ds`` = ``grazing_ds``, the rule before session 13, a corrector
+stopped one Newton step earlier turns that level's main family from 26.8-953 Hz into 17.1-38.2 Hz; both
+paths are smooth, symmetric to 1e-11, and part where they leave the fold at 37.026996 Hz). Along that
+family a single grazing (the events change by 2, 1176 changes of the events in all) is 80 % of the
+changes; the changes by more than one grazing are where the clusters are. With ``multi_grazing_ds`` =
+1e-3 (the default) the family is the same under the corrector perturbed (``corrector_tol`` x 10) and from
+another start (the linear orbit at the band's top instead of an HB orbit at 34.9 Hz): 17.13 Hz to the
+band's top, the same 36 folds, the same stable stretches, in 5100 points, 1.9x the old rule's shorter,
+round-off-made path (tests/test_exact_frc_robust.py); ``grazing_ds`` = 1e-3 for every change gives the same
+family in 6700 points. Taking up the refused step after a short one (``resume_after_guard``) saves a fifth
+of the points but is not robust: from the HB orbit at 34.9 Hz it turned back at 38.2 Hz (47 folds).
 
 **Stability** of each point: the Floquet multipliers, eigenvalues of the monodromy (the product
 of the segments' monodromies, exact for the exact orbit). **Symmetry.** The three-mass model
@@ -105,6 +112,7 @@ SWITCHED = {"pitchfork_mirror": "asymmetric", "pitchfork_half_wave": "half_wave_
 PD_CRITICAL_TOL = 0.05  # |mu + 1| of the located critical multiplier beyond which a period doubling is not switched at
 REJOIN_TOL = 1e-7  # symmetry-breaking part of a switched family, relative to its point, below which it has rejoined
 SAME_ORBIT_TOL = 1e-6  # relative: two orbits shot at the same frequency closer than this (nodes) are one orbit
+NEAR_ORBIT_TOL = 1e-2  # relative: a known family's point this close to a new first orbit is shot at its frequency too
 COVER_TRIES = 4  # guesses tried per family of cover_families at most (a guess may find no orbit)
 JOIN_DIST, JOIN_COS = 5e-3, 0.9  # an isolated family this close (scaled) to a known family's path, parallel: joined
 
@@ -124,6 +132,14 @@ class ExactFRCOptions:
         deg, largest turn of the tangent over a step, and of a step's secant from the new tangent.
     grazing_ds : float
         Longest step allowed to change the number of contact events per period.
+    multi_grazing_ds : float
+        Longest step allowed to change it by more than one grazing (more than two events; used if
+        below ``grazing_ds``): the clusters of grazings at the tongues' folds are crossed in short
+        steps, where the sheet a long step lands on depends on round-off (module docstring).
+    resume_after_guard : bool
+        After a step shortened by the grazing rules, the next step is the one refused
+        (:class:`reduced.periodic.continuation.ContinuationOptions` ``resume_after_guard``). Off: the
+        path then depends on the start again (module docstring).
     max_iter : int
         Newton iterations of a corrector.
     max_steps : int
@@ -189,12 +205,14 @@ class ExactFRCOptions:
     velocity_scale: str = "fastest"
     corrector_tol: float = CORRECTOR_TOL
     angle_step: bool = False
+    resume_after_guard: bool = False
+    multi_grazing_ds: float = 1e-3
 
     def __post_init__(self) -> None:
         _check.integer("segments", self.segments, lo=2)
         if self.segments % 2:
             raise _check.InvalidArgument(f"segments must be even, got {self.segments}")
-        for key in ("ds", "ds_max", "ds_min", "max_angle_deg", "grazing_ds", "corrector_tol"):
+        for key in ("ds", "ds_max", "ds_min", "max_angle_deg", "grazing_ds", "multi_grazing_ds", "corrector_tol"):
             _check.positive(key, getattr(self, key))
         if not self.deadline_s > 0.0:
             raise _check.InvalidArgument(f"deadline_s must be > 0 s, got {self.deadline_s!r}")
@@ -209,12 +227,13 @@ class ExactFRCOptions:
         _check.flag("period_doubling", self.period_doubling)
         _check.choice("velocity_scale", self.velocity_scale, ("fastest", "omega"))
         _check.flag("angle_step", self.angle_step)
+        _check.flag("resume_after_guard", self.resume_after_guard)
 
     def continuation(self, max_steps: int) -> ContinuationOptions:
         # tol bounds the last Newton step: the error after it is ~ its square (quadratic convergence)
         return ContinuationOptions(ds=self.ds, ds_max=self.ds_max, ds_min=self.ds_min, max_steps=max_steps,
                                    max_iter=self.max_iter, max_angle_deg=self.max_angle_deg, tol=self.corrector_tol,
-                                   angle_step=self.angle_step)
+                                   angle_step=self.angle_step, resume_after_guard=self.resume_after_guard)
 
 
 # -- symmetries ----------------------------------------------------------------------------------
@@ -655,7 +674,7 @@ def _follow(res: ShootingResidual, y0: np.ndarray, param: int, direction: float,
         return [int(c) for c in np.argsort(-np.abs(t))[:3]]
 
     def prog(y):
-        res.guard = (y, res.events(y), opts.grazing_ds)  # a grazing is crossed in a short step
+        res.guard = _guard(res, y, opts)  # a grazing is crossed in a short step
         if progress is not None:
             progress(y)
 
@@ -664,7 +683,7 @@ def _follow(res: ShootingResidual, y0: np.ndarray, param: int, direction: float,
     y_start, p_start, d_start = y0, param, direction
     k = 0
     while total < max_steps:
-        res.guard = (y_start, res.events(y_start), opts.grazing_ds)
+        res.guard = _guard(res, y_start, opts)
         try:
             br = continue_branch(res, y_start, param=p_start, direction=d_start,
                                  options=opts.continuation(max_steps - total), stop=stop, monitor=(i_w,),
@@ -693,6 +712,15 @@ def _follow(res: ShootingResidual, y0: np.ndarray, param: int, direction: float,
                      f" piece {k + 1} from {res.omega(y_start) / (2 * math.pi):.6g} Hz")
         k += 1
     return np.concatenate(Ys), data, folds, np.concatenate(seg), statuses, notes
+
+
+def _guard(res: ShootingResidual, y: np.ndarray, opts: ExactFRCOptions) -> tuple:
+    """The residual's guard from the point y (:meth:`ShootingResidual._check_guard`): a step that changes the
+    contact events per period is refused while longer than ``grazing_ds``, one that changes them by more than
+    one grazing while longer than ``multi_grazing_ds`` (if shorter)."""
+    if opts.multi_grazing_ds < opts.grazing_ds:
+        return (y, res.events(y), opts.grazing_ds, opts.multi_grazing_ds)
+    return (y, res.events(y), opts.grazing_ds)
 
 
 def _restart(res: ShootingResidual, y: np.ndarray, t: np.ndarray, y_back: np.ndarray):
@@ -1027,7 +1055,12 @@ def first_orbit(res: ShootingResidual, guess: np.ndarray, omega: float) -> np.nd
     try:
         return shoot_at(res, guess, omega)
     except ShootingError as exc:
-        first = exc
+        return _load_start(res, omega, exc)
+
+
+def _load_start(res: ShootingResidual, omega: float, first: ShootingError) -> np.ndarray:
+    """The load continuation of :func:`first_orbit` (its Newton failed with ``first``, raised again if this
+    fails too)."""
     flow = res.flow
     P = flow.amplitude_N
     sy = flow.system
@@ -1126,7 +1159,11 @@ def exact_frc(system: GapSystem, load: np.ndarray, amplitude_N: float, f_min_hz:
 
 def _main_start(res: ShootingResidual, starts: list, f1: float) -> tuple[np.ndarray, list[str]]:
     """(the scaled point of the first orbit found from ``starts``, then the linear orbit at f1 where
-    it closes no stop; notes on the guesses that failed). Raises ShootingError if none."""
+    it closes no stop; notes on the guesses that failed). Raises ShootingError if none. Newton from each guess
+    in turn, then :func:`first_orbit`'s load continuation at the first guess's frequency: the same orbit as
+    :func:`first_orbit` on the first guess and Newton on the others, unless that continuation would have
+    found the first guess's orbit where Newton did not (at 10 N it runs its 400 steps and fails: discrete-frc
+    ~2 s CPU, now spent only where no guess converges)."""
     flow = res.flow
     w1 = 2 * math.pi * f1
     t0, _ = res.times(w1)
@@ -1136,12 +1173,18 @@ def _main_start(res: ShootingResidual, starts: list, f1: float) -> tuple[np.ndar
     cand = list(starts)
     if np.all(np.max(np.abs(lin[:, : sy.n] @ sy.B.T), axis=0) < np.abs(sy.offset)):
         cand.append((f1, lin))
-    notes = []
-    for k, (f, g) in enumerate(cand):
+    notes, first = [], None
+    for f, g in cand:
         try:
-            return (first_orbit(res, g, 2 * math.pi * f) if k == 0 else shoot_at(res, g, 2 * math.pi * f)), notes
+            return shoot_at(res, g, 2 * math.pi * f), notes
         except ShootingError as exc:
+            first = first or exc
             notes.append(f"no orbit from the guess at {f:.6g} Hz ({' '.join(str(exc).split())[:80]})")
+    if cand:
+        try:
+            return _load_start(res, 2 * math.pi * cand[0][0], first), notes[1:]
+        except ShootingError:
+            pass
     raise ShootingError("no periodic orbit from any guess: " + "; ".join(notes))
 
 
@@ -1373,8 +1416,9 @@ def _image_points(res: ShootingResidual, nodes: np.ndarray, omega: np.ndarray, p
 
 def _known(families: list, residuals: dict, res_new: ShootingResidual, y_new: np.ndarray, sym: Symmetry):
     """The index of a family of the same period whose orbit at y_new's frequency (Newton at that
-    frequency from its nearest points on each side) is y_new's orbit or one of its images
-    (:data:`SAME_ORBIT_TOL`), else None."""
+    frequency from its nearest points on each side, and from its point nearest y_new's orbit or an image of
+    it if within :data:`NEAR_ORBIT_TOL`) is y_new's orbit or one of its images (:data:`SAME_ORBIT_TOL`),
+    else None."""
     nodes, w = res_new.nodes(y_new)
     f = w / (2 * math.pi)
     ims = _images(nodes, res_new.periods, sym)
@@ -1386,8 +1430,14 @@ def _known(families: list, residuals: dict, res_new: ShootingResidual, y_new: np
         res = residuals[k][0]
         d = fam.freq_hz - f
         cross = np.flatnonzero((d[:-1] * d[1:] <= 0) & (fam.segment[:-1] == fam.segment[1:]))
-        for i in cross:
-            j = i if abs(d[i]) <= abs(d[i + 1]) else i + 1
+        near = [i if abs(d[i]) <= abs(d[i + 1]) else i + 1 for i in cross]
+        # and its point nearest y_new (relative node distance, any image) if within NEAR_ORBIT_TOL: a family born
+        # at the same branch point as y_new's (a parent that retraces its path passes it twice) starts at a fold
+        # in frequency, its first points just beside y_new's frequency, where no crossing is
+        dist = np.min([np.max(np.abs((fam.nodes - x) * sc), axis=(1, 2)) for x in ims], axis=0) / scale
+        j = int(np.argmin(dist))
+        extra = [j] if dist[j] < NEAR_ORBIT_TOL and j not in near else []
+        for j in extra + near:
             try:
                 other = res.nodes(shoot_at(res, fam.nodes[j], w))[0]
             except ShootingError:

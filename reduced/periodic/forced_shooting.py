@@ -56,6 +56,7 @@ SEGMENTS = 8  # default nodes per load period: a node sees |mu|^(1/8) of the orb
 PEAK_SAMPLES_PER_PERIOD = 6.0  # samples of a contact state's closed form per period of its fastest mode ...
 PEAK_MAX_SAMPLES = 256  # ... but at most this many a stretch (then Newton refines each bracketed extreme)
 _FRESH = 32  # the peaks' samples step e^{lam dt} from sample to sample; every 32nd is a fresh exp (drift ~32 eps)
+GRAZING_EVENTS = 2  # contact events one grazing adds or removes per period (a stop closing and opening once)
 D_LOG_OMEGA = 1e-6  # central-difference step of dR/d ln(Omega) (truncation ~1e-12, round-off ~1e-10)
 MAX_STRETCHES = 512  # contact-state stretches of a segment kept for the peaks (more: marched again)
 _STATUS = {-1: "too many contact events in a segment", -2: "the motion reached an infeasible contact state",
@@ -827,7 +828,7 @@ class ShootingResidual:
     _events: dict = field(default_factory=dict, repr=False)
     _segments: tuple | None = field(default=None, repr=False)
     _gen: int = field(default=0, repr=False)  # forget() count: a Jacobian asked for after it is not memoised
-    guard: tuple | None = field(default=None, repr=False)  # (Y_ref, its events, radius): see _check_guard
+    guard: tuple | None = field(default=None, repr=False)  # (Y_ref, its events, radius[, radius_multi]): _check_guard
     _scale: tuple | None = field(default=None, repr=False)  # (Omega, D sqrt(S)) of the last scale() asked for
 
     @property
@@ -933,14 +934,18 @@ class ShootingResidual:
         """Refuse (NewtonError) a point farther than ``guard``'s radius from its reference point
         whose number of contact events differs from the reference's: a continuation step may
         cross a grazing only when it is short (the corrector's trial points are refused at their
-        first evaluation, before any Newton iteration is spent on them)."""
+        first evaluation, before any Newton iteration is spent on them). Raises
+        :class:`reduced.periodic.hb.GuardRefusal`, a NewtonError."""
         if self.guard is None:
             return
-        y_ref, ev_ref, radius = self.guard
-        if self._events[key] != ev_ref and float(np.linalg.norm(Y - y_ref)) > radius:
-            from reduced.periodic.hb import NewtonError
+        y_ref, ev_ref, radius, *multi = self.guard
+        change = abs(self._events[key] - ev_ref)
+        if multi and change > GRAZING_EVENTS:  # more than one grazing: (Y_ref, events, radius, radius of those)
+            radius = multi[0]
+        if change and float(np.linalg.norm(Y - y_ref)) > radius:
+            from reduced.periodic.hb import GuardRefusal
 
-            raise NewtonError("a grazing contact crossed in a long step")
+            raise GuardRefusal("a grazing contact crossed in a long step")
 
     def forget(self) -> None:
         """Drop the memoised evaluations (after the flow's load changed)."""

@@ -70,6 +70,13 @@ class NewtonError(RuntimeError):
     """Newton's method did not converge (message: iterations, residual, step)."""
 
 
+class GuardRefusal(NewtonError):
+    """A trial point refused by a guard of the residual (e.g. a grazing crossed in a step longer than the
+    guard allows), not a failure of Newton's method: the continuation shortens the step, and may take up
+    the step it had before once the guard is passed (:class:`reduced.periodic.continuation.ContinuationOptions`
+    ``resume_after_guard``)."""
+
+
 def default_samples(H: int) -> int:
     """AFT samples per period for H harmonics with a gap force: a power of 2, >= 32 (2H+1).
 
@@ -933,6 +940,7 @@ def newton(
 
 
 __all__ = [
+    "GuardRefusal",
     "NewtonError",
     "NewtonResult",
     "newton",
