@@ -370,10 +370,26 @@ def friction_table(system: GapSystem, omega_ref: float) -> FrictionTable:
     return table
 
 
+def _slider_rates(system: GapSystem, slip: np.ndarray, stop_of: np.ndarray) -> np.ndarray:
+    """R (p, n) of one state, the rows of the sliders' rates on v (:func:`_state_parts`'s, the same arithmetic,
+    without the state's stiffness): Bt_k (open tip), 0 (sticking), Bt_k - (a_k / kt_k) B_j (slipping,
+    a_k = sigma_k mu_k k_j side_j)."""
+    fr = system.friction
+    R = np.zeros((fr.p, system.n))
+    for k in range(fr.p):
+        j = stop_of[k]
+        if j < 0:
+            R[k] = fr.Bt[k]
+        elif slip[k] != STICK:
+            a = slip[k] * fr.mu[k] * system.k[j] * system.side[j]
+            R[k] = fr.Bt[k] - (a / fr.k_t[k]) * system.B[j]
+    return R
+
+
 def _state_links(system: GapSystem, table: FrictionTable, s: int) -> None:
-    """Fill state s's stiffness, slider rates and events (rows, constants, successors; cheap) in ``table``."""
+    """Fill state s's slider rates and events (rows, constants, successors; cheap) in ``table``."""
     st = table.states
-    _, _, _, R, _, _ = _state_parts(system, st.closed[s], st.slip[s], st.stop_of[s])
+    R = _slider_rates(system, st.slip[s], st.stop_of[s])
     table.R[s] = R
     rows, c, act, sc, rs, kd = _event_rows(system, st, s, R, table.omega_ref)
     table.erow[s], table.ec[s], table.eact[s], table.succ[s], table.reset[s], table.ekind[s] = rows, c, act, sc, rs, kd
@@ -465,7 +481,7 @@ def _kept(lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     up = np.flatnonzero(lam.imag > 0.0)
     real = np.flatnonzero(lam.imag == 0.0)
     down = np.flatnonzero(lam.imag < 0.0)
-    paired = up.size == down.size and all(np.any(lam[down] == np.conj(lam[i])) for i in up)
+    paired = up.size == down.size and bool(np.all(np.any(lam[down][None, :] == np.conj(lam[up])[:, None], axis=1)))
     if not paired:
         keep, kappa = np.arange(lam.size), np.ones(lam.size)
     else:
