@@ -57,12 +57,12 @@ def _first_events_against_expm():
     Minv = np.linalg.inv(system.M)
     n = system.n
     reach = REACH_OMEGA_TAU / om
-    nodes, weights = np.polynomial.legendre.leggauss(8)  # exact to round-off on these short stretches (omega tau < 0.01)
+    nodes, weights = np.polynomial.legendre.leggauss(8)  # exact to round-off here (omega tau < 0.01)
     kinds: dict = {}
     clear_tables()
     events = [integrate_exact_friction(system, np.zeros(4), v0, T, 20000.0, log_events=10_000).events
               for v0, T in ((V0, 0.02), ([0.0, 0.0, 0.3, 0.2], 0.3))]  # the second for a slip's end (rare here)
-    for ev, i in ((ev, i) for ev in events for i in range(len(ev) - 1)):
+    for ev, i in ((log, i) for log in events for i in range(len(log) - 1)):
         s, y0, gap = int(ev.state[i]), ev.y[i], ev.t[i + 1] - ev.t[i]
         if gap < 1e-9 or kinds.get(str(ev.kind[i + 1]), 0) >= 3:
             continue

@@ -242,7 +242,23 @@ def pass_through(system: GapSystem, table: FrictionTable, Minv: np.ndarray, s: i
 
 def switch(system: GapSystem, table: FrictionTable, s: int, e: int, y: np.ndarray, fric: tuple) -> tuple[int, float]:
     """(state after event e of state s, friction work of the switch), y's sliders updated in place: the
-    kernels' switch (:func:`reduced.transient._friction_kernels._switch`), in NumPy."""
+    kernels' switch (:func:`reduced.transient._friction_kernels._switch`), in NumPy.
+
+    Parameters
+    ----------
+    system : GapSystem
+        The run's system (with friction).
+    table : FrictionTable
+        Its states' links (successors, resets, kinds).
+    s, e : the state and the event's slot
+    y : (2n + p,) the state at the event; its sliders' positions are updated
+    fric : the kernels' slider data (:attr:`reduced.transient.friction.FrictionExactStepper.fric`)
+
+    Returns
+    -------
+    (int, float)
+        The next state and the friction work of the sliders' jumps, J.
+    """
     Bt, slider_tip, stop_tip, slider_stop, ekind, stop_of, B, kstop, offset, side, mu, kt = fric
     n, p, m = system.n, Bt.shape[0], B.shape[0]
     s_new = int(table.succ[s, e])
