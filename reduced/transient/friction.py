@@ -490,6 +490,7 @@ class FrictionExactStepper(_stepper.Stepper):
         reach = min(REACH_OMEGA_TAU / self.omega_max, t_end - self.t, t_next_sample - self.t)
         if self.n_events + 1 >= self.options.max_events:
             return False
+        self.lazy.link(self.s)
         res = pass_through(self.run_system, self.table, self.lazy._Minv, self.s, self.y, reach, fresh, hold,
                            self.hmin)
         if res is None:

@@ -775,8 +775,8 @@ class LazyFrictionTables:
     of its 361), and a state's closed form (an eigendecomposition of order 2n + p, its inverse, condition and
     work tables) is most of the tables' cost.
 
-    The links between the states (event rows, successors, resets, kinds) are built for every state at once
-    (cheap). A state's entries, once built, are those :func:`friction_table` and :func:`friction_modal_table`
+    The links of a state (event rows, successors, resets, kinds; ~1 ms) are filled the first time a run reads
+    them (:meth:`link`: on entering it, before its closed form or without it). A state's entries, once built, are those :func:`friction_table` and :func:`friction_modal_table`
     give it (the same arithmetic on the state's slice) and never change; unbuilt entries hold zeros, which the
     kernels never read (they return ``NEW_STATE`` on entering a state whose ``built`` flag is False). When a
     state keeps more terms than the term arrays hold, they are reallocated larger. Each build makes a new
@@ -794,8 +794,7 @@ class LazyFrictionTables:
     def __init__(self, system: GapSystem, omega_ref: float) -> None:
         self.system = system
         self.table = _empty_table(system, omega_ref)
-        for s in range(self.S):
-            _state_links(system, self.table, s)
+        self.linked = np.zeros(self.S, bool)  # states whose links are filled (:meth:`link`)
         self.built = np.zeros(self.S, bool)
         self.has_slip = np.any(self.table.states.slip != 0, axis=1)
         with single_thread_blas():
@@ -811,6 +810,14 @@ class LazyFrictionTables:
     def S(self) -> int:
         return self.table.states.S
 
+    def link(self, s: int) -> None:
+        """Fill state s's links (slider rates, event rows, constants, successors, resets, kinds; ~1 ms) unless
+        they are: what a run reads of a state it enters before or without its closed form (the pass-through of
+        :mod:`reduced.transient.friction_probe`, an event's kind in the log)."""
+        if not self.linked[s]:
+            _state_links(self.system, self.table, s)
+            self.linked[s] = True
+
     def ensure(self, s: int) -> bool:
         """Build state ``s`` unless it is built; True if it was built now.
 
@@ -825,6 +832,7 @@ class LazyFrictionTables:
             if self.built[s]:
                 return False
             t0 = time.perf_counter()
+            self.link(s)
             with single_thread_blas():
                 _state_closed_form(self.system, self.table, s, self._Minv, self._cache)
                 groups = friction_modal_table(self.system, _one_state(self.table, s),
