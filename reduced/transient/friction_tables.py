@@ -776,8 +776,9 @@ class LazyFrictionTables:
     work tables) is most of the tables' cost.
 
     The links of a state (event rows, successors, resets, kinds; ~1 ms) are filled the first time a run reads
-    them (:meth:`link`: on entering it, before its closed form or without it). A state's entries, once built, are those :func:`friction_table` and :func:`friction_modal_table`
-    give it (the same arithmetic on the state's slice) and never change; unbuilt entries hold zeros, which the
+    them (:meth:`link`: on entering it, before its closed form or without it). A state's entries, once built,
+    are those :func:`friction_table` and :func:`friction_modal_table` give it (the same arithmetic on the
+    state's slice) and never change; unbuilt entries hold zeros, which the
     kernels never read (they return ``NEW_STATE`` on entering a state whose ``built`` flag is False). When a
     state keeps more terms than the term arrays hold, they are reallocated larger. Each build makes a new
     ``built`` array (and new arrays of the near-cancelling work terms), so a kernel running on the arrays of
