@@ -11,7 +11,8 @@ of the scene's apparatus (assembly, 120 fixed-interface modes, not planar), each
 - ``basis, mu = 0``: the reduction with the tangential coordinates (130 with axial+lateral), run without
   friction (the frictionless kernels): the comparison run of the hammer stage;
 - ``friction``: the same with mu (the friction kernels; 361 friction states with axial+lateral, each state's
-  tables built the first time a record enters it).
+  tables built the first time a record runs in it; a state entered for an instant is passed through without
+  them, :mod:`reduced.transient.friction_probe`).
 
 Each model runs a 20 ms record first (numba's compilation), then its tables are forgotten (both the
 frictionless and the friction integrator's), and the levels run in order in one process, as the hammer stage

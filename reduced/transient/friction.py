@@ -64,6 +64,7 @@ from reduced.transient.explicit import (
     ExplicitStepper,
     _damping_factor,
 )
+from reduced.transient.friction_probe import REACH_OMEGA_TAU, pass_through, switch
 from reduced.transient.friction_tables import (
     KIND_GAP,
     KIND_SLIP_END,
@@ -76,6 +77,9 @@ from reduced.transient.friction_tables import (
 from reduced.transient.result import RingdownResult, RingdownStream, zeros_view
 
 EVENT_KINDS = {KIND_GAP: "gap", KIND_STICK_UP: "slip+", KIND_STICK_DOWN: "slip-", KIND_SLIP_END: "stick"}
+PASS_THROUGH = True  # states a free run enters for an instant passed through without their tables (_pass_through)
+PASS_THROUGH_MIN_N = 40  # ... on systems of at least this many coordinates (a smaller one's state costs less to
+# build than to probe: the discrete model's 4 coordinates build in ~1 ms)
 TABLES_KEPT = 1  # systems whose friction tables are kept for the next run (each holds its built states')
 _TABLES: OrderedDict = OrderedDict()  # digest of a system -> its LazyFrictionTables
 _TABLES_LOCK = threading.Lock()
@@ -304,6 +308,7 @@ class FrictionExactStepper(_stepper.Stepper):
                      c(system.k), c(system.offset), c(system.side), c(fr.mu), c(fr.k_t))
         self.offset_max = float(np.max(np.abs(system.offset), initial=0.0))
         self.damped = not system.undamped
+        self.pass_through = PASS_THROUGH and system.n >= PASS_THROUGH_MIN_N
         self._start(x0, v0, options.w0, duration_s, n_samples, sample_rate_hz, loads)
 
     def _start(self, x0: np.ndarray, v0: np.ndarray, w0, duration_s: float, n_samples: int, sample_rate_hz: float,
@@ -328,7 +333,7 @@ class FrictionExactStepper(_stepper.Stepper):
         self.n_pieces = n_pieces = max(options.chunks, math.ceil(t_end / MAX_PIECE_S))
         self.breakpoints = loads.breakpoints(t_end) if self.forced else np.zeros(0)
         self.stats.update({"n_events": 0, "n_steps": 1, "n_march": 0, "n_states": int(table.states.S),
-                           "n_pieces": n_pieces, "n_sliders": fr.p, "tables_reused": self.cached})
+                           "n_pieces": n_pieces, "n_sliders": fr.p, "tables_reused": self.cached, "n_passed": 0})
         self.table_s += time.perf_counter() - t0
         self._table_stats()
         if self.forced:
@@ -337,6 +342,11 @@ class FrictionExactStepper(_stepper.Stepper):
         self.groups = [bounds] if not self.forced and not self.report else [bounds[c:c + 1] for c in range(n_pieces)]
         self.t, self.W, self.Wf, self.E, self.n_events, self.n_iter = 0.0, 0.0, 0.0, 0.0, 0, 0
         self.n_stuck = 0
+        self.n_passed = 0  # states passed through without their tables (_pass_through)
+        # the states this run has run in by their closed form: with pass-through the kernels return NEW_STATE on
+        # entering any other, so that which states are passed through depends on this run alone, not on the
+        # states earlier runs built (the same bits whatever ran before, in this process or another)
+        self.entered = np.zeros(table.states.S, bool)
         self.g = 0
         self.runs: list = []
         self.c = 0
@@ -452,7 +462,11 @@ class FrictionExactStepper(_stepper.Stepper):
                 break
             t0 = time.perf_counter()
             if self.runs[0][2] is None:
+                if self.pass_through and self._pass_through(buf):
+                    self.table_s += time.perf_counter() - t0
+                    continue
                 self.lazy.ensure(self.s)
+                self.entered[self.s] = True
             else:
                 self.forced_table.ensure(self.s)
             self.table_s += time.perf_counter() - t0
@@ -463,6 +477,45 @@ class FrictionExactStepper(_stepper.Stepper):
             buf.arrays[4][filled:buf.filled] = buf.arrays[0][filled:buf.filled] @ self.rows.R.T
         return status
 
+    def _pass_through(self, buf: _stepper.Buffer) -> bool:
+        """On a free run's return NEW_STATE: the state entered passed through to its first event by the flow's
+        Taylor series (:func:`reduced.transient.friction_probe.pass_through`) when that event is within the
+        reach and clear of every decision the kernel makes by its round-off rules; then the switch, the works,
+        the log and the kernel's memory of the switch (``carry``) as the kernel would leave them, and True. False
+        (nothing changed) where the state must be built."""
+        hold, e_prev, fresh, _, _ = (int(v) for v in self.carry)
+        g = self.groups[self.g]
+        t_end = float(g[self.c]) if len(g) > 1 else float(self.runs[0][1])
+        t_next_sample = float(buf.t[buf.filled]) if buf.filled < buf.k else float(buf.t_after)
+        reach = min(REACH_OMEGA_TAU / self.omega_max, t_end - self.t, t_next_sample - self.t)
+        if self.n_events + 1 >= self.options.max_events:
+            return False
+        self.lazy.link(self.s)
+        res = pass_through(self.run_system, self.table, self.lazy._Minv, self.s, self.y, reach, fresh, hold,
+                           self.hmin)
+        if res is None:
+            return False
+        t = self.t + res.tau
+        if not (t < t_end and t < t_next_sample):
+            return False
+        y = res.y.copy()
+        s_new, dWf = switch(self.run_system, self.table, self.s, res.slot, y, self.fric)
+        m = self.run_system.m
+        e = res.slot
+        self.W += res.dW
+        self.Wf += res.dWf + dWf
+        self.carry[:] = (e if (e == e_prev and e >= m) else -1), e, (e if e >= m else -1), self.s, 1
+        self.t, self.y, self.s = t, y, s_new
+        self.n_stuck = 0
+        if self.n_log < self.log[0].shape[0]:
+            self.log[0][self.n_log], self.log[1][self.n_log], self.log[2][self.n_log] = t, e, s_new
+            self.log[3][self.n_log] = y
+        self.n_log += 1
+        self.n_events += 1
+        self.n_passed += 1
+        self.stats.update(n_events=self.n_events, n_steps=self.n_events + 1, n_passed=self.n_passed)
+        return True
+
     def _call_once(self, buf: _stepper.Buffer) -> int:
         """One kernel call of the present run on ``buf`` (the state advanced); returns its status."""
         _, t_b, starts = self.runs[0]
@@ -470,6 +523,8 @@ class FrictionExactStepper(_stepper.Stepper):
         out_y, out_W, out_Wf, out_E = buf.arrays[:4]
         left = self.options.max_events - self.n_events
         modal, events, wv, wf, built = self.lazy.arrays()
+        if self.pass_through:
+            built = self.entered
         if starts is None:
             bounds = g if len(g) > 1 else np.array([t_b])
             S, Kmax = modal[1].shape

@@ -370,10 +370,26 @@ def friction_table(system: GapSystem, omega_ref: float) -> FrictionTable:
     return table
 
 
+def _slider_rates(system: GapSystem, slip: np.ndarray, stop_of: np.ndarray) -> np.ndarray:
+    """R (p, n) of one state, the rows of the sliders' rates on v (:func:`_state_parts`'s, the same arithmetic,
+    without the state's stiffness): Bt_k (open tip), 0 (sticking), Bt_k - (a_k / kt_k) B_j (slipping,
+    a_k = sigma_k mu_k k_j side_j)."""
+    fr = system.friction
+    R = np.zeros((fr.p, system.n))
+    for k in range(fr.p):
+        j = stop_of[k]
+        if j < 0:
+            R[k] = fr.Bt[k]
+        elif slip[k] != STICK:
+            a = slip[k] * fr.mu[k] * system.k[j] * system.side[j]
+            R[k] = fr.Bt[k] - (a / fr.k_t[k]) * system.B[j]
+    return R
+
+
 def _state_links(system: GapSystem, table: FrictionTable, s: int) -> None:
-    """Fill state s's stiffness, slider rates and events (rows, constants, successors; cheap) in ``table``."""
+    """Fill state s's slider rates and events (rows, constants, successors; cheap) in ``table``."""
     st = table.states
-    _, _, _, R, _, _ = _state_parts(system, st.closed[s], st.slip[s], st.stop_of[s])
+    R = _slider_rates(system, st.slip[s], st.stop_of[s])
     table.R[s] = R
     rows, c, act, sc, rs, kd = _event_rows(system, st, s, R, table.omega_ref)
     table.erow[s], table.ec[s], table.eact[s], table.succ[s], table.reset[s], table.ekind[s] = rows, c, act, sc, rs, kd
@@ -465,7 +481,7 @@ def _kept(lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     up = np.flatnonzero(lam.imag > 0.0)
     real = np.flatnonzero(lam.imag == 0.0)
     down = np.flatnonzero(lam.imag < 0.0)
-    paired = up.size == down.size and all(np.any(lam[down] == np.conj(lam[i])) for i in up)
+    paired = up.size == down.size and bool(np.all(np.any(lam[down][None, :] == np.conj(lam[up])[:, None], axis=1)))
     if not paired:
         keep, kappa = np.arange(lam.size), np.ones(lam.size)
     else:
@@ -759,9 +775,10 @@ class LazyFrictionTables:
     of its 361), and a state's closed form (an eigendecomposition of order 2n + p, its inverse, condition and
     work tables) is most of the tables' cost.
 
-    The links between the states (event rows, successors, resets, kinds) are built for every state at once
-    (cheap). A state's entries, once built, are those :func:`friction_table` and :func:`friction_modal_table`
-    give it (the same arithmetic on the state's slice) and never change; unbuilt entries hold zeros, which the
+    The links of a state (event rows, successors, resets, kinds; ~1 ms) are filled the first time a run reads
+    them (:meth:`link`: on entering it, before its closed form or without it). A state's entries, once built,
+    are those :func:`friction_table` and :func:`friction_modal_table` give it (the same arithmetic on the
+    state's slice) and never change; unbuilt entries hold zeros, which the
     kernels never read (they return ``NEW_STATE`` on entering a state whose ``built`` flag is False). When a
     state keeps more terms than the term arrays hold, they are reallocated larger. Each build makes a new
     ``built`` array (and new arrays of the near-cancelling work terms), so a kernel running on the arrays of
@@ -778,8 +795,7 @@ class LazyFrictionTables:
     def __init__(self, system: GapSystem, omega_ref: float) -> None:
         self.system = system
         self.table = _empty_table(system, omega_ref)
-        for s in range(self.S):
-            _state_links(system, self.table, s)
+        self.linked = np.zeros(self.S, bool)  # states whose links are filled (:meth:`link`)
         self.built = np.zeros(self.S, bool)
         self.has_slip = np.any(self.table.states.slip != 0, axis=1)
         with single_thread_blas():
@@ -795,6 +811,14 @@ class LazyFrictionTables:
     def S(self) -> int:
         return self.table.states.S
 
+    def link(self, s: int) -> None:
+        """Fill state s's links (slider rates, event rows, constants, successors, resets, kinds; ~1 ms) unless
+        they are: what a run reads of a state it enters before or without its closed form (the pass-through of
+        :mod:`reduced.transient.friction_probe`, an event's kind in the log)."""
+        if not self.linked[s]:
+            _state_links(self.system, self.table, s)
+            self.linked[s] = True
+
     def ensure(self, s: int) -> bool:
         """Build state ``s`` unless it is built; True if it was built now.
 
@@ -809,6 +833,7 @@ class LazyFrictionTables:
             if self.built[s]:
                 return False
             t0 = time.perf_counter()
+            self.link(s)
             with single_thread_blas():
                 _state_closed_form(self.system, self.table, s, self._Minv, self._cache)
                 groups = friction_modal_table(self.system, _one_state(self.table, s),
