@@ -143,6 +143,32 @@ def hill(hb: HarmonicBalance, X: np.ndarray, omega: float, tol: float = HILL_TOL
     return HillResult(lam[order], mu[order], tol)
 
 
+SCREEN_MARGIN = 1e-4  # hill_screened: a verdict by the standard form is taken when its max |mu| is this far from
+# 1 + tol; nearer, QZ decides (the two forms' max |mu| differ by <= 4e-9 on discrete-fep's branches, measured)
+
+
+def hill_screened(hb: HarmonicBalance, X: np.ndarray, omega: float, tol: float = HILL_TOL,
+                  solver: str = "qz", strict_zone: bool = False) -> HillResult:
+    """:func:`hill` for its stability verdict alone: the same ``stable`` as ``hill(..., solver="qz")``,
+    about 2.5 times faster at H = 15 on the 3-DOF model.
+
+    The "standard" form (B^-1 A, Hessenberg QR) first; its exponents are QZ's up to round-off, so
+    where its max |mu| is more than :data:`SCREEN_MARGIN` from the threshold 1 + tol, QZ's verdict is
+    the same, and the result is returned; nearer the threshold (or not finite) the "qz" result is.
+    The multipliers returned may then differ from QZ's in the last digits: use :func:`hill` where
+    they are written. Other solvers than "qz" are passed to :func:`hill` unchanged.
+
+    Parameters and returns: as :func:`hill`.
+    """
+    if solver != "qz":
+        return hill(hb, X, omega, tol, solver, strict_zone)
+    r = hill(hb, X, omega, tol, "standard", strict_zone)
+    m = r.max_multiplier
+    if np.isfinite(m) and abs(m - (1.0 + tol)) > SCREEN_MARGIN:
+        return r
+    return hill(hb, X, omega, tol, "qz", strict_zone)
+
+
 def _dense_eigenvalues(hb: HarmonicBalance, J0: np.ndarray, J1: np.ndarray, J2: np.ndarray, solver: str
                        ) -> np.ndarray:
     """All 2 n (2H+1) eigenvalues of Hill's companion pencil, by QZ or the standard form (:func:`hill`)."""
@@ -274,4 +300,4 @@ def compare(energy_J, floquet_max, floquet_stable, hill_max, hill_stable) -> Sta
     return StabilityComparison(np.asarray(energy_J, float), fm, np.asarray(hill_max, float), fs, hs, agree)
 
 
-__all__ = ["HillResult", "hill", "compare", "StabilityComparison", "HILL_TOL", "HILL_SOLVERS"]
+__all__ = ["HillResult", "hill", "hill_screened", "compare", "StabilityComparison", "HILL_TOL", "HILL_SOLVERS"]
