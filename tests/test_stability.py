@@ -131,3 +131,13 @@ def test_hill_screened_takes_qz_near_the_threshold(nnm2_h15):
             assert np.array_equal(sc.multipliers, qz.multipliers) and sc.stable == qz.stable
         far = st.hill_screened(hb, X, w, tol=m - 1.0 - 3 * st.SCREEN_MARGIN)  # clear: unstable by the standard form
     assert not far.stable and far.max_multiplier == m
+
+
+def test_hill_matrices_j0_is_the_residual_jacobian_bit_for_bit(nnm2_h15):
+    # hill_matrices builds J0 = A + dF/dX without R and dR/domega: residual()'s dR/dX, the same bits
+    b = nnm2_h15
+    hb = b.residual.hb
+    for i in (0, len(b.energy_J) // 2, len(b.energy_J) - 1):
+        J0, J1, J2 = hb.hill_matrices(b.X[i], b.omega[i])
+        assert np.array_equal(J0, hb.residual(b.X[i], b.omega[i])[1])
+        assert np.array_equal(J2, np.kron(np.eye(2 * hb.H + 1), hb.M))
