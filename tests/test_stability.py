@@ -102,8 +102,8 @@ def test_shift_invert_falls_back_to_the_dense_solve(nnm2_h15, monkeypatch):
 
 
 # hill_screened (the fep study's verdicts off the written points): the same verdict as QZ at every point of
-# NNM 2 at H = 15 up to 200 J (stable and unstable stretches), the standard form's multipliers where the
-# verdict is clear, QZ's bits where the standard form's max |mu| is within SCREEN_MARGIN of 1 + tol.
+# NNM 2 at H = 15 up to 200 J (stable and unstable stretches), shift-invert's multipliers where the
+# verdict is clear, QZ's bits where shift-invert's max |mu| is within SCREEN_MARGIN of 1 + tol.
 def test_hill_screened_gives_qz_verdicts(nnm2_h15):
     b = nnm2_h15
     hb = b.residual.hb
@@ -112,9 +112,9 @@ def test_hill_screened_gives_qz_verdicts(nnm2_h15):
         for i in range(0, len(b.energy_J), 8):
             qz = hill(hb, b.X[i], b.omega[i])
             sc = st.hill_screened(hb, b.X[i], b.omega[i])
-            std = hill(hb, b.X[i], b.omega[i], solver="standard")
+            si = hill(hb, b.X[i], b.omega[i], solver="shift-invert")
             assert sc.stable == qz.stable
-            assert np.array_equal(sc.multipliers, std.multipliers)  # clear verdicts here: the standard form's
+            assert np.array_equal(sc.multipliers, si.multipliers)  # clear verdicts here: shift-invert's
             verdicts.add(qz.stable)
     assert verdicts == {True, False}
 
@@ -124,12 +124,12 @@ def test_hill_screened_takes_qz_near_the_threshold(nnm2_h15):
     i = int(np.argmin(np.abs(np.log(b.energy_J / 2.6))))  # |mu| ~ 1.7
     hb, X, w = b.residual.hb, b.X[i], b.omega[i]
     with single_thread_blas():
-        m = hill(hb, X, w, solver="standard").max_multiplier
+        m = hill(hb, X, w, solver="shift-invert").max_multiplier
         for tol in (m - 1.0, m - 1.0 + 0.5 * st.SCREEN_MARGIN, m - 1.0 - 0.5 * st.SCREEN_MARGIN):  # at the threshold
             sc = st.hill_screened(hb, X, w, tol=tol)
             qz = hill(hb, X, w, tol=tol)
             assert np.array_equal(sc.multipliers, qz.multipliers) and sc.stable == qz.stable
-        far = st.hill_screened(hb, X, w, tol=m - 1.0 - 3 * st.SCREEN_MARGIN)  # clear: unstable by the standard form
+        far = st.hill_screened(hb, X, w, tol=m - 1.0 - 3 * st.SCREEN_MARGIN)  # clear: unstable by shift-invert
     assert not far.stable and far.max_multiplier == m
 
 

@@ -318,7 +318,7 @@ def _piece(job: tuple):
         if fm.hill.get("solver", "qz") != "qz":
             return [hill(b.residual.hb, b.X[i], b.omega[i], **fm.hill) for i in range(len(b.energy_J))]
         # QZ's multipliers where stability.csv writes them (the points nearest the shooting energies); elsewhere
-        # only the verdict is used (fep.csv), screened by the faster standard form (stability.hill_screened)
+        # only the verdict is used (fep.csv), screened by the faster shift-invert solve (stability.hill_screened)
         exact = set(_nearest_points(b, energies))
         return [hill(b.residual.hb, b.X[i], b.omega[i], **fm.hill) if i in exact
                 else hill_screened(b.residual.hb, b.X[i], b.omega[i], **fm.hill) for i in range(len(b.energy_J))]
