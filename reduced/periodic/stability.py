@@ -144,21 +144,26 @@ def hill(hb: HarmonicBalance, X: np.ndarray, omega: float, tol: float = HILL_TOL
 
 
 SCREEN_MARGIN = 1e-4  # hill_screened: a verdict by "shift-invert" is taken when its max |mu| is this far from
-# 1 + tol; nearer, QZ decides (measured on discrete-fep's drawn branches: max |mu| of "standard" within 1.0e-6 of
-# QZ's over all 740 points, of "shift-invert" within 3.6e-7 on NNM 2 at H = 15)
+# 1 + tol; nearer, QZ decides. Measured on discrete-fep's drawn branches (740 points, H = 1 and 15): max |mu| by
+# "shift-invert" within 5e-8 (relative) of QZ's at 739 points, within 2e-9 at the 311 points within 0.05 of
+# 1 + tol; at one point (NNM 1, H = 15, 1.3e-3 J, near grazing) 3.65 against QZ's 4.20, the 2n exponents of
+# smallest |Im| not the same ones (both unstable). The verdicts agreed at all 740 (benchmarks/fep_hill_speed.py).
 
 
 def hill_screened(hb: HarmonicBalance, X: np.ndarray, omega: float, tol: float = HILL_TOL,
                   solver: str = "qz", strict_zone: bool = False) -> HillResult:
-    """:func:`hill` for its stability verdict alone: the same ``stable`` as ``hill(..., solver="qz")``,
-    about 4 times faster at H = 15 on the 3-DOF model (4 against 16 ms a point).
+    """:func:`hill` for its stability verdict alone (the fep study's points whose multipliers are not
+    written): ``hill(..., solver="qz")``'s ``stable`` where measured, about 4 times faster at H = 15 on
+    the 3-DOF model (4 against 16 ms a point).
 
     The "shift-invert" solver first (the first-zone exponents by ARPACK, or the dense "standard" form
     where it cannot certify them); its exponents are QZ's up to round-off, so where its max |mu| is
-    more than :data:`SCREEN_MARGIN` from the threshold 1 + tol, QZ's verdict is the same and that
-    result is returned; nearer the threshold (or not finite), the "qz" result. The multipliers returned
-    may then differ from QZ's in the last digits: use :func:`hill` where they are written. Other
-    solvers than "qz" are passed to :func:`hill` unchanged.
+    more than :data:`SCREEN_MARGIN` from the threshold 1 + tol, that result is returned; nearer the
+    threshold (or not finite), the "qz" result. Not a proof: where Hill's selection of the 2n exponents
+    of smallest |Im lam| is not robust (near grazing) the two solvers can keep different exponents
+    (:data:`SCREEN_MARGIN`'s comment: one point of 740, both unstable). The multipliers returned may
+    differ from QZ's: use :func:`hill` where they are written. Other solvers than "qz" are passed to
+    :func:`hill` unchanged.
 
     Parameters and returns: as :func:`hill`.
     """
