@@ -63,11 +63,12 @@ def main() -> None:
                     ref = out
                 else:
                     got = out
-    same_verdicts = all(h.stable == g.stable for rs, gs in zip(ref, got) for h, g in zip(rs, gs))
+    same_verdicts = all(h.stable == g.stable for rs, gs in zip(ref, got, strict=True)
+                        for h, g in zip(rs, gs, strict=True))
     same_written = all(ref[k][i].max_multiplier == got[k][i].max_multiplier
                        for k, (b, E) in enumerate(jobs) for i in nnm_fep._nearest_points(b, E))
     diff = max(abs(h.max_multiplier - hill(b.residual.hb, b.X[i], b.omega[i], solver="shift-invert").max_multiplier)
-               for (b, _), rs in zip(jobs, ref) for i, h in enumerate(rs))
+               for (b, _), rs in zip(jobs, ref, strict=True) for i, h in enumerate(rs))
     med = {k: np.median(np.array(v), axis=0) for k, v in times.items()}
     print(f"{a.scene}: {len(jobs)} branches, {n_points} points, {a.repeats} repeats interleaved")
     for k in ("old", "new"):
