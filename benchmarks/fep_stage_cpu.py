@@ -32,7 +32,8 @@ def main() -> None:
             c, w = time.process_time(), time.perf_counter()
             nnm_fep.compute_fep(scene, False)
             res.setdefault(name, []).append((time.process_time() - c, time.perf_counter() - w))
-            print(name, rep, "cpu %.2f s, wall %.2f s" % res[name][-1], flush=True)
+            cpu, wall = res[name][-1]
+            print(name, rep, f"cpu {cpu:.2f} s, wall {wall:.2f} s", flush=True)
     nnm_fep.hill_screened = screened
     print(res)
 
