@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import reduced.periodic.stability as st
+from reduced._blas import single_thread_blas
 from reduced.models.discrete import DiscreteParams
 from reduced.periodic.backbones import nnm_branch
 from reduced.periodic.shooting import conservative, shoot
@@ -98,3 +99,45 @@ def test_shift_invert_falls_back_to_the_dense_solve(nnm2_h15, monkeypatch):
     monkeypatch.setattr(st, "DENSE_BELOW", 100)
     assert st._nearest_exponents(*hb.hill_matrices(X, w), hb.n, w, False) is None
     assert np.array_equal(hill(hb, X, w, solver="shift-invert").exponents, ref.exponents)
+
+
+# hill_screened (the fep study's verdicts off the written points): the same verdict as QZ at every point of
+# NNM 2 at H = 15 up to 200 J (stable and unstable stretches), shift-invert's multipliers where the
+# verdict is clear, QZ's bits where shift-invert's max |mu| is within SCREEN_MARGIN of 1 + tol.
+def test_hill_screened_gives_qz_verdicts(nnm2_h15):
+    b = nnm2_h15
+    hb = b.residual.hb
+    verdicts = set()
+    with single_thread_blas():  # as the stage runs it (threaded BLAS on 186 rows is slow on a shared machine)
+        for i in range(0, len(b.energy_J), 8):
+            qz = hill(hb, b.X[i], b.omega[i])
+            sc = st.hill_screened(hb, b.X[i], b.omega[i])
+            si = hill(hb, b.X[i], b.omega[i], solver="shift-invert")
+            assert sc.stable == qz.stable
+            assert np.array_equal(sc.multipliers, si.multipliers)  # clear verdicts here: shift-invert's
+            verdicts.add(qz.stable)
+    assert verdicts == {True, False}
+
+
+def test_hill_screened_takes_qz_near_the_threshold(nnm2_h15):
+    b = nnm2_h15
+    i = int(np.argmin(np.abs(np.log(b.energy_J / 2.6))))  # |mu| ~ 1.7
+    hb, X, w = b.residual.hb, b.X[i], b.omega[i]
+    with single_thread_blas():
+        m = hill(hb, X, w, solver="shift-invert").max_multiplier
+        for tol in (m - 1.0, m - 1.0 + 0.5 * st.SCREEN_MARGIN, m - 1.0 - 0.5 * st.SCREEN_MARGIN):  # at the threshold
+            sc = st.hill_screened(hb, X, w, tol=tol)
+            qz = hill(hb, X, w, tol=tol)
+            assert np.array_equal(sc.multipliers, qz.multipliers) and sc.stable == qz.stable
+        far = st.hill_screened(hb, X, w, tol=m - 1.0 - 3 * st.SCREEN_MARGIN)  # clear: unstable by shift-invert
+    assert not far.stable and far.max_multiplier == m
+
+
+def test_hill_matrices_j0_is_the_residual_jacobian_bit_for_bit(nnm2_h15):
+    # hill_matrices builds J0 = A + dF/dX without R and dR/domega: residual()'s dR/dX, the same bits
+    b = nnm2_h15
+    hb = b.residual.hb
+    for i in (0, len(b.energy_J) // 2, len(b.energy_J) - 1):
+        J0, J1, J2 = hb.hill_matrices(b.X[i], b.omega[i])
+        assert np.array_equal(J0, hb.residual(b.X[i], b.omega[i])[1])
+        assert np.array_equal(J2, np.kron(np.eye(2 * hb.H + 1), hb.M))

@@ -60,7 +60,7 @@ from reduced.periodic import nnm2
 from reduced.periodic.backbones import START_FRACTION, hb_point_at_energy, nnm_branch
 from reduced.periodic.hb import NewtonError, default_samples
 from reduced.periodic.shooting import conservative, shooting_branch
-from reduced.periodic.stability import compare, hill
+from reduced.periodic.stability import compare, hill, hill_screened
 from reduced.transient.flow import Flow
 
 N_FOLLOWED = 3  # NNMs followed: the lowest open-gap modes that move the gaps (the 3-DOF model's three)
@@ -302,7 +302,7 @@ def _piece(job: tuple):
     """One independent piece of the study: ``("branch", fm, spec, nnm, H, N, backbone1)`` an HB branch (the
     points of its one-harmonic branch, or None),
     ``("shooting", fm, spec, nnm, guides)`` the shooting orbits of one NNM (energies, orbits, wall_s), or
-    ``("hill", fm, spec, nnm, branch)`` Hill's method at every point of one branch."""
+    ``("hill", fm, spec, nnm, branch, shooting energies)`` Hill's method at every point of one branch."""
     kind, fm, spec, mode = job[:4]
     if kind == "branch":
         H, N, backbone1 = job[4:]
@@ -310,14 +310,31 @@ def _piece(job: tuple):
                           **fm.branch)
     if kind == "shooting":
         guides = job[4]
-        E0 = guides[-1].energy_J[0]
-        energies = np.logspace(np.log10(E0), np.log10(spec.energy_max_J), spec.n_shooting)
+        energies = _shooting_energies(spec, guides)
         t0 = time.perf_counter()
         return energies, shooting_branch(Flow(fm.system), energies, guides, **fm.shooting), time.perf_counter() - t0
     if kind == "hill":
-        b = job[4]
-        return [hill(b.residual.hb, b.X[i], b.omega[i], **fm.hill) for i in range(len(b.energy_J))]
+        b, energies = job[4:]
+        if fm.hill.get("solver", "qz") != "qz":
+            return [hill(b.residual.hb, b.X[i], b.omega[i], **fm.hill) for i in range(len(b.energy_J))]
+        # QZ's multipliers where stability.csv writes them (the points nearest the shooting energies); elsewhere
+        # only the verdict is used (fep.csv), screened by the faster shift-invert solve (stability.hill_screened)
+        exact = set(_nearest_points(b, energies))
+        return [hill(b.residual.hb, b.X[i], b.omega[i], **fm.hill) if i in exact
+                else hill_screened(b.residual.hb, b.X[i], b.omega[i], **fm.hill) for i in range(len(b.energy_J))]
     raise ValueError(f"unknown piece {kind!r}")
+
+
+def _shooting_energies(spec, guides: list) -> np.ndarray:
+    """J, the energies of the shooting orbits of one NNM: ``[fep] n_shooting`` log-spaced from the first
+    point of its last guide (its one-harmonic branch) to ``[fep] energy_max_J``."""
+    E0 = guides[-1].energy_J[0]
+    return np.logspace(np.log10(E0), np.log10(spec.energy_max_J), spec.n_shooting)
+
+
+def _nearest_points(b, energies: np.ndarray) -> list[int]:
+    """Index of the point of branch ``b`` nearest in log energy to each of ``energies`` (:func:`_stability`)."""
+    return [int(np.argmin(np.abs(np.log(b.energy_J / E)))) for E in energies]
 
 
 def _guides(fm: FEPModel, spec, branches: dict, mode: int) -> list:
@@ -337,7 +354,8 @@ def _shooting_and_hills(fm: FEPModel, spec, branches: dict, bar) -> tuple[dict, 
     bar.set_postfix_str("shooting and Hill")
     hill_keys = [(mode, H) for mode in range(n) for H in spec.harmonics]
     pieces = [("shooting", fm, spec, mode, _guides(fm, spec, branches, mode)) for mode in range(n)]
-    pieces += [("hill", fm, spec, mode, branches[(mode, H, None)]) for mode, H in hill_keys]
+    pieces += [("hill", fm, spec, mode, branches[(mode, H, None)],
+                _shooting_energies(spec, _guides(fm, spec, branches, mode))) for mode, H in hill_keys]
     out = fan_out(_piece, pieces)
     bar.update(2 * n)
     return dict(zip(range(n), out[:n], strict=True)), dict(zip(hill_keys, out[n:], strict=True))
@@ -356,7 +374,7 @@ def _stability(spec, n: int, branches: dict, shots: dict, hills: dict) -> tuple[
             b = branches[(mode, H, None)]
             hm = np.array([h.max_multiplier for h in hills[(mode, H)]])
             hs = np.array([h.stable for h in hills[(mode, H)]])
-            idx = [int(np.argmin(np.abs(np.log(b.energy_J / E)))) for E in energies]
+            idx = _nearest_points(b, energies)
             near = np.array([abs(np.log(b.energy_J[i] / E)) < 0.05 for i, E in zip(idx, energies, strict=True)])
             cmp = compare(energies, np.where(near, fl_max, np.nan), fl_st, hm[idx], hs[idx])
             n_dis[f"NNM {mode + 1} H={H}"] = cmp.n_disagree

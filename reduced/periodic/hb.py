@@ -402,8 +402,10 @@ class HarmonicBalance:
 
         A perturbation e^{lam t} p(tau) of the periodic solution, p in the HB basis, obeys
         J0 = dR/dX, J1 = 2 omega kron(Nab, M) + kron(I, C), J2 = kron(I, M).
+        J0 is :meth:`residual`'s A + dF/dX (the same bits) without R and dR/domega, which Hill does not use.
         """
-        _, J0, _ = self.residual(X, omega)
+        _, w = self.force(self.E @ self.unpack(np.asarray(X, float)))
+        J0 = self.linear_operator(omega) + self._aft_jacobian(w)
         I = np.eye(2 * self.H + 1)
         J1 = 2.0 * omega * np.kron(self.Nab, self.M)
         if self.C is not None:
