@@ -165,7 +165,24 @@ def hill_screened(hb: HarmonicBalance, X: np.ndarray, omega: float, tol: float =
     differ from QZ's: use :func:`hill` where they are written. Other solvers than "qz" are passed to
     :func:`hill` unchanged.
 
-    Parameters and returns: as :func:`hill`.
+    Parameters
+    ----------
+    hb : HarmonicBalance
+        The discretisation of the solution.
+    X : (n (2H+1),) ndarray of float
+        HB coefficients.
+    omega : float
+        rad/s, the solution's frequency.
+    tol : float
+        Stability tolerance stored in the result.
+    solver : {'qz', 'standard', 'shift-invert'}
+        "qz": screened as above; another is passed to :func:`hill`.
+    strict_zone : bool
+        As :func:`hill`.
+
+    Returns
+    -------
+    HillResult
     """
     if solver != "qz":
         return hill(hb, X, omega, tol, solver, strict_zone)

@@ -188,27 +188,7 @@ def pass_through(system: GapSystem, table: FrictionTable, Minv: np.ndarray, s: i
         # one has no root whatever its ends' size, another none when its bound is below the band
         if np.any(~mono[:g] & (top[:g] >= -band[i])):
             return _decline("touch before the crossing")
-        lo, hi = grid[g], grid[g + 1]
-        q_lo, q_hi = qg[i, g], qg[i, g + 1]
-        for _ in range(100):  # Newton from the bracket's end nearer the root (bisection where it would leave it)
-            x, qx = (hi, q_hi) if q_hi < -q_lo else (lo, q_lo)
-            dx = _poly_at(Q[i, 1:], x)
-            if dx > 0.0 and abs(qx) <= 2.0 * EPS * x * dx:
-                lo = hi = x - qx / dx  # Newton's step below the last bit: the root
-                break
-            mid = x - qx / dx if dx > 0.0 else 0.5 * (lo + hi)
-            if not lo < mid < hi:
-                mid = 0.5 * (lo + hi)
-            if mid <= lo or mid >= hi:
-                break
-            q_mid = _poly_at(Q[i], mid)
-            if q_mid >= 0.0:
-                hi, q_hi = mid, q_mid
-            else:
-                lo, q_lo = mid, q_mid
-            if hi - lo <= 4.0 * EPS * hi or q_hi == 0.0:
-                break
-        tau = hi
+        tau = _root(Q[i], grid[g], grid[g + 1], qg[i, g], qg[i, g + 1])
         d1 = _poly_at(Q[i, 1:], tau)
         if not d1 > 100.0 * band[i] / reach:
             return _decline("graze")  # a touch, not a crossing
@@ -222,8 +202,54 @@ def pass_through(system: GapSystem, table: FrictionTable, Minv: np.ndarray, s: i
         return _decline("two events at one instant")
     if e == fresh or tau <= hmin:
         return _decline("the switched slot again or below the floor")
-    n = system.n
     yt = _poly_at(D.T, tau)
+    dW, dWf = _works(system, parts, D, tau, fact)
+    return PassThrough(float(tau), e, yt, dW, dWf)
+
+
+def _root(q: np.ndarray, lo: float, hi: float, q_lo: float, q_hi: float) -> float:
+    """The root of the polynomial q (Taylor coefficients) in [lo, hi], q(lo) < 0 <= q(hi): Newton from the
+    bracket's end nearer the root, bisection where Newton would leave it; the right end of the last bracket.
+
+    Parameters
+    ----------
+    q : (K,) the polynomial's Taylor coefficients (q(t) = sum_k q_k t^k / k!)
+    lo, hi : s, the bracket
+    q_lo, q_hi : q(lo) < 0 and q(hi) >= 0
+    """
+    for _ in range(100):
+        x, qx = (hi, q_hi) if q_hi < -q_lo else (lo, q_lo)
+        dx = _poly_at(q[1:], x)
+        if dx > 0.0 and abs(qx) <= 2.0 * EPS * x * dx:
+            return x - qx / dx  # Newton's step below the last bit: the root
+        mid = x - qx / dx if dx > 0.0 else 0.5 * (lo + hi)
+        if not lo < mid < hi:
+            mid = 0.5 * (lo + hi)
+        if mid <= lo or mid >= hi:
+            break
+        q_mid = _poly_at(q, mid)
+        if q_mid >= 0.0:
+            hi, q_hi = mid, q_mid
+        else:
+            lo, q_lo = mid, q_mid
+        if hi - lo <= 4.0 * EPS * hi or q_hi == 0.0:
+            break
+    return hi
+
+
+def _works(system: GapSystem, parts: tuple, D: np.ndarray, tau: float, fact: np.ndarray) -> tuple[float, float]:
+    """(viscous work, friction work) over [0, tau] of the state's series D: each an integral of a product of
+    two polynomials, int_0^tau (sum_i p_i t^i / i!) (sum_j r_j t^j / j!) dt = p^T Wt r.
+
+    Parameters
+    ----------
+    system : the run's system (its C, B, offsets)
+    parts : :func:`_flow_parts`' tuple for the state (its last two: the sliders' rate rows and their terms)
+    D : (ORDER + 1, 2n + p) the state's Taylor coefficients (:func:`_series`)
+    tau : s, the upper limit
+    fact : (ORDER + 1,) the factorials 0! ... ORDER!
+    """
+    n = system.n
     vq = D[:, n:2 * n]
     Cv = vq @ system.C  # (ORDER + 1, n)
     Gm = Cv @ vq.T  # v_i^T C v_j
@@ -237,7 +263,7 @@ def pass_through(system: GapSystem, table: FrictionTable, Minv: np.ndarray, s: i
         pen[0] -= system.offset[j]
         rate = D[:, n:2 * n] @ parts[-2][k]
         dWf += a * float(pen @ Wt @ rate)
-    return PassThrough(float(tau), e, yt, dW, dWf)
+    return dW, dWf
 
 
 def switch(system: GapSystem, table: FrictionTable, s: int, e: int, y: np.ndarray, fric: tuple) -> tuple[int, float]:
