@@ -152,25 +152,32 @@ LIMITS = (
      "eigenvalues, its peaks); from the linear orbit at 900 Hz the curve needs no HB (the same family), which the "
      "stage does not use yet (its HB-first start is kept: the other levels' families start at f_min)"),
     ("main job, bearingshaft run",
-     "the machine changed on 2026-11-27 (an Intel Xeon at 2.1 GHz, sum(range(10**6)) 18.3 ms; before, an AMD EPYC): "
-     "measured on it, quiet, after warming the reduced-model cache (2026-11-27 07:50 UTC, load 0.4 at the start): "
-     "440 s wall, 870 s CPU. The same job on the EPYC before this session's changes: 359 s, 705 s. Stages whose code "
-     "did not change run 1.2-1.6x as long here (discrete-fep's nnm 29.7 -> 46.8 s; alone, 48.4 s against 23 s in "
-     "fep_headline.csv; rom-fep 49 -> 62 s; hammer-test's hammer 25 -> 32 s), so the machine, not the code, moved "
-     "the job past 360 s. Cut this session: Dask's own monitoring turned down on the local cluster (no 10 ms stack "
-     "sampler: 128 against 145 s CPU on four scenes, load 6-10), a mesh cache (9 CPU-s a job), the reduced beam's "
-     "forced response averaged over its mirror (rom-frc 286 -> 277 s wall on the slower machine, with asymmetric "
-     "families it did not have). Added: the friction stage's grid of exact orbits (+5 % of that stage). The frc "
-     "stages remain most of it (rom-frc 277 s, discrete-frc 196 s, discrete-friction-frc 101 s); their continuation "
-     "paths changed with round-off at clusters of grazings; session 13's multi_grazing_ds = 1e-3 makes them robust "
-     "(the 10 N main family of discrete-frc the whole curve, 1.8x the CPU of the old, shorter path: "
-     "reduced.periodic.exact_frc's docstring); the job was not re-timed in session 13 (machine under load 8-13)"),
+     "on this session's machine (an Intel Xeon at 2.1 GHz; the targets were first met on an AMD EPYC, where the job "
+     "took 359 s before session 12's changes), quiet, reduced-model cache warm (2026-11-27 10:24 UTC, load 1.2 at "
+     "the start): 374 s wall, 740 s CPU; session 12's code took 440 s, 870 s here. Session 13 cut the Jenkins "
+     "element's return map into a numba kernel (discrete-friction-frc 101 -> 86 s wall, its files byte-identical, "
+     "while it gained a response map: about +10 s CPU), screened Hill's method by shift-invert in the fep study "
+     "(discrete-fep 47 -> 41 s, files byte-identical), passed the hammer-friction records through the friction "
+     "states entered for an instant (29 -> 21 s), and made the exact continuation robust to round-off at clusters "
+     "of grazings (multi_grazing_ds = 1e-3), which lengthens the paths it follows, with rom-frc 277 -> 237 s and "
+     "discrete-frc 196 -> 141 s wall in this run (their first orbit no longer runs a failing load continuation; "
+     "duplicate switched families dropped). The frc stages are 464 of the stages' 734 s: rom-frc's exact families "
+     "(32 %) and its response map (29 %, numba kernels) lead its profile"),
     ("test suite, python -m pytest",
-     "measured on this session's machine (an Intel Xeon at 2.1 GHz, 2026-11-27 08:36 UTC, load 2.0 at the start): "
-     "238 s wall, 469 s CPU, 1422 tests, after tests/file_seconds.csv was rewritten on it; a run just after edits to "
-     "three files holding numba kernels took 311 s (their compilations are cached per source file). On the AMD EPYC "
-     "of the session before: 180 s, 354 s, 1387 tests. No test takes more than 23 s "
-     "(results/performance/job_durations.csv); the suite's time is spread over ~100 files"),
+     "measured on this session's machine (an Intel Xeon at 2.1 GHz, 2026-11-27 10:38 UTC, load 1.7 at the start, "
+     "after tests/file_seconds.csv was rewritten on it): 312 s wall, 616 s CPU, 1467 tests. Session 12's 1422 tests "
+     "took 238 s, 469 s here. The 45 new tests (friction map, pass-through, lumped kernel, continuation guard, "
+     "Hill screen) add ~20 s of CPU; test_frc's stage test doubled (18 -> 38 s: the robust continuation's main "
+     "family at 1 N, 2219 points to 40 Hz, and its switched families); others grew without a change of theirs "
+     "(test_results_folder 35 -> 47 s, test_hammer 28 -> 40 s in the file timings), as the machine's speed moved "
+     "during the session (sum(range(10**6)) 18-32 ms)"),
+    ("hammer-test record with friction (mu = 0.3, axial + lateral), 200 N blow, cold",
+     "the 200 N record's cold ratio straddles 2 on this machine: 2.06 (this row, load 2.5-5.4), then 1.64 and 2.18 "
+     "in two quiet runs (2026-11-27 10:54 and 10:57 UTC; 500 N 1.73, 1.80; 1000 N 1.96, 1.59). Of the 23 friction "
+     "states the 200 N record builds (a 260 x 260 eigendecomposition and inverse each, 40-80 ms), 16-21 a record are "
+     "entered at an event where a slot or a slider's cone starts at zero and are not passed through "
+     "(reduced.transient.friction_probe declines them: the kernel's own rules decide there); the friction model's "
+     "top mode (22.97 kHz against 15.57 kHz) also makes the anti-alias rate 3x instead of 2x"),
     ("FE modal, 112,629 DOFs: relative residual",
      "the twelve soft-spring modes (0.4-34 Hz) stop at 1-3x their round-off floor eps |||K| |phi||| / ||K phi||, "
      "above 1e-8 in double precision; the elastic modes reach 4-8e-10"),
