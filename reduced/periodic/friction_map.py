@@ -57,7 +57,7 @@ from scipy.linalg import expm
 from reduced import _checks as _check
 from reduced.models.gaps import GapSystem
 from reduced.periodic.friction_sensitivity import LOG_EVENTS, FlowSensitivity
-from reduced.periodic.response_map import MapOptions, ResponseMap, sweep
+from reduced.periodic.response_map import MapOptions, ResponseMap, map_inputs, sweep
 from reduced.periodic.stepped_sine import slowest_decay_rate
 from reduced.transient.exact import ExactIntegratorError
 from reduced.transient.friction import FrictionFlow, initial_friction_state
@@ -367,20 +367,8 @@ def friction_response_map(system: GapSystem, load, amplitude_N: float, freq_hz, 
     _check.gap_system(system)
     if system.friction is None:
         raise _check.InvalidArgument("system has no friction: use reduced.periodic.response_map.response_map")
-    b = _check.vector("load", load, system.n)
-    P = _check.positive("amplitude_N", amplitude_N, "N")
-    freqs = np.atleast_1d(_check.series("freq_hz", freq_hz))
-    if np.any(freqs <= 0.0):
-        raise _check.InvalidArgument("freq_hz must be > 0 Hz")
-    _check.choice("direction", direction, ("up", "down"))
-    opts = options if options is not None else MapOptions()
-    rows = np.eye(system.n) if point_rows is None else np.atleast_2d(np.asarray(point_rows, float))
-    names = tuple(point_names or system.dof_names)
-    pair = None
-    if all(m_ in names for m_ in mirror):
-        a, c = names.index(mirror[0]), names.index(mirror[1])
-        rows = np.vstack([rows, rows[a] - rows[c]])
-        pair = (a, c, rows.shape[0] - 1)
+    b, P, freqs, opts, rows, names, pair = map_inputs(system, load, amplitude_N, freq_hz, direction, options,
+                                                      point_rows, point_names, mirror)
     states = _States(system, b, P)
     N = states.N
     try:

@@ -622,6 +622,33 @@ def response_map(system: GapSystem, load, amplitude_N: float, freq_hz, *, direct
         A failure of the exact flow is a RuntimeError naming the frequency.
     """
     _check.gap_system(system)
+    b, P, freqs, opts, rows, names, pair = map_inputs(system, load, amplitude_N, freq_hz, direction, options,
+                                                      point_rows, point_names, mirror)
+    table = state_table(system)
+    modal = modal_table(system, table)
+    norm = _fixed_norm(system, float(freqs[0]))
+    sigma = slowest_decay_rate(system, b)
+    y = np.zeros(2 * system.n) if y0 is None else _check.vector("y0", y0, 2 * system.n)
+    return sweep(lambda f: PeriodMap(system, b, P, f, rows=rows, table=table, modal=modal, norm=norm), y, P, freqs,
+                 sigma, opts, direction=direction, names=names, mirror=pair, jump_step_hz=jump_step_hz,
+                 extend_step_hz=extend_step_hz, progress=progress)
+
+
+def map_inputs(system: GapSystem, load, amplitude_N: float, freq_hz, direction: str, options, point_rows,
+               point_names, mirror) -> tuple:
+    """A response map's inputs checked (one-line InvalidArgument naming the field) and its output rows: the
+    points' rows, with the mirror pair's difference row appended where both its names are points.
+
+    Parameters
+    ----------
+    system : the gap system (checked by the caller)
+    load, amplitude_N, freq_hz, direction, options, point_rows, point_names, mirror : as :func:`response_map`
+
+    Returns
+    -------
+    (b, P, freqs, opts, rows, names, pair) : the load (n,), its amplitude, the frequencies (> 0), the options,
+        the output rows, their names, and (a, c, row of x_a - x_c) or None
+    """
     b = _check.vector("load", load, system.n)
     P = _check.positive("amplitude_N", amplitude_N, "N")
     freqs = np.atleast_1d(_check.series("freq_hz", freq_hz))
@@ -636,14 +663,7 @@ def response_map(system: GapSystem, load, amplitude_N: float, freq_hz, *, direct
         a, c = names.index(mirror[0]), names.index(mirror[1])
         rows = np.vstack([rows, rows[a] - rows[c]])
         pair = (a, c, rows.shape[0] - 1)
-    table = state_table(system)
-    modal = modal_table(system, table)
-    norm = _fixed_norm(system, float(freqs[0]))
-    sigma = slowest_decay_rate(system, b)
-    y = np.zeros(2 * system.n) if y0 is None else _check.vector("y0", y0, 2 * system.n)
-    return sweep(lambda f: PeriodMap(system, b, P, f, rows=rows, table=table, modal=modal, norm=norm), y, P, freqs,
-                 sigma, opts, direction=direction, names=names, mirror=pair, jump_step_hz=jump_step_hz,
-                 extend_step_hz=extend_step_hz, progress=progress)
+    return b, P, freqs, opts, rows, names, pair
 
 
 def sweep(period_map, y0: np.ndarray, amplitude_N: float, freq_hz: np.ndarray, sigma: float, opts: MapOptions, *,
