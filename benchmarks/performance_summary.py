@@ -74,7 +74,9 @@ LIMITS = (
      "matrix-vector products (below)"),
     ("explicit (central difference) ringdown in the open-gap modal coordinates, jumped in blocks",
      "the block kernel's own row, alternating with the physical and modal kernels; its changes and the load "
-     "are those of the rom-impulse row above (2.97e7 steps/s at load 2.1, the fastest run 3.08e7). "
+     "are those of the rom-impulse row above. The same kernel, in the same run (2026-11-27 11:07 UTC, load 1.0-1.1): "
+     "3.03e7 steps/s in the default row, 2.45e7 here (fastest 2.88e7), where it alternates with the two slower "
+     "kernels; helper D's run at load 2.1 gave 2.97e7 here (fastest 3.08e7): the two rows differ by the run's noise. "
      "A block costs two matrix-vector products from the block's start state (the stop rows of its steps and the "
      "end state with its mean velocity: up to 56 + 36 rows of 25 columns, SIMD over the rows, ~160 and ~110 ns "
      "in CPU time at load 8; three other layouts of the product were 2-6x slower, measured) and two short "
