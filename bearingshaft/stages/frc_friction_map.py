@@ -22,10 +22,9 @@ import time
 
 import numpy as np
 
-from bearingshaft.output import write_rows
 from bearingshaft.stages.frc_friction_bands import contact_band
 from bearingshaft.stages.frc_map import BAND_MARGIN_HZ
-from bearingshaft.stages.frc_map_files import JUMP_FIELDS, MAP_FIELDS, REGIME_COLORS, _label, _sweep_rows, _sweep_stats
+from bearingshaft.stages.frc_map_files import REGIME_COLORS, _label, write_tables, x1_column
 from bearingshaft.stages.frc_results import MapLevel
 from reduced.periodic.friction_map import friction_response_map
 from reduced.periodic.response_map import MapOptions, linear_contact_bands, map_frequencies, merge_bands
@@ -103,10 +102,6 @@ def state_at(level: MapLevel | None, freq_hz: float, direction: str = "up"):
     return pt, pt.state
 
 
-def _col(names: tuple) -> int:
-    return names.index("x1") if "x1" in names else 0
-
-
 def write(result, writer) -> None:
     """response_map.csv, response_map_jumps.csv and response_map.png (nothing without a map); the statistics in
     ``writer.stats["frc"]["response_map"]``.
@@ -119,17 +114,8 @@ def write(result, writer) -> None:
     maps = {P: lvl for P, lvl in (getattr(result, "response_maps", {}) or {}).items() if lvl is not None}
     if not maps:
         return
-    col = _col(result.names)
-    rows, jumps, st = [], [], {}
-    for P, lvl in maps.items():
-        for d, rm in lvl.sweeps.items():
-            r, j = _sweep_rows(P, d, rm, col)
-            rows += r
-            jumps += j
-            st[f"{P:g} N {d}"] = _sweep_stats(rm, lvl)
-    write_rows(writer.path("response_map.csv"), rows, fields=MAP_FIELDS)
-    write_rows(writer.path("response_map_jumps.csv"), jumps, fields=JUMP_FIELDS)
-    writer.stats.setdefault("frc", {})["response_map"] = st
+    col = x1_column(result)
+    writer.stats.setdefault("frc", {})["response_map"] = write_tables(maps, writer, col)
     _plot(writer.path("response_map.png"), result, maps, col)
 
 
@@ -165,7 +151,7 @@ def markdown(result) -> list[str]:
     maps = {P: lvl for P, lvl in (getattr(result, "response_maps", {}) or {}).items() if lvl is not None}
     if not maps:
         return []
-    col = _col(result.names)
+    col = x1_column(result)
     spec = result.scene.frc
     lines = ["## The response map: what a stepped-sine test sees (response_map.csv, response_map.png)", "",
              f"A stepped sine up and down by the exact friction flow (stick, slip and gaps as events), "

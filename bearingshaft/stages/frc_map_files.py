@@ -61,6 +61,28 @@ def write(result: FRCResult, writer, stats: dict, drawn: dict) -> None:
     if not maps:
         return
     col = x1_column(result)
+    stats["response_map"] = write_tables(maps, writer, col)
+    _plot_map(writer.path("response_map.png"), result, col, drawn)
+    _plot_spectra(writer.path("response_map_spectra.png"), result)
+
+
+def write_tables(maps: dict, writer, col: int) -> dict:
+    """response_map.csv and response_map_jumps.csv of every level's sweeps; their statistics (for
+    provenance.json), keyed "<P> N <direction>".
+
+    Parameters
+    ----------
+    maps : dict
+        P -> the level's MapLevel (its ``sweeps``: direction -> ResponseMap).
+    writer : StageWriter
+        Where the files go.
+    col : int
+        The column of x1 among the monitored points.
+
+    Returns
+    -------
+    dict
+    """
     rows, jumps, st = [], [], {}
     for P, lvl in maps.items():
         for d, rm in lvl.sweeps.items():
@@ -70,13 +92,12 @@ def write(result: FRCResult, writer, stats: dict, drawn: dict) -> None:
             st[f"{P:g} N {d}"] = _sweep_stats(rm, lvl)
     write_rows(writer.path("response_map.csv"), rows, fields=MAP_FIELDS)
     write_rows(writer.path("response_map_jumps.csv"), jumps, fields=JUMP_FIELDS)
-    stats["response_map"] = st
-    _plot_map(writer.path("response_map.png"), result, col, drawn)
-    _plot_spectra(writer.path("response_map_spectra.png"), result)
+    return st
 
 
 def x1_column(result: FRCResult) -> int:
-    """The column of x1 among the output points (the response map's point), else the first.
+    """The column of x1 among the output points (the response map's point), else the first; of any stage result
+    with ``names`` (the friction stage's too).
 
     Parameters
     ----------
