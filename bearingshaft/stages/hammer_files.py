@@ -219,7 +219,7 @@ def draw_friction(rig: VirtualRig, rec: Record, fc, scene: Scene, labels: dict):
     ax.set_xlabel("time [s]")
     ax.set_ylabel("modal energy [J]")
     ax.set_title("energy of the open-gap longitudinal, lateral, yaw and roll modes", fontsize=10)
-    ax.legend(fontsize=8, ncol=4)
+    ax.legend(fontsize=8, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.22))  # below the axes, off the data
     return fig
 
 
