@@ -430,3 +430,12 @@ def test_integrator_speed_names_its_baseline_and_keeps_the_legends_off_the_point
             assert not _boxes_overlap(a.get_legend().get_window_extent(), a.get_window_extent())
     finally:
         plt.close(fig)
+
+
+def test_friction_panel_names_the_motions_it_does_not_draw():
+    """friction.png leaves out a run whose modal energy never reaches the panel (below ENERGY_FLOOR of the
+    peak) and says so in the title; a mode hidden in both runs is named once."""
+    hidden = [("lateral", "with"), ("lateral", "without"), ("yaw", "with"), ("yaw", "without"),
+              ("roll", "without")]
+    assert hammer_files._hidden_text(hidden) == "lateral, yaw (both runs); roll (without friction)"
+    assert hammer_files._hidden_text([("roll", "with")]) == "roll (with friction)"

@@ -147,6 +147,7 @@ def balance_text(error: float) -> str:
 
 
 DECAY_SHOWN = ("longitudinal", "lateral", "yaw", "roll")  # the motions friction at the tips acts on (friction.png)
+ENERGY_FLOOR = 1e-8  # friction.png's energy panel spans [ENERGY_FLOOR, 3] x the largest modal energy of either run
 
 
 def friction_csv(path: Path, fc) -> None:
@@ -204,23 +205,41 @@ def draw_friction(rig: VirtualRig, rec: Record, fc, scene: Scene, labels: dict):
         fig.colorbar(mesh, ax=ax, label="PSD [dB]", pad=0.01)
     ax = axes[2]
     colors = ("tab:blue", "tab:orange", "tab:green", "tab:red")
+    peak = max((max(d["with"]["peak_J"], d["without"]["peak_J"]) for k, d in fc.decay.items() if k in DECAY_SHOWN),
+               default=1.0)
+    floor = peak * ENERGY_FLOOR
+    hidden = []
     for c, label in zip(colors, DECAY_SHOWN, strict=True):
         if label not in fc.decay:
             continue
         d = fc.decay[label]
-        ax.semilogy(rec.t, np.maximum(d["with"]["energy_J"], 1e-300), color=c, lw=1.0,
-                    label=f"{label} ({d['freq_hz']:.3g} Hz), friction")
-        ax.semilogy(fc.frictionless.t, np.maximum(d["without"]["energy_J"], 1e-300), color=c, lw=1.0, ls="--",
-                    label=f"{label}, no friction")
-    peak = max((max(d["with"]["peak_J"], d["without"]["peak_J"]) for k, d in fc.decay.items() if k in DECAY_SHOWN),
-               default=1.0)
-    ax.set_ylim(peak * 1e-8, peak * 3)
+        for run, t, ls, what in (("with", rec.t, "-", f"{label} ({d['freq_hz']:.3g} Hz), friction"),
+                                 ("without", fc.frictionless.t, "--", f"{label}, no friction")):
+            if d[run]["peak_J"] < floor:  # never reaches the panel: no curve, no legend entry
+                hidden.append((label, run))
+                continue
+            ax.semilogy(t, np.maximum(d[run]["energy_J"], 1e-300), color=c, lw=1.0, ls=ls, label=what)
+    ax.set_ylim(floor, peak * 3)
     ax.set_xlim(rec.t[0], rec.t[-1])
     ax.set_xlabel("time [s]")
     ax.set_ylabel("modal energy [J]")
-    ax.set_title("energy of the open-gap longitudinal, lateral, yaw and roll modes", fontsize=10)
+    title = "energy of the open-gap longitudinal, lateral, yaw and roll modes"
+    if hidden:
+        title += f"\nnot drawn, below {ENERGY_FLOOR:g} of the peak all the record: " + _hidden_text(hidden)
+    ax.set_title(title, fontsize=10)
     ax.legend(fontsize=8, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.22))  # below the axes, off the data
     return fig
+
+
+def _hidden_text(hidden: list[tuple[str, str]]) -> str:
+    """'lateral, yaw, roll (both runs); longitudinal (without friction)' from (mode, run) pairs."""
+    runs = {}
+    for label, run in hidden:
+        runs.setdefault(label, []).append(run)
+    both = [k for k, v in runs.items() if len(v) == 2]
+    parts = [", ".join(both) + " (both runs)"] if both else []
+    parts += [f"{k} ({v[0]} friction)" for k, v in runs.items() if len(v) == 1]
+    return "; ".join(parts)
 
 
 def friction_text(fc, end_share_s: float) -> list[str]:
