@@ -196,7 +196,7 @@ def block_form(mats: tuple, om2: np.ndarray, offset: np.ndarray, side: np.ndarra
     Ls = block_lengths(mb, every_length)
     RGL = np.array([-(-(nu * L) // 8) * 8 for L in Ls], np.int64)
     TG = np.zeros((len(Ls), len(masks), ns, RGL.max()))
-    TS = np.zeros((len(Ls), len(masks), ns, 3 * n))
+    TS = np.zeros((len(Ls), len(masks), ns, -(-(3 * n + 2 * nu) // 8) * 8))
     for ic, mask in enumerate(masks):
         A = step_map(mats, offset, k, dt, mask)
         Ps = [np.eye(ns)]  # A^j, j = 0 .. mb, each the product of the one before (the same bits for any length)
@@ -206,7 +206,8 @@ def block_form(mats: tuple, om2: np.ndarray, offset: np.ndarray, side: np.ndarra
         for il, L in enumerate(Ls):
             for j in range(1, L + 1):
                 TG[il, ic, :, np.arange(nu) * L + j - 1] = rows[j]
-            TS[il, ic] = np.vstack([Ps[L][:2 * n], 0.5 * (Ps[L - 1][n:2 * n] + Ps[L][n:2 * n])]).T
+            TS[il, ic, :, :3 * n + 2 * nu] = np.vstack([Ps[L][:2 * n], 0.5 * (Ps[L - 1][n:2 * n] + Ps[L][n:2 * n]),
+                                                        rows[L], Bu @ (Ps[L][:n] + dt * Ps[L][n:2 * n])]).T
     LH = np.array([[_bounds(offset, side, rows_of[u], mask) for u in range(nu)] for mask in masks])
     lut = np.full(1 << m, -1, np.int64)
     lut[masks] = np.arange(len(masks))
@@ -268,7 +269,8 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
     n2 = 2 * n
     y = np.empty(TG.shape[3])
     st = np.empty(n2 + 1)
-    nxt = np.empty(3 * n)  # the block's end state and its mean velocity
+    RS = TS.shape[3]
+    nxt = np.empty(RS)  # the block's end state, its mean velocity and its stop rows now and at the next step
     for i in range(n):
         st[i] = z[i]
         st[n + i] = zd[i]
@@ -280,6 +282,7 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
     guess = -1  # the last block's contact state, tried first for the next
     last = -1  # the last block's contact state (-1 after a step of cd_modal)
     e_end = 0.0  # E of the state in contact state last (when last >= 0)
+    em_end = 0.0  # its modal part (without the stops')
     known = 0  # steps ahead known to stay in contact state ck
     ck = 0
     io = i0
@@ -329,10 +332,16 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
                     ck = c
                     continue
             if held:  # the block holds: jump
-                _matvec(TS[li, c], st, nxt, 3 * n, n2)
                 mk = masks[c]
-                e0 = e_end if last == c else _energy(st, om2, dt, Bu, umap, offset, k, mk)
-                e_end = _energy(nxt, om2, dt, Bu, umap, offset, k, mk)
+                if last == c:
+                    e0 = e_end
+                elif last >= 0:  # the last block's end state, its stop rows (in nxt) in this block's state
+                    e0 = em_end + _stop_energy(nxt, 3 * n, nu, umap, offset, k, mk)
+                else:
+                    e0 = _energy(st, om2, dt, Bu, umap, offset, k, mk)
+                _matvec(TS[li, c], st, nxt, RS, n2)
+                em_end = _modal_energy(nxt, om2, dt)
+                e_end = em_end + _stop_energy(nxt, 3 * n, nu, umap, offset, k, mk)
                 Wp += e0 - e_end
                 for col in range(n2):
                     st[col] = nxt[col]
@@ -442,6 +451,33 @@ def _energy(st, om2, dt, Bu, umap, offset, k, mask):
                 g1 += Bu[u, i] * st[n + i]
             g1 = g0 + dt * g1
             e += k[j] * (g1 - offset[j]) * (g0 - offset[j])
+        mask >>= 1
+        j += 1
+    return 0.5 * e
+
+
+@nb.njit(cache=True, fastmath={"reassoc", "contract"})
+def _modal_energy(nxt, om2, dt):
+    """The modal part of :func:`_energy`, (|zd|^2 + z^T om2 (z + dt zd)) / 2, of nxt = (z, zd, ...)."""
+    n = om2.shape[0]
+    e = 0.0
+    for i in range(n):
+        zi = nxt[i]
+        zdi = nxt[n + i]
+        e += zdi * zdi + om2[i] * zi * (zi + dt * zdi)
+    return 0.5 * e
+
+
+@nb.njit(cache=True, fastmath={"reassoc", "contract"})
+def _stop_energy(nxt, at, nu, umap, offset, k, mask):
+    """The closed stops' part of :func:`_energy`, sum k (g1 - offset) (g0 - offset) / 2 over the stops of
+    ``mask``, from the stop rows g0 = nxt[at + u] (at z) and g1 = nxt[at + nu + u] (at z + dt zd)."""
+    e = 0.0
+    j = 0
+    while mask:
+        if mask & 1:
+            u = umap[j]
+            e += k[j] * (nxt[at + nu + u] - offset[j]) * (nxt[at + u] - offset[j])
         mask >>= 1
         j += 1
     return 0.5 * e
