@@ -346,13 +346,11 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
                 for col in range(n2):
                     st[col] = nxt[col]
                 jumped = True
-                guess = c
+                guess = _row_state(nxt, 3 * n + nu, umap, offset, side, lut)  # the next step's, from its rows
                 last = c
                 pos += L
                 if known:
                     known -= L
-                    if known == 0:  # the next step leaves c (the check saw it): find its state, not try c
-                        guess = -1
             else:  # the switch is at the first step: one step of cd_modal
                 if jumped:
                     W, pw_old = _work(nxt, d, UT, Wp, dt)
@@ -481,6 +479,16 @@ def _stop_energy(nxt, at, nu, umap, offset, k, mask):
         mask >>= 1
         j += 1
     return 0.5 * e
+
+
+@nb.njit(cache=True, fastmath={"reassoc", "contract"})
+def _row_state(nxt, at, umap, offset, side, lut):
+    """The contact state of the stop rows g = nxt[at + u] by the kernel's rule (-1: none)."""
+    mask = 0
+    for j in range(offset.shape[0]):
+        if side[j] * (nxt[at + umap[j]] - offset[j]) > 0.0:
+            mask |= 1 << j
+    return lut[mask]
 
 
 @nb.njit(cache=True, fastmath={"reassoc", "contract"})
