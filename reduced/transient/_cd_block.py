@@ -307,15 +307,15 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
                 if c >= 0:
                     R = RGL[li]
                     _matvec(TG[li, c], st, y, R, n2)
-                    ok = True
+                    bad = 0
                     for u in range(nu):  # every stop as in the state at every step: the rows within [lo, hi]
                         lo = LH[c, u, 0]
                         hi = LH[c, u, 1]
                         for t in range(L):
                             g = y[u * L + t]
-                            ok &= (g >= lo) & (g <= hi)
+                            bad += (g < lo) | (g > hi)
                     held = L
-                    if not ok:  # the steps before the first that leaves the state
+                    if bad:  # the steps before the first that leaves the state
                         for u in range(nu):
                             lo = LH[c, u, 0]
                             hi = LH[c, u, 1]
