@@ -219,11 +219,29 @@ def block_form(mats: tuple, om2: np.ndarray, offset: np.ndarray, side: np.ndarra
 
 
 KEYS = ("Ls", "RGL", "TG", "TS", "LH", "lut", "masks", "om2")  # the form's arrays cd_block takes, in order
+CARRY = 6  # carry[:CARRY]: set, the last block's state, the next one's, E and its modal part at its end, W + dt p / 2
+
+
+def new_carry(nu: int) -> np.ndarray:
+    """A run's carry of :func:`cd_block` from call to call, not yet set: (CARRY + 2 nu,) zeros (the last block's
+    stop rows at its end and at the next step after the first CARRY).
+
+    Parameters
+    ----------
+    nu : int
+        Distinct stop rows.
+
+    Returns
+    -------
+    ndarray
+        The carry (float64).
+    """
+    return np.zeros(CARRY + 2 * nu)
 
 
 @nb.njit(cache=True, fastmath={"reassoc", "contract"})
 def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, RGL, TG, TS, LH, lut, masks, om2,
-             PhiT, offset, side, k, z, zd, dt, n_steps, every, out_x, out_v, out_W, W, pw_old, i0, a, bm, P, out_E, E,
+             PhiT, carry, offset, side, k, z, zd, dt, n_steps, every, out_x, out_v, out_W, W, pw_old, i0, a, bm, P, out_E, E,
              pe_old):
     """Advance n_steps as :func:`reduced.transient._cd_modal.cd_modal` (same arguments and returns, with the block
     form's arrays ``KEYS`` after the modal arrays) in blocks where the contact state holds. Each output interval
@@ -235,6 +253,9 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
     ``a`` = U^T zd on exit.
     Unlike ``cd_modal`` it stores the samples in physical coordinates, x = Phi z and v = Phi zd (PhiT = Phi^T,
     :func:`_physical_rows`): in the kernel, a sample's two products cost less than a pass over the buffers after.
+    What the blocks carry from one to the next (the last one's contact state and energy, the next one's state
+    read off its rows, W + dt p_n / 2) is kept in ``carry`` (:func:`new_carry`) from call to call, so that the
+    samples are the same bits however a run is cut into calls.
 
     Long because it is one numba loop over blocks whose branches (check, jump, one step) share the carried state;
     the matrix-vector products and the energy sums are helpers, called once a block, not a step.
@@ -253,6 +274,8 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
         The block form (om2 in rad^2/s^2).
     PhiT : ndarray
         (n, n) Phi^T, the open-gap modes transposed (C-contiguous).
+    carry : ndarray
+        (CARRY + 2 nu,) the blocks' carry, :func:`new_carry` before a run's first call; changed in place.
     offset, side, k, z, zd, dt, n_steps, every, out_x, out_v, out_W, W, pw_old, i0, a, bm, P, out_E, E, pe_old
         As ``cd_modal`` (dt in s, W in J).
     """
@@ -263,6 +286,7 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
                                             a, bm, P, out_E, E, pe_old)
         for r in range(i0, io):
             _physical_rows(PhiT, out_x, out_v, r)
+        carry[0] = 0.0  # a block after these steps starts afresh
         return W, pw_old, io, E, pe_old
     nu = Bu.shape[0]
     p = UT.shape[0]
@@ -279,10 +303,14 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
     zds = st[n:n2]
     Wp = W + 0.5 * dt * pw_old  # W + dt p_n / 2
     jumped = False  # the last advance was a block (p_n not formed yet)
-    guess = -1  # the last block's contact state, tried first for the next
+    guess = -1  # the next block's contact state as the last block's rows show it, tried first
     last = -1  # the last block's contact state (-1 after a step of cd_modal)
     e_end = 0.0  # E of the state in contact state last (when last >= 0)
-    em_end = 0.0  # its modal part (without the stops')
+    em_end = _modal_energy(st, om2, dt)  # its modal part (without the stops'); here the start state's
+    if carry[0]:  # as the last call left them
+        last, guess, e_end, em_end, Wp = int(carry[1]), int(carry[2]), carry[3], carry[4], carry[5]
+        for r in range(2 * nu):
+            nxt[3 * n + r] = carry[CARRY + r]
     known = 0  # steps ahead known to stay in contact state ck
     ck = 0
     io = i0
@@ -337,8 +365,8 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
                     e0 = e_end
                 elif last >= 0:  # the last block's end state, its stop rows (in nxt) in this block's state
                     e0 = em_end + _stop_energy(nxt, 3 * n, nu, umap, offset, k, mk)
-                else:
-                    e0 = _energy(st, om2, dt, Bu, umap, offset, k, mk)
+                else:  # from the state itself, as at a call's start (em_end: its modal part)
+                    e0 = em_end + _stop_energy_of(st, dt, Bu, umap, offset, k, mk)
                 _matvec(TS[li, c], st, nxt, RS, n2)
                 em_end = _modal_energy(nxt, om2, dt)
                 e_end = em_end + _stop_energy(nxt, 3 * n, nu, umap, offset, k, mk)
@@ -372,6 +400,7 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
                 Wp = W + 0.5 * dt * pw_old
                 guess = -1
                 last = -1
+                em_end = _modal_energy(st, om2, dt)
         if jumped:  # the sample: the last block's end
             W, pw_old = _work(nxt, d, UT, Wp, dt)
             jumped = False
@@ -394,6 +423,14 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
         for i in range(n):
             s += UT[q, i] * zd[i]
         a[q] = s
+    carry[0] = 1.0
+    carry[1] = last
+    carry[2] = guess
+    carry[3] = e_end
+    carry[4] = em_end
+    carry[5] = Wp
+    for r in range(2 * nu):
+        carry[CARRY + r] = nxt[3 * n + r]
     return W, pw_old, io, E, pe_old
 
 
@@ -429,15 +466,12 @@ def _matvec(Tc, st, y, R, n2):
 
 
 @nb.njit(cache=True, fastmath={"reassoc", "contract"})
-def _energy(st, om2, dt, Bu, umap, offset, k, mask):
-    """The scheme's discrete energy E(s) of the state st = (z, zd) with the stops of ``mask`` closed (J per unit
-    modal mass: :func:`cd_block`)."""
-    n = om2.shape[0]
+def _stop_energy_of(st, dt, Bu, umap, offset, k, mask):
+    """The closed stops' part of the scheme's discrete energy E(s) (:func:`cd_block`), sum k (g1 - offset)
+    (g0 - offset) / 2 over the stops of ``mask``, from the state st = (z, zd) itself: g0 = Bu z, g1 = Bu (z + dt
+    zd) (J per unit modal mass)."""
+    n = Bu.shape[1]
     e = 0.0
-    for i in range(n):
-        zi = st[i]
-        zdi = st[n + i]
-        e += zdi * zdi + om2[i] * zi * (zi + dt * zdi)
     j = 0
     while mask:
         if mask & 1:
@@ -456,7 +490,8 @@ def _energy(st, om2, dt, Bu, umap, offset, k, mask):
 
 @nb.njit(cache=True, fastmath={"reassoc", "contract"})
 def _modal_energy(nxt, om2, dt):
-    """The modal part of :func:`_energy`, (|zd|^2 + z^T om2 (z + dt zd)) / 2, of nxt = (z, zd, ...)."""
+    """The modal part of the scheme's discrete energy E(s) (:func:`cd_block`), (|zd|^2 + z^T om2 (z + dt zd)) / 2,
+    of nxt = (z, zd, ...)."""
     n = om2.shape[0]
     e = 0.0
     for i in range(n):
@@ -468,7 +503,7 @@ def _modal_energy(nxt, om2, dt):
 
 @nb.njit(cache=True, fastmath={"reassoc", "contract"})
 def _stop_energy(nxt, at, nu, umap, offset, k, mask):
-    """The closed stops' part of :func:`_energy`, sum k (g1 - offset) (g0 - offset) / 2 over the stops of
+    """The closed stops' part of E(s) (:func:`_stop_energy_of`), sum k (g1 - offset) (g0 - offset) / 2 over the stops of
     ``mask``, from the stop rows g0 = nxt[at + u] (at z) and g1 = nxt[at + nu + u] (at z + dt zd)."""
     e = 0.0
     j = 0
