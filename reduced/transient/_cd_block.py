@@ -10,11 +10,14 @@ what bounds the step-by-step kernel (results/performance/README.md, the roofline
 
 - the stop rows at steps k+1 .. k+mb, Bu P_j[:n] (nu mb rows): the block holds while every stop is closed or open
   as in c, by the stepping kernel's rule side (B x - offset) > 0 (as bounds lo <= g <= hi, the same rule exactly);
-- the state after L steps, P_L[:2n], and its mean velocity (P_{L-1} + P_L)[n:2n] / 2, for the lengths L the held
-  steps are jumped in (every length up to mb, or mb and the powers of two below it for a large form);
-- the dissipated work from the scheme's discrete energy balance (:func:`cd_block`), two short sums a block.
+- the state after L steps, P_L[:2n], its mean velocity (P_{L-1} + P_L)[n:2n] / 2 and the stop rows there and at
+  the next step, Bu P_L[:n] and Bu (P_L[:n] + dt P_L[n:2n]) (2 nu rows), for the lengths L the held steps are
+  jumped in (every length up to mb, or mb and the powers of two below it for a large form);
+- the dissipated work from the scheme's discrete energy balance (:func:`cd_block`): a short sum over the modes
+  a block, the closed stops' terms from those stop rows (issue 28, session 14: no sums over the coordinates).
 
-The contact state tried is the last block's (else the first step's); when a stop leaves it at step t + 1 of the
+The contact state tried is the next step's as the last block's stop rows show it (else the first step's, from
+the state); when a stop leaves it at step t + 1 of the
 block, the t steps that held are jumped and the next block starts at the switch; a switch at the first step is one
 step of ``cd_modal`` itself (the same rules, the same code). Blocks end on output samples (an interval of
 ``every`` steps is covered by blocks of at most mb), so a sample is a block's end state. The products A_c^j are
@@ -176,7 +179,8 @@ def block_form(mats: tuple, om2: np.ndarray, offset: np.ndarray, side: np.ndarra
         ``EVERY_LENGTH_BYTES``, else the powers of two); ``TG`` (n_lengths, n_states, 2n + 1, RG): per length L
         and contact state the stop rows of each step (nu L of them, row u L + t the row u at step t + 1, zero
         rows up to ``RGL[length]``, a multiple of 8), stored column by column; ``TS`` (n_lengths, n_states,
-        2n + 1, 3n) the end state and its mean velocity, likewise;
+        2n + 1, 3n + 2 nu rounded up to a multiple of 8) the end state, its mean velocity and the stop rows at the
+        end and at the next step, likewise;
         ``LH`` (n_states, nu, 2) each state's bounds of each stop row; ``lut`` (2^m,) the state of a closed-stop
         mask (-1 where none); ``masks`` (n_states,); ``om2``.
     """
@@ -241,8 +245,8 @@ def new_carry(nu: int) -> np.ndarray:
 
 @nb.njit(cache=True, fastmath={"reassoc", "contract"})
 def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, RGL, TG, TS, LH, lut, masks, om2,
-             PhiT, carry, offset, side, k, z, zd, dt, n_steps, every, out_x, out_v, out_W, W, pw_old, i0, a, bm, P, out_E, E,
-             pe_old):
+             PhiT, carry, offset, side, k, z, zd, dt, n_steps, every, out_x, out_v, out_W, W, pw_old, i0, a, bm, P,
+             out_E, E, pe_old):
     """Advance n_steps as :func:`reduced.transient._cd_modal.cd_modal` (same arguments and returns, with the block
     form's arrays ``KEYS`` after the modal arrays) in blocks where the contact state holds. Each output interval
     (``every`` steps) is covered greedily: the longest length of Ls that fits, the contact state that of its first
@@ -264,7 +268,11 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
     dt (p_{k+1} + ... + p_{k+L}) = E(s_k) - E(s_{k+L}), the scheme's discrete energy balance (exact for the
     recurrence: multiply its step by the mean velocity) with E(s) = (|zd|^2 + z^T om2 (z + dt zd)
     + sum over closed stops k (g(z + dt zd) - offset) (g(z) - offset)) / 2, g the stop's row. The mean velocity and
-    p_n are formed at a sample and before a step of ``cd_modal``, from the last block's start.
+    p_n are formed at a sample and before a step of ``cd_modal``, from the last block's start. A block's E at its
+    end is its modal part plus the closed stops' terms from the end-state table's stop rows (g at z and at
+    z + dt zd); the next block's E at its start is that one when the contact state holds, else the same modal part
+    with the new state's stop terms from those rows; only at a run's start and after a step of ``cd_modal`` is
+    E formed from the state itself (:func:`_stop_energy_of`).
 
     Parameters
     ----------
