@@ -445,6 +445,11 @@ def reduced_beam_explicit_rows(base: dict, repeats: int, commit: str) -> tuple[l
     loads = f"machine load (1 min) {load0:.1f} before, {load1:.1f} after, on {os.cpu_count()} cores"
     alt = f"median of {repeats}, alternating with the other explicit kernels of this scene"
 
+    def against_physical(c: str) -> dict:
+        """The row's time and its ratio to today's physical kernel (no target: a reference or a second look)."""
+        return {"ours_s": cpu[c], "baseline": "explicit in physical coordinates, same process, alternating",
+                "baseline_s": cpu["physical"], "ratio": cpu["physical"] / cpu[c], "target": "", "met": ""}
+
     def speeds(c: str) -> str:
         return (f"{steps / cpu[c]:.3g} steps/s in CPU time ({alt}; fastest run {steps / t[c]['min_s']:.3g}; wall "
                 f"time {steps / t[c]['wall_median_s']:.3g})")
@@ -476,9 +481,7 @@ def reduced_beam_explicit_rows(base: dict, repeats: int, commit: str) -> tuple[l
         "target": f">= {rate:.0e} steps/s in CPU time (<= {steps / rate:.3g} s)", "met": steps / cpu["auto"] >= rate}
     head = {"what": f"explicit (central difference) ringdown in the open-gap modal coordinates, rom-impulse, "
                     f"{LONG_S:g} s, step by step (the block kernel's reference, not the default): {steps} steps, "
-                    f"{speeds('modal')}",
-            "ours_s": cpu["modal"], "baseline": "explicit in physical coordinates, same process, alternating",
-            "baseline_s": cpu["physical"], "ratio": cpu["physical"] / cpu["modal"],
+                    f"{speeds('modal')}", **against_physical("modal"),
             "error": f"first {WINDOW_S:g} s differs from the physical kernel by {head_diff(mo, ph, FS):.2g} of max |x| "
                      f"(round-off; the runs part later as the motion is chaotic); energy balance "
                      f"{mo.energy_balance_error:.3g} (physical {ph.energy_balance_error:.3g}); {loads}; roofline (CPU "
@@ -487,21 +490,18 @@ def reduced_beam_explicit_rows(base: dict, repeats: int, commit: str) -> tuple[l
                      f"peak and {rl['l1_bytes_per_s'] / 1e9:.3g} GB/s from L1: neither bound; a step takes "
                      f"{rl['links_per_step']:.2g} x the latency of one dependent 12-term sum feeding a 12-term update "
                      f"({rl['link_latency_s'] * 1e9:.3g} ns measured), and its sums over the coordinates (tip rows, "
-                     f"U^T y, the new velocity) each wait for the last: latency-bound",
-            "target": "", "met": ""}
+                     f"U^T y, the new velocity) each wait for the last: latency-bound"}
     blocked = {"what": f"explicit (central difference) ringdown in the open-gap modal coordinates, jumped in blocks "
                        f"of up to 25 steps while the contact state holds, rom-impulse, {LONG_S:g} s (the default "
                        f"kernel, asked for by name: a second measurement of the rom-impulse row's kernel in the same "
                        f"loop; that row carries the target): {steps} steps, {speeds('blocked')}",
-               "ours_s": cpu["blocked"], "baseline": "explicit in physical coordinates, same process, alternating",
-               "baseline_s": cpu["physical"], "ratio": cpu["physical"] / cpu["blocked"],
+               **against_physical("blocked"),
                "error": f"{'the same bits as the default run' if same else 'NOT the same bits as the default run'}; "
                         f"first {WINDOW_S:g} s differs from the step-by-step modal kernel by "
                         f"{head_diff(bl, mo, FS):.2g} and from the physical kernel by {head_diff(bl, ph, FS):.2g} of "
                         f"max |x| (round-off; the runs part later as the motion is chaotic); energy balance "
                         f"{bl.energy_balance_error:.3g} (physical {ph.energy_balance_error:.3g}); CPU time "
-                        f"{cpu['modal'] / cpu['blocked']:.2f}x the modal kernel's; {loads}",
-               "target": "", "met": ""}
+                        f"{cpu['modal'] / cpu['blocked']:.2f}x the modal kernel's; {loads}"}
     for row in (default, head, blocked):
         print(row, flush=True)
     return [default, head, blocked], details
