@@ -4,18 +4,19 @@
         [--hammer-modes 60 120] [--no-dop853-2s] [--out results/performance] [--explicit-only]
 
 Measures, each a median of ``--repeats`` wall times (perf_counter; CPU times beside them, as the
-machine may be shared), in one process:
+machine may be shared; the explicit rows in CPU time, wall beside), in one process:
 
 1. the exact integrator on the 2 s ``discrete-impulse`` and ``rom-impulse`` ringdowns (20 kHz), and
    per output sample on the ``hammer-test`` reduced model (apparatus, ``--hammer-modes``
    fixed-interface modes; a 20 N, 1 ms blow at 10 ms that closes no gap; the marginal cost of a
    sample = (t(0.22 s) - t(0.02 s)) / 4000) beside one numpy N x K complex matrix-vector product
    (what a sample must at least cost);
-2. the central-difference integrator on the same 2 s ringdowns (steps per second; on discrete-impulse the lumped
+2. the central-difference integrator on the same 2 s ringdowns (steps per second in CPU time, every kernel of a
+   scene alternating with the others in one loop, :func:`alternate`; on discrete-impulse the lumped
    kernel against the register kernel it replaced, alternating, and the latency of its dependent path), and on
-   rom-impulse
-   in the open-gap modal coordinates (issue 28), step by step and jumped in blocks while the contact state
-   holds, against the physical-coordinate kernel, alternating (``--modal-explicit-only`` measures just those
+   rom-impulse the default kernel (jumped in blocks while the contact state holds, issue 28) against the previous
+   release's, the step-by-step kernel in the open-gap modal coordinates (its reference, no target) and the
+   physical-coordinate kernel, with a roofline line for each (``--explicit-only`` measures just the explicit
    rows and replaces them in the tables);
 3. the exact integrator against DOP853 restarted at every crossing (``integrate_dop853(...,
    events=True)``, the independent reference) at equal error: on the 0.2 s window the error is the
@@ -74,6 +75,7 @@ DOP_RTOLS_SHORT = (1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12, 1e-13)
 DOP_RTOLS_LONG = (1e-8, 1e-9, 1e-10, 1e-11)
 ERROR_TARGETS = (1e-6, 1e-8)
 TARGET_RATIO = 1000.0  # exact vs DOP853 restarted at crossings, at equal error
+RATES = {"discrete-impulse": 5e7, "rom-impulse": 3e7}  # steps/s, the explicit step's targets (issues 14, 28)
 BASELINE = "exact, the previous release's kernels ({}), same process"
 
 
@@ -116,6 +118,29 @@ def timed(fn, repeats: int) -> tuple[object, dict]:
                  "cpu_median_s": float(np.median(cpus)), "repeats": repeats}
 
 
+def alternate(fns: dict, repeats: int) -> tuple[dict, dict]:
+    """Each of ``fns`` (code -> callable) warmed once, then ``repeats`` rounds in which every one runs once in
+    turn: (the last result of each, {code: {median_s, min_s, max_s: CPU seconds (process_time); wall_median_s,
+    wall_min_s: wall seconds; repeats}}). The explicit rows are measured this way, every kernel in the same loop,
+    so that they share the machine's state (its load, which moves by tens of percent within a minute on a shared
+    machine, and the caches) and are compared by CPU time, which a co-scheduled process inflates less than wall
+    time."""
+    for fn in fns.values():
+        fn()
+    walls = {c: [] for c in fns}
+    cpus = {c: [] for c in fns}
+    res = {}
+    for _ in range(repeats):
+        for c, fn in fns.items():
+            c0, t0 = time.process_time(), time.perf_counter()
+            res[c] = fn()
+            walls[c].append(time.perf_counter() - t0)
+            cpus[c].append(time.process_time() - c0)
+    return res, {c: {"median_s": float(np.median(cpus[c])), "min_s": float(np.min(cpus[c])),
+                     "max_s": float(np.max(cpus[c])), "wall_median_s": float(np.median(walls[c])),
+                     "wall_min_s": float(np.min(walls[c])), "repeats": repeats} for c in fns}
+
+
 def cold(fn):
     """``fn`` with the exact integrator's kept tables forgotten first (:func:`run_tables`): a run that
     works out its tables, as the first run of a system does."""
@@ -148,16 +173,24 @@ def head_diff(a, b, fs: float) -> float:
 
 def exact_rows(base: dict, repeats: int, commit: str, methods=("exact", "explicit")) -> tuple[list[dict], list[dict]]:
     """Headline and detail rows of the exact and explicit 2 s ringdowns (of ``methods``), ours against the
-    baseline."""
+    baseline; the explicit one of discrete-impulse only (rom-impulse's: :func:`reduced_beam_explicit_rows`), ours
+    and the baseline alternating (:func:`alternate`), in CPU time."""
     heads, details = [], []
     targets = {("exact", "discrete-impulse"): 0.03, ("exact", "rom-impulse"): 0.4}
-    rates = {"discrete-impulse": 5e7, "rom-impulse": 3e7}
     for scene in ("discrete-impulse", "rom-impulse"):
         system, x0, v0 = scene_model(scene)
         kw = {"step_basis": "contact"} if scene == "rom-impulse" else {}
         for method in methods:
+            if method == "explicit" and scene == "rom-impulse":
+                continue  # reduced_beam_explicit_rows: the default kernel beside the physical and modal ones
             ours = integrate_exact if method == "exact" else integrate_explicit
             opts = {} if method == "exact" else kw
+            if method == "explicit":
+                res, heads_row, rows = _explicit_row(scene, system, x0, v0, base, commit, repeats)
+                heads.append(heads_row)
+                details += rows
+                print(heads[-1], flush=True)
+                continue
             res, t = timed(partial(ours, system, x0, v0, LONG_S, FS, **opts), repeats)
             row = {"scene": scene, "method": method, "code": "ours", **t, "n_events": res.stats.get("n_events", ""),
                    "n_march": res.stats.get("n_march", ""), "n_steps": res.stats.get("n_steps", ""),
@@ -189,27 +222,39 @@ def exact_rows(base: dict, repeats: int, commit: str, methods=("exact", "explici
                               "baseline_s": b_t["median_s"] if b_t else "", "ratio": b_t["median_s"] / t["median_s"]
                               if b_t else "", "error": err, "target": f"<= {target:g} s",
                               "met": t["median_s"] <= target})
-            else:
-                steps = res.stats["n_steps"]
-                same = b_res is not None and np.array_equal(res.x, b_res.x) and np.array_equal(res.v, b_res.v) \
-                    and np.array_equal(res.dissipated, b_res.dissipated)
-                rate = rates[scene]
-                heads.append({"what": f"explicit (central difference) ringdown, {scene}, {LONG_S:g} s: {steps} steps, "
-                                      f"{steps / t['median_s']:.3g} steps/s (CPU time: "
-                                      f"{steps / t['cpu_median_s']:.3g}; fastest run {steps / t['min_s']:.3g}; "
-                                      f"machine load (1 min) {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores)",
-                              "ours_s": t["median_s"], "baseline": BASELINE.format(commit).replace("exact", "explicit"),
-                              "baseline_s": b_t["median_s"] if b_t else "",
-                              "ratio": b_t["median_s"] / t["median_s"] if b_t else "",
-                              "error": "bit for bit as before" if same else
-                              (f"the default {res.stats.get('coordinates', '')} kernel: first {WINDOW_S:g} s differs "
-                               f"from before by {head_diff(res, b_res, FS):.2g} of max |x| (round-off; the runs part "
-                               f"later as the motion is chaotic); energy balance {res.energy_balance_error:.3g} "
-                               f"(before: {b_res.energy_balance_error:.3g})" if b_res is not None else ""),
-                              "target": f">= {rate:.0e} steps/s (<= {steps / rate:.3g} s)",
-                              "met": steps / t["median_s"] >= rate})
             print(heads[-1], flush=True)
     return heads, details
+
+
+def _explicit_row(scene: str, system, x0, v0, base: dict, commit: str, repeats: int) -> tuple:
+    """(our run, the headline row, detail rows) of the explicit 2 s ringdown of ``scene`` (discrete-impulse:
+    the lumped kernel) against the baseline's, alternating (:func:`alternate`), in CPU time."""
+    fns = {"ours": partial(integrate_explicit, system, x0, v0, LONG_S, FS)}
+    if "explicit" in base:
+        fns["baseline"] = partial(base["explicit"].integrate_explicit, system, x0, v0, LONG_S, FS)
+    load0 = os.getloadavg()[0]
+    res, t = alternate(fns, repeats)
+    load1 = os.getloadavg()[0]
+    ours, b_res = res["ours"], res.get("baseline")
+    steps = ours.stats["n_steps"]
+    details = [{"scene": scene, "method": "explicit", "code": "ours" if c == "ours" else f"baseline {commit}",
+                **t[c], "n_steps": steps, "energy_balance_error": res[c].energy_balance_error} for c in fns]
+    same = b_res is not None and all(np.array_equal(getattr(ours, k), getattr(b_res, k))
+                                     for k in ("x", "v", "dissipated"))
+    tc = t["ours"]
+    rate = RATES[scene]
+    row = {"what": f"explicit (central difference) ringdown, {scene}, {LONG_S:g} s: {steps} steps, "
+                   f"{steps / tc['median_s']:.3g} steps/s in CPU time (median of {repeats}, alternating with the "
+                   f"baseline; fastest run {steps / tc['min_s']:.3g}; wall time {steps / tc['wall_median_s']:.3g}; "
+                   f"machine load (1 min) {load0:.1f} before, {load1:.1f} after, on {os.cpu_count()} cores)",
+           "ours_s": tc["median_s"], "baseline": BASELINE.format(commit).replace("exact", "explicit") + ", alternating",
+           "baseline_s": t["baseline"]["median_s"] if b_res is not None else "",
+           "ratio": t["baseline"]["median_s"] / tc["median_s"] if b_res is not None else "",
+           "error": "bit for bit as before" if same else "" if b_res is None else
+           f"first {WINDOW_S:g} s differs from before by {head_diff(ours, b_res, FS):.2g} of max |x|; energy balance "
+           f"{ours.energy_balance_error:.3g} (before: {b_res.energy_balance_error:.3g})",
+           "target": f">= {rate:.0e} steps/s (<= {steps / rate:.3g} s CPU)", "met": steps / tc["median_s"] >= rate}
+    return ours, row, details
 
 
 def _chain_kernel():
@@ -328,74 +373,138 @@ def lumped_rows(repeats: int) -> tuple[str, list[dict]]:
     return text, details
 
 
-def modal_explicit_rows(repeats: int) -> tuple[list[dict], list[dict]]:
-    """The central difference in the open-gap modal coordinates (``coordinates="modal"``, issue 28) and jumped in
-    blocks while the contact state holds (``coordinates="blocked"``) on the 2 s rom-impulse ringdown against
-    today's physical-coordinate kernel, alternating in the same process; their difference over the first 0.2 s
-    (round-off, not yet amplified by the chaotic motion)."""
+def block_roofline(form: dict, n: int, every: int, blocks_per_interval: float, steps_per_cpu_s: float,
+                   peak: float) -> dict:
+    """Where the block kernel sits (:mod:`reduced.transient._cd_block`): its flops and table bytes a step, from
+    its tables' sizes (a check of the longest block's stop rows and a jump with the end-state rows,
+    ``blocks_per_interval`` of each an output interval of ``every`` steps, a sample's two n x n products), against
+    ``peak`` (flop/s, the one-core dgemm peak :func:`roofline` measures); and the block's two matrix-vector
+    products timed alone on its own tables (warm, in L1): what a block cannot beat as written."""
+    import numba as nb
+
+    from reduced.transient import _cd_block
+
+    TG, TS, RGL = form["TG"], form["TS"], form["RGL"]
+    ns, RS, RG = TG.shape[2], TS.shape[3], int(RGL[0])
+    mv = _cd_block._matvec
+
+    @nb.njit
+    def products(TGc, TSc, st, y, nxt, R):
+        for _ in range(R):
+            mv(TGc, st, y, RG, ns - 1)
+            mv(TSc, st, nxt, RS, ns - 1)
+            st[0] += 1e-300 * (y[0] + nxt[0])  # the next block starts from this one's end: a dependent chain
+        return st[0]
+
+    st = np.full(ns, 1e-6)
+    st[-1] = 1.0
+    y, nxt = np.empty(TG.shape[3]), np.empty(RS)
+    TGc, TSc = np.ascontiguousarray(TG[0, 0]), np.ascontiguousarray(TS[0, 0])
+    products(TGc, TSc, st, y, nxt, 10)
+    t = []
+    for _ in range(5):
+        c0 = time.process_time()
+        products(TGc, TSc, st, y, nxt, 100_000)
+        t.append((time.process_time() - c0) / 100_000)
+    pair = min(t)
+    flops = (2.0 * ns * (RG + RS) * blocks_per_interval + 4.0 * n * n) / every
+    bytes_ = 8.0 * ns * (RG + RS) * blocks_per_interval / every
+    return {"flops_per_step": flops, "bytes_per_step": bytes_, "peak_flops_per_s": peak,
+            "fraction_of_peak": flops * steps_per_cpu_s / peak, "table_bytes_per_s": bytes_ * steps_per_cpu_s,
+            "products_s": pair, "block_s": every / (blocks_per_interval * steps_per_cpu_s),
+            "rows_check": RG, "rows_jump": RS, "columns": ns}
+
+
+def reduced_beam_explicit_rows(base: dict, repeats: int, commit: str) -> tuple[list[dict], list[dict]]:
+    """The explicit rows of the 2 s rom-impulse ringdown of the 10-mode reduced beam, all from one loop
+    (:func:`alternate`, CPU time): the default kernel (``coordinates="auto"``: the block kernel, issue 28) against
+    the previous release's (``base``), the step-by-step kernel in the open-gap modal coordinates
+    (``coordinates="modal"``, the block kernel's reference: no target) and the block kernel asked for by name
+    (``coordinates="blocked"``: the default kernel again, a second measurement of it in the same loop) against
+    today's physical-coordinate kernel; their differences over the first 0.2 s (round-off, not yet amplified by the
+    chaotic motion). Headline rows: the default (target 3e7 steps/s in CPU time), the modal reference, the block
+    kernel's own."""
+    from reduced.transient import _cd_block
+
     system, x0, v0 = scene_model("rom-impulse")
-    rate = 3e7
-    runs = {}
-    codes = ("physical", "modal", "blocked")
+    rate = RATES["rom-impulse"]
+    fns = {c: partial(integrate_explicit, system, x0, v0, LONG_S, FS, step_basis="contact", coordinates=c)
+           for c in ("auto", "physical", "modal", "blocked")}
+    if "explicit" in base:
+        fns["baseline"] = partial(base["explicit"].integrate_explicit, system, x0, v0, LONG_S, FS,
+                                  step_basis="contact")
     load0 = os.getloadavg()[0]
-    for c in codes:  # warm-up (compilation, the modal split of the model, the block form)
-        integrate_explicit(system, x0, v0, LONG_S, FS, step_basis="contact", coordinates=c)
-    walls = {c: [] for c in codes}
-    cpus = {c: [] for c in codes}
-    for _ in range(repeats):
-        for c in codes:
-            c0, t0 = time.process_time(), time.perf_counter()
-            runs[c] = integrate_explicit(system, x0, v0, LONG_S, FS, step_basis="contact", coordinates=c)
-            walls[c].append(time.perf_counter() - t0)
-            cpus[c].append(time.process_time() - c0)
+    runs, t = alternate(fns, repeats)
     load1 = os.getloadavg()[0]
-    ph, mo, bl = runs["physical"], runs["modal"], runs["blocked"]
+    ph, mo, bl, de, b_res = runs["physical"], runs["modal"], runs["blocked"], runs["auto"], runs.get("baseline")
     steps = mo.stats["n_steps"]
-    med = {c: float(np.median(walls[c])) for c in walls}
-    cpu = {c: float(np.median(cpus[c])) for c in cpus}
-    best = {c: float(np.min(walls[c])) for c in walls}
-    details = [{"scene": "rom-impulse", "method": "explicit", "code": f"ours, {c} coordinates", "median_s": med[c],
-                "min_s": best[c], "max_s": float(np.max(walls[c])), "cpu_median_s": cpu[c], "repeats": repeats,
-                "n_steps": steps, "energy_balance_error": runs[c].energy_balance_error} for c in codes]
+    cpu = {c: t[c]["median_s"] for c in t}
+    details = [{"scene": "rom-impulse", "method": "explicit",
+                "code": f"baseline {commit}" if c == "baseline" else f"ours, {c} coordinates", **t[c],
+                "n_steps": steps, "energy_balance_error": runs[c].energy_balance_error} for c in t]
     loads = f"machine load (1 min) {load0:.1f} before, {load1:.1f} after, on {os.cpu_count()} cores"
+    alt = f"median of {repeats}, alternating with the other explicit kernels of this scene"
+
+    def against_physical(c: str) -> dict:
+        """The row's time and its ratio to today's physical kernel (no target: a reference or a second look)."""
+        return {"ours_s": cpu[c], "baseline": "explicit in physical coordinates, same process, alternating",
+                "baseline_s": cpu["physical"], "ratio": cpu["physical"] / cpu[c], "target": "", "met": ""}
+
+    def speeds(c: str) -> str:
+        return (f"{steps / cpu[c]:.3g} steps/s in CPU time ({alt}; fastest run {steps / t[c]['min_s']:.3g}; wall "
+                f"time {steps / t[c]['wall_median_s']:.3g})")
+
+    rl = roofline(system.n, 3, 2, steps / cpu["modal"])
+    form = next(iter(_cd_block._FORMS.values()))
+    br = block_roofline(form, system.n, 25, 1.25, steps / cpu["auto"], rl["peak_flops_per_s"])
+    details.append({"scene": "rom-impulse", "method": "explicit", "code": "roofline of the modal kernel", **rl})
+    details.append({"scene": "rom-impulse", "method": "explicit", "code": "roofline of the block kernel", **br})
+    same = all(np.array_equal(getattr(de, k), getattr(bl, k)) for k in ("x", "v", "dissipated"))
+    default = {
+        "what": f"explicit (central difference) ringdown, rom-impulse, {LONG_S:g} s: {steps} steps, {speeds('auto')}; "
+                f"{loads}",
+        "ours_s": cpu["auto"], "baseline": BASELINE.format(commit).replace("exact", "explicit") + ", alternating",
+        "baseline_s": cpu["baseline"] if b_res is not None else "",
+        "ratio": cpu["baseline"] / cpu["auto"] if b_res is not None else "",
+        "error": (f"the default {de.stats.get('coordinates', '')} kernel: first {WINDOW_S:g} s differs from before "
+                  f"by {head_diff(de, b_res, FS):.2g} of max |x| (round-off; the runs part later as the motion is "
+                  f"chaotic); energy balance {de.energy_balance_error:.3g} (before: {b_res.energy_balance_error:.3g})"
+                  if b_res is not None else "")
+        + (f"; roofline (CPU time, same process): {br['flops_per_step']:.0f} flop and {br['bytes_per_step']:.0f} B "
+           f"of tables a step (a check of {br['rows_check']} stop rows and a jump of {br['rows_jump']} end-state "
+           f"rows, {br['columns']} columns, 1.25 of each an output interval of 25 steps, and a sample's two 12 x 12 "
+           f"products), {br['fraction_of_peak']:.0%} of the measured {br['peak_flops_per_s']:.3g} flop/s one-core "
+           f"dgemm peak, {br['table_bytes_per_s'] / 1e9:.3g} GB/s from L1/L2: neither bound; a block takes "
+           f"{br['block_s'] * 1e9:.0f} ns, its two products alone (warm, chained block to block) "
+           f"{br['products_s'] * 1e9:.0f} ns: the rest is the check of the rows against the contact state, the "
+           f"energy and the sample"),
+        "target": f">= {rate:.0e} steps/s in CPU time (<= {steps / rate:.3g} s)", "met": steps / cpu["auto"] >= rate}
     head = {"what": f"explicit (central difference) ringdown in the open-gap modal coordinates, rom-impulse, "
-                    f"{LONG_S:g} s: {steps} steps, {steps / med['modal']:.3g} steps/s (CPU time: "
-                    f"{steps / cpu['modal']:.3g}; fastest run {steps / best['modal']:.3g})",
-            "ours_s": med["modal"], "baseline": "explicit in physical coordinates (today's default kernel), same "
-                                                "process, alternating",
-            "baseline_s": med["physical"], "ratio": med["physical"] / med["modal"],
+                    f"{LONG_S:g} s, step by step (the block kernel's reference, not the default): {steps} steps, "
+                    f"{speeds('modal')}", **against_physical("modal"),
             "error": f"first {WINDOW_S:g} s differs from the physical kernel by {head_diff(mo, ph, FS):.2g} of max |x| "
                      f"(round-off; the runs part later as the motion is chaotic); energy balance "
-                     f"{mo.energy_balance_error:.3g} (physical {ph.energy_balance_error:.3g}); {loads}",
-            "target": f">= {rate:.0e} steps/s (<= {steps / rate:.3g} s)", "met": steps / med["modal"] >= rate}
+                     f"{mo.energy_balance_error:.3g} (physical {ph.energy_balance_error:.3g}); {loads}; roofline (CPU "
+                     f"time, same process): {rl['flops_per_step']} flop and {rl['bytes_per_step']} B (L1) a step, "
+                     f"{rl['fraction_of_peak']:.0%} of the measured {rl['peak_flops_per_s']:.3g} flop/s one-core dgemm "
+                     f"peak and {rl['l1_bytes_per_s'] / 1e9:.3g} GB/s from L1: neither bound; a step takes "
+                     f"{rl['links_per_step']:.2g} x the latency of one dependent 12-term sum feeding a 12-term update "
+                     f"({rl['link_latency_s'] * 1e9:.3g} ns measured), and its sums over the coordinates (tip rows, "
+                     f"U^T y, the new velocity) each wait for the last: latency-bound"}
     blocked = {"what": f"explicit (central difference) ringdown in the open-gap modal coordinates, jumped in blocks "
-                       f"of up to 25 steps while the contact state holds, rom-impulse, {LONG_S:g} s: {steps} steps, "
-                       f"{steps / med['blocked']:.3g} steps/s (CPU time: {steps / cpu['blocked']:.3g}; fastest run "
-                       f"{steps / best['blocked']:.3g})",
-               "ours_s": med["blocked"], "baseline": "explicit in physical coordinates (today's default kernel), "
-                                                     "same process, alternating",
-               "baseline_s": med["physical"], "ratio": med["physical"] / med["blocked"],
-               "error": f"first {WINDOW_S:g} s differs from the step-by-step modal kernel by "
+                       f"of up to 25 steps while the contact state holds, rom-impulse, {LONG_S:g} s (the default "
+                       f"kernel, asked for by name: a second measurement of the rom-impulse row's kernel in the same "
+                       f"loop; that row carries the target): {steps} steps, {speeds('blocked')}",
+               **against_physical("blocked"),
+               "error": f"{'the same bits as the default run' if same else 'NOT the same bits as the default run'}; "
+                        f"first {WINDOW_S:g} s differs from the step-by-step modal kernel by "
                         f"{head_diff(bl, mo, FS):.2g} and from the physical kernel by {head_diff(bl, ph, FS):.2g} of "
                         f"max |x| (round-off; the runs part later as the motion is chaotic); energy balance "
                         f"{bl.energy_balance_error:.3g} (physical {ph.energy_balance_error:.3g}); CPU time "
-                        f"{cpu['modal'] / cpu['blocked']:.2f}x the modal kernel's; {loads}",
-               "target": f">= {rate:.0e} steps/s (<= {steps / rate:.3g} s)", "met": steps / med["blocked"] >= rate}
-    form = mo.stats.get("coordinates")
-    rl = roofline(system.n, 3, 2, steps / cpu["modal"])
-    details.append({"scene": "rom-impulse", "method": "explicit", "code": f"roofline of the {form} kernel", **rl})
-    if not head["met"]:
-        head["error"] += (f"; roofline (CPU time, same process): {rl['flops_per_step']} flop and "
-                          f"{rl['bytes_per_step']} B (L1) a step, {rl['fraction_of_peak']:.0%} of the measured "
-                          f"{rl['peak_flops_per_s']:.3g} flop/s one-core dgemm peak and "
-                          f"{rl['l1_bytes_per_s'] / 1e9:.3g} GB/s from L1: neither bound; a step takes "
-                          f"{rl['links_per_step']:.2g} x the latency of one "
-                          f"dependent 12-term sum feeding a 12-term update ({rl['link_latency_s'] * 1e9:.3g} ns "
-                          f"measured), and its sums over the coordinates (tip rows, U^T y, the new velocity) "
-                          f"each wait for the last: latency-bound")
-    print(head, flush=True)
-    print(blocked, flush=True)
-    return [head, blocked], details
+                        f"{cpu['modal'] / cpu['blocked']:.2f}x the modal kernel's; {loads}"}
+    for row in (default, head, blocked):
+        print(row, flush=True)
+    return [default, head, blocked], details
 
 
 def hammer_rows(base: dict, modes: list[int], repeats: int, commit: str) -> tuple[list[dict], list[dict]]:
@@ -568,7 +677,7 @@ def draw(heads: list[dict], scans: list[dict]):
         ax.text(num(h["ours_s"]), i + 0.2, f" {num(h['ratio']):.3g}x faster", va="center", fontsize=8)
     ax.set_yticks(y, [short_label(h["what"]) for h in rows], fontsize=8)
     ax.set_xscale("log")
-    ax.set_xlabel("wall time [s], median of the repeats")
+    ax.set_xlabel("time [s], median of the repeats (wall; CPU for the explicit rows, alternating)")
     ax.set_title("The integrators now and with the previous release's kernels", fontsize=10)
     ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=1, frameon=False)
     ax = axes[1]
@@ -614,8 +723,6 @@ def main(argv=None) -> int:
     ap.add_argument("--no-dop853-2s", action="store_true", help="skip the 2 s DOP853 window (minutes a run)")
     ap.add_argument("--out", default="results/performance")
     ap.add_argument("--figure-only", action="store_true", help="redraw integrator_speed.png from the CSV files")
-    ap.add_argument("--modal-explicit-only", action="store_true",
-                    help="measure only the modal-coordinate explicit row and replace it in integrator_headline.csv")
     ap.add_argument("--explicit-only", action="store_true",
                     help="measure only the explicit rows (both scenes, the lumped kernel, the modal and block "
                          "kernels) and replace them in the tables; the exact and DOP853 rows are kept")
@@ -628,8 +735,6 @@ def main(argv=None) -> int:
         return 0
     out.mkdir(parents=True, exist_ok=True)
     info = machine_rows()
-    if args.modal_explicit_only:
-        return modal_explicit_only(out, args.repeats, info)
     if args.explicit_only:
         return explicit_only(out, args, info)
     base = load_baseline(args.baseline_commit)
@@ -648,36 +753,9 @@ def main(argv=None) -> int:
     return 0
 
 
-def modal_explicit_only(out: Path, repeats: int, info: list[dict]) -> int:
-    """Measure the modal-coordinate explicit row alone; replace it (and its detail rows) in the tables of
-    ``out``, after the rom-impulse explicit row when it is new; the machine file gets this run's keys
-    prefixed ``modal_explicit_``."""
-    with single_thread_blas():
-        heads, details = modal_explicit_rows(repeats)
-    info.append({"key": "load_1min_end", "value": os.getloadavg()[0]})
-    fmt = [{k: (f"{v:.4g}" if isinstance(v, float) else v) for k, v in r.items()} for r in heads]
-    tag = "explicit (central difference) ringdown in the open-gap modal coordinates"
-    old = read_rows(out / "integrator_headline.csv")
-    kept = [r for r in old if not r["what"].startswith(tag)]
-    rom = "explicit (central difference) ringdown, rom"
-    at = next((i + 1 for i, r in enumerate(kept) if r["what"].startswith(rom)), len(kept))
-    fields = ["what", "ours_s", "baseline", "baseline_s", "ratio", "error", "target", "met"]
-    write_rows(out / "integrator_headline.csv", kept[:at] + fmt + kept[at:], fields)
-    old_d = [r for r in read_rows(out / "integrator_details.csv") if "coordinates" not in r.get("code", "")]
-    dfields = list(old_d[0]) if old_d else []
-    dfields += sorted({k for r in details for k in r} - set(dfields))
-    write_rows(out / "integrator_details.csv", old_d + [{k: r.get(k, "") for k in dfields} for r in details], dfields,
-               float_format=".5g")
-    m_old = [r for r in read_rows(out / "integrator_machine.csv") if not r["key"].startswith("modal_explicit_")]
-    write_rows(out / "integrator_machine.csv", m_old + [{"key": f"modal_explicit_{r['key']}", "value": r["value"]}
-                                                        for r in info])
-    print(f"updated {out}/integrator_{{headline,details,machine}}.csv")
-    return 0
-
-
 def explicit_only(out: Path, args, info: list[dict]) -> int:
     """Measure the explicit rows alone (:func:`exact_rows` for the explicit method, :func:`lumped_rows`,
-    :func:`modal_explicit_rows`) and put them in place of the explicit rows of ``out``'s tables, in the same
+    :func:`reduced_beam_explicit_rows`) and put them in place of the explicit rows of ``out``'s tables, in the same
     order; the exact and DOP853 rows stay as measured before. The machine file gets this run's keys prefixed
     ``explicit_``; the figure is redrawn."""
     base = load_baseline(args.baseline_commit)
@@ -689,7 +767,7 @@ def explicit_only(out: Path, args, info: list[dict]) -> int:
         for h in heads:
             if h["what"].startswith("explicit (central difference) ringdown, discrete-impulse"):
                 h["error"] = f"{h['error']}; {text}"
-        h, d = modal_explicit_rows(args.repeats)
+        h, d = reduced_beam_explicit_rows(base, args.repeats, args.baseline_commit)
         heads += h
         details += d
     info.append({"key": "load_1min_end", "value": os.getloadavg()[0]})
@@ -738,7 +816,7 @@ def run_all(base: dict, args) -> tuple[list[dict], list[dict], list[dict]]:
     for h in heads:
         if h["what"].startswith("explicit (central difference) ringdown, discrete-impulse"):
             h["error"] = f"{h['error']}; {text}"
-    h, d = modal_explicit_rows(args.repeats)
+    h, d = reduced_beam_explicit_rows(base, args.repeats, args.baseline_commit)
     heads += h
     details += d
     h, d = hammer_rows(base, args.hammer_modes, args.repeats, args.baseline_commit)

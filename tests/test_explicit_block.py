@@ -70,6 +70,50 @@ def test_step_map_is_one_step_of_the_modal_kernel():
         assert np.abs(want[N:2 * N] - zd1).max() <= 1e-13 * np.abs(zd1).max()
 
 
+def test_end_state_rows_give_the_stop_rows_the_energy_and_the_next_state():
+    # Issue 28, session 14: the end-state table of a block (length L, contact state c) gives, besides z and zd
+    # after L steps, the stop rows g0 = Bu z and g1 = Bu (z + dt zd) there; the kernel takes the block's energy and
+    # the next block's contact state from them. Against the L-th power of the one-step map and the energy's closed
+    # form E = (|zd|^2 + z^T om2 (z + dt zd) + sum over closed stops k (g1 - offset) (g0 - offset)) / 2 formed in
+    # numpy (to round-off: 1e-12 of each quantity's scale), and the contact state by the kernel's rule
+    # side (g1 - offset) > 0 (states drawn away from the offsets: no tie).
+    s = _beam_like()
+    dt = 2e-6
+    form = _cd_modal.modal_form(s.M, s.K, s.C, s.B, np.zeros((0, N)), dt)
+    mats = form["mats"]
+    bf = _cd_block.block_form(mats, form["om2"], s.offset, s.side, s.k, dt, 25)
+    Bu, umap, nu = mats[10], mats[12], mats[10].shape[0]
+    om2 = form["om2"]
+    rng = np.random.default_rng(3)
+    checked = set()
+    for trial in range(60):
+        ic = trial % len(bf["masks"])
+        il = int(rng.integers(len(bf["Ls"])))
+        L, mask = int(bf["Ls"][il]), int(bf["masks"][ic])
+        st = np.concatenate([form["PhiTM"] @ (3e-4 * rng.standard_normal(N)), 0.3 * rng.standard_normal(N), [1.0]])
+        want = np.linalg.matrix_power(_cd_block.step_map(mats, s.offset, s.k, dt, mask), L) @ st
+        nxt = bf["TS"][il, ic].T @ st  # the kernel's product (the table column by column)
+        z, zd = want[:N], want[N:2 * N]
+        assert np.abs(nxt[:2 * N] - want[:2 * N]).max() <= 1e-12 * np.abs(want[:2 * N]).max()
+        g0, g1 = Bu @ z, Bu @ (z + dt * zd)
+        assert np.abs(nxt[3 * N:3 * N + nu] - g0).max() <= 1e-12 * np.abs(g0).max()
+        assert np.abs(nxt[3 * N + nu:3 * N + 2 * nu] - g1).max() <= 1e-12 * np.abs(g1).max()
+        closed = [j for j in range(len(s.k)) if mask >> j & 1]
+        e = 0.5 * (zd @ zd + z @ (om2 * (z + dt * zd))
+                   + sum(s.k[j] * (g1[umap[j]] - s.offset[j]) * (g0[umap[j]] - s.offset[j]) for j in closed))
+        rows = _cd_block._modal_energy(nxt, om2, dt) + _cd_block._stop_energy(nxt, 3 * N, nu, umap, s.offset, s.k,
+                                                                               mask)
+        of_state = _cd_block._modal_energy(want, om2, dt) + _cd_block._stop_energy_of(want, dt, Bu, umap, s.offset,
+                                                                                         s.k, mask)
+        scale = 0.5 * (zd @ zd + z @ (om2 * z)) + abs(e)
+        assert abs(rows - e) <= 1e-12 * scale and abs(of_state - e) <= 1e-12 * scale
+        nxt_mask = sum(1 << j for j in range(len(s.k)) if s.side[j] * (g1[umap[j]] - s.offset[j]) > 0.0)
+        assert min(abs(g1[umap[j]] - s.offset[j]) for j in range(len(s.k))) > 1e-9
+        assert _cd_block._row_state(nxt, 3 * N + nu, umap, s.offset, s.side, bf["lut"]) == bf["lut"][nxt_mask]
+        checked.add(mask)
+    assert len(checked) == len(bf["masks"]) and any(checked)  # every contact state, closed stops among them
+
+
 def test_bounds_are_the_kernels_rule():
     # [lo, hi] of each closed-stop pattern of a row against side (g - offset) > 0 at the offsets, their
     # neighbours and between: the same answer everywhere (exact: the bounds are offsets or their neighbours).

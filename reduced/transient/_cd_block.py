@@ -10,11 +10,14 @@ what bounds the step-by-step kernel (results/performance/README.md, the roofline
 
 - the stop rows at steps k+1 .. k+mb, Bu P_j[:n] (nu mb rows): the block holds while every stop is closed or open
   as in c, by the stepping kernel's rule side (B x - offset) > 0 (as bounds lo <= g <= hi, the same rule exactly);
-- the state after L steps, P_L[:2n], and its mean velocity (P_{L-1} + P_L)[n:2n] / 2, for the lengths L the held
-  steps are jumped in (every length up to mb, or mb and the powers of two below it for a large form);
-- the dissipated work from the scheme's discrete energy balance (:func:`cd_block`), two short sums a block.
+- the state after L steps, P_L[:2n], its mean velocity (P_{L-1} + P_L)[n:2n] / 2 and the stop rows there and at
+  the next step, Bu P_L[:n] and Bu (P_L[:n] + dt P_L[n:2n]) (2 nu rows), for the lengths L the held steps are
+  jumped in (every length up to mb, or mb and the powers of two below it for a large form);
+- the dissipated work from the scheme's discrete energy balance (:func:`cd_block`): a short sum over the modes
+  a block, the closed stops' terms from those stop rows (issue 28, session 14: no sums over the coordinates).
 
-The contact state tried is the last block's (else the first step's); when a stop leaves it at step t + 1 of the
+The contact state tried is the next step's as the last block's stop rows show it (else the first step's, from
+the state); when a stop leaves it at step t + 1 of the
 block, the t steps that held are jumped and the next block starts at the switch; a switch at the first step is one
 step of ``cd_modal`` itself (the same rules, the same code). Blocks end on output samples (an interval of
 ``every`` steps is covered by blocks of at most mb), so a sample is a block's end state. The products A_c^j are
@@ -176,7 +179,8 @@ def block_form(mats: tuple, om2: np.ndarray, offset: np.ndarray, side: np.ndarra
         ``EVERY_LENGTH_BYTES``, else the powers of two); ``TG`` (n_lengths, n_states, 2n + 1, RG): per length L
         and contact state the stop rows of each step (nu L of them, row u L + t the row u at step t + 1, zero
         rows up to ``RGL[length]``, a multiple of 8), stored column by column; ``TS`` (n_lengths, n_states,
-        2n + 1, 3n) the end state and its mean velocity, likewise;
+        2n + 1, 3n + 2 nu rounded up to a multiple of 8) the end state, its mean velocity and the stop rows at the
+        end and at the next step, likewise;
         ``LH`` (n_states, nu, 2) each state's bounds of each stop row; ``lut`` (2^m,) the state of a closed-stop
         mask (-1 where none); ``masks`` (n_states,); ``om2``.
     """
@@ -196,7 +200,7 @@ def block_form(mats: tuple, om2: np.ndarray, offset: np.ndarray, side: np.ndarra
     Ls = block_lengths(mb, every_length)
     RGL = np.array([-(-(nu * L) // 8) * 8 for L in Ls], np.int64)
     TG = np.zeros((len(Ls), len(masks), ns, RGL.max()))
-    TS = np.zeros((len(Ls), len(masks), ns, 3 * n))
+    TS = np.zeros((len(Ls), len(masks), ns, -(-(3 * n + 2 * nu) // 8) * 8))
     for ic, mask in enumerate(masks):
         A = step_map(mats, offset, k, dt, mask)
         Ps = [np.eye(ns)]  # A^j, j = 0 .. mb, each the product of the one before (the same bits for any length)
@@ -206,7 +210,8 @@ def block_form(mats: tuple, om2: np.ndarray, offset: np.ndarray, side: np.ndarra
         for il, L in enumerate(Ls):
             for j in range(1, L + 1):
                 TG[il, ic, :, np.arange(nu) * L + j - 1] = rows[j]
-            TS[il, ic] = np.vstack([Ps[L][:2 * n], 0.5 * (Ps[L - 1][n:2 * n] + Ps[L][n:2 * n])]).T
+            TS[il, ic, :, :3 * n + 2 * nu] = np.vstack([Ps[L][:2 * n], 0.5 * (Ps[L - 1][n:2 * n] + Ps[L][n:2 * n]),
+                                                        rows[L], Bu @ (Ps[L][:n] + dt * Ps[L][n:2 * n])]).T
     LH = np.array([[_bounds(offset, side, rows_of[u], mask) for u in range(nu)] for mask in masks])
     lut = np.full(1 << m, -1, np.int64)
     lut[masks] = np.arange(len(masks))
@@ -218,12 +223,30 @@ def block_form(mats: tuple, om2: np.ndarray, offset: np.ndarray, side: np.ndarra
 
 
 KEYS = ("Ls", "RGL", "TG", "TS", "LH", "lut", "masks", "om2")  # the form's arrays cd_block takes, in order
+CARRY = 6  # carry[:CARRY]: set, the last block's state, the next one's, E and its modal part at its end, W + dt p / 2
+
+
+def new_carry(nu: int) -> np.ndarray:
+    """A run's carry of :func:`cd_block` from call to call, not yet set: (CARRY + 2 nu,) zeros (the last block's
+    stop rows at its end and at the next step after the first CARRY).
+
+    Parameters
+    ----------
+    nu : int
+        Distinct stop rows.
+
+    Returns
+    -------
+    ndarray
+        The carry (float64).
+    """
+    return np.zeros(CARRY + 2 * nu)
 
 
 @nb.njit(cache=True, fastmath={"reassoc", "contract"})
 def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, RGL, TG, TS, LH, lut, masks, om2,
-             PhiT, offset, side, k, z, zd, dt, n_steps, every, out_x, out_v, out_W, W, pw_old, i0, a, bm, P, out_E, E,
-             pe_old):
+             PhiT, carry, offset, side, k, z, zd, dt, n_steps, every, out_x, out_v, out_W, W, pw_old, i0, a, bm, P,
+             out_E, E, pe_old):
     """Advance n_steps as :func:`reduced.transient._cd_modal.cd_modal` (same arguments and returns, with the block
     form's arrays ``KEYS`` after the modal arrays) in blocks where the contact state holds. Each output interval
     (``every`` steps) is covered greedily: the longest length of Ls that fits, the contact state that of its first
@@ -234,6 +257,9 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
     ``a`` = U^T zd on exit.
     Unlike ``cd_modal`` it stores the samples in physical coordinates, x = Phi z and v = Phi zd (PhiT = Phi^T,
     :func:`_physical_rows`): in the kernel, a sample's two products cost less than a pass over the buffers after.
+    What the blocks carry from one to the next (the last one's contact state and energy, the next one's state
+    read off its rows, W + dt p_n / 2) is kept in ``carry`` (:func:`new_carry`) from call to call, so that the
+    samples are the same bits however a run is cut into calls.
 
     Long because it is one numba loop over blocks whose branches (check, jump, one step) share the carried state;
     the matrix-vector products and the energy sums are helpers, called once a block, not a step.
@@ -242,7 +268,11 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
     dt (p_{k+1} + ... + p_{k+L}) = E(s_k) - E(s_{k+L}), the scheme's discrete energy balance (exact for the
     recurrence: multiply its step by the mean velocity) with E(s) = (|zd|^2 + z^T om2 (z + dt zd)
     + sum over closed stops k (g(z + dt zd) - offset) (g(z) - offset)) / 2, g the stop's row. The mean velocity and
-    p_n are formed at a sample and before a step of ``cd_modal``, from the last block's start.
+    p_n are formed at a sample and before a step of ``cd_modal``, from the last block's start. A block's E at its
+    end is its modal part plus the closed stops' terms from the end-state table's stop rows (g at z and at
+    z + dt zd); the next block's E at its start is that one when the contact state holds, else the same modal part
+    with the new state's stop terms from those rows; only at a run's start and after a step of ``cd_modal`` is
+    E formed from the state itself (:func:`_stop_energy_of`).
 
     Parameters
     ----------
@@ -252,6 +282,8 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
         The block form (om2 in rad^2/s^2).
     PhiT : ndarray
         (n, n) Phi^T, the open-gap modes transposed (C-contiguous).
+    carry : ndarray
+        (CARRY + 2 nu,) the blocks' carry, :func:`new_carry` before a run's first call; changed in place.
     offset, side, k, z, zd, dt, n_steps, every, out_x, out_v, out_W, W, pw_old, i0, a, bm, P, out_E, E, pe_old
         As ``cd_modal`` (dt in s, W in J).
     """
@@ -262,13 +294,15 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
                                             a, bm, P, out_E, E, pe_old)
         for r in range(i0, io):
             _physical_rows(PhiT, out_x, out_v, r)
+        carry[0] = 0.0  # a block after these steps starts afresh
         return W, pw_old, io, E, pe_old
     nu = Bu.shape[0]
     p = UT.shape[0]
     n2 = 2 * n
     y = np.empty(TG.shape[3])
     st = np.empty(n2 + 1)
-    nxt = np.empty(3 * n)  # the block's end state and its mean velocity
+    RS = TS.shape[3]
+    nxt = np.empty(RS)  # the block's end state, its mean velocity and its stop rows now and at the next step
     for i in range(n):
         st[i] = z[i]
         st[n + i] = zd[i]
@@ -277,9 +311,14 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
     zds = st[n:n2]
     Wp = W + 0.5 * dt * pw_old  # W + dt p_n / 2
     jumped = False  # the last advance was a block (p_n not formed yet)
-    guess = -1  # the last block's contact state, tried first for the next
+    guess = -1  # the next block's contact state as the last block's rows show it, tried first
     last = -1  # the last block's contact state (-1 after a step of cd_modal)
     e_end = 0.0  # E of the state in contact state last (when last >= 0)
+    em_end = _modal_energy(st, om2, dt)  # its modal part (without the stops'); here the start state's
+    if carry[0]:  # as the last call left them
+        last, guess, e_end, em_end, Wp = int(carry[1]), int(carry[2]), carry[3], carry[4], carry[5]
+        for r in range(2 * nu):
+            nxt[3 * n + r] = carry[CARRY + r]
     known = 0  # steps ahead known to stay in contact state ck
     ck = 0
     io = i0
@@ -304,15 +343,15 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
                 if c >= 0:
                     R = RGL[li]
                     _matvec(TG[li, c], st, y, R, n2)
-                    ok = True
+                    bad = 0
                     for u in range(nu):  # every stop as in the state at every step: the rows within [lo, hi]
                         lo = LH[c, u, 0]
                         hi = LH[c, u, 1]
                         for t in range(L):
                             g = y[u * L + t]
-                            ok &= (g >= lo) & (g <= hi)
+                            bad += (g < lo) | (g > hi)
                     held = L
-                    if not ok:  # the steps before the first that leaves the state
+                    if bad:  # the steps before the first that leaves the state
                         for u in range(nu):
                             lo = LH[c, u, 0]
                             hi = LH[c, u, 1]
@@ -329,21 +368,25 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
                     ck = c
                     continue
             if held:  # the block holds: jump
-                _matvec(TS[li, c], st, nxt, 3 * n, n2)
                 mk = masks[c]
-                e0 = e_end if last == c else _energy(st, om2, dt, Bu, umap, offset, k, mk)
-                e_end = _energy(nxt, om2, dt, Bu, umap, offset, k, mk)
+                if last == c:
+                    e0 = e_end
+                elif last >= 0:  # the last block's end state, its stop rows (in nxt) in this block's state
+                    e0 = em_end + _stop_energy(nxt, 3 * n, nu, umap, offset, k, mk)
+                else:  # from the state itself, as at a call's start (em_end: its modal part)
+                    e0 = em_end + _stop_energy_of(st, dt, Bu, umap, offset, k, mk)
+                _matvec(TS[li, c], st, nxt, RS, n2)
+                em_end = _modal_energy(nxt, om2, dt)
+                e_end = em_end + _stop_energy(nxt, 3 * n, nu, umap, offset, k, mk)
                 Wp += e0 - e_end
                 for col in range(n2):
                     st[col] = nxt[col]
                 jumped = True
-                guess = c
+                guess = _row_state(nxt, 3 * n + nu, umap, offset, side, lut)  # the next step's, from its rows
                 last = c
                 pos += L
                 if known:
                     known -= L
-                    if known == 0:  # the next step leaves c (the check saw it): find its state, not try c
-                        guess = -1
             else:  # the switch is at the first step: one step of cd_modal
                 if jumped:
                     W, pw_old = _work(nxt, d, UT, Wp, dt)
@@ -365,6 +408,7 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
                 Wp = W + 0.5 * dt * pw_old
                 guess = -1
                 last = -1
+                em_end = _modal_energy(st, om2, dt)
         if jumped:  # the sample: the last block's end
             W, pw_old = _work(nxt, d, UT, Wp, dt)
             jumped = False
@@ -387,6 +431,14 @@ def cd_block(dtgom2, alpha, dtg, d, UT, GUT, hQ, S, Q, h, Bu, dtGBu, umap, Ls, R
         for i in range(n):
             s += UT[q, i] * zd[i]
         a[q] = s
+    carry[0] = 1.0
+    carry[1] = last
+    carry[2] = guess
+    carry[3] = e_end
+    carry[4] = em_end
+    carry[5] = Wp
+    for r in range(2 * nu):
+        carry[CARRY + r] = nxt[3 * n + r]
     return W, pw_old, io, E, pe_old
 
 
@@ -422,15 +474,12 @@ def _matvec(Tc, st, y, R, n2):
 
 
 @nb.njit(cache=True, fastmath={"reassoc", "contract"})
-def _energy(st, om2, dt, Bu, umap, offset, k, mask):
-    """The scheme's discrete energy E(s) of the state st = (z, zd) with the stops of ``mask`` closed (J per unit
-    modal mass: :func:`cd_block`)."""
-    n = om2.shape[0]
+def _stop_energy_of(st, dt, Bu, umap, offset, k, mask):
+    """The closed stops' part of the scheme's discrete energy E(s) (:func:`cd_block`), sum k (g1 - offset)
+    (g0 - offset) / 2 over the stops of ``mask``, from the state st = (z, zd) itself: g0 = Bu z, g1 = Bu (z + dt
+    zd) (J per unit modal mass)."""
+    n = Bu.shape[1]
     e = 0.0
-    for i in range(n):
-        zi = st[i]
-        zdi = st[n + i]
-        e += zdi * zdi + om2[i] * zi * (zi + dt * zdi)
     j = 0
     while mask:
         if mask & 1:
@@ -445,6 +494,44 @@ def _energy(st, om2, dt, Bu, umap, offset, k, mask):
         mask >>= 1
         j += 1
     return 0.5 * e
+
+
+@nb.njit(cache=True, fastmath={"reassoc", "contract"})
+def _modal_energy(nxt, om2, dt):
+    """The modal part of the scheme's discrete energy E(s) (:func:`cd_block`), (|zd|^2 + z^T om2 (z + dt zd)) / 2,
+    of nxt = (z, zd, ...)."""
+    n = om2.shape[0]
+    e = 0.0
+    for i in range(n):
+        zi = nxt[i]
+        zdi = nxt[n + i]
+        e += zdi * zdi + om2[i] * zi * (zi + dt * zdi)
+    return 0.5 * e
+
+
+@nb.njit(cache=True, fastmath={"reassoc", "contract"})
+def _stop_energy(nxt, at, nu, umap, offset, k, mask):
+    """The closed stops' part of E(s) (:func:`_stop_energy_of`), sum k (g1 - offset) (g0 - offset) / 2 over the stops of
+    ``mask``, from the stop rows g0 = nxt[at + u] (at z) and g1 = nxt[at + nu + u] (at z + dt zd)."""
+    e = 0.0
+    j = 0
+    while mask:
+        if mask & 1:
+            u = umap[j]
+            e += k[j] * (nxt[at + nu + u] - offset[j]) * (nxt[at + u] - offset[j])
+        mask >>= 1
+        j += 1
+    return 0.5 * e
+
+
+@nb.njit(cache=True, fastmath={"reassoc", "contract"})
+def _row_state(nxt, at, umap, offset, side, lut):
+    """The contact state of the stop rows g = nxt[at + u] by the kernel's rule (-1: none)."""
+    mask = 0
+    for j in range(offset.shape[0]):
+        if side[j] * (nxt[at + umap[j]] - offset[j]) > 0.0:
+            mask |= 1 << j
+    return lut[mask]
 
 
 @nb.njit(cache=True, fastmath={"reassoc", "contract"})

@@ -483,7 +483,8 @@ class ExplicitStepper(_stepper.Stepper):
                              lambda: _damping_factor(system.C))
             self.kernel = _cd_block.cd_block
             self.mats = (*self.modal["mats"], *(self.jump[key] for key in _cd_block.KEYS),
-                         np.ascontiguousarray(self.modal["Phi"].T))  # the kernel stores physical samples
+                         np.ascontiguousarray(self.modal["Phi"].T),  # the kernel stores physical samples
+                         _cd_block.new_carry(self.modal["mats"][10].shape[0]))  # the blocks' carry, this run's
             self.dtGbT, self.b = None, self.modal["bm"]
         elif self.modal is not None:
             self.L = _cached(("L", _damping_factor, system.C.tobytes(), system.C.shape),

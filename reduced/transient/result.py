@@ -219,7 +219,7 @@ class RingdownStream:
         for start, x, v, W, *ext in self._blocks:
             wall += time.perf_counter() - t0
             if x.size:
-                self.max_abs_x = max(self.max_abs_x, float(np.max(np.abs(x))))
+                self.max_abs_x = max(self.max_abs_x, float(x.max()), -float(x.min()))  # no |x| array (MBs)
             t = np.arange(start, start + x.shape[0]) / self.sample_rate_hz
             yield Chunk(start, t, x, v, W, self.system, external=ext[0] if ext else zeros_view(x.shape[0]),
                         w=ext[1] if len(ext) > 1 else None, friction=ext[2] if len(ext) > 2 else None)
