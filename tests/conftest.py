@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import fcntl
+import os
 import pickle
 from collections import defaultdict
 from pathlib import Path
@@ -48,6 +49,24 @@ def assembly_rom20(tmp_path_factory, worker_id):
         return build_rom(RomSpec(layout="assembly", planar=False, n_modes=20))
 
     return _once(tmp_path_factory, worker_id, "assembly_rom20", build)
+
+
+# --- One BLAS thread a worker (issue 28) -------------------------------------------------------------------------
+# With a pytest-xdist worker on every core, each worker's OpenBLAS (and MKL, pypardiso's) would start a thread per
+# core as well: 2 x 2 threads on 2 busy cores, whose spinning waits cost CPU time and gain nothing. The controller
+# sets these before it starts the workers (a library reads them when it loads), unless the user set them; the
+# workers and every process they start (Dask workers, command-line children) inherit them. The stages that do
+# dense algebra run on one BLAS thread already (reduced._blas.single_thread_blas); this reaches the rest (model
+# builds, the tests' own references). With -n 0 nothing changes: one process may use every core.
+BLAS_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def pytest_configure(config):
+    workers = getattr(config.option, "numprocesses", None) or 0  # an int by now (xdist's pytest_cmdline_main)
+    if hasattr(config, "workerinput") or not isinstance(workers, int) or workers < (os.cpu_count() or 1):
+        return
+    for name in BLAS_THREAD_VARS:
+        os.environ.setdefault(name, "1")
 
 
 # --- Scheduling: the longest files first (issue 28) --------------------------------------------------------------
