@@ -21,6 +21,7 @@ from reduced.models.loads import Harmonic, Loads
 from reduced.periodic.forced_shooting import ForcedFlow, ShootingResidual
 from reduced.periodic.forced_stability import hb_states
 from reduced.periodic.hb import newton
+from reduced.periodic.response_map import MapOptions, PointResponse, _defer_after, classify
 from reduced.transient._exact_kernels import _exponentials, _series_at
 from reduced.transient.exact import integrate_exact
 from reduced.transient.integrate import ringdown
@@ -275,3 +276,22 @@ def test_nnm_newtons_asking_lazily_are_the_eager_ones(monkeypatch):
     ref = both()
     assert ref[1] is not None and br.energy_J[-1] > 1e-2  # a branch into contact, a corrector that converged
     assert np.array_equal(lazy[0], ref[0]) and np.array_equal(lazy[1], ref[1])
+
+
+def test_the_map_samples_on_the_march_or_after_it_with_the_same_bits(attractor):
+    """classify's ``defer`` (the sweep's guess from the previous frequency) changes no number of a chaotic point."""
+    pm, y = attractor
+    opts = MapOptions(n_transient=4, n_record=32, max_blocks=1)
+    got = [classify(pm, y, 1.0, opts, (0, 2, 3), np.random.default_rng(0), defer=d) for d in (True, False)]
+    assert got[0].regime == "chaotic"  # a point that reads its samples: the deferred one replays them
+    for f in PointResponse.__dataclass_fields__:
+        a, b = getattr(got[0], f), getattr(got[1], f)
+        assert np.array_equal(a, b, equal_nan=isinstance(a, float) or np.asarray(a).dtype.kind == "f"), f
+
+
+def test_a_sweep_samples_on_the_march_after_a_response_that_read_its_samples():
+    def point(regime, settled=True):
+        return PointResponse(regime, 0, 0.0, 0.0, 0.0, settled, *[None] * 8)
+    assert _defer_after([]) and _defer_after([point("periodic")]) and _defer_after([point("subharmonic")])
+    assert not _defer_after([point("chaotic")]) and not _defer_after([point("quasi_periodic")])
+    assert not _defer_after([point("periodic", settled=False)])  # unsettled: its record's samples were read

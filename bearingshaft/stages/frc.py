@@ -323,7 +323,8 @@ def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: 
     """
     t0 = time.perf_counter()
     ok = not isinstance(br, Exception)
-    contact = bool(np.any(_in_contact(system, br))) if ok else True
+    in_contact = _in_contact(system, br) if ok else np.zeros(0, bool)  # read twice: worked out once
+    contact = bool(np.any(in_contact)) if ok else True
     Hc = check_harmonics(spec)
     change = hb_change(br, Hc) if ok and Hc >= 1 else math.nan
     method = spec.curve
@@ -345,7 +346,6 @@ def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: 
                            period_doubling_depth=spec.period_doubling_depth,
                            period_doubling_steps=spec.period_doubling_steps, cover_families=spec.cover_families,
                            deadline_s=spec.switching_max_s or math.inf)
-    in_contact = _in_contact(system, br) if ok else np.zeros(0, bool)
     try:
         if ok:  # the HB orbits at f_min, then at points spread over the curve (where HB is far from exact)
             idx = np.concatenate([[0], _evenly(len(br.freq_hz), START_GUESSES)[1:]])

@@ -473,7 +473,7 @@ def _minimal_period(pm: PeriodMap, ys: np.ndarray, J: np.ndarray, q: int, opts: 
 
 
 def classify(pm: PeriodMap, y0: np.ndarray, sigma: float, opts: MapOptions, mirror=None,
-             rng: np.random.Generator | None = None) -> PointResponse:
+             rng: np.random.Generator | None = None, defer: bool = True) -> PointResponse:
     """The response at one frequency from the state y0 (module docstring).
 
     Parameters
@@ -484,6 +484,9 @@ def classify(pm: PeriodMap, y0: np.ndarray, sigma: float, opts: MapOptions, mirr
     opts : MapOptions
     mirror : (a, b, a - b) row indices of the mirror pair in pm.rows, or None
     rng : of the kick and the tangent start (default seeded by opts.seed)
+    defer : march the record blocks without sampling and sample them afterwards only if they are read
+        (:meth:`PeriodMap.sampled`); False samples them on the march. The same numbers either way: a
+        guess of which costs less (a response that ends chaotic reads its samples, a periodic one does not)
 
     Returns
     -------
@@ -502,10 +505,11 @@ def classify(pm: PeriodMap, y0: np.ndarray, sigma: float, opts: MapOptions, mirr
         r = pm.run(y, opts.n_transient, tangent=W, samples_per_period=0, inner_samples=0)
         y, W, active, n_run = r.y, r.tangent, r.active, opts.n_transient
     for _ in range(opts.max_blocks):
-        # the record's peaks and samples are read only if no periodic orbit ends the classification here: the
-        # march records its segments and samples them afterwards if they are (PeriodMap.sampled, the same numbers)
+        # the record's peaks and samples are read only if no periodic orbit ends the classification here: with
+        # ``defer`` the march records its segments and samples them afterwards if they are (PeriodMap.sampled,
+        # the same numbers), else it samples them on the way (cheaper where they are read: in a chaotic band)
         r = pm.run(y, opts.n_record, tangent=W, active=active, samples_per_period=opts.samples_per_period,
-                   inner_samples=opts.inner_samples, record_samples=True, defer_samples=True)
+                   inner_samples=opts.inner_samples, record_samples=True, defer_samples=defer)
         n_run += opts.n_record
         y, W, active = r.y, r.tangent, r.active
         logs = r.log_growth[:, 0] / pm.period_s
@@ -563,6 +567,13 @@ def _fixed_norm(system: GapSystem, freq_hz: float) -> tuple | None:
         return None
     D = energy_norm_matrix(system, 2.0 * np.pi * freq_hz)
     return D, np.linalg.inv(D)
+
+
+def _defer_after(points: list) -> bool:
+    """Whether the next frequency's record blocks are sampled after the march (:func:`classify`'s ``defer``):
+    yes unless the previous frequency read its samples (a chaotic, quasi-periodic or unsettled response: a
+    sweep stays in such a band for many steps, where sampling on the march costs less than replaying it)."""
+    return not points or (points[-1].settled and points[-1].regime in ("periodic", "subharmonic"))
 
 
 def jumps(freq_hz: np.ndarray, points: list, max_step_hz: float) -> np.ndarray:
@@ -701,7 +712,7 @@ def sweep(period_map, y0: np.ndarray, amplitude_N: float, freq_hz: np.ndarray, s
         f = todo.pop(0)
         t0 = time.perf_counter()
         try:
-            pt = classify(period_map(f), y, sigma, opts, mirror, rng)
+            pt = classify(period_map(f), y, sigma, opts, mirror, rng, defer=_defer_after(points))
         except ExactIntegratorError as exc:
             raise RuntimeError(f"{label} at {f:.6g} Hz, {amplitude_N:g} N: {exc}") from None
         y = pt.state
