@@ -570,7 +570,8 @@ def _node_peaks(lam, V, Vinv, yp, valid, B, offset, side, Y0, h, hmin, omega, fY
                             flo = prev[p, 1]
                             t_ = 0.5 * (lo + hi)
                             for _ in range(40):
-                                _row_series(rows[p:p + 1], V[s, :n], Ys, yp[s, :n], beta, Fa, omega, lam[s], t_, one, ebr)
+                                _row_series(rows[p:p + 1], V[s, :n], Ys, yp[s, :n], beta, Fa, omega, lam[s], t_,
+                                            one, ebr)
                                 d1, d2 = one[0, 1], one[0, 2]
                                 if (d1 > 0.0) == (flo > 0.0):
                                     lo = t_
