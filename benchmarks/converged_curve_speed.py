@@ -2,29 +2,34 @@
 with stability in under 10 s" for one level of the 3-DOF model).
 
     PYTHONPATH=. python benchmarks/converged_curve_speed.py [--scene discrete-frc] [--levels 1 10]
-        [--repeats 3] [--out results/performance] [--grazing-ds 2e-2] [--multi-grazing-ds 1e-3]
+        [--repeats 3] [--out results/performance] [--no-hb] [--grazing-ds 2e-2] [--multi-grazing-ds 1e-3]
 
-What is timed, per level, as the frc stage computes it (the scene's [frc] table, one BLAS thread):
+What is timed, per level (the scene's [frc] table with ``branch_switching = false`` and ``cover_families = 0``,
+one BLAS thread), two ways in the same process, one after the other:
 
-1. the HB curve at the scene's ``harmonics`` with the monodromy stability of every point
-   (:func:`bearingshaft.stages.frc._curve`, ``hill_points = 0``): it supplies the first orbits' guesses;
-2. the drawn curve (:func:`bearingshaft.stages.frc.converged_curve`) with ``branch_switching = false`` and
-   ``cover_families = 0``: where HB is not converged in H, the main family of exact periodic orbits (the
-   family through the linear response at the band's ends), continued by multiple shooting with the Floquet
-   multipliers of every point; no family born at a branch point, no isolated family.
+1. **the curve, no HB** (the headline): :func:`bearingshaft.stages.frc.linear_start_families`: the main family
+   of exact periodic orbits continued by multiple shooting with the Floquet multipliers of every point, started
+   from the linear orbit at the band's top (closed form, every stop open), the displacement scale from the
+   linear response over the band; no harmonic balance at all. The same family as the stage's (its extent,
+   folds and stability: tests/test_exact_frc_robust.py), traced from the other end (about as many points);
+2. **the stage's path** (the baseline; skipped with ``--no-hb``): the HB curve at the scene's ``harmonics`` with
+   the monodromy stability of every point (:func:`bearingshaft.stages.frc._curve`, ``hill_points = 0``), then
+   the drawn curve (:func:`bearingshaft.stages.frc.converged_curve`: HB where it is converged in H, at 0.1 N,
+   else the main family from the HB orbits' guesses). The stage needs its HB curve anyway (drawn beside the
+   exact families, the choice between HB and shooting, the fill outside the families, the cover guesses).
 
-The sum of both is the "converged curve with stability" compared with the 10 s target, in CPU seconds
-(``time.process_time``: what the run costs on a shared machine) and wall seconds; the medians over
-``--repeats`` runs in one process (numba's kernels loaded first by an untimed run at the lowest level).
-The 1-minute load average is recorded beside each run. ``--grazing-ds`` and ``--multi-grazing-ds`` set the exact
+The medians over ``--repeats`` runs in one process (numba's kernels loaded first by an untimed run at the lowest
+level), in CPU seconds (``time.process_time``: what the run costs on a shared machine) and wall seconds. The
+1-minute load average is recorded beside each run. ``--grazing-ds`` and ``--multi-grazing-ds`` set the exact
 families' ``grazing_ds`` and ``multi_grazing_ds`` (:class:`reduced.periodic.exact_frc.ExactFRCOptions`; defaults:
 the stage's, 2e-2 and 1e-3, the main family robust to round-off, tests/test_exact_frc_robust.py; 2e-2 and 2e-2:
 the rule before session 13).
 
-Writes ``converged_curve_speed.csv`` (every run: level, repeat, HB and main-family CPU/wall, the points,
-the band the main family spans, its folds, its stable points, the load), ``converged_curve_headline.csv``
-(one row per level, the columns of benchmarks/performance_summary.py: what, ours_s = the median CPU,
-target, met) and ``converged_curve_machine.csv``.
+Writes ``converged_curve_speed.csv`` (every run: level, repeat, the no-HB curve's CPU/wall, its points, band,
+folds, stable points and how it ended; the stage path's HB and main-family CPU/wall and points; the load),
+``converged_curve_headline.csv`` (one row per level, the columns of benchmarks/performance_summary.py: what,
+ours_s = the no-HB curve's median CPU, baseline_s = the stage path's, target, met) and
+``converged_curve_machine.csv``.
 """
 
 from __future__ import annotations
@@ -44,7 +49,7 @@ import numpy as np  # noqa: E402
 import bearingshaft.stages.frc as stage  # noqa: E402
 from bearingshaft.output import machine_rows, write_rows  # noqa: E402
 from bearingshaft.scenes import load_scene  # noqa: E402
-from bearingshaft.stages.frc import _curve, converged_curve  # noqa: E402
+from bearingshaft.stages.frc import _curve, converged_curve, linear_start_families  # noqa: E402
 from bearingshaft.stages.frc_friction import load_vector  # noqa: E402
 from bearingshaft.systems import model_system  # noqa: E402
 from reduced._blas import single_thread_blas  # noqa: E402
@@ -62,6 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--levels", type=float, nargs="*", default=None, help="N (default: the scene's levels)")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--out", default="results/performance")
+    ap.add_argument("--no-hb", action="store_true", help="skip the stage's path (HB curve + converged_curve)")
     ap.add_argument("--grazing-ds", type=float, default=None, help="the exact families' grazing_ds (default 2e-2)")
     ap.add_argument("--multi-grazing-ds", type=float, default=None,
                     help="the exact families' multi_grazing_ds (default 1e-3)")
@@ -84,44 +90,57 @@ def main(argv: list[str] | None = None) -> int:
     with single_thread_blas(), warnings.catch_warnings():
         warnings.simplefilter("ignore")  # LinAlgWarning from LU on rejected continuation steps, as the stage
         P0 = min(levels)
-        converged_curve(system, b, P0, spec, _curve(system, b, P0, spec, spec.harmonics, rows, names,
-                                                    hill_points=0), rows, names)  # numba's kernels loaded
+        linear_start_families(system, b, P0, spec, rows, names)  # numba's kernels loaded
+        if not args.no_hb:
+            converged_curve(system, b, P0, spec, _curve(system, b, P0, spec, spec.harmonics, rows, names,
+                                                        hill_points=0), rows, names)
         for rep in range(args.repeats):
             for P in levels:
                 load = os.getloadavg()[0]
-                br, hb_wall, hb_cpu = _timed(_curve, system, b, P, spec, spec.harmonics, rows, names, hill_points=0)
-                cc, cc_wall, cc_cpu = _timed(converged_curve, system, b, P, spec, br, rows, names)
-                row = {"scene": scene.name, "level_N": P, "repeat": rep + 1, "method": cc.method,
-                       "hb_cpu_s": round(hb_cpu, 3), "hb_wall_s": round(hb_wall, 3),
-                       "main_cpu_s": round(cc_cpu, 3), "main_wall_s": round(cc_wall, 3),
-                       "total_cpu_s": round(hb_cpu + cc_cpu, 3), "total_wall_s": round(hb_wall + cc_wall, 3),
-                       "load_1min": round(load, 2)}
-                if cc.exact is not None:
-                    f = cc.exact.families[0]
-                    row.update(points=len(f.freq_hz), freq_min_hz=f"{f.freq_hz.min():.6g}",
-                               freq_max_hz=f"{f.freq_hz.max():.6g}", folds=len(f.folds),
-                               stable_points=int(np.sum(f.stable)), status=f.status)
-                else:
-                    row.update(points=len(br.freq_hz), freq_min_hz=f"{br.freq_hz.min():.6g}",
-                               freq_max_hz=f"{br.freq_hz.max():.6g}", folds="", stable_points="", status="hb")
+                ex, cc_wall, cc_cpu = _timed(linear_start_families, system, b, P, spec, rows, names)
+                f = ex.families[0]
+                row = {"scene": scene.name, "level_N": P, "repeat": rep + 1, "cpu_s": round(cc_cpu, 3),
+                       "wall_s": round(cc_wall, 3), "points": len(f.freq_hz), "freq_min_hz": f"{f.freq_hz.min():.6g}",
+                       "freq_max_hz": f"{f.freq_hz.max():.6g}", "folds": len(f.folds),
+                       "stable_points": int(np.sum(f.stable)), "status": f.status, "load_1min": round(load, 2)}
+                msg = (f"[converged-curve-speed] {scene.name} {P:g} N #{rep + 1}: no HB {cc_cpu:.1f} s CPU "
+                       f"({cc_wall:.1f} s wall, {len(f.freq_hz)} points)")
+                if not args.no_hb:
+                    br, hb_wall, hb_cpu = _timed(_curve, system, b, P, spec, spec.harmonics, rows, names,
+                                                 hill_points=0)
+                    cc, st_wall, st_cpu = _timed(converged_curve, system, b, P, spec, br, rows, names)
+                    row.update(stage_method=cc.method, stage_hb_cpu_s=round(hb_cpu, 3),
+                               stage_hb_wall_s=round(hb_wall, 3), stage_main_cpu_s=round(st_cpu, 3),
+                               stage_main_wall_s=round(st_wall, 3), stage_total_cpu_s=round(hb_cpu + st_cpu, 3),
+                               stage_total_wall_s=round(hb_wall + st_wall, 3),
+                               stage_points=len(cc.exact.families[0].freq_hz) if cc.exact is not None
+                               else len(br.freq_hz))
+                    msg += (f"; the stage's path ({cc.method}) {hb_cpu + st_cpu:.1f} s CPU ({hb_cpu:.1f} HB + "
+                            f"{st_cpu:.1f} main, {row['stage_points']} points)")
                 runs.append(row)
-                print(f"[converged-curve-speed] {scene.name} {P:g} N #{rep + 1} ({cc.method}): "
-                      f"{row['total_cpu_s']:.1f} s CPU ({hb_cpu:.1f} HB + {cc_cpu:.1f} main), "
-                      f"{row['total_wall_s']:.1f} s wall, load {load:.1f}", flush=True)
+                print(msg + f", load {load:.1f}", flush=True)
     write_rows(out / "converged_curve_speed.csv", runs)
     head = []
     for P in levels:
         mine = [r for r in runs if r["level_N"] == P]
-        cpu = float(np.median([r["total_cpu_s"] for r in mine]))
-        wall = float(np.median([r["total_wall_s"] for r in mine]))
+        cpu = float(np.median([r["cpu_s"] for r in mine]))
+        wall = float(np.median([r["wall_s"] for r in mine]))
         r0 = mine[0]
-        head.append({"what": f"converged main curve with stability, {scene.name} {P:g} N ({r0['method']}: HB guesses "
-                             f"{np.median([r['hb_cpu_s'] for r in mine]):.1f} s + main family "
-                             f"{np.median([r['main_cpu_s'] for r in mine]):.1f} s, {r0['points']} points over "
-                             f"{r0['freq_min_hz']}-{r0['freq_max_hz']} Hz, ended: {r0['status']}), CPU seconds "
-                             f"(median of {args.repeats}; grazing_ds {grazing_ds:g}, multi_grazing_ds {multi_ds:g}; "
-                             f"wall {wall:.1f} s)",
-                     "ours_s": round(cpu, 2), "baseline": "", "baseline_s": "", "ratio": "", "error": "",
+        base, why = "", ""
+        if not args.no_hb:
+            base = float(np.median([r["stage_total_cpu_s"] for r in mine]))
+            why = (f"; the stage's path ({r0['stage_method']}): HB guesses "
+                   f"{np.median([r['stage_hb_cpu_s'] for r in mine]):.1f} s + "
+                   f"{'main family' if r0['stage_method'] == 'shooting' else 'HB check'} "
+                   f"{np.median([r['stage_main_cpu_s'] for r in mine]):.1f} s")
+        head.append({"what": f"converged main curve with stability, {scene.name} {P:g} N (the exact main family "
+                             f"from the linear orbit at the band's top, no HB: {r0['points']} points over "
+                             f"{r0['freq_min_hz']}-{r0['freq_max_hz']} Hz, {r0['folds']} folds, ended: "
+                             f"{r0['status']}), CPU seconds (median of {args.repeats}; grazing_ds {grazing_ds:g}, "
+                             f"multi_grazing_ds {multi_ds:g}; wall {wall:.1f} s{why})",
+                     "ours_s": round(cpu, 2), "baseline": "" if args.no_hb else "the stage's path: HB curve + "
+                     "converged_curve, CPU s", "baseline_s": "" if args.no_hb else round(base, 2),
+                     "ratio": "" if args.no_hb else round(base / cpu, 2), "error": "",
                      "target": f"<= {TARGET_S:g} s CPU", "met": bool(cpu <= TARGET_S)})
     write_rows(out / "converged_curve_headline.csv", head)
     write_rows(out / "converged_curve_machine.csv", machine_rows(scene=scene.name, load_1min_start=round(load0, 2)))

@@ -41,7 +41,7 @@ SOURCES = (
      "python benchmarks/fep_speed.py --repeats 3", ""),
     ("converged_curve_headline.csv", "converged_curve_machine.csv",
      "converged main curve with stability per level (issue 25)",
-     "PYTHONPATH=. python benchmarks/converged_curve_speed.py --repeats 2", ""),
+     "PYTHONPATH=. python benchmarks/converged_curve_speed.py --repeats 3", ""),
     ("job_headline.csv", "job_machine.csv", "the main job and the test suite, whole",
      "PYTHONPATH=. python benchmarks/job_times.py", ""),
 )
@@ -128,22 +128,22 @@ LIMITS = (
      "against the 1368 Hz seventeenth mode) where one block solve does it; a better shift: with a Cholesky factor "
      "the shift stays below the first mode, and the slow modes' rate is fixed by (998 / 1368)^2 = 0.53 whatever it is"),
     ("converged main curve with stability, discrete-frc 10 N",
-     "measured at load 3 (2026-11-27 10:05 UTC, session 13, median of 2; 23.9 s under load 10): 15.6 s CPU, 5.1 s "
-     "of it the HB curve at H = 15 (the stage needs it for its other parts and for the first orbit's guess: the HB "
-     "orbit at 34.9 Hz), 10.5 s the main exact family, now the whole curve: 5099 points from 17.13 Hz to the band's "
-     "top, 36 folds. Before, 18 s (HB 8.1 + 10.0, load 8-10) bought a shorter path, 26.8-953 Hz, 2696 points, that "
-     "round-off had made (clusters of grazings at the tongues' lower folds crossed in one step). Session 13 refuses "
-     "a step that changes the contact events by more than one grazing while longer than multi_grazing_ds = 1e-3 "
-     "(ExactFRCOptions; one grazing: grazing_ds = 2e-2 as before): the same family from the HB start, under "
-     "corrector_tol x10 and from the linear orbit at 900 Hz (no HB at all), tests/test_exact_frc_robust.py (slow). "
-     "In one process, interleaved (load 3): the old rule 5.8-7.4 s CPU for its 2696 points (2.1-2.7 ms a point), "
-     "the new 11.6-12.2 s for 5099 (2.3-2.4 ms a point; medians 6.6 and 11.9 s: 1.8x; at load 10, 9.1 and 15.5 s); "
-     "grazing_ds = 1e-3 for every change gives the same family in 6700 points. Cut: the first orbit's load "
-     "continuation from the HB guess at 10 Hz (400 steps that failed, ~2 s CPU) now runs only if Newton converges "
-     "from no guess. What limits it: the path's length (1176 changes of the contact events along it; ~4 points "
-     "between two) times ~2.3 ms a point (8 marches and 6 Jacobians of the 8-node shooting a point, its monodromy's "
-     "eigenvalues, its peaks); from the linear orbit at 900 Hz the curve needs no HB (the same family), which the "
-     "stage does not use yet (its HB-first start is kept: the other levels' families start at f_min)"),
+     "measured at load 2 (2026-11-27 13:04-13:06 UTC, session 14, median of 3; sum(range(10**6)) 22-29 ms): 13.8 s "
+     "CPU (12.9-16.4), the stage's path in the same runs 19.1 s (HB 6.9 + main family 12.4; session 13 measured it "
+     "at 15.6 s, load 3); at load 8-14 (12:25-12:48) 17.0 s against 26.9 s. Session 14: the curve is timed from the "
+     "linear orbit at the band's top (bearingshaft.stages.frc.linear_start_families: no HB at all; the same family, "
+     "its extent, 36 folds and stability, tests/test_exact_frc_robust.py; 5185 points, 17.13-900 Hz), 1.4-1.6x less "
+     "CPU than the stage's path in the same process; and a point costs less, bit for bit the same family (Y, "
+     "multipliers, peaks, test signs, folds; discrete-frc 1 N and 10 N, rom-frc 1 N and 10 N): the fold, pitchfork "
+     "and period-doubling test signs by elimination (sign of det(A -+ I) per symmetry block, a small numba kernel) "
+     "instead of four eigenvalue problems a point, and the peaks skip the contact-state stretches bounded inside the "
+     "extremes already found: 1.29x CPU on the discrete 10 N family (median of 4, old and new code alternating in "
+     "one process, load 8), 1.1x at 1 N, none on rom-frc 10 N (0.97x, one pair). What limits it: the path's length "
+     "(1176 changes of the contact events; 5185 points) times 2.5-3 ms a point: ~5 marches of the 8-node flow a "
+     "point (3-4 Newton iterations of the corrector at tol 1e-8: a first step of ~1e-4 contracts only ~0.3, and "
+     "stopping on a contraction estimate would save ~9 % of the marches but leave the orbits 1e-8 from exact "
+     "instead of round-off), the refused steps at grazings (2838 marches for 1896 refusals), the Jacobians and "
+     "their LU, the peaks, and Python between them"),
     ("main job, bearingshaft run",
      "on this session's machine (an Intel Xeon at 2.1 GHz; the targets were first met on an AMD EPYC, where the job "
      "took 359 s before session 12's changes), quiet, reduced-model cache warm (2026-11-27 10:24 UTC, load 1.2 at "

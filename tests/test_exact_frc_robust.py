@@ -23,10 +23,6 @@ import reduced.periodic.exact_frc as ef
 from bearingshaft.scenes import load_scene
 from bearingshaft.stages.frc_friction import load_vector
 from bearingshaft.systems import model_system
-from reduced.models.symmetry import tip_mirror
-from reduced.periodic.exact_hb import default_root_samples
-from reduced.periodic.forced_balance import ForcedBalance
-from reduced.periodic.frc import default_x_ref
 
 
 def test_corrector_tol_reaches_the_continuation():
@@ -63,12 +59,7 @@ def _main_family(monkeypatch, P, **opts):
 def _from_the_top(P):
     """The same family started from the linear orbit at the band's top (no HB guess), the stage's options."""
     spec, system, rows, names, b = _setup(P)
-    fb = ForcedBalance(system, b, P, 0.0, spec.harmonics, default_root_samples(spec.harmonics), True)
-    opts = ef.ExactFRCOptions(segments=spec.shooting_segments, branch_switching=False, cover_families=0,
-                              max_steps=spec.shooting_steps)
-    return ef.exact_frc(system, b, P, spec.freq_min_hz, spec.freq_max_hz, [], point_rows=rows, point_names=names,
-                        x_ref=default_x_ref(fb, spec.freq_min_hz, spec.freq_max_hz), options=opts,
-                        mirror=tip_mirror(system, b)[0]).families[0]
+    return sf.linear_start_families(system, b, P, spec, rows, names).families[0]
 
 
 @pytest.mark.slow

@@ -72,6 +72,7 @@ from reduced.periodic.frc import (
     FRC_STEPS,
     FRCBranch,
     _synthesis,
+    default_x_ref,
     frc,
     linear_frf,
     max_abs_over_period,
@@ -338,14 +339,8 @@ def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: 
             why += "; " + "; ".join(notes)
         return ConvergedCurve(P, "hb", why, spec.harmonics, Hc, change, contact, None, "", time.perf_counter() - t0,
                               refined)
-    S = spec.shooting_segments + spec.shooting_segments % 2
-    opts = ExactFRCOptions(segments=S, branch_switching=spec.branch_switching, max_families=spec.max_families,
-                           family_steps=spec.family_steps, max_steps=spec.shooting_steps,
-                           period_doubling=spec.period_doubling,
-                           period_doubling_families=spec.period_doubling_families,
-                           period_doubling_depth=spec.period_doubling_depth,
-                           period_doubling_steps=spec.period_doubling_steps, cover_families=spec.cover_families,
-                           deadline_s=spec.switching_max_s or math.inf)
+    opts = _exact_options(spec)
+    S = opts.segments
     try:
         if ok:  # the HB orbits at f_min, then at points spread over the curve (where HB is far from exact)
             idx = np.concatenate([[0], _evenly(len(br.freq_hz), START_GUESSES)[1:]])
@@ -396,6 +391,46 @@ def converged_curve(system: GapSystem, b: np.ndarray, P: float, spec, br, rows: 
                 f"the HB orbit closes one; {'stable' if open_gap.stable else 'unstable'}): an exact orbit, drawn")
     return ConvergedCurve(P, "shooting", why, spec.harmonics, Hc, change, contact, ex, "", time.perf_counter() - t0,
                           refined, fill, open_gap)
+
+
+def linear_start_families(system: GapSystem, b: np.ndarray, P: float, spec, rows: np.ndarray, names: tuple):
+    """The exact families of level P as :func:`converged_curve` continues them (its options from the [frc]
+    table), started from the linear orbit at the band's top (closed form, every stop open) instead of HB
+    guesses: no HB curve is needed. The displacement scale is the HB curve's own
+    (:func:`reduced.periodic.frc.default_x_ref`, the largest linear response over the band), so the steps
+    are measured alike; the main family is the same one (tests/test_exact_frc_robust.py at 10 N: its
+    extent, its 36 folds, its stability), traced from the other end. What benchmarks/converged_curve_speed.py
+    times; the stage keeps its HB start (it draws the HB curve, and chooses between HB and shooting, and
+    fills outside the families, from it).
+
+    Parameters
+    ----------
+    system, b, P : the gap system, the load direction (n,) and its amplitude (N)
+    spec : the [frc] table
+    rows, names : the output points
+
+    Returns
+    -------
+    reduced.periodic.exact_frc.ExactFRC
+        Raises :class:`reduced.periodic.shooting.ShootingError` where the linear orbit at the band's top
+        closes a stop (no start).
+    """
+    fb = ForcedBalance(system, b, P, 0.0, spec.harmonics, default_root_samples(spec.harmonics), True)
+    return exact_frc(system, b, P, spec.freq_min_hz, spec.freq_max_hz, [], point_rows=rows, point_names=names,
+                     x_ref=default_x_ref(fb, spec.freq_min_hz, spec.freq_max_hz),
+                     options=replace(_exact_options(spec), cover_families=0), mirror=tip_mirror(system, b)[0])
+
+
+def _exact_options(spec) -> ExactFRCOptions:
+    """The exact families' options from the [frc] table (an even number of segments)."""
+    return ExactFRCOptions(segments=spec.shooting_segments + spec.shooting_segments % 2,
+                           branch_switching=spec.branch_switching, max_families=spec.max_families,
+                           family_steps=spec.family_steps, max_steps=spec.shooting_steps,
+                           period_doubling=spec.period_doubling,
+                           period_doubling_families=spec.period_doubling_families,
+                           period_doubling_depth=spec.period_doubling_depth,
+                           period_doubling_steps=spec.period_doubling_steps, cover_families=spec.cover_families,
+                           deadline_s=spec.switching_max_s or math.inf)
 
 
 def _open_gap(system: GapSystem, b: np.ndarray, P: float, br, rows: np.ndarray, in_contact: np.ndarray

@@ -83,10 +83,12 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+import numba as nb
 import numpy as np
 
 from reduced import _checks as _check
 from reduced._blas import single_thread_blas
+from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
 from reduced.periodic.continuation import ContinuationError, ContinuationOptions, continue_branch, tangent
 from reduced.periodic.forced_shooting import SEGMENTS, ForcedFlow, ShootingResidual, shoot_at
@@ -478,10 +480,49 @@ def _runs(mask: np.ndarray) -> list[np.ndarray]:
 
 
 # -- point data: multipliers, symmetry tests, peaks -------------------------------------------------
-def _real_signs(lam: np.ndarray, c: float) -> float:
-    """sign of det(A - c I) from A's eigenvalues: complex pairs count |lam - c|^2 > 0."""
-    real = np.abs(lam.imag) <= REAL_TOL * np.maximum(np.abs(lam), 1e-300)
-    return float(np.prod(np.sign(lam.real[real] - c)))
+def _real_signs_pm(lam: np.ndarray) -> tuple[float, float]:
+    """(sign of det(A - I), sign of det(A + I)) from A's eigenvalues: complex pairs count |lam -+ 1|^2 > 0,
+    so each is the product of sign(lam - c) over the real eigenvalues (c = +1, -1). The reference of
+    :func:`_det_signs` (tests/test_exact_frc_speed.py)."""
+    re = lam.real[np.abs(lam.imag) <= REAL_TOL * np.maximum(np.abs(lam), 1e-300)]
+    return float(np.prod(np.sign(re - 1.0))), float(np.prod(np.sign(re + 1.0)))
+
+
+@nb.njit(cache=True)
+def _det_sign(A, c):
+    """sign of det(A - c I) (A square): Gaussian elimination with partial pivoting, the product of the
+    pivots' signs and the row swaps' (0 at a zero pivot column)."""
+    m = A.shape[0]
+    U = A.copy()
+    for i in range(m):
+        U[i, i] -= c
+    sign = 1.0
+    for k in range(m):
+        p = k
+        for i in range(k + 1, m):
+            if abs(U[i, k]) > abs(U[p, k]):
+                p = i
+        if U[p, k] == 0.0:
+            return 0.0
+        if p != k:
+            sign = -sign
+            for j in range(k, m):
+                U[k, j], U[p, j] = U[p, j], U[k, j]
+        if U[k, k] < 0.0:
+            sign = -sign
+        for i in range(k + 1, m):
+            f = U[i, k] / U[k, k]
+            for j in range(k + 1, m):
+                U[i, j] -= f * U[k, j]
+    return sign
+
+
+@nb.njit(cache=True)
+def _det_signs(A):
+    """(sign of det(A - I), sign of det(A + I)) of a real square A: the numbers of :func:`_real_signs_pm` on
+    A's eigenvalues (det(A - c I) is the product of (lam - c) over them, a complex pair's |lam - c|^2 > 0),
+    without the eigenvalues (they differ only where det(A -+ I) is at round-off, at a crossing itself)."""
+    return _det_sign(A, 1.0), _det_sign(A, -1.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -525,20 +566,16 @@ class _Analyser:
                 G = -Phi
         return Phi, G
 
-    def signs(self, Js: np.ndarray, maps: tuple | None = None, mu: np.ndarray | None = None) -> np.ndarray:
-        """The test signs of the channels from the segments' monodromies (``maps``: their :meth:`maps`, if made;
-        ``mu``: the eigenvalues of their Phi, if found, in any order)."""
+    def signs(self, Js: np.ndarray, maps: tuple | None = None) -> np.ndarray:
+        """The test signs of the channels from the segments' monodromies (``maps``: their :meth:`maps`, if made)."""
         Phi, G = self.maps(Js) if maps is None else maps
         out = []
-        for name, Q in self.blocks:
-            # the whole space: Q = I, Q^T Phi Q is Phi to the bit (products by 1 and sums of zeros)
-            lamP = mu if mu is not None and name == "all" else np.linalg.eigvals(Q.T @ Phi @ Q)
-            if self.half_sym:
-                lamG = np.linalg.eigvals(Q.T @ G @ Q)
-                out += [_real_signs(lamG, 1.0), _real_signs(lamG, -1.0)]
-            else:
-                out += [_real_signs(lamP, 1.0)]
-            out += [_real_signs(lamP, -1.0)]
+        for _, Q in self.blocks:
+            # the whole space: Q = I, Q^T Phi Q is Phi to the bit (products by 1 and sums of zeros); the signs of
+            # det(A -+ I) by elimination (:func:`_det_signs`: what the eigenvalues' signs give, a few us, not ~50)
+            sp = call_numba_kernel(_det_signs, np.ascontiguousarray(Q.T @ Phi @ Q))
+            out += ([*call_numba_kernel(_det_signs, np.ascontiguousarray(Q.T @ G @ Q)), sp[1]] if self.half_sym
+                    else [*sp])
         return np.array(out)
 
     def measures(self, nodes: np.ndarray) -> tuple[float, float]:
@@ -569,7 +606,7 @@ class _Analyser:
         mu = mu[np.argsort(-np.abs(mu), kind="stable")]
         pmax, pmin = res.peaks(Y, self.rows)
         a, hw = self.measures(res.nodes(Y)[0])
-        return mu, self.signs(Js, maps, mu), res.events(Y), a, hw, np.maximum(pmax, -pmin)
+        return mu, self.signs(Js, maps), res.events(Y), a, hw, np.maximum(pmax, -pmin)
 
 
 # -- continuation of one family -------------------------------------------------------------------

@@ -55,6 +55,7 @@ from reduced.transient.flow import MAX_SEGMENTS, _against_its_rate, _settle
 SEGMENTS = 8  # default nodes per load period: a node sees |mu|^(1/8) of the orbit's growth (1e4 -> 3.2)
 PEAK_SAMPLES_PER_PERIOD = 6.0  # samples of a contact state's closed form per period of its fastest mode ...
 PEAK_MAX_SAMPLES = 256  # ... but at most this many a stretch (then Newton refines each bracketed extreme)
+_BOUND_SLACK = 1e-9  # relative slack of a stretch's bound in _node_peaks, far above its samples' round-off (~1e-14)
 _FRESH = 32  # the peaks' samples step e^{lam dt} from sample to sample; every 32nd is a fresh exp (drift ~32 eps)
 GRAZING_EVENTS = 2  # contact events one grazing adds or removes per period (a stop closing and opening once)
 D_LOG_OMEGA = 1e-6  # central-difference step of dR/d ln(Omega) (truncation ~1e-12, round-off ~1e-10)
@@ -442,7 +443,10 @@ def _node_peaks(lam, V, Vinv, yp, valid, B, offset, side, Y0, h, hmin, omega, fY
     form sampled (``samples_per_rad`` per radian of its fastest mode, 8 to ``q_max`` samples) and
     each extreme refined by safeguarded Newton on the closed form's derivative. Returns a status
     as :func:`_march_nodes`. Where st_n[k] >= 0 the node's contact-state stretches are taken from
-    st_state[k], st_tau[k] (recorded by :func:`_march_kernel`) instead of marching again.
+    st_state[k], st_tau[k] (recorded by :func:`_march_kernel`) instead of marching again. A stretch whose
+    closed form is bounded inside the extremes found so far (this node's and the earlier nodes') is not
+    sampled: pmax, pmin of a node may then fall short of its own extremes, never of the largest and smallest
+    over the nodes (all that :meth:`ForcedFlow.peaks` returns).
 
     Long because it is one numba kernel: per stretch the output rows are projected once and the samples
     stepped by e^{lam dt}, and each bracketed extreme refined in place, without allocating per sample."""
@@ -463,6 +467,8 @@ def _node_peaks(lam, V, Vinv, yp, valid, B, offset, side, Y0, h, hmin, omega, fY
     eb = np.empty(N, np.complex128)
     ebr = np.empty(N, np.complex128)
     step = np.empty(N, np.complex128)
+    gmax = np.full(P, -np.inf)  # the extremes of the nodes before k
+    gmin = np.full(P, np.inf)
     for k in range(S):
         if st_n[k] >= 0:
             n_seg = st_n[k]
@@ -509,68 +515,83 @@ def _node_peaks(lam, V, Vinv, yp, valid, B, offset, side, Y0, h, hmin, omega, fY
                     chp[p] += w * Ys[r]
                     for mm in range(N):
                         RV[p, mm] += w * V[s, r, mm]
-            dsig = tau / q
-            for mm in range(N):
-                step[mm] = np.exp(lam[s, mm] * dsig)
-            eh_step = np.exp(1j * omega * dsig)
-            for j in range(q + 1):
-                sj = tau * j / q
-                if j % _FRESH == 0:
-                    e_h = Fa * np.exp(1j * omega * sj)
-                    for mm in range(N):
-                        eb[mm] = beta[mm] * np.exp(lam[s, mm] * sj)
-                else:
-                    e_h *= eh_step
-                    for mm in range(N):
-                        eb[mm] *= step[mm]
-                for p in range(P):
-                    a0 = 0.0 + 0.0j
-                    a1 = 0.0 + 0.0j
-                    for mm in range(N):
-                        t = RV[p, mm] * eb[mm]
-                        a0 += t
-                        a1 += t * lam[s, mm]
-                    ev[p, 0] = c0p[p] + (chp[p] * e_h).real + a0.real
-                    ev[p, 1] = (1j * omega * chp[p] * e_h).real + a1.real
-                for p in range(P):
-                    v = ev[p, 0]
-                    if v > pmax[k, p]:
-                        pmax[k, p] = v
-                    if v < pmin[k, p]:
-                        pmin[k, p] = v
-                    if j > 0 and (prev[p, 1] > 0.0) != (ev[p, 1] > 0.0):
-                        # an extremum in (s_{j-1}, s_j); it can beat the extremes so far only if it lies
-                        # within dt max |x'| of the bracket's ends: then Newton on x' = 0 in the bracket
-                        reach = (tau / q) * max(abs(prev[p, 1]), abs(ev[p, 1]))
-                        if prev[p, 1] > 0.0 and max(prev[p, 0], v) + reach < pmax[k, p]:
-                            continue
-                        if prev[p, 1] < 0.0 and min(prev[p, 0], v) - reach > pmin[k, p]:
-                            continue
-                        lo, hi = tau * (j - 1) / q, sj
-                        flo = prev[p, 1]
-                        t_ = 0.5 * (lo + hi)
-                        for _ in range(40):
-                            _row_series(rows[p:p + 1], V[s, :n], Ys, yp[s, :n], beta, Fa, omega, lam[s], t_, one, ebr)
-                            d1, d2 = one[0, 1], one[0, 2]
-                            if (d1 > 0.0) == (flo > 0.0):
-                                lo = t_
-                            else:
-                                hi = t_
-                            tn = t_ - d1 / d2 if d2 != 0.0 else 0.5 * (lo + hi)
-                            if not (lo <= tn <= hi):
-                                tn = 0.5 * (lo + hi)
-                            if abs(tn - t_) <= 1e-15 * tau or hi - lo <= 1e-15 * tau:
+            # a stretch whose closed form provably stays inside the extremes already found (of this node's and the
+            # earlier nodes' stretches) is not sampled: |Re(ch e_h)| <= |ch| |Fa|, |Re(RV_m beta_m e^{lam_m sigma})|
+            # <= |RV_m beta_m| max(1, e^{Re lam_m tau}); the result, the largest and smallest over all nodes, is
+            # the same (every sample and refined extreme of the stretch lies below, resp. above, it)
+            skip = True
+            for p in range(P):
+                acc = abs(chp[p]) * abs(Fa)
+                for mm in range(N):
+                    acc += abs(RV[p, mm]) * abs(beta[mm]) * max(1.0, math.exp(lam[s, mm].real * tau))
+                slack = acc + _BOUND_SLACK * (abs(c0p[p]) + acc)
+                if not (c0p[p] + slack < max(gmax[p], pmax[k, p]) and c0p[p] - slack > min(gmin[p], pmin[k, p])):
+                    skip = False
+                    break
+            if not skip:
+                dsig = tau / q
+                for mm in range(N):
+                    step[mm] = np.exp(lam[s, mm] * dsig)
+                eh_step = np.exp(1j * omega * dsig)
+                for j in range(q + 1):
+                    sj = tau * j / q
+                    if j % _FRESH == 0:
+                        e_h = Fa * np.exp(1j * omega * sj)
+                        for mm in range(N):
+                            eb[mm] = beta[mm] * np.exp(lam[s, mm] * sj)
+                    else:
+                        e_h *= eh_step
+                        for mm in range(N):
+                            eb[mm] *= step[mm]
+                    for p in range(P):
+                        a0 = 0.0 + 0.0j
+                        a1 = 0.0 + 0.0j
+                        for mm in range(N):
+                            t = RV[p, mm] * eb[mm]
+                            a0 += t
+                            a1 += t * lam[s, mm]
+                        ev[p, 0] = c0p[p] + (chp[p] * e_h).real + a0.real
+                        ev[p, 1] = (1j * omega * chp[p] * e_h).real + a1.real
+                    for p in range(P):
+                        v = ev[p, 0]
+                        if v > pmax[k, p]:
+                            pmax[k, p] = v
+                        if v < pmin[k, p]:
+                            pmin[k, p] = v
+                        if j > 0 and (prev[p, 1] > 0.0) != (ev[p, 1] > 0.0):
+                            # an extremum in (s_{j-1}, s_j); it can beat the extremes so far only if it lies
+                            # within dt max |x'| of the bracket's ends: then Newton on x' = 0 in the bracket
+                            reach = (tau / q) * max(abs(prev[p, 1]), abs(ev[p, 1]))
+                            if prev[p, 1] > 0.0 and max(prev[p, 0], v) + reach < pmax[k, p]:
+                                continue
+                            if prev[p, 1] < 0.0 and min(prev[p, 0], v) - reach > pmin[k, p]:
+                                continue
+                            lo, hi = tau * (j - 1) / q, sj
+                            flo = prev[p, 1]
+                            t_ = 0.5 * (lo + hi)
+                            for _ in range(40):
+                                _row_series(rows[p:p + 1], V[s, :n], Ys, yp[s, :n], beta, Fa, omega, lam[s], t_,
+                                            one, ebr)
+                                d1, d2 = one[0, 1], one[0, 2]
+                                if (d1 > 0.0) == (flo > 0.0):
+                                    lo = t_
+                                else:
+                                    hi = t_
+                                tn = t_ - d1 / d2 if d2 != 0.0 else 0.5 * (lo + hi)
+                                if not (lo <= tn <= hi):
+                                    tn = 0.5 * (lo + hi)
+                                if abs(tn - t_) <= 1e-15 * tau or hi - lo <= 1e-15 * tau:
+                                    t_ = tn
+                                    break
                                 t_ = tn
-                                break
-                            t_ = tn
-                        _row_series(rows[p:p + 1], V[s, :n], Ys, yp[s, :n], beta, Fa, omega, lam[s], t_, one, ebr)
-                        if one[0, 0] > pmax[k, p]:
-                            pmax[k, p] = one[0, 0]
-                        if one[0, 0] < pmin[k, p]:
-                            pmin[k, p] = one[0, 0]
-                for p in range(P):
-                    prev[p, 0] = ev[p, 0]
-                    prev[p, 1] = ev[p, 1]
+                            _row_series(rows[p:p + 1], V[s, :n], Ys, yp[s, :n], beta, Fa, omega, lam[s], t_, one, ebr)
+                            if one[0, 0] > pmax[k, p]:
+                                pmax[k, p] = one[0, 0]
+                            if one[0, 0] < pmin[k, p]:
+                                pmin[k, p] = one[0, 0]
+                    for p in range(P):
+                        prev[p, 0] = ev[p, 0]
+                        prev[p, 1] = ev[p, 1]
             # the state at the end of this contact state's stretch: the closed form at tau
             E = _segment_exp(lam, V, Vinv, s, tau, W)
             Fb = F0[k, 0] * np.exp(1j * omega * (sig + tau))
@@ -578,6 +599,9 @@ def _node_peaks(lam, V, Vinv, yp, valid, B, offset, side, Y0, h, hmin, omega, fY
             for r in range(N):
                 ya[r] += yp[s, r] + (fY[s, r, 0] * Fb).real
             sig += tau
+        for p in range(P):
+            gmax[p] = max(gmax[p], pmax[k, p])
+            gmin[p] = min(gmin[p], pmin[k, p])
     return 0, -1
 
 
@@ -875,8 +899,12 @@ class ShootingResidual:
 
     def times(self, omega: float) -> tuple[np.ndarray, float]:
         """(node times t_k (S,), segment length h) in s at Omega."""
-        h = self.periods * 2.0 * math.pi / omega / self.segments
+        h = self.segment_length(omega)
         return np.arange(self.segments) * h, h
+
+    def segment_length(self, omega: float) -> float:
+        """s, h = p T / S at Omega (:meth:`times` without the node times)."""
+        return self.periods * 2.0 * math.pi / omega / self.segments
 
     def __call__(self, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         R, jacobian = self.lazy(Y)
@@ -893,7 +921,7 @@ class ShootingResidual:
             R, J = self._memo[key]
             return R, lambda: J
         w = self.omega(Y)
-        _, h = self.times(w)
+        h = self.segment_length(w)
         shot = self.flow.shoot(Y[: self.size].reshape(self.segments, 2 * self.n), self.scale(w), h, w)
         self._events[key] = int(shot.events.sum())
         if len(self._events) > 64:
@@ -927,7 +955,7 @@ class ShootingResidual:
         if key in self._memo:
             return self._memo[key][0]
         w = self.omega(Y)
-        _, h = self.times(w)
+        h = self.segment_length(w)
         return self.flow.shoot(Y[: self.size].reshape(self.segments, 2 * self.n), self.scale(w), h, w).R
 
     def _check_guard(self, Y: np.ndarray, key: bytes) -> None:
