@@ -864,12 +864,13 @@ def estimate(scene: Scene) -> list[Estimate]:
         states = (1 + 2 * 3 ** (p // 4)) ** 2  # closed with its d sliders each sticking or slipping either way)
         N = 2 * n + p  # [x; v; w]
         # a built state holds V, V^-1 (complex), the friction power's form, its stiffness (40 N^2 + 8 n^2 bytes)
-        # and its terms (U^T, U^-1, |U^-1|, two work tables: ~36 N^2 with ~N/2 terms kept). The states entered:
-        # 15 % of them in the first record, 2.5 % more a further level (hammer-friction's 200, 500 and 1000 N
-        # records entered 36, 60 and 73 of 361; the oblique blow's one 53); x 2.7 and each level's record held
-        # twice (the run with sliders and its histories): calibrated on hammer-friction (3 levels, 2421 MiB
-        # measured, estimate 1.07 x) and hammer-friction-oblique (1 level, 1582 MiB, 1.24 x)
-        built = min(states, (0.15 + 0.025 * (levels - 1)) * states)
+        # and its terms (U^T, U^-1, |U^-1|, two work tables: ~36 N^2 with ~N/2 terms kept). The states built
+        # (those entered for an instant are passed through without tables, reduced.transient.friction_probe):
+        # 4.2 % of them in the first record, 1.5 % more a further level (hammer-friction's 200, 500 and 1000 N
+        # records built 15, 24 and 26 of 361 in all); x 2.7 and each level's record held twice (the run with
+        # sliders and its histories): calibrated on hammer-friction (3 levels, 1660 MiB measured, estimate
+        # 1.15 x) and hammer-friction-oblique (1 level, 1230 MiB, 1.13 x)
+        built = min(states, (0.042 + 0.015 * (levels - 1)) * states)
         exact += 2.7 * built * (76 * N**2 + 8 * n**2)
         levels *= 2
     return [Estimate("hammer", int(MATPLOTLIB_BYTES + COPIES * samples * per + levels * samples * per + exact),
