@@ -103,7 +103,8 @@ def _run(duration_s, **kw):
 def test_runs_with_states_passed_through_equal_those_without_to_round_off(monkeypatch):
     # 12 ms of the blow: the same events (slots, states), at the same times and states to round-off (the motion
     # is sensitive: a round-off difference grows ~10x every 3 ms, so the run is short, and the times are compared
-    # within a band that grows so, 1e-15 s x 10^(t / 3 ms) (the states 1e-12 x theirs): 2e-16 s differences at 2 ms grew to 3e-14 at 8.6 ms),
+    # within a band that grows so, 1e-15 s x 10^(t / 3 ms) (the states 1e-12 x theirs): 2e-16 s differences at
+    # 2 ms grew to 3e-14 at 8.6 ms),
     # energy balance at round-off, states passed through and fewer built.
     monkeypatch.setattr(friction_module, "PASS_THROUGH_MIN_N", 0)
     out = {}
