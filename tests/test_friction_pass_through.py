@@ -42,6 +42,13 @@ def _affine(system, table, s):
     return A
 
 
+def _probe_setup():
+    """(system, its friction table of every state, M^-1, the probe's reach in s) of the discrete friction model."""
+    system = DiscreteFrictionParams().system()
+    om = system.omega_max()
+    return system, friction_table(system, om), np.linalg.inv(system.M), REACH_OMEGA_TAU / om
+
+
 def test_the_first_event_and_the_works_equal_the_matrix_exponentials():
     with single_thread_blas():  # SciPy's expm of an 11 x 11 matrix: 23 ms on a busy machine's threads, 0.1 ms on one
         _first_events_against_expm()
@@ -51,13 +58,10 @@ def _first_events_against_expm():
     # From points of a run just before its events (the state there by expm from the event before), the probe
     # finds the run's next event: the same slot, its time and the state there as expm's to round-off, and the
     # works as the quadrature of the powers along expm's motion.
-    system = DiscreteFrictionParams().system()
-    om = system.omega_max()
-    table = friction_table(system, om)
-    Minv = np.linalg.inv(system.M)
+    system, table, Minv, reach = _probe_setup()
     n = system.n
-    reach = REACH_OMEGA_TAU / om
-    nodes, weights = np.polynomial.legendre.leggauss(8)  # exact to round-off here (omega tau < 0.01)
+    nodes, weights = np.polynomial.legendre.leggauss(8)  # to ~1e-12 here (omega_max tau <= 1: the powers' terms
+    # e^{2 i omega t} are polynomials of degree ~10 to round-off on the interval)
     kinds: dict = {}
     clear_tables()
     events = [integrate_exact_friction(system, np.zeros(4), v0, T, 20000.0, log_events=10_000).events
@@ -154,11 +158,7 @@ def _zero_starts_against_expm():
     # functions at 0: a zero start), the probe finds the run's next event: its slot, its time and the state there
     # as expm's (an independent method) to round-off, and along expm's motion on a fine grid every active event
     # function stays below 0 until then (no event missed behind the start). Some zero starts must pass.
-    system = DiscreteFrictionParams().system()
-    om = system.omega_max()
-    table = friction_table(system, om)
-    Minv = np.linalg.inv(system.M)
-    reach = REACH_OMEGA_TAU / om
+    system, table, Minv, reach = _probe_setup()
     clear_tables()
     ev = integrate_exact_friction(system, np.zeros(4), V0, 0.03, 20000.0, log_events=10_000).events
     passed = 0
