@@ -761,15 +761,7 @@ def explicit_only(out: Path, args, info: list[dict]) -> int:
     base = load_baseline(args.baseline_commit)
     base = {"explicit": base["explicit"]} if "explicit" in base else {}
     with single_thread_blas():
-        heads, details = exact_rows(base, args.repeats, args.baseline_commit, methods=("explicit",))
-        text, d = lumped_rows(args.repeats)
-        details += d
-        for h in heads:
-            if h["what"].startswith("explicit (central difference) ringdown, discrete-impulse"):
-                h["error"] = f"{h['error']}; {text}"
-        h, d = reduced_beam_explicit_rows(base, args.repeats, args.baseline_commit)
-        heads += h
-        details += d
+        heads, details = ringdown_rows(base, args, methods=("explicit",))
     info.append({"key": "load_1min_end", "value": os.getloadavg()[0]})
     fmt = {r["what"].split(",")[0] + r["what"].split(",")[1]: {k: (f"{v:.4g}" if isinstance(v, float) else v)
                                                                 for k, v in r.items()} for r in heads}
@@ -809,16 +801,35 @@ def read_rows(path: Path) -> list[dict]:
         return list(csv.DictReader(f))
 
 
-def run_all(base: dict, args) -> tuple[list[dict], list[dict], list[dict]]:
-    heads, details = exact_rows(base, args.repeats, args.baseline_commit)
+def ringdown_rows(base: dict, args, methods=("exact", "explicit")) -> tuple[list[dict], list[dict]]:
+    """The ringdown rows (:func:`exact_rows` for ``methods``), the lumped kernel's comparison put
+    into the 3-DOF explicit row's error column, and the reduced beam's explicit rows: (headline rows, details).
+
+    Parameters
+    ----------
+    base : dict
+        The previous release's kernels (:func:`load_baseline`).
+    args : argparse.Namespace
+        ``repeats`` and ``baseline_commit``.
+    methods : tuple of str
+        The methods of :func:`exact_rows`.
+
+    Returns
+    -------
+    tuple of (list of dict, list of dict)
+    """
+    heads, details = exact_rows(base, args.repeats, args.baseline_commit, methods)
     text, d = lumped_rows(args.repeats)
     details += d
     for h in heads:
         if h["what"].startswith("explicit (central difference) ringdown, discrete-impulse"):
             h["error"] = f"{h['error']}; {text}"
     h, d = reduced_beam_explicit_rows(base, args.repeats, args.baseline_commit)
-    heads += h
-    details += d
+    return heads + h, details + d
+
+
+def run_all(base: dict, args) -> tuple[list[dict], list[dict], list[dict]]:
+    heads, details = ringdown_rows(base, args)
     h, d = hammer_rows(base, args.hammer_modes, args.repeats, args.baseline_commit)
     heads += h
     details += d
