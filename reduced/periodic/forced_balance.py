@@ -47,9 +47,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from reduced import _checks as _check
-from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
-from reduced.periodic.exact_hb import _moments, contact_intervals, series_extrema
+from reduced.periodic.exact_hb import stop_moments
 from reduced.periodic.hb import _derivative_matrix
 
 
@@ -164,26 +163,19 @@ class ForcedBalance:
     # -- the stops ---------------------------------------------------------------------------
     def contact(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, list]:
         """phi (2H+1, u), dphi (u, 2H+1, 2H+1) (d phi_r / d q_r) and the contact intervals of each
-        stop [(alpha, beta)] at q (2H+1, u), by exact projection (:mod:`reduced.periodic.exact_hb`)."""
+        stop [(alpha, beta)] at q (2H+1, u), by exact projection (:mod:`reduced.periodic.exact_hb`; every
+        stop's intervals and moments in one kernel call, :func:`reduced.periodic.exact_hb.stop_moments`)."""
         s = self.system
         h = 2 * self.H + 1
         phi = np.zeros((h, self.u))
         dphi = np.zeros((self.u, h, h))
-        ext = [series_extrema(q[:, r], self.Nab, self.N) for r in range(self.u)]
-        intervals = []
-        G = np.empty((h, h))
-        g = np.empty(h)
+        intervals, G, g = stop_moments(q, self.row_of, s.side, s.offset, self.Nab, self.N)
         for j in range(s.m):
-            r = self.row_of[j]
-            p = s.side[j] * q[:, r]
-            p[0] -= s.side[j] * s.offset[j]
-            alpha, beta = contact_intervals(p, self.Nab, self.N, ext[r])
-            intervals.append((alpha, beta))
-            if alpha.size == 0:
+            if intervals[j][0].size == 0:
                 continue
-            call_numba_kernel(_moments, alpha, beta, self.H, G, g)
-            phi[:, r] += s.k[j] * (G @ q[:, r] - s.offset[j] * g)
-            dphi[r] += s.k[j] * G
+            r = self.row_of[j]
+            phi[:, r] += s.k[j] * (G[j] @ q[:, r] - s.offset[j] * g[j])
+            dphi[r] += s.k[j] * G[j]
         return phi, dphi, intervals
 
     # -- residual ----------------------------------------------------------------------------
