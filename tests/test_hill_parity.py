@@ -29,7 +29,7 @@ def _odd_orbit(fb: ForcedBalance, scale: float, rng) -> np.ndarray:
 
 def _full_hill(fb, z, omega, monkeypatch):
     with monkeypatch.context() as m:
-        m.setattr(fs, "_parity_blocks", lambda H, n: [np.arange((2 * H + 1) * n)])
+        m.setattr(fs, "_hill_blocks", lambda fb, J0, size: [np.arange(size)])
         return fs.forced_hill(fb, z, omega)
 
 
@@ -64,3 +64,20 @@ def test_an_orbit_with_even_harmonics_breaks_the_parity():
     dF = fb.force_jacobian(fb.full_q(z))
     even, odd = fs._parity_blocks(fb.H, fb.n)
     assert np.max(np.abs(dF[np.ix_(even, odd)])) > 1e-3 * np.max(np.abs(dF))
+
+
+def test_a_balance_not_marked_for_the_split_is_solved_whole(monkeypatch):
+    """A balance whose class does not say its derivative keeps the parity (the friction balance) gets the full
+    eigenproblem: the very bits of the unsplit method."""
+    fb = _balance(5, odd=True)
+    z = _odd_orbit(fb, 1.3, np.random.default_rng(3))
+    w = 2 * np.pi * 20.0
+    full = _full_hill(fb, z, w, monkeypatch)
+    monkeypatch.setattr(ForcedBalance, "HILL_PARITY_SPLIT", False)
+    assert fs.forced_hill(fb, z, w).tobytes() == full.tobytes()
+
+
+def test_the_friction_balance_is_not_split():
+    from reduced.periodic.friction_aft import FrictionBalance
+
+    assert ForcedBalance.HILL_PARITY_SPLIT and not FrictionBalance.HILL_PARITY_SPLIT

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
@@ -72,6 +73,8 @@ class ForcedBalance:
     odd : keep only the odd harmonics (half-wave symmetric response)
     """
 
+    HILL_PARITY_SPLIT: ClassVar[bool] = True  # on odd-harmonic orbits the stops' derivative keeps the parity
+    # (a coordinate's two symmetric stops close half a period apart): Hill's problem splits (forced_stability)
     system: GapSystem
     b: np.ndarray  # (n,) force direction
     amplitude_N: float  # N, P

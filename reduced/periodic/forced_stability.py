@@ -144,7 +144,8 @@ def forced_hill(fb: ForcedBalance, z: np.ndarray, omega: float) -> np.ndarray:
     Im lam < 0 are ranked last so each counts once. mu = exp(2 pi lam / Omega). On a half-wave
     symmetric orbit (``fb.odd``) the problem splits into the even and the odd harmonics
     (:func:`_parity_blocks`), solved as two eigenproblems of about half the size (the same exponents to
-    round-off, a quarter of the work: tests/test_hill_parity.py).
+    round-off, a quarter of the work: tests/test_hill_parity.py) when J0 couples the parities by round-off
+    only (:func:`_hill_blocks`; not for the friction balance, whose slider derivative is not shown to keep it).
 
     Parameters
     ----------
@@ -168,7 +169,7 @@ def forced_hill(fb: ForcedBalance, z: np.ndarray, omega: float) -> np.ndarray:
     J0 = np.kron(I, Minv) @ J0  # J2^-1 J0
     size = h * n
     lam, vec = [], []
-    for rows in _parity_blocks(fb.H, n) if fb.odd else [np.arange(size)]:
+    for rows in _hill_blocks(fb, J0, size):
         m = rows.size
         A = np.block([[np.zeros((m, m)), np.eye(m)], [-J0[np.ix_(rows, rows)], -J1[np.ix_(rows, rows)]]])
         lb, vb = np.linalg.eig(A)
@@ -183,6 +184,21 @@ def forced_hill(fb: ForcedBalance, z: np.ndarray, omega: float) -> np.ndarray:
     cand = lam[np.argsort(key, kind="stable")][: 2 * n]
     mu = np.exp(cand * (2.0 * np.pi / omega))
     return mu[np.argsort(-np.abs(mu), kind="stable")]
+
+
+PARITY_ROUNDOFF = 1e-12  # cross-parity entries of J0 below this times its largest: the parities decoupled
+
+
+def _hill_blocks(fb: ForcedBalance, J0: np.ndarray, size: int) -> list[np.ndarray]:
+    """The index sets Hill's problem is solved on: the two parities (:func:`_parity_blocks`) where the balance
+    keeps odd harmonics alone, its class says its force derivative keeps the parity
+    (``ForcedBalance.HILL_PARITY_SPLIT``) and J0 couples the parities by round-off only; else all of them."""
+    if fb.odd and getattr(fb, "HILL_PARITY_SPLIT", False):
+        even, odd = _parity_blocks(fb.H, fb.n)
+        cross = max(float(np.max(np.abs(J0[np.ix_(even, odd)]))), float(np.max(np.abs(J0[np.ix_(odd, even)]))))
+        if cross <= PARITY_ROUNDOFF * float(np.max(np.abs(J0))):
+            return [even, odd]
+    return [np.arange(size)]
 
 
 def _parity_blocks(H: int, n: int) -> list[np.ndarray]:
