@@ -130,21 +130,43 @@ class ForcedBalance:
     def receptances(self, omega: float, derivative: bool = False, harmonics: np.ndarray | None = None):
         """Per harmonic k (default 0..H): W_k = Z_k^-1 [U^T, f_k] (n, u + 1) complex, and dW_k/dOmega."""
         s = self.system
-        n, u = self.n, self.u
-        k = np.arange(self.H + 1) if harmonics is None else np.asarray(harmonics)
+        k, rhs, dZc = self._omega_free(harmonics)
         Z = (s.K[None] - ((k * omega) ** 2)[:, None, None] * s.M[None]).astype(complex)
         if self._Cr is not None:
             Z = Z + 1j * (k * omega)[:, None, None] * self._Cr[None]
-        rhs = np.zeros((k.size, n, u + 1), complex)
-        rhs[:, :, :u] = self.U.T[None]
-        rhs[k == 1, :, u] = self.b * self.amplitude_N * np.exp(1j * math.radians(self.phase_deg))
         W = np.linalg.solve(Z, rhs)
         if not derivative:
             return W, None
         dZ = (-2.0 * omega * k**2)[:, None, None] * s.M[None] + 0j
-        if self._Cr is not None:
-            dZ = dZ + 1j * k[:, None, None] * self._Cr[None]
+        if dZc is not None:
+            dZ = dZ + dZc
         return W, -np.linalg.solve(Z, dZ @ W)
+
+    def _omega_free(self, harmonics: np.ndarray | str | None):
+        """(k, the right-hand sides [U^T, f_k] (len(k), n, u + 1), the damping part i k C of dZ_k/dOmega or None)
+        of :meth:`receptances`: what does not depend on Omega, made once per harmonic set (read-only); with
+        ``harmonics="kept"`` the harmonic numbers of the kept rows."""
+        memo = self.__dict__.setdefault("_memo", {})  # made on first use (a subclass may skip __post_init__)
+        if "kept" not in memo:
+            kept = np.unique((self.keep + 1) // 2)
+            kept.flags.writeable = False
+            memo["kept"] = kept
+        if isinstance(harmonics, str):  # "kept"
+            return memo["kept"]
+        key = None if harmonics is None else (np.asarray(harmonics).dtype.str, np.asarray(harmonics).tobytes())
+        if key not in memo:
+            s = self.system
+            n, u = self.n, self.u
+            k = np.arange(self.H + 1) if harmonics is None else np.array(harmonics)
+            rhs = np.zeros((k.size, n, u + 1), complex)
+            rhs[:, :, :u] = self.U.T[None]
+            rhs[k == 1, :, u] = self.b * self.amplitude_N * np.exp(1j * math.radians(self.phase_deg))
+            dZc = 1j * k[:, None, None] * self._Cr[None] if self._Cr is not None else None
+            for a in (k, rhs, dZc):
+                if a is not None:
+                    a.flags.writeable = False
+            memo[key] = (k, rhs, dZc)
+        return memo[key]
 
     @staticmethod
     def _real_rows(c: np.ndarray) -> np.ndarray:
@@ -221,8 +243,8 @@ class ForcedBalance:
 
     @property
     def _harmonics_kept(self) -> np.ndarray:
-        """Harmonic numbers of the kept rows (each once, increasing)."""
-        return np.unique((self.keep + 1) // 2)
+        """Harmonic numbers of the kept rows (each once, increasing; made once, read-only)."""
+        return self._omega_free("kept")
 
     @staticmethod
     def _rows_of(c: np.ndarray, ks: np.ndarray) -> np.ndarray:
