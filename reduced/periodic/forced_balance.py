@@ -155,7 +155,6 @@ class ForcedBalance:
             return memo["kept"]
         key = None if harmonics is None else (np.asarray(harmonics).dtype.str, np.asarray(harmonics).tobytes())
         if key not in memo:
-            s = self.system
             n, u = self.n, self.u
             k = np.arange(self.H + 1) if harmonics is None else np.array(harmonics)
             rhs = np.zeros((k.size, n, u + 1), complex)
