@@ -308,6 +308,94 @@ def _moments(alpha, beta, H, G, g):
             G[r, c] = w * v
 
 
+@nb.njit(cache=True)
+def _matvec(A, x, out):
+    """out = A x by rows, each a sum from 0.0 in column order (for the derivative matrix Nab, one nonzero per
+    row: the product itself, as numpy's A @ x gives it)."""
+    for i in range(A.shape[0]):
+        acc = 0.0
+        for c in range(A.shape[1]):
+            acc += A[i, c] * x[c]
+        out[i] = acc
+
+
+@nb.njit(cache=True)
+def _stops_kernel(q, row_of, side, offset, Nab, samples, basis, ext, n_ext, alpha, beta, n_int, G, g):
+    """Every stop's contact intervals and moments at once, as :func:`series_extrema`, :func:`contact_intervals`
+    and :func:`_moments` give them stop by stop (the same kernels on the same numbers): q (2H+1, u) the
+    coefficients of the contact coordinates, stop j on coordinate row_of[j] with penetration series
+    side_j (q_r - o_j). Out: ext[r, :n_ext[r]] the extrema of coordinate r; per stop alpha[j, :n_int[j]],
+    beta[j, :n_int[j]] its intervals (n_int[j] = 0: never closed), G[j], g[j] their moments (when n_int[j] > 0)."""
+    h = q.shape[0]
+    H = (h - 1) // 2
+    a = np.empty(h)
+    da = np.empty(h)
+    dda = np.empty(h)
+    p = np.empty(h)
+    dp = np.empty(h)
+    for r in range(q.shape[1]):
+        for i in range(h):
+            a[i] = q[i, r]
+        _matvec(Nab, a, da)
+        _matvec(Nab, da, dda)
+        n_ext[r] = _extrema(da, dda, samples, basis, ext[r])
+    for j in range(row_of.shape[0]):
+        r = row_of[j]
+        for i in range(h):
+            p[i] = side[j] * q[i, r]
+        p[0] -= side[j] * offset[j]
+        _matvec(Nab, p, dp)
+        n = _intervals(p, dp, ext[r, : n_ext[r]], n_ext[r], alpha[j], beta[j])
+        if n < 0:  # closed over the whole period
+            alpha[j, 0] = 0.0
+            beta[j, 0] = 2.0 * math.pi
+            n = 1
+        n_int[j] = n
+        if n > 0:
+            _moments(alpha[j, :n], beta[j, :n], H, G[j], g[j])
+
+
+def stop_moments(q: np.ndarray, row_of: np.ndarray, side: np.ndarray, offset: np.ndarray, Nab: np.ndarray,
+                 samples: int) -> tuple[list, np.ndarray, np.ndarray]:
+    """Per stop, its contact intervals and the moments G_j, g_j over them (module docstring), all stops in one
+    kernel call: what :func:`series_extrema` (once per contact coordinate), :func:`contact_intervals` and
+    :func:`_moments` (once per stop) give, to the bit (tests/test_stop_moments.py).
+
+    Parameters
+    ----------
+    q : (2H+1, u) ndarray of float
+        Coefficients of the contact coordinates (HB row layout).
+    row_of : (m,) ndarray of int
+        Stop j acts on coordinate row_of[j].
+    side, offset : (m,) ndarray of float
+        Stop j is closed where side_j (q_r - offset_j) > 0.
+    Nab : (2H+1, 2H+1) ndarray of float
+        d/dtau on the coefficients.
+    samples : int
+        Phases per period bracketing the extrema.
+
+    Returns
+    -------
+    tuple
+        ([(alpha_j, beta_j)] the intervals of each stop (empty arrays: never closed; [0], [2 pi]: always),
+        G (m, 2H+1, 2H+1) and g (m, 2H+1): the moments of stop j in G[j], g[j], zero where it never closes).
+    """
+    h, u = q.shape
+    m = row_of.shape[0]
+    ext = np.empty((u, samples + 1))
+    n_ext = np.zeros(u, np.int64)
+    width = samples + 1
+    alpha, beta = np.empty((m, width)), np.empty((m, width))
+    n_int = np.zeros(m, np.int64)
+    G, g = np.zeros((m, h, h)), np.zeros((m, h))
+    call_numba_kernel(_stops_kernel, np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(row_of, np.int64),
+                      np.ascontiguousarray(side, dtype=float), np.ascontiguousarray(offset, dtype=float),
+                      np.ascontiguousarray(Nab, dtype=float), int(samples), grid_basis((h - 1) // 2, int(samples)),
+                      ext, n_ext, alpha, beta, n_int, G, g)
+    intervals = [(alpha[j, : n_int[j]].copy(), beta[j, : n_int[j]].copy()) for j in range(m)]
+    return intervals, G, g
+
+
 @dataclass(frozen=True, eq=False)
 class ExactGapBalance(HarmonicBalance):
     """:class:`HarmonicBalance` of a gap system whose stop forces are projected exactly (module
@@ -387,4 +475,4 @@ class ExactGapBalance(HarmonicBalance):
         return F.ravel(), dF.reshape(self.size, self.size)
 
 
-__all__ = ["ExactGapBalance", "contact_intervals", "series_extrema", "default_root_samples"]
+__all__ = ["ExactGapBalance", "contact_intervals", "default_root_samples", "series_extrema", "stop_moments"]

@@ -43,13 +43,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
 from reduced import _checks as _check
-from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
-from reduced.periodic.exact_hb import _moments, contact_intervals, series_extrema
+from reduced.periodic.exact_hb import stop_moments
 from reduced.periodic.hb import _derivative_matrix
 
 
@@ -73,6 +73,8 @@ class ForcedBalance:
     odd : keep only the odd harmonics (half-wave symmetric response)
     """
 
+    HILL_PARITY_SPLIT: ClassVar[bool] = True  # on odd-harmonic orbits the stops' derivative keeps the parity
+    # (a coordinate's two symmetric stops close half a period apart): Hill's problem splits (forced_stability)
     system: GapSystem
     b: np.ndarray  # (n,) force direction
     amplitude_N: float  # N, P
@@ -128,21 +130,42 @@ class ForcedBalance:
     def receptances(self, omega: float, derivative: bool = False, harmonics: np.ndarray | None = None):
         """Per harmonic k (default 0..H): W_k = Z_k^-1 [U^T, f_k] (n, u + 1) complex, and dW_k/dOmega."""
         s = self.system
-        n, u = self.n, self.u
-        k = np.arange(self.H + 1) if harmonics is None else np.asarray(harmonics)
+        k, rhs, dZc = self._omega_free(harmonics)
         Z = (s.K[None] - ((k * omega) ** 2)[:, None, None] * s.M[None]).astype(complex)
         if self._Cr is not None:
             Z = Z + 1j * (k * omega)[:, None, None] * self._Cr[None]
-        rhs = np.zeros((k.size, n, u + 1), complex)
-        rhs[:, :, :u] = self.U.T[None]
-        rhs[k == 1, :, u] = self.b * self.amplitude_N * np.exp(1j * math.radians(self.phase_deg))
         W = np.linalg.solve(Z, rhs)
         if not derivative:
             return W, None
         dZ = (-2.0 * omega * k**2)[:, None, None] * s.M[None] + 0j
-        if self._Cr is not None:
-            dZ = dZ + 1j * k[:, None, None] * self._Cr[None]
+        if dZc is not None:
+            dZ = dZ + dZc
         return W, -np.linalg.solve(Z, dZ @ W)
+
+    def _omega_free(self, harmonics: np.ndarray | str | None):
+        """(k, the right-hand sides [U^T, f_k] (len(k), n, u + 1), the damping part i k C of dZ_k/dOmega or None)
+        of :meth:`receptances`: what does not depend on Omega, made once per harmonic set (read-only); with
+        ``harmonics="kept"`` the harmonic numbers of the kept rows."""
+        memo = self.__dict__.setdefault("_memo", {})  # made on first use (a subclass may skip __post_init__)
+        if "kept" not in memo:
+            kept = np.unique((self.keep + 1) // 2)
+            kept.flags.writeable = False
+            memo["kept"] = kept
+        if isinstance(harmonics, str):  # "kept"
+            return memo["kept"]
+        key = None if harmonics is None else (np.asarray(harmonics).dtype.str, np.asarray(harmonics).tobytes())
+        if key not in memo:
+            n, u = self.n, self.u
+            k = np.arange(self.H + 1) if harmonics is None else np.array(harmonics)
+            rhs = np.zeros((k.size, n, u + 1), complex)
+            rhs[:, :, :u] = self.U.T[None]
+            rhs[k == 1, :, u] = self.b * self.amplitude_N * np.exp(1j * math.radians(self.phase_deg))
+            dZc = 1j * k[:, None, None] * self._Cr[None] if self._Cr is not None else None
+            for a in (k, rhs, dZc):
+                if a is not None:
+                    a.flags.writeable = False
+            memo[key] = (k, rhs, dZc)
+        return memo[key]
 
     @staticmethod
     def _real_rows(c: np.ndarray) -> np.ndarray:
@@ -164,26 +187,19 @@ class ForcedBalance:
     # -- the stops ---------------------------------------------------------------------------
     def contact(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, list]:
         """phi (2H+1, u), dphi (u, 2H+1, 2H+1) (d phi_r / d q_r) and the contact intervals of each
-        stop [(alpha, beta)] at q (2H+1, u), by exact projection (:mod:`reduced.periodic.exact_hb`)."""
+        stop [(alpha, beta)] at q (2H+1, u), by exact projection (:mod:`reduced.periodic.exact_hb`; every
+        stop's intervals and moments in one kernel call, :func:`reduced.periodic.exact_hb.stop_moments`)."""
         s = self.system
         h = 2 * self.H + 1
         phi = np.zeros((h, self.u))
         dphi = np.zeros((self.u, h, h))
-        ext = [series_extrema(q[:, r], self.Nab, self.N) for r in range(self.u)]
-        intervals = []
-        G = np.empty((h, h))
-        g = np.empty(h)
+        intervals, G, g = stop_moments(q, self.row_of, s.side, s.offset, self.Nab, self.N)
         for j in range(s.m):
-            r = self.row_of[j]
-            p = s.side[j] * q[:, r]
-            p[0] -= s.side[j] * s.offset[j]
-            alpha, beta = contact_intervals(p, self.Nab, self.N, ext[r])
-            intervals.append((alpha, beta))
-            if alpha.size == 0:
+            if intervals[j][0].size == 0:
                 continue
-            call_numba_kernel(_moments, alpha, beta, self.H, G, g)
-            phi[:, r] += s.k[j] * (G @ q[:, r] - s.offset[j] * g)
-            dphi[r] += s.k[j] * G
+            r = self.row_of[j]
+            phi[:, r] += s.k[j] * (G[j] @ q[:, r] - s.offset[j] * g[j])
+            dphi[r] += s.k[j] * G[j]
         return phi, dphi, intervals
 
     # -- residual ----------------------------------------------------------------------------
@@ -226,8 +242,8 @@ class ForcedBalance:
 
     @property
     def _harmonics_kept(self) -> np.ndarray:
-        """Harmonic numbers of the kept rows (each once, increasing)."""
-        return np.unique((self.keep + 1) // 2)
+        """Harmonic numbers of the kept rows (each once, increasing; made once, read-only)."""
+        return self._omega_free("kept")
 
     @staticmethod
     def _rows_of(c: np.ndarray, ks: np.ndarray) -> np.ndarray:

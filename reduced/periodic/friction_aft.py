@@ -46,6 +46,7 @@ import math
 import time
 import warnings
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numba as nb
 import numpy as np
@@ -238,6 +239,7 @@ class FrictionBalance(ForcedBalance):
     samples : AFT samples of a period for the sliders (0: :func:`reduced.periodic.hb.default_samples`)
     """
 
+    HILL_PARITY_SPLIT: ClassVar[bool] = False  # the sliders' AFT derivative is not shown to keep the parity
     normal_N: float | None = None
     samples: int = 0
     trow: np.ndarray = field(init=False, repr=False)  # (p,) slider -> row of V
