@@ -241,6 +241,7 @@ class FrictionBalance(ForcedBalance):
     normal_N: float | None = None
     samples: int = 0
     trow: np.ndarray = field(init=False, repr=False)  # (p,) slider -> row of V
+    _states: dict = field(default_factory=dict, init=False, repr=False)  # z's bytes -> slider_state(z)
 
     def __post_init__(self) -> None:
         s = self.system
@@ -360,8 +361,15 @@ class FrictionBalance(ForcedBalance):
         return dF.reshape(h * n, h * n)
 
     def slider_state(self, z: np.ndarray) -> np.ndarray:
-        """(p, 3) the fraction of the period each slider is open, sticking and slipping at z."""
-        return np.array([[np.mean(lp.state == s) for s in (OPEN, STICK, SLIP)] for lp in self.loops(self.full_q(z))])
+        """(p, 3) the fraction of the period each slider is open, sticking and slipping at z (a copy of the one
+        worked out at the first call with these z: a stage reads each point's states several times)."""
+        z = np.asarray(z, float)
+        key = z.tobytes()
+        got = self._states.get(key)
+        if got is None:
+            got = self._states[key] = np.array([[np.mean(lp.state == s) for s in (OPEN, STICK, SLIP)]
+                                                for lp in self.loops(self.full_q(z))])
+        return got.copy()
 
 
 # -- forced-response curves with friction -----------------------------------------------------------
