@@ -283,7 +283,7 @@ class FrictionBalance(ForcedBalance):
 
     def normal_force(self, qs: np.ndarray, k: int) -> tuple[np.ndarray, list]:
         """(N (Ns,), [(row, dN/dq_row (Ns,))]) of slider k at the samples qs (Ns, u) of the coordinates."""
-        s, fr = self.system, self.system.friction
+        s = self.system
         if self.normal_N is not None:
             return np.full(qs.shape[0], float(self.normal_N)), []
         N = np.zeros(qs.shape[0])
