@@ -173,3 +173,41 @@ def test_a_given_one_harmonic_backbone_is_the_one_continued_at_the_tongue():
     assert np.array_equal(a.X, b.X) and np.array_equal(a.energy_J, b.energy_J) and a.tongues == b.tongues
     with pytest.raises(ValueError, match="backbone1"):
         nnm_branch(DISCRETE, 0, H=3, backbone1=one.branches[0].y[:, :4])
+
+
+def _full_sum_rows(res, y) -> np.ndarray:
+    """dR/dy's HB block as the jacobian summed it before :meth:`NNMResidual._hb_rows`: (A + dF - delta omega
+    kron(Nab, M) on its blocks) / omega_ref^2 over the whole matrix."""
+    hb = res.hb
+    Psi, omega, delta, a = res.split(y)
+    _, w = hb.force(hb.E @ hb.unpack(a * Psi))
+    dF = res._force_jacobian(w).copy()
+    A, _, DM = res._linear(omega)
+    Jx = A + dF
+    if delta != 0.0:
+        for rows, cols in res._dm_blocks:
+            Jx[rows, cols] -= delta * omega * DM[rows, cols]
+    Jx /= res.omega_ref**2
+    return Jx
+
+
+@pytest.mark.parametrize("system", [CHAIN, DISCRETE], ids=["chain", "3-dof"])
+def test_hb_rows_summed_where_they_are_not_zero_are_the_full_sums_bits(system):
+    # the jacobian's HB block from the sums on the blocks and the pattern alone, against the full sums, to the
+    # bit and to the sign of every zero (int64 views): in contact with damping d, the same point without it (the
+    # kron(Nab, M) blocks written back), a point with every stop open (dF zero), a new omega, d again
+    res, y, _, _ = _in_contact(system, 9)
+    nX = res.hb.size
+    y_open = y.copy()
+    y_open[-1] -= 3.0  # a thousandth of the amplitude: every stop open
+    y_far = y.copy()
+    y_far[nX] *= 1.07
+    y0 = y.copy()
+    y0[nX + 1] = 0.0
+    points = (y, y0, y_open, y_far, y, y0)
+    for z in points:
+        got = res.lazy(z)[1]()[:nX, :nX]
+        ref = _full_sum_rows(res, z)
+        assert np.array_equal(got.view(np.int64), ref.view(np.int64))
+    assert getattr(res._scratch, "T", None) is not None  # the summed path was taken
+    assert np.any(_full_sum_rows(res, y) != _full_sum_rows(res, y0))  # d changes the kron(Nab, M) blocks

@@ -71,3 +71,28 @@ def test_the_lean_flow_refuses_what_the_public_one_does():
         with pytest.raises(_check.InvalidArgument):
             lean(17.4, y[:-1], 0.0, 1e-3)
         assert np.array_equal(lean(17.4, y, 0.0, 1e-3)[-1], flow(system, B, P, 17.4, y, 0.0, 1e-3)[-1])
+
+
+def test_the_start_states_are_the_reference_decisions():
+    # _initial_states (each exact run starts there) against the numpy form it replaced, _initial_states_reference:
+    # the same closed stops and slider codes over starts in contact from a forced run and random starts around the
+    # gaps (open, either stop of a tip), the sliders inside and past their cone (w moved so that |k_t (t - w)|
+    # crosses mu N)
+    from reduced.transient.friction import _initial_states, _initial_states_reference
+
+    system = DiscreteFrictionParams(mu=0.3).system()
+    n, p = system.n, system.p
+    rng = np.random.default_rng(7)
+    starts = [(y[:n], y[2 * n:]) for y in _states(system, 17.4, 20)]
+    g = float(np.max(np.abs(system.offset)))
+    for _ in range(400):
+        x = rng.normal(0.0, 1.5 * g, n)
+        w = system.friction.Bt @ x + rng.normal(0.0, 1e-6, p) * rng.choice([0.0, 1.0, 100.0])
+        starts.append((x, w))
+    seen = set()
+    for x, w in starts:
+        a, b = _initial_states(system, x, w), _initial_states_reference(system, x, w)
+        assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+        assert a[0].dtype == b[0].dtype and a[1].dtype == b[1].dtype
+        seen.add((tuple(a[0]), tuple(a[1])))
+    assert len(seen) >= 20  # open, either stop closed, sticking and slipping both ways at both tips: measured 33

@@ -42,6 +42,7 @@ and Den Hartog's steady response of the forced Coulomb oscillator (:func:`den_ha
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 import warnings
@@ -243,6 +244,7 @@ class FrictionBalance(ForcedBalance):
     normal_N: float | None = None
     samples: int = 0
     trow: np.ndarray = field(init=False, repr=False)  # (p,) slider -> row of V
+    _states: dict = field(default_factory=dict, init=False, repr=False)  # z's bytes -> slider_state(z)
 
     def __post_init__(self) -> None:
         s = self.system
@@ -275,15 +277,20 @@ class FrictionBalance(ForcedBalance):
         object.__setattr__(self, "_P", _projection_matrix(self.H, tau))
 
     # -- the forces ----------------------------------------------------------------------------------
+    @functools.cached_property
+    def _stops_of(self) -> tuple:
+        """For each slider, ((stop j, its row of V), ...) over the stops of its tip, ascending j."""
+        s, fr = self.system, self.system.friction
+        return tuple(tuple((int(j), self.row_of[j]) for j in np.flatnonzero(s.tip == fr.tip[k])) for k in range(fr.p))
+
     def normal_force(self, qs: np.ndarray, k: int) -> tuple[np.ndarray, list]:
         """(N (Ns,), [(row, dN/dq_row (Ns,))]) of slider k at the samples qs (Ns, u) of the coordinates."""
-        s, fr = self.system, self.system.friction
+        s = self.system
         if self.normal_N is not None:
             return np.full(qs.shape[0], float(self.normal_N)), []
         N = np.zeros(qs.shape[0])
         terms = []
-        for j in np.flatnonzero(s.tip == fr.tip[k]):
-            r = self.row_of[j]
+        for j, r in self._stops_of[k]:
             d = s.side[j] * (qs[:, r] - s.offset[j])
             closed = d > 0.0
             N += s.k[j] * np.where(closed, d, 0.0)
@@ -315,11 +322,15 @@ class FrictionBalance(ForcedBalance):
             rt = self.trow[k]
             N, terms = self.normal_force(qs, k)
             loop = jenkins_loop(qs[:, rt], N, fr.k_t[k], fr.mu[k])
+            if not loop.state.any():  # open over the whole period (OPEN = 0): f, GE and c are zeros, and so
+                continue  # are their projections (+0, which leave phi and dphi as they are: test_friction_aft.py)
             GE, c, j = loop.synthesised(E, fr.k_t[k], fr.mu[k])
             phi[:, rt] += P @ loop.f
             dphi[rt, :, rt, :] += P @ GE
             for r, dN in terms:
-                dphi[rt, :, r, :] += P @ ((c * dN[j])[:, None] * E[j])
+                cdN = c * dN[j]
+                if cdN.any():  # a stop that engages the slider at some sample (else zeros, as above)
+                    dphi[rt, :, r, :] += P @ (cdN[:, None] * E[j])
         return phi, dphi, intervals
 
     # -- residual ----------------------------------------------------------------------------------
@@ -362,8 +373,15 @@ class FrictionBalance(ForcedBalance):
         return dF.reshape(h * n, h * n)
 
     def slider_state(self, z: np.ndarray) -> np.ndarray:
-        """(p, 3) the fraction of the period each slider is open, sticking and slipping at z."""
-        return np.array([[np.mean(lp.state == s) for s in (OPEN, STICK, SLIP)] for lp in self.loops(self.full_q(z))])
+        """(p, 3) the fraction of the period each slider is open, sticking and slipping at z (a copy of the one
+        worked out at the first call with these z: a stage reads each point's states several times)."""
+        z = np.asarray(z, float)
+        key = z.tobytes()
+        got = self._states.get(key)
+        if got is None:
+            got = self._states[key] = np.array([[np.mean(lp.state == s) for s in (OPEN, STICK, SLIP)]
+                                                for lp in self.loops(self.full_q(z))])
+        return got.copy()
 
 
 # -- forced-response curves with friction -----------------------------------------------------------

@@ -950,7 +950,58 @@ def _land_on_event(rhs, t0: float, z0: np.ndarray, t_e: float, g, rtol: float, a
 
 
 def _initial_states(system: GapSystem, x0: np.ndarray, w0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(closed stops, slider codes) at the start, from the physics (as :func:`initial_friction_state`)."""
+    """(closed stops, slider codes) at the start, from the physics (as :func:`initial_friction_state`): at each
+    tip the deepest penetrating stop closed (the first of equals), a slider engaged by a closed stop slipping
+    (sign of its force) where |k_t (Bt x - w)| > mu k_j pen_j. The same decisions on the same numbers as
+    :func:`_initial_states_reference` (tests/test_friction_flow.py), with the system's tips and engagements
+    worked out once (:func:`_start_layout`): each exact flow run starts here."""
+    fr = system.friction
+    pen = system.penetration(x0)
+    by_tip, engages, mu_k = _start_layout(system)
+    pl = pen.tolist()
+    closed = np.zeros(system.m, bool)
+    for js in by_tip:
+        best = -1
+        for j in js:
+            if pl[j] > 0.0 and (best < 0 or pl[j] > pl[best]):
+                best = j
+        if best >= 0:
+            closed[best] = True
+    slip = np.zeros(fr.p, np.int8)
+    f0 = fr.force(x0, w0).tolist()
+    for q, stops in enumerate(engages):
+        j = next((j for j in stops if closed[j]), -1)
+        if j >= 0 and abs(f0[q]) > mu_k[q][j] * pl[j]:
+            slip[q] = 1 if f0[q] > 0 else -1
+    return closed, slip
+
+
+_LAYOUTS: dict = {}  # id(system) -> (system, layout) of :func:`_start_layout` (the system kept: its id stays its own)
+_LAYOUTS_KEPT = 64
+
+
+def _start_layout(system: GapSystem) -> tuple:
+    """(stops of each tip (by tip number, ascending stop index), stops engaging each slider (ascending),
+    mu_q k_j of each slider q and stop j (float products as numpy makes them)) of ``system``, kept for the
+    last _LAYOUTS_KEPT systems."""
+    got = _LAYOUTS.get(id(system))
+    if got is not None and got[0] is system:
+        return got[1]
+    fr = system.friction
+    by_tip = tuple(tuple(int(j) for j in np.flatnonzero(system.tip == t_)) for t_ in np.unique(system.tip))
+    eng = fr.engages(system.tip)
+    engages = tuple(tuple(int(j) for j in np.flatnonzero(row)) for row in eng)
+    mu_k = tuple(tuple(float(fr.mu[q] * system.k[j]) for j in range(system.m)) for q in range(fr.p))
+    layout = (by_tip, engages, mu_k)
+    if len(_LAYOUTS) >= _LAYOUTS_KEPT:
+        _LAYOUTS.pop(next(iter(_LAYOUTS)))
+    _LAYOUTS[id(system)] = (system, layout)
+    return layout
+
+
+def _initial_states_reference(system: GapSystem, x0: np.ndarray, w0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_initial_states` as it was written first, on numpy arrays throughout (kept for the test that the
+    faster one makes the same decisions)."""
     fr = system.friction
     pen = system.penetration(x0)
     closed = np.zeros(system.m, bool)
