@@ -172,3 +172,23 @@ def test_retrace_prefilter_finds_what_the_full_distances_find():
         got.append(r.add(y, t))
     assert got == want
     assert sum(want) > 50 and not any(want[:1200])  # the second pass is seen, the first is not
+
+
+def test_retrace_partial_sums_drop_only_points_beyond_the_distance():
+    # _within keeps every candidate whose full squared distance is within r2 (whatever the order of its sum) and
+    # drops only those beyond it: distances spread around the threshold, in 193 dimensions (rom-frc's unknowns)
+    from reduced.periodic.exact_frc import RETRACE_DIST, RETRACE_MARGIN, _within
+
+    rng = np.random.default_rng(11)
+    dim, k = 193, 3000
+    y = rng.standard_normal(dim)
+    dirs = rng.standard_normal((k, dim))
+    dirs /= np.linalg.norm(dirs, axis=1)[:, None]
+    dist = RETRACE_DIST * np.concatenate([rng.uniform(0.0, 3.0, k - 4), [1.0, 1.0 - 1e-14, 1.0 + 1e-14, 0.0]])
+    Y = y + dist[:, None] * dirs
+    cand = rng.permutation(k)[: k // 2 + 2]
+    cand = np.concatenate([cand, [k - 4, k - 3, k - 2, k - 1]])
+    kept = _within(Y, cand, y, (RETRACE_DIST + RETRACE_MARGIN) ** 2)
+    full = np.linalg.norm(Y[cand] - y, axis=1)
+    assert np.array_equal(kept, cand[full <= RETRACE_DIST + RETRACE_MARGIN])  # in the candidates' order
+    assert set(cand[full < RETRACE_DIST]) <= set(kept) and not set(cand[full > 1.01 * RETRACE_DIST]) & set(kept)
