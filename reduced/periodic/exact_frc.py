@@ -935,7 +935,9 @@ def _critical_vector(analyser: _Analyser, Js: np.ndarray, channel: int) -> np.nd
 def _switch(parent_res: ShootingResidual, analyser: _Analyser, y_bp: np.ndarray, Js: np.ndarray, channel: int,
             kind: str, opts: ExactFRCOptions):
     """The first point of the family born at a crossing: (residual of the family, Y, the
-    perturbation direction (scaled), its h), or None."""
+    perturbation direction (scaled), its h), or None. Each offset h of SWITCH_H is tried by Newton on the
+    hyperplane d . (Y - Y_bp - h d) = 0; a try whose Newton step exceeds SWITCH_MAX_STEP has left the
+    branch point's neighbourhood and is given up (the next h is tried)."""
     e = _critical_vector(analyser, Js, channel)
     nodes, w = parent_res.nodes(y_bp)
     S = parent_res.segments
