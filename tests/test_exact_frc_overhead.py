@@ -192,3 +192,39 @@ def test_retrace_partial_sums_drop_only_points_beyond_the_distance():
     full = np.linalg.norm(Y[cand] - y, axis=1)
     assert np.array_equal(kept, cand[full <= RETRACE_DIST + RETRACE_MARGIN])  # in the candidates' order
     assert set(cand[full < RETRACE_DIST]) <= set(kept) and not set(cand[full > 1.01 * RETRACE_DIST]) & set(kept)
+
+
+def test_switch_tries_give_up_beyond_the_largest_step(monkeypatch):
+    # every first-orbit Newton of a switch is bounded by SWITCH_MAX_STEP (a try that wanders off is given up), the
+    # switched families of the gap oscillator are still found (the bound is far above their steps)
+    import reduced.periodic.exact_frc as ef
+
+    s = GapSystem(M=np.eye(1), C=2 * ZETA * math.sqrt(K) * np.eye(1), K=K * np.eye(1), dof_names=("x",),
+                  **two_sided_stops(np.eye(1), RATIO * K, GAP, ("x",)))
+    b = np.ones(1)
+    seen, newton = [], ef.newton
+
+    def bounded(fun, y0, **kw):
+        seen.append(kw.get("max_step"))
+        return newton(fun, y0, **kw)
+
+    monkeypatch.setattr(ef, "_switch", lambda *a, **k: _switch_recording(ef, bounded, *a, **k))
+    opts = ExactFRCOptions(max_families=1, depth=1, family_steps=20, period_doubling=False)
+    with single_thread_blas():
+        ex = exact_frc(s, b, LOAD, 3.0, 12.0, hb_start(s, b, LOAD, 3.0, opts.segments), x_ref=GAP, options=opts)
+    assert seen and all(m == ef.SWITCH_MAX_STEP for m in seen)
+    assert [f.kind for f in ex.families] == ["main", "half_wave_broken"]
+    assert 0.1 < ef.SWITCH_MAX_STEP <= 1.0  # above the largest converged step seen (0.15), below the orbit's size
+
+
+def _switch_recording(ef, bounded, *args, **kw):
+    """ef._switch with its module's newton replaced by ``bounded`` for the call."""
+    saved = ef.newton
+    ef.newton = bounded
+    try:
+        return _SWITCH(*args, **kw)
+    finally:
+        ef.newton = saved
+
+
+from reduced.periodic.exact_frc import _switch as _SWITCH  # noqa: E402  (the function itself, before any patch)
