@@ -172,3 +172,59 @@ def test_retrace_prefilter_finds_what_the_full_distances_find():
         got.append(r.add(y, t))
     assert got == want
     assert sum(want) > 50 and not any(want[:1200])  # the second pass is seen, the first is not
+
+
+def test_retrace_partial_sums_drop_only_points_beyond_the_distance():
+    # _within keeps every candidate whose full squared distance is within r2 (whatever the order of its sum) and
+    # drops only those beyond it: distances spread around the threshold, in 193 dimensions (rom-frc's unknowns)
+    from reduced.periodic.exact_frc import RETRACE_DIST, RETRACE_MARGIN, _within
+
+    rng = np.random.default_rng(11)
+    dim, k = 193, 3000
+    y = rng.standard_normal(dim)
+    dirs = rng.standard_normal((k, dim))
+    dirs /= np.linalg.norm(dirs, axis=1)[:, None]
+    dist = RETRACE_DIST * np.concatenate([rng.uniform(0.0, 3.0, k - 4), [1.0, 1.0 - 1e-14, 1.0 + 1e-14, 0.0]])
+    Y = y + dist[:, None] * dirs
+    cand = rng.permutation(k)[: k // 2 + 2]
+    cand = np.concatenate([cand, [k - 4, k - 3, k - 2, k - 1]])
+    kept = _within(Y, cand, y, (RETRACE_DIST + RETRACE_MARGIN) ** 2)
+    full = np.linalg.norm(Y[cand] - y, axis=1)
+    assert np.array_equal(kept, cand[full <= RETRACE_DIST + RETRACE_MARGIN])  # in the candidates' order
+    assert set(cand[full < RETRACE_DIST]) <= set(kept) and not set(cand[full > 1.01 * RETRACE_DIST]) & set(kept)
+
+
+def test_switch_tries_give_up_beyond_the_largest_step(monkeypatch):
+    # every first-orbit Newton of a switch is bounded by SWITCH_MAX_STEP (a try that wanders off is given up), the
+    # switched families of the gap oscillator are still found (the bound is far above their steps)
+    import reduced.periodic.exact_frc as ef
+
+    s = GapSystem(M=np.eye(1), C=2 * ZETA * math.sqrt(K) * np.eye(1), K=K * np.eye(1), dof_names=("x",),
+                  **two_sided_stops(np.eye(1), RATIO * K, GAP, ("x",)))
+    b = np.ones(1)
+    seen, newton = [], ef.newton
+
+    def bounded(fun, y0, **kw):
+        seen.append(kw.get("max_step"))
+        return newton(fun, y0, **kw)
+
+    monkeypatch.setattr(ef, "_switch", lambda *a, **k: _switch_recording(ef, bounded, *a, **k))
+    opts = ExactFRCOptions(max_families=1, depth=1, family_steps=20, period_doubling=False)
+    with single_thread_blas():
+        ex = exact_frc(s, b, LOAD, 3.0, 12.0, hb_start(s, b, LOAD, 3.0, opts.segments), x_ref=GAP, options=opts)
+    assert seen and all(m == ef.SWITCH_MAX_STEP for m in seen)
+    assert [f.kind for f in ex.families] == ["main", "half_wave_broken"]
+    assert 0.1 < ef.SWITCH_MAX_STEP <= 1.0  # above the largest converged step seen (0.15), below the orbit's size
+
+
+def _switch_recording(ef, bounded, *args, **kw):
+    """ef._switch with its module's newton replaced by ``bounded`` for the call."""
+    saved = ef.newton
+    ef.newton = bounded
+    try:
+        return _SWITCH(*args, **kw)
+    finally:
+        ef.newton = saved
+
+
+from reduced.periodic.exact_frc import _switch as _SWITCH  # noqa: E402  (the function itself, before any patch)

@@ -107,6 +107,10 @@ LOAD_DIFF = 1e-7  # forward-difference step of dR/d ln P in the load continuatio
 START_HARMONICS = 15  # harmonics of the balance that guesses the first orbit
 BISECTIONS = 12  # bisections locating a crossing between two points (the bracket shrinks 4096 times)
 SWITCH_H = (1e-3, 3e-4, 3e-3)  # offsets tried along the critical eigenvector (scaled unknowns), in order
+SWITCH_MAX_STEP = 1.0  # a Newton step of a switch's first orbit longer than this (scaled, max norm) ends that try:
+# the orbit sought lies within ~h of the branch point, and a step of the orbit's own size (~1 / sqrt(S)) has left
+# it (rom-frc 1 N: such tries wandered to 0.8-1e5 Hz, 8.6 s CPU for one; the largest step of a try that
+# converged, over the rom-frc and discrete-frc families, is 0.15)
 FAMILY_KINDS = ("main", "asymmetric", "half_wave_broken", "asymmetric_half_wave", "period_doubled", "isolated",
                 "close_return")
 SWITCHED = {"pitchfork_mirror": "asymmetric", "pitchfork_half_wave": "half_wave_broken",
@@ -625,6 +629,25 @@ class _Budget:
         return self.spent < self.deadline_s
 
 
+@nb.njit(cache=True)
+def _within(Y, cand, y, r2):
+    """The candidates c (in order) with sum_j (Y[c, j] - y[j])^2 <= r2, each sum stopped once past r2 (its
+    partial sums only grow): :class:`_Retrace`'s prefilter before its full distances."""
+    out = np.empty(cand.shape[0], np.int64)
+    m = 0
+    for c in cand:
+        acc = 0.0
+        for j in range(y.shape[0]):
+            d = Y[c, j] - y[j]
+            acc += d * d
+            if acc > r2:
+                break
+        if acc <= r2:
+            out[m] = c
+            m += 1
+    return out[:m]
+
+
 class _Retrace:
     """Whether a family has come back onto its own path, going the same way (it is cycling around a
     closed loop, or a step jumped back onto a stretch already traced): a point within
@@ -649,16 +672,27 @@ class _Retrace:
         from scipy.spatial import cKDTree
 
         k = self.k
-        s = self.s[k - 1] + float(np.linalg.norm(y - self.Y[k - 1])) if k else 0.0
+        s = 0.0
+        if k:
+            d = y - self.Y[k - 1]
+            s = self.s[k - 1] + math.sqrt(float(d.dot(d)))  # np.linalg.norm's sum and root, without its wrapper
         yu = y @ self.U
-        cand = np.arange(self.n_tree, k)
+        # the points since the tree, then the tree's near ones, each kept if more than RETRACE_ARC behind (the
+        # newer ones tested on a slice: the same numbers as on their indices)
+        cand = np.flatnonzero(s - self.s[self.n_tree:k] > RETRACE_ARC) + self.n_tree
         if self.tree is not None:
-            cand = np.concatenate([cand, np.array(self.tree.query_ball_point(y @ self.Pm, RETRACE_DIST), int)])
-        cand = cand[s - self.s[cand] > RETRACE_ARC]
+            near = np.array(self.tree.query_ball_point(y @ self.Pm, RETRACE_DIST), int)
+            if near.size:
+                cand = np.concatenate([cand, near[s - self.s[near] > RETRACE_ARC]])
         if cand.size:
             # a candidate farther than RETRACE_DIST along a unit direction is farther in full: dropped before
             # the full distances (the margin covers the projections' round-off; the test itself is unchanged)
             cand = cand[np.max(np.abs(self.Yu[cand] - yu), axis=1) < RETRACE_DIST + RETRACE_MARGIN]
+        if cand.size:
+            # in many dimensions the projections keep most candidates (rom-frc: ~100 a point of 193 unknowns):
+            # a candidate whose squared distance summed over its first coordinates already passes
+            # (RETRACE_DIST + RETRACE_MARGIN)^2 is farther in full; dropped before the full distances
+            cand = call_numba_kernel(_within, self.Y, cand, y, (RETRACE_DIST + RETRACE_MARGIN) ** 2)
         hit = bool(cand.size) and bool(np.any((np.linalg.norm(self.Y[cand] - y, axis=1) < RETRACE_DIST)
                                               & (self.T[cand] @ t > 0.9)))
         if k == self.Y.shape[0]:
@@ -901,7 +935,9 @@ def _critical_vector(analyser: _Analyser, Js: np.ndarray, channel: int) -> np.nd
 def _switch(parent_res: ShootingResidual, analyser: _Analyser, y_bp: np.ndarray, Js: np.ndarray, channel: int,
             kind: str, opts: ExactFRCOptions):
     """The first point of the family born at a crossing: (residual of the family, Y, the
-    perturbation direction (scaled), its h), or None."""
+    perturbation direction (scaled), its h), or None. Each offset h of SWITCH_H is tried by Newton on the
+    hyperplane d . (Y - Y_bp - h d) = 0; a try whose Newton step exceeds SWITCH_MAX_STEP has left the
+    branch point's neighbourhood and is given up (the next h is tried)."""
     e = _critical_vector(analyser, Js, channel)
     nodes, w = parent_res.nodes(y_bp)
     S = parent_res.segments
@@ -944,7 +980,7 @@ def _switch(parent_res: ShootingResidual, analyser: _Analyser, y_bp: np.ndarray,
             return np.concatenate([R, [d @ (z - target)]]), np.vstack([J, d])
 
         try:
-            y = newton(fun, target, tol=1e-11, max_iter=30).y
+            y = newton(fun, target, tol=1e-11, max_iter=30, max_step=SWITCH_MAX_STEP).y
         except NewtonError:
             continue
         return res, y, d, h

@@ -46,6 +46,7 @@ from reduced.cache import call_numba_kernel
 from reduced.models.gaps import GapSystem
 from reduced.models.loads import Harmonic, Loads
 from reduced.periodic.shooting import ShootingError
+from reduced.transient._cabs import cabs
 from reduced.transient._exact_kernels import _eval_state, _exponentials, _next_crossing
 from reduced.transient._modal import QTOL_REL, _state_of
 from reduced.transient.exact import HMIN_PERIODS
@@ -521,9 +522,9 @@ def _node_peaks(lam, V, Vinv, yp, valid, B, offset, side, Y0, h, hmin, omega, fY
             # the same (every sample and refined extreme of the stretch lies below, resp. above, it)
             skip = True
             for p in range(P):
-                acc = abs(chp[p]) * abs(Fa)
+                acc = cabs(chp[p]) * cabs(Fa)  # the moduli inlined (the library's hypot's bits)
                 for mm in range(N):
-                    acc += abs(RV[p, mm]) * abs(beta[mm]) * max(1.0, math.exp(lam[s, mm].real * tau))
+                    acc += cabs(RV[p, mm]) * cabs(beta[mm]) * max(1.0, math.exp(lam[s, mm].real * tau))
                 slack = acc + _BOUND_SLACK * (abs(c0p[p]) + acc)
                 if not (c0p[p] + slack < max(gmax[p], pmax[k, p]) and c0p[p] - slack > min(gmin[p], pmin[k, p])):
                     skip = False

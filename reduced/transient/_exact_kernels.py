@@ -21,6 +21,7 @@ import math
 import numba as nb
 import numpy as np
 
+from reduced.transient._cabs import cabs
 from reduced.transient._modal import (
     BUFFER_FULL,
     EPS,
@@ -88,18 +89,19 @@ def _work_setup(X, C, lam, n, G, Gz, az):
 @nb.njit(cache=True)
 def _series_at(coef, lam, tau, q, d, dscale, Q2):
     """Add the terms c_i e^{lam_i tau} to q, q' = Re sum lam_i c_i e^{lam_i tau}, the scale of q'
-    (sum |lam_i c_i e^{lam_i tau}|) and the bound Q2 = sum |lam_i|^2 |c_i e^{lam_i tau}| on |q''|."""
+    (sum |lam_i c_i e^{lam_i tau}|) and the bound Q2 = sum |lam_i|^2 |c_i e^{lam_i tau}| on |q''| (the moduli by
+    :func:`reduced.transient._cabs.cabs`, the library's hypot inlined: the same bits)."""
     N = lam.shape[0]
     i = 0
     while i < N:
         li = lam[i]
         x = np.exp(li * tau)
-        al = abs(li)
+        al = cabs(li)
         al2 = al**2
         e = coef[i] * x
         q += e.real
         d += (li * e).real
-        ae = abs(e)
+        ae = cabs(e)
         dscale += ae * al
         Q2 += ae * al2
         i += 1
@@ -111,7 +113,7 @@ def _series_at(coef, lam, tau, q, d, dscale, Q2):
             e = coef[i] * np.conj(x)
             q += e.real
             d += (lc * e).real
-            ae = abs(e)
+            ae = cabs(e)
             dscale += ae * al
             Q2 += ae * al2
             i += 1
@@ -157,7 +159,7 @@ def _first_root(const, coef, lam, tau_limit, hmin, qnoise, dnoise, floor):
     N = lam.shape[0]
     osc = 0.0
     for i in range(N):
-        osc += abs(coef[i])
+        osc += cabs(coef[i])
     if osc < floor and abs(const) < floor:
         return np.inf, 0
     qtol = QTOL_REL * (abs(const) + osc) + NOISE_FACTOR * qnoise
@@ -342,7 +344,7 @@ def _first_root_forced(const, coef, lam, Qp, poly, tau_limit, hmin, qnoise, dnoi
     M = Qp.shape[0] - 1
     osc = 0.0
     for i in range(N):
-        osc += abs(coef[i]) * (math.exp(lam[i].real * tau_limit) if grow and lam[i].real > 0.0 else 1.0)
+        osc += cabs(coef[i]) * (math.exp(lam[i].real * tau_limit) if grow and lam[i].real > 0.0 else 1.0)
     Q2p = 0.0
     pmax = 0.0
     if poly:
@@ -363,7 +365,7 @@ def _first_root_forced(const, coef, lam, Qp, poly, tau_limit, hmin, qnoise, dnoi
         if grow:
             for i in range(N):
                 if lam[i].real > 0.0:  # its size at tau_limit, not at tau, bounds it ahead
-                    Q2 += abs(coef[i]) * (math.exp(lam[i].real * tau_limit) - math.exp(lam[i].real * tau)) * abs(
+                    Q2 += cabs(coef[i]) * (math.exp(lam[i].real * tau_limit) - math.exp(lam[i].real * tau)) * cabs(
                         lam[i]) ** 2
         if poly:
             pv = Qp[M]
@@ -696,8 +698,8 @@ def _next_crossing(B, offset, side, active, yp_s, V_s, X, z, werr, poly, P, Qp, 
                 pv = 0.0 + 0.0j
                 for r in range(n):
                     pv += B[j, r] * V_s[r, i]
-                qnoise += abs(pv) * werr[i]
-                dnoise += abs(pv) * abs(z[i]) * werr[i]  # z[i] = lambda_i for the modes i < 2n
+                qnoise += cabs(pv) * werr[i]
+                dnoise += cabs(pv) * cabs(z[i]) * werr[i]  # z[i] = lambda_i for the modes i < 2n
         if poly:
             _stop_poly(B, j, sgn, P, Qp)
         tj, it = _first_root_forced(const, coef, z, Qp, poly, tau_ev, hmin, qnoise, dnoise, floor, False)
