@@ -10,10 +10,17 @@ Subpackages, imported one way (``models`` imports no solver):
 - :mod:`reduced.studies`: work-precision, stiff and extreme cases, mode-count convergence.
 
 The names most used are importable from here (``from reduced import GapSystem, ringdown``);
-each is loaded on first use, so importing :mod:`reduced` costs nothing.
+each is loaded on first use, so importing :mod:`reduced` costs almost nothing: it only checks
+that numba's disk cache of the package's kernels was compiled against these sources
+(:func:`reduced._kernel_cache.refresh`, ~4 ms; numba alone checks only the file that defines a kernel,
+not the files of the kernels it calls).
 """
 
 from importlib import import_module
+
+from reduced._kernel_cache import refresh as _refresh_kernel_cache
+
+_refresh_kernel_cache()
 
 _PUBLIC = {
     "GapSystem": "reduced.models.gaps",
