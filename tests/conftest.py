@@ -12,6 +12,7 @@ import csv
 import fcntl
 import os
 import pickle
+import sys
 from collections import defaultdict
 from pathlib import Path
 
@@ -40,15 +41,41 @@ def _once(tmp_path_factory, worker_id: str, name: str, build):
 @pytest.fixture(scope="session")
 def assembly_rom20(tmp_path_factory, worker_id):
     """(rom, fe): the 3-D apparatus (assembly layout, every mode: planar = false, hex20) reduced to 20
-    fixed-interface modes, as test_hammer.py and test_frf.py both use it (~10 CPU s to mesh, assemble and
-    reduce; built once instead of once per file). Both are frozen dataclasses: no test can change them."""
+    fixed-interface modes, as test_hammer.py, test_hammer_oblique.py and test_frf.py use it; built once instead
+    of once per file. The reduced model comes from the model cache ($BEARINGSHAFT_CACHE, as rom-fep's does in
+    test_rom_fep.py), built and stored there if absent (~11 s CPU to mesh, assemble and reduce); the 3-D model is
+    meshed (mesh cache) and assembled again (~2 s). A cached model is the build's bits
+    (reduced.models.rom.reduction; test_cache.py). Both are frozen dataclasses: no test can change them."""
 
     def build():
-        from reduced.models.rom import RomSpec, build_rom
+        from reduced.models.rom import RomSpec, build_fe, build_rom, from_cache, store_in_cache
 
-        return build_rom(RomSpec(layout="assembly", planar=False, n_modes=20))
+        spec = RomSpec(layout="assembly", planar=False, n_modes=20)
+        rom = from_cache(spec)
+        if rom is not None:
+            return rom, build_fe(spec)
+        rom, fe = build_rom(spec)
+        store_in_cache(rom, spec)
+        return rom, fe
 
     return _once(tmp_path_factory, worker_id, "assembly_rom20", build)
+
+
+# --- Bytecode kept between runs (issue 28) ---------------------------------------------------------------------
+# Python compiles a module's source on every import unless a current .pyc sits in its __pycache__, and pytest does
+# the same for the assertion-rewritten test files. With PYTHONDONTWRITEBYTECODE set (this machine's environment
+# sets it) none is ever written: each xdist worker, and each process a test starts (the forked command-line server,
+# Dask workers, `python -m bearingshaft.cli` children), compiles the four packages and the test files again,
+# every run. Measured on this machine: collecting the suite 13.3 -> 7.5 s CPU a worker, importing the command line
+# 2.4 -> 1.7 s a process. So the suite writes bytecode (into __pycache__, which git ignores; Python checks a .pyc
+# against its source's mtime and size, so an edit is never hidden by a stale one): here for this process, which
+# imports the test files after this one, and through the environment for every process it starts, the xdist
+# workers included (they are started after this file is read). SUITE_WRITES_BYTECODE = False keeps the user's
+# setting.
+SUITE_WRITES_BYTECODE = True
+if SUITE_WRITES_BYTECODE:
+    sys.dont_write_bytecode = False
+    os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
 
 
 # --- One BLAS thread a worker (issue 28) -------------------------------------------------------------------------

@@ -15,6 +15,7 @@ from __future__ import annotations
 import ast
 import subprocess
 import sys
+from collections.abc import MutableMapping
 from importlib import import_module
 from pathlib import Path
 
@@ -89,7 +90,37 @@ def _imports(mod: str, path: Path) -> set[str]:
     return out
 
 
-GRAPH = {m: _imports(m, p) for m, p in MODULES.items()}
+class _ImportGraph(MutableMapping):
+    """``{module: project modules it imports}``, read from the sources on first use rather than at collection:
+    under pytest-xdist every worker collects every file, and the worker that does not run this one would parse
+    the four packages for nothing (issue 28). A mutable mapping, so a test can plant edges with monkeypatch."""
+
+    def __init__(self):
+        self._edges = None
+
+    @property
+    def edges(self) -> dict[str, set[str]]:
+        if self._edges is None:
+            self._edges = {m: _imports(m, p) for m, p in MODULES.items()}
+        return self._edges
+
+    def __getitem__(self, key):
+        return self.edges[key]
+
+    def __setitem__(self, key, value):
+        self.edges[key] = value
+
+    def __delitem__(self, key):
+        del self.edges[key]
+
+    def __iter__(self):
+        return iter(self.edges)
+
+    def __len__(self):
+        return len(self.edges)
+
+
+GRAPH = _ImportGraph()
 
 
 def _package_layer(mod: str) -> int:

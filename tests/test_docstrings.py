@@ -25,6 +25,7 @@ Exempt:
 from __future__ import annotations
 
 import ast
+import functools
 import re
 from pathlib import Path
 
@@ -44,7 +45,11 @@ def _definitions():
                     yield f"{path.relative_to(ROOT)}:{node.lineno} {node.name}", node
 
 
-DEFINITIONS = list(_definitions())
+@functools.cache
+def _all_definitions() -> list:
+    """Every checked definition, read on first use, not at collection: under pytest-xdist each worker collects
+    every file, and the worker that does not run this one would parse the four packages for nothing (issue 28)."""
+    return list(_definitions())
 
 
 def _arguments(node: ast.FunctionDef) -> list[str]:
@@ -97,28 +102,30 @@ def _violations(definitions) -> dict[str, list[str]]:
     return out
 
 
-VIOLATIONS = _violations(DEFINITIONS)
+@functools.cache
+def _all_violations() -> dict:
+    return _violations(_all_definitions())
 
 
 def test_the_definitions_are_found():
     # a guard on the reader: the four packages hold hundreds of public definitions, known ones among them
-    assert len(DEFINITIONS) > 300
-    names = {node.name for _, node in DEFINITIONS}
+    assert len(_all_definitions()) > 300
+    names = {node.name for _, node in _all_definitions()}
     assert {"build_mesh", "modal_analysis", "craig_bampton", "AssemblyGeometry"} <= names
 
 
 def test_functions_have_a_parameters_section():
-    bad = VIOLATIONS["no_parameters"]
+    bad = _all_violations()["no_parameters"]
     assert not bad, f"{len(bad)} public functions without a numpydoc Parameters section:\n" + "\n".join(bad)
 
 
 def test_every_argument_is_described():
-    bad = VIOLATIONS["undescribed"]
+    bad = _all_violations()["undescribed"]
     assert not bad, "arguments missing from the Parameters section:\n" + "\n".join(bad)
 
 
 def test_classes_have_a_parameters_or_attributes_section():
-    bad = VIOLATIONS["class"]
+    bad = _all_violations()["class"]
     assert not bad, f"{len(bad)} public classes without a Parameters or Attributes section:\n" + "\n".join(bad)
 
 
