@@ -47,6 +47,19 @@ SOURCES = (
 )
 XEON = ("on this session's machine, an Intel Xeon at 2.1 GHz (2026-11-27 08:30 UTC, quiet), slower than the AMD "
         "EPYC of the sessions before, where this row met its target; what follows was measured on the EPYC: ")
+# what a reader must know beside the table (issue 28 is open on the first)
+CAVEATS = [
+    "The ringdown integrator rows (results/performance/integrator_*.csv) are session 14's run (2026-11-27 "
+    "13:51 UTC, on f45ab52 with the session's measurement edits). Session 15 changed the exact kernels (|z| inlined, the same bits), and its run of "
+    "`benchmarks/integrator_speed.py --repeats 5` (2026-11-27 16:21 UTC, load 1.2, not committed) missed three "
+    "rows: exact vs DOP853 on the 0.2 s window at 1e-6, 737x (ours 4.9 ms against 3.2 ms); the explicit step of the "
+    "reduced beam, 2.77e7 steps/s; the exact discrete ringdown, 33 ms against 30 ms. Not the code: the same 2 s "
+    "exact ringdown in alternating child processes of the old and the new code runs at 18-22 ms or 31-35 ms a "
+    "process, both codes in both modes, and a pickled copy of the system (its tables placed anew) flips the mode "
+    "inside one process. The benchmark times one process, so its rows draw one placement; they are not settled "
+    "until it times several processes or the kernels' tables stop depending on where they land.",
+]
+
 # what limits each target not met, from the profiles (a row matches by the start of its ``what``)
 LIMITS = (
     ("explicit (central difference) ringdown, discrete-impulse",
@@ -346,6 +359,8 @@ def main() -> None:
         lines.append(f"- {r['what']}: {_num(r['ours_s'])} s against {r['target']}. What limits it: {said_why}.")
     if not unmet:
         lines.append("- none")
+    lines += ["", "## Caveats", ""]
+    lines += [f"- {text}" for text in CAVEATS]
     lines += ["", "## The same code on another machine", "",
               "Absolute times and even the ratios against a Python-level baseline move with the machine "
               "(our numba kernels and SciPy's Python-level DOP853 do not speed up alike). On an earlier machine "
