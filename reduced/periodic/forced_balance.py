@@ -41,6 +41,7 @@ rows scaled by 1 / x_ref.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -142,18 +143,11 @@ class ForcedBalance:
             dZ = dZ + dZc
         return W, -np.linalg.solve(Z, dZ @ W)
 
-    def _omega_free(self, harmonics: np.ndarray | str | None):
+    def _omega_free(self, harmonics: np.ndarray | None):
         """(k, the right-hand sides [U^T, f_k] (len(k), n, u + 1), the damping part i k C of dZ_k/dOmega or None)
-        of :meth:`receptances`: what does not depend on Omega, made once per harmonic set (read-only); with
-        ``harmonics="kept"`` the harmonic numbers of the kept rows."""
-        memo = self.__dict__.setdefault("_memo", {})  # made on first use (a subclass may skip __post_init__)
-        if "kept" not in memo:
-            kept = np.unique((self.keep + 1) // 2)
-            kept.flags.writeable = False
-            memo["kept"] = kept
-        if isinstance(harmonics, str):  # "kept"
-            return memo["kept"]
+        of :meth:`receptances`: what does not depend on Omega, made once per harmonic set (read-only)."""
         key = None if harmonics is None else (np.asarray(harmonics).dtype.str, np.asarray(harmonics).tobytes())
+        memo = self._receptance_parts
         if key not in memo:
             n, u = self.n, self.u
             k = np.arange(self.H + 1) if harmonics is None else np.array(harmonics)
@@ -166,6 +160,11 @@ class ForcedBalance:
                     a.flags.writeable = False
             memo[key] = (k, rhs, dZc)
         return memo[key]
+
+    @functools.cached_property
+    def _receptance_parts(self) -> dict:
+        """:meth:`_omega_free`'s parts by harmonic set (filled on use)."""
+        return {}
 
     @staticmethod
     def _real_rows(c: np.ndarray) -> np.ndarray:
@@ -240,10 +239,12 @@ class ForcedBalance:
         J[np.diag_indices(S)] += 1.0
         return R.ravel(), J, dRdw.ravel()
 
-    @property
+    @functools.cached_property
     def _harmonics_kept(self) -> np.ndarray:
         """Harmonic numbers of the kept rows (each once, increasing; made once, read-only)."""
-        return self._omega_free("kept")
+        kept = np.unique((self.keep + 1) // 2)
+        kept.flags.writeable = False
+        return kept
 
     @staticmethod
     def _rows_of(c: np.ndarray, ks: np.ndarray) -> np.ndarray:
