@@ -23,6 +23,7 @@ start unloaded, w(0) = Bt x(0), unless ``w0`` is given.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 import threading
@@ -953,7 +954,7 @@ def _initial_states(system: GapSystem, x0: np.ndarray, w0: np.ndarray) -> tuple[
     """(closed stops, slider codes) at the start, from the physics (as :func:`initial_friction_state`): at each
     tip the deepest penetrating stop closed (the first of equals), a slider engaged by a closed stop slipping
     (sign of its force) where |k_t (Bt x - w)| > mu k_j pen_j. The same decisions on the same numbers as
-    :func:`_initial_states_reference` (tests/test_friction_flow.py), with the system's tips and engagements
+    the numpy form it replaced (tests/test_friction_flow.py), with the system's tips and engagements
     worked out once (:func:`_start_layout`): each exact flow run starts here."""
     fr = system.friction
     pen = system.penetration(x0)
@@ -976,47 +977,17 @@ def _initial_states(system: GapSystem, x0: np.ndarray, w0: np.ndarray) -> tuple[
     return closed, slip
 
 
-_LAYOUTS: dict = {}  # id(system) -> (system, layout) of :func:`_start_layout` (the system kept: its id stays its own)
-_LAYOUTS_KEPT = 64
-
-
+@functools.lru_cache(maxsize=64)
 def _start_layout(system: GapSystem) -> tuple:
     """(stops of each tip (by tip number, ascending stop index), stops engaging each slider (ascending),
     mu_q k_j of each slider q and stop j (float products as numpy makes them)) of ``system``, kept for the
-    last _LAYOUTS_KEPT systems."""
-    got = _LAYOUTS.get(id(system))
-    if got is not None and got[0] is system:
-        return got[1]
+    last 64 systems (by identity: a GapSystem compares and hashes as itself)."""
     fr = system.friction
     by_tip = tuple(tuple(int(j) for j in np.flatnonzero(system.tip == t_)) for t_ in np.unique(system.tip))
     eng = fr.engages(system.tip)
     engages = tuple(tuple(int(j) for j in np.flatnonzero(row)) for row in eng)
     mu_k = tuple(tuple(float(fr.mu[q] * system.k[j]) for j in range(system.m)) for q in range(fr.p))
-    layout = (by_tip, engages, mu_k)
-    if len(_LAYOUTS) >= _LAYOUTS_KEPT:
-        _LAYOUTS.pop(next(iter(_LAYOUTS)))
-    _LAYOUTS[id(system)] = (system, layout)
-    return layout
-
-
-def _initial_states_reference(system: GapSystem, x0: np.ndarray, w0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_initial_states` as it was written first, on numpy arrays throughout (kept for the test that the
-    faster one makes the same decisions)."""
-    fr = system.friction
-    pen = system.penetration(x0)
-    closed = np.zeros(system.m, bool)
-    for t_ in np.unique(system.tip):
-        j = np.flatnonzero((system.tip == t_) & (pen > 0.0))
-        if j.size:
-            closed[j[np.argmax(pen[j])]] = True
-    slip = np.zeros(fr.p, np.int8)
-    f0 = fr.force(x0, w0)
-    stop_of = fr.engaged_by(system.tip, closed)
-    for q in range(fr.p):
-        j = stop_of[q]
-        if j >= 0 and abs(f0[q]) > fr.mu[q] * system.k[j] * pen[j]:
-            slip[q] = 1 if f0[q] > 0 else -1
-    return closed, slip
+    return by_tip, engages, mu_k
 
 
 def _reference_leg(system: GapSystem, closed, slip, loads, t0: float, t_bound: float, z: np.ndarray, rtol: float,
