@@ -95,24 +95,25 @@ def cache_dirs(root: Path = ROOT) -> list[Path]:
     return found
 
 
-def refresh(root: Path = ROOT, digest: str | None = None) -> list[Path]:
+def refresh(root: Path = ROOT) -> list[Path]:
     """Remove numba's cache files compiled against other sources of ``root``; stamp the directories.
 
     Parameters
     ----------
     root : Path
         The package directory.
-    digest : str, optional
-        The sources' stamp; :func:`sources_digest` of ``root`` when not given.
 
     Returns
     -------
     list of Path
         The cache directories that were cleared (their stamp was missing or different).
     """
-    digest = digest or sources_digest(root)
+    dirs = cache_dirs(root)
+    if not dirs:  # nothing compiled yet (a fresh clone): no sources to read
+        return []
+    digest = sources_digest(root)
     cleared = []
-    for c in cache_dirs(root):
+    for c in dirs:
         stamp = c / STAMP_NAME
         with contextlib.suppress(OSError):
             if stamp.read_text() == digest:
