@@ -50,9 +50,10 @@ XEON = ("on this session's machine, an Intel Xeon at 2.1 GHz (2026-11-27 08:30 U
 # what a reader must know beside the table (issue 28 is open on the first)
 CAVEATS = [
     "The ringdown integrator rows (results/performance/integrator_*.csv) are session 14's run (2026-11-27 "
-    "13:51 UTC, on f45ab52 with the session's measurement edits). Session 15 changed the exact kernels (|z| inlined, the same bits), and its run of "
-    "`benchmarks/integrator_speed.py --repeats 5` (2026-11-27 16:21 UTC, load 1.2, not committed) missed three "
-    "rows: exact vs DOP853 on the 0.2 s window at 1e-6, 737x (ours 4.9 ms against 3.2 ms); the explicit step of the "
+    "13:51 UTC, on f45ab52 with the session's measurement edits). Session 15 changed the exact kernels (|z| "
+    "inlined, the same bits), and its run of `benchmarks/integrator_speed.py --repeats 5` (2026-11-27 16:21 UTC, "
+    "load 1.2, not committed) missed three rows: exact vs DOP853 on the 0.2 s window at 1e-6, 737x (ours 4.9 ms "
+    "against 3.2 ms); the explicit step of the "
     "reduced beam, 2.77e7 steps/s; the exact discrete ringdown, 33 ms against 30 ms. Not the code: the same 2 s "
     "exact ringdown in alternating child processes of the old and the new code runs at 18-22 ms or 31-35 ms a "
     "process, both codes in both modes, and a pickled copy of the system (its tables placed anew) flips the mode "
