@@ -66,6 +66,9 @@ from reduced.transient.exact import integrate_exact  # noqa: E402
 from reduced.transient.exact_tables import clear_table_cache  # noqa: E402
 from reduced.transient.explicit import integrate_explicit  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from process_median import median_rows, probe_ms, probe_text, read_csv, run_children  # noqa: E402  (issue 28)
+
 FS = 20000.0  # Hz, the scenes' output rate
 LONG_S = 2.0  # s, the ringdowns of the scenes
 WINDOW_S = 0.2  # s, the window where the motion is still predictable pointwise
@@ -721,6 +724,9 @@ def main(argv=None) -> int:
                     help="the previous release's kernels (the code before issue 14)")
     ap.add_argument("--hammer-modes", type=int, nargs="*", default=[60, 120])
     ap.add_argument("--no-dop853-2s", action="store_true", help="skip the 2 s DOP853 window (minutes a run)")
+    ap.add_argument("--processes", type=int, default=5,
+                    help="child processes the whole measurement runs in, one after the other; each headline row is "
+                         "that of the median process (benchmarks/process_median.py; odd; 1: this process alone)")
     ap.add_argument("--out", default="results/performance")
     ap.add_argument("--figure-only", action="store_true", help="redraw integrator_speed.png from the CSV files")
     ap.add_argument("--explicit-only", action="store_true",
@@ -733,14 +739,20 @@ def main(argv=None) -> int:
     if args.figure_only:
         redraw(out)
         return 0
+    if args.processes < 1 or args.processes % 2 == 0:
+        ap.error("--processes must be odd and >= 1")
     out.mkdir(parents=True, exist_ok=True)
+    if args.processes > 1:
+        return in_processes(out, args, argv if argv is not None else sys.argv[1:])
     info = machine_rows()
+    info.append({"key": "probe_ms_start", "value": probe_ms()})
     if args.explicit_only:
         return explicit_only(out, args, info)
     base = load_baseline(args.baseline_commit)
     with single_thread_blas():
         heads, details, scans = run_all(base, args)
     info.append({"key": "load_1min_end", "value": os.getloadavg()[0]})
+    info.append({"key": "probe_ms_end", "value": probe_ms()})
     fields = ["what", "ours_s", "baseline", "baseline_s", "ratio", "error", "target", "met"]
     write_rows(out / "integrator_headline.csv", [{k: (f"{v:.4g}" if isinstance(v, float) else v)
                                                   for k, v in r.items()} for r in heads], fields)
@@ -750,6 +762,52 @@ def main(argv=None) -> int:
     write_rows(out / "integrator_machine.csv", info)
     figure(heads, scans, out / "integrator_speed.png")
     print(f"wrote {out}/integrator_{{headline,details,dop853,machine}}.csv and integrator_speed.png")
+    return 0
+
+
+def in_processes(out: Path, args, argv: list[str]) -> int:
+    """The whole measurement in ``args.processes`` child processes (:func:`process_median.run_children`,
+    folders out/processes/p<k>), then the tables of ``out`` from them: each headline row that of the median
+    process (:func:`process_median.median_rows`, a ``processes`` column with every process's number and speed
+    probe); integrator_processes.csv the per-process rows; integrator_details.csv every process's details (a
+    ``process`` column); integrator_dop853.csv the scans of the process chosen for the 0.2 s DOP853 row at the
+    loosest error (every process's in integrator_dop853_processes.csv); integrator_machine.csv this process's
+    machine rows and each child's probe and load. With ``--explicit-only`` each child replaces the explicit rows of
+    a copy of the tables in ``out``."""
+    import shutil
+
+    keep = [a for i, a in enumerate(argv) if not (a.startswith("--out") or a.startswith("--processes")
+            or (i > 0 and argv[i - 1] in ("--out", "--processes")))]
+    base_dir = out / "processes"
+    if args.explicit_only:  # each child updates its own copy of the committed tables
+        for k in range(args.processes):
+            (base_dir / f"p{k}").mkdir(parents=True, exist_ok=True)
+            for f in out.glob("integrator_*.csv"):
+                shutil.copy(f, base_dir / f"p{k}" / f.name)
+    dirs = run_children([str(Path(__file__).resolve()), *keep, "--processes", "1"], args.processes, base_dir)
+    machines = [read_csv(d / "integrator_machine.csv") for d in dirs]
+    probes = [probe_text(m) for m in machines]
+    heads, per, chosen = median_rows([read_csv(d / "integrator_headline.csv") for d in dirs], probes)
+    fields = ["what", "ours_s", "baseline", "baseline_s", "ratio", "error", "target", "met", "processes"]
+    write_rows(out / "integrator_headline.csv", heads, fields)
+    write_rows(out / "integrator_processes.csv", per)
+    details = [{"process": k, **r} for k, d in enumerate(dirs) for r in read_csv(d / "integrator_details.csv")]
+    write_rows(out / "integrator_details.csv", details, sorted({c for r in details for c in r},
+               key=lambda c: (c not in ("process", "scene", "method", "code"), c)))
+    scans_all = [{"process": k, **r} for k, d in enumerate(dirs) for r in read_csv(d / "integrator_dop853.csv")]
+    dop = [i for i, h in enumerate(heads) if "DOP853" in h["what"]]
+    k_fig = chosen[dop[0]] if dop else 0
+    write_rows(out / "integrator_dop853_processes.csv", scans_all)
+    write_rows(out / "integrator_dop853.csv", [{c: v for c, v in r.items() if c != "process"} for r in scans_all
+                                               if r["process"] == k_fig])
+    info = machine_rows() + [{"key": "processes", "value": args.processes},
+                             {"key": "dop853_scans_of_process", "value": k_fig}]
+    info += [{"key": f"process{k}_{r['key']}", "value": r["value"]} for k, m in enumerate(machines) for r in m
+             if r["key"] in ("probe_ms_start", "probe_ms_end", "load_1min_end")]
+    write_rows(out / "integrator_machine.csv", info)
+    redraw(out)
+    print(f"wrote {out}/integrator_{{headline,processes,details,dop853,machine}}.csv and integrator_speed.png "
+          f"from {args.processes} processes")
     return 0
 
 
@@ -763,10 +821,11 @@ def explicit_only(out: Path, args, info: list[dict]) -> int:
     with single_thread_blas():
         heads, details = ringdown_rows(base, args, methods=("explicit",))
     info.append({"key": "load_1min_end", "value": os.getloadavg()[0]})
+    info.append({"key": "probe_ms_end", "value": probe_ms()})
     fmt = {r["what"].split(",")[0] + r["what"].split(",")[1]: {k: (f"{v:.4g}" if isinstance(v, float) else v)
                                                                 for k, v in r.items()} for r in heads}
     tag = "explicit (central difference) ringdown"
-    old = read_rows(out / "integrator_headline.csv")
+    old = read_csv(out / "integrator_headline.csv")
     rows, left = [], dict(fmt)
     for r in old:
         key = r["what"].split(",")[0] + r["what"].split(",")[1]
@@ -778,27 +837,17 @@ def explicit_only(out: Path, args, info: list[dict]) -> int:
     rows += list(left.values())
     fields = ["what", "ours_s", "baseline", "baseline_s", "ratio", "error", "target", "met"]
     write_rows(out / "integrator_headline.csv", rows, fields)
-    old_d = [r for r in read_rows(out / "integrator_details.csv") if r.get("method") != "explicit"]
+    old_d = [r for r in read_csv(out / "integrator_details.csv") if r.get("method") != "explicit"]
     dfields = list(old_d[0]) if old_d else []
     dfields += sorted({k for r in details for k in r} - set(dfields))
     write_rows(out / "integrator_details.csv", old_d + [{k: r.get(k, "") for k in dfields} for r in details], dfields,
                float_format=".5g")
-    m_old = [r for r in read_rows(out / "integrator_machine.csv") if not r["key"].startswith("explicit_")]
+    m_old = [r for r in read_csv(out / "integrator_machine.csv") if not r["key"].startswith("explicit_")]
     write_rows(out / "integrator_machine.csv", m_old + [{"key": f"explicit_{r['key']}", "value": r["value"]}
                                                         for r in info])
     redraw(out)
     print(f"updated {out}/integrator_{{headline,details,machine}}.csv and integrator_speed.png")
     return 0
-
-
-def read_rows(path: Path) -> list[dict]:
-    """The rows of a CSV file ([] when it does not exist)."""
-    import csv
-
-    if not path.exists():
-        return []
-    with open(path, newline="") as f:
-        return list(csv.DictReader(f))
 
 
 def ringdown_rows(base: dict, args, methods=("exact", "explicit")) -> tuple[list[dict], list[dict]]:

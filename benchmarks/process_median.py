@@ -1,0 +1,215 @@
+"""Benchmark rows timed in several processes and reported by the median process (issue 28).
+
+On this machine class a process runs at one of two speeds, and keeps it: the same 2 s exact ringdown
+takes 18-22 ms in some processes and 31-35 ms in others, old and new code alike, and a loop of
+``sin(a) * exp(b)`` calls with no data at all (:func:`probe_ms`) takes ~4.7 ms or ~7.2 ms. A
+dependent chain of multiplies and adds shows no such split (it runs at the same speed in both), so
+it is not the clock; a process's new thread may draw the other speed, a forked child mostly keeps
+its parent's, and which one a process draws does not follow its stack depth, its core, address
+randomisation (``setarch -R``) or the hash seed (measured 2026-11-27, scripts in the session-16
+note on issue 28). A row timed in one process therefore draws one speed. This module runs the same
+benchmark in several child processes and keeps, for every headline row, the row of the process in
+the middle of the row's deciding number (its ratio for a ``>= ...x`` target, else its time), so
+the table's text and numbers stay those of one real measurement; the per-process numbers and each
+process's probe go beside it.
+
+The pieces: :func:`probe_ms` (the speed probe), :func:`run_children` (the children, one at a time,
+so that they do not share the cores), :func:`row_key` and :func:`median_rows` (the choice).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numba as nb
+
+
+@nb.njit(cache=True)
+def _probe_loop(n):
+    s = 0.0
+    for i in range(n):
+        s += math.sin(i * 1e-3) * math.exp(-i * 1e-9)
+    return s
+
+
+def probe_ms(n: int = 300_000, repeats: int = 9) -> float:
+    """The speed probe: the fastest of ``repeats`` CPU times (ms) of sum_i sin(i 1e-3) exp(-1e-9 i),
+    i < n, a compiled loop of libm calls that touches no array (~4.7 ms in a fast process of this
+    machine, ~7.2 ms in a slow one).
+
+    Parameters
+    ----------
+    n : int
+        Terms of the sum.
+    repeats : int
+        Timed calls after one warm-up.
+
+    Returns
+    -------
+    float
+        Milliseconds of CPU time.
+    """
+    _probe_loop(10)
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.process_time()
+        _probe_loop(n)
+        best = min(best, time.process_time() - t0)
+    return best * 1e3
+
+
+def run_children(argv: list[str], n: int, out: Path) -> list[Path]:
+    """Run ``python argv... --out out/p<k>`` for k < n, one after the other; the folders they wrote.
+
+    Parameters
+    ----------
+    argv : list of str
+        The benchmark script and its options (without ``--out``).
+    n : int
+        Child processes.
+    out : Path
+        Parent folder of the children's folders.
+
+    Returns
+    -------
+    list of Path
+
+    Raises
+    ------
+    RuntimeError
+        A child that exits with a non-zero status (its command named).
+    """
+    dirs = []
+    for k in range(n):
+        d = out / f"p{k}"
+        cmd = [sys.executable, *argv, "--out", str(d)]
+        print(f"process {k + 1} of {n}: {' '.join(cmd)}", flush=True)
+        if subprocess.run(cmd).returncode != 0:
+            raise RuntimeError(f"child {k} failed: {' '.join(cmd)}")
+        dirs.append(d)
+    return dirs
+
+
+def _num(v) -> float:
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def row_key(row: dict) -> tuple[str, float]:
+    """(name, value) of the number that decides a headline row: its ratio for a target ``>= ...x``,
+    else its time ``ours_s`` (a time target, a steps-per-second target in CPU time, or no target).
+
+    Parameters
+    ----------
+    row : dict
+        A headline row (what, ours_s, baseline, baseline_s, ratio, error, target, met).
+
+    Returns
+    -------
+    tuple of (str, float)
+
+    >>> row_key({"target": ">= 1000x", "ratio": "1240", "ours_s": "0.003"})
+    ('ratio', 1240.0)
+    >>> row_key({"target": "<= 0.03 s", "ratio": "11", "ours_s": "0.02"})
+    ('ours_s', 0.02)
+    """
+    target = (row.get("target") or "").strip()
+    if target.startswith(">=") and target.endswith("x"):
+        return "ratio", _num(row.get("ratio"))
+    return "ours_s", _num(row.get("ours_s"))
+
+
+def median_rows(tables: list[list[dict]], probes: list[str]) -> tuple[list[dict], list[dict], list[int]]:
+    """For each headline row, the row of the process in the middle of its deciding number
+    (:func:`row_key`), with a ``processes`` column saying so; the per-process rows; and the
+    chosen process of each row.
+
+    Parameters
+    ----------
+    tables : list of list of dict
+        Each process's headline rows, in the same order (an odd number of processes).
+    probes : list of str
+        Each process's speed probe, as text (:func:`probe_ms` at its start and end).
+
+    Returns
+    -------
+    tuple of (list of dict, list of dict, list of int)
+
+    Raises
+    ------
+    ValueError
+        An even number of processes, or tables whose rows differ in number or kind.
+    """
+    n = len(tables)
+    if n % 2 == 0:
+        raise ValueError(f"processes: {n} (an odd number, so that one process is the median)")
+    if len({len(t) for t in tables}) != 1:
+        raise ValueError(f"processes wrote {[len(t) for t in tables]} headline rows: not the same rows")
+    rows, per, chosen = [], [], []
+    for i, group in enumerate(zip(*tables, strict=True)):
+        heads = {r["what"].split(",")[0] + (r.get("target") or "") for r in group}
+        if len(heads) != 1:
+            raise ValueError(f"row {i} differs between processes: {sorted(heads)}")
+        name, _ = row_key(group[0])
+        vals = [row_key(r)[1] for r in group]
+        order = sorted(range(n), key=lambda k: (math.isnan(vals[k]), vals[k]))
+        k_mid = order[n // 2]
+        met = [r.get("met") for r in group]
+        n_met = sum(m in (True, "True") for m in met)
+        has_target = any(m not in ("", None) for m in met)
+        text = (f"the median of {n} processes by {name} (process {k_mid}); per process {name}: "
+                + ", ".join(f"{v:.4g}" for v in vals)
+                + (f"; target met in {n_met} of {n}" if has_target else "")
+                + f"; speed probe per process (ms, start/end): {'; '.join(probes)}")
+        rows.append({**group[k_mid], "processes": text})
+        chosen.append(k_mid)
+        for k, r in enumerate(group):
+            per.append({"row": i, "process": k, "what": r["what"].split(",")[0], "key": name, "value": vals[k],
+                        "ours_s": r.get("ours_s"), "baseline_s": r.get("baseline_s"), "ratio": r.get("ratio"),
+                        "met": r.get("met"), "probe_ms": probes[k], "chosen": k == k_mid})
+    return rows, per, chosen
+
+
+def read_csv(path: Path) -> list[dict]:
+    """The rows of a CSV file ([] when it does not exist).
+
+    Parameters
+    ----------
+    path : Path
+
+    Returns
+    -------
+    list of dict
+    """
+    if not path.exists():
+        return []
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def probe_text(machine: list[dict]) -> str:
+    """A process's probes as ``start/end`` text, from its machine rows (keys probe_ms_start, probe_ms_end; with a
+    prefix, e.g. ``explicit_``, the last such key).
+
+    Parameters
+    ----------
+    machine : list of dict
+        Rows with ``key`` and ``value``.
+
+    Returns
+    -------
+    str
+
+    >>> probe_text([{"key": "probe_ms_start", "value": "4.71"}, {"key": "probe_ms_end", "value": "7.2"}])
+    '4.7/7.2'
+    """
+    kv = {key: _num(r["value"]) for r in machine for key in ("probe_ms_start", "probe_ms_end")
+          if r["key"].endswith(key)}
+    return f"{kv.get('probe_ms_start', math.nan):.1f}/{kv.get('probe_ms_end', math.nan):.1f}"
