@@ -18,7 +18,10 @@ one BLAS thread), two ways in the same process, one after the other:
    else the main family from the HB orbits' guesses). The stage needs its HB curve anyway (drawn beside the
    exact families, the choice between HB and shooting, the fill outside the families, the cover guesses).
 
-The medians over ``--repeats`` runs in one process (numba's kernels loaded first by an untimed run at the lowest
+With ``--processes`` P > 1 (default 5) the whole measurement runs in P child processes, one after the other, and
+each headline row is that of the median process (benchmarks/process_median.py: a process of this machine runs at one
+of two speeds), the runs of all in converged_curve_speed.csv with a ``process`` column. In each process: the
+medians over ``--repeats`` runs (numba's kernels loaded first by an untimed run at the lowest
 level), in CPU seconds (``time.process_time``: what the run costs on a shared machine) and wall seconds. The
 1-minute load average is recorded beside each run. ``--grazing-ds`` and ``--multi-grazing-ds`` set the exact
 families' ``grazing_ds`` and ``multi_grazing_ds`` (:class:`reduced.periodic.exact_frc.ExactFRCOptions`; defaults:
@@ -57,6 +60,7 @@ from reduced.periodic.exact_frc import ExactFRCOptions  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from converged_frc_speed import _timed  # noqa: E402  (one timing helper for both benchmarks)
+from process_median import merge, probe_ms, run_children  # noqa: E402  (issue 28)
 
 TARGET_S = 10.0  # the issue's target, CPU seconds of one level
 
@@ -67,11 +71,27 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--levels", type=float, nargs="*", default=None, help="N (default: the scene's levels)")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--out", default="results/performance")
+    ap.add_argument("--processes", type=int, default=5,
+                    help="child processes the whole measurement runs in, one after the other; each headline row is "
+                         "that of the median process (benchmarks/process_median.py; odd; 1: this process alone)")
     ap.add_argument("--no-hb", action="store_true", help="skip the stage's path (HB curve + converged_curve)")
     ap.add_argument("--grazing-ds", type=float, default=None, help="the exact families' grazing_ds (default 2e-2)")
     ap.add_argument("--multi-grazing-ds", type=float, default=None,
                     help="the exact families' multi_grazing_ds (default 1e-3)")
     args = ap.parse_args(argv)
+    if args.processes < 1 or args.processes % 2 == 0:
+        ap.error("--processes must be odd and >= 1")
+    if args.processes > 1:
+        out = Path(args.out)
+        argv = list(sys.argv[1:] if argv is None else argv)
+        keep = [a for i, a in enumerate(argv) if not (a.startswith(("--out", "--processes"))
+                or (i > 0 and argv[i - 1] in ("--out", "--processes")))]
+        dirs = run_children([str(Path(__file__).resolve()), *keep, "--processes", "1"], args.processes,
+                            out / "processes")
+        merge(dirs, "converged_curve", out, concat=("converged_curve_speed.csv",))
+        print(f"wrote {out}/converged_curve_{{headline,processes,speed,machine}}.csv from {args.processes} processes")
+        return 0
+    probe0 = probe_ms()
     scene = load_scene(args.scene)
     spec = replace(scene.frc, branch_switching=False, cover_families=0)
     grazing_ds, multi_ds = ExactFRCOptions().grazing_ds, ExactFRCOptions().multi_grazing_ds
@@ -143,7 +163,8 @@ def main(argv: list[str] | None = None) -> int:
                      "ratio": "" if args.no_hb else round(base / cpu, 2), "error": "",
                      "target": f"<= {TARGET_S:g} s CPU", "met": bool(cpu <= TARGET_S)})
     write_rows(out / "converged_curve_headline.csv", head)
-    write_rows(out / "converged_curve_machine.csv", machine_rows(scene=scene.name, load_1min_start=round(load0, 2)))
+    write_rows(out / "converged_curve_machine.csv", machine_rows(scene=scene.name, load_1min_start=round(load0, 2),
+                                                                 probe_ms_start=probe0, probe_ms_end=probe_ms()))
     for h in head:
         print(f"{h['what']}: {h['ours_s']} s, met {h['met']}")
     return 0

@@ -1,10 +1,13 @@
 """Speed of the ringdown integrators (issue 14), every ratio against a named baseline in the same process.
 
     PYTHONPATH=. python benchmarks/integrator_speed.py [--repeats 5] [--baseline-commit fc521a5]
-        [--hammer-modes 60 120] [--no-dop853-2s] [--out results/performance] [--explicit-only]
+        [--hammer-modes 60 120] [--no-dop853-2s] [--out results/performance] [--explicit-only] [--processes 5]
 
-Measures, each a median of ``--repeats`` wall times (perf_counter; CPU times beside them, as the
-machine may be shared; the explicit rows in CPU time, wall beside), in one process:
+The whole measurement runs in ``--processes`` child processes (default 5), one after the other, and each
+headline row is that of the median process (:func:`in_processes`; benchmarks/process_median.py: a process of
+this machine runs at one of two speeds, so one process draws one). In each process it measures, each a median
+of ``--repeats`` wall times (perf_counter; CPU times beside them, as the machine may be shared; the explicit rows
+in CPU time, wall beside):
 
 1. the exact integrator on the 2 s ``discrete-impulse`` and ``rom-impulse`` ringdowns (20 kHz), and
    per output sample on the ``hammer-test`` reduced model (apparatus, ``--hammer-modes``
@@ -36,7 +39,8 @@ today's (max |difference| over the first 0.2 s, where round-off has not yet been
 bit for bit for the explicit scheme).
 
 Writes integrator_headline.csv (columns what, ours_s, baseline, baseline_s, ratio = baseline_s /
-ours_s, error, target, met: rows that can be concatenated with other headline tables),
+ours_s, error, target, met: rows that can be concatenated with other headline tables; processes: the per-process
+numbers), integrator_processes.csv (every process's headline numbers and speed probe),
 integrator_details.csv (every measurement), integrator_dop853.csv (the DOP853 scans),
 integrator_machine.csv (machine, versions, load) and integrator_speed.png.
 """
@@ -67,7 +71,7 @@ from reduced.transient.exact_tables import clear_table_cache  # noqa: E402
 from reduced.transient.explicit import integrate_explicit  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from process_median import median_rows, probe_ms, probe_text, read_csv, run_children  # noqa: E402  (issue 28)
+from process_median import merge, probe_ms, read_csv, run_children  # noqa: E402  (issue 28)
 
 FS = 20000.0  # Hz, the scenes' output rate
 LONG_S = 2.0  # s, the ringdowns of the scenes
@@ -785,26 +789,16 @@ def in_processes(out: Path, args, argv: list[str]) -> int:
             for f in out.glob("integrator_*.csv"):
                 shutil.copy(f, base_dir / f"p{k}" / f.name)
     dirs = run_children([str(Path(__file__).resolve()), *keep, "--processes", "1"], args.processes, base_dir)
-    machines = [read_csv(d / "integrator_machine.csv") for d in dirs]
-    probes = [probe_text(m) for m in machines]
-    heads, per, chosen = median_rows([read_csv(d / "integrator_headline.csv") for d in dirs], probes)
-    fields = ["what", "ours_s", "baseline", "baseline_s", "ratio", "error", "target", "met", "processes"]
-    write_rows(out / "integrator_headline.csv", heads, fields)
-    write_rows(out / "integrator_processes.csv", per)
-    details = [{"process": k, **r} for k, d in enumerate(dirs) for r in read_csv(d / "integrator_details.csv")]
-    write_rows(out / "integrator_details.csv", details, sorted({c for r in details for c in r},
-               key=lambda c: (c not in ("process", "scene", "method", "code"), c)))
-    scans_all = [{"process": k, **r} for k, d in enumerate(dirs) for r in read_csv(d / "integrator_dop853.csv")]
+    chosen = merge(dirs, "integrator", out, concat=("integrator_details.csv", "integrator_dop853.csv"))
+    heads = read_csv(out / "integrator_headline.csv")
     dop = [i for i, h in enumerate(heads) if "DOP853" in h["what"]]
     k_fig = chosen[dop[0]] if dop else 0
-    write_rows(out / "integrator_dop853_processes.csv", scans_all)
-    write_rows(out / "integrator_dop853.csv", [{c: v for c, v in r.items() if c != "process"} for r in scans_all
-                                               if r["process"] == k_fig])
-    info = machine_rows() + [{"key": "processes", "value": args.processes},
-                             {"key": "dop853_scans_of_process", "value": k_fig}]
-    info += [{"key": f"process{k}_{r['key']}", "value": r["value"]} for k, m in enumerate(machines) for r in m
-             if r["key"] in ("probe_ms_start", "probe_ms_end", "load_1min_end")]
-    write_rows(out / "integrator_machine.csv", info)
+    scans = read_csv(out / "integrator_dop853.csv")
+    write_rows(out / "integrator_dop853_processes.csv", scans)
+    write_rows(out / "integrator_dop853.csv", [{c: v for c, v in r.items() if c != "process"} for r in scans
+                                               if r["process"] == str(k_fig)])
+    machine = read_csv(out / "integrator_machine.csv")
+    write_rows(out / "integrator_machine.csv", machine + [{"key": "dop853_scans_of_process", "value": k_fig}])
     redraw(out)
     print(f"wrote {out}/integrator_{{headline,processes,details,dop853,machine}}.csv and integrator_speed.png "
           f"from {args.processes} processes")

@@ -213,3 +213,43 @@ def probe_text(machine: list[dict]) -> str:
     kv = {key: _num(r["value"]) for r in machine for key in ("probe_ms_start", "probe_ms_end")
           if r["key"].endswith(key)}
     return f"{kv.get('probe_ms_start', math.nan):.1f}/{kv.get('probe_ms_end', math.nan):.1f}"
+
+
+def merge(dirs: list[Path], stem: str, out: Path, concat: tuple[str, ...] = ()) -> list[int]:
+    """The tables of ``out`` from the children's folders ``dirs``: ``<stem>_headline.csv`` each row that of the
+    median process (:func:`median_rows`), ``<stem>_processes.csv`` the per-process rows, each file of ``concat``
+    every process's rows with a ``process`` column, and ``<stem>_machine.csv`` this machine's rows with each
+    child's speed probes and final load (keys ``process<k>_...``).
+
+    Parameters
+    ----------
+    dirs : list of Path
+        The children's folders, as :func:`run_children` returns them.
+    stem : str
+        The benchmark's file prefix (``integrator``, ``converged_curve``).
+    out : Path
+        The folder written.
+    concat : tuple of str
+        Other CSV files of the children, concatenated.
+
+    Returns
+    -------
+    list of int
+        The process chosen for each headline row.
+    """
+    from bearingshaft.output import machine_rows, write_rows
+
+    machines = [read_csv(d / f"{stem}_machine.csv") for d in dirs]
+    heads, per, chosen = median_rows([read_csv(d / f"{stem}_headline.csv") for d in dirs],
+                                     [probe_text(m) for m in machines])
+    write_rows(out / f"{stem}_headline.csv", heads, [*[c for c in heads[0] if c != "processes"], "processes"])
+    write_rows(out / f"{stem}_processes.csv", per)
+    for name in concat:
+        rows = [{"process": k, **r} for k, d in enumerate(dirs) for r in read_csv(d / name)]
+        write_rows(out / name, rows, list(dict.fromkeys(c for r in rows for c in r)))
+    keys = ("probe_ms_start", "probe_ms_end", "load_1min_end", "load_1min_start")
+    info = machine_rows(processes=len(dirs))
+    info += [{"key": f"process{k}_{r['key']}", "value": r["value"]} for k, m in enumerate(machines) for r in m
+             if r["key"].endswith(keys)]
+    write_rows(out / f"{stem}_machine.csv", info)
+    return chosen
