@@ -60,7 +60,7 @@ from reduced.periodic.exact_frc import ExactFRCOptions  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from converged_frc_speed import _timed  # noqa: E402  (one timing helper for both benchmarks)
-from process_median import merge, probe_ms, run_children  # noqa: E402  (issue 28)
+from process_median import children, merge, probe_ms  # noqa: E402  (issue 28)
 
 TARGET_S = 10.0  # the issue's target, CPU seconds of one level
 
@@ -84,11 +84,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.processes > 1:
         out = Path(args.out)
         argv = list(sys.argv[1:] if argv is None else argv)
-        keep = [a for i, a in enumerate(argv) if not (a.startswith(("--out", "--processes"))
-                or (i > 0 and argv[i - 1] in ("--out", "--processes")))]
-        dirs = run_children([str(Path(__file__).resolve()), *keep, "--processes", "1"], args.processes,
-                            out / "processes")
-        merge(dirs, "converged_curve", out, concat=("converged_curve_speed.csv",))
+        out.mkdir(parents=True, exist_ok=True)
+        with children(str(Path(__file__).resolve()), argv, args.processes) as dirs:
+            merge(dirs, "converged_curve", out, concat=("converged_curve_speed.csv",))
         print(f"wrote {out}/converged_curve_{{headline,processes,speed,machine}}.csv from {args.processes} processes")
         return 0
     probe0 = probe_ms()

@@ -71,7 +71,7 @@ from reduced.transient.exact_tables import clear_table_cache  # noqa: E402
 from reduced.transient.explicit import integrate_explicit  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from process_median import merge, probe_ms, read_csv, run_children  # noqa: E402  (issue 28)
+from process_median import children, merge, probe_ms, read_csv  # noqa: E402  (issue 28)
 
 FS = 20000.0  # Hz, the scenes' output rate
 LONG_S = 2.0  # s, the ringdowns of the scenes
@@ -728,9 +728,10 @@ def main(argv=None) -> int:
                     help="the previous release's kernels (the code before issue 14)")
     ap.add_argument("--hammer-modes", type=int, nargs="*", default=[60, 120])
     ap.add_argument("--no-dop853-2s", action="store_true", help="skip the 2 s DOP853 window (minutes a run)")
-    ap.add_argument("--processes", type=int, default=5,
+    ap.add_argument("--processes", type=int, default=None,
                     help="child processes the whole measurement runs in, one after the other; each headline row is "
-                         "that of the median process (benchmarks/process_median.py; odd; 1: this process alone)")
+                         "that of the median process (benchmarks/process_median.py; odd; 1: this process alone; "
+                         "default 5, with --explicit-only 1)")
     ap.add_argument("--out", default="results/performance")
     ap.add_argument("--figure-only", action="store_true", help="redraw integrator_speed.png from the CSV files")
     ap.add_argument("--explicit-only", action="store_true",
@@ -743,8 +744,12 @@ def main(argv=None) -> int:
     if args.figure_only:
         redraw(out)
         return 0
+    if args.processes is None:
+        args.processes = 1 if args.explicit_only else 5
     if args.processes < 1 or args.processes % 2 == 0:
         ap.error("--processes must be odd and >= 1")
+    if args.explicit_only and args.processes > 1:
+        ap.error("--explicit-only replaces rows of one process's tables: use --processes 1 (or measure everything)")
     out.mkdir(parents=True, exist_ok=True)
     if args.processes > 1:
         return in_processes(out, args, argv if argv is not None else sys.argv[1:])
@@ -770,25 +775,34 @@ def main(argv=None) -> int:
 
 
 def in_processes(out: Path, args, argv: list[str]) -> int:
-    """The whole measurement in ``args.processes`` child processes (:func:`process_median.run_children`,
-    folders out/processes/p<k>), then the tables of ``out`` from them: each headline row that of the median
+    """The whole measurement in ``args.processes`` child processes (:func:`process_median.children`, in a
+    temporary folder), then the tables of ``out`` from them: each headline row that of the median
     process (:func:`process_median.median_rows`, a ``processes`` column with every process's number and speed
     probe); integrator_processes.csv the per-process rows; integrator_details.csv every process's details (a
     ``process`` column); integrator_dop853.csv the scans of the process chosen for the 0.2 s DOP853 row at the
     loosest error (every process's in integrator_dop853_processes.csv); integrator_machine.csv this process's
-    machine rows and each child's probe and load. With ``--explicit-only`` each child replaces the explicit rows of
-    a copy of the tables in ``out``."""
-    import shutil
+    machine rows and each child's probe and load."""
+    with children(str(Path(__file__).resolve()), argv, args.processes) as dirs:
+        merge_children(dirs, out)
+    print(f"wrote {out}/integrator_{{headline,processes,details,dop853,machine}}.csv and integrator_speed.png "
+          f"from {args.processes} processes")
+    return 0
 
-    keep = [a for i, a in enumerate(argv) if not (a.startswith("--out") or a.startswith("--processes")
-            or (i > 0 and argv[i - 1] in ("--out", "--processes")))]
-    base_dir = out / "processes"
-    if args.explicit_only:  # each child updates its own copy of the committed tables
-        for k in range(args.processes):
-            (base_dir / f"p{k}").mkdir(parents=True, exist_ok=True)
-            for f in out.glob("integrator_*.csv"):
-                shutil.copy(f, base_dir / f"p{k}" / f.name)
-    dirs = run_children([str(Path(__file__).resolve()), *keep, "--processes", "1"], args.processes, base_dir)
+
+def merge_children(dirs: list[Path], out: Path) -> None:
+    """The tables and figure of ``out`` from the children's folders ``dirs`` (:func:`in_processes`).
+
+    Parameters
+    ----------
+    dirs : list of Path
+        Each child's folder of integrator_*.csv.
+    out : Path
+        The folder written.
+
+    Returns
+    -------
+    None
+    """
     chosen = merge(dirs, "integrator", out, concat=("integrator_details.csv", "integrator_dop853.csv"))
     heads = read_csv(out / "integrator_headline.csv")
     dop = [i for i, h in enumerate(heads) if "DOP853" in h["what"]]
@@ -800,9 +814,6 @@ def in_processes(out: Path, args, argv: list[str]) -> int:
     machine = read_csv(out / "integrator_machine.csv")
     write_rows(out / "integrator_machine.csv", machine + [{"key": "dop853_scans_of_process", "value": k_fig}])
     redraw(out)
-    print(f"wrote {out}/integrator_{{headline,processes,details,dop853,machine}}.csv and integrator_speed.png "
-          f"from {args.processes} processes")
-    return 0
 
 
 def explicit_only(out: Path, args, info: list[dict]) -> int:

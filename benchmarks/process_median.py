@@ -19,10 +19,12 @@ so that they do not share the cores), :func:`row_key` and :func:`median_rows` (t
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import math
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -93,6 +95,37 @@ def run_children(argv: list[str], n: int, out: Path) -> list[Path]:
             raise RuntimeError(f"child {k} failed: {' '.join(cmd)}")
         dirs.append(d)
     return dirs
+
+
+@contextlib.contextmanager
+def children(script: str, argv: list[str], n: int, prepare=None):
+    """Run ``python script argv... --processes 1 --out <tmp>/p<k>`` for k < n (:func:`run_children`), in a
+    temporary folder removed afterwards; ``--out`` and ``--processes`` are taken out of ``argv`` first; yields
+    the children's folders.
+
+    Parameters
+    ----------
+    script : str
+        The benchmark script.
+    argv : list of str
+        Its command-line options as given.
+    n : int
+        Child processes.
+    prepare : callable, optional
+        Called with each child's folder (created) before the children run.
+
+    Yields
+    ------
+    list of Path
+    """
+    keep = [a for i, a in enumerate(argv) if not (a.startswith(("--out", "--processes"))
+            or (i > 0 and argv[i - 1] in ("--out", "--processes")))]
+    with tempfile.TemporaryDirectory(prefix=f"{Path(script).stem}_") as tmp:
+        if prepare is not None:
+            for k in range(n):
+                (Path(tmp) / f"p{k}").mkdir()
+                prepare(Path(tmp) / f"p{k}")
+        yield run_children([script, *keep, "--processes", "1"], n, Path(tmp))
 
 
 def _num(v) -> float:
@@ -247,7 +280,7 @@ def merge(dirs: list[Path], stem: str, out: Path, concat: tuple[str, ...] = ()) 
     for name in concat:
         rows = [{"process": k, **r} for k, d in enumerate(dirs) for r in read_csv(d / name)]
         write_rows(out / name, rows, list(dict.fromkeys(c for r in rows for c in r)))
-    keys = ("probe_ms_start", "probe_ms_end", "load_1min_end", "load_1min_start")
+    keys = ("probe_ms_start", "probe_ms_end", "load_1min_end", "load_1min_start", "date_utc", "git_commit")
     info = machine_rows(processes=len(dirs))
     info += [{"key": f"process{k}_{r['key']}", "value": r["value"]} for k, m in enumerate(machines) for r in m
              if r["key"].endswith(keys)]
