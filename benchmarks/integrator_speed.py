@@ -684,7 +684,8 @@ def draw(heads: list[dict], scans: list[dict]):
         ax.text(num(h["ours_s"]), i + 0.2, f" {num(h['ratio']):.3g}x faster", va="center", fontsize=8)
     ax.set_yticks(y, [short_label(h["what"]) for h in rows], fontsize=8)
     ax.set_xscale("log")
-    ax.set_xlabel("time [s], median of the repeats (wall; CPU for the explicit rows, alternating)")
+    ax.set_xlabel("time [s], median of the repeats in the median process (wall; CPU for the explicit rows, "
+                  "alternating)")
     ax.set_title("The integrators now and with the previous release's kernels", fontsize=10)
     ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=1, frameon=False)
     ax = axes[1]

@@ -29,7 +29,7 @@ from bearingshaft.output import write_rows  # noqa: E402
 # (headline file, machine file, what it measures, command, what a bare number in its error column is)
 SOURCES = (
     ("integrator_headline.csv", "integrator_machine.csv", "ringdown integrators",
-     "PYTHONPATH=. python benchmarks/integrator_speed.py --repeats 5", ""),
+     "PYTHONPATH=. python benchmarks/integrator_speed.py --repeats 5 --processes 5", ""),
     ("modal_headline.csv", "modal_machine.csv", "FE modal analysis, 112,629 DOFs",
      "python benchmarks/modal_speed.py --sizes 0.012 --repeats 3",
      "largest relative residual ||K phi - w^2 M phi|| / ||K phi|| over the 16 modes (a soft-spring mode; "
@@ -41,24 +41,27 @@ SOURCES = (
      "python benchmarks/fep_speed.py --repeats 3", ""),
     ("converged_curve_headline.csv", "converged_curve_machine.csv",
      "converged main curve with stability per level (issue 25)",
-     "PYTHONPATH=. python benchmarks/converged_curve_speed.py --repeats 3", ""),
+     "PYTHONPATH=. python benchmarks/converged_curve_speed.py --repeats 2 --processes 5", ""),
     ("job_headline.csv", "job_machine.csv", "the main job and the test suite, whole",
      "PYTHONPATH=. python benchmarks/job_times.py", ""),
 )
-XEON = ("on this session's machine, an Intel Xeon at 2.1 GHz (2026-11-27 08:30 UTC, quiet), slower than the AMD "
-        "EPYC of the sessions before, where this row met its target; what follows was measured on the EPYC: ")
-# what a reader must know beside the table (issue 28 is open on the first)
+# what a reader must know beside the table
+SPEED_STATES = (
+    "this machine's cores run in two speed states, switching within a second, each core on its own "
+    "(machine_speed.png, `PYTHONPATH=. python benchmarks/machine_speed.py --seconds 90`, 2026-11-27 18:10 UTC): "
+    "a compiled loop of sin and exp calls takes ~4.5 ms or ~7 ms, the fast state 30 % of the time, while a "
+    "dependent multiply-add chain shows no such states (2.5-3.3 ms). Nothing else ran in this guest and it had "
+    "no steal time: the slow state comes from the host. Store- and call-heavy code such as the exact "
+    "integrator's kernels runs 1.5-1.7x slower in it (the 2 s exact ringdown 18-22 ms against 31-36 ms)"
+)
 CAVEATS = [
-    "The ringdown integrator rows (results/performance/integrator_*.csv) are session 14's run (2026-11-27 "
-    "13:51 UTC, on f45ab52 with the session's measurement edits). Session 15 changed the exact kernels (|z| "
-    "inlined, the same bits), and its run of `benchmarks/integrator_speed.py --repeats 5` (2026-11-27 16:21 UTC, "
-    "load 1.2, not committed) missed three rows: exact vs DOP853 on the 0.2 s window at 1e-6, 737x (ours 4.9 ms "
-    "against 3.2 ms); the explicit step of the "
-    "reduced beam, 2.77e7 steps/s; the exact discrete ringdown, 33 ms against 30 ms. Not the code: the same 2 s "
-    "exact ringdown in alternating child processes of the old and the new code runs at 18-22 ms or 31-35 ms a "
-    "process, both codes in both modes, and a pickled copy of the system (its tables placed anew) flips the mode "
-    "inside one process. The benchmark times one process, so its rows draw one placement; they are not settled "
-    "until it times several processes or the kernels' tables stop depending on where they land.",
+    "The ringdown integrator rows and the converged-curve rows are each the row of the median of five processes "
+    "(benchmarks/process_median.py; the per-process numbers and each process's speed probe are in the headline "
+    "file's `processes` column and in integrator_processes.csv, converged_curve_processes.csv), because "
+    + SPEED_STATES + ". A row timed in one process draws one state: session 14's table (the exact ringdown 20.75 "
+    "ms, 1240x on the 0.2 s window at 1e-6) and session 15's single-process converged curve (9.7 s) were fast "
+    "draws. The five-process integrator run: 2026-11-27 17:14-17:46 UTC, load 0.7-1.1, the kernels of 7f87532; "
+    "the converged curve: 17:50-17:58 UTC.",
 ]
 
 # what limits each target not met, from the profiles (a row matches by the start of its ``what``)
@@ -98,22 +101,22 @@ LIMITS = (
      "12 x 12 products; padding the tables to 16 rows, eight columns a pass, row tiles held in registers, the "
      "sample's products in 16-wide padded rows were each slower or no faster (measured, same process)"),
     ("exact vs DOP853 restarted at every crossing",
-     XEON + "the exact run's kernel (perf, issue 28) spends about a quarter of its time in libm (sincos, exp, expm1 of "
-     "the terms e^{lam tau} at each march step) and most of the rest in the march's chains of dependent sqrt "
-     "and divisions (the safe steps); its set-up (eigen-decompositions and modal tables, ~1 ms at load 1) is "
-     "kept across runs of one system, so a first run is slower (the row's second figure); DOP853 at the "
-     "loosest rtol that reaches the error asked is cheap (1e-10 for 1e-6 on the 0.2 s window), and its "
-     "relative speed moves with the machine and its load (below). The kernel is unchanged in session 13: a profile by "
-     "instruction (perf) put ~40 % of the kernel in the march's sqrt and division chains and ~10 % in its "
-     "per-stop sums; no change that keeps the bits and pays was found (numba's error_model='numpy', no "
-     "zero-division checks: no gain measured), and a change of the march moves the event times by round-off, "
-     "hence every exact science file. A full run at load 9 (2026-11-27 09:33 UTC) gave 1159x and 1981x on the "
-     "0.2 s window, 548x and 997x on the 2 s window: the row's ratio moves with the load"),
+     "the machine's speed states (Caveats): the 0.2 s window at error 1e-6 gave 1248, 593, 588, 830 and 1517x in "
+     "the five processes, met in two: ours took 2.4-2.8 ms in the two processes whose run drew the fast state and "
+     "4.9-5.2 ms in the three that drew the slow one, DOP853 2.9-4.2 s in all five. At 1e-8 the same window "
+     "gives 1124x (920-2257x), the 2 s window 1266x at 1e-6 and 1659x at 1e-8. The exact run's kernel (perf, "
+     "issue 28) spends about a quarter of its time in libm (sincos, exp, expm1 of the terms e^{lam tau} at each "
+     "march step) and most of the rest in the march's chains of dependent sqrt and divisions (the safe steps); "
+     "no change that keeps the bits and pays was found (session 13; a change of the march moves the event "
+     "times by round-off, hence every exact science file). Session 16 tried summing the work integral's "
+     "matrix product without its scratch vector (the same bits): 1.01x, not kept"),
     ("exact ringdown, discrete-impulse",
-     "the machine's load (integrator_machine.csv: 10-16 on 2 cores during the issue-28 runs, when the 3-DOF "
-     "explicit kernel, 6.4e7 steps/s at load ~1, ran at 1e7); in alternating same-process runs the free "
-     "kernel is 1.6x the one before issue 28 (13.6 against 21.8 ms CPU on the 2 s window, "
-     "reduced/transient/_modal.py)"),
+     "the machine's speed states (Caveats): 36.0, 36.0, 34.5, 35.4 and 34.7 ms in the five processes, each "
+     "started in the slow state (its probe 6.9-8.5 ms); a fast process runs it in 18-22 ms (session 14's 20.75 "
+     "ms). Of a 2 s run (fast state), 15 ms are its 12,562 events (~1.2 us an event: the march's terms and "
+     "safe steps, the segment's start and end) and ~10 ms its 40,000 output samples, 4 ms of them the "
+     "dissipated work of each sample; in alternating same-process runs the free kernel is 1.6x the one before "
+     "issue 28"),
     ("exact, hammer-test model",
      "the machine's load (integrator_machine.csv: 10-16 on 2 cores during the issue-28 runs; this row was met "
      "at load ~1 with the same per-sample code)"),
@@ -143,11 +146,11 @@ LIMITS = (
      "against the 1368 Hz seventeenth mode) where one block solve does it; a better shift: with a Cholesky factor "
      "the shift stays below the first mode, and the slow modes' rate is fixed by (998 / 1368)^2 = 0.53 whatever it is"),
     ("converged main curve with stability, discrete-frc 10 N",
-     "this row: the lead's run after the session's merges (2026-11-27 13:46 UTC, load 1.4-2.1, median of 2: 10.8 "
-     "and 9.4 s), missed by 1 %; the stage's path in the same runs 22.5 and 16.9 s. Helper A's run "
-     "at load 2 (2026-11-27 13:04-13:06 UTC, median of 3; sum(range(10**6)) 22-29 ms): 13.8 s "
-     "CPU (12.9-16.4), the stage's path in the same runs 19.1 s (HB 6.9 + main family 12.4; session 13 measured it "
-     "at 15.6 s, load 3); at load 8-14 (12:25-12:48) 17.0 s against 26.9 s. Session 14: the curve is timed from the "
+     "the machine's speed states (Caveats): 11.92, 15.25, 15.46, 9.81 and 11.93 s CPU in the five processes "
+     "(medians of 2), met in one, whose probe was in the fast state at its start and end (4.6/4.8 ms); the stage's "
+     "path 19.0 s in the median process. Session 15's single run, 9.7 s (9.6, 9.8), was most likely a fast "
+     "draw (no probe was recorded then). "
+     "Session 14: the curve is timed from the "
      "linear orbit at the band's top (bearingshaft.stages.frc.linear_start_families: no HB at all; the same family, "
      "its extent, 36 folds and stability, tests/test_exact_frc_robust.py; 5185 points, 17.13-900 Hz), 1.4-1.6x less "
      "CPU than the stage's path in the same process; and a point costs less, bit for bit the same family (Y, "
@@ -223,6 +226,11 @@ COLUMNS = ("what", "ours_s", "baseline", "baseline_s", "ratio", "error", "target
 
 
 # -- headline rows of the benchmarks that write only their own tables (issues 25 and 27) ----------------------
+def _short(what: str, n: int = 110) -> str:
+    """A row's ``what`` cut at a word boundary to at most n characters (and an ellipsis)."""
+    return what if len(what) <= n else what[:n].rsplit(" ", 1)[0] + " ..."
+
+
 def _median(values: list[float]) -> float:
     v = sorted(values)
     return 0.5 * (v[(len(v) - 1) // 2] + v[len(v) // 2])
@@ -320,7 +328,8 @@ def main() -> None:
             missing.append((headline, command))
             continue
         for r in _read(path):
-            row = {"benchmark": topic, **{c: r.get(c, "") for c in COLUMNS}, "command": command}
+            row = {"benchmark": topic, **{c: r.get(c, "") for c in COLUMNS}, "processes": r.get("processes", ""),
+                   "command": command}
             if meaning and _num(row["error"]) != row["error"]:  # a bare number: say what it is
                 row["error"] = f"{meaning}: {_num(row['error'])}"
             rows.append(row)
@@ -331,7 +340,7 @@ def main() -> None:
         except (OSError, KeyError, StopIteration, ValueError) as exc:
             missing.append((f"results/{sub} ({type(exc).__name__}: {exc})", command))
             continue
-        rows += [{"benchmark": topic, **r, "command": command} for r in got]
+        rows += [{"benchmark": topic, **r, "processes": "", "command": command} for r in got]
         machines.append((topic, f"recorded in results/{sub}/"))
     write_rows(folder / "summary.csv", rows)
 
@@ -350,6 +359,12 @@ def main() -> None:
                      f"{'yes' if r['met'] == 'True' else 'no' if r['met'] == 'False' else '-'} |")
     lines += ["", "## Accuracy at those speeds", ""]
     lines += [f"- {r['what']}: {r['error']}" for r in rows if r["error"]]
+    several = [r for r in rows if r["processes"]]
+    if several:
+        lines += ["", "## Rows measured in several processes", "",
+                  "Each is the row of the median process (benchmarks/process_median.py, Caveats); the number that "
+                  "decides it in every process, and each process's speed probe at its start and end:", ""]
+        lines += [f"- {_short(r['what'])}: {r['processes']}" for r in several]
     lines += ["", "## Targets not met", ""]
     unmet = [r for r in rows if r["met"] == "False"]
     said = set()
