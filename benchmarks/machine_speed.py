@@ -6,7 +6,7 @@ One process moves between the cores (``os.sched_setaffinity``) and times, on eac
 of benchmarks/process_median.py (a compiled loop of ``sin(a) * exp(b)`` calls that touches no array; the
 fastest of 7 CPU times) and a dependent chain of multiplies and adds (latency only, no memory, no calls),
 for ``--seconds``. On this machine class the probe runs at ~4.5 ms or at ~7 ms, on each core
-independently, switching within a second (2026-11-27 18:10 UTC, 90 s: fast 30 % of the time), while the
+independently, switching within a second (2026-11-27 18:01-18:03 UTC, 90 s: fast 30 % of the time), while the
 chain shows no such two states (2.5-3.3 ms): the slow state is not the clock and not this guest's load
 (nothing else runs, no steal time), it comes from the host (what shares the core with ours there). A benchmark timed
 in one process draws these states; benchmarks/integrator_speed.py and converged_curve_speed.py therefore

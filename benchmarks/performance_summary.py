@@ -48,7 +48,7 @@ SOURCES = (
 # what a reader must know beside the table
 SPEED_STATES = (
     "this machine's cores run in two speed states, switching within a second, each core on its own "
-    "(machine_speed.png, `PYTHONPATH=. python benchmarks/machine_speed.py --seconds 90`, 2026-11-27 18:10 UTC): "
+    "(machine_speed.png, `PYTHONPATH=. python benchmarks/machine_speed.py --seconds 90`, 2026-11-27 18:01-18:03 UTC): "
     "a compiled loop of sin and exp calls takes ~4.5 ms or ~7 ms, the fast state 30 % of the time, while a "
     "dependent multiply-add chain shows no such states (2.5-3.3 ms). Nothing else ran in this guest and it had "
     "no steal time: the slow state comes from the host. Store- and call-heavy code such as the exact "
