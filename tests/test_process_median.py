@@ -88,3 +88,15 @@ def test_merge_writes_the_median_rows_the_per_process_rows_and_every_run(tmp_pat
     with open(tmp_path / "x_machine.csv") as f:
         machine = {r["key"]: r["value"] for r in csv.DictReader(f)}
     assert machine["processes"] == "3" and machine["process1_probe_ms_start"] == "5.7"
+
+
+def test_job_times_takes_the_run_of_the_median_wall_and_names_every_run():
+    spec = importlib.util.spec_from_file_location("job_times", ROOT / "benchmarks" / "job_times.py")
+    jt = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(jt)
+    rows = [{"label": "ours", "wall_s": 377.0, "cpu_s": 745.0}, {"label": "ours-2", "wall_s": 348.0, "cpu_s": 687.0},
+            {"label": "ours-3", "wall_s": 353.0, "cpu_s": 696.0}, {"label": "baseline", "wall_s": 700.0, "cpu_s": 700.0}]
+    mid, text = jt.median_run(rows)
+    assert mid["label"] == "ours-3"  # walls 348, 353, 377: the baseline is not one of ours
+    assert text == "; the median of 3 runs one after the other (wall s 377, 348, 353; CPU s 745, 687, 696)"
+    assert jt.median_run(rows[:1]) == (rows[0], "")
