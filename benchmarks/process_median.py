@@ -1,17 +1,18 @@
 """Benchmark rows timed in several processes and reported by the median process (issue 28).
 
-On this machine class a process runs at one of two speeds, and keeps it: the same 2 s exact ringdown
-takes 18-22 ms in some processes and 31-35 ms in others, old and new code alike, and a loop of
-``sin(a) * exp(b)`` calls with no data at all (:func:`probe_ms`) takes ~4.7 ms or ~7.2 ms. A
-dependent chain of multiplies and adds shows no such split (it runs at the same speed in both), so
-it is not the clock; a process's new thread may draw the other speed, a forked child mostly keeps
-its parent's, and which one a process draws does not follow its stack depth, its core, address
-randomisation (``setarch -R``) or the hash seed (measured 2026-11-27, scripts in the session-16
-note on issue 28). A row timed in one process therefore draws one speed. This module runs the same
-benchmark in several child processes and keeps, for every headline row, the row of the process in
-the middle of the row's deciding number (its ratio for a ``>= ...x`` target, else its time), so
-the table's text and numbers stay those of one real measurement; the per-process numbers and each
-process's probe go beside it.
+This machine's cores run in two speed states, each core on its own, switching within a second and
+sometimes holding one for tens of seconds (benchmarks/machine_speed.py, results/performance/
+machine_speed.png: the fast state ~30 % of the time). A loop of ``sin(a) * exp(b)`` calls that
+touches no array (:func:`probe_ms`) takes ~4.5 ms in the fast state and ~7 ms in the slow one, and
+the same 2 s exact ringdown 18-22 ms or 31-36 ms; a dependent chain of multiplies and adds shows no
+such states, so it is not the clock, and nothing else runs in this guest (no steal time either): it
+comes from the host. The placement of the data, which session 15 suspected (a fresh copy of the
+tables "flipped the mode"), does not explain it: the probe holds no data and switches too. A row timed in
+one process, over a few seconds, draws one state. This module runs the same benchmark in several
+child processes, one after the other, and keeps, for every headline row, the row of the process in
+the middle of the row's deciding number (its ratio for a ``>= ...x`` target, else its time), so the
+table's text and numbers stay those of one real measurement; the per-process numbers and each
+process's probe (at its start and end) go beside it.
 
 The pieces: :func:`probe_ms` (the speed probe), :func:`run_children` (the children, one at a time,
 so that they do not share the cores), :func:`row_key` and :func:`median_rows` (the choice).
@@ -41,8 +42,8 @@ def _probe_loop(n):
 
 def probe_ms(n: int = 300_000, repeats: int = 9) -> float:
     """The speed probe: the fastest of ``repeats`` CPU times (ms) of sum_i sin(i 1e-3) exp(-1e-9 i),
-    i < n, a compiled loop of libm calls that touches no array (~4.7 ms in a fast process of this
-    machine, ~7.2 ms in a slow one).
+    i < n, a compiled loop of libm calls that touches no array (~4.5 ms in this machine's fast state,
+    ~7 ms in its slow one).
 
     Parameters
     ----------
