@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from process_median import probe_ms  # noqa: E402
+from process_median import fastest_ms, probe_ms  # noqa: E402
 
 from bearingshaft.output import machine_rows, write_rows  # noqa: E402
 
@@ -46,8 +46,8 @@ def _chain(n):
 
 
 def chain_ms(n: int = 1_000_000, repeats: int = 7) -> float:
-    """The fastest of ``repeats`` CPU times (ms) of s <- 0.999999 s + 1e-9, n times: a dependent chain of a
-    multiply and an add, no memory and no calls (its time is the clock's and the latency's only).
+    """:func:`process_median.fastest_ms` of s <- 0.999999 s + 1e-9, n times: a dependent chain of a multiply and
+    an add, no memory and no calls (its time is the clock's and the latency's only).
 
     Parameters
     ----------
@@ -60,13 +60,7 @@ def chain_ms(n: int = 1_000_000, repeats: int = 7) -> float:
     -------
     float
     """
-    _chain(10)
-    best = float("inf")
-    for _ in range(repeats):
-        t0 = time.process_time()
-        _chain(n)
-        best = min(best, time.process_time() - t0)
-    return best * 1e3
+    return fastest_ms(_chain, n, repeats)
 
 
 def series(seconds: float) -> list[dict]:

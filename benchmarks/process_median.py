@@ -40,10 +40,34 @@ def _probe_loop(n):
     return s
 
 
+def fastest_ms(fn, n: int, repeats: int) -> float:
+    """The fastest of ``repeats`` CPU times (ms) of ``fn(n)``, after one warm-up call ``fn(10)``.
+
+    Parameters
+    ----------
+    fn : callable
+        A compiled kernel of one integer.
+    n : int
+        Its argument in the timed calls.
+    repeats : int
+        Timed calls.
+
+    Returns
+    -------
+    float
+    """
+    fn(10)
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.process_time()
+        fn(n)
+        best = min(best, time.process_time() - t0)
+    return best * 1e3
+
+
 def probe_ms(n: int = 300_000, repeats: int = 9) -> float:
-    """The speed probe: the fastest of ``repeats`` CPU times (ms) of sum_i sin(i 1e-3) exp(-1e-9 i),
-    i < n, a compiled loop of libm calls that touches no array (~4.5 ms in this machine's fast state,
-    ~7 ms in its slow one).
+    """The speed probe: :func:`fastest_ms` of sum_i sin(i 1e-3) exp(-1e-9 i), i < n, a compiled loop of libm
+    calls that touches no array (~4.5 ms in this machine's fast state, ~7 ms in its slow one).
 
     Parameters
     ----------
@@ -57,13 +81,7 @@ def probe_ms(n: int = 300_000, repeats: int = 9) -> float:
     float
         Milliseconds of CPU time.
     """
-    _probe_loop(10)
-    best = math.inf
-    for _ in range(repeats):
-        t0 = time.process_time()
-        _probe_loop(n)
-        best = min(best, time.process_time() - t0)
-    return best * 1e3
+    return fastest_ms(_probe_loop, n, repeats)
 
 
 def run_children(argv: list[str], n: int, out: Path) -> list[Path]:
