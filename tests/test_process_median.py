@@ -94,8 +94,10 @@ def test_job_times_takes_the_run_of_the_median_wall_and_names_every_run():
     spec = importlib.util.spec_from_file_location("job_times", ROOT / "benchmarks" / "job_times.py")
     jt = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(jt)
-    rows = [{"label": "ours", "wall_s": 377.0, "cpu_s": 745.0}, {"label": "ours-2", "wall_s": 348.0, "cpu_s": 687.0},
-            {"label": "ours-3", "wall_s": 353.0, "cpu_s": 696.0}, {"label": "baseline", "wall_s": 700.0, "cpu_s": 700.0}]
+    rows = [{"label": "ours", "wall_s": 377.0, "cpu_s": 745.0},
+            {"label": "ours-2", "wall_s": 348.0, "cpu_s": 687.0},
+            {"label": "ours-3", "wall_s": 353.0, "cpu_s": 696.0},
+            {"label": "baseline", "wall_s": 700.0, "cpu_s": 700.0}]
     mid, text = jt.median_run(rows)
     assert mid["label"] == "ours-3"  # walls 348, 353, 377: the baseline is not one of ours
     assert text == "; the median of 3 runs one after the other (wall s 377, 348, 353; CPU s 745, 687, 696)"
