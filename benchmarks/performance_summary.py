@@ -43,7 +43,7 @@ SOURCES = (
      "converged main curve with stability per level (issue 25)",
      "PYTHONPATH=. python benchmarks/converged_curve_speed.py --repeats 2 --processes 5", ""),
     ("job_headline.csv", "job_machine.csv", "the main job and the test suite, whole",
-     "PYTHONPATH=. python benchmarks/job_times.py", ""),
+     "PYTHONPATH=. python benchmarks/job_times.py --no-baseline --runs 3", ""),
 )
 # what a reader must know beside the table
 SPEED_STATES = (
@@ -62,6 +62,10 @@ CAVEATS = [
     "ms, 1240x on the 0.2 s window at 1e-6) and session 15's single-process converged curve (9.7 s) were fast "
     "draws. The five-process integrator run: 2026-11-27 17:14-17:46 UTC, load 0.7-1.1, the kernels of 7f87532; "
     "the converged curve: 17:50-17:58 UTC.",
+    "The main job and the suite are each the run of the median wall time of three, one after the other "
+    "(`job_times.py --runs 3`, 2026-11-27 18:25-19:18 UTC): a run of several minutes averages the states, but "
+    "how much of the time the host holds our cores in the slow one changes by the hour. On the same code the "
+    "job took 322-353 s and the suite 223 s three hours earlier (session 15, met), 412-449 s and 268-293 s now.",
 ]
 
 # what limits each target not met, from the profiles (a row matches by the start of its ``what``)
@@ -165,27 +169,30 @@ LIMITS = (
      "instead of round-off), the refused steps at grazings (2838 marches for 1896 refusals), the Jacobians and "
      "their LU, the peaks, and Python between them"),
     ("main job, bearingshaft run",
-     "this row: session 15's code after its merges, quiet, caches warm (2026-11-27 16:07 UTC, load 0.27 at the "
-     "start, sum(range(10**6)) 22 ms): 348 s wall, 687 s CPU; a run 8 minutes before on the same code, its numba "
-     "kernels compiled in it, took 322 s, 634 s CPU. Session 14's measurement (428 s, 847 s CPU) ran kernels "
-     "whose disk cache was stale: numba stamps a kernel's cache with its own file only, so a caller of a kernel of "
-     "another file kept machine code compiled against an older callee (reduced/_kernel_cache.py now clears the "
-     "package's caches when any of its sources changes). Session 15 cut, with every science file byte-identical: "
-     "the march's |z| inlined (glibc's hypot to the bit), _Retrace's partial-sum prefilter and a cap on a "
-     "switch's wandering Newton steps (rom-frc 1 N families 1.19x), Hill's method split by harmonic parity on "
-     "half-wave symmetric orbits (rom-frc point checks 15.3 -> 6.4 s CPU), the stops' moments in one kernel, "
-     "friction slider states kept per point and the NNM Jacobian summed on its nonzero blocks. The job is "
-     "CPU-bound on 2 cores (the stages' walls sum to ~2x the job's): rom-frc (~200 s), discrete-frc (~120 s) and "
-     "discrete-friction-frc (~70 s) are most of it, their exact families and response maps first"),
+     "the machine's speed states (Caveats): on the same code the job took 322-353 s wall (634-696 s CPU) in "
+     "session 15's three runs (2026-11-27 15:59-16:37 UTC, met) and 377, 412, 449 and 420 s (745-886 s CPU) in "
+     "this session's four (18:12-18:46 UTC; the row is the median of the last three, "
+     "`job_times.py --what job suite --no-baseline --runs 3`): the same work costs 8-29 % more CPU time now. The "
+     "job is CPU-bound on 2 cores (the stages' walls sum to ~2x the job's): rom-frc (~200-270 s), discrete-frc "
+     "(~120-175 s) and discrete-friction-frc (~70-85 s) are most of it, their exact families and response maps "
+     "first, so meeting 360 s in the slow state needs about a fifth less work there. Session 15 cut, with every "
+     "science file byte-identical: the march's |z| inlined (glibc's hypot to the bit), _Retrace's partial-sum "
+     "prefilter and a cap on a switch's wandering Newton steps (rom-frc 1 N families 1.19x), Hill's method split "
+     "by harmonic parity on half-wave symmetric orbits (rom-frc point checks 15.3 -> 6.4 s CPU), the stops' "
+     "moments in one kernel, friction slider states kept per point and the NNM Jacobian summed on its nonzero "
+     "blocks; reduced/_kernel_cache.py clears numba's caches when any source of the package changes (numba "
+     "stamps a kernel's cache with its own file only)"),
     ("test suite, python -m pytest",
-     "this row: session 15's code after its merges (2026-11-27 16:13 UTC, load 2.0 at the start, just after the "
-     "main job): 223 s wall, 433 s CPU, 1511 passed. Session 15 made collection lighter (the import graph and "
-     "docstring checks parse the packages on first use; the suite writes bytecode although this machine's "
-     "environment sets PYTHONDONTWRITEBYTECODE: collection 13.3 -> 7.5 s CPU a worker), took the assembly and "
-     "hex8 reduced models of three fixtures from the model cache, and solved the Timoshenko reference by "
-     "shift-invert Lanczos (0.1 s against 1.4-11 s a call). Session 14's code: 305 s wall, 598 s CPU, 1479 tests; "
-     "the suite is CPU-bound on its 2 xdist workers, the heaviest files test_results_folder (forked CLI runs), "
-     "test_modal_speed_paths and test_hammer"),
+     "the machine's speed states (Caveats): this session's runs on the same code took 273 s (18:05 UTC, `time "
+     "python -m pytest`), then 244, 256 and 293 s (18:49-19:03; the first failed test_lint on a line of this "
+     "session's own, fixed in 7a3cd35) and 281, 268 and 291 s wall, 524-571 s CPU (19:03-19:18, the row, "
+     "`job_times.py --what suite --no-baseline --runs 3`), against 223 s wall, 433 s CPU in session 15 (16:13 "
+     "UTC): meeting 240 s in the slow state needs about a seventh less work. The suite is CPU-bound on its 2 xdist "
+     "workers, the heaviest files test_results_folder (forked CLI runs), test_modal_speed_paths and test_hammer. "
+     "Session 15 made collection lighter (the import graph and docstring checks parse the packages on first "
+     "use; the suite writes bytecode although this machine's environment sets PYTHONDONTWRITEBYTECODE), took "
+     "three fixtures' reduced models from the model cache and solved the Timoshenko reference by shift-invert "
+     "Lanczos"),
     ("hammer-test record with friction (mu = 0.3, axial + lateral), 200 N blow, cold",
      "session 14 passes through the states entered just after a closing whose slots fall at once (zero starts) and "
      "reaches omega_max tau = 1: states built 23/34/40 -> 15/24/26 after the 200/500/1000 N records; cold ratios "
