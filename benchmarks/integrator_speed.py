@@ -713,13 +713,8 @@ def draw(heads: list[dict], scans: list[dict]):
 
 def redraw(out: Path) -> None:
     """The figure again from the CSV files (``--figure-only``)."""
-    import csv
-
-    with open(out / "integrator_headline.csv") as fh:
-        heads = list(csv.DictReader(fh))
-    with open(out / "integrator_dop853.csv") as fh:
-        scans = list(csv.DictReader(fh))
-    figure(heads, scans, out / "integrator_speed.png")
+    figure(read_csv(out / "integrator_headline.csv"), read_csv(out / "integrator_dop853.csv"),
+           out / "integrator_speed.png")
 
 
 def main(argv=None) -> int:
@@ -781,7 +776,8 @@ def in_processes(out: Path, args, argv: list[str]) -> int:
     process (:func:`process_median.median_rows`, a ``processes`` column with every process's number and speed
     probe); integrator_processes.csv the per-process rows; integrator_details.csv every process's details (a
     ``process`` column); integrator_dop853.csv the scans of the process chosen for the 0.2 s DOP853 row at the
-    loosest error (every process's in integrator_dop853_processes.csv); integrator_machine.csv this process's
+    loosest error (marked ``chosen`` in integrator_processes.csv; every process's in
+    integrator_dop853_processes.csv); integrator_machine.csv this process's
     machine rows and each child's probe and load."""
     with children(str(Path(__file__).resolve()), argv, args.processes) as dirs:
         merge_children(dirs, out)
@@ -804,16 +800,12 @@ def merge_children(dirs: list[Path], out: Path) -> None:
     -------
     None
     """
-    chosen = merge(dirs, "integrator", out, concat=("integrator_details.csv", "integrator_dop853.csv"))
-    heads = read_csv(out / "integrator_headline.csv")
-    dop = [i for i, h in enumerate(heads) if "DOP853" in h["what"]]
-    k_fig = chosen[dop[0]] if dop else 0
-    scans = read_csv(out / "integrator_dop853.csv")
-    write_rows(out / "integrator_dop853_processes.csv", scans)
-    write_rows(out / "integrator_dop853.csv", [{c: v for c, v in r.items() if c != "process"} for r in scans
-                                               if r["process"] == str(k_fig)])
-    machine = read_csv(out / "integrator_machine.csv")
-    write_rows(out / "integrator_machine.csv", machine + [{"key": "dop853_scans_of_process", "value": k_fig}])
+    chosen = merge(dirs, "integrator", out, concat=("integrator_details.csv",))
+    dop = [i for i, h in enumerate(read_csv(dirs[0] / "integrator_headline.csv")) if "DOP853" in h["what"]]
+    k_fig = chosen[dop[0]] if dop else 0  # integrator_processes.csv marks it chosen
+    write_rows(out / "integrator_dop853_processes.csv",
+               [{"process": k, **r} for k, d in enumerate(dirs) for r in read_csv(d / "integrator_dop853.csv")])
+    write_rows(out / "integrator_dop853.csv", read_csv(dirs[k_fig] / "integrator_dop853.csv"))
     redraw(out)
 
 
