@@ -117,7 +117,7 @@ def run_children(argv: list[str], n: int, out: Path) -> list[Path]:
 
 
 @contextlib.contextmanager
-def children(script: str, argv: list[str], n: int, prepare=None):
+def children(script: str, argv: list[str], n: int):
     """Run ``python script argv... --processes 1 --out <tmp>/p<k>`` for k < n (:func:`run_children`), in a
     temporary folder removed afterwards; ``--out`` and ``--processes`` are taken out of ``argv`` first; yields
     the children's folders.
@@ -130,8 +130,6 @@ def children(script: str, argv: list[str], n: int, prepare=None):
         Its command-line options as given.
     n : int
         Child processes.
-    prepare : callable, optional
-        Called with each child's folder (created) before the children run.
 
     Yields
     ------
@@ -140,10 +138,6 @@ def children(script: str, argv: list[str], n: int, prepare=None):
     keep = [a for i, a in enumerate(argv) if not (a.startswith(("--out", "--processes"))
             or (i > 0 and argv[i - 1] in ("--out", "--processes")))]
     with tempfile.TemporaryDirectory(prefix=f"{Path(script).stem}_") as tmp:
-        if prepare is not None:
-            for k in range(n):
-                (Path(tmp) / f"p{k}").mkdir()
-                prepare(Path(tmp) / f"p{k}")
         yield run_children([script, *keep, "--processes", "1"], n, Path(tmp))
 
 
