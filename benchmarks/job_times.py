@@ -50,15 +50,26 @@ CLI = [sys.executable, "-m", "bearingshaft.cli"]
 
 
 def timed(argv: list[str], log: Path, env: dict | None = None) -> dict:
-    """Run ``argv`` from the checkout: wall s, CPU s and peak MB of its process tree, exit code, load."""
+    """Run ``argv`` from the checkout: wall s, CPU s and peak MB of its process tree, exit code, load, and the
+    fraction of the run the host's cores spent in their fast state (``host_fast``, sampled every 2 s by
+    ``benchmarks/machine_speed.py --watch`` beside it, ~0.4 % of the CPU; its own CPU is not counted)."""
     load = os.getloadavg()[0]
+    states = log.with_suffix(".states.csv")
+    watch = subprocess.Popen([sys.executable, str(ROOT / "benchmarks" / "machine_speed.py"), "--watch", str(states)],
+                             cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
     t0 = time.perf_counter()
     with open(log, "wb") as fh:
         proc = subprocess.Popen(argv, stdout=fh, stderr=subprocess.STDOUT, cwd=ROOT, env=env)
         _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    watch.terminate()
+    watch.wait()
+    from machine_speed import watched_fast_fraction
+
+    fast, samples = watched_fast_fraction(states) if states.exists() else (float("nan"), 0)
     proc.returncode = os.waitstatus_to_exitcode(status)
-    return {"wall_s": time.perf_counter() - t0, "cpu_s": usage.ru_utime + usage.ru_stime,
-            "peak_mb": usage.ru_maxrss / 1024.0, "exit_code": proc.returncode, "load_1min": load}
+    return {"wall_s": wall, "cpu_s": usage.ru_utime + usage.ru_stime, "peak_mb": usage.ru_maxrss / 1024.0,
+            "exit_code": proc.returncode, "load_1min": load, "host_fast": fast, "host_samples": samples}
 
 
 def same_files(a: Path, b: Path) -> tuple[int, list[str]]:
@@ -90,7 +101,9 @@ def median_run(rows: list[dict]) -> tuple[dict, str]:
         return mid, ""
     walls = ", ".join(f"{r['wall_s']:.0f}" for r in rows if r["label"].startswith("ours"))
     cpus = ", ".join(f"{r['cpu_s']:.0f}" for r in rows if r["label"].startswith("ours"))
-    return mid, f"; the median of {len(mine)} runs one after the other (wall s {walls}; CPU s {cpus})"
+    fast = ", ".join(f"{100 * r['host_fast']:.0f}" for r in rows if r["label"].startswith("ours") and "host_fast" in r)
+    fast = f"; host's fast state % {fast}" if fast else ""
+    return mid, f"; the median of {len(mine)} runs one after the other (wall s {walls}; CPU s {cpus}{fast})"
 
 
 def _labels(runs: int) -> list[str]:
@@ -106,7 +119,7 @@ def main_job(work: Path, baseline: bool, cold: bool, out: Path | None = None, ru
             env["BEARINGSHAFT_CACHE"] = str(work / f"cache-{label}")
         r = timed([*CLI, "run", "--out", str(work / label), "--no-progress", *extra], work / f"job-{label}.log", env)
         print(f"main job, {label}: {r['wall_s']:.0f} s wall, {r['cpu_s']:.0f} s CPU, exit {r['exit_code']}, "
-              f"load {r['load_1min']:.2f}", flush=True)
+              f"load {r['load_1min']:.2f}, host fast {100 * r['host_fast']:.0f} %", flush=True)
         rows.append({"label": label, **r})
     ours, several = median_run(rows)
     log = work / f"job-{ours['label']}.log"
@@ -141,7 +154,7 @@ def suite(work: Path, baseline: bool, durations_path: Path, runs: int = 1) -> li
     for label, extra in todo:
         r = timed([sys.executable, "-m", "pytest", "-q", *extra], work / f"suite-{label}.log")
         print(f"suite, {label}: {r['wall_s']:.0f} s wall, {r['cpu_s']:.0f} s CPU, exit {r['exit_code']}, "
-              f"load {r['load_1min']:.2f}", flush=True)
+              f"load {r['load_1min']:.2f}, host fast {100 * r['host_fast']:.0f} %", flush=True)
         rows.append({"label": label, **r})
     ours, several = median_run(rows)
     log = (work / f"suite-{ours['label']}.log").read_text(errors="replace")
@@ -201,7 +214,8 @@ def main(argv: list[str] | None = None) -> int:
                {"key": "date_utc", "value": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}]
     machine += [{"key": f"{r['job']} {r['label']}",
                  "value": f"wall {r['wall_s']:.1f} s, CPU {r['cpu_s']:.1f} s, peak {r['peak_mb']:.0f} MB, "
-                          f"load {r['load_1min']:.2f}, exit {r['exit_code']}"} for r in raw]
+                          f"load {r['load_1min']:.2f}, exit {r['exit_code']}, host fast "
+                          f"{100 * r['host_fast']:.0f} % of {r['host_samples']} samples"} for r in raw]
     if (out / "job_machine.csv").exists():  # keep the run lines of the job not measured now
         with open(out / "job_machine.csv", newline="") as f:
             gone = ("main job",) if "job" in args.what else ()

@@ -14,12 +14,21 @@ report the median of several processes.
 
 Writes ``machine_speed.csv`` (time, core, probe ms, chain ms) and ``machine_speed.png`` (both series per
 core, and the probe's histogram).
+
+    PYTHONPATH=. python benchmarks/machine_speed.py --watch FILE [--every 2]
+
+instead samples the state while something else runs (benchmarks/job_times.py around each run): every ``--every``
+seconds a short probe (:data:`WATCH_N` terms, the fastest of :data:`WATCH_REPEATS`: ~2 ms a call) on each core in
+turn, a row appended to FILE, until terminated; ~0.4 % of the machine's CPU. The probe's CPU time is its own
+(``time.process_time``), so a core busy with the job does not lengthen it, only the job's cache contents may.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import os
+import signal
 import sys
 import time
 from pathlib import Path
@@ -35,6 +44,7 @@ from process_median import fastest_ms, probe_ms  # noqa: E402
 from bearingshaft.output import machine_rows, write_rows  # noqa: E402
 
 FAST_MS = 6.0  # probe times below this are the fast state (~4.7 ms; the slow one ~7-8 ms)
+WATCH_N, WATCH_REPEATS = 100_000, 3  # the watch's short probe: a third of the terms, FAST_MS / 3 its threshold
 
 
 @nb.njit(cache=True)
@@ -89,6 +99,52 @@ def series(seconds: float) -> list[dict]:
     return rows
 
 
+def watch(path: Path, every_s: float) -> None:
+    """Append (t_s, core, probe_ms) to the CSV ``path`` every ``every_s`` seconds, each core in turn, with the short
+    probe (:data:`WATCH_N` terms), until SIGTERM.
+
+    Parameters
+    ----------
+    path : Path
+        The CSV written (its header first, a row flushed per sample).
+    every_s : float
+        Seconds between samples.
+    """
+    stop = []
+    signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
+    cores = sorted(os.sched_getaffinity(0))
+    t0 = time.perf_counter()
+    with open(path, "w", newline="") as fh:
+        out = csv.writer(fh)
+        out.writerow(["t_s", "core", "probe_ms"])
+        while not stop:
+            for c in cores:
+                os.sched_setaffinity(0, {c})
+                out.writerow([round(time.perf_counter() - t0, 3), c, round(probe_ms(WATCH_N, WATCH_REPEATS), 3)])
+            fh.flush()
+            os.sched_setaffinity(0, set(cores))
+            time.sleep(every_s)
+
+
+def watched_fast_fraction(path: Path) -> tuple[float, int]:
+    """(fraction of the samples in the fast state, samples) of a :func:`watch` file (nan, 0 if it has none).
+
+    Parameters
+    ----------
+    path : Path
+        The watch's CSV.
+
+    Returns
+    -------
+    tuple of (float, int)
+    """
+    with open(path, newline="") as fh:
+        probes = [float(r["probe_ms"]) for r in csv.DictReader(fh)]
+    if not probes:
+        return float("nan"), 0
+    return sum(p < FAST_MS * WATCH_N / 300_000 for p in probes) / len(probes), len(probes)
+
+
 def figure(rows: list[dict], path: Path) -> None:
     """machine_speed.png: probe and chain against time per core, and the probe's histogram.
 
@@ -133,9 +189,16 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=60.0)
     ap.add_argument("--out", default="results/performance")
+    ap.add_argument("--watch", help="sample the state into this CSV until terminated (see the module docstring)")
+    ap.add_argument("--every", type=float, default=2.0, help="seconds between the watch's samples")
     args = ap.parse_args(argv)
     if not args.seconds > 0:
         ap.error("--seconds must be > 0")
+    if args.watch:
+        if not args.every > 0:
+            ap.error("--every must be > 0")
+        watch(Path(args.watch), args.every)
+        return 0
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = series(args.seconds)
