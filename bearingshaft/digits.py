@@ -231,15 +231,16 @@ def human(n: float) -> str:
     Returns
     -------
     str
-        Three significant digits and a binary unit, from B to PiB.
+        Three significant digits and a binary unit, from B to PiB; four digits from 999.5 to 1023 of a unit
+        (``.3g`` would write them with an exponent, 1.01e+03).
 
     Examples
     --------
-    >>> human(512), human(3 * 2**20), human(1.5 * 2**40)
-    ('512 B', '3 MiB', '1.5 TiB')
+    >>> human(512), human(3 * 2**20), human(1.5 * 2**40), human(1010 * 2**20), human(999.4)
+    ('512 B', '3 MiB', '1.5 TiB', '1010 MiB', '999 B')
     """
     for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
         if abs(n) < 1024 or unit == "PiB":
-            return f"{n:.3g} {unit}"
+            break
         n /= 1024
-    return f"{n:.3g} PiB"
+    return f"{n:.3g} {unit}" if abs(n) < 999.5 else f"{n:.0f} {unit}"

@@ -7,6 +7,8 @@ import re
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from tqdm import tqdm
 
 import bearingshaft.progress as progress
@@ -125,3 +127,18 @@ def test_run_ends_with_a_total_line_and_no_carriage_returns(tmp_path, capsys):
     # getrusage and the kernel's VmHWM count the same pages; the line shows 3-4 digits
     assert shown == pytest.approx(_vm_hwm_bytes(), rel=0.02)
     assert peak_memory_bytes() == pytest.approx(_vm_hwm_bytes(), rel=0.01)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.one_of(st.just(0.0), st.floats(min_value=1.0, max_value=2.0**60), st.integers(0, 2**60)))
+def test_human_bytes_never_writes_an_exponent_and_reads_back(n):
+    # .3g alone wrote 1000-1023 of a unit as 1.01e+03 (a run's total line: "peak memory 1.01e+03 MiB")
+    # (a count of bytes: 0, or 1 and more; a fraction of a byte below 1e-4 would still be written with an exponent)
+    from bearingshaft.digits import human
+
+    text = human(n)
+    m = re.fullmatch(r"(\d+(?:\.\d+)?) (B|KiB|MiB|GiB|TiB|PiB)", text)
+    assert m, text
+    value = float(m[1]) * 1024.0 ** ("B", "KiB", "MiB", "GiB", "TiB", "PiB").index(m[2])
+    assert value == pytest.approx(n, rel=5e-3, abs=0.5), text  # 3 significant digits: 0.5 % at worst
+    assert float(m[1]) <= 1024.0 or m[2] == "PiB", text
