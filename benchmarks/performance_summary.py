@@ -63,9 +63,10 @@ CAVEATS = [
     "draws. The five-process integrator run: 2026-11-27 17:14-17:46 UTC, load 0.7-1.1, the kernels of 7f87532; "
     "the converged curve: 17:50-17:58 UTC.",
     "The main job and the suite are each the run of the median wall time of three, one after the other "
-    "(`job_times.py --runs 3`, 2026-11-27 18:25-19:18 UTC): a run of several minutes averages the states, but "
-    "how much of the time the host holds our cores in the slow one changes by the hour. On the same code the "
-    "job took 322-353 s and the suite 223 s three hours earlier (session 15, met), 412-449 s and 268-293 s now.",
+    "(`job_times.py --runs 3`, 2026-11-27 20:11-20:47 UTC), each run watched by `machine_speed.py --watch` (a "
+    "short probe on each core every 2 s): a run of several minutes averages the states, but how much of the time "
+    "the host holds our cores in the fast one changes by the hour (36-54 % of these runs). On the same code the "
+    "job took 322-353 s and the suite 223 s at 15:59-16:37 UTC (session 15, met), 374-449 s and 244-307 s since.",
 ]
 
 # what limits each target not met, from the profiles (a row matches by the start of its ``what``)
@@ -169,13 +170,18 @@ LIMITS = (
      "instead of round-off), the refused steps at grazings (2838 marches for 1896 refusals), the Jacobians and "
      "their LU, the peaks, and Python between them"),
     ("main job, bearingshaft run",
-     "the machine's speed states (Caveats): on the same code the job took 322-353 s wall (634-696 s CPU) in "
-     "session 15's three runs (2026-11-27 15:59-16:37 UTC, met) and 377, 412, 449 and 420 s (745-886 s CPU) in "
-     "this session's four (18:12-18:46 UTC; the row is the median of the last three, "
-     "`job_times.py --what job suite --no-baseline --runs 3`): the same work costs 8-29 % more CPU time now. The "
-     "job is CPU-bound on 2 cores (the stages' walls sum to ~2x the job's): rom-frc (~200-270 s), discrete-frc "
-     "(~120-175 s) and discrete-friction-frc (~70-85 s) are most of it, their exact families and response maps "
-     "first, so meeting 360 s in the slow state needs about a fifth less work there. Session 15 cut, with every "
+     "the machine's speed states (Caveats): on the same code the job took 322, 348 and 353 s wall (634-696 s CPU) "
+     "at 2026-11-27 15:59-16:37 UTC (session 15, met), 377, 412, 449 and 420 s (745-886 s CPU) at 18:12-18:46 "
+     "(session 16) and 426, 412 and 374 s (838, 810 and 738 s CPU) at 20:11-20:32 with the cores in their fast "
+     "state 36, 42 and 54 % of each run (session 17, the row, `job_times.py --what job suite --no-baseline --runs "
+     "3`): met in 3 of 10 runs. The CPU time falls with the fast share, about 1040 - 560 f s through these three "
+     "runs (three points: a trend, not a law), so 360 s wall (~710 s CPU) needs the cores fast ~60 % of the time "
+     "or more. The job is CPU-bound on 2 cores (the stages' walls sum to ~2x the job's): rom-frc (200 s CPU alone, "
+     "its 10 N response map 47-65 s of it, in _periods_kernel, the exact period map and its tangent, and its 10 N "
+     "and 1 N converged curves 38-49 and 31 s, the forced shooting's march, Jacobian, peaks and LU), discrete-frc "
+     "(123 s alone) and discrete-friction-frc (~70-85 s) are most of it, so meeting 360 s in the slow state needs "
+     "about a fifth less work, spread over kernels with no single hot spot left (session 17: cProfile of each "
+     "part of the stage in one process). Session 15 cut, with every "
      "science file byte-identical: the march's |z| inlined (glibc's hypot to the bit), _Retrace's partial-sum "
      "prefilter and a cap on a switch's wandering Newton steps (rom-frc 1 N families 1.19x), Hill's method split "
      "by harmonic parity on half-wave symmetric orbits (rom-frc point checks 15.3 -> 6.4 s CPU), the stops' "
@@ -183,12 +189,14 @@ LIMITS = (
      "blocks; reduced/_kernel_cache.py clears numba's caches when any source of the package changes (numba "
      "stamps a kernel's cache with its own file only)"),
     ("test suite, python -m pytest",
-     "the machine's speed states (Caveats): this session's runs on the same code took 273 s (18:05 UTC, `time "
-     "python -m pytest`), then 244, 256 and 293 s (18:49-19:03; the first failed test_lint on a line of this "
-     "session's own, fixed in 7a3cd35) and 281, 268 and 291 s wall, 524-571 s CPU (19:03-19:18, the row, "
-     "`job_times.py --what suite --no-baseline --runs 3`), against 223 s wall, 433 s CPU in session 15 (16:13 "
-     "UTC): meeting 240 s in the slow state needs about a seventh less work. The suite is CPU-bound on its 2 xdist "
-     "workers, the heaviest files test_results_folder (forked CLI runs), test_modal_speed_paths and test_hammer. "
+     "the machine's speed states (Caveats): on the same code the suite took 223 s wall, 433 s CPU at 16:13 UTC "
+     "(session 15, met), 244-307 s in nine runs at 18:05-19:30 (session 16) and 278, 275, 265, 247 and 275 s "
+     "(478-536 s CPU) at 19:46-20:47 (session 17; the last three the row, with the cores fast 44-48 % of each; "
+     "the first and third failed one test, on a display bug fixed since: digits.human wrote 1010 MiB as "
+     "1.01e+03 MiB): met in 1 of 17 runs. Meeting 240 s in the slow state needs about a seventh less work. The "
+     "suite is CPU-bound on its 2 xdist workers (the tests' own durations sum to 519 s of 549 worker-seconds), "
+     "the heaviest files test_results_folder (forked CLI runs), test_modal_speed_paths and test_hammer, and no "
+     "test above 19 s. "
      "Session 15 made collection lighter (the import graph and docstring checks parse the packages on first "
      "use; the suite writes bytecode although this machine's environment sets PYTHONDONTWRITEBYTECODE), took "
      "three fixtures' reduced models from the model cache and solved the Timoshenko reference by shift-invert "
