@@ -102,3 +102,18 @@ def test_job_times_takes_the_run_of_the_median_wall_and_names_every_run():
     assert mid["label"] == "ours-3"  # walls 348, 353, 377: the baseline is not one of ours
     assert text == "; the median of 3 runs one after the other (wall s 377, 348, 353; CPU s 745, 687, 696)"
     assert jt.median_run(rows[:1]) == (rows[0], "")
+    watched = [dict(r, host_fast=f) for r, f in zip(rows[:3], (0.36, 0.42, 0.54), strict=True)]
+    assert jt.median_run(watched)[1].endswith("CPU s 745, 687, 696; host's fast state % 36, 42, 54)")
+
+
+def test_the_watch_counts_the_fast_samples_below_the_scaled_threshold(tmp_path):
+    spec = importlib.util.spec_from_file_location("machine_speed", ROOT / "benchmarks" / "machine_speed.py")
+    ms = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(ms)
+    path = tmp_path / "w.csv"
+    # the short probe (a third of the terms): ~1.55 ms fast, ~2.3-2.9 ms slow; the threshold FAST_MS / 3 = 2 ms
+    path.write_text("t_s,core,probe_ms\n0.0,0,1.55\n0.01,1,2.43\n2.0,0,1.99\n2.01,1,2.01\n4.0,0,2.9\n")
+    assert ms.watched_fast_fraction(path) == (pytest.approx(0.4), 5)
+    path.write_text("t_s,core,probe_ms\n")  # terminated before its first sample
+    fast, n = ms.watched_fast_fraction(path)
+    assert n == 0 and fast != fast
