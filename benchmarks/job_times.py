@@ -66,7 +66,7 @@ def timed(argv: list[str], log: Path, env: dict | None = None) -> dict:
     watch.wait()
     from machine_speed import watched_fast_fraction
 
-    fast, samples = watched_fast_fraction(states) if states.exists() else (float("nan"), 0)
+    fast, samples = watched_fast_fraction(states)
     proc.returncode = os.waitstatus_to_exitcode(status)
     return {"wall_s": wall, "cpu_s": usage.ru_utime + usage.ru_stime, "peak_mb": usage.ru_maxrss / 1024.0,
             "exit_code": proc.returncode, "load_1min": load, "host_fast": fast, "host_samples": samples}

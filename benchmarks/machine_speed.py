@@ -39,7 +39,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from process_median import fastest_ms, probe_ms  # noqa: E402
+from process_median import fastest_ms, probe_ms, read_csv  # noqa: E402
 
 from bearingshaft.output import machine_rows, write_rows  # noqa: E402
 
@@ -127,7 +127,8 @@ def watch(path: Path, every_s: float) -> None:
 
 
 def watched_fast_fraction(path: Path) -> tuple[float, int]:
-    """(fraction of the samples in the fast state, samples) of a :func:`watch` file (nan, 0 if it has none).
+    """(fraction of the samples in the fast state, samples) of a :func:`watch` file (nan, 0 if it has none or
+    does not exist: a watch terminated before its first sample).
 
     Parameters
     ----------
@@ -138,8 +139,7 @@ def watched_fast_fraction(path: Path) -> tuple[float, int]:
     -------
     tuple of (float, int)
     """
-    with open(path, newline="") as fh:
-        probes = [float(r["probe_ms"]) for r in csv.DictReader(fh)]
+    probes = [float(r["probe_ms"]) for r in read_csv(path)]
     if not probes:
         return float("nan"), 0
     return sum(p < FAST_MS * WATCH_N / 300_000 for p in probes) / len(probes), len(probes)

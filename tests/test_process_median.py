@@ -117,3 +117,5 @@ def test_the_watch_counts_the_fast_samples_below_the_scaled_threshold(tmp_path):
     path.write_text("t_s,core,probe_ms\n")  # terminated before its first sample
     fast, n = ms.watched_fast_fraction(path)
     assert n == 0 and fast != fast
+    fast, n = ms.watched_fast_fraction(tmp_path / "none.csv")  # terminated before it wrote its header
+    assert n == 0 and fast != fast
